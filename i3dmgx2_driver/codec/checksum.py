@@ -1,0 +1,32 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The one checksum of the protocol: a 16-bit sum of bytes.
+
+Wired records, wireless command packets and wireless data packets all use it;
+they differ only in which bytes are summed, which the framing module decides.
+"""
+
+ByteString = bytes | bytearray | memoryview
+
+
+def checksum16(data: ByteString) -> int:
+    """Return the sum of ``data`` modulo 65536."""
+    return sum(data) & 0xFFFF
+
+
+def append_checksum(data: ByteString) -> bytes:
+    """Return ``data`` followed by its big-endian 16-bit checksum."""
+    return bytes(data) + checksum16(data).to_bytes(2, 'big')

@@ -1,0 +1,230 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Encoders and decoders of commands and records, driven by the layout table.
+
+Commands are what the host sends (command byte, confirmation bytes,
+arguments); records are what the sensor answers (echo byte and data, without
+the wired checksum, which belongs to the framing). Each direction has an
+encoder and a decoder, so that the driver and the simulated sensor share one
+implementation and every layout can be tested by a round trip.
+"""
+
+import math
+from typing import Any, NamedTuple
+
+from .errors import DecodeError, EncodeError, LengthError, UnknownCommandError
+from .layouts import (
+    BUILT_IN_TEST, CAPTURE_GYRO_BIAS, DEVICE_IDENTIFIER, Field, Layout, LAYOUTS, PING,
+    READ_EEPROM, SET_CONTINUOUS, STOP_CONTINUOUS, TRANSFER_TO_NON_VOLATILE,
+    WRITE_ACCEL_BIAS, WRITE_EEPROM, WRITE_GYRO_BIAS,
+)
+from .records import DeviceIdentifier
+
+_LAYOUT_BY_TYPE: dict[type, Layout] = {
+    layout.record_type: layout for layout in LAYOUTS.values()
+    if layout.record_type is not None and layout.reply is not None
+}
+_INT_RANGES = {'B': 0xFF, 'H': 0xFFFF, 'I': 0xFFFFFFFF}
+
+
+class Command(NamedTuple):
+    """A decoded host command: its byte and its arguments in table order."""
+
+    code: int
+    args: tuple[Any, ...] = ()
+
+    @property
+    def name(self) -> str:
+        """Name of the command in the layout table."""
+        return LAYOUTS[self.code].name
+
+    def arguments(self) -> dict[str, Any]:
+        """Return the arguments by field name."""
+        fields = LAYOUTS[self.code].request
+        return {field.name: value for field, value in zip(fields, self.args, strict=False)}
+
+
+def layout_of(code: int) -> Layout:
+    """Return the layout of a command byte, or raise UnknownCommandError."""
+    try:
+        return LAYOUTS[code]
+    except KeyError:
+        raise UnknownCommandError(f'unknown command byte 0x{code:02X}') from None
+
+
+def _flatten(fields: tuple[Field, ...], values: tuple[Any, ...], what: str) -> list:
+    if len(values) != len(fields):
+        names = ', '.join(f.name for f in fields) or 'no arguments'
+        raise EncodeError(f'{what} takes {names}; got {len(values)} values')
+    flat = []
+    for field, value in zip(fields, values, strict=True):
+        try:
+            items = (value,) if field.count == 1 else tuple(value)
+        except TypeError:
+            raise EncodeError(f'{what}: {field.name} needs {field.count} values') from None
+        if len(items) != field.count:
+            raise EncodeError(f'{what}: {field.name} needs {field.count} values')
+        for item in items:
+            if field.code in _INT_RANGES:
+                if isinstance(item, bool) or not isinstance(item, int) \
+                        or not 0 <= item <= _INT_RANGES[field.code]:
+                    raise EncodeError(
+                        f'{what}: {field.name} must be an integer in '
+                        f'0..{_INT_RANGES[field.code]}, got {item!r}')
+            elif field.code == 'f':
+                if not isinstance(item, (int, float)) or isinstance(item, bool):
+                    raise EncodeError(f'{what}: {field.name} must be a number')
+                if math.isfinite(item) and abs(item) > 3.4028234663852886e38:
+                    raise EncodeError(f'{what}: {field.name} overflows float32')
+            elif field.code == '16s':
+                text = item.encode('latin-1') if isinstance(item, str) else bytes(item)
+                if len(text) != 16:
+                    raise EncodeError(f'{what}: {field.name} must be 16 characters')
+                item = text  # noqa: PLW2901 - the packed form replaces the text
+            flat.append(item)
+    return flat
+
+
+def encode_command(code: int, *args: Any) -> bytes:
+    """Return the command bytes (command byte, confirmation, arguments)."""
+    layout = layout_of(code)
+    flat = _flatten(layout.request, args, layout.name)
+    return bytes((code,)) + layout.confirm + layout.request_struct.pack(*flat)
+
+
+def _group(values: tuple[Any, ...], fields: tuple[Field, ...]) -> tuple:
+    grouped = []
+    index = 0
+    for field in fields:
+        if field.count == 1:
+            grouped.append(values[index])
+        else:
+            grouped.append(tuple(values[index:index + field.count]))
+        index += field.count
+    return tuple(grouped)
+
+
+def decode_command(data: bytes) -> Command:
+    """Decode command bytes as the sensor receives them."""
+    if not data:
+        raise LengthError('empty command')
+    layout = layout_of(data[0])
+    if len(data) != layout.request_size:
+        raise LengthError(
+            f'{layout.name} is {layout.request_size} bytes, got {len(data)}')
+    confirm_end = 1 + len(layout.confirm)
+    if bytes(data[1:confirm_end]) != layout.confirm:
+        raise DecodeError(f'{layout.name}: wrong confirmation bytes')
+    values = layout.request_struct.unpack_from(data, confirm_end)
+    return Command(layout.code, _group(values, layout.request))
+
+
+def record_size(code: int) -> int:
+    """Return the size of a command's reply record (0 when it has none)."""
+    return layout_of(code).record_size
+
+
+def decode_record(data: bytes) -> Any:
+    """
+    Decode a record (echo byte and data, no checksum) into its record type.
+
+    The caller has already matched the size to the echo byte when the record
+    came out of the stream parser; a mismatch here raises LengthError.
+    """
+    layout = LAYOUTS.get(data[0]) if data else None
+    if layout is None or layout.reply_struct is None:
+        raise UnknownCommandError(
+            f'no record starts with 0x{data[0]:02X}' if data else 'empty record')
+    if len(data) != layout.record_size:
+        raise LengthError(
+            f'{layout.name} record is {layout.record_size} bytes, got {len(data)}')
+    return _decode_known(layout, data)
+
+
+def _decode_known(layout: Layout, data: bytes) -> Any:
+    values = layout.reply_struct.unpack_from(data, 1)
+    if layout.record_type is DeviceIdentifier:
+        return DeviceIdentifier(values[0], values[1].decode('latin-1'))
+    return layout.record_type(*[values[p] for p in layout.plan])
+
+
+def encode_record(record: Any) -> bytes:
+    """Encode a record as the sensor sends it (echo byte and data)."""
+    layout = _LAYOUT_BY_TYPE.get(type(record))
+    if layout is None:
+        raise EncodeError(f'{type(record).__name__} is not a record of the protocol')
+    flat = _flatten(layout.reply, tuple(record), layout.name)
+    return bytes((layout.code,)) + layout.reply_struct.pack(*flat)
+
+
+# Builders for the commands the driver uses by name: they read better at the
+# call site than encode_command with a bare code, and check their arguments.
+
+def ping(address: int) -> bytes:
+    """Return the base-station ping for a node address (sent unframed)."""
+    return encode_command(PING, address)
+
+
+def set_continuous(command: int) -> bytes:
+    """Return the 0xC4 request to stream ``command`` (0 stops streaming)."""
+    if command and LAYOUTS.get(command) is None:
+        raise EncodeError(f'0x{command:02X} is not a command that can stream')
+    return encode_command(SET_CONTINUOUS, command)
+
+
+def stop_continuous() -> bytes:
+    """Return 0xFA, the stop that needs no reply."""
+    return encode_command(STOP_CONTINUOUS)
+
+
+def read_eeprom(address: int) -> bytes:
+    """Return the request for the EEPROM word at ``address``."""
+    return encode_command(READ_EEPROM, address)
+
+
+def write_eeprom(address: int, value: int) -> bytes:
+    """Return the request that writes ``value`` to the EEPROM word at ``address``."""
+    return encode_command(WRITE_EEPROM, address, value)
+
+
+def capture_gyro_bias(sampling_time_ms: int) -> bytes:
+    """Return the 0xCD request; the sensor must stay still for that long."""
+    return encode_command(CAPTURE_GYRO_BIAS, sampling_time_ms)
+
+
+def write_accel_bias(bias: tuple[float, float, float]) -> bytes:
+    """Return the 0xC9 request that sets the accelerometer bias (g)."""
+    return encode_command(WRITE_ACCEL_BIAS, tuple(bias))
+
+
+def write_gyro_bias(bias: tuple[float, float, float]) -> bytes:
+    """Return the 0xCA request that sets the gyro bias (rad/s)."""
+    return encode_command(WRITE_GYRO_BIAS, tuple(bias))
+
+
+def transfer_to_non_volatile(quantity: int) -> bytes:
+    """Return the 0xD0 request (1: accel bias, 2: gyro bias)."""
+    return encode_command(TRANSFER_TO_NON_VOLATILE, quantity)
+
+
+def device_identifier(selector: int) -> bytes:
+    """Return the 0xEA request (0 model number, 1 serial, 2 name, 3 options)."""
+    return encode_command(DEVICE_IDENTIFIER, selector)
+
+
+def built_in_test(config: int) -> bytes:
+    """Return the 0xFB request with its configuration bits."""
+    return encode_command(BUILT_IN_TEST, config)

@@ -1,0 +1,206 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The command table: for each command byte, the request and reply layouts.
+
+Everything else in the codec is driven by this one table, in both
+directions: the driver encodes requests and decodes replies with it, the
+simulated sensor decodes requests and encodes replies with it, so the two
+cannot disagree about a single byte. Sizes in protocol.md are checked
+against the table when the module loads.
+"""
+
+import struct
+from typing import NamedTuple
+
+from . import records as r
+
+
+class Field(NamedTuple):
+    """One named field: a struct code for one element and how many there are."""
+
+    name: str
+    code: str
+    count: int = 1
+
+
+class Layout(NamedTuple):
+    """Request and reply layout of one command (all derived sizes included)."""
+
+    code: int
+    name: str
+    confirm: bytes
+    request: tuple[Field, ...]
+    reply: tuple[Field, ...] | None
+    record_type: type | None
+    request_struct: struct.Struct
+    reply_struct: struct.Struct | None
+    #: Size of the request: command byte, confirmation bytes and arguments.
+    request_size: int
+    #: Size of the reply record inside a wireless packet (echo + data).
+    record_size: int
+    #: Size of the wired reply (record + 2-byte checksum); 0 when no reply.
+    wired_size: int
+    #: Where each record field sits in the unpacked tuple (index or slice).
+    plan: tuple[object, ...]
+
+
+_V3 = 3
+_M9 = 9
+_TIMER = Field('timer', 'I')
+
+
+def _struct(fields: tuple[Field, ...]) -> struct.Struct:
+    return struct.Struct('>' + ''.join(f.code * f.count for f in fields))
+
+
+def _plan(fields: tuple[Field, ...]) -> tuple[object, ...]:
+    plan = []
+    index = 0
+    for field in fields:
+        plan.append(index if field.count == 1 else slice(index, index + field.count))
+        index += field.count
+    return tuple(plan)
+
+
+def _layout(code: int, name: str, reply: tuple[Field, ...] | None,
+            record_type: type | None, confirm: bytes = b'',
+            request: tuple[Field, ...] = ()) -> Layout:
+    request_struct = _struct(request)
+    reply_struct = _struct(reply) if reply is not None else None
+    record_size = 1 + reply_struct.size if reply_struct is not None else 0
+    return Layout(
+        code=code, name=name, confirm=confirm, request=request, reply=reply,
+        record_type=record_type, request_struct=request_struct,
+        reply_struct=reply_struct,
+        request_size=1 + len(confirm) + request_struct.size,
+        record_size=record_size,
+        wired_size=record_size + 2 if record_size else 0,
+        plan=_plan(reply) if reply is not None else (),
+    )
+
+
+_ACCEL = Field('accel', 'f', _V3)
+_RATE = Field('angular_rate', 'f', _V3)
+_MAG = Field('mag', 'f', _V3)
+_MATRIX = Field('matrix', 'f', _M9)
+_BIAS = Field('bias', 'f', _V3)
+_CONFIRM = b'\xC1\x29'
+
+#: Command codes with a name, for readable call sites.
+PING = 0x02
+RAW_ACCEL_ANG_RATE = 0xC1
+ACCEL_ANG_RATE = 0xC2
+DELTA_ANGLE_VELOCITY = 0xC3
+SET_CONTINUOUS = 0xC4
+ORIENTATION_MATRIX = 0xC5
+ORIENTATION_UPDATE_MATRIX = 0xC6
+MAGNETOMETER = 0xC7
+ACCEL_ANG_RATE_ORIENTATION = 0xC8
+WRITE_ACCEL_BIAS = 0xC9
+WRITE_GYRO_BIAS = 0xCA
+ACCEL_ANG_RATE_MAG = 0xCB
+ACCEL_ANG_RATE_MAG_ORIENTATION = 0xCC
+CAPTURE_GYRO_BIAS = 0xCD
+EULER_ANGLES = 0xCE
+EULER_ANGLES_ANG_RATE = 0xCF
+TRANSFER_TO_NON_VOLATILE = 0xD0
+TEMPERATURES = 0xD1
+STABILISED_ACCEL_ANG_RATE_MAG = 0xD2
+DELTA_ANGLE_VELOCITY_MAG = 0xD3
+WRITE_EEPROM = 0xE4
+READ_EEPROM = 0xE5
+FIRMWARE_VERSION = 0xE9
+DEVICE_IDENTIFIER = 0xEA
+STOP_CONTINUOUS = 0xFA
+BUILT_IN_TEST = 0xFB
+
+#: Every command of protocol.md, by command byte.
+LAYOUTS: dict[int, Layout] = {layout.code: layout for layout in (
+    # Ping is a base-station exchange: its one-byte answer is neither an
+    # echoed record nor checksummed, so it has no record layout here.
+    _layout(PING, 'wireless_ping', None, r.PingReply, request=(Field('address', 'H'),)),
+    _layout(RAW_ACCEL_ANG_RATE, 'raw_accel_ang_rate',
+            (Field('accel_raw', 'f', _V3), Field('angular_rate_raw', 'f', _V3), _TIMER),
+            r.RawAccelAngRate),
+    _layout(ACCEL_ANG_RATE, 'accel_ang_rate', (_ACCEL, _RATE, _TIMER), r.AccelAngRate),
+    _layout(DELTA_ANGLE_VELOCITY, 'delta_angle_velocity',
+            (Field('delta_angle', 'f', _V3), Field('delta_velocity', 'f', _V3), _TIMER),
+            r.DeltaAngleVelocity),
+    _layout(SET_CONTINUOUS, 'set_continuous_mode', (Field('command', 'B'), _TIMER),
+            r.ContinuousModeReply, _CONFIRM, (Field('command', 'B'),)),
+    _layout(ORIENTATION_MATRIX, 'orientation_matrix', (_MATRIX, _TIMER), r.OrientationMatrix),
+    _layout(ORIENTATION_UPDATE_MATRIX, 'orientation_update_matrix', (_MATRIX, _TIMER),
+            r.OrientationUpdateMatrix),
+    _layout(MAGNETOMETER, 'magnetometer', (_MAG, _TIMER), r.Magnetometer),
+    _layout(ACCEL_ANG_RATE_ORIENTATION, 'accel_ang_rate_orientation',
+            (_ACCEL, _RATE, _MATRIX, _TIMER), r.AccelAngRateOrientation),
+    _layout(WRITE_ACCEL_BIAS, 'write_accel_bias', (_BIAS, _TIMER), r.AccelBias,
+            b'\xB7\x44', (_BIAS,)),
+    _layout(WRITE_GYRO_BIAS, 'write_gyro_bias', (_BIAS, _TIMER), r.GyroBias,
+            b'\x12\xA5', (_BIAS,)),
+    _layout(ACCEL_ANG_RATE_MAG, 'accel_ang_rate_mag', (_ACCEL, _RATE, _MAG, _TIMER),
+            r.AccelAngRateMag),
+    _layout(ACCEL_ANG_RATE_MAG_ORIENTATION, 'accel_ang_rate_mag_orientation',
+            (_ACCEL, _RATE, _MAG, _MATRIX, _TIMER), r.AccelAngRateMagOrientation),
+    _layout(CAPTURE_GYRO_BIAS, 'capture_gyro_bias', (_BIAS, _TIMER), r.CapturedGyroBias,
+            _CONFIRM, (Field('sampling_time_ms', 'H'),)),
+    _layout(EULER_ANGLES, 'euler_angles',
+            (Field('roll', 'f'), Field('pitch', 'f'), Field('yaw', 'f'), _TIMER),
+            r.EulerAngles),
+    _layout(EULER_ANGLES_ANG_RATE, 'euler_angles_ang_rate',
+            (Field('roll', 'f'), Field('pitch', 'f'), Field('yaw', 'f'), _RATE, _TIMER),
+            r.EulerAnglesAngRate),
+    _layout(TRANSFER_TO_NON_VOLATILE, 'transfer_to_non_volatile',
+            (Field('quantity', 'H'), _TIMER), r.TransferToNonVolatile,
+            _CONFIRM, (Field('quantity', 'H'),)),
+    _layout(TEMPERATURES, 'temperatures',
+            (Field('accel_code', 'H'), Field('gyro_codes', 'H', _V3), _TIMER), r.Temperatures),
+    _layout(STABILISED_ACCEL_ANG_RATE_MAG, 'stabilised_accel_ang_rate_mag',
+            (_ACCEL, _RATE, _MAG, _TIMER), r.StabilisedAccelAngRateMag),
+    _layout(DELTA_ANGLE_VELOCITY_MAG, 'delta_angle_velocity_mag',
+            (Field('delta_angle', 'f', _V3), Field('delta_velocity', 'f', _V3), _MAG, _TIMER),
+            r.DeltaAngleVelocityMag),
+    _layout(WRITE_EEPROM, 'write_eeprom_word', (Field('value', 'H'),), r.EepromWritten,
+            _CONFIRM + b'\x00', (Field('address', 'H'), Field('value', 'H'))),
+    _layout(READ_EEPROM, 'read_eeprom_word', (Field('value', 'H'),), r.EepromWord,
+            b'\x00', (Field('address', 'H'),)),
+    _layout(FIRMWARE_VERSION, 'firmware_version', (Field('version', 'I'),), r.FirmwareVersion),
+    _layout(DEVICE_IDENTIFIER, 'device_identifier',
+            (Field('selector', 'B'), Field('text', '16s')), r.DeviceIdentifier,
+            request=(Field('selector', 'B'),)),
+    _layout(STOP_CONTINUOUS, 'stop_continuous_mode', None, None),
+    # protocol.md (!): the manual says 8 bytes but lists echo, config and
+    # checksum; we follow the listed fields, 4 bytes wired.
+    _layout(BUILT_IN_TEST, 'built_in_test', (Field('config', 'B'),), r.BuiltInTest,
+            _CONFIRM, (Field('config', 'B'),)),
+)}
+
+#: Wired reply sizes as protocol.md lists them, checked against the table.
+_PROTOCOL_WIRED_SIZES = {
+    0xC1: 31, 0xC2: 31, 0xC3: 31, 0xC4: 8, 0xC5: 43, 0xC6: 43, 0xC7: 19, 0xC8: 67,
+    0xC9: 19, 0xCA: 19, 0xCB: 43, 0xCC: 79, 0xCD: 19, 0xCE: 19, 0xCF: 31, 0xD0: 9,
+    0xD1: 15, 0xD2: 43, 0xD3: 43, 0xE4: 5, 0xE5: 5, 0xE9: 7, 0xEA: 20, 0xFA: 0, 0xFB: 4,
+}
+for _code, _size in _PROTOCOL_WIRED_SIZES.items():
+    if LAYOUTS[_code].wired_size != _size:  # pragma: no cover - a table typo
+        raise AssertionError(f'layout of 0x{_code:02X} disagrees with protocol.md')
+
+#: Commands whose replies are framed records: echo byte -> record size.
+RECORD_SIZES: dict[int, int] = {
+    code: layout.record_size for code, layout in LAYOUTS.items() if layout.record_size
+}
+#: Largest record, which bounds every wireless data packet.
+MAX_RECORD_SIZE = max(RECORD_SIZES.values())

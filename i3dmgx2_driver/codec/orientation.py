@@ -1,0 +1,150 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Orientation: Shepperd's matrix-to-quaternion method and the two conventions.
+
+The device's matrix M maps earth (north-east-down) coordinates into sensor
+(x forward, y right, z down) coordinates, so the sensor's attitude in the
+earth frame is M transposed. ROS (REP-103) wants east-north-up and x forward,
+y left, z up; both changes of axes are fixed permutations with sign flips,
+applied on each side of the attitude:
+
+    R_enu_flu = P * M^T * D,   P = [[0, 1, 0], [1, 0, 0], [0, 0, -1]],
+                               D = diag(1, -1, -1).
+
+Pure Python on 9-tuples, so the codec needs no numpy; the node uses these
+same functions, and the tests compare them with scipy.
+"""
+
+from collections.abc import Sequence
+import math
+from typing import NamedTuple
+
+Vector3 = tuple[float, float, float]
+Matrix3 = tuple[float, float, float, float, float, float, float, float, float]
+
+#: The two frame conventions the driver can publish in.
+ENU = 'enu'
+NED = 'ned'
+CONVENTIONS = (ENU, NED)
+
+
+class Quaternion(NamedTuple):
+    """A unit quaternion in ROS order (x, y, z, w), with w >= 0."""
+
+    x: float
+    y: float
+    z: float
+    w: float
+
+
+def shepperd(m: Sequence[float]) -> Quaternion:
+    """
+    Convert a row-major 3x3 rotation matrix to a unit quaternion.
+
+    Shepperd (1978) takes the square root of whichever of the trace and the
+    three diagonal terms is largest, so the divisor is never below 1/2 and the
+    result stays accurate for every rotation, 180 degrees included. The result
+    is normalised because real matrices are float32 and only close to
+    orthonormal, and w is made non-negative so that equal rotations give equal
+    quaternions.
+    """
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
+    trace = m00 + m11 + m22
+    if trace >= m00 and trace >= m11 and trace >= m22:
+        s = 2.0 * math.sqrt(max(1.0 + trace, 0.0)) or math.nan
+        w, x, y, z = 0.25 * s, (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s
+    elif m00 >= m11 and m00 >= m22:
+        s = 2.0 * math.sqrt(max(1.0 + m00 - m11 - m22, 0.0)) or math.nan
+        w, x, y, z = (m21 - m12) / s, 0.25 * s, (m01 + m10) / s, (m02 + m20) / s
+    elif m11 >= m22:
+        s = 2.0 * math.sqrt(max(1.0 - m00 + m11 - m22, 0.0)) or math.nan
+        w, x, y, z = (m02 - m20) / s, (m01 + m10) / s, 0.25 * s, (m12 + m21) / s
+    else:
+        s = 2.0 * math.sqrt(max(1.0 - m00 - m11 + m22, 0.0)) or math.nan
+        w, x, y, z = (m10 - m01) / s, (m02 + m20) / s, (m12 + m21) / s, 0.25 * s
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    if not 0.0 < norm < math.inf:
+        # Garbage in (NaN, infinities, a zero matrix): say so, never raise.
+        return Quaternion(math.nan, math.nan, math.nan, math.nan)
+    if w < 0.0:
+        norm = -norm
+    return Quaternion(x / norm, y / norm, z / norm, w / norm)
+
+
+def transpose(m: Sequence[float]) -> Matrix3:
+    """Return the transpose of a row-major 3x3 matrix."""
+    return (m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8])
+
+
+def attitude_ned(m: Sequence[float]) -> Matrix3:
+    """Sensor attitude in the device's own convention: NED world, FRD body."""
+    return transpose(m)
+
+
+def attitude_enu(m: Sequence[float]) -> Matrix3:
+    """
+    Sensor attitude per REP-103: ENU world, FLU body, as P * M^T * D.
+
+    With A = M^T (row-major a0..a8), swapping the first two rows and negating
+    the third gives P * A; negating the last two columns then applies D.
+    """
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = transpose(m)
+    return (a3, -a4, -a5,
+            a0, -a1, -a2,
+            -a6, a7, a8)
+
+
+def attitude(m: Sequence[float], convention: str) -> Matrix3:
+    """Sensor attitude in the named convention (``'enu'`` or ``'ned'``)."""
+    if convention == ENU:
+        return attitude_enu(m)
+    if convention == NED:
+        return attitude_ned(m)
+    raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
+
+
+def orientation(m: Sequence[float], convention: str) -> Quaternion:
+    """Quaternion of the sensor attitude in the named convention."""
+    return shepperd(attitude(m, convention))
+
+
+def body_vector(v: Sequence[float], convention: str) -> Vector3:
+    """
+    Express a body-frame vector (accel, rate, field) in the convention's body.
+
+    FRD to FLU negates y and z; NED keeps the device's axes.
+    """
+    if convention == ENU:
+        return (v[0], -v[1], -v[2])
+    if convention == NED:
+        return (v[0], v[1], v[2])
+    raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
+
+
+def matrix_from_quaternion(q: Quaternion) -> Matrix3:
+    """Return the rotation matrix of a unit quaternion (row-major)."""
+    x, y, z, w = q
+    return (1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+            2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+            2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y))
+
+
+def euler_from_matrix(m: Sequence[float]) -> Vector3:
+    """Roll, pitch, yaw (rad) from M as protocol.md defines them."""
+    pitch = math.asin(max(-1.0, min(1.0, -m[2])))
+    roll = math.atan2(m[5], m[8])
+    yaw = math.atan2(m[1], m[0])
+    return (roll, pitch, yaw)

@@ -1,0 +1,386 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Incremental stream parsers: bytes in, frames out, whatever the chunking.
+
+``SensorStreamParser`` reads what the base station (or a wired sensor) sends
+to the host; ``CommandStreamParser`` reads what the host sends to the sensor,
+for the simulated sensor. Both keep partial frames between calls, trust a
+length byte only after checking it against the size the command table gives
+for the frame's echo byte, and on any mismatch move forward exactly one byte,
+so that a corrupted length or checksum never swallows the good frames behind
+it. Neither raises on bad input: they count what they skipped and why.
+"""
+
+from typing import Any, NamedTuple
+
+from .framing import (
+    ACK, COMMAND_FLAGS, CommandPacket, DATA_FLAGS, DATA_TRAILER_SIZE, DataPacket,
+    HEADER_SIZE, NACK,
+)
+from .layouts import DEVICE_IDENTIFIER, LAYOUTS, MAX_RECORD_SIZE, PING
+from .records import DeviceIdentifier, PingReply
+
+ByteString = bytes | bytearray | memoryview
+
+#: Largest frame either parser ever waits for; bounds the carried-over buffer.
+MAX_FRAME_SIZE = HEADER_SIZE + MAX_RECORD_SIZE + DATA_TRAILER_SIZE
+
+
+class Ack(NamedTuple):
+    """The base station accepted a command packet (byte 0xAA)."""
+
+    # A field, so that an Ack never compares equal to a Nack (two empty
+    # tuples would): events are compared by value in callers and tests.
+    byte: int = ACK
+
+
+class Nack(NamedTuple):
+    """The base station rejected a command packet (byte 0x21)."""
+
+    byte: int = NACK
+
+
+#: The two base-station answers, as single immutable instances.
+ACK_EVENT = Ack()
+NACK_EVENT = Nack()
+
+Event = DataPacket | Ack | Nack | PingReply
+
+
+class ParserStats:
+    """Counters of what a parser saw, for diagnostics and tests."""
+
+    __slots__ = (
+        'acks',
+        'bytes_in',
+        'bytes_skipped',
+        'checksum_failures',
+        'foreign_frames',
+        'good_frames',
+        'length_failures',
+        'nacks',
+    )
+
+    def __init__(self) -> None:
+        self.good_frames = 0
+        self.checksum_failures = 0
+        self.length_failures = 0
+        self.bytes_skipped = 0
+        self.foreign_frames = 0
+        self.acks = 0
+        self.nacks = 0
+        self.bytes_in = 0
+
+    def as_dict(self) -> dict:
+        """Return the counters by name."""
+        return {name: getattr(self, name) for name in self.__slots__}
+
+    def __repr__(self) -> str:
+        fields = ', '.join(f'{k}={v}' for k, v in self.as_dict().items())
+        return f'ParserStats({fields})'
+
+
+def _decoders() -> dict:
+    """Map each echo byte to (record size, unpack, record type, plan)."""
+    table = {}
+    for code, layout in LAYOUTS.items():
+        if layout.reply_struct is not None:
+            table[code] = (layout.record_size, layout.reply_struct.unpack_from,
+                           layout.record_type, layout.plan)
+    return table
+
+
+_DECODERS = _decoders()
+
+
+def _decode(buf: bytearray, start: int, code: int) -> Any:
+    _, unpack, record_type, plan = _DECODERS[code]
+    values = unpack(buf, start + 1)
+    if code == DEVICE_IDENTIFIER:
+        return DeviceIdentifier(values[0], values[1].decode('latin-1'))
+    return record_type(*[values[p] for p in plan])
+
+
+class SensorStreamParser:
+    """
+    Turn the byte stream from a base station or wired sensor into events.
+
+    ``wireless`` selects the framing. With an ``address``, wireless packets
+    from other nodes are counted and dropped. Call :meth:`expect_ping` before
+    a ping so that its one-byte answer is recognised, and :meth:`idle` when
+    the line has gone quiet, so that a lone trailing 0xAA is taken as an ACK
+    rather than the start of a packet that never comes.
+    """
+
+    def __init__(self, address: int | None = None, wireless: bool = True) -> None:
+        self.address = address
+        self.wireless = wireless
+        self.stats = ParserStats()
+        self._buf = bytearray()
+        self._ping_pending = False
+
+    def reset(self) -> None:
+        """Forget any partial frame (after a reconnect); keep the counters."""
+        self.stats.bytes_skipped += len(self._buf)
+        self._buf.clear()
+        self._ping_pending = False
+
+    def expect_ping(self) -> None:
+        """Take the next lone 0x02 or 0x21 as the answer to a ping."""
+        self._ping_pending = True
+
+    @property
+    def pending(self) -> int:
+        """Bytes held back waiting for the rest of a frame."""
+        return len(self._buf)
+
+    def idle(self) -> list[Event]:
+        """Resolve a lone trailing 0xAA as an ACK once the line is quiet."""
+        buf = self._buf
+        if self.wireless and len(buf) == 1 and buf[0] == ACK:
+            buf.clear()
+            self.stats.acks += 1
+            return [ACK_EVENT]
+        return []
+
+    def feed(self, chunk: ByteString) -> list[Event]:
+        """Add bytes from the port; return the complete events, in order."""
+        buf = self._buf
+        buf += chunk
+        self.stats.bytes_in += len(chunk)
+        if self.wireless:
+            consumed, events = self._parse_wireless(buf)
+        else:
+            consumed, events = self._parse_wired(buf)
+        del buf[:consumed]
+        if len(buf) > MAX_FRAME_SIZE:  # pragma: no cover - cannot happen by design
+            self.stats.bytes_skipped += len(buf)
+            buf.clear()
+        return events
+
+    def _lone_byte(self, byte: int, out: list[Event]) -> bool:
+        """Handle a single-byte answer at a frame boundary; True if it was one."""
+        stats = self.stats
+        if self._ping_pending and byte in (PING, NACK):
+            self._ping_pending = False
+            out.append(PingReply(byte == PING))
+            return True
+        if byte == NACK and self.wireless:
+            stats.nacks += 1
+            out.append(NACK_EVENT)
+            return True
+        return False
+
+    def _skip_garbage(self, buf: bytearray, i: int, n: int) -> int:
+        """Return where the next possible frame starts after position ``i``."""
+        nxt = n
+        for marker in self._markers():
+            j = buf.find(marker, i + 1)
+            if 0 <= j < nxt:
+                nxt = j
+        self.stats.bytes_skipped += nxt - i
+        return nxt
+
+    def _markers(self) -> tuple:
+        if not self.wireless:
+            return ()
+        markers = (b'\xaa', b'\x21')
+        return (*markers, b'\x02') if self._ping_pending else markers
+
+    def _parse_wireless(self, buf: bytearray):
+        out: list[Event] = []
+        stats = self.stats
+        decoders = _DECODERS
+        address = self.address
+        n = len(buf)
+        i = 0
+        while i < n:
+            if buf[i] != ACK:
+                if self._lone_byte(buf[i], out):
+                    i += 1
+                else:
+                    i = self._skip_garbage(buf, i, n)
+                continue
+            if n - i < 2:
+                break
+            if buf[i + 1] != DATA_FLAGS:
+                stats.acks += 1
+                out.append(ACK_EVENT)
+                i += 1
+                continue
+            if n - i < HEADER_SIZE + 1:
+                break
+            entry = decoders.get(buf[i + HEADER_SIZE])
+            if entry is None or buf[i + 5] != entry[0] + 1 or buf[i + 2] or buf[i + 6]:
+                stats.length_failures += 1
+                stats.bytes_skipped += 1
+                i += 1
+                continue
+            end = i + HEADER_SIZE + entry[0]
+            if end + DATA_TRAILER_SIZE > n:
+                break
+            if (sum(buf[i + 1:end]) & 0xFFFF) != ((buf[end + 2] << 8) | buf[end + 3]):
+                stats.checksum_failures += 1
+                stats.bytes_skipped += 1
+                i += 1
+                continue
+            node = (buf[i + 3] << 8) | buf[i + 4]
+            if address is not None and node != address:
+                stats.foreign_frames += 1
+            else:
+                stats.good_frames += 1
+                out.append(DataPacket(node, _decode(buf, i + HEADER_SIZE, buf[i + HEADER_SIZE]),
+                                      buf[end], buf[end + 1]))
+            i = end + DATA_TRAILER_SIZE
+        return i, out
+
+    def _parse_wired(self, buf: bytearray):
+        out: list[Event] = []
+        stats = self.stats
+        decoders = _DECODERS
+        n = len(buf)
+        i = 0
+        while i < n:
+            code = buf[i]
+            entry = decoders.get(code)
+            if entry is None:
+                if self._lone_byte(code, out):
+                    i += 1
+                else:
+                    stats.bytes_skipped += 1
+                    i += 1
+                continue
+            end = i + entry[0]
+            if end + 2 > n:
+                break
+            if (sum(buf[i:end]) & 0xFFFF) != ((buf[end] << 8) | buf[end + 1]):
+                stats.checksum_failures += 1
+                stats.bytes_skipped += 1
+                i += 1
+                continue
+            stats.good_frames += 1
+            out.append(DataPacket(None, _decode(buf, i, code), None, None))
+            i = end + 2
+        return i, out
+
+
+class RejectedPacket(NamedTuple):
+    """A command packet the base station must NACK, and why."""
+
+    reason: str
+
+
+class RawCommand(NamedTuple):
+    """An unframed command: a ping to the base station, or a wired command."""
+
+    command: bytes
+
+
+HostEvent = CommandPacket | RejectedPacket | RawCommand
+
+_MAX_REQUEST_SIZE = max(layout.request_size for layout in LAYOUTS.values())
+
+
+class CommandStreamParser:
+    """
+    Turn the bytes a host sends into commands, as a base station sees them.
+
+    Wireless: command packets (checked: header, length against the command
+    table, checksum) and unframed pings. Wired: bare command bytes, whose
+    size the command table gives. Used by the simulated sensor.
+
+    A bad packet is reported once, as a base station NACKs it once: while
+    the parser steps through the rest of the bytes that packet spans, it still
+    finds any valid packet there, but it reports no further rejections and
+    takes no 0x02 for an unframed ping (a length byte or checksum byte 0x02
+    would otherwise start a false ping that swallows the next packet's start).
+    """
+
+    def __init__(self, wireless: bool = True) -> None:
+        self.wireless = wireless
+        self.stats = ParserStats()
+        self._buf = bytearray()
+        # Bytes still to come of the last rejected packet (see the class doc).
+        self._quiet = 0
+
+    def feed(self, chunk: ByteString) -> list[HostEvent]:
+        """Add bytes from the host; return the complete commands, in order."""
+        buf = self._buf
+        buf += chunk
+        self.stats.bytes_in += len(chunk)
+        out: list[HostEvent] = []
+        n = len(buf)
+        i = 0
+        while i < n:
+            step = self._frame_at(buf, i, n, out)
+            if step == 0:
+                break
+            i += step
+            if self._quiet:
+                self._quiet = max(0, self._quiet - step)
+        del buf[:i]
+        return out
+
+    def _reject(self, out: list[HostEvent], reason: str, extent: int) -> int:
+        """Count a bad packet, report it unless inside the last one; skip one byte."""
+        self.stats.bytes_skipped += 1
+        if not self._quiet:
+            out.append(RejectedPacket(reason))
+        self._quiet = max(self._quiet, extent)
+        return 1
+
+    def _frame_at(self, buf: bytearray, i: int, n: int, out: list[HostEvent]) -> int:
+        """Return how many bytes the frame at ``i`` used (0: wait for more)."""
+        stats = self.stats
+        code = buf[i]
+        if self.wireless and code == ACK:
+            if n - i < HEADER_SIZE + 1:
+                return 0
+            layout = LAYOUTS.get(buf[i + HEADER_SIZE])
+            size = buf[i + 5] - 1
+            if buf[i + 1] != COMMAND_FLAGS or buf[i + 2] or buf[i + 6] or layout is None \
+                    or layout.request_size != size:
+                stats.length_failures += 1
+                # Its extent: the longer of what its length byte says (at most
+                # the longest command of the table) and what its command needs.
+                size = max(0, min(size, _MAX_REQUEST_SIZE))
+                if layout is not None:
+                    size = max(size, layout.request_size)
+                return self._reject(out, 'bad header or length', HEADER_SIZE + size + 2)
+            end = i + HEADER_SIZE + size
+            if end + 2 > n:
+                return 0
+            if (sum(buf[i + 1:end]) & 0xFFFF) != ((buf[end] << 8) | buf[end + 1]):
+                stats.checksum_failures += 1
+                return self._reject(out, 'bad checksum', end + 2 - i)
+            stats.good_frames += 1
+            self._quiet = 0
+            out.append(CommandPacket((buf[i + 3] << 8) | buf[i + 4],
+                                     bytes(buf[i + HEADER_SIZE:end])))
+            return end + 2 - i
+        layout = LAYOUTS.get(code)
+        if layout is None or (self.wireless and (code != PING or self._quiet)):
+            stats.bytes_skipped += 1
+            return 1
+        if n - i < layout.request_size:
+            return 0
+        command = bytes(buf[i:i + layout.request_size])
+        if command[1:1 + len(layout.confirm)] != layout.confirm:
+            stats.bytes_skipped += 1
+            return 1
+        stats.good_frames += 1
+        out.append(RawCommand(command))
+        return layout.request_size

@@ -1,0 +1,22 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The device layer: the serial port and the protocol dialogue, no ROS.
+
+``port`` opens the serial port and reads what is there as soon as it is
+there; ``link`` runs the reader thread and the request/reply exchanges;
+``supervisor`` keeps a link alive through stalls and unplugs; ``clock``
+turns device timer ticks into host timestamps.
+"""

@@ -1,0 +1,131 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Device-clock timestamps: the host time at which each sample was taken.
+
+The host's read time of a packet is the sample time plus a delay that is at
+least the time the packet takes on the wire and at most that plus whatever
+the USB adapter, the kernel and the scheduler add (milliseconds, random).
+The device timer, by contrast, ticks evenly (±0.01 %) at the moment of each
+sample. So the stamp is the device time mapped onto the host clock by a line
+fitted to the *lower envelope* of (host read time - device time): the
+minimum delay over each one-second window is nearly constant, the mean is
+not. The slope of that line is the device clock's drift.
+
+Usable from the very first message (the first stamp is the read time less
+the wire time), it only gets better, it never runs backwards, it never stamps
+a sample later than it was read, and it starts afresh when told the device
+was reset or reconnected.
+"""
+
+from collections import deque
+
+from ..codec.records import TICKS_PER_SECOND
+
+
+class DeviceClock:
+    """
+    Map unwrapped device ticks to host seconds (offset and drift estimate).
+
+    ``window`` is the span of device time (s) that each envelope point
+    covers, ``history`` how many such points the line is fitted to.
+    """
+
+    def __init__(self, window: float = 1.0, history: int = 60) -> None:
+        self.window = window
+        self.history = history
+        self.anchors = 0
+        self._points: deque[tuple[float, float]] = deque(maxlen=history)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the estimate: the device restarted or the link was reopened."""
+        self._points.clear()
+        self._bucket: int | None = None
+        self._bucket_min: tuple[float, float] = (0.0, 0.0)
+        self._origin: float | None = None
+        self._offset = 0.0
+        self._drift = 0.0
+        self._last_stamp = float('-inf')
+        self.samples = 0
+        self.anchors += 1
+
+    @property
+    def offset(self) -> float:
+        """Host time minus device time at the device-time origin (s)."""
+        return self._offset
+
+    @property
+    def drift_ppm(self) -> float:
+        """How much faster the host clock runs than the device's, in ppm."""
+        return self._drift * 1e6
+
+    def stamp(self, ticks: int, host_time: float, wire_time: float = 0.0) -> float:
+        """
+        Return the host time (s) at which the sample with ``ticks`` was taken.
+
+        ``host_time`` is when its last byte was read, ``wire_time`` how long
+        the packet takes on the line (it cannot have been sampled later than
+        ``host_time - wire_time``).
+        """
+        device = ticks / TICKS_PER_SECOND
+        latest = host_time - wire_time
+        if self._origin is None:
+            self._origin = device
+        t = device - self._origin
+        self._add(t, latest - device)
+        stamp = device + self._offset + self._drift * t
+        if stamp > latest:
+            # The line says this sample was taken after it was read: the
+            # envelope is too high (first samples, or the delay just shrank).
+            self._offset -= stamp - latest
+            stamp = latest
+        if stamp <= self._last_stamp:
+            stamp = self._last_stamp + 1e-9
+        self._last_stamp = stamp
+        self.samples += 1
+        return stamp
+
+    def _add(self, t: float, excess: float) -> None:
+        bucket = int(t // self.window)
+        if bucket != self._bucket:
+            if self._bucket is not None:
+                self._points.append(self._bucket_min)
+                self._fit()
+            self._bucket = bucket
+            self._bucket_min = (t, excess)
+        elif excess < self._bucket_min[1]:
+            self._bucket_min = (t, excess)
+        # Until there is a line, the running minimum is the best offset.
+        if len(self._points) < 2 and (
+                self.samples == 0 or excess < self._offset + self._drift * t):
+            self._offset = excess - self._drift * t
+
+    def _fit(self) -> None:
+        points = self._points
+        n = len(points)
+        if n < 2:
+            return
+        mean_t = sum(p[0] for p in points) / n
+        mean_e = sum(p[1] for p in points) / n
+        var = sum((p[0] - mean_t) ** 2 for p in points)
+        if var <= 0.0:
+            return
+        slope = sum((p[0] - mean_t) * (p[1] - mean_e) for p in points) / var
+        intercept = mean_e - slope * mean_t
+        # Shift the line down so that no envelope point lies below it.
+        lowest = min(p[1] - (intercept + slope * p[0]) for p in points)
+        self._drift = slope
+        self._offset = intercept + min(lowest, 0.0)

@@ -1,0 +1,254 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+One connection to the device: the reader thread and request/reply exchanges.
+
+A single thread reads the port, feeds the parser and hands every record to
+the consumer the moment it is complete: no queue, no executor in between, so
+nothing else can delay a sample. Requests (polled records, EEPROM, identity,
+continuous mode) are made from another thread: they write a command packet
+and wait for the reader to see the reply, the base station's ACK or NACK, or
+nothing, with a timeout and bounded retries, because the radio loses
+commands both ways.
+"""
+
+from collections.abc import Callable
+import threading
+import time
+from typing import Any, NamedTuple
+
+from .port import PortDisconnected, SerialPort
+from ..codec import commands, layouts
+from ..codec.framing import DataPacket, encode_command_packet
+from ..codec.records import PingReply
+from ..codec.stream import Ack, Nack, SensorStreamParser
+
+#: Called from the reader thread with each data packet and its read time.
+RecordCallback = Callable[[DataPacket, float], None]
+
+_CODE_OF_TYPE = {layout.record_type: code for code, layout in layouts.LAYOUTS.items()
+                 if layout.record_type is not None}
+
+
+class DeviceTimeout(Exception):
+    """A request got no reply after every retry."""
+
+
+class DeviceNack(DeviceTimeout):
+    """The base station rejected a request on every try."""
+
+
+class RadioStats(NamedTuple):
+    """Latest, lowest and mean LQI and RSSI of the packets received."""
+
+    lqi: int
+    rssi: int
+    lqi_min: int
+    rssi_min: int
+    lqi_mean: float
+    rssi_mean: float
+
+
+class _Pending:
+    """A request waiting for its reply, filled in by the reader thread."""
+
+    def __init__(self, code: int | None) -> None:
+        self.code = code
+        self.done = threading.Event()
+        self.reply: Any = None
+        self.acked = threading.Event()
+        self.nacked = threading.Event()
+
+
+class DeviceLink:
+    """
+    The reader thread and the exchanges of one open port.
+
+    ``address`` selects the sensor behind a base station; ``wireless=False``
+    speaks to a wired sensor (no packets, no ACKs). ``on_record`` receives
+    every data packet not claimed by a pending request.
+    """
+
+    def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
+                 wireless: bool = True, read_timeout: float = 0.2) -> None:
+        self.port = port
+        self.address = address
+        self.wireless = wireless
+        self.parser = SensorStreamParser(address=address if wireless else None,
+                                         wireless=wireless)
+        self._on_record = on_record
+        self._read_timeout = read_timeout
+        self._pending: _Pending | None = None
+        self._lock = threading.Lock()
+        self._write_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.disconnected = threading.Event()
+        self.error: str | None = None
+        self.last_data_time = 0.0
+        self.records = 0
+        self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
+
+    # -- reader thread -------------------------------------------------
+
+    def start(self) -> None:
+        """Start the reader thread."""
+        self._thread = threading.Thread(target=self._run, name='gx2-reader', daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the reader thread and wait for it (a read times out quickly)."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+
+    def abort(self) -> None:
+        """Make the reader and any waiting request give up (driver shutdown)."""
+        self._stop.set()
+        self._wake_pending()
+
+    def _run(self) -> None:
+        parser = self.parser
+        read = self.port.read_some
+        while not self._stop.is_set():
+            timeout = 0.02 if parser.pending == 1 else self._read_timeout
+            try:
+                data = read(timeout)
+            except PortDisconnected as exc:
+                self.error = str(exc)
+                self.disconnected.set()
+                self._wake_pending()
+                return
+            now = time.time()
+            events = parser.feed(data) if data else parser.idle()
+            for event in events:
+                self._dispatch(event, now)
+
+    def _dispatch(self, event: Any, now: float) -> None:
+        if isinstance(event, DataPacket):
+            self.last_data_time = now
+            if event.lqi is not None:
+                self._note_radio(event.lqi, event.rssi)
+            pending = self._pending
+            code = _CODE_OF_TYPE.get(type(event.record))
+            if pending is not None and pending.code == code:
+                pending.reply = event.record
+                pending.done.set()
+                if code != layouts.ACCEL_ANG_RATE_MAG_ORIENTATION:
+                    return
+            self.records += 1
+            self._on_record(event, now)
+        elif isinstance(event, Ack):
+            if self._pending is not None:
+                self._pending.acked.set()
+        elif isinstance(event, Nack):
+            if self._pending is not None:
+                self._pending.nacked.set()
+        elif isinstance(event, PingReply):
+            pending = self._pending
+            if pending is not None and pending.code == layouts.PING:
+                pending.reply = event
+                pending.done.set()
+
+    def _wake_pending(self) -> None:
+        pending = self._pending
+        if pending is not None:
+            pending.done.set()
+
+    def _note_radio(self, lqi: int, rssi: int) -> None:
+        radio = self._radio
+        radio[0], radio[1] = lqi, rssi
+        radio[2] = min(radio[2], lqi)
+        radio[3] = min(radio[3], rssi)
+        radio[4] += lqi
+        radio[5] += rssi
+        radio[6] += 1
+
+    @property
+    def radio(self) -> RadioStats | None:
+        """Radio link quality so far, or None before the first packet."""
+        r = self._radio
+        if not r[6]:
+            return None
+        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
+
+    # -- requests ------------------------------------------------------
+
+    def send(self, command: bytes) -> None:
+        """Write one command, framed for the link; no waiting."""
+        data = encode_command_packet(self.address, command) if self.wireless else command
+        with self._write_lock:
+            self.port.write(data)
+
+    def request(self, command: bytes, reply_code: int | None, timeout: float = 0.5,
+                retries: int = 3) -> Any:
+        """
+        Send ``command`` until its reply (a record of ``reply_code``) arrives.
+
+        Returns the reply record. A NACK resends at once; silence resends
+        after ``timeout``. Raises DeviceTimeout (DeviceNack if every try was
+        rejected) after ``retries`` tries, PortDisconnected if the port died.
+        """
+        with self._lock:
+            nacks = 0
+            for _ in range(retries):
+                pending = _Pending(reply_code)
+                self._pending = pending
+                try:
+                    self.send(command)
+                    deadline = time.monotonic() + timeout
+                    while not pending.nacked.is_set():
+                        left = deadline - time.monotonic()
+                        if left <= 0 or pending.done.wait(min(left, 0.02)):
+                            break
+                finally:
+                    self._pending = None
+                if self.disconnected.is_set():
+                    raise PortDisconnected(self.error or 'device disconnected')
+                if self._stop.is_set():
+                    raise DeviceTimeout('the link is shutting down')
+                if pending.done.is_set():
+                    return pending.reply
+                if pending.nacked.is_set():
+                    nacks += 1
+            name = layouts.LAYOUTS[command[0]].name
+            if nacks == retries:
+                raise DeviceNack(f'{name}: the base station rejected it {retries} times')
+            raise DeviceTimeout(f'{name}: no reply after {retries} tries')
+
+    def ping(self, timeout: float = 0.5, retries: int = 3) -> bool:
+        """Ask the base station whether the sensor answers over the radio."""
+        with self._lock:
+            for _ in range(retries):
+                pending = _Pending(layouts.PING)
+                self._pending = pending
+                try:
+                    self.parser.expect_ping()
+                    with self._write_lock:
+                        self.port.write(commands.ping(self.address))
+                    pending.done.wait(timeout)
+                finally:
+                    self._pending = None
+                if self.disconnected.is_set():
+                    raise PortDisconnected(self.error or 'device disconnected')
+                if pending.reply is not None:
+                    return bool(pending.reply.ok)
+            return False
+
+    def stop_streaming(self, repeats: int = 3, gap: float = 0.02) -> None:
+        """Send 0xFA several times: it has no reply and the radio may drop it."""
+        for _ in range(repeats):
+            self.send(commands.stop_continuous())
+            time.sleep(gap)

@@ -1,0 +1,390 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Keep the device streaming: the start-up dialogue, stalls, unplugs, shutdown.
+
+The supervisor thread opens the port, quiets any stream already running,
+reads the device's identity, sets the data rate if asked, and starts
+continuous mode, retrying each step because commands get lost over the
+radio. It then watches the stream: a stall re-requests continuous mode and
+then reopens the port; an unplug reopens it every ``reconnect_interval``,
+forever. The reader thread inside the link does the publishing; this thread
+never touches a sample.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+import enum
+import logging
+import threading
+import time
+from typing import Any, NamedTuple
+
+from .link import DeviceLink, DeviceTimeout, RecordCallback
+from .port import PortDisconnected, PortError, SerialPort
+from ..codec import commands, layouts
+
+#: EEPROM word holding the data-rate divider: rate = 51200 / x Hz.
+RATE_DIVIDER_ADDRESS = 0xFCA2
+#: Base of the data-rate divider.
+RATE_BASE_HZ = 51200.0
+#: Valid range of the divider (about 300 Hz down to 1 Hz).
+MIN_DIVIDER = 170
+MAX_DIVIDER = 51200
+#: Lowest and highest data rate the divider can give.
+MIN_RATE_HZ = RATE_BASE_HZ / MAX_DIVIDER
+MAX_RATE_HZ = RATE_BASE_HZ / MIN_DIVIDER
+#: The record the driver streams.
+STREAM_COMMAND = layouts.ACCEL_ANG_RATE_MAG_ORIENTATION
+
+IDENTIFIER_NAMES = ('model_number', 'serial_number', 'model_name', 'options')
+
+
+class State(str, enum.Enum):
+    """What the supervisor is doing, for logs and diagnostics."""
+
+    CONNECTING = 'connecting'
+    INITIALISING = 'initialising'
+    STREAMING = 'streaming'
+    STALLED = 'stalled'
+    PAUSED = 'paused'
+    DISCONNECTED = 'disconnected'
+    STOPPED = 'stopped'
+
+
+class DeviceInfo(NamedTuple):
+    """What the device says it is."""
+
+    model_number: str
+    serial_number: str
+    model_name: str
+    options: str
+    firmware: str
+
+
+@dataclass(frozen=True)
+class SupervisorConfig:
+    """How to reach the device and how patient to be with it."""
+
+    port: str
+    address: int
+    baud: int = 115200
+    wireless: bool = True
+    low_latency: bool = True
+    stall_timeout: float = 1.0
+    reconnect_interval: float = 1.0
+    data_rate_hz: float | None = None
+    request_timeout: float = 0.5
+    request_retries: int = 3
+    continuous_retries: int = 5
+
+
+def divider_for_rate(rate_hz: float) -> int:
+    """Return the EEPROM divider for a data rate, clamped to the valid range."""
+    return max(MIN_DIVIDER, min(MAX_DIVIDER, round(RATE_BASE_HZ / rate_hz)))
+
+
+class Throttle:
+    """Let one message per key through every ``period`` seconds."""
+
+    def __init__(self, period: float) -> None:
+        self.period = period
+        self._last: dict[str, float] = {}
+
+    def allow(self, key: str) -> bool:
+        """Tell whether a message of this key may be logged now."""
+        now = time.monotonic()
+        if now - self._last.get(key, -1e9) >= self.period:
+            self._last[key] = now
+            return True
+        return False
+
+
+class DeviceSupervisor:
+    """
+    Own the connection to one device for the life of the driver.
+
+    ``on_record`` runs in the reader thread for every streamed record;
+    ``on_connect`` runs in the supervisor thread each time a link is made
+    (the node re-anchors its clock there). ``log`` is any object with
+    ``debug/info/warning/error`` methods (a ``logging.Logger`` by default;
+    the node passes its rclpy logger).
+    """
+
+    def __init__(self, config: SupervisorConfig, on_record: RecordCallback,
+                 log: Any = None, on_connect: Callable[[], None] | None = None,
+                 port_factory: Callable[..., SerialPort] = SerialPort) -> None:
+        self.config = config
+        self._on_record = on_record
+        self._on_connect = on_connect
+        self._log = log or logging.getLogger('i3dmgx2_driver')
+        self._port_factory = port_factory
+        self._throttle = Throttle(10.0)
+        self._stop = threading.Event()
+        self._paused = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._link: DeviceLink | None = None
+        self.state = State.CONNECTING
+        self.connections = 0
+        self.reconnects = 0
+        self.stalls = 0
+        self.last_error = ''
+        self.info: DeviceInfo | None = None
+        self.divider: int | None = None
+        self.low_latency_state = ''
+        self.ping_ok: bool | None = None
+        self.parser_totals: dict[str, int] = {}
+        self._info_logged: DeviceInfo | None = None
+
+    # -- life cycle ----------------------------------------------------
+
+    def start(self) -> None:
+        """Start the supervisor thread."""
+        self._thread = threading.Thread(target=self._run, name='gx2-supervisor', daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 1.5) -> None:
+        """Stop streaming (0xFA), stop the threads, close the port."""
+        self._stop.set()
+        link = self._link
+        if link is not None:
+            link.abort()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        self.state = State.STOPPED
+
+    @property
+    def link(self) -> DeviceLink | None:
+        """The current link, or None while disconnected."""
+        return self._link
+
+    @property
+    def expected_rate_hz(self) -> float | None:
+        """The rate the divider gives, once known."""
+        return RATE_BASE_HZ / self.divider if self.divider else None
+
+    def parser_stats(self) -> dict[str, int]:
+        """Parser counters summed over every connection so far."""
+        totals = dict(self.parser_totals)
+        link = self._link
+        if link is not None:
+            for key, value in link.parser.stats.as_dict().items():
+                totals[key] = totals.get(key, 0) + value
+        return totals
+
+    # -- the thread ----------------------------------------------------
+
+    def _warn(self, key: str, message: str) -> None:
+        self.last_error = message
+        if self._throttle.allow(key):
+            self._log.warning(message)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self.state = State.CONNECTING
+            link = None
+            try:
+                link = self._open()
+                self._initialise(link)
+                self._watch(link)
+            except PortError as exc:
+                self._warn(type(exc).__name__, str(exc))
+            except DeviceTimeout as exc:
+                self._warn('timeout', f'device not answering: {exc}')
+            finally:
+                if link is not None:
+                    self._close(link, send_stop=self._stop.is_set())
+            if self._stop.is_set():
+                break
+            self.state = State.DISCONNECTED
+            self._stop.wait(self.config.reconnect_interval)
+        self.state = State.STOPPED
+
+    def _open(self) -> DeviceLink:
+        cfg = self.config
+        port = self._port_factory(cfg.port, cfg.baud, low_latency=cfg.low_latency)
+        if port.low_latency_state != self.low_latency_state:
+            self.low_latency_state = port.low_latency_state
+            self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
+        link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless)
+        self._link = link
+        self.connections += 1
+        if self.connections > 1:
+            self.reconnects += 1
+        return link
+
+    def _close(self, link: DeviceLink, send_stop: bool) -> None:
+        link.stop()
+        if send_stop:
+            try:
+                link.stop_streaming(repeats=2, gap=0.01)
+            except PortError:
+                pass
+        link.port.close()
+        for key, value in link.parser.stats.as_dict().items():
+            self.parser_totals[key] = self.parser_totals.get(key, 0) + value
+        self._link = None
+
+    def _initialise(self, link: DeviceLink) -> None:
+        """Quiet the device, learn what it is, and start the stream."""
+        self.state = State.INITIALISING
+        link.port.flush_input()
+        link.stop_streaming()
+        time.sleep(0.05)
+        link.port.flush_input()
+        link.start()
+        if self._on_connect is not None:
+            self._on_connect()
+        if link.wireless:
+            self.ping_ok = link.ping(timeout=0.3, retries=2)
+            if not self.ping_ok:
+                self._warn('ping', f'node {self.config.address} does not answer the base '
+                                   f'station ping: check it is powered, its address and '
+                                   f'the radio channel')
+        # The thesis author found continuous mode unreliable as the very first
+        # command: a couple of polled requests first make it dependable.
+        for _ in range(2):
+            try:
+                link.request(bytes((layouts.ACCEL_ANG_RATE,)), layouts.ACCEL_ANG_RATE,
+                             timeout=self.config.request_timeout, retries=2)
+            except DeviceTimeout:
+                pass
+        self._identify(link)
+        self._configure_rate(link)
+        self.start_continuous(link)
+        self.state = State.STREAMING
+        self._log.info(f'streaming 0xCC from node {self.config.address} on {self.config.port}'
+                       + (f' at {self.expected_rate_hz:.1f} Hz' if self.divider else ''))
+
+    def _identify(self, link: DeviceLink) -> None:
+        cfg = self.config
+        texts = []
+        for selector, _ in enumerate(IDENTIFIER_NAMES):
+            try:
+                reply = link.request(commands.device_identifier(selector),
+                                     layouts.DEVICE_IDENTIFIER, cfg.request_timeout,
+                                     cfg.request_retries)
+                texts.append(reply.text.strip(' \x00'))
+            except DeviceTimeout:
+                texts.append('')
+        try:
+            firmware = link.request(bytes((layouts.FIRMWARE_VERSION,)),
+                                    layouts.FIRMWARE_VERSION, cfg.request_timeout,
+                                    cfg.request_retries).text
+        except DeviceTimeout:
+            firmware = ''
+        info = DeviceInfo(*texts, firmware)
+        if not any(info):
+            self._warn('identity', 'the device did not tell its identity (0xEA, 0xE9)')
+            return
+        self.info = info
+        if info != self._info_logged:
+            self._info_logged = info
+            self._log.info(f'device: model {info.model_name or "?"} '
+                           f'({info.model_number or "?"}), serial {info.serial_number or "?"}, '
+                           f'firmware {info.firmware or "?"}, options {info.options or "-"}')
+
+    def _configure_rate(self, link: DeviceLink) -> None:
+        cfg = self.config
+        current = link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS), layouts.READ_EEPROM,
+                               cfg.request_timeout, cfg.request_retries).value
+        self.divider = current
+        if cfg.data_rate_hz is None:
+            return
+        wanted = divider_for_rate(cfg.data_rate_hz)
+        if wanted == current:
+            return
+        link.request(commands.write_eeprom(RATE_DIVIDER_ADDRESS, wanted), layouts.WRITE_EEPROM,
+                     cfg.request_timeout, cfg.request_retries)
+        readback = link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
+                                layouts.READ_EEPROM, cfg.request_timeout,
+                                cfg.request_retries).value
+        if readback != wanted:
+            raise DeviceTimeout(f'data rate: wrote divider {wanted}, read back {readback}')
+        self.divider = readback
+        self._log.warning(
+            f'data rate set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM 0xFCA2: {current} -> '
+            f'{wanted}); this persists across power cycles')
+
+    def start_continuous(self, link: DeviceLink) -> None:
+        """Ask for continuous 0xCC until records actually arrive."""
+        cfg = self.config
+        period = 1.0 / self.expected_rate_hz if self.divider else 0.01
+        for _ in range(cfg.continuous_retries):
+            before = link.records
+            try:
+                link.request(commands.set_continuous(STREAM_COMMAND), layouts.SET_CONTINUOUS,
+                             cfg.request_timeout, 1)
+            except DeviceTimeout:
+                pass  # the reply may be lost while the stream started: look for records
+            deadline = time.monotonic() + max(0.3, 5 * period)
+            while time.monotonic() < deadline and not self._stop.is_set():
+                if link.records > before:
+                    return
+                if link.disconnected.is_set():
+                    raise PortDisconnected(link.error or 'device disconnected')
+                time.sleep(0.01)
+            if self._stop.is_set():
+                return
+        raise DeviceTimeout(f'continuous mode: no records after {cfg.continuous_retries} '
+                            f'requests')
+
+    def _watch(self, link: DeviceLink) -> None:
+        """Return when the link is lost or cannot be revived; recover stalls."""
+        cfg = self.config
+        period = 1.0 / self.expected_rate_hz if self.divider else 0.01
+        stall_after = max(cfg.stall_timeout, 3 * period)
+        while not self._stop.wait(min(0.05, stall_after / 4)):
+            if link.disconnected.is_set():
+                raise PortDisconnected(link.error or 'device disconnected')
+            if self._paused.is_set():
+                continue
+            if time.time() - link.last_data_time > stall_after:
+                self.stalls += 1
+                self.state = State.STALLED
+                self._warn('stall', f'no data for {stall_after:.1f} s: re-requesting '
+                                    f'continuous mode')
+                try:
+                    self.start_continuous(link)
+                except DeviceTimeout:
+                    self._warn('stall', 'stream did not resume: reopening the port')
+                    return
+                self.state = State.STREAMING
+                self._log.info('stream resumed')
+
+    # -- exclusive operations for services ------------------------------
+
+    def run_paused(self, operation: Callable[[DeviceLink], Any]) -> Any:
+        """
+        Stop the stream, run ``operation(link)``, then restart the stream.
+
+        Used by services that need the device's full attention (gyro bias
+        capture, built-in test). Raises PortError or DeviceTimeout.
+        """
+        link = self._link
+        if link is None or self.state not in (State.STREAMING, State.STALLED):
+            raise DeviceTimeout(f'device not streaming (state: {self.state.value})')
+        self._paused.set()
+        self.state = State.PAUSED
+        try:
+            link.stop_streaming()
+            time.sleep(0.05)
+            return operation(link)
+        finally:
+            try:
+                self.start_continuous(link)
+                self.state = State.STREAMING
+            finally:
+                self._paused.clear()

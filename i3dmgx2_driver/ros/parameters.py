@@ -1,0 +1,212 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The node's parameters: one table with types, defaults, ranges and meaning.
+
+Every parameter is declared with a descriptor (description, range, read-only
+where changing it at run time makes no sense), so ``ros2 param describe``
+documents the driver and rclpy rejects out-of-range values. Whatever rclpy
+cannot check (choices, "0 or at least 1 Hz") is checked here; every failure
+becomes one ``ParameterError`` whose message names the parameter and its
+valid range, and the node stops. Nothing falls back to a default silently.
+"""
+
+from dataclasses import dataclass
+import math
+from typing import Any, NamedTuple
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import (
+    InvalidParameterTypeException, InvalidParameterValueException,
+    ParameterUninitializedException,
+)
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
+from ..codec.orientation import CONVENTIONS
+from ..device.supervisor import MAX_RATE_HZ, MIN_RATE_HZ
+
+TIME_SOURCES = ('device', 'host')
+RELIABILITIES = ('reliable', 'best_effort')
+_REQUIRED = object()
+
+
+class ParameterError(ValueError):
+    """A parameter is missing or invalid; the message says which and why."""
+
+
+class Spec(NamedTuple):
+    """One parameter: name, type, default (or _REQUIRED), meaning, limits."""
+
+    name: str
+    kind: Parameter.Type
+    default: Any
+    description: str
+    limits: tuple[float, float] | None = None
+    choices: tuple[str, ...] = ()
+    read_only: bool = True
+
+
+SPECS: list[Spec] = [
+    Spec('port', Parameter.Type.STRING, '/dev/ttyUSB0',
+         'Serial port of the base station (or wired sensor).'),
+    Spec('address', Parameter.Type.INTEGER, _REQUIRED,
+         'Node address of the sensor (factory: last two digits of its serial number).',
+         (MIN_ADDRESS, MAX_ADDRESS)),
+    Spec('baud', Parameter.Type.INTEGER, 115200, 'Serial baud rate.', (9600, 921600)),
+    Spec('wireless', Parameter.Type.BOOL, True,
+         'True: through a wireless base station (packets, ACK/NACK); false: wired sensor.'),
+    Spec('frame_id', Parameter.Type.STRING, 'imu_link',
+         'Frame of the published messages (_ned is appended in the ned convention).'),
+    Spec('frame_convention', Parameter.Type.STRING, 'enu',
+         'enu: REP-103 (ENU world, x-forward/y-left/z-up body); ned: device axes '
+         '(NED world, x-forward/y-right/z-down body).', choices=CONVENTIONS),
+    Spec('orientation_stddev', Parameter.Type.DOUBLE, 0.0,
+         'Orientation standard deviation (rad); 0: unknown.', (0.0, 10.0)),
+    Spec('angular_velocity_stddev', Parameter.Type.DOUBLE, 0.0,
+         'Angular velocity standard deviation (rad/s); 0: unknown.', (0.0, 10.0)),
+    Spec('linear_acceleration_stddev', Parameter.Type.DOUBLE, 0.0,
+         'Linear acceleration standard deviation (m/s^2); 0: unknown.', (0.0, 100.0)),
+    Spec('magnetic_field_stddev', Parameter.Type.DOUBLE, 0.0,
+         'Magnetic field standard deviation (T); 0: unknown.', (0.0, 1.0)),
+    Spec('time_source', Parameter.Type.STRING, 'device',
+         'device: sample time from the sensor timer aligned to the host clock; '
+         'host: time the packet was read.', choices=TIME_SOURCES),
+    Spec('qos_reliability', Parameter.Type.STRING, 'reliable',
+         'QoS reliability of the publishers (best_effort does not match reliable '
+         'subscribers).', choices=RELIABILITIES),
+    Spec('qos_depth', Parameter.Type.INTEGER, 10, 'QoS history depth.', (1, 1000)),
+    Spec('read_timeout', Parameter.Type.DOUBLE, 1.0,
+         'Seconds without data before the stream counts as stalled.', (0.1, 60.0)),
+    Spec('reconnect_interval', Parameter.Type.DOUBLE, 1.0,
+         'Seconds between attempts to reopen a lost port.', (0.1, 60.0)),
+    Spec('publish_mag', Parameter.Type.BOOL, True,
+         'Publish sensor_msgs/MagneticField on imu/mag (NaN readings are skipped).'),
+    Spec('data_rate', Parameter.Type.DOUBLE, 0.0,
+         f'Data rate (Hz) to write to the device (EEPROM 0xFCA2, persists); 0: leave the '
+         f'device as it is; otherwise {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f}.',
+         (0.0, round(MAX_RATE_HZ, 1))),
+    Spec('low_latency', Parameter.Type.BOOL, True,
+         'Put the serial port in Linux low-latency mode (USB adapters) when it supports it.'),
+]
+
+
+@dataclass(frozen=True)
+class DriverConfig:
+    """The validated parameters, as plain values."""
+
+    port: str
+    address: int
+    baud: int
+    wireless: bool
+    frame_id: str
+    frame_convention: str
+    orientation_stddev: float
+    angular_velocity_stddev: float
+    linear_acceleration_stddev: float
+    magnetic_field_stddev: float
+    time_source: str
+    qos_reliability: str
+    qos_depth: int
+    read_timeout: float
+    reconnect_interval: float
+    publish_mag: bool
+    data_rate: float
+    low_latency: bool
+
+    @property
+    def data_rate_hz(self) -> float | None:
+        """The rate to set, or None to leave the device as it is."""
+        return self.data_rate or None
+
+
+def _valid_range(spec: Spec) -> str:
+    if spec.choices:
+        return 'one of ' + ', '.join(repr(c) for c in spec.choices)
+    if spec.name == 'data_rate':
+        return f'0 (leave the device as it is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz'
+    if spec.limits is not None:
+        low, high = spec.limits
+        return f'{low:g}..{high:g}'
+    return {Parameter.Type.STRING: 'a non-empty string',
+            Parameter.Type.BOOL: 'true or false'}.get(spec.kind, 'a valid value')
+
+
+def _descriptor(spec: Spec) -> ParameterDescriptor:
+    descriptor = ParameterDescriptor(
+        description=spec.description, read_only=spec.read_only,
+        additional_constraints=f'valid: {_valid_range(spec)}')
+    if spec.limits is not None and spec.kind == Parameter.Type.INTEGER:
+        descriptor.integer_range = [IntegerRange(
+            from_value=int(spec.limits[0]), to_value=int(spec.limits[1]), step=1)]
+    elif spec.limits is not None and spec.kind == Parameter.Type.DOUBLE:
+        descriptor.floating_point_range = [FloatingPointRange(
+            from_value=float(spec.limits[0]), to_value=float(spec.limits[1]), step=0.0)]
+    return descriptor
+
+
+def _declare(node: Node, spec: Spec) -> Any:
+    problem = f'parameter {spec.name!r} must be {_valid_range(spec)}'
+    try:
+        if spec.default is _REQUIRED:
+            node.declare_parameter(spec.name, spec.kind, _descriptor(spec))
+        else:
+            node.declare_parameter(spec.name, spec.default, _descriptor(spec))
+        value = node.get_parameter(spec.name).value
+    except ParameterUninitializedException:
+        raise ParameterError(f'parameter {spec.name!r} is required: set it with '
+                             f'-p {spec.name}:=<value> ({_valid_range(spec)})') from None
+    except InvalidParameterTypeException as exc:
+        kind = {Parameter.Type.DOUBLE: 'a floating-point number, e.g. 1.0',
+                Parameter.Type.INTEGER: 'an integer', Parameter.Type.BOOL: 'true or false',
+                Parameter.Type.STRING: 'a string'}[spec.kind]
+        raise ParameterError(f'{problem}, written as {kind}: {exc}') from None
+    except InvalidParameterValueException:
+        raise ParameterError(f'{problem}') from None
+    return value
+
+
+def _check(spec: Spec, value: Any) -> Any:
+    problem = f'parameter {spec.name!r} must be {_valid_range(spec)}, got {value!r}'
+    if spec.choices and value not in spec.choices:
+        raise ParameterError(problem)
+    if spec.kind == Parameter.Type.STRING and not value:
+        raise ParameterError(problem)
+    if spec.kind == Parameter.Type.DOUBLE:
+        if not math.isfinite(value):
+            raise ParameterError(problem)
+        if spec.limits is not None and not spec.limits[0] <= value <= spec.limits[1]:
+            raise ParameterError(problem)
+    if spec.kind == Parameter.Type.INTEGER and spec.limits is not None \
+            and not spec.limits[0] <= value <= spec.limits[1]:
+        raise ParameterError(problem)
+    if spec.name == 'data_rate' and value and not MIN_RATE_HZ <= value <= MAX_RATE_HZ:
+        raise ParameterError(problem)
+    return value
+
+
+def declare_parameters(node: Node, extra: tuple[Spec, ...] = ()) -> dict:
+    """Declare every parameter on ``node``; return the validated values by name."""
+    values = {}
+    for spec in (*SPECS, *extra):
+        values[spec.name] = _check(spec, _declare(node, spec))
+    return values
+
+
+def driver_config(values: dict) -> DriverConfig:
+    """Build the driver's configuration from validated values."""
+    fields = DriverConfig.__dataclass_fields__
+    return DriverConfig(**{name: values[name] for name in fields})

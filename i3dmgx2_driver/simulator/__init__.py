@@ -1,0 +1,40 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+A simulated 3DM-GX2 and wireless base station, for tests, benchmarks and demos.
+
+``SimulatedSensor`` is the device model (no I/O); ``PtySimulator`` puts it
+behind a pseudo-terminal that a driver opens like a real serial port, with
+faults from ``FaultConfig`` and the ground truth of every packet in
+``SentRecord`` entries. ``python -m i3dmgx2_driver.simulator`` runs it from a
+shell. Pure Python on top of the codec: the simulator and the driver share
+one implementation of every byte.
+"""
+
+from .faults import FaultConfig
+from .motion import Motion, MotionConfig
+from .pty_link import (
+    HostCommand,
+    PtySimulator,
+    SentRecord,
+    SimulatorConfig,
+    SimulatorStats,
+)
+from .sensor import Reply, SimulatedSensor
+
+__all__ = [
+    'FaultConfig', 'HostCommand', 'Motion', 'MotionConfig', 'PtySimulator', 'Reply',
+    'SentRecord', 'SimulatedSensor', 'SimulatorConfig', 'SimulatorStats',
+]

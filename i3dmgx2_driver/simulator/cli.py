@@ -1,0 +1,212 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Command line of the simulator: a 3DM-GX2 on a pseudo-terminal for a driver to open.
+
+The first line printed is ``port: <path>`` (flushed at once), so that a script
+or a person can hand the path to the driver (``port:=<path>``); then a status
+line every few seconds. SIGINT and SIGTERM stop it cleanly with exit status 0,
+so that it can run under a launch file or a test harness.
+"""
+
+import argparse
+import signal
+import threading
+import time
+
+from .faults import FaultConfig
+from .motion import MotionConfig
+from .pty_link import PtySimulator, SimulatorConfig
+
+
+def _probability(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f'a probability is in 0..1, got {text}')
+    return value
+
+
+def _non_negative(text: str) -> float:
+    value = float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f'must not be negative, got {text}')
+    return value
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f'must be positive, got {text}')
+    return value
+
+
+def _address(text: str) -> int:
+    value = int(text, 0)
+    if not 1 <= value <= 65534:
+        raise argparse.ArgumentTypeError(f'a node address is in 1..65534, got {text}')
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser (separate so that docs and tests can use it)."""
+    parser = argparse.ArgumentParser(
+        prog='simulator',
+        description='Simulated MicroStrain 3DM-GX2 with its wireless base station on a '
+                    'pseudo-terminal. Prints "port: PATH" first; open PATH like a serial '
+                    'port at 115200 baud.')
+    device = parser.add_argument_group('device')
+    device.add_argument('--address', type=_address, default=95,
+                        help='node address of the sensor (default: 95)')
+    device.add_argument('--serial', default='3095', help='serial number (default: 3095)')
+    device.add_argument('--rate', type=_positive, metavar='HZ',
+                        help='calculation rate overriding the EEPROM divider (benchmarks)')
+    device.add_argument('--static', action='store_true', help='sensor at rest')
+    device.add_argument('--nan-mag', action='store_true',
+                        help='no magnetometer: every field reading is NaN (Inertia-Link)')
+    device.add_argument('--mag-nan-probability', type=_probability, default=0.0, metavar='P',
+                        help='share of cycles without a new magnetometer reading')
+    device.add_argument('--ppm', type=float, default=40.0,
+                        help='clock error of the sensor timer in ppm (default: 40)')
+    device.add_argument('--timer-start', type=lambda s: int(s, 0), metavar='TICKS',
+                        help='timer at power-up (default: 5 s before the rollover)')
+    device.add_argument('--latency-ms', type=_non_negative, default=2.0,
+                        help='radio latency (default: 2 ms)')
+    device.add_argument('--line-rate-limit', action='store_true',
+                        help='skip streamed cycles a 115200-baud line could not carry')
+    device.add_argument('--seed', type=int, help='seed for reproducible noise and faults')
+
+    faults = parser.add_argument_group('faults')
+    faults.add_argument('--garbage', type=_probability, default=0.0, metavar='P',
+                        help='chance of random garbage bytes before a packet')
+    faults.add_argument('--garbage-any', action='store_true',
+                        help='garbage may contain 0xAA/0x21/0x02 (spurious ACK/NACK)')
+    faults.add_argument('--corrupt-checksum', type=_probability, default=0.0, metavar='P',
+                        help='chance of a packet with a bad checksum')
+    faults.add_argument('--corrupt-length', type=_probability, default=0.0, metavar='P',
+                        help='chance of a packet with a bad length byte')
+    faults.add_argument('--foreign', type=_probability, default=0.0, metavar='P',
+                        help='chance of a packet from another sensor address')
+    faults.add_argument('--drop', type=_probability, default=0.0, metavar='P',
+                        help='chance that a data packet is lost on the radio')
+    faults.add_argument('--command-loss', type=_probability, default=0.0, metavar='P',
+                        help='chance that an ACKed command never reaches the sensor')
+    faults.add_argument('--already-streaming', action='store_true',
+                        help='the sensor streams 0xCC from power-up')
+    faults.add_argument('--ignore-first-continuous', action='store_true',
+                        help='the first request to stream is ignored')
+    faults.add_argument('--needs-polled-first', action='store_true',
+                        help='a request to stream is ignored unless a polled request came '
+                             'first since the port was opened')
+    faults.add_argument('--jitter-ms', type=_non_negative, default=0.0, metavar='N',
+                        help='random 0..N ms extra delay before each packet is written')
+    faults.add_argument('--stall-at', type=_non_negative, metavar='T',
+                        help='radio silence starting T seconds after start')
+    faults.add_argument('--stall-for', type=_non_negative, default=2.0, metavar='S',
+                        help='length of that silence (default: 2 s)')
+    faults.add_argument('--unplug-at', type=_non_negative, metavar='T',
+                        help='unplug the base station T seconds after start')
+    faults.add_argument('--unplug-for', type=_non_negative, default=2.0, metavar='S',
+                        help='how long it stays unplugged (default: 2 s)')
+
+    run = parser.add_argument_group('run')
+    run.add_argument('--duration', type=_positive, metavar='S',
+                     help='exit after S seconds (default: run until SIGINT/SIGTERM)')
+    run.add_argument('--symlink', metavar='PATH',
+                     help='fixed path for the port symlink (default: a temporary directory)')
+    run.add_argument('--status-interval', type=_positive, default=5.0, metavar='S',
+                     help='seconds between status lines (default: 5)')
+    run.add_argument('--quiet', action='store_true', help='print the port line only')
+    return parser
+
+
+def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
+    """Turn parsed arguments into a simulator configuration."""
+    faults = FaultConfig(
+        garbage_probability=args.garbage, garbage_safe=not args.garbage_any,
+        corrupt_checksum_probability=args.corrupt_checksum,
+        corrupt_length_probability=args.corrupt_length,
+        foreign_probability=args.foreign, drop_probability=args.drop,
+        command_loss_probability=args.command_loss,
+        already_streaming=args.already_streaming,
+        ignore_first_continuous=args.ignore_first_continuous,
+        needs_polled_first=args.needs_polled_first, jitter_ms=args.jitter_ms,
+        stall_at=args.stall_at, stall_seconds=args.stall_for,
+        unplug_at=args.unplug_at, unplug_seconds=args.unplug_for)
+    return SimulatorConfig(
+        address=args.address, serial_number=args.serial, rate_hz=args.rate, seed=args.seed,
+        motion=MotionConfig(static=args.static), faults=faults, nan_mag=args.nan_mag,
+        mag_nan_probability=args.mag_nan_probability, clock_ppm=args.ppm,
+        timer_start=args.timer_start, latency_s=args.latency_ms / 1000.0,
+        symlink=args.symlink, limit_to_line_rate=args.line_rate_limit,
+        # A demo may run for hours: keep no ground truth, only the counters.
+        truth_limit=0)
+
+
+def status_line(sim: PtySimulator, elapsed: float) -> str:
+    """One line on what the simulator has done so far."""
+    stats = sim.stats
+    streaming = f'0x{sim.streaming:02X}' if sim.streaming else 'no'
+    line = (f'[{elapsed:8.1f} s] records={stats.records_sent} replies={stats.replies_sent} '
+            f'commands={stats.commands_received} acks={stats.acks} nacks={stats.nacks} '
+            f'streaming={streaming} rate={sim.sensor.rate_hz:g}Hz '
+            f'port={"plugged" if sim.plugged else "unplugged"} opens={stats.port_opens}')
+    extra = {name: value for name, value in stats.as_dict().items() if value and name in (
+        'garbage_bytes', 'corrupted_checksum', 'corrupted_length', 'foreign', 'dropped',
+        'stalled', 'unplugged_lost', 'overflow_packets', 'commands_lost', 'commands_ignored',
+        'line_rate_skipped', 'late_skipped')}
+    if extra:
+        line += ' ' + ' '.join(f'{k}={v}' for k, v in extra.items())
+    return line
+
+
+def _say(text: str) -> None:
+    try:
+        print(text, flush=True)
+    except (BrokenPipeError, ValueError):
+        pass  # nobody listens any more; keep simulating until told to stop
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the simulator until SIGINT, SIGTERM or ``--duration``; return 0."""
+    args = build_parser().parse_args(argv)
+    config = config_from_args(args)
+    stop = threading.Event()
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            previous[signum] = signal.signal(signum, lambda *_: stop.set())
+    try:
+        with PtySimulator(config) as sim:
+            _say(f'port: {sim.port}')
+            start = time.monotonic()
+            deadline = start + args.duration if args.duration else None
+            next_status = start + args.status_interval
+            while not stop.is_set():
+                now = time.monotonic()
+                if deadline is not None and now >= deadline:
+                    break
+                wake = next_status if deadline is None else min(next_status, deadline)
+                if stop.wait(max(wake - now, 0.0)):
+                    break
+                if time.monotonic() >= next_status:
+                    next_status += args.status_interval
+                    if not args.quiet:
+                        _say(status_line(sim, time.monotonic() - start))
+            if not args.quiet:
+                _say(status_line(sim, time.monotonic() - start))
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    return 0

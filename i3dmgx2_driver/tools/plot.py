@@ -1,0 +1,454 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Plot a capture, the real-records fixture or a recorded run to a PNG.
+
+Three stacked panels over time: acceleration (m/s^2), angular rate (rad/s)
+and orientation as roll, pitch, yaw (deg), per axis. Gaps in the data are
+shaded and never bridged by a line, so that lost packets and the pauses
+between separate captures cannot pass for smooth data.
+
+Inputs:
+
+- a capture (``GX2CAP``, see :mod:`i3dmgx2_driver.capture`): parsed with the
+  codec's ``SensorStreamParser``; records that carry acceleration, angular
+  rate and orientation matrix (0xCC, also 0xC8) are plotted, in REP-103 axes
+  (ENU world, FLU body) or, with ``--convention ned``, the device's own (NED
+  world, FRD body). Time comes from the device timer, unwrapped; the host
+  receive times only settle what the timer cannot tell (a pause longer than
+  half its 218 s period, a restart);
+- the fixture (``--fixture PATH``), through the same path as a capture;
+- a CSV of a recorded run of the driver, in the values it published on
+  ``/imu/raw_data`` (so already in the node's ``frame_convention``)::
+
+      time,ax,ay,az,wx,wy,wz,qx,qy,qz,qw
+      1714000000.012,0.12,-0.03,9.79,0.001,-0.002,0.0005,0.0,0.0,0.0,1.0
+
+  ``time`` is ``header.stamp`` in seconds, ``a*`` ``linear_acceleration``
+  (m/s^2), ``w*`` ``angular_velocity`` (rad/s), ``q*`` ``orientation``.
+  Lines starting with ``#`` are skipped; the header row is required. The
+  output of ``ros2 topic echo --csv /imu/raw_data > run.csv`` (40 columns, no
+  header) is read as well.
+"""
+
+import argparse
+from collections.abc import Iterable, Sequence
+import csv
+import math
+import os
+import sys
+from typing import NamedTuple
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+import numpy as np
+
+from ..capture import (
+    FIXTURE_ADDRESS, fixture_chunks, is_capture, load_fixture, read_capture, timeline,
+)
+from ..codec.framing import DataPacket
+from ..codec.orientation import (
+    body_vector, CONVENTIONS, ENU, matrix_from_quaternion, orientation, Quaternion,
+)
+from ..codec.records import TICKS_PER_SECOND
+from ..codec.stream import SensorStreamParser
+from ..codec.timer import TIMER_MODULUS
+
+#: Standard gravity (m/s^2 per g), the factor of the device's g units (as the node uses).
+STANDARD_GRAVITY = 9.80665
+#: Period of the device timer (s): it wraps after 2^32 ticks.
+TIMER_PERIOD = TIMER_MODULUS / TICKS_PER_SECOND
+#: A gap is at least this long (s), and at least GAP_FACTOR typical intervals.
+MIN_GAP = 0.5
+GAP_FACTOR = 5.0
+#: Columns of the CSV format, in order.
+CSV_COLUMNS = ('time', 'ax', 'ay', 'az', 'wx', 'wy', 'wz', 'qx', 'qy', 'qz', 'qw')
+#: Columns of ``ros2 topic echo --csv`` for sensor_msgs/Imu: stamp (2), frame_id,
+#: orientation (4) and its covariance (9), angular velocity (3) and covariance (9),
+#: linear acceleration (3) and covariance (9).
+ECHO_CSV_COLUMNS = 40
+#: Figure size (in) and resolution (dpi) of a report-quality page figure.
+FIGSIZE = (10.0, 8.0)
+DPI = 150
+#: Axis colours: x, y, z as the RGB convention of axes in RViz.
+COLOURS = ('tab:red', 'tab:green', 'tab:blue')
+
+
+class Series(NamedTuple):
+    """What the figure shows, as arrays: the one place tests compare with the data."""
+
+    time: np.ndarray          # (n,) s from the first sample
+    accel: np.ndarray         # (n, 3) m/s^2
+    angular_rate: np.ndarray  # (n, 3) rad/s
+    euler: np.ndarray         # (n, 3) roll, pitch, yaw in degrees
+    gaps: list[tuple[float, float]]   # spans without data (s)
+    breaks: list[tuple[float, float]]  # spans where the timer restarts (separate captures)
+    labels: list[tuple[float, str]]   # (time, text) marks, e.g. the fixture's poses
+    source: str
+    frame: str
+    time_note: str
+
+
+# Orientation ------------------------------------------------------------------
+
+
+def euler_deg(q: Sequence[float]) -> tuple[float, float, float]:
+    """
+    Roll, pitch, yaw (deg) of a quaternion (x, y, z, w), aircraft ZYX set.
+
+    Taken from the attitude matrix (body to world) so that in the device's
+    convention it is exactly protocol.md's set from M (R = M^T). A zero or
+    NaN quaternion (orientation unknown) gives NaN, not an exception.
+    """
+    x, y, z, w = q
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not 0.0 < norm < math.inf:
+        return (math.nan, math.nan, math.nan)
+    r = matrix_from_quaternion(Quaternion(x / norm, y / norm, z / norm, w / norm))
+    roll = math.atan2(r[7], r[8])
+    pitch = math.asin(max(-1.0, min(1.0, -r[6])))
+    yaw = math.atan2(r[3], r[0])
+    return (math.degrees(roll), math.degrees(pitch), math.degrees(yaw))
+
+
+# Time -----------------------------------------------------------------------------
+
+
+def device_times(timers: Sequence[int], host_times: Sequence[float],
+                 tolerance: float = 1.0) -> tuple[list[float], list[int]]:
+    """
+    Unwrap the device timer into seconds from the first record.
+
+    Each step is the timer's forward difference plus whichever number of
+    whole periods (218.45 s) brings it closest to the host's elapsed receive
+    time: that unwraps rollovers, including pauses longer than half a period
+    that a timer-only unwrapper must take for resets. When no period count
+    agrees with the host (within ``tolerance`` s plus 2 %), the timer has
+    restarted (a power cycle, or separate captures joined): the host's
+    elapsed time is used instead and the index is returned as a break.
+    """
+    times: list[float] = []
+    breaks: list[int] = []
+    for i, raw in enumerate(timers):
+        if i == 0:
+            times.append(0.0)
+            continue
+        step = ((raw - timers[i - 1]) % TIMER_MODULUS) / TICKS_PER_SECOND
+        host = max(0.0, host_times[i] - host_times[i - 1])
+        periods = max(0, round((host - step) / TIMER_PERIOD))
+        candidate = step + periods * TIMER_PERIOD
+        if abs(candidate - host) <= tolerance + 0.02 * host:
+            times.append(times[-1] + candidate)
+        else:
+            times.append(times[-1] + host)
+            breaks.append(i)
+    return times, breaks
+
+
+def find_gaps(time: np.ndarray, breaks: Iterable[int] = (),
+              threshold: float | None = None) -> tuple[list[int], float]:
+    """
+    Return the indices that start after a gap, and the threshold used (s).
+
+    By default a gap is a step longer than GAP_FACTOR times the median step
+    and at least MIN_GAP, so a few lost packets at 100 Hz and the pauses of
+    a 3 Hz poll are both told from ordinary jitter. Breaks always count.
+    """
+    steps = np.diff(time)
+    if threshold is None:
+        positive = steps[steps > 0]
+        median = float(np.median(positive)) if positive.size else 0.0
+        threshold = max(MIN_GAP, GAP_FACTOR * median)
+    starts = {int(i) + 1 for i in np.nonzero((steps > threshold) | (steps < 0))[0]}
+    starts.update(breaks)
+    return sorted(starts), threshold
+
+
+# Inputs ---------------------------------------------------------------------------
+
+
+def _empty_series(source: str, frame: str, note: str) -> Series:
+    empty = np.zeros((0, 3))
+    return Series(np.zeros(0), empty, empty.copy(), empty.copy(), [], [], [], source, frame,
+                  note)
+
+
+def _frame_name(convention: str) -> str:
+    return 'ENU world / FLU body (REP-103)' if convention == ENU else \
+        'NED world / FRD body (device axes)'
+
+
+def series_from_chunks(chunks: Iterable[tuple[float, bytes]], address: int | None = None,
+                       convention: str = ENU, wireless: bool = True, source: str = '',
+                       segments: Sequence[tuple[float, str]] = (),
+                       gap: float | None = None) -> Series:
+    """
+    Decode ``(receive_time, bytes)`` chunks and build the plotted series.
+
+    Events complete in a chunk take that chunk's receive time; ``segments``
+    are ``(receive_time, label)`` marks, placed at the first record received
+    at or after their time.
+    """
+    if convention not in CONVENTIONS:
+        raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
+    parser = SensorStreamParser(address=address, wireless=wireless)
+    host: list[float] = []
+    records = []
+    for receive_time, data in chunks:
+        for event in parser.feed(data):
+            if isinstance(event, DataPacket) and all(
+                    hasattr(event.record, name) for name in ('accel', 'angular_rate', 'matrix')):
+                host.append(receive_time)
+                records.append(event.record)
+    frame = _frame_name(convention)
+    note = 'from the device timer, unwrapped'
+    if not records:
+        return _empty_series(source, frame, note)
+    times, break_idx = device_times([r.timer for r in records], host)
+    accel = np.array([body_vector(r.accel, convention) for r in records]) * STANDARD_GRAVITY
+    rate = np.array([body_vector(r.angular_rate, convention) for r in records])
+    euler = np.array([euler_deg(orientation(r.matrix, convention)) for r in records])
+    t = np.array(times)
+    labels = []
+    for when, text in segments:
+        later = [i for i, h in enumerate(host) if h >= when - 1e-6]
+        if later:
+            labels.append((float(t[later[0]]), text))
+    return _finish(t, accel, rate, euler, break_idx, labels, source, frame, note, gap)
+
+
+def _finish(t: np.ndarray, accel: np.ndarray, rate: np.ndarray, euler: np.ndarray,
+            break_idx: Sequence[int], labels: list[tuple[float, str]], source: str,
+            frame: str, note: str, gap: float | None) -> Series:
+    starts, _ = find_gaps(t, break_idx, gap)
+    breaks = set(break_idx)
+    gaps = [(float(t[i - 1]), float(t[i])) for i in starts if i not in breaks]
+    restarts = [(float(t[i - 1]), float(t[i])) for i in starts if i in breaks]
+    return Series(t, accel, rate, euler, gaps, restarts, labels, source, frame, note)
+
+
+def series_from_capture(path: str, address: int | None = None, convention: str = ENU,
+                        gap: float | None = None) -> Series:
+    """Build the series of a capture file (see the module docstring)."""
+    header, chunks = read_capture(path)
+    segments = [(float(s['start_time']), str(s['label']).split(' (')[0])
+                for s in header.get('segments', ()) if isinstance(s, dict)
+                and 'start_time' in s and 'label' in s]
+    source = os.path.basename(path)
+    if header.get('address') is not None and address is None:
+        source += f' (node {header["address"]})'
+    elif address is not None:
+        source += f' (node {address})'
+    return series_from_chunks(chunks, address, convention,
+                              bool(header.get('wireless', True)), source, segments, gap)
+
+
+def series_from_fixture(path: str, convention: str = ENU, gap: float | None = None,
+                        address: int = FIXTURE_ADDRESS) -> Series:
+    """Build the series of the real-records fixture, labelled with its poses."""
+    sets = load_fixture(path)
+    start = 0.0
+    segments = []
+    seen = set()
+    for seconds, index, _ in timeline(sets):
+        if index not in seen:
+            seen.add(index)
+            segments.append((start + seconds, f'{sets[index].name}: '
+                             f'{sets[index].description.split(" (")[0]}'))
+    chunks = fixture_chunks(path, address=address, start_time=start)
+    source = f'real records, sensor at rest in three poses ({os.path.basename(path)})'
+    return series_from_chunks(chunks, address, convention, True, source, segments, gap)
+
+
+def _csv_rows(path: str) -> tuple[list[str] | None, list[list[str]]]:
+    with open(path, newline='', encoding='utf-8') as f:
+        rows = [row for row in csv.reader(f)
+                if row and ''.join(row).strip() and not row[0].lstrip().startswith('#')]
+    if rows and rows[0] and rows[0][0].strip().lower() == 'time':
+        return [c.strip().lower() for c in rows[0]], rows[1:]
+    return None, rows
+
+
+def read_csv(path: str) -> dict[str, np.ndarray]:
+    """Read a recorded run into columns by CSV_COLUMNS name (float arrays)."""
+    names, rows = _csv_rows(path)
+    if names is not None:
+        missing = [c for c in CSV_COLUMNS if c not in names]
+        if missing:
+            raise ValueError(f'{path}: CSV lacks columns {", ".join(missing)} '
+                             f'(expected {",".join(CSV_COLUMNS)})')
+        index = [names.index(c) for c in CSV_COLUMNS]
+        table = [[float(row[i]) for i in index] for row in rows]
+    elif rows and all(len(row) == ECHO_CSV_COLUMNS for row in rows):
+        # ros2 topic echo --csv: sec, nanosec, frame_id, orientation, ..., see ECHO_CSV_COLUMNS.
+        table = [[float(r[0]) + float(r[1]) * 1e-9, *map(float, r[28:31]),
+                  *map(float, r[16:19]), *map(float, r[3:7])] for r in rows]
+    else:
+        raise ValueError(f'{path}: not a recognised CSV: expected a header row '
+                         f'{",".join(CSV_COLUMNS)} or `ros2 topic echo --csv` rows of '
+                         f'sensor_msgs/Imu')
+    data = np.array(table, dtype=float).reshape(-1, len(CSV_COLUMNS))
+    return {name: data[:, i] for i, name in enumerate(CSV_COLUMNS)}
+
+
+def series_from_csv(path: str, gap: float | None = None) -> Series:
+    """Build the series of a recorded run, in the frame it was published in."""
+    cols = read_csv(path)
+    stamp = cols['time']
+    frame = 'as published (frame_convention of the recording)'
+    note = 'from the CSV time column'
+    if not stamp.size:
+        return _empty_series(os.path.basename(path), frame, note)
+    t = stamp - stamp[0]
+    accel = np.column_stack([cols['ax'], cols['ay'], cols['az']])
+    rate = np.column_stack([cols['wx'], cols['wy'], cols['wz']])
+    quats = np.column_stack([cols['qx'], cols['qy'], cols['qz'], cols['qw']])
+    euler = np.array([euler_deg(q) for q in quats]).reshape(-1, 3)
+    return _finish(t, accel, rate, euler, [], [], os.path.basename(path), frame, note, gap)
+
+
+# Drawing --------------------------------------------------------------------------
+
+
+def _broken(t: np.ndarray, y: np.ndarray, starts: Sequence[int],
+            wrap: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Insert NaN before each gap start (and each wrap of an angle) to lift the pen."""
+    cut = set(starts)
+    if wrap is not None and y.size > 1:
+        cut.update(int(i) + 1 for i in np.nonzero(np.abs(np.diff(y)) > wrap)[0])
+    idx = sorted(cut)
+    return np.insert(t, idx, np.nan), np.insert(y, idx, np.nan)
+
+
+def render(series: Series, output: str, title: str | None = None) -> Figure:
+    """
+    Draw the three panels of ``series`` into the PNG ``output``; return the figure.
+
+    The figure is made on an Agg canvas directly, not through pyplot: no
+    display is ever needed or opened, no global state is kept, and the
+    figure is freed with its last reference.
+    """
+    fig = Figure(figsize=FIGSIZE, layout='constrained')
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(3, 1, sharex=True)
+    _draw(fig, axes, series, title)
+    fig.savefig(output, dpi=DPI)
+    return fig
+
+
+def _draw(fig, axes, series: Series, title: str | None) -> None:
+    t = series.time
+    ends = [b for _, b in series.gaps + series.breaks]
+    starts = sorted({int(i) for i in np.searchsorted(t, ends) if 0 < i < t.size})
+    panels = (
+        (series.accel, 'Acceleration (m/s²)', ('x', 'y', 'z'), None),
+        (series.angular_rate, 'Angular rate (rad/s)', ('x', 'y', 'z'), None),
+        (series.euler, 'Orientation (deg)', ('roll', 'pitch', 'yaw'), 180.0),
+    )
+    for ax, (values, ylabel, names, wrap) in zip(axes, panels, strict=True):
+        for k, (name, colour) in enumerate(zip(names, COLOURS, strict=True)):
+            x, y = _broken(t, values[:, k], starts, wrap)
+            ax.plot(x, y, color=colour, linewidth=0.9, label=name)
+        for a, b in series.gaps:
+            ax.axvspan(a, b, color='0.85', linewidth=0, zorder=0)
+        for a, b in series.breaks:
+            ax.axvspan(a, b, facecolor='0.92', edgecolor='0.6', hatch='///', linewidth=0,
+                       zorder=0)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, color='0.85', linewidth=0.6)
+        ax.margins(x=0.01)
+    axes[2].set_yticks(np.arange(-180, 181, 90))
+    axes[2].set_ylim(-200, 200)
+    for ax in axes:
+        handles, names = ax.get_legend_handles_labels()
+        if ax is axes[0]:
+            if series.gaps:
+                handles.append(Patch(color='0.85', label='no data'))
+            if series.breaks:
+                handles.append(Patch(facecolor='0.92', edgecolor='0.6', hatch='///',
+                                     label='timer restarts\n(separate captures)'))
+            names = [h.get_label() for h in handles]
+        ax.legend(handles, names, loc='upper left', bbox_to_anchor=(1.01, 1.0),
+                  frameon=False, fontsize='small')
+    if series.labels:
+        for when, text in series.labels:
+            axes[0].annotate(text, xy=(when, 1.0), xycoords=('data', 'axes fraction'),
+                             xytext=(2, -2), textcoords='offset points', va='top',
+                             fontsize='small', color='0.25')
+        low, high = axes[0].get_ylim()
+        axes[0].set_ylim(low, high + 0.18 * (high - low))
+    axes[2].set_xlabel(f'Time (s), {series.time_note}')
+    count = f'{t.size:,} samples'
+    heading = title or f'3DM-GX2: {series.source}'
+    fig.suptitle(f'{heading}\n{count}; {series.frame}', fontsize='medium')
+
+
+# Command line ---------------------------------------------------------------------
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='plot',
+        description='Plot acceleration, angular rate and orientation of a 3DM-GX2 capture, '
+                    'of the real-records fixture or of a CSV recorded run to a PNG.')
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument('input', nargs='?',
+                        help='capture file (GX2CAP) or CSV (time,ax,ay,az,wx,wy,wz,qx,qy,'
+                             'qz,qw, or `ros2 topic echo --csv /imu/raw_data` output)')
+    source.add_argument('--fixture', metavar='PATH', help='plot the real-records fixture')
+    parser.add_argument('--address', type=int,
+                        help='only records from this node address (captures)')
+    parser.add_argument('--convention', choices=CONVENTIONS, default=None,
+                        help="enu: REP-103 ENU/FLU (default); ned: the device's NED/FRD "
+                             'axes (captures and fixture; a CSV is plotted as recorded)')
+    parser.add_argument('--output', '-o', metavar='FILE.png',
+                        help="PNG to write (default: the input's name with .png)")
+    parser.add_argument('--title', help='figure title')
+    parser.add_argument('--gap', type=float, metavar='S',
+                        help='steps longer than S seconds are gaps (default: automatic)')
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the plot command line; return the exit status."""
+    args = _parser().parse_args(argv)
+    convention = args.convention or ENU
+    source_path = args.fixture or args.input
+    output = args.output or os.path.splitext(os.path.basename(source_path))[0] + '.png'
+    try:
+        if args.fixture:
+            series = series_from_fixture(args.fixture, convention, args.gap)
+        elif is_capture(args.input):
+            series = series_from_capture(args.input, args.address, convention, args.gap)
+        else:
+            if args.convention:
+                print('plot: a CSV is plotted in the frame it was recorded in; '
+                      '--convention ignored', file=sys.stderr)
+            series = series_from_csv(args.input, args.gap)
+    except (OSError, ValueError) as exc:
+        print(f'plot: {exc}', file=sys.stderr)
+        return 1
+    if not series.time.size:
+        print(f'plot: no records with acceleration, angular rate and orientation in '
+              f'{source_path}', file=sys.stderr)
+        return 1
+    render(series, output, args.title)
+    print(f'plot: {series.time.size} samples -> {output}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,519 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Replay a capture into a pseudo-terminal, so the driver can run on recorded data.
+
+The driver opens the pty's slave path as if it were the base station's port
+and reads the recorded bytes, chunk by chunk as the port once returned them,
+at the recorded pace (``--speed 1``), faster (``--speed 10``) or as fast as
+the reader takes them (``--speed 0``).
+
+Replay serves data only: there is no sensor behind the pty. What the driver
+writes is read and discarded (logged with ``-v``); the one answer given is
+the base station's: an ACK byte (0xAA) for each well-formed wireless command
+packet and a NACK (0x21) for a malformed one, so that a driver waiting for
+the ACK does not stall. Everything else the driver asks (pings, firmware
+version, setting continuous mode) goes unanswered and times out; the driver
+must carry on reading the stream regardless. A capture of a real session
+also holds the ACKs and replies of that session, which arrive at their
+recorded times. In a loop the device timer jumps back at each pass.
+
+The pty slave is put in raw mode at once (no echo, no line editing: the
+bytes are binary) and kept open here, so that the driver may close and
+reopen the port without the pty hanging up.
+"""
+
+import argparse
+from collections.abc import Iterable, Sequence
+import fcntl
+import logging
+import os
+import select
+import shutil
+import signal
+import statistics
+import struct
+import sys
+import tempfile
+import termios
+import threading
+import time
+import tty
+from typing import Any
+
+from ..capture import FIXTURE_ADDRESS, fixture_chunks, read_capture
+from ..codec.framing import ACK, CommandPacket, NACK
+from ..codec.stream import CommandStreamParser, RejectedPacket, SensorStreamParser
+
+Chunk = tuple[float, bytes]
+
+_LOG = logging.getLogger('i3dmgx2_driver.replay')
+#: How long a paced write waits for the reader to make room before dropping
+#: the rest of the chunk, as a serial line does when the host stops reading.
+WRITE_STALL = 0.25
+#: An ACK waits for the end of the packet being sent, but never longer than this.
+ACK_HOLD = 0.5
+#: Granularity of the threads' checks for a stop request.
+POLL = 0.05
+
+
+def _hex(data: bytes) -> str:
+    return data.hex(' ')
+
+
+class ReplayStats:
+    """What a replay did, for the log and for tests."""
+
+    __slots__ = (
+        'acks_sent',
+        'bytes_dropped',
+        'bytes_sent',
+        'chunks_sent',
+        'commands',
+        'host_bytes',
+        'nacks_sent',
+        'passes',
+    )
+
+    def __init__(self) -> None:
+        for name in self.__slots__:
+            setattr(self, name, 0)
+
+    def as_dict(self) -> dict:
+        """Return the counters by name."""
+        return {name: getattr(self, name) for name in self.__slots__}
+
+    def __repr__(self) -> str:
+        return 'ReplayStats(' + ', '.join(f'{k}={v}' for k, v in self.as_dict().items()) + ')'
+
+
+def schedule(times: Sequence[float], max_gap: float | None = None) -> list[float]:
+    """
+    Turn receive times into offsets from the first chunk (s), for pacing.
+
+    Steps backwards (the host clock was set back while recording) count as
+    zero; with ``max_gap``, longer silences are shortened to it, so that a
+    capture with long pauses can be replayed without waiting them out.
+    """
+    offsets: list[float] = []
+    total = 0.0
+    for i, t in enumerate(times):
+        if i:
+            step = max(0.0, t - times[i - 1])
+            if max_gap is not None:
+                step = min(step, max_gap)
+            total += step
+        offsets.append(total)
+    return offsets
+
+
+class Replayer:
+    """
+    Play ``(receive_time, bytes)`` chunks into a new pseudo-terminal.
+
+    ``start()`` opens the pty and returns the path to give the driver: the
+    symlink ``link`` if one was asked for, else a symlink in a private
+    temporary directory (so the path is stable and says what it is); the pty
+    itself is :attr:`pty_name`. ``speed`` is the pace relative to the
+    recording (0: as fast as the reader takes the bytes). ``wireless``
+    selects the base station's ACK/NACK answers (a wired sensor sends none).
+    With ``wait_for_host`` the playback starts when the host first writes,
+    so that nothing is played before the driver is there.
+    """
+
+    def __init__(self, chunks: Iterable[Chunk], speed: float = 1.0, loop: bool = False,
+                 link: str | None = None, wireless: bool = True,
+                 max_gap: float | None = None, wait_for_host: bool = False) -> None:
+        if not speed >= 0:
+            raise ValueError(f'speed must be >= 0 (0: as fast as possible), got {speed!r}')
+        if max_gap is not None and not max_gap >= 0:
+            raise ValueError(f'max_gap must be >= 0, got {max_gap!r}')
+        self.chunks: list[Chunk] = [(float(t), bytes(d)) for t, d in chunks if d]
+        self.speed = float(speed)
+        self.loop = loop
+        self.wireless = wireless
+        self.wait_for_host = wait_for_host
+        self.stats = ReplayStats()
+        self._offsets = schedule([t for t, _ in self.chunks], max_gap)
+        self._link_request = link
+        self._link: str | None = None
+        self._tmpdir: str | None = None
+        self._master = -1
+        self._slave = -1
+        self.pty_name: str | None = None
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._finished = threading.Event()
+        self._host_seen = threading.Event()
+        self._answers: list[bytes] = []
+        self._answers_lock = threading.Lock()
+        self._answer_due = 0.0
+        self._threads: list[threading.Thread] = []
+        self._tracker = SensorStreamParser(wireless=True)
+        self._dropping = False
+
+    # Public interface --------------------------------------------------------
+
+    @property
+    def port(self) -> str | None:
+        """Path for the driver's ``port`` parameter (None before start)."""
+        return self._link or self.pty_name
+
+    @property
+    def finished(self) -> bool:
+        """Tell whether the last chunk was played (never so when looping)."""
+        return self._finished.is_set()
+
+    def start(self) -> str:
+        """Open the pty, start playing and answering; return :attr:`port`."""
+        if self._threads:
+            raise RuntimeError('replayer already started')
+        self._master, self._slave = os.openpty()
+        try:
+            # Raw at once: no echo of the driver's commands back into the stream, no
+            # CR/LF translation, no signal characters in binary data.
+            tty.setraw(self._slave)
+            os.set_blocking(self._master, False)
+            self.pty_name = os.ttyname(self._slave)
+            self._make_link()
+        except BaseException:
+            self._close_fds()
+            raise
+        self._threads = [
+            threading.Thread(target=self._play, name='replay-play', daemon=True),
+            threading.Thread(target=self._listen, name='replay-listen', daemon=True),
+        ]
+        for thread in self._threads:
+            thread.start()
+        _LOG.info('replaying %d chunks into %s (%s), speed %s%s', len(self.chunks),
+                  self.port, self.pty_name, self.speed or 'max', ', looping' if self.loop else '')
+        return self.port
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait for the end of the playback; True if it ended."""
+        return self._finished.wait(timeout)
+
+    def pending_output(self) -> int:
+        """Bytes played but not yet read by the driver (0 after stop)."""
+        if self._slave < 0:
+            return 0
+        try:
+            raw = fcntl.ioctl(self._slave, termios.FIONREAD, b'\0\0\0\0')
+        except OSError:
+            return 0
+        return struct.unpack('i', raw)[0]
+
+    def drain(self, timeout: float, abort: threading.Event | None = None) -> bool:
+        """Wait up to ``timeout`` s for the driver to read what was played."""
+        deadline = time.monotonic() + timeout
+        abort = abort or self._stop
+        while self.pending_output() > 0:
+            if time.monotonic() >= deadline or abort.wait(POLL) or self._stop.is_set():
+                return False
+        return True
+
+    def stop(self) -> None:
+        """Stop both threads, close the pty and remove the link; idempotent."""
+        self._stop.set()
+        self._wake.set()
+        for thread in self._threads:
+            if thread is not threading.current_thread():
+                thread.join()
+        self._close_fds()
+        self._remove_link()
+
+    def __enter__(self) -> 'Replayer':
+        self.start()
+        return self
+
+    def __exit__(self, *exc_info: Any) -> None:
+        self.stop()
+
+    # The link ----------------------------------------------------------------
+
+    def _make_link(self) -> None:
+        link = self._link_request
+        if link is None:
+            self._tmpdir = tempfile.mkdtemp(prefix='gx2-replay-')
+            link = os.path.join(self._tmpdir, 'ttyGX2')
+        elif os.path.islink(link):
+            os.unlink(link)  # a stale link of an earlier replay
+        elif os.path.exists(link):
+            raise FileExistsError(f'{link} exists and is not a symlink; not replacing it')
+        os.symlink(self.pty_name, link)
+        self._link = link
+
+    def _remove_link(self) -> None:
+        link, self._link = self._link, None
+        if link and os.path.islink(link) and os.readlink(link) == self.pty_name:
+            os.unlink(link)
+        if self._tmpdir:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            self._tmpdir = None
+
+    def _close_fds(self) -> None:
+        for name in ('_master', '_slave'):
+            fd = getattr(self, name)
+            if fd >= 0:
+                setattr(self, name, -1)
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+
+    # Playing -----------------------------------------------------------------
+
+    def _play(self) -> None:
+        try:
+            self._play_passes()
+            self._finished.set()
+            while not self._stop.is_set():  # keep answering commands until stopped
+                self._wake.wait(POLL)
+                self._wake.clear()
+                self._send_answers(force=True)
+        except OSError as exc:
+            if not self._stop.is_set():
+                _LOG.error('replay stopped: %s', exc)
+            self._finished.set()
+
+    def _play_passes(self) -> None:
+        if self.wait_for_host:
+            while not self._host_seen.wait(POLL):
+                if self._stop.is_set():
+                    return
+                self._send_answers(force=True)
+        if not self.chunks:
+            return
+        period = self._loop_period()
+        start = time.monotonic()
+        base = 0.0
+        while not self._stop.is_set():
+            self.stats.passes += 1
+            for offset, (_, data) in zip(self._offsets, self.chunks, strict=True):
+                if self.speed > 0 and not self._sleep_until(start + (base + offset) / self.speed):
+                    return
+                self._send_answers()
+                if self._stop.is_set():
+                    return
+                self._send_chunk(data)
+            if not self.loop:
+                return
+            base += period
+
+    def _loop_period(self) -> float:
+        """Time from one pass's first chunk to the next pass's (s)."""
+        steps = [b - a for a, b in zip(self._offsets, self._offsets[1:], strict=False) if b > a]
+        return self._offsets[-1] + (statistics.median(steps) if steps else 0.1)
+
+    def _sleep_until(self, deadline: float) -> bool:
+        """Sleep to ``deadline``, answering commands meanwhile; False if stopped."""
+        while True:
+            self._send_answers()
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return not self._stop.is_set()
+            if self._stop.is_set():
+                return False
+            self._wake.wait(min(remaining, ACK_HOLD))
+            self._wake.clear()
+
+    def _send_chunk(self, data: bytes) -> None:
+        sent = self._write(data, paced=self.speed > 0)
+        self.stats.chunks_sent += 1
+        self.stats.bytes_sent += sent
+        if sent < len(data):
+            self.stats.bytes_dropped += len(data) - sent
+            if not self._dropping:
+                _LOG.warning('nobody is reading %s: dropping data, as a serial line would',
+                             self.port)
+            self._dropping = True
+        else:
+            self._dropping = False
+        if self.wireless:
+            self._tracker.feed(data[:sent])
+
+    def _write(self, data: bytes, paced: bool) -> int:
+        """
+        Write all of ``data`` unless stopped; return the bytes written.
+
+        Paced, a full pty (nobody reading) drops the rest after WRITE_STALL, as
+        a serial port nobody reads overruns; unpaced, the reader sets the pace.
+        """
+        view = memoryview(data)
+        written = 0
+        stall_end = time.monotonic() + WRITE_STALL
+        while written < len(data):
+            try:
+                written += os.write(self._master, view[written:])
+                continue
+            except BlockingIOError:
+                pass
+            if self._stop.is_set() or (paced and time.monotonic() >= stall_end):
+                break
+            select.select([], [self._master], [], POLL)
+        return written
+
+    # Answering the host --------------------------------------------------------
+
+    def _at_boundary(self) -> bool:
+        # At most a lone 0xAA held back: an ACK after it reads the same either way.
+        return self._tracker.pending <= 1
+
+    def _send_answers(self, force: bool = False) -> None:
+        """Send queued ACK/NACKs between packets, never inside one."""
+        with self._answers_lock:
+            if not self._answers:
+                return
+        if not force and not self._at_boundary() and time.monotonic() < self._answer_due:
+            return
+        with self._answers_lock:
+            answers, self._answers = self._answers, []
+        for answer in answers:
+            if self._write(answer, paced=False) == len(answer):
+                if answer[0] == ACK:
+                    self.stats.acks_sent += 1
+                else:
+                    self.stats.nacks_sent += 1
+
+    def _queue_answer(self, byte: int) -> None:
+        with self._answers_lock:
+            if not self._answers:
+                self._answer_due = time.monotonic() + ACK_HOLD
+            self._answers.append(bytes((byte,)))
+        self._wake.set()
+
+    def _listen(self) -> None:
+        parser = CommandStreamParser(wireless=True)
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([self._master], [], [], POLL)
+                if not ready:
+                    continue
+                data = os.read(self._master, 4096)
+            except BlockingIOError:
+                continue
+            except OSError as exc:
+                if not self._stop.is_set():
+                    _LOG.error('reading the host stopped: %s', exc)
+                return
+            if not data:
+                continue
+            self.stats.host_bytes += len(data)
+            self._host_seen.set()
+            _LOG.debug('host wrote %d bytes: %s', len(data), _hex(data))
+            if not self.wireless:
+                continue
+            for event in parser.feed(data):
+                if isinstance(event, CommandPacket):
+                    self.stats.commands += 1
+                    _LOG.info('host command to node %d: %s (ACK; replay does not answer it)',
+                              event.address, _hex(event.command))
+                    self._queue_answer(ACK)
+                elif isinstance(event, RejectedPacket):
+                    _LOG.info('host sent a malformed packet (%s): NACK', event.reason)
+                    self._queue_answer(NACK)
+                else:
+                    _LOG.info('host sent %s: not answered (no sensor behind a replay)',
+                              _hex(event.command))
+
+
+# Command line -----------------------------------------------------------------
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='replay',
+        description='Play a 3DM-GX2 capture (or the real-records fixture) into a '
+                    'pseudo-terminal; run the driver with port:=<the printed path>. Replay '
+                    "serves data only: the driver's commands get the base station's ACK "
+                    'and nothing else, so its requests time out.')
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument('capture', nargs='?', help='capture file (GX2CAP) to play')
+    source.add_argument('--fixture', metavar='PATH',
+                        help='play the real-records fixture instead of a capture')
+    parser.add_argument('--address', type=int, default=FIXTURE_ADDRESS,
+                        help="node address of the fixture's packets (default %(default)s)")
+    parser.add_argument('--speed', type=float, default=1.0,
+                        help='pace relative to the recording: 1 original, 10 ten times '
+                             'faster, 0 as fast as the reader takes it (default 1)')
+    parser.add_argument('--loop', action='store_true', help='start again at the end')
+    parser.add_argument('--link', metavar='PATH',
+                        help='symlink to the pty to create (default: in a private temp dir)')
+    parser.add_argument('--max-gap', type=float, metavar='S',
+                        help='shorten silences longer than S seconds to S')
+    parser.add_argument('--wait-for-host', action='store_true',
+                        help='start playing when the driver first writes to the port')
+    parser.add_argument('--linger', type=float, default=2.0, metavar='S',
+                        help='at the end, wait up to S seconds for the driver to read '
+                             'what was played (default %(default)s)')
+    parser.add_argument('-v', '--verbose', action='count', default=0,
+                        help="log the host's commands (-v) and bytes (-vv) to stderr")
+    return parser
+
+
+def _load(args: argparse.Namespace) -> tuple[list[Chunk], bool, str]:
+    if args.fixture:
+        return list(fixture_chunks(args.fixture, address=args.address)), True, args.fixture
+    header, chunks = read_capture(args.capture)
+    return list(chunks), bool(header.get('wireless', True)), args.capture
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the replay command line; return the exit status."""
+    args = _parser().parse_args(argv)
+    logging.basicConfig(
+        level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)],
+        format='replay: %(levelname)s: %(message)s', stream=sys.stderr)
+    if args.speed < 0:
+        print('replay: --speed must be >= 0', file=sys.stderr)
+        return 2
+    try:
+        chunks, wireless, source = _load(args)
+    except (OSError, ValueError) as exc:
+        print(f'replay: {exc}', file=sys.stderr)
+        return 1
+    replayer = Replayer(chunks, speed=args.speed, loop=args.loop, link=args.link,
+                        wireless=wireless, max_gap=args.max_gap,
+                        wait_for_host=args.wait_for_host)
+    stop = threading.Event()
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            previous[signum] = signal.signal(signum, lambda *_: stop.set())
+    try:
+        try:
+            port = replayer.start()
+        except OSError as exc:
+            print(f'replay: {exc}', file=sys.stderr)
+            return 1
+        print(f'port: {port}', flush=True)
+        _LOG.info('source %s: %d chunks, %d bytes', source, len(chunks),
+                  sum(len(d) for _, d in chunks))
+        while not stop.is_set() and not replayer.wait(0.1):
+            pass
+        if not stop.is_set():
+            drained = replayer.drain(args.linger, stop)
+            if not drained and not stop.is_set():
+                _LOG.info('%d bytes were not read by anyone', replayer.pending_output())
+    finally:
+        replayer.stop()
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    _LOG.info('done: %r', replayer.stats)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+# The test command: set up (scripts/setup.sh), then run the whole test suite with the venv's
+# python. Extra arguments go to pytest, e.g. `scripts/test.sh -m 'not slow' -x`.
+# Exits with pytest's exit code.
+
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+
+bash "$ROOT/scripts/setup.sh"
+
+cd "$ROOT"
+# Tests import the package from the source tree (setup.cfg: pythonpath = .); env.sh gives the
+# ones that start the installed executables what those need ($I3DMGX2_LIB, PYTHONPATH, ...).
+# shellcheck source=scripts/env.sh
+source "$ROOT/scripts/env.sh"
+
+set +e
+"$I3DMGX2_PY" -m pytest "$@"
+rc=$?
+set -e
+exit "$rc"

@@ -1,0 +1,196 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Test harness for the node: run it as a real process, subscribe with rclpy.
+
+Every test session gets its own ROS domain and stays on localhost, so tests
+never see another run's messages. Nothing here mocks ROS: the node process
+publishes through Fast DDS and the test process subscribes through it.
+"""
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def ros_env(extra: Optional[Dict[str, str]] = None) -> Dict[str, str]:
+    """Environment for a node process: this repo on PYTHONPATH, same domain."""
+    env = dict(os.environ)
+    env['PYTHONPATH'] = REPO + (os.pathsep + env['PYTHONPATH'] if env.get('PYTHONPATH') else '')
+    env['PYTHONUNBUFFERED'] = '1'
+    env['RCUTILS_COLORIZED_OUTPUT'] = '0'
+    if extra:
+        env.update(extra)
+    return env
+
+
+def isolate_ros_domain() -> int:
+    """Pick a random ROS domain for this process and its children, localhost only."""
+    domain = os.environ.get('I3DMGX2_TEST_DOMAIN')
+    if domain is None:
+        domain = str(random.SystemRandom().randint(1, 100))
+        os.environ['I3DMGX2_TEST_DOMAIN'] = domain
+    os.environ['ROS_DOMAIN_ID'] = domain
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    return int(domain)
+
+
+def param_args(params: Dict[str, object]) -> List[str]:
+    """Turn a dict into ``--ros-args -p name:=value`` arguments."""
+    args = ['--ros-args']
+    for name, value in params.items():
+        if isinstance(value, bool):
+            text = 'true' if value else 'false'
+        else:
+            text = str(value)
+        args += ['-p', f'{name}:={text}']
+    return args
+
+
+class NodeProcess:
+    """The driver node in its own process, with its output in a file."""
+
+    def __init__(self, params: Dict[str, object], extra_args: Sequence[str] = (),
+                 command: Optional[Sequence[str]] = None,
+                 env: Optional[Dict[str, str]] = None) -> None:
+        self.log_file = tempfile.NamedTemporaryFile(
+            prefix='i3dmgx2-node-', suffix='.log', delete=False)
+        base = list(command) if command else [sys.executable, '-m', 'i3dmgx2_driver.ros.main']
+        self.argv = base + param_args(params) + list(extra_args)
+        self.proc = subprocess.Popen(
+            self.argv, stdout=self.log_file, stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL, env=env or ros_env(), cwd=REPO)
+
+    def output(self) -> str:
+        """Everything the node printed so far."""
+        with open(self.log_file.name, 'r', errors='replace') as handle:
+            return handle.read()
+
+    def wait_for_output(self, text: str, timeout: float = 20.0) -> bool:
+        """Wait until ``text`` appears in the node's output."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.output():
+                return True
+            if self.proc.poll() is not None:
+                return text in self.output()
+            time.sleep(0.05)
+        return False
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> Tuple[int, float]:
+        """Send ``sig``; return the exit code and how long the exit took."""
+        start = time.monotonic()
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return self.proc.returncode, time.monotonic() - start
+
+    def wait(self, timeout: float = 20.0) -> int:
+        """Wait for the process to end by itself; return its exit code."""
+        return self.proc.wait(timeout)
+
+    def close(self) -> None:
+        """Kill the process if it still runs and remove its log."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.log_file.close()
+        try:
+            os.unlink(self.log_file.name)
+        except OSError:
+            pass
+
+
+class Listener:
+    """An rclpy node in the test process that records what it receives."""
+
+    def __init__(self, topics: Dict[str, type], reliable: bool = True, depth: int = 1000,
+                 namespace: str = '') -> None:
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('i3dmgx2_test_listener', namespace=namespace,
+                                      context=self.context)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=depth,
+            reliability=ReliabilityPolicy.RELIABLE if reliable
+            else ReliabilityPolicy.BEST_EFFORT)
+        self.messages: Dict[str, List[Tuple[float, object]]] = {t: [] for t in topics}
+        self._lock = threading.Lock()
+        for topic, msg_type in topics.items():
+            self.node.create_subscription(
+                msg_type, topic, lambda msg, t=topic: self._store(t, msg), qos)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        try:
+            self.executor.spin()
+        except Exception:  # noqa: B902 - the context is shut down under us at close()
+            pass
+
+    def _store(self, topic: str, msg: object) -> None:
+        with self._lock:
+            self.messages[topic].append((time.time(), msg))
+
+    def received(self, topic: str) -> List[object]:
+        """The messages of ``topic`` received so far."""
+        with self._lock:
+            return [m for _, m in self.messages[topic]]
+
+    def wait_for(self, topic: str, count: int, timeout: float = 20.0) -> List[object]:
+        """Wait until ``count`` messages of ``topic`` arrived; return them all."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            got = self.received(topic)
+            if len(got) >= count:
+                return got
+            time.sleep(0.02)
+        return self.received(topic)
+
+    def clear(self) -> None:
+        """Forget what was received."""
+        with self._lock:
+            for topic in self.messages:
+                self.messages[topic].clear()
+
+    def close(self) -> None:
+        """Stop spinning and shut the context down."""
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=2.0)
+
+
+def stamp_seconds(msg: object) -> float:
+    """A message header's stamp in seconds."""
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
