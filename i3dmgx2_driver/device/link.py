@@ -37,6 +37,8 @@ from ..codec.stream import Ack, Nack, SensorStreamParser
 
 #: Called from the reader thread with each data packet and its read time.
 RecordCallback = Callable[[DataPacket, float], None]
+#: Called from the reader thread with each read's bytes and their read time.
+BytesCallback = Callable[[bytes, float], None]
 
 _CODE_OF_TYPE = {layout.record_type: code for code, layout in layouts.LAYOUTS.items()
                  if layout.record_type is not None}
@@ -78,17 +80,21 @@ class DeviceLink:
 
     ``address`` selects the sensor behind a base station; ``wireless=False``
     speaks to a wired sensor (no packets, no ACKs). ``on_record`` receives
-    every data packet not claimed by a pending request.
+    every data packet not claimed by a pending request. ``on_bytes``, if
+    given, receives every read's bytes as read, before they are parsed (a
+    raw capture); it runs in the reader thread and must not raise or block.
     """
 
     def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
-                 wireless: bool = True, read_timeout: float = 0.2) -> None:
+                 wireless: bool = True, read_timeout: float = 0.2,
+                 on_bytes: BytesCallback | None = None) -> None:
         self.port = port
         self.address = address
         self.wireless = wireless
         self.parser = SensorStreamParser(address=address if wireless else None,
                                          wireless=wireless)
         self._on_record = on_record
+        self._on_bytes = on_bytes
         self._read_timeout = read_timeout
         self._pending: _Pending | None = None
         self._lock = threading.Lock()
@@ -132,6 +138,8 @@ class DeviceLink:
                 self._wake_pending()
                 return
             now = time.time()
+            if data and self._on_bytes is not None:
+                self._on_bytes(data, now)
             events = parser.feed(data) if data else parser.idle()
             for event in events:
                 self._dispatch(event, now)

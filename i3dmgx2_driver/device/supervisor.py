@@ -32,7 +32,7 @@ import threading
 import time
 from typing import Any, NamedTuple
 
-from .link import DeviceLink, DeviceTimeout, RecordCallback
+from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .port import PortDisconnected, PortError, SerialPort
 from ..codec import commands, layouts
 
@@ -120,14 +120,17 @@ class DeviceSupervisor:
     ``on_connect`` runs in the supervisor thread each time a link is made
     (the node re-anchors its clock there). ``log`` is any object with
     ``debug/info/warning/error`` methods (a ``logging.Logger`` by default;
-    the node passes its rclpy logger).
+    the node passes its rclpy logger). ``on_bytes`` runs in the reader
+    thread with every read's raw bytes and read time (a raw capture).
     """
 
     def __init__(self, config: SupervisorConfig, on_record: RecordCallback,
                  log: Any = None, on_connect: Callable[[], None] | None = None,
-                 port_factory: Callable[..., SerialPort] = SerialPort) -> None:
+                 port_factory: Callable[..., SerialPort] = SerialPort,
+                 on_bytes: BytesCallback | None = None) -> None:
         self.config = config
         self._on_record = on_record
+        self._on_bytes = on_bytes
         self._on_connect = on_connect
         self._log = log or logging.getLogger('i3dmgx2_driver')
         self._port_factory = port_factory
@@ -218,7 +221,8 @@ class DeviceSupervisor:
         if port.low_latency_state != self.low_latency_state:
             self.low_latency_state = port.low_latency_state
             self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
-        link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless)
+        link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless,
+                          on_bytes=self._on_bytes)
         self._link = link
         self.connections += 1
         if self.connections > 1:

@@ -27,6 +27,7 @@ import sys
 import threading
 
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
@@ -40,7 +41,12 @@ _SPIN_PERIOD = 0.1
 
 def main(args: list[str] | None = None) -> int:
     """Run the driver node until SIGINT or SIGTERM."""
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RCLError as exc:
+        # rcl's own words name the argument it could not parse.
+        print(f'[FATAL] [i3dmgx2_driver]: invalid ROS arguments: {exc}', file=sys.stderr)
+        return EXIT_BAD_PARAMETER
     stop = threading.Event()
 
     def request_stop(signum: int, frame: object) -> None:

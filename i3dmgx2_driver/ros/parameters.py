@@ -58,6 +58,8 @@ class Spec(NamedTuple):
     limits: tuple[float, float] | None = None
     choices: tuple[str, ...] = ()
     read_only: bool = True
+    #: A string that may be empty ('' switches a feature off).
+    empty_ok: bool = False
 
 
 SPECS: list[Spec] = [
@@ -101,6 +103,21 @@ SPECS: list[Spec] = [
          (0.0, round(MAX_RATE_HZ, 1))),
     Spec('low_latency', Parameter.Type.BOOL, True,
          'Put the serial port in Linux low-latency mode (USB adapters) when it supports it.'),
+    Spec('gyro_bias_sampling_ms', Parameter.Type.INTEGER, 10000,
+         'Sampling time (ms) of ~/capture_gyro_bias (0xCD); the sensor must stay still that '
+         'long. The protocol advises 10000..30000; down to 100 is accepted for tests and the '
+         'simulator, at the cost of a noisier bias. Can be changed at run time.',
+         (100, 30000), read_only=False),
+    Spec('capture_gyro_bias_on_start', Parameter.Type.BOOL, False,
+         'Capture the gyro bias once, right after streaming first starts (the sensor must '
+         'be still then).'),
+    Spec('temperature_period', Parameter.Type.DOUBLE, 0.0,
+         'Seconds between polls of the temperatures (0xD1), published on imu/temperature; '
+         '0: off.', (0.0, 3600.0)),
+    Spec('capture_file', Parameter.Type.STRING, '',
+         "Write every byte read from the port, with its receive time, to this capture file "
+         "(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '': off.",
+         empty_ok=True),
 ]
 
 
@@ -126,6 +143,10 @@ class DriverConfig:
     publish_mag: bool
     data_rate: float
     low_latency: bool
+    gyro_bias_sampling_ms: int
+    capture_gyro_bias_on_start: bool
+    temperature_period: float
+    capture_file: str
 
     @property
     def data_rate_hz(self) -> float | None:
@@ -136,6 +157,8 @@ class DriverConfig:
 def _valid_range(spec: Spec) -> str:
     if spec.choices:
         return 'one of ' + ', '.join(repr(c) for c in spec.choices)
+    if spec.empty_ok:
+        return "a string, or '' (off)"
     if spec.name == 'data_rate':
         return f'0 (leave the device as it is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz'
     if spec.limits is not None:
@@ -183,7 +206,7 @@ def _check(spec: Spec, value: Any) -> Any:
     problem = f'parameter {spec.name!r} must be {_valid_range(spec)}, got {value!r}'
     if spec.choices and value not in spec.choices:
         raise ParameterError(problem)
-    if spec.kind == Parameter.Type.STRING and not value:
+    if spec.kind == Parameter.Type.STRING and not value and not spec.empty_ok:
         raise ParameterError(problem)
     if spec.kind == Parameter.Type.DOUBLE:
         if not math.isfinite(value):

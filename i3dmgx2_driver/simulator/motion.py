@@ -96,7 +96,7 @@ class TrueState(NamedTuple):
     accel: Vector3
     #: Earth magnetic field (Gauss), sensor axes.
     mag: Vector3
-    #: Roll, pitch, yaw (rad) of the attitude.
+    #: Roll, pitch, yaw (rad) of the attitude, yaw in (-pi, pi].
     euler: Vector3
 
 
@@ -207,7 +207,9 @@ class Motion:
         m = matrix_from_euler(roll, pitch, yaw)
         # The accelerometer feels the reaction to gravity: -1 g along earth down.
         accel = (-m[2], -m[5], -m[8])
-        return TrueState(m, rate, accel, mat_vec(m, self.earth_field), (roll, pitch, yaw))
+        # Heading as the device reports it: wrapped into (-pi, pi].
+        heading = math.atan2(math.sin(yaw), math.cos(yaw))
+        return TrueState(m, rate, accel, mat_vec(m, self.earth_field), (roll, pitch, heading))
 
     def update_matrix(self, t: float, dt: float) -> Matrix3:
         """Return the rotation of the last ``dt`` seconds, M(t) * M(t - dt)^T (0xC6)."""

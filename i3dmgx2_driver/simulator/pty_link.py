@@ -47,6 +47,7 @@ import collections.abc
 import dataclasses
 import fcntl
 import heapq
+import itertools
 import os
 import random
 import select
@@ -60,16 +61,20 @@ import tty
 import typing
 from typing import Any, NamedTuple
 
-from ..codec import framing
-from ..codec import layouts as lay
-from ..codec.commands import Command, decode_command
-from ..codec.errors import CodecError
-from ..codec.stream import CommandStreamParser, RawCommand, RejectedPacket
+from i3dmgx2_driver.codec import framing
+from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec.commands import Command, decode_command
+from i3dmgx2_driver.codec.errors import CodecError
+from i3dmgx2_driver.codec.stream import CommandStreamParser, RawCommand, RejectedPacket
+
 from . import faults as flt
 from . import sensor as sns
 from .faults import FaultConfig
 from .motion import Motion, MotionConfig
 from .sensor import Reply, SimulatedSensor
+
+if typing.TYPE_CHECKING:  # typing.Self is new in Python 3.11; Jazzy allows 3.10
+    from typing import Self
 
 #: Bytes per second of a 115200-baud 8N1 line.
 LINE_BYTES_PER_SECOND = 11520
@@ -84,9 +89,6 @@ _READ_SIZE = 4096
 #: Longest sleep of either thread, so that stop() never waits long.
 _POLL_S = 0.25
 _PING_FAILED = bytes((framing.NACK,))
-
-if typing.TYPE_CHECKING:  # typing.Self is new in Python 3.11; Jazzy allows 3.10
-    from typing import Self
 
 
 @dataclasses.dataclass
@@ -275,7 +277,8 @@ class PtySimulator:
         self._chunk_rng = random.Random(seeds.getrandbits(64))
         self._faults = config.faults
 
-        #: Guards the sensor, the queues and the ground truth (never held while writing).
+        #: Guards the sensor, the queues and the ground truth. Lock order: ``lock``
+        #: may be held while taking ``_io_lock`` (one-byte answers), never the reverse.
         self.lock = threading.RLock()
         self._tx_wake = threading.Condition(self.lock)
         self._changed = threading.Condition(self.lock)
@@ -480,7 +483,7 @@ class PtySimulator:
 
     @property
     def faults(self) -> FaultConfig:
-        """The faults in effect."""
+        """Return the faults in effect."""
         return self._faults
 
     def set_faults(self, faults: FaultConfig | None = None, **changes: Any) -> FaultConfig:
@@ -567,7 +570,7 @@ class PtySimulator:
 
     @property
     def stats(self) -> SimulatorStats:
-        """A snapshot of the counters."""
+        """Return a snapshot of the counters."""
         with self.lock:
             return self._stats.copy()
 
@@ -674,52 +677,54 @@ class PtySimulator:
                     self.last_port_open = now
                     self._changed.notify_all()
             return
+        # Each event is handled whole under the lock, answer written included, so
+        # that the ground truth already shows a command when the host sees its ACK.
         with self.lock:
             self._stats.bytes_read += len(data) - 1
-            events = self._parser.feed(data[1:])
-        for event in events:
-            if isinstance(event, framing.CommandPacket):
-                self._on_command_packet(event, now)
-            elif isinstance(event, RejectedPacket):
-                self._write_raw(bytes((framing.NACK,)))
-                self._log(HostCommand(now, 'rejected', None, None, b'',
-                                      f'rejected: {event.reason}'), nacks=1)
-            elif isinstance(event, RawCommand):
-                self._on_raw_command(event.command, now)
+            for event in self._parser.feed(data[1:]):
+                if isinstance(event, framing.CommandPacket):
+                    self._on_command_packet(event, now)
+                elif isinstance(event, RejectedPacket):
+                    self._log(HostCommand(now, 'rejected', None, None, b'',
+                                          f'rejected: {event.reason}'), nacks=1)
+                    self._write_raw(bytes((framing.NACK,)))
+                elif isinstance(event, RawCommand):
+                    self._on_raw_command(event.command, now)
 
     def _on_raw_command(self, raw: bytes, now: float) -> None:
+        """Answer a ping for the base station (lock held)."""
         try:
             command = decode_command(raw)
         except CodecError:
             return
         if command.code != lay.PING:
             return
-        with self.lock:
-            answer = self.sensor.ping_reply(command.args[0])
-            if self._stalled(now):
-                answer = _PING_FAILED
-        self._write_raw(answer)
+        answer = self.sensor.ping_reply(command.args[0])
+        if self._stalled(now):
+            answer = _PING_FAILED
         outcome = 'ping ok' if answer != _PING_FAILED else 'ping failed'
         self._log(HostCommand(now, 'ping', command.args[0], command, raw, outcome), pings=1)
+        self._write_raw(answer)
 
     def _on_command_packet(self, packet: framing.CommandPacket, now: float) -> None:
+        """ACK a command packet and pass it on over the radio (lock held)."""
         # The base station ACKs every well-formed packet: it only checks the
-        # framing and sends it over the air, whoever it is for.
+        # framing and sends it over the air, whoever it is for. The ACK goes out
+        # first; the sensor's answer is queued behind it.
         self._write_raw(bytes((framing.ACK,)))
         try:
             command: Command | None = decode_command(packet.command)
         except CodecError:
             command = None
-        with self.lock:
-            if packet.address != self.sensor.address:
-                outcome, counter = 'other_address', 'commands_other_address'
-            elif self._stalled(now):
-                outcome, counter = 'stalled', 'commands_lost'
-            elif self._command_rng.random() < self._faults.command_loss_probability:
-                outcome, counter = 'lost', 'commands_lost'
-            else:
-                outcome = self._deliver(command, packet.command, now)
-                counter = 'commands_received' if outcome == 'delivered' else 'commands_ignored'
+        if packet.address != self.sensor.address:
+            outcome, counter = 'other_address', 'commands_other_address'
+        elif self._stalled(now):
+            outcome, counter = 'stalled', 'commands_lost'
+        elif self._command_rng.random() < self._faults.command_loss_probability:
+            outcome, counter = 'lost', 'commands_lost'
+        else:
+            outcome = self._deliver(command, packet.command, now)
+            counter = 'commands_received' if outcome == 'delivered' else 'commands_ignored'
         self._log(HostCommand(now, 'packet', packet.address, command, packet.command, outcome),
                   acks=1, **{counter: 1})
 
@@ -891,7 +896,7 @@ class PtySimulator:
         if count <= 1:
             return [data]
         cuts = sorted(self._chunk_rng.sample(range(1, len(data)), count - 1))
-        return [data[a:b] for a, b in zip([0] + cuts, cuts + [len(data)])]
+        return [data[a:b] for a, b in itertools.pairwise([0, *cuts, len(data)])]
 
     def _write_packet(self, data: bytes) -> tuple[str | None, float | None]:
         """Write one packet in chunks; return (fault or None, time after its last byte)."""

@@ -34,11 +34,17 @@ import random
 import struct
 from typing import Any, ClassVar, NamedTuple
 
-from ..codec import layouts as lay
-from ..codec import records as rec
-from ..codec.commands import Command, decode_command, decode_record, encode_record
-from ..codec.errors import CodecError
-from ..codec.orientation import euler_from_matrix
+from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec import records as rec
+from i3dmgx2_driver.codec.commands import (
+    Command,
+    decode_command,
+    decode_record,
+    encode_record,
+)
+from i3dmgx2_driver.codec.errors import CodecError
+from i3dmgx2_driver.codec.orientation import euler_from_matrix
+
 from .motion import Motion, Vector3
 
 #: The timer wraps after this many ticks.
@@ -88,7 +94,7 @@ class Reply(NamedTuple):
 
     @property
     def code(self) -> int:
-        """The record's echo byte."""
+        """Return the record's echo byte."""
         return self.data[0]
 
 
@@ -182,7 +188,7 @@ class SimulatedSensor:
 
     @property
     def rate_hz(self) -> float:
-        """Calculation rate (Hz): the override, or 51200 / EEPROM divider."""
+        """Return the calculation rate (Hz): the override, or 51200 / EEPROM divider."""
         if self._rate_override is not None:
             return self._rate_override
         return BASE_RATE_HZ / self.eeprom.get(RATE_DIVIDER_ADDRESS, FACTORY_DIVIDER)
@@ -212,6 +218,10 @@ class SimulatedSensor:
 
     def _latest_cycle_rel(self, rel: float) -> float:
         index = math.floor((rel - self._grid_origin) / self.period + 1e-9)
+        return self._cycle_rel(max(index, 0))
+
+    def _next_cycle_rel(self, rel: float) -> float:
+        index = math.ceil((rel - self._grid_origin) / self.period - 1e-9)
         return self._cycle_rel(max(index, 0))
 
     def start_streaming(self, code: int, t: float) -> None:
@@ -249,7 +259,7 @@ class SimulatedSensor:
     # -- commands ---------------------------------------------------------------------------
 
     def ping_reply(self, address: int) -> bytes:
-        """Base station's answer to a ping: 0x02 if our address, else 0x21."""
+        """Return the base station's answer to a ping: 0x02 if ours, else 0x21."""
         return bytes((lay.PING if address == self.address else 0x21,))
 
     def link_quality(self) -> tuple[int, int]:
@@ -287,7 +297,11 @@ class SimulatedSensor:
         cycle_time = self.power_up_time + cycle
         timer = self._timer_rel(cycle)
         if code in STREAMABLE:
-            return [self._reply(self._record(code, cycle), now, cycle_time)]
+            # A polled record is the one the next calculation cycle computes,
+            # sent when that cycle completes.
+            polled = self._next_cycle_rel(rel)
+            polled_time = self.power_up_time + polled
+            return [self._reply(self._record(code, polled), polled_time, polled_time)]
         if code == lay.SET_CONTINUOUS:
             target = args[0]
             if target == 0:

@@ -415,7 +415,8 @@ def _parser() -> argparse.ArgumentParser:
                         help="enu: REP-103 ENU/FLU (default); ned: the device's NED/FRD "
                              'axes (captures and fixture; a CSV is plotted as recorded)')
     parser.add_argument('--output', '-o', metavar='FILE.png',
-                        help="PNG to write (default: the input's name with .png)")
+                        help='PNG to write (default: the input file name with .png, in '
+                             'the current directory)')
     parser.add_argument('--title', help='figure title')
     parser.add_argument('--gap', type=float, metavar='S',
                         help='steps longer than S seconds are gaps (default: automatic)')

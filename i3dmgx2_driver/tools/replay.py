@@ -38,6 +38,7 @@ reopen the port without the pty hanging up.
 import argparse
 from collections.abc import Iterable, Sequence
 import fcntl
+import itertools
 import logging
 import os
 import select
@@ -314,7 +315,7 @@ class Replayer:
 
     def _loop_period(self) -> float:
         """Time from one pass's first chunk to the next pass's (s)."""
-        steps = [b - a for a, b in zip(self._offsets, self._offsets[1:], strict=False) if b > a]
+        steps = [b - a for a, b in itertools.pairwise(self._offsets) if b > a]
         return self._offsets[-1] + (statistics.median(steps) if steps else 0.1)
 
     def _sleep_until(self, deadline: float) -> bool:

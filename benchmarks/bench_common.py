@@ -1,0 +1,472 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+What the benchmarks share: processes, the node in-process, statistics, the table.
+
+Every benchmark runs the simulated device in a process of its own
+(``sim_process.py``), as a real device is, and reads its ground truth when
+it stops: the time each packet's last byte was written and the time its
+sample was taken, keyed by the device timer. The node runs either in the
+benchmark's process (to time ``publish()`` from inside) or as the real
+executable (to measure its CPU). Subscribers run in another process
+(``subscriber.py``). Every run gets its own ROS domain on localhost only.
+
+Benchmarks print numbers; they never fail on speed.
+"""
+
+import json
+import math
+import os
+from pathlib import Path
+import platform
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from typing import Any, NamedTuple
+
+BENCH_DIR = Path(__file__).resolve().parent
+REPO = BENCH_DIR.parent
+OUTPUT_DIR = BENCH_DIR / 'output'
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+#: Node address the simulator and the node agree on.
+ADDRESS = 95
+#: Highest rate of 88-byte packets a 115200-baud 8N1 line carries (11,520 bytes/s).
+LINE_MAX_RATE_HZ = 11520 / 88
+
+
+class Result(NamedTuple):
+    """One row of the results table; ``met`` is None for a figure with no target."""
+
+    metric: str
+    value: str
+    target: str = ''
+    met: bool | None = None
+
+
+# -- statistics ------------------------------------------------------------------------------
+
+def percentile(values: list[float], q: float) -> float:
+    """The ``q`` percentile (0..100) by linear interpolation; NaN for no values."""
+    if not values:
+        return math.nan
+    ordered = sorted(values)
+    position = (len(ordered) - 1) * q / 100.0
+    low = math.floor(position)
+    high = min(low + 1, len(ordered) - 1)
+    return ordered[low] + (ordered[high] - ordered[low]) * (position - low)
+
+
+class Summary(NamedTuple):
+    """Count, mean, p50, p99 and max of a sample."""
+
+    n: int
+    mean: float
+    p50: float
+    p99: float
+    max: float
+
+    def ms(self) -> str:
+        """Format as milliseconds: ``p50 / p99 / max``."""
+        return (f'{self.p50 * 1e3:.3f} / {self.p99 * 1e3:.3f} / {self.max * 1e3:.3f} ms '
+                f'(n={self.n})')
+
+
+def summarise(values: list[float]) -> Summary:
+    """Summarise a sample (NaN everywhere when it is empty)."""
+    if not values:
+        return Summary(0, math.nan, math.nan, math.nan, math.nan)
+    return Summary(len(values), sum(values) / len(values), percentile(values, 50),
+                   percentile(values, 99), max(values))
+
+
+def std_dev(values: list[float]) -> float:
+    """Population standard deviation (NaN for fewer than two values)."""
+    if len(values) < 2:
+        return math.nan
+    mean = sum(values) / len(values)
+    return math.sqrt(sum((v - mean) ** 2 for v in values) / len(values))
+
+
+# -- the machine and the table ---------------------------------------------------------------
+
+def machine_info() -> list[tuple[str, str]]:
+    """CPU, cores, OS, Python, rclpy and RMW: what the numbers depend on."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open('/proc/cpuinfo') as handle:
+            for line in handle:
+                if line.startswith('model name'):
+                    cpu = line.split(':', 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    try:
+        from importlib import metadata
+        rclpy_version = next((metadata.version(name) for name in
+                              ('ros-jazzy-rclpy', 'ros-rclpy', 'rclpy')
+                              if _has_distribution(metadata, name)), 'unknown')
+    except ImportError:
+        rclpy_version = 'unknown'
+    rmw = os.environ.get('RMW_IMPLEMENTATION') or 'rmw_fastrtps_cpp (default)'
+    return [
+        ('CPU', cpu),
+        ('cores', str(os.cpu_count())),
+        ('OS', f'{platform.system()} {platform.release()}'),
+        ('Python', platform.python_version()),
+        ('rclpy', rclpy_version),
+        ('RMW', rmw),
+    ]
+
+
+def _has_distribution(metadata: Any, name: str) -> bool:
+    try:
+        metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return False
+    return True
+
+
+def markdown_table(results: list[Result]) -> str:
+    """The results as a Markdown table: metric, value, target, met?."""
+    lines = ['| metric | value | target | met? |', '|---|---|---|---|']
+    for result in results:
+        met = {True: 'yes', False: '**no**', None: '-'}[result.met]
+        lines.append(f'| {result.metric} | {result.value} | {result.target or "-"} | {met} |')
+    return '\n'.join(lines)
+
+
+def machine_table() -> str:
+    """The machine information as a Markdown table."""
+    lines = ['| machine | |', '|---|---|']
+    lines += [f'| {name} | {value} |' for name, value in machine_info()]
+    return '\n'.join(lines)
+
+
+def report(title: str, results: list[Result], notes: list[str] = (),
+           output: str | None = None) -> str:
+    """Print the results (and machine) as Markdown; also write them to ``output``."""
+    text = '\n'.join([f'## {title}', '', machine_table(), '', markdown_table(results), '',
+                      *[f'- {note}' for note in notes]]).rstrip() + '\n'
+    print(text, flush=True)
+    if output:
+        OUTPUT_DIR.mkdir(parents=True, exist_ok=True)
+        path = OUTPUT_DIR / output
+        path.write_text(text)
+        print(f'(written to {path.relative_to(REPO)})', flush=True)
+    return text
+
+
+# -- processes -------------------------------------------------------------------------------
+
+def isolate_ros_domain() -> int:
+    """Use a random ROS domain on localhost only, for this process and its children."""
+    domain = os.environ.get('I3DMGX2_BENCH_DOMAIN')
+    if domain is None:
+        domain = str(random.SystemRandom().randint(1, 100))
+        os.environ['I3DMGX2_BENCH_DOMAIN'] = domain
+    os.environ['ROS_DOMAIN_ID'] = domain
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    return int(domain)
+
+
+def child_env() -> dict[str, str]:
+    """Environment of a child process: this repository first on PYTHONPATH."""
+    env = dict(os.environ)
+    env['PYTHONPATH'] = str(REPO) + (os.pathsep + env['PYTHONPATH']
+                                     if env.get('PYTHONPATH') else '')
+    env['PYTHONUNBUFFERED'] = '1'
+    env['RCUTILS_COLORIZED_OUTPUT'] = '0'
+    return env
+
+
+class _Child:
+    """A helper process that prints a line when ready and saves JSON when stopped."""
+
+    #: The command-line option that names the JSON file the child writes.
+    out_flag = '--out'
+
+    def __init__(self, argv: list[str], ready_prefix: str, timeout: float = 20.0) -> None:
+        handle, self.out_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.json')
+        os.close(handle)
+        self.name = Path(argv[1]).name
+        # Standard error goes to a file: a pipe nobody reads could fill and block the child.
+        self._stderr = tempfile.TemporaryFile(mode='w+')
+        self.proc = subprocess.Popen(
+            [*argv, self.out_flag, self.out_path],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
+            text=True, env=child_env(), cwd=str(REPO))
+        self.ready_line = self._wait_line(ready_prefix, timeout)
+        self._lines: list[str] = []
+        self._reader = threading.Thread(target=self._read_rest, daemon=True)
+        self._reader.start()
+
+    def _wait_line(self, prefix: str, timeout: float) -> str:
+        timer = threading.Timer(timeout, self.proc.kill)
+        timer.start()
+        try:
+            for line in self.proc.stdout:
+                if line.startswith(prefix):
+                    return line.strip()
+        finally:
+            timer.cancel()
+        raise RuntimeError(f'{self.name} did not start: {self.errors()}')
+
+    def errors(self) -> str:
+        """What the process wrote to standard error so far."""
+        self._stderr.seek(0)
+        return self._stderr.read()
+
+    def _read_rest(self) -> None:
+        for line in self.proc.stdout:
+            self._lines.append(line.strip())
+
+    def signal(self, signum: int) -> None:
+        """Send a signal if the process still runs."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signum)
+
+    def stop(self, timeout: float = 15.0) -> Any:
+        """Stop the process; return the JSON it saved."""
+        self.signal(signal.SIGTERM)
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        try:
+            with open(self.out_path) as handle:
+                return json.load(handle)
+        except (OSError, ValueError) as exc:
+            raise RuntimeError(f'{self.name} saved nothing: {self.errors()}') from exc
+        finally:
+            os.unlink(self.out_path)
+
+
+class TruthEntry(NamedTuple):
+    """One data packet the simulator produced."""
+
+    timer: int | None
+    sample_time: float
+    write_time: float | None
+    valid: bool
+    source: str
+
+
+class SimProcess(_Child):
+    """The simulated device in its own process; ``truth`` after :meth:`stop`."""
+
+    out_flag = '--truth'
+
+    def __init__(self, **config: Any) -> None:
+        config.setdefault('address', ADDRESS)
+        config.setdefault('seed', 1)
+        super().__init__([sys.executable, str(BENCH_DIR / 'sim_process.py'),
+                          '--config', json.dumps(config)], 'port: ')
+        self.port = self.ready_line.split(': ', 1)[1]
+        self.truth: list[TruthEntry] = []
+        self.stats: dict[str, int] = {}
+
+    def silence(self, timeout: float = 5.0) -> None:
+        """Stop the sensor's packets for good (the radio goes silent)."""
+        self.signal(signal.SIGUSR1)
+        deadline = time.monotonic() + timeout
+        while 'silent' not in self._lines and time.monotonic() < deadline:
+            time.sleep(0.01)
+
+    def stop(self, timeout: float = 15.0) -> dict:
+        """Stop the simulator; fill ``truth`` and ``stats``."""
+        document = super().stop(timeout)
+        self.truth = [TruthEntry(*row) for row in document['truth']]
+        self.stats = document['stats']
+        return document
+
+    def written_stream(self) -> list[TruthEntry]:
+        """The valid streamed packets that were written whole."""
+        return [e for e in self.truth
+                if e.source == 'stream' and e.valid and e.write_time is not None]
+
+
+class SubscriberProcess(_Child):
+    """A subscriber to ``imu/raw_data`` in its own process."""
+
+    def __init__(self, topic: str = 'imu/raw_data') -> None:
+        super().__init__([sys.executable, str(BENCH_DIR / 'subscriber.py'),
+                          '--topic', topic], 'ready')
+        self.rows: list[tuple[int, int, float]] = []
+
+    def stop(self, timeout: float = 15.0) -> list:
+        """Stop; return and keep the rows (stamp sec, stamp nanosec, receive time)."""
+        self.rows = [tuple(row) for row in super().stop(timeout)]
+        return self.rows
+
+
+def process_cpu_seconds(pid: int) -> float:
+    """User plus system CPU time (s) of a process and all its threads so far."""
+    with open(f'/proc/{pid}/stat') as handle:
+        fields = handle.read().rsplit(')', 1)[1].split()
+    # After the command name: state is field 3, utime 14 and stime 15 (1-based).
+    utime, stime = int(fields[11]), int(fields[12])
+    return (utime + stime) / os.sysconf('SC_CLK_TCK')
+
+
+# -- the node in this process ----------------------------------------------------------------
+
+class Published(NamedTuple):
+    """One Imu message as the node published it, and when publish() returned."""
+
+    timer: int
+    stamp_sec: int
+    stamp_nanosec: int
+    time: float
+
+
+class InProcessNode:
+    """
+    The driver node in this process, spinning as ``ros2 run`` would spin it.
+
+    The executor runs in a thread of its own, the node's reader thread
+    publishes, and ``published`` gets one entry per Imu message right after
+    ``publish()`` returned: the timer of the record (to match the ground
+    truth) and ``time.time()``, the clock the simulator stamps its writes
+    with. The timing wraps the publisher's ``publish`` and the message
+    factory's ``fill_imu`` of this node object only; the driver code is not
+    changed.
+    """
+
+    def __init__(self, port: str, **params: Any) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.parameter import Parameter
+        from rclpy.signals import SignalHandlerOptions
+
+        from i3dmgx2_driver.ros.imu_node import ImuDriverNode
+
+        self._rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        params = {'port': port, 'address': ADDRESS, **params}
+        self.published: list[Published] = []
+        self.node = ImuDriverNode(
+            context=self.context,
+            parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
+        self._instrument(self.node)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._spin, name='bench-executor', daemon=True)
+        self._thread.start()
+
+    def _instrument(self, node: Any) -> None:
+        published = self.published
+        clock = time.time
+        factory = node.messages
+        fill_imu = factory.fill_imu
+        publish = node.imu_pub.publish
+        current = [0]
+
+        def timed_fill_imu(record: Any, stamp: float) -> Any:
+            current[0] = record.timer
+            return fill_imu(record, stamp)
+
+        def timed_publish(msg: Any) -> None:
+            publish(msg)
+            now = clock()
+            stamp = msg.header.stamp
+            published.append(Published(current[0], stamp.sec, stamp.nanosec, now))
+
+        factory.fill_imu = timed_fill_imu
+        node.imu_pub.publish = timed_publish
+
+    def _spin(self) -> None:
+        while not self._stop.is_set() and self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.1)
+            except Exception:  # noqa: B902 - the context is shut down under us at close()
+                break
+
+    def wait_published(self, count: int, timeout: float = 20.0) -> bool:
+        """Wait until ``count`` messages were published."""
+        deadline = time.monotonic() + timeout
+        while len(self.published) < count and time.monotonic() < deadline:
+            time.sleep(0.02)
+        return len(self.published) >= count
+
+    def wait_quiet(self, quiet: float = 0.5, timeout: float = 10.0) -> None:
+        """Wait until nothing has been published for ``quiet`` seconds."""
+        deadline = time.monotonic() + timeout
+        last = -1
+        while time.monotonic() < deadline:
+            count = len(self.published)
+            if count == last:
+                return
+            last = count
+            time.sleep(quiet)
+
+    def close(self) -> None:
+        """Stop the device stream, the executor and the context."""
+        self.node.shutdown()
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self.executor.shutdown(timeout_sec=0.5)
+        self.node.destroy_node()
+        self._rclpy.try_shutdown(context=self.context)
+
+
+def stamp_key(sec: int, nanosec: int) -> int:
+    """A stamp as integer nanoseconds, for matching."""
+    return sec * 1_000_000_000 + nanosec
+
+
+def write_latencies(truth: list[TruthEntry], published: list[Published]) -> list[float]:
+    """Seconds from each packet's last byte written to its publish() returned."""
+    written = {e.timer: e.write_time for e in truth
+               if e.source == 'stream' and e.valid and e.write_time is not None}
+    return [p.time - written[p.timer] for p in published if p.timer in written]
+
+
+def subscriber_latencies(truth: list[TruthEntry], published: list[Published],
+                         rows: list[tuple[int, int, float]]) -> list[float]:
+    """Seconds from each packet's last byte written to a subscriber's callback."""
+    written = {e.timer: e.write_time for e in truth
+               if e.source == 'stream' and e.valid and e.write_time is not None}
+    timer_of = {stamp_key(p.stamp_sec, p.stamp_nanosec): p.timer for p in published}
+    out = []
+    for sec, nanosec, received in rows:
+        timer = timer_of.get(stamp_key(sec, nanosec))
+        if timer in written:
+            out.append(received - written[timer])
+    return out
+
+
+def standard_args(description: str, default_seconds: float, quick_seconds: float) -> Any:
+    """The command line every benchmark script shares: --quick, --seconds."""
+    import argparse
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument('--quick', action='store_true', help='short runs (a smoke test)')
+    parser.add_argument('--seconds', type=float, default=None,
+                        help=f'measuring time per run (default {default_seconds:g} s, '
+                             f'{quick_seconds:g} s with --quick)')
+    parser.add_argument('--no-output', action='store_true',
+                        help='do not write benchmarks/output/')
+    args = parser.parse_args()
+    if args.seconds is None:
+        args.seconds = quick_seconds if args.quick else default_seconds
+    return args

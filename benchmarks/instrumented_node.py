@@ -1,0 +1,131 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The real driver node, with its counters written to a JSON file for the soak campaign.
+
+Runs ``i3dmgx2_driver.ros.main.main()`` unchanged, with two observers added
+from the outside: a ROS timer that writes the node's ``stats``, the parser
+counters summed over every connection (``supervisor.parser_stats()``) and the
+supervisor's counters to the file named by ``$I3DMGX2_SOAK_STATS`` twice a
+second and once more after shutdown; and a serial port that notes the time
+of every open, input flush and close, which tell the campaign when the node
+could read the port (records written outside those windows may be lost
+legitimately). Nothing on the path of a sample is changed.
+
+Usage: ``I3DMGX2_SOAK_STATS=out.json python -m benchmarks.instrumented_node
+--ros-args -p port:=... -p address:=...``.
+"""
+
+import functools
+import json
+import os
+import sys
+import threading
+import time
+
+from i3dmgx2_driver.device.port import SerialPort
+from i3dmgx2_driver.ros import imu_node
+from i3dmgx2_driver.ros import main as node_main
+
+#: Environment variable naming the JSON file the counters go to.
+STATS_ENV = 'I3DMGX2_SOAK_STATS'
+#: How often the counters are written while the node runs (s).
+DUMP_PERIOD = 0.5
+
+_events: list[tuple[str, float, int]] = []
+_events_lock = threading.Lock()
+_connection = [0]
+
+
+def _note(kind: str) -> None:
+    with _events_lock:
+        _events.append((kind, time.time(), _connection[0]))
+
+
+class ObservedPort(SerialPort):
+    """A SerialPort that notes when it was opened, flushed and closed."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        with _events_lock:
+            _connection[0] += 1
+        _note('open')
+
+    def flush_input(self) -> None:
+        """Flush, then note the time: what was written before is gone."""
+        super().flush_input()
+        _note('flush')
+
+    def close(self) -> None:
+        """Note the time, then close: the reader has stopped by now."""
+        _note('close')
+        super().close()
+
+
+def _snapshot(node: imu_node.ImuDriverNode, final: bool) -> dict:
+    stats = node.stats
+    supervisor = node.supervisor
+    with _events_lock:
+        events = list(_events)
+    return {
+        'time': time.time(),
+        'final': final,
+        'pid': os.getpid(),
+        'stats': {name: getattr(stats, name) for name in (
+            'published', 'unpublished', 'mag_published', 'lost', 'other_records',
+            'device_resets')},
+        'parser': supervisor.parser_stats(),
+        'supervisor': {'connections': supervisor.connections,
+                       'reconnects': supervisor.reconnects, 'stalls': supervisor.stalls,
+                       'state': supervisor.state.value, 'last_error': supervisor.last_error},
+        'port_events': events,
+    }
+
+
+def _write(path: str, document: dict) -> None:
+    temporary = f'{path}.tmp'
+    with open(temporary, 'w') as handle:
+        json.dump(document, handle)
+    os.replace(temporary, path)
+
+
+class ObservedNode(imu_node.ImuDriverNode):
+    """The driver node, writing its counters to a file as it runs."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._stats_path = os.environ[STATS_ENV]
+        self.create_timer(DUMP_PERIOD, lambda: _write(self._stats_path,
+                                                      _snapshot(self, False)))
+
+    def shutdown(self) -> None:
+        """Shut down as the node does, then write the final counters."""
+        super().shutdown()
+        _write(self._stats_path, _snapshot(self, True))
+
+
+def main() -> int:
+    """Run the driver node with the observers in place."""
+    if not os.environ.get(STATS_ENV):
+        print(f'{STATS_ENV} must name the file for the counters', file=sys.stderr)
+        return 2
+    imu_node.DeviceSupervisor = functools.partial(imu_node.DeviceSupervisor,
+                                                  port_factory=ObservedPort)
+    node_main.ImuDriverNode = ObservedNode
+    return node_main.main()
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,110 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Latency: last byte of a packet written to the port, to the message published.
+
+The simulated device (its own process) notes ``time.time()`` right after it
+wrote each packet's last byte to the pseudo-terminal. The node runs in this
+process and the time right after ``publish()`` returned is taken for every
+Imu message; a subscriber in a third process notes when its callback starts.
+Matched by the record's timer (and the message stamp), the differences are
+the driver's own delay (read, parse, stamp, fill, publish) and the delay to a
+subscriber in another process (that adds DDS and the subscriber's executor).
+
+Runs at 100 Hz (the factory rate) and at the most a 115200-baud line carries
+(~131 Hz of 88-byte packets). Target: p99 of write -> publish() <= 0.1 ms
+(the original C++ node: 0.99 ms mean, 1.16 ms max).
+"""
+
+import time
+
+from bench_common import (
+    InProcessNode, isolate_ros_domain, LINE_MAX_RATE_HZ, report, Result, SimProcess,
+    standard_args, subscriber_latencies, SubscriberProcess, summarise, write_latencies,
+)
+
+#: p99 of last byte written -> publish() returned (s).
+TARGET_P99_S = 0.1e-3
+#: Seconds of streaming left out at the start (start-up, DDS discovery).
+WARM_UP_S = 2.0
+
+
+class LatencyRun:
+    """One measured run: the latencies to publish() and to a remote subscriber."""
+
+    def __init__(self, rate_hz: float, seconds: float, node_params: dict | None = None,
+                 load: object = None) -> None:
+        self.rate_hz = rate_hz
+        sim = SimProcess(rate_hz=rate_hz)
+        subscriber = SubscriberProcess()
+        node = None
+        try:
+            node = InProcessNode(sim.port, **(node_params or {}))
+            if not node.wait_published(1, timeout=20.0):
+                raise RuntimeError('the node published nothing within 20 s')
+            time.sleep(WARM_UP_S)
+            first = len(node.published)
+            if load is not None:
+                load.start()
+            time.sleep(seconds)
+            if load is not None:
+                load.stop()
+            sim.silence()
+            node.wait_quiet()
+            measured = node.published[first:]
+        finally:
+            if node is not None:
+                node.close()
+            rows = subscriber.stop()
+            sim.stop()
+        self.published = measured
+        self.to_publish = summarise(write_latencies(sim.truth, measured))
+        self.to_subscriber = summarise(subscriber_latencies(sim.truth, measured, rows))
+        self.sim_stats = sim.stats
+
+
+def run(seconds: float) -> list[Result]:
+    """Measure at 100 Hz and at the line's maximum rate; return the table rows."""
+    isolate_ros_domain()
+    results = []
+    for label, rate in (('100 Hz', 100.0), (f'{LINE_MAX_RATE_HZ:.0f} Hz (line max)',
+                                               LINE_MAX_RATE_HZ)):
+        measured = LatencyRun(rate, seconds)
+        pub = measured.to_publish
+        results.append(Result(
+            f'latency write -> publish() returned, {label}: p50 / p99 / max',
+            pub.ms(), 'p99 <= 0.100 ms', pub.p99 <= TARGET_P99_S))
+        results.append(Result(
+            f'latency write -> publish() returned, {label}: mean', f'{pub.mean * 1e3:.3f} ms'))
+        sub = measured.to_subscriber
+        results.append(Result(
+            f'latency write -> subscriber callback (other process), {label}: p50 / p99 / max',
+            sub.ms()))
+    return results
+
+
+def main() -> None:
+    """Run from the command line."""
+    args = standard_args(__doc__.splitlines()[1], 30.0, 8.0)
+    results = run(args.seconds)
+    report('Latency', results,
+           [f'{args.seconds:g} s per rate after {WARM_UP_S:g} s of warm-up; simulated device, '
+            f'node and subscriber in three processes.',
+            'Original C++ node (thesis): 0.99 ms mean, 1.16 ms max.'],
+           None if args.no_output else 'latency.md')
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,99 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The simulated device in a process of its own, with its ground truth saved at the end.
+
+The benchmarks run the simulator apart from the node, as a real device is: the
+two then never compete for one interpreter lock, and what is measured is the
+node's own delay. Prints ``port: PATH`` once the pty exists. SIGUSR1 silences
+the radio for good (no more packets: the node can drain what was written, so
+that every written packet can be accounted for). On SIGTERM, SIGINT or end of
+standard input it stops and writes, as JSON, every data packet it produced
+(timer, sample time, write time, valid, source) and its counters.
+
+Usage: ``sim_process.py --config '{"rate_hz": 1000}' --truth OUT.json``. The
+config keys are SimulatorConfig fields, plus ``faults`` (a dict of FaultConfig
+fields) and ``motion`` (a dict of MotionConfig fields).
+"""
+
+import argparse
+import json
+from pathlib import Path
+import signal
+import sys
+import threading
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from i3dmgx2_driver.simulator import (  # noqa: E402 - after the path is set
+    FaultConfig, MotionConfig, PtySimulator, SimulatorConfig,
+)
+
+
+def build_config(spec: dict) -> SimulatorConfig:
+    """Turn a JSON dict into a simulator configuration."""
+    spec = dict(spec)
+    faults = FaultConfig(**spec.pop('faults', {}))
+    motion = MotionConfig(**spec.pop('motion', {}))
+    if 'chunks' in spec:
+        spec['chunks'] = tuple(spec['chunks'])
+    return SimulatorConfig(faults=faults, motion=motion, **spec)
+
+
+def dump_truth(sim: PtySimulator, path: str) -> None:
+    """Write the ground truth and the counters as one JSON document."""
+    rows = [[entry.timer, entry.sample_time, entry.write_time, entry.valid, entry.source]
+            for entry in sim.truth]
+    document = {'fields': ['timer', 'sample_time', 'write_time', 'valid', 'source'],
+                'truth': rows, 'stats': sim.stats.as_dict(),
+                'start_time': sim.start_time}
+    with open(path, 'w') as handle:
+        json.dump(document, handle)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the simulator until told to stop; then save what it did."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--config', default='{}', help='SimulatorConfig fields as JSON')
+    parser.add_argument('--truth', required=True, help='where to write the ground truth')
+    args = parser.parse_args(argv)
+    stop = threading.Event()
+    silence = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    signal.signal(signal.SIGUSR1, lambda *_: silence.set())
+
+    def watch_stdin() -> None:
+        sys.stdin.read()  # returns at end of input: the benchmark went away
+        stop.set()
+
+    threading.Thread(target=watch_stdin, daemon=True).start()
+    sim = PtySimulator(build_config(json.loads(args.config)))
+    sim.start()
+    try:
+        print(f'port: {sim.port}', flush=True)
+        while not stop.wait(0.05):
+            if silence.is_set():
+                silence.clear()
+                sim.stall(1e9)
+                print('silent', flush=True)
+    finally:
+        sim.stop()
+        dump_truth(sim, args.truth)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,84 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+A subscriber in another process: when did each Imu message arrive?
+
+Subscribes to ``imu/raw_data`` (reliable, deep history, so that nothing is
+dropped on its side), and notes the wall-clock time at the start of each
+callback with the message's stamp. Prints ``ready`` once subscribed and, on
+SIGTERM, SIGINT or end of standard input, writes the rows
+``[stamp_sec, stamp_nanosec, receive_time]`` as JSON and exits.
+"""
+
+import argparse
+import json
+import signal
+import sys
+import threading
+import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import Imu
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Subscribe until told to stop; then save the receive times."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--out', required=True, help='where to write the rows (JSON)')
+    parser.add_argument('--topic', default='imu/raw_data')
+    parser.add_argument('--depth', type=int, default=5000)
+    args = parser.parse_args(argv)
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+
+    def watch_stdin() -> None:
+        sys.stdin.read()
+        stop.set()
+
+    threading.Thread(target=watch_stdin, daemon=True).start()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node('i3dmgx2_benchmark_subscriber')
+    rows: list[tuple[int, int, float]] = []
+    clock = time.time
+
+    def on_message(msg: Imu) -> None:
+        now = clock()
+        stamp = msg.header.stamp
+        rows.append((stamp.sec, stamp.nanosec, now))
+
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=args.depth,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    node.create_subscription(Imu, args.topic, on_message, qos)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    print('ready', flush=True)
+    try:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        with open(args.out, 'w') as handle:
+            json.dump(rows, handle)
+        executor.shutdown(timeout_sec=0.5)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
