@@ -43,6 +43,7 @@ setup(
             'simulator = i3dmgx2_driver.simulator.cli:main',
             'replay = i3dmgx2_driver.tools.replay:main',
             'plot = i3dmgx2_driver.tools.plot:main',
+            'monitor = i3dmgx2_driver.ros.monitor:main',
         ],
     },
 )

@@ -177,7 +177,9 @@ def main(argv=None):
     print(f'runs          : {args.repeat}, frames/s best {best:,.0f}, median '
           f'{statistics.median(rates):,.0f}, worst {min(rates):,.0f}; '
           f'CPU time of the best run {cpu:.3f} s for {wall:.3f} s wall')
-    print(f'per frame     : {1e6 * wall / args.frames:.2f} us (bytes in, record out)')
+    print(f'per frame     : {1e6 * wall / args.frames:.2f} us (bytes in, record out); '
+          f'{args.frames / min(r[1] for r in results):,.0f} frames per CPU second '
+          '(less sensitive to other load)')
     print(f'machine       : {_cpu_name()}, {platform.machine()}, {os.cpu_count()} CPUs, '
           f'{pinned}')
     print(f'python        : {platform.python_implementation()} {platform.python_version()} '

@@ -113,7 +113,7 @@ def _parse_all():
 
 
 PACKETS, PARSER, EVENTS = _parse_all()
-RECORDS = [event.record for event in EVENTS]
+RECORDS = [event.record for event in EVENTS if isinstance(event, DataPacket)]
 BY_SET = {}
 _start = 0
 for _pose in SETS:
@@ -259,7 +259,8 @@ def test_timer_rollover_is_unwrapped():
     ticks, 1/3 s), at 770, and at 216 after a 60.5 s gap. Between records 750 and 751 the raw
     timer jumps from 858,295,945 to 4,171,399,561: 168.5 s forward, or 49.9 s back. A forward
     step of more than half the range is indistinguishable from a step back, so the unwrapper
-    reports it as a reset (a new epoch), by design. Within each epoch the unwrapped timer
+    reports it as a reset (a new epoch), by design (given host times it would not: see
+    test_codec_timer.test_host_time_resolves_the_fixture_gap). Within each epoch the timer
     strictly increases, and across the clean rollover it moves by exactly the raw step
     (6,554,112 ticks: 1/3 s, the poll period).
     """

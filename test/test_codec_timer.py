@@ -159,3 +159,56 @@ def test_any_step_back_is_a_reset(start, back):
     raw = (start - back) % TIMER_MODULUS
     assert unwrapper.update(raw) == raw
     assert unwrapper.last_was_reset and unwrapper.resets == 1
+
+
+# ---------------------------------------------------------------- with host times
+
+def test_host_time_unwraps_a_long_pause():
+    """Given host times, a 300 s outage (more than a whole wrap) is unwrapped exactly."""
+    start = TIMER_MODULUS - 1000
+    pause = 300 * TICKS_PER_SECOND  # 5,898,240,000 ticks: 1.37 wraps
+    raw = (start + pause) % TIMER_MODULUS
+    unwrapper = TimerUnwrapper()
+    unwrapper.update(start, host_time=100.0)
+    assert unwrapper.update(raw, host_time=400.0) == start + pause
+    assert unwrapper.wraps == (start + pause) // TIMER_MODULUS == 2
+    assert not unwrapper.last_was_reset
+    # Without host times the same raw step can only be read modulo 2^32: 81.5 s.
+    blind = TimerUnwrapper()
+    blind.update(start)
+    assert blind.update(raw) == start + pause - TIMER_MODULUS
+
+
+def test_host_time_tolerates_late_reads():
+    """Records read in a burst, 1.5 s late, still count as the 10 ms that passed."""
+    unwrapper = TimerUnwrapper()
+    unwrapper.update(1_000_000, host_time=10.0)
+    assert unwrapper.update(1_196_608, host_time=11.5) == 1_196_608
+    assert not unwrapper.last_was_reset and unwrapper.resets == 0
+
+
+def test_host_time_detects_a_reset():
+    """The device timer goes from 100 s to 0.5 s while the host saw 1 s pass: a reset."""
+    unwrapper = TimerUnwrapper()
+    unwrapper.update(100 * TICKS_PER_SECOND, host_time=50.0)
+    assert unwrapper.update(TICKS_PER_SECOND // 2, host_time=51.0) == TICKS_PER_SECOND // 2
+    assert unwrapper.last_was_reset and unwrapper.resets == 1
+
+
+def test_host_time_resolves_the_fixture_gap():
+    """
+    The fixture's long set jumps from 858,295,945 to 4,171,399,561 ticks.
+
+    That is 168.5 s forward or 49.9 s back; without host times it must be called a
+    reset (see test_codec_fixtures), but a host that saw 168.5 s pass unwraps it forward.
+    """
+    before, after = 858_295_945, 4_171_399_561
+    blind = TimerUnwrapper()
+    blind.update(before)
+    blind.update(after)
+    assert blind.last_was_reset
+    unwrapper = TimerUnwrapper()
+    unwrapper.update(before, host_time=0.0)
+    assert unwrapper.update(after, host_time=168.5) == after
+    assert not unwrapper.last_was_reset and unwrapper.resets == 0
+    assert ticks_to_seconds(after - before) == pytest.approx(168.5, abs=0.1)

@@ -32,7 +32,11 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, MagneticField
 
 from .conversions import mag_is_valid, MessageFactory
+from .diagnostics import DiagnosticsPublisher
 from .parameters import declare_parameters, driver_config, DriverConfig
+from .raw_capture import RawCapture
+from .services import DeviceServices
+from .temperature import TemperaturePoller
 from ..codec.framing import DATA_TRAILER_SIZE, DataPacket, HEADER_SIZE
 from ..codec.layouts import ACCEL_ANG_RATE_MAG_ORIENTATION, LAYOUTS
 from ..codec.records import AccelAngRateMagOrientation
@@ -91,12 +95,22 @@ class ImuDriverNode(Node):
         self._use_device_time = cfg.time_source == 'device'
         self._wire_time = wire_time(cfg.baud, cfg.wireless)
         self._publish_lock = threading.Lock()
+        self.raw_capture = RawCapture(
+            cfg.capture_file, self.get_logger(), port=cfg.port, address=cfg.address,
+            baud=cfg.baud, wireless=cfg.wireless, node=self.get_fully_qualified_name())
         self.supervisor = DeviceSupervisor(
             SupervisorConfig(
                 port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
                 low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
                 reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz),
-            on_record=self._on_record, log=self.get_logger(), on_connect=self._on_connect)
+            on_record=self._on_record, log=self.get_logger(), on_connect=self._on_connect,
+            on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None)
+        self.device_services = DeviceServices(self)
+        self.temperature = TemperaturePoller(self, cfg.temperature_period, qos)
+        self.diagnostics = DiagnosticsPublisher(
+            self, calibration=self.device_services.calibration,
+            temperature=lambda: self.temperature.latest, capture=self.raw_capture.describe,
+            operation=lambda: self.device_services.operation)
         self.get_logger().info(
             f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
             f'frame {self.messages.frame_id} ({cfg.frame_convention}), '
@@ -122,7 +136,7 @@ class ImuDriverNode(Node):
             return
         with self._publish_lock:
             stats = self.stats
-            ticks = self.unwrapper.update(record.timer)
+            ticks = self.unwrapper.update(record.timer, read_time)
             if self.unwrapper.last_was_reset:
                 stats.device_resets += 1
                 self.clock_model.reset()
@@ -154,7 +168,10 @@ class ImuDriverNode(Node):
     def shutdown(self) -> None:
         """Stop the device stream and close the port (bounded in time)."""
         start = time.monotonic()
+        self.device_services.stop()
+        self.temperature.stop()
         self.supervisor.stop()
+        self.raw_capture.close()
         message = (f'stopped: {self.stats.published} records published, port closed '
                    f'({time.monotonic() - start:.2f} s)')
         if self.context.ok():

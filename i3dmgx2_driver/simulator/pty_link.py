@@ -793,13 +793,17 @@ class PtySimulator:
             self._transmit(item)
 
     def _transmit(self, item: _Outgoing) -> None:
+        """
+        Write one packet with its faults, and record it in the ground truth.
+
+        The lock is held throughout, so that a host that has read a packet and
+        then looks at ``truth`` always finds it there, complete.
+        """
         reply = item.reply
-        pieces: list[tuple[bytes, tuple[Reply, str, int, str | None] | None]] = []
         with self.lock:
             faults = self._faults
             rng = self._fault_rng
-            sensor = self.sensor if item.source != 'foreign' else self._foreign
-            lqi, rssi = sensor.link_quality()
+            lqi, rssi = self.sensor.link_quality()
             packet = framing.encode_data_packet(item.address, reply.data, lqi, rssi)
             fault = None
             if self._stalled(item.send):
@@ -816,33 +820,32 @@ class PtySimulator:
                 self._line_free_at = (max(time.time(), self._line_free_at)
                                       + len(packet) / LINE_BYTES_PER_SECOND)
             if faults.garbage_probability and rng.random() < faults.garbage_probability:
-                pieces.append((self._garbage(faults), None))
+                garbage = self._garbage(faults)
+                self._write_packet(garbage)
+                self._stats.garbage_bytes += len(garbage)
+                self._stats.garbage_bursts += 1
             if faults.foreign_probability and rng.random() < faults.foreign_probability:
-                code = reply.code if reply.code in sns.STREAMABLE else lay.ACCEL_ANG_RATE
-                other = self._foreign.record_at(code, item.send)
-                f_lqi, f_rssi = self._foreign.link_quality()
-                f_packet = framing.encode_data_packet(self._foreign.address, other.data,
-                                                      f_lqi, f_rssi)
-                pieces.append((f_packet,
-                               (other, 'foreign', self._foreign.address, flt.FAULT_FOREIGN)))
+                self._transmit_foreign(reply.code, item.send)
             if faults.corrupt_checksum_probability \
                     and rng.random() < faults.corrupt_checksum_probability:
                 packet, fault = self._flip_bit(packet), flt.FAULT_CHECKSUM
             elif faults.corrupt_length_probability \
                     and rng.random() < faults.corrupt_length_probability:
                 packet, fault = self._bad_length(packet), flt.FAULT_LENGTH
-        pieces.append((packet, (reply, item.source, item.address, fault)))
-        for data, info in pieces:
-            error, write_time = self._write_packet(data)
-            if info is None:
-                with self.lock:
-                    self._stats.garbage_bytes += len(data)
-                    self._stats.garbage_bursts += 1
-                continue
-            what, source, address, fault = info
-            valid = (fault is None and error is None and address == self.config.address)
-            with self.lock:
-                self._add_truth(what, write_time, data, address, valid, fault or error, source)
+            error, write_time = self._write_packet(packet)
+            valid = fault is None and error is None
+            self._add_truth(reply, write_time, packet, item.address, valid, fault or error,
+                            item.source)
+
+    def _transmit_foreign(self, code: int, send: float) -> None:
+        """Write a well-formed packet of another sensor (lock held)."""
+        other = self._foreign.record_at(
+            code if code in sns.STREAMABLE else lay.ACCEL_ANG_RATE, send)
+        lqi, rssi = self._foreign.link_quality()
+        packet = framing.encode_data_packet(self._foreign.address, other.data, lqi, rssi)
+        error, write_time = self._write_packet(packet)
+        self._add_truth(other, write_time, packet, self._foreign.address, False,
+                        flt.FAULT_FOREIGN if error is None else error, 'foreign')
 
     def _garbage(self, faults: FaultConfig) -> bytes:
         rng = self._fault_rng

@@ -1,0 +1,468 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The driver's health on ``/diagnostics``, once a second.
+
+Each status is built by a pure function from plain values (numbers,
+strings, the device layer's small records) into a ROS-free :class:`Status`,
+so every level decision can be unit-tested without a node, a port or a
+clock. :class:`DiagnosticsPublisher` is the only part that knows ROS: a 1 Hz
+timer that reads the node's counters, keeps what the previous tick saw (to
+measure rates and growth over the last period) and publishes one
+``DiagnosticArray``. ``diagnostic_updater`` is not used: it is not available
+as a wheel, and the few lines it would save are these.
+
+Levels follow ``diagnostic_msgs/DiagnosticStatus``: OK, WARN, ERROR, and
+STALE for "no data to judge by" (nothing arrives, nothing measured yet).
+"""
+
+from collections.abc import Callable, Iterable, Mapping
+import math
+import time
+from typing import Any, NamedTuple
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy._rclpy_pybind11 import RCLError
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+
+from ..device.link import RadioStats
+from ..device.supervisor import DeviceInfo, State
+
+OK = 0
+WARN = 1
+ERROR = 2
+STALE = 3
+LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
+
+#: Prefix of every status name, as diagnostic_aggregator analyzers expect.
+PREFIX = 'i3dmgx2_driver: '
+#: Period of the diagnostics (s).
+PERIOD = 1.0
+#: Measured rate within this fraction of the configured one is OK.
+RATE_TOLERANCE = 0.05
+#: Below these the radio link counts as poor. The base station reports LQI and
+#: RSSI as raw bytes with no documented scale; a good link reads about 230 and
+#: 170 (the real-records fixture, the simulator), so these are well below that.
+LOW_LQI = 100
+LOW_RSSI = 60
+#: A drift estimate beyond this is implausible (the device clock is good to
+#: 100 ppm, NTP slews the host's by at most 500 ppm): the stamps are suspect.
+MAX_DRIFT_PPM = 600.0
+
+#: Parser counters that mean a damaged frame, and when they grow, a WARN.
+PARSER_FAILURES = ('checksum_failures', 'length_failures')
+#: Parser counters shown, with their labels.
+PARSER_KEYS = (
+    ('good_frames', 'good frames'),
+    ('checksum_failures', 'checksum failures'),
+    ('length_failures', 'length failures'),
+    ('bytes_skipped', 'bytes skipped'),
+    ('foreign_frames', 'foreign-address frames'),
+    ('acks', 'ACKs'),
+    ('nacks', 'NACKs'),
+    ('bytes_in', 'bytes read'),
+)
+
+
+class Status(NamedTuple):
+    """One diagnostic status, ROS-free: level, short name, message, key-values."""
+
+    level: int
+    name: str
+    message: str
+    values: tuple[tuple[str, str], ...] = ()
+
+    def value(self, key: str) -> str | None:
+        """Return the value of ``key``, or None (for tests and logs)."""
+        for name, value in self.values:
+            if name == key:
+                return value
+        return None
+
+
+class Calibration(NamedTuple):
+    """The outcome of the last gyro bias capture of this session."""
+
+    #: Host time (s since the epoch) of the capture.
+    time: float
+    #: Whether the bias was accepted (the sensor stayed still).
+    accepted: bool
+    #: The captured bias (rad/s), sensor axes; None when no reply came.
+    bias: tuple[float, float, float] | None
+    sampling_ms: int
+    #: One line on what happened (why it was refused, or that it is in use).
+    summary: str
+
+
+def _fmt(value: float | None, digits: int = 3, unit: str = '') -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return 'n/a'
+    text = f'{value:.{digits}f}'
+    return f'{text} {unit}' if unit else text
+
+
+def _vector(values: Iterable[float], digits: int = 5) -> str:
+    return '(' + ', '.join(f'{v:.{digits}f}' for v in values) + ')'
+
+
+def connection_status(port: str, address: int, wireless: bool, state: State,
+                      connections: int, reconnects: int, stalls: int, last_error: str,
+                      low_latency: str, ping_ok: bool | None, capture: str) -> Status:
+    """
+    Say whether the port is open and the device streaming.
+
+    Disconnected is an ERROR (nothing can work until the port is back);
+    connecting, initialising and stalled are WARN (the supervisor is on it);
+    paused for an operation the driver itself started is OK.
+    """
+    if state is State.STREAMING:
+        level, message = OK, 'streaming'
+    elif state is State.PAUSED:
+        level, message = OK, 'stream paused for a device operation'
+    elif state is State.STALLED:
+        level, message = WARN, 'stream stalled: re-requesting continuous mode'
+    elif state in (State.CONNECTING, State.INITIALISING) and not reconnects \
+            and connections <= 1 and not last_error:
+        level, message = WARN, f'{state.value}'
+    elif state is State.STOPPED:
+        level, message = ERROR, 'driver stopped'
+    elif state in (State.CONNECTING, State.INITIALISING):
+        level, message = ERROR, f'{state.value} after a failure: {last_error or "?"}'
+    else:
+        level, message = ERROR, f'disconnected: {last_error or "port lost"}'
+    return Status(level, 'connection', message, (
+        ('port', port),
+        ('node address', str(address)),
+        ('link', 'wireless' if wireless else 'wired'),
+        ('state', state.value),
+        ('connections', str(connections)),
+        ('reconnects', str(reconnects)),
+        ('stalls', str(stalls)),
+        ('last error', last_error or '-'),
+        ('low-latency mode', low_latency or 'not opened yet'),
+        ('base station ping', {None: 'not tried', True: 'ok', False: 'no answer'}[ping_ok]
+         if wireless else 'n/a (wired)'),
+        ('raw capture', capture),
+    ))
+
+
+def rate_level(measured_hz: float | None, expected_hz: float | None,
+               tolerance: float = RATE_TOLERANCE) -> tuple[int, str]:
+    """Judge a measured data rate against the configured one (±``tolerance``)."""
+    if measured_hz is None:
+        return OK, 'measuring the rate'
+    if not expected_hz:
+        return WARN, f'{measured_hz:.1f} Hz; configured rate unknown'
+    error = measured_hz / expected_hz - 1.0
+    text = f'{measured_hz:.1f} Hz (configured {expected_hz:.1f} Hz, {error:+.1%})'
+    if abs(error) <= tolerance:
+        return OK, text
+    return WARN, f'rate off by more than {tolerance:.0%}: {text}'
+
+
+def stream_status(state: State, measured_hz: float | None, expected_hz: float | None,
+                  received_in_period: int, period: float, silent_for: float | None,
+                  published: int, lost: int, lost_in_period: int, device_resets: int,
+                  other_records: int, mag_published: int, operation: str = '') -> Status:
+    """
+    Judge the IMU stream over the last period: is it there, and at its rate?
+
+    STALE when no record arrived in the period (there is no data to judge),
+    WARN when paused or the measured rate is off by more than 5 %.
+    """
+    if state is State.PAUSED:
+        level, message = WARN, f'no data: stream paused for {operation or "a device operation"}'
+    elif received_in_period == 0:
+        since = f' for {silent_for:.1f} s' if silent_for is not None else ' yet'
+        level, message = STALE, f'no data{since}'
+    else:
+        level, message = rate_level(measured_hz, expected_hz)
+    return Status(level, 'stream', message, (
+        ('measured rate (Hz)', _fmt(measured_hz, 2)),
+        ('configured rate (Hz)', _fmt(expected_hz, 2)),
+        ('records in last period', str(received_in_period)),
+        ('period (s)', _fmt(period, 2)),
+        ('published', str(published)),
+        ('lost (timer gaps)', str(lost)),
+        ('lost in last period', str(lost_in_period)),
+        ('magnetometer published', str(mag_published)),
+        ('other records', str(other_records)),
+        ('device resets', str(device_resets)),
+    ))
+
+
+def radio_status(wireless: bool, radio: RadioStats | None, fresh: bool,
+                 low_lqi: int = LOW_LQI, low_rssi: int = LOW_RSSI) -> Status:
+    """
+    Judge the radio link by the latest LQI and RSSI the base station reported.
+
+    WARN when either is low; STALE when no packet arrived in the last period
+    (the numbers are old); OK with nothing to show on a wired sensor.
+    """
+    if not wireless:
+        return Status(OK, 'radio link', 'wired sensor: no radio', ())
+    if radio is None:
+        return Status(STALE, 'radio link', 'no packet received yet', ())
+    values = (
+        ('LQI', str(radio.lqi)),
+        ('RSSI', str(radio.rssi)),
+        ('LQI min', str(radio.lqi_min)),
+        ('RSSI min', str(radio.rssi_min)),
+        ('LQI mean', f'{radio.lqi_mean:.1f}'),
+        ('RSSI mean', f'{radio.rssi_mean:.1f}'),
+        ('LQI warn below', str(low_lqi)),
+        ('RSSI warn below', str(low_rssi)),
+    )
+    if not fresh:
+        return Status(STALE, 'radio link', 'no packet in the last period', values)
+    low = [f'{name} {value} < {limit}' for name, value, limit in
+           (('LQI', radio.lqi, low_lqi), ('RSSI', radio.rssi, low_rssi)) if value < limit]
+    if low:
+        return Status(WARN, 'radio link', 'weak link: ' + ', '.join(low), values)
+    return Status(OK, 'radio link', f'LQI {radio.lqi}, RSSI {radio.rssi}', values)
+
+
+def parser_status(totals: Mapping[str, int], previous: Mapping[str, int] | None) -> Status:
+    """
+    Show the parser's counters; WARN while damaged frames keep arriving.
+
+    Checksum and length failures that grew since the previous period mean a
+    noisy line or radio (or another protocol on the port); skipped bytes
+    alone are normal at start-up and after a reconnect.
+    """
+    values = tuple((label, str(totals.get(key, 0))) for key, label in PARSER_KEYS)
+    if previous is None:
+        return Status(OK, 'parser', 'counting', values)
+    grown = {key: totals.get(key, 0) - previous.get(key, 0) for key in PARSER_FAILURES}
+    foreign = totals.get('foreign_frames', 0) - previous.get('foreign_frames', 0)
+    if any(count > 0 for count in grown.values()):
+        text = ', '.join(f'{count} {key.replace("_", " ")}'
+                         for key, count in grown.items() if count > 0)
+        return Status(WARN, 'parser', f'damaged frames in the last period: {text}', values)
+    if foreign > 0:
+        return Status(OK, 'parser', f'{foreign} frames from other sensors ignored', values)
+    return Status(OK, 'parser', 'no damaged frames in the last period', values)
+
+
+def device_status(info: DeviceInfo | None, connected_once: bool, address: int,
+                  divider: int | None, expected_hz: float | None,
+                  temperature_c: float | None) -> Status:
+    """
+    Show what the device said it is; WARN when it did not say.
+
+    STALE before the first connection (nothing asked yet).
+    """
+    values = [('node address', str(address)),
+              ('rate divider (EEPROM 0xFCA2)', str(divider) if divider else 'unknown'),
+              ('configured rate (Hz)', _fmt(expected_hz, 2))]
+    if temperature_c is not None:
+        values.append(('accel temperature (C)', _fmt(temperature_c, 1)))
+    if info is None:
+        level = WARN if connected_once else STALE
+        text = ('the device did not tell its identity (0xEA, 0xE9)' if connected_once
+                else 'not connected yet')
+        return Status(level, 'device', text, tuple(values))
+    values = [('model', info.model_name or '?'), ('model number', info.model_number or '?'),
+              ('serial number', info.serial_number or '?'),
+              ('firmware', info.firmware or '?'), ('options', info.options or '-'),
+              *values]
+    return Status(OK, 'device', f'{info.model_name or info.model_number or "?"}, serial '
+                                f'{info.serial_number or "?"}, firmware {info.firmware or "?"}',
+                  tuple(values))
+
+
+def time_status(time_source: str, samples: int, offset: float, drift_ppm: float,
+                clock_resets: int, device_resets: int,
+                max_drift_ppm: float = MAX_DRIFT_PPM) -> Status:
+    """
+    Show how stamps are made; WARN when the device clock fit is implausible.
+
+    ``samples`` is how many stamps the current fit has made (0: none yet,
+    STALE with the device time source).
+    """
+    values = (
+        ('time source', time_source),
+        ('clock offset (s)', f'{offset:.6f}' if samples else 'n/a'),
+        ('clock drift (ppm)', f'{drift_ppm:.1f}' if samples else 'n/a'),
+        ('samples in this fit', str(samples)),
+        ('clock re-anchors', str(clock_resets)),
+        ('device resets', str(device_resets)),
+    )
+    if time_source != 'device':
+        return Status(OK, 'time', 'host time: stamps are packet read times', values)
+    if not samples:
+        return Status(STALE, 'time', 'no samples to align the device clock yet', values)
+    if not math.isfinite(drift_ppm) or abs(drift_ppm) > max_drift_ppm:
+        return Status(WARN, 'time', f'implausible clock drift {drift_ppm:.0f} ppm '
+                                    f'(over {max_drift_ppm:.0f}): stamps are suspect', values)
+    return Status(OK, 'time', f'device clock, drift {drift_ppm:.1f} ppm', values)
+
+
+def calibration_status(last: Calibration | None, good: Calibration | None,
+                       now: float) -> Status:
+    """
+    Show the gyro bias captured in this session, and WARN if the last try failed.
+
+    ``last`` is the last attempt, ``good`` the last accepted one.
+    """
+    values: list[tuple[str, str]] = [('gyro bias captured', 'yes' if good else 'no')]
+    if good is not None and good.bias is not None:
+        values += [('gyro bias (rad/s)', _vector(good.bias)),
+                   ('captured (s ago)', f'{now - good.time:.0f}'),
+                   ('sampling time (ms)', str(good.sampling_ms))]
+    if last is not None and not last.accepted:
+        values.append(('last attempt', last.summary))
+        return Status(WARN, 'calibration', f'last gyro bias capture failed: {last.summary}',
+                      tuple(values))
+    if good is None:
+        return Status(OK, 'calibration', 'no gyro bias captured in this session: the device '
+                                         'uses its stored bias', tuple(values))
+    return Status(OK, 'calibration', f'gyro bias captured {now - good.time:.0f} s ago',
+                  tuple(values))
+
+
+def to_message(statuses: Iterable[Status], hardware_id: str) -> list[DiagnosticStatus]:
+    """Turn statuses into ``DiagnosticStatus`` messages, names prefixed."""
+    out = []
+    for status in statuses:
+        msg = DiagnosticStatus()
+        msg.level = bytes((status.level,))
+        msg.name = PREFIX + status.name
+        msg.message = status.message
+        msg.hardware_id = hardware_id
+        msg.values = [KeyValue(key=key, value=value) for key, value in status.values]
+        out.append(msg)
+    return out
+
+
+class RateMeter:
+    """
+    Measure the record rate between two ticks from the records' read times.
+
+    The rate is (records since the last tick) over the time between the last
+    record of each tick, so neither timer jitter nor the tick's own phase
+    affects it. It restarts whenever the stream was not running at both ticks
+    (a pause or reconnect would otherwise show as a low rate).
+    """
+
+    def __init__(self) -> None:
+        self._count: int | None = None
+        self._time = 0.0
+
+    def update(self, count: int, last_time: float, running: bool) -> float | None:
+        """Take this tick's record count and last read time; return the rate or None."""
+        rate = None
+        if running and self._count is not None and last_time > self._time \
+                and count > self._count:
+            rate = (count - self._count) / (last_time - self._time)
+        self._count, self._time = (count, last_time) if running else (None, 0.0)
+        return rate
+
+
+class DiagnosticsPublisher:
+    """
+    Publish the node's diagnostics on ``/diagnostics`` every :data:`PERIOD` s.
+
+    ``node`` is the ImuDriverNode (its supervisor, stream stats and clock
+    model are read, never changed). ``calibration`` and ``temperature`` and
+    ``capture`` are callables the other features provide; they default to
+    "nothing to report". The timer runs in its own callback group, so a
+    multi-threaded executor keeps it ticking during a long service call.
+    """
+
+    def __init__(self, node: Node, period: float = PERIOD,
+                 calibration: Callable[[], tuple[Calibration | None, Calibration | None]]
+                 | None = None,
+                 temperature: Callable[[], float | None] | None = None,
+                 capture: Callable[[], str] | None = None,
+                 operation: Callable[[], str] | None = None) -> None:
+        self.node = node
+        self.period = period
+        self._calibration = calibration or (lambda: (None, None))
+        self._temperature = temperature or (lambda: None)
+        self._capture = capture or (lambda: 'off')
+        self._operation = operation or (lambda: '')
+        self._rate = RateMeter()
+        self._last_tick = time.monotonic()
+        self._last_published = 0
+        self._last_lost = 0
+        self._last_parser: dict[str, int] | None = None
+        self._last_good_frames = 0
+        self._last_radio: RadioStats | None = None
+        self.publisher = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.timer = node.create_timer(period, self.tick,
+                                       callback_group=MutuallyExclusiveCallbackGroup())
+
+    def collect(self) -> list[Status]:
+        """Read the node's state and build every status (advances the period)."""
+        node: Any = self.node
+        sup = node.supervisor
+        cfg = node.config
+        stats = node.stats
+        now = time.monotonic()
+        period = now - self._last_tick
+        self._last_tick = now
+        state = sup.state
+        published = stats.published
+        received = published - self._last_published
+        self._last_published = published
+        lost_in_period = stats.lost - self._last_lost
+        self._last_lost = stats.lost
+        measured = self._rate.update(published, stats.last_time, state is State.STREAMING)
+        silent_for = time.time() - stats.last_time if stats.last_time else None
+        parser = sup.parser_stats()
+        fresh = parser.get('good_frames', 0) > self._last_good_frames
+        self._last_good_frames = parser.get('good_frames', 0)
+        link = sup.link
+        radio = link.radio if link is not None else None
+        if radio is None:
+            radio = self._last_radio  # disconnected: show the last link's numbers
+        self._last_radio = radio
+        clock = node.clock_model
+        last, good = self._calibration()
+        statuses = [
+            connection_status(cfg.port, cfg.address, cfg.wireless, state, sup.connections,
+                              sup.reconnects, sup.stalls, sup.last_error,
+                              sup.low_latency_state, sup.ping_ok, self._capture()),
+            stream_status(state, measured, sup.expected_rate_hz, received, period,
+                          silent_for, published, stats.lost, lost_in_period,
+                          stats.device_resets, stats.other_records, stats.mag_published,
+                          self._operation()),
+            radio_status(cfg.wireless, radio, fresh),
+            parser_status(parser, self._last_parser),
+            device_status(sup.info, sup.connections > 0, cfg.address, sup.divider,
+                          sup.expected_rate_hz, self._temperature()),
+            time_status(cfg.time_source, clock.samples, clock.offset, clock.drift_ppm,
+                        clock.anchors - 1, stats.device_resets),
+            calibration_status(last, good, time.time()),
+        ]
+        self._last_parser = parser
+        return statuses
+
+    def hardware_id(self) -> str:
+        """The device's serial number once known, else ''."""
+        info = self.node.supervisor.info
+        return info.serial_number if info is not None and info.serial_number else ''
+
+    def tick(self) -> None:
+        """Build and publish one DiagnosticArray (the timer callback)."""
+        array = DiagnosticArray()
+        array.header.stamp = self.node.get_clock().now().to_msg()
+        array.status = to_message(self.collect(), self.hardware_id())
+        try:
+            self.publisher.publish(array)
+        except RCLError:
+            pass  # ROS is shutting down: nobody is left to tell

@@ -1,0 +1,119 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``ros2 run i3dmgx2_driver monitor``: a live, one-line view of the IMU topic.
+
+What ``ros2 topic echo`` would show, condensed for a person: the message
+rate, the latest acceleration and angular rate, the attitude as roll, pitch
+and yaw, and the age of the stamp, refreshed twice a second. It is also how
+the README's first command shows that data flows without the ``ros2`` CLI.
+"""
+
+import argparse
+import math
+import sys
+import threading
+import time
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from sensor_msgs.msg import Imu
+
+
+def roll_pitch_yaw(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """Z-Y-X Euler angles (rad) of a unit quaternion."""
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def describe(msg: Imu, rate: float, now: float) -> str:
+    """One line about the latest message."""
+    a, g, q = msg.linear_acceleration, msg.angular_velocity, msg.orientation
+    roll, pitch, yaw = (math.degrees(v) for v in roll_pitch_yaw(q.x, q.y, q.z, q.w))
+    age = now - (msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+    return (f'{rate:6.1f} Hz  accel [{a.x:+6.2f} {a.y:+6.2f} {a.z:+6.2f}] m/s2  '
+            f'rate [{g.x:+6.3f} {g.y:+6.3f} {g.z:+6.3f}] rad/s  '
+            f'rpy [{roll:+7.1f} {pitch:+6.1f} {yaw:+7.1f}] deg  '
+            f'stamp age {age * 1e3:5.1f} ms  ({msg.header.frame_id})')
+
+
+class Monitor(Node):
+    """Subscribe to the IMU topic and keep the latest message and the rate."""
+
+    def __init__(self, topic: str, best_effort: bool) -> None:
+        super().__init__('i3dmgx2_monitor')
+        qos = qos_profile_sensor_data if best_effort else QoSProfile(depth=10)
+        self.create_subscription(Imu, topic, self._store, qos)
+        self.latest: Imu | None = None
+        self.count = 0
+        self._lock = threading.Lock()
+
+    def _store(self, msg: Imu) -> None:
+        with self._lock:
+            self.latest = msg
+            self.count += 1
+
+    def take(self) -> tuple[Imu | None, int]:
+        """Return the latest message and how many arrived since the last call."""
+        with self._lock:
+            count, self.count = self.count, 0
+            return self.latest, count
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the IMU topic's rate and values until Ctrl-C or --duration."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--topic', default='imu/raw_data')
+    parser.add_argument('--duration', type=float, default=0.0,
+                        help='stop after this many seconds (0: until Ctrl-C)')
+    parser.add_argument('--best-effort', action='store_true',
+                        help='subscribe best effort (for a best_effort publisher)')
+    parser.add_argument('--period', type=float, default=0.5, help='seconds between lines')
+    args = parser.parse_args(rclpy.utilities.remove_ros_args(argv or sys.argv)[1:])
+    rclpy.init(args=argv)
+    node = Monitor(args.topic, args.best_effort)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    start = last = time.monotonic()
+    received = 0
+    try:
+        while not args.duration or time.monotonic() - start < args.duration:
+            time.sleep(args.period)
+            msg, count = node.take()
+            now = time.monotonic()
+            received += count
+            if msg is None:
+                print(f'waiting for {node.resolve_topic_name(args.topic)} ...', flush=True)
+            else:
+                print(describe(msg, count / (now - last), time.time()), flush=True)
+            last = now
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    print(f'{received} messages received', flush=True)
+    return 0 if received else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

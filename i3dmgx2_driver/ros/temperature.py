@@ -1,0 +1,116 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Temperatures: poll 0xD1 while the stream runs, publish sensor_msgs/Temperature.
+
+The poll is a request in combined mode: it is sent while the device streams
+and its reply, interleaved with the stream, is claimed by the pending
+request rather than published as IMU data. A request can take a few
+round trips over a lossy radio, so it runs in a worker thread of its own
+that sleeps for the period between polls: neither the executor (parameters,
+services, diagnostics) nor the reader thread (the IMU stream) ever waits
+for it. Polls are skipped while the stream is not running (connecting, or
+paused for a capture or the self test).
+"""
+
+import threading
+import time
+
+from rclpy._rclpy_pybind11 import RCLError
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import Temperature
+
+from .conversions import set_stamp
+from ..codec import layouts
+from ..device.link import DeviceTimeout
+from ..device.port import PortError
+from ..device.supervisor import State, Throttle
+
+#: Per-try timeout and tries of one poll: short, the next period tries again.
+POLL_TIMEOUT = 0.3
+POLL_RETRIES = 2
+#: Seconds between two warnings about failed polls.
+WARN_PERIOD = 60.0
+
+
+class TemperaturePoller:
+    """
+    Publish the accelerometer temperature on ``imu/temperature`` every ``period`` s.
+
+    ``node`` provides ``supervisor`` and ``messages.frame_id`` (the IMU frame).
+    ``period`` 0 disables it: no publisher, no thread.
+    """
+
+    def __init__(self, node: Node, period: float, qos: QoSProfile | int = 10) -> None:
+        self.node = node
+        self.period = period
+        self.published = 0
+        self.failures = 0
+        #: The last temperature read (deg C), None before the first.
+        self.latest: float | None = None
+        self._stop = threading.Event()
+        self._throttle = Throttle(WARN_PERIOD)
+        self._thread: threading.Thread | None = None
+        self.publisher = None
+        if period > 0:
+            self.publisher = node.create_publisher(Temperature, 'imu/temperature', qos)
+            self._msg = Temperature()
+            self._msg.header.frame_id = node.messages.frame_id
+            self._msg.variance = 0.0
+            self._thread = threading.Thread(target=self._run, name='gx2-temperature',
+                                            daemon=True)
+            self._thread.start()
+
+    def stop(self) -> None:
+        """
+        Stop polling, without waiting long: shutdown has a time budget.
+
+        A poll under way ends when the supervisor aborts the link, which
+        the node does right after this.
+        """
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=0.1)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.period):
+            self.poll()
+
+    def poll(self) -> bool:
+        """Read the temperatures once and publish; False if skipped or failed."""
+        supervisor = self.node.supervisor
+        link = supervisor.link
+        if link is None or supervisor.state is not State.STREAMING:
+            return False
+        try:
+            reply = link.request(bytes((layouts.TEMPERATURES,)), layouts.TEMPERATURES,
+                                 POLL_TIMEOUT, POLL_RETRIES)
+        except (DeviceTimeout, PortError) as exc:
+            self.failures += 1
+            if self._throttle.allow('poll') and not self._stop.is_set():
+                self.node.get_logger().warning(f'temperature poll failed: {exc}')
+            return False
+        read_time = time.time()
+        self.latest = reply.accel_celsius
+        msg = self._msg
+        msg.temperature = self.latest
+        set_stamp(msg.header, read_time)
+        try:
+            self.publisher.publish(msg)
+        except RCLError:
+            return False  # ROS is shutting down
+        self.published += 1
+        return True

@@ -1,0 +1,202 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The diagnostics builders, from plain values: every level decision, no node.
+
+The node tests (test_node_diagnostics.py) show the statuses arrive; these
+show each one says the right thing in every case, including the ones a
+simulator run cannot reach cheaply (a weak radio, an implausible drift).
+"""
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import pytest
+
+from i3dmgx2_driver.device.link import RadioStats
+from i3dmgx2_driver.device.supervisor import DeviceInfo, State
+from i3dmgx2_driver.ros import diagnostics as d
+
+INFO = DeviceInfo('3DM-GX2', '3095', '3DM-GX2 Wireless', '5g 300deg/s', '2.1.03')
+GOOD_RADIO = RadioStats(230, 170, 200, 150, 228.5, 168.0)
+
+
+def connection(state, **changes):
+    args = dict(port='/dev/ttyUSB0', address=95, wireless=True, state=state, connections=1,
+                reconnects=0, stalls=0, last_error='', low_latency='on', ping_ok=True,
+                capture='off')
+    args.update(changes)
+    return d.connection_status(**args)
+
+
+@pytest.mark.parametrize('state, changes, level', [
+    (State.STREAMING, {}, d.OK),
+    (State.STREAMING, {'reconnects': 3, 'last_error': 'old trouble'}, d.OK),
+    (State.PAUSED, {}, d.OK),
+    (State.STALLED, {}, d.WARN),
+    (State.CONNECTING, {'connections': 0}, d.WARN),
+    (State.INITIALISING, {}, d.WARN),
+    (State.DISCONNECTED, {'last_error': 'serial port gone'}, d.ERROR),
+    (State.CONNECTING, {'connections': 2, 'reconnects': 1, 'last_error': 'x'}, d.ERROR),
+    (State.STOPPED, {}, d.ERROR),
+])
+def test_connection_levels(state, changes, level):
+    status = connection(state, **changes)
+    assert status.level == level, status
+    assert status.value('state') == state.value
+
+
+def test_connection_shows_what_a_user_needs():
+    status = connection(State.DISCONNECTED, last_error='serial port /dev/ttyUSB0 does not exist',
+                        reconnects=2, low_latency='refused by the port (ValueError)',
+                        capture='/tmp/a.gx2: 3 reads, 100 bytes')
+    assert 'does not exist' in status.message
+    assert status.value('reconnects') == '2'
+    assert status.value('low-latency mode') == 'refused by the port (ValueError)'
+    assert status.value('raw capture') == '/tmp/a.gx2: 3 reads, 100 bytes'
+    assert status.value('port') == '/dev/ttyUSB0'
+    wired = connection(State.STREAMING, wireless=False, ping_ok=None)
+    assert wired.value('base station ping') == 'n/a (wired)'
+
+
+@pytest.mark.parametrize('measured, expected, level', [
+    (100.0, 100.0, d.OK),
+    (95.1, 100.0, d.OK),
+    (104.9, 100.0, d.OK),
+    (94.0, 100.0, d.WARN),
+    (106.0, 100.0, d.WARN),
+    (80.0, 100.0, d.WARN),
+    (None, 100.0, d.OK),      # the first tick after a start: nothing measured yet
+    (100.0, None, d.WARN),    # the divider was never read
+])
+def test_rate_levels(measured, expected, level):
+    assert d.rate_level(measured, expected)[0] == level
+
+
+def stream(state=State.STREAMING, measured=100.0, received=100, **changes):
+    args = dict(state=state, measured_hz=measured, expected_hz=100.0,
+                received_in_period=received, period=1.0, silent_for=0.01, published=1000,
+                lost=3, lost_in_period=1, device_resets=0, other_records=0,
+                mag_published=1000)
+    args.update(changes)
+    return d.stream_status(**args)
+
+
+def test_stream_ok_warn_stale():
+    assert stream().level == d.OK
+    assert stream().value('lost (timer gaps)') == '3'
+    assert stream().value('published') == '1000'
+    off = stream(measured=80.0)
+    assert off.level == d.WARN
+    assert '80.0 Hz' in off.message and '5%' in off.message
+    quiet = stream(state=State.DISCONNECTED, measured=None, received=0, silent_for=4.2)
+    assert quiet.level == d.STALE
+    assert '4.2 s' in quiet.message
+    never = stream(state=State.CONNECTING, measured=None, received=0, silent_for=None)
+    assert never.level == d.STALE
+    paused = stream(state=State.PAUSED, measured=None, received=0, operation='self test')
+    assert paused.level == d.WARN
+    assert 'self test' in paused.message
+
+
+def test_radio_levels():
+    assert d.radio_status(True, GOOD_RADIO, fresh=True).level == d.OK
+    status = d.radio_status(True, GOOD_RADIO, fresh=True)
+    assert [status.value(k) for k in ('LQI', 'RSSI', 'LQI min', 'RSSI min')] == \
+        ['230', '170', '200', '150']
+    assert status.value('LQI mean') == '228.5'
+    weak = d.radio_status(True, GOOD_RADIO._replace(lqi=40), fresh=True)
+    assert weak.level == d.WARN and 'LQI 40' in weak.message
+    faint = d.radio_status(True, GOOD_RADIO._replace(rssi=20), fresh=True)
+    assert faint.level == d.WARN and 'RSSI 20' in faint.message
+    assert d.radio_status(True, GOOD_RADIO, fresh=False).level == d.STALE
+    assert d.radio_status(True, None, fresh=False).level == d.STALE
+    assert d.radio_status(False, None, fresh=True).level == d.OK
+
+
+def test_parser_warns_only_while_failures_grow():
+    before = {'good_frames': 100, 'checksum_failures': 2, 'length_failures': 1,
+              'bytes_skipped': 40, 'foreign_frames': 0}
+    assert d.parser_status(before, None).level == d.OK
+    same = dict(before, good_frames=200, bytes_skipped=60)
+    assert d.parser_status(same, before).level == d.OK
+    worse = dict(before, good_frames=200, checksum_failures=5)
+    status = d.parser_status(worse, before)
+    assert status.level == d.WARN
+    assert '3 checksum failures' in status.message
+    assert status.value('checksum failures') == '5'
+    longer = dict(before, length_failures=4)
+    assert d.parser_status(longer, before).level == d.WARN
+    foreign = dict(before, foreign_frames=7)
+    status = d.parser_status(foreign, before)
+    assert status.level == d.OK and '7 frames from other sensors' in status.message
+    assert status.value('foreign-address frames') == '7'
+
+
+def test_device_status():
+    status = d.device_status(INFO, True, 95, 512, 100.0, 25.3)
+    assert status.level == d.OK
+    assert status.value('serial number') == '3095'
+    assert status.value('firmware') == '2.1.03'
+    assert status.value('options') == '5g 300deg/s'
+    assert status.value('model') == '3DM-GX2 Wireless'
+    assert status.value('accel temperature (C)') == '25.3'
+    assert d.device_status(None, True, 95, 512, 100.0, None).level == d.WARN
+    assert d.device_status(None, False, 95, None, None, None).level == d.STALE
+
+
+def test_time_status():
+    ok = d.time_status('device', 500, 1.7e9, -38.2, 1, 0)
+    assert ok.level == d.OK
+    assert ok.value('clock drift (ppm)') == '-38.2'
+    assert ok.value('clock re-anchors') == '1'
+    assert d.time_status('device', 0, 0.0, 0.0, 0, 0).level == d.STALE
+    assert d.time_status('device', 500, 0.0, 5000.0, 0, 0).level == d.WARN
+    assert d.time_status('device', 500, 0.0, float('nan'), 0, 0).level == d.WARN
+    assert d.time_status('host', 0, 0.0, 0.0, 0, 0).level == d.OK
+
+
+def test_calibration_status():
+    assert d.calibration_status(None, None, 100.0).level == d.OK
+    assert d.calibration_status(None, None, 100.0).value('gyro bias captured') == 'no'
+    good = d.Calibration(90.0, True, (-0.0033, -0.0217, -0.0052), 500, 'bias ...')
+    status = d.calibration_status(good, good, 100.0)
+    assert status.level == d.OK
+    assert status.value('gyro bias (rad/s)') == '(-0.00330, -0.02170, -0.00520)'
+    assert status.value('captured (s ago)') == '10'
+    bad = d.Calibration(95.0, False, (0.2, 0.0, 0.0), 500, 'the sensor moved')
+    status = d.calibration_status(bad, good, 100.0)
+    assert status.level == d.WARN
+    assert 'moved' in status.message
+    assert status.value('gyro bias captured') == 'yes'
+
+
+def test_rate_meter_measures_between_last_records_and_restarts():
+    meter = d.RateMeter()
+    assert meter.update(10, 100.0, running=True) is None
+    assert meter.update(110, 101.0, running=True) == pytest.approx(100.0)
+    assert meter.update(110, 101.0, running=True) is None   # nothing new
+    assert meter.update(110, 101.0, running=False) is None  # paused: restart
+    assert meter.update(120, 105.0, running=True) is None   # not across the pause
+    assert meter.update(200, 106.0, running=True) == pytest.approx(80.0)
+
+
+def test_to_message_prefixes_names_and_sets_levels():
+    statuses = [d.Status(d.OK, 'a', 'fine', (('k', 'v'),)),
+                d.Status(d.STALE, 'b', 'nothing', ())]
+    msgs = d.to_message(statuses, '3095')
+    assert [m.name for m in msgs] == ['i3dmgx2_driver: a', 'i3dmgx2_driver: b']
+    assert msgs[0].level == DiagnosticStatus.OK
+    assert msgs[1].level == DiagnosticStatus.STALE
+    assert {m.hardware_id for m in msgs} == {'3095'}
+    assert (msgs[0].values[0].key, msgs[0].values[0].value) == ('k', 'v')
