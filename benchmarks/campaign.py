@@ -41,6 +41,7 @@ import math
 import os
 from pathlib import Path
 import random
+import shutil
 import statistics
 import struct
 import sys
@@ -515,16 +516,14 @@ def run_campaign(cfg: CampaignConfig) -> 'CampaignResult':
             divider=sim.sensor.eeprom.get(0xFCA2, 512), node_output=node.output(),
             started=started)
     finally:
-        if driver.is_alive():
-            driver.stop()
-        node.close()
-        subscriber.close()
-        if collector.is_alive():
-            collector.stop()
-        sim.stop()
-        for name in os.listdir(workdir):
-            os.unlink(os.path.join(workdir, name))
-        os.rmdir(workdir)
+        # Each step on its own: a failure in one must not leave the node process behind.
+        for step in (lambda: driver.is_alive() and driver.stop(), node.close,
+                     subscriber.close, lambda: collector.is_alive() and collector.stop(),
+                     sim.stop, lambda: shutil.rmtree(workdir, ignore_errors=True)):
+            try:
+                step()
+            except Exception as exc:  # keep cleaning up; say what went wrong
+                print(f'soak cleanup: {type(exc).__name__}: {exc}', file=sys.stderr)
     return analyse(data)
 
 

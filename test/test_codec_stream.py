@@ -729,3 +729,18 @@ def test_command_parser_random_bytes_never_raise(wireless):
     for start in range(0, len(data), 4096):
         parser.feed(data[start:start + 4096])
     assert parser.stats.bytes_in == len(data)
+
+
+def test_answer_bytes_inside_a_corrupted_packet_are_not_acks_or_nacks():
+    """0xAA and 0x21 inside a packet that failed its checksum are its data."""
+    record = bytearray(encode_record(records.EepromWord(0x21AA)))
+    packet = bytearray(encode_data_packet(ADDRESS, bytes(record), 0x21, 0xAA))
+    packet[-1] ^= 0x01  # the checksum no longer matches
+    stream = bytes(packet) + E5_PACKET + b'\x21'
+    for cut in range(1, len(stream)):
+        parser = SensorStreamParser(address=ADDRESS)
+        events = parser.feed(stream[:cut]) + parser.feed(stream[cut:])
+        assert events == [E5_EVENT, Nack()], cut
+        assert parser.stats.checksum_failures == 1
+        assert parser.stats.acks == 0 and parser.stats.nacks == 1
+        assert parser.stats.bytes_skipped == len(packet)

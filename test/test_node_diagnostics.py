@@ -73,8 +73,6 @@ def wait_for(listener, node, predicate, what, timeout=15.0):
         seen = len(arrays)
         time.sleep(0.05)
     summary = {k: (s.level, s.message) for k, s in (last or {}).items()}
-    import subprocess
-    print('DEBUG', subprocess.run('ls -l /tmp/i3dmgx2-sim-*/; lsof /dev/pts/* 2>/dev/null | grep -v dds', shell=True, capture_output=True, text=True).stdout)
     raise AssertionError(f'no diagnostics with {what} in {timeout} s; last: {summary}\n'
                          f'{node.output()}')
 

@@ -35,6 +35,8 @@ from .records import DeviceIdentifier, PingReply
 
 ByteString = bytes | bytearray | memoryview
 
+#: Single bytes the base station answers with (ACK, NACK, ping answers).
+_ANSWER_BYTES = frozenset((ACK, NACK, PING))
 #: Largest frame either parser ever waits for; bounds the carried-over buffer.
 MAX_FRAME_SIZE = HEADER_SIZE + MAX_RECORD_SIZE + DATA_TRAILER_SIZE
 
@@ -131,12 +133,14 @@ class SensorStreamParser:
         self.stats = ParserStats()
         self._buf = bytearray()
         self._ping_pending = False
+        self._quiet = 0
 
     def reset(self) -> None:
         """Forget any partial frame (after a reconnect); keep the counters."""
         self.stats.bytes_skipped += len(self._buf)
         self._buf.clear()
         self._ping_pending = False
+        self._quiet = 0
 
     def expect_ping(self) -> None:
         """Take the next lone 0x02 or 0x21 as the answer to a ping."""
@@ -207,9 +211,16 @@ class SensorStreamParser:
         address = self.address
         n = len(buf)
         i = 0
+        # Inside a packet that failed its checksum, 0xAA and 0x21 are its
+        # bytes, not the base station's answers: report no ACK/NACK there
+        # (a valid packet starting inside it is still found).
+        quiet_end = self._quiet
         while i < n:
             if buf[i] != ACK:
-                if self._lone_byte(buf[i], out):
+                if i >= quiet_end and self._lone_byte(buf[i], out):
+                    i += 1
+                elif i < quiet_end and buf[i] in _ANSWER_BYTES:
+                    stats.bytes_skipped += 1
                     i += 1
                 else:
                     i = self._skip_garbage(buf, i, n)
@@ -217,8 +228,11 @@ class SensorStreamParser:
             if n - i < 2:
                 break
             if buf[i + 1] != DATA_FLAGS:
-                stats.acks += 1
-                out.append(ACK_EVENT)
+                if i < quiet_end:
+                    stats.bytes_skipped += 1
+                else:
+                    stats.acks += 1
+                    out.append(ACK_EVENT)
                 i += 1
                 continue
             if n - i < HEADER_SIZE + 1:
@@ -235,6 +249,7 @@ class SensorStreamParser:
             if (sum(buf[i + 1:end]) & 0xFFFF) != ((buf[end + 2] << 8) | buf[end + 3]):
                 stats.checksum_failures += 1
                 stats.bytes_skipped += 1
+                quiet_end = max(quiet_end, end + DATA_TRAILER_SIZE)
                 i += 1
                 continue
             node = (buf[i + 3] << 8) | buf[i + 4]
@@ -245,6 +260,7 @@ class SensorStreamParser:
                 out.append(DataPacket(node, _decode(buf, i + HEADER_SIZE, buf[i + HEADER_SIZE]),
                                       buf[end], buf[end + 1]))
             i = end + DATA_TRAILER_SIZE
+        self._quiet = max(0, quiet_end - i)
         return i, out
 
     def _parse_wired(self, buf: bytearray):
