@@ -333,6 +333,8 @@ class Published(NamedTuple):
     """One Imu message as the node published it, and when publish() returned."""
 
     timer: int
+    read_time: float
+    stamp: float
     stamp_sec: int
     stamp_nanosec: int
     time: float
@@ -343,12 +345,11 @@ class InProcessNode:
     The driver node in this process, spinning as ``ros2 run`` would spin it.
 
     The executor runs in a thread of its own, the node's reader thread
-    publishes, and ``published`` gets one entry per Imu message right after
-    ``publish()`` returned: the timer of the record (to match the ground
-    truth) and ``time.time()``, the clock the simulator stamps its writes
-    with. The timing wraps the publisher's ``publish`` and the message
-    factory's ``fill_imu`` of this node object only; the driver code is not
-    changed.
+    publishes, and ``published`` gets one entry per Imu message through the
+    node's ``on_published`` hook, called right after ``publish()`` returned:
+    the record's timer (to match the ground truth), the time the reader got
+    its last byte, the stamp, and ``time.time()`` at that moment, the clock
+    the simulator stamps its writes with.
     """
 
     def __init__(self, port: str, **params: Any) -> None:
@@ -357,9 +358,11 @@ class InProcessNode:
         from rclpy.parameter import Parameter
         from rclpy.signals import SignalHandlerOptions
 
+        from i3dmgx2_driver.ros.conversions import stamp_parts
         from i3dmgx2_driver.ros.imu_node import ImuDriverNode
 
         self._rclpy = rclpy
+        self._stamp_parts = stamp_parts
         self.context = rclpy.Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         params = {'port': port, 'address': ADDRESS, **params}
@@ -367,33 +370,18 @@ class InProcessNode:
         self.node = ImuDriverNode(
             context=self.context,
             parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
-        self._instrument(self.node)
+        self.node.on_published = self._on_published
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, name='bench-executor', daemon=True)
         self._thread.start()
 
-    def _instrument(self, node: Any) -> None:
-        published = self.published
-        clock = time.time
-        factory = node.messages
-        fill_imu = factory.fill_imu
-        publish = node.imu_pub.publish
-        current = [0]
-
-        def timed_fill_imu(record: Any, stamp: float) -> Any:
-            current[0] = record.timer
-            return fill_imu(record, stamp)
-
-        def timed_publish(msg: Any) -> None:
-            publish(msg)
-            now = clock()
-            stamp = msg.header.stamp
-            published.append(Published(current[0], stamp.sec, stamp.nanosec, now))
-
-        factory.fill_imu = timed_fill_imu
-        node.imu_pub.publish = timed_publish
+    def _on_published(self, record: Any, read_time: float, stamp: float,
+                      clock: Any = time.time) -> None:
+        now = clock()
+        self.published.append(Published(record.timer, read_time, stamp,
+                                         *self._stamp_parts(stamp), now))
 
     def _spin(self) -> None:
         while not self._stop.is_set() and self.context.ok():
@@ -435,11 +423,25 @@ def stamp_key(sec: int, nanosec: int) -> int:
     return sec * 1_000_000_000 + nanosec
 
 
+def written_times(truth: list[TruthEntry]) -> dict[int, float]:
+    """Timer -> time the packet's last byte was written, for the valid streamed packets."""
+    return {e.timer: e.write_time for e in truth
+            if e.source == 'stream' and e.valid and e.write_time is not None}
+
+
 def write_latencies(truth: list[TruthEntry], published: list[Published]) -> list[float]:
     """Seconds from each packet's last byte written to its publish() returned."""
-    written = {e.timer: e.write_time for e in truth
-               if e.source == 'stream' and e.valid and e.write_time is not None}
+    written = written_times(truth)
     return [p.time - written[p.timer] for p in published if p.timer in written]
+
+
+def stage_latencies(truth: list[TruthEntry], published: list[Published]
+                    ) -> tuple[list[float], list[float]]:
+    """Split the latency: write -> read returned (kernel, wake-up), read -> publish() returned."""
+    written = written_times(truth)
+    matched = [p for p in published if p.timer in written]
+    return ([p.read_time - written[p.timer] for p in matched],
+            [p.time - p.read_time for p in matched])
 
 
 def subscriber_latencies(truth: list[TruthEntry], published: list[Published],
@@ -470,3 +472,57 @@ def standard_args(description: str, default_seconds: float, quick_seconds: float
     if args.seconds is None:
         args.seconds = quick_seconds if args.quick else default_seconds
     return args
+
+
+class NodeProcess:
+    """The driver as ``ros2 run`` starts it (``i3dmgx2_driver.ros.main``), output to a file."""
+
+    def __init__(self, port: str, **params: Any) -> None:
+        params = {'port': port, 'address': ADDRESS, **params}
+        argv = [sys.executable, '-m', 'i3dmgx2_driver.ros.main', '--ros-args']
+        for name, value in params.items():
+            text = str(value).lower() if isinstance(value, bool) else str(value)
+            argv += ['-p', f'{name}:={text}']
+        self.log = tempfile.NamedTemporaryFile(prefix='i3dmgx2-bench-node-', suffix='.log',
+                                               delete=False)
+        self.proc = subprocess.Popen(argv, stdout=self.log, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, env=child_env(), cwd=str(REPO))
+
+    def output(self) -> str:
+        """What the node printed so far."""
+        with open(self.log.name, errors='replace') as handle:
+            return handle.read()
+
+    def wait_for_output(self, text: str, timeout: float = 20.0) -> bool:
+        """Wait until ``text`` appears in the node's output."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.output():
+                return True
+            if self.proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        return text in self.output()
+
+    def cpu_seconds(self) -> float:
+        """CPU time (user + system, all threads) the node used so far."""
+        return process_cpu_seconds(self.proc.pid)
+
+    def stop(self, timeout: float = 10.0) -> int:
+        """SIGINT, as Ctrl-C; return the exit code."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.log.close()
+        return self.proc.returncode
+
+    def remove_log(self) -> None:
+        """Delete the output file."""
+        try:
+            os.unlink(self.log.name)
+        except OSError:
+            pass

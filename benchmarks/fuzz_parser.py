@@ -120,13 +120,13 @@ def command_frame(address: int, command: bytes) -> bytes:
     return body + _sum16(body[1:]).to_bytes(2, 'big')
 
 
-def _same(a, b) -> bool:
-    """Equality that takes NaN as equal to NaN, through tuples."""
+def same(a, b) -> bool:
+    """Tell whether a and b are equal, taking NaN as equal to NaN, through tuples."""
     if isinstance(a, float) and isinstance(b, float):
         return a == b or (math.isnan(a) and math.isnan(b))
     if isinstance(a, tuple) and isinstance(b, tuple):
         return type(a) is type(b) and len(a) == len(b) and all(
-            _same(x, y) for x, y in zip(a, b, strict=True))
+            same(x, y) for x, y in zip(a, b, strict=True))
     return a == b
 
 
@@ -168,15 +168,15 @@ def _find_frame(data: bytes, start: int, limit: int, event, wireless: bool) -> i
         try:
             if wireless:
                 decoded = framing.decode_data_packet(piece)
-                same = (decoded.address == event.address and decoded.lqi == event.lqi
+                link = (decoded.address == event.address and decoded.lqi == event.lqi
                         and decoded.rssi == event.rssi)
                 record = decoded.record
             else:
                 record = framing.decode_wired_record(piece)
-                same = True
+                link = True
         except CodecError:
             continue
-        if same and _same(record, event.record):
+        if link and same(record, event.record):
             return at
     return -1
 
@@ -253,7 +253,7 @@ def check_sensor_parsers(data: bytes, seed: int) -> list:
     for wireless in (True, False):
         whole, whole_stats = run_sensor_parser(data, [data], wireless, None)
         split, split_stats = run_sensor_parser(data, chunks, wireless, None)
-        if not _same(tuple(whole), tuple(split)) or whole_stats != split_stats:
+        if not same(tuple(whole), tuple(split)) or whole_stats != split_stats:
             raise PropertyViolation(
                 'chunking_changes_result',
                 f'wireless={wireless}: whole {whole_stats} vs chunked {split_stats}')
@@ -265,7 +265,7 @@ def check_sensor_parsers(data: bytes, seed: int) -> list:
                       or e.address == ADDRESS]
             foreign = sum(1 for e in whole if isinstance(e, framing.DataPacket)
                           and e.address != ADDRESS)
-            if not _same(tuple(kept), tuple(wanted)) or kept_stats['foreign_frames'] != foreign:
+            if not same(tuple(kept), tuple(wanted)) or kept_stats['foreign_frames'] != foreign:
                 raise PropertyViolation(
                     'address_filter_wrong',
                     f'{len(kept)} events kept of {len(whole)}, {kept_stats["foreign_frames"]} '
@@ -394,6 +394,8 @@ def check_records(records: list) -> None:
 
 def check_input(data: bytes) -> None:
     """Check every property on one input; raise PropertyViolation if one breaks."""
+    if commands is None:
+        _bind(_load_codec())
     seed = int.from_bytes(hashlib.blake2b(data, digest_size=4).digest(), 'big')
     records = check_sensor_parsers(data, seed)
     check_command_parsers(data, seed)

@@ -32,7 +32,8 @@ import time
 
 from bench_common import (
     InProcessNode, isolate_ros_domain, LINE_MAX_RATE_HZ, report, Result, SimProcess,
-    standard_args, subscriber_latencies, SubscriberProcess, summarise, write_latencies,
+    stage_latencies, standard_args, subscriber_latencies, SubscriberProcess, summarise,
+    write_latencies,
 )
 
 #: p99 of last byte written -> publish() returned (s).
@@ -71,6 +72,9 @@ class LatencyRun:
             sim.stop()
         self.published = measured
         self.to_publish = summarise(write_latencies(sim.truth, measured))
+        to_read, in_driver = stage_latencies(sim.truth, measured)
+        self.to_read = summarise(to_read)
+        self.in_driver = summarise(in_driver)
         self.to_subscriber = summarise(subscriber_latencies(sim.truth, measured, rows))
         self.sim_stats = sim.stats
 
@@ -88,6 +92,12 @@ def run(seconds: float) -> list[Result]:
             pub.ms(), 'p99 <= 0.100 ms', pub.p99 <= TARGET_P99_S))
         results.append(Result(
             f'latency write -> publish() returned, {label}: mean', f'{pub.mean * 1e3:.3f} ms'))
+        results.append(Result(
+            f'  of which write -> read() returned (kernel pty, wake-up), {label}',
+            measured.to_read.ms()))
+        results.append(Result(
+            f'  of which read() returned -> publish() returned (driver), {label}',
+            measured.in_driver.ms()))
         sub = measured.to_subscriber
         results.append(Result(
             f'latency write -> subscriber callback (other process), {label}: p50 / p99 / max',

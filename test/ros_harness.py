@@ -163,7 +163,7 @@ class Listener:
             self.messages[topic].append((time.time(), msg))
 
     def received(self, topic: str) -> List[object]:
-        """The messages of ``topic`` received so far."""
+        """Return the messages of ``topic`` received so far."""
         with self._lock:
             return [m for _, m in self.messages[topic]]
 
@@ -192,5 +192,5 @@ class Listener:
 
 
 def stamp_seconds(msg: object) -> float:
-    """A message header's stamp in seconds."""
+    """Return a message header's stamp in seconds."""
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9

@@ -21,20 +21,19 @@ simulator run cannot reach cheaply (a weak radio, an implausible drift).
 """
 
 from diagnostic_msgs.msg import DiagnosticStatus
-import pytest
-
 from i3dmgx2_driver.device.link import RadioStats
 from i3dmgx2_driver.device.supervisor import DeviceInfo, State
 from i3dmgx2_driver.ros import diagnostics as d
+import pytest
 
 INFO = DeviceInfo('3DM-GX2', '3095', '3DM-GX2 Wireless', '5g 300deg/s', '2.1.03')
 GOOD_RADIO = RadioStats(230, 170, 200, 150, 228.5, 168.0)
 
 
 def connection(state, **changes):
-    args = dict(port='/dev/ttyUSB0', address=95, wireless=True, state=state, connections=1,
-                reconnects=0, stalls=0, last_error='', low_latency='on', ping_ok=True,
-                capture='off')
+    args = {'port': '/dev/ttyUSB0', 'address': 95, 'wireless': True, 'state': state,
+            'connections': 1, 'reconnects': 0, 'stalls': 0, 'last_error': '',
+            'low_latency': 'on', 'ping_ok': True, 'capture': 'off'}
     args.update(changes)
     return d.connection_status(**args)
 
@@ -84,10 +83,10 @@ def test_rate_levels(measured, expected, level):
 
 
 def stream(state=State.STREAMING, measured=100.0, received=100, **changes):
-    args = dict(state=state, measured_hz=measured, expected_hz=100.0,
-                received_in_period=received, period=1.0, silent_for=0.01, published=1000,
-                lost=3, lost_in_period=1, device_resets=0, other_records=0,
-                mag_published=1000)
+    args = {'state': state, 'measured_hz': measured, 'expected_hz': 100.0,
+            'received_in_period': received, 'period': 1.0, 'silent_for': 0.01,
+            'published': 1000, 'lost': 3, 'lost_in_period': 1, 'device_resets': 0,
+            'other_records': 0, 'mag_published': 1000}
     args.update(changes)
     return d.stream_status(**args)
 

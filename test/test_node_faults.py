@@ -13,8 +13,9 @@
 # limitations under the License.
 
 """
-The node against every fault the simulator injects: it survives, recovers,
-and publishes only what is valid.
+The node against every fault the simulator injects.
+
+It survives, recovers, and publishes only what is valid.
 
 Each test starts a fresh simulator and node process; the listener is real
 rclpy in this process. Assertions are on content and counts, never on how
@@ -26,12 +27,11 @@ import signal
 import tempfile
 import time
 
-import pytest
-from sensor_msgs.msg import Imu
-
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
+import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess
+from sensor_msgs.msg import Imu
 from test_node_stream import match, stream_truth
 
 
@@ -126,8 +126,8 @@ def test_stall_is_recovered_by_rerequesting_continuous():
 
 
 def test_radio_stall_then_resume():
-    with PtySimulator(SimulatorConfig(seed=24, faults=FaultConfig(stall_at=1.5,
-                                                                   stall_seconds=1.5))) as sim:
+    faults = FaultConfig(stall_at=1.5, stall_seconds=1.5)
+    with PtySimulator(SimulatorConfig(seed=24, faults=faults)) as sim:
         listener, node = run_node(sim)
         try:
             time.sleep(3.5)

@@ -13,8 +13,10 @@
 # limitations under the License.
 
 """
-The ROS layout: build with colcon into a temporary prefix, as a ROS user
-would, and run the installed executables that ``ros2 run`` runs.
+The ROS layout, as a ROS user gets it from colcon.
+
+The test builds with colcon into a temporary prefix and runs the installed
+executables that ``ros2 run`` runs.
 
 ``ros2`` itself is not on PyPI, so the test does by hand what ``ros2 run
 i3dmgx2_driver node`` does: find ``lib/i3dmgx2_driver/node`` under the
@@ -27,18 +29,17 @@ import shutil
 import subprocess
 import sys
 
-import pytest
-from sensor_msgs.msg import Imu
-
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess, REPO
+from sensor_msgs.msg import Imu
 
 COLCON = os.path.join(os.path.dirname(sys.executable), 'colcon')
 
 
 @pytest.fixture(scope='module')
 def prefix(tmp_path_factory):
-    """The package built and installed by colcon into a fresh prefix."""
+    """Build and install the package with colcon into a fresh prefix."""
     assert os.path.exists(COLCON), 'colcon is part of requirements-dev.txt'
     base = tmp_path_factory.mktemp('colcon')
     source = base / 'src' / 'i3dmgx2_driver'
@@ -59,7 +60,7 @@ def prefix(tmp_path_factory):
 
 
 def installed_env(prefix) -> dict:
-    """What a sourced install/setup.bash gives: the installed package only."""
+    """Return what a sourced install/setup.bash gives: the installed package only."""
     env = dict(os.environ)
     site = glob.glob(str(prefix / 'lib' / 'python3*' / 'site-packages'))
     assert site, 'colcon installed no Python package'

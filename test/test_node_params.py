@@ -13,18 +13,19 @@
 # limitations under the License.
 
 """
-Parameters: bad values stop the node with a message naming the parameter and
-its valid range; good ones do what they say (data rate, params file,
-namespace and remapping).
+Parameters, bad and good.
+
+Bad values stop the node with a message naming the parameter and its valid
+range; good ones do what they say (data rate, params file, namespace and
+remapping, QoS).
 """
 
 import os
 
-import pytest
-from sensor_msgs.msg import Imu
-
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess, REPO
+from sensor_msgs.msg import Imu
 
 
 @pytest.fixture(autouse=True)

@@ -24,14 +24,13 @@ sample times.
 
 import math
 
-import numpy as np
-import pytest
-from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import Imu, MagneticField
-
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+import numpy as np
+import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import Imu, MagneticField
 
 G = 9.80665
 # The device's NED world and FRD body to REP-103's ENU world and FLU body.
@@ -40,21 +39,21 @@ FRD_TO_FLU = np.diag([1.0, -1.0, -1.0])
 
 
 def stream_truth(sim: PtySimulator) -> list:
-    """Valid 0xCC stream records the simulator wrote whole, in order."""
+    """Return the valid 0xCC records the simulator wrote whole, in order."""
     return [t for t in sim.truth
             if t.valid and t.write_time is not None
             and isinstance(t.record, AccelAngRateMagOrientation)]
 
 
 def expected_vectors(record, convention: str):
-    """Accel (m/s^2), rate (rad/s), field (T) as the convention wants them."""
+    """Return accel (m/s^2), rate (rad/s), field (T) as the convention wants them."""
     flip = FRD_TO_FLU if convention == 'enu' else np.eye(3)
     return (flip @ (np.array(record.accel) * G), flip @ np.array(record.angular_rate),
             flip @ (np.array(record.mag) * 1e-4))
 
 
 def expected_quaternion(record, convention: str) -> np.ndarray:
-    """The sensor attitude M^T, in the convention's frames, by scipy (x, y, z, w)."""
+    """Return the sensor attitude M^T in the convention's frames, by scipy (x, y, z, w)."""
     m = np.array(record.matrix, dtype=float).reshape(3, 3)
     attitude = m.T if convention == 'ned' else NED_TO_ENU @ m.T @ FRD_TO_FLU
     u, _, vt = np.linalg.svd(attitude)  # nearest rotation: float32 M is not exact
@@ -82,7 +81,7 @@ def match(messages: list, truth: list, convention: str) -> list:
 
 @pytest.fixture(scope='module')
 def enu_run():
-    """A node streaming from the simulator for a few seconds, then stopped."""
+    """Run a node streaming from the simulator for a few seconds, then stop it."""
     isolate_ros_domain()
     sim = PtySimulator(SimulatorConfig(seed=11, mag_nan_probability=0.3)).start()
     listener = Listener({'imu/raw_data': Imu, 'imu/mag': MagneticField})
@@ -164,9 +163,13 @@ def test_stamps_monotonic_and_close_to_sample_times(enu_run):
     stamps = [stamp_seconds(msg) for msg, _ in pairs]
     assert all(b > a for a, b in zip(stamps, stamps[1:], strict=False))
     errors = np.array([stamp_seconds(msg) - entry.sample_time for msg, entry in pairs])
+    print(f'stamp - sample time: median {np.median(errors) * 1e3:.3f} ms, '
+          f'std (second half) {errors[len(errors) // 2:].std() * 1e6:.1f} us')
     # The radio latency (simulated: a few ms) is what remains uncompensated;
     # the spread is what device timestamps remove.
-    assert abs(np.median(errors)) < 0.01
+    # The wire time is compensated; what remains is the simulated radio
+    # latency (2 ms), which no host can observe.
+    assert 0.0 <= np.median(errors) < 0.005
     settled = errors[len(errors) // 2:]
     assert settled.std() < 0.002
 

@@ -25,6 +25,8 @@ from itertools import pairwise
 import math
 import os
 import stat
+import subprocess
+import sys
 import time
 
 from i3dmgx2_driver.codec import (
@@ -181,6 +183,27 @@ def test_port_is_a_stable_symlink_to_a_raw_pty(sim):
     assert os.path.basename(sim.port) == 'ttyGX2'
     assert os.path.realpath(sim.port) == sim.device
     assert stat.S_ISCHR(os.stat(sim.port).st_mode)
+    # Through /proc/<pid>/fd: a link left by a killed simulator dangles instead of
+    # leading to whatever pseudo-terminal reuses the number.
+    assert os.readlink(sim.port) == f'/proc/{os.getpid()}/fd/{sim._slave}'
+
+
+def test_a_killed_simulator_leaves_no_usable_port(tmp_path):
+    link = tmp_path / 'port'
+    code = ('import os, time; from i3dmgx2_driver.simulator import PtySimulator, '
+            f'SimulatorConfig; s = PtySimulator(SimulatorConfig(symlink={str(link)!r})); '
+            's.start(); print(s.device, flush=True); time.sleep(60)')
+    child = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True,
+                             cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    try:
+        assert child.stdout.readline().startswith('/dev/pts/')
+        assert link.is_symlink() and link.exists()
+    finally:
+        child.kill()
+        child.wait()
+    assert link.is_symlink() and not link.exists(), 'the stale link dangles'
+    with pytest.raises(serial.SerialException):
+        serial.Serial(str(link), 115200)
 
 
 def test_every_good_command_packet_is_acked_and_a_bad_one_nacked(sim, host):
@@ -327,6 +350,32 @@ def test_stop_with_0xfa_has_no_reply_and_0xc4_0_has_one(sim, host):
     reply = host.request(cmd.set_continuous(0), code=lay.SET_CONTINUOUS)
     assert reply.command == 0
     assert sim.wait_until(lambda: not sim.streaming, 2.0)
+
+
+def test_power_cycle_restarts_the_timer_and_the_auto_start(sim, host):
+    host.request(cmd.write_eeprom(0xFCA6, 0x8000 | lay.ACCEL_ANG_RATE))
+    host.pump(0.2)
+    before = host.request(cmd.encode_command(lay.ACCEL_ANG_RATE)).timer
+    assert sim.streaming == 0, 'auto-start acts at the next power-up'
+    sim.power_cycle()
+    assert host.pump_until(lambda: len(host.records(lay.ACCEL_ANG_RATE)) >= 4)
+    stop_stream(host)
+    unwrapper = TimerUnwrapper()
+    for record in host.records(lay.ACCEL_ANG_RATE):
+        unwrapper.update(record.timer)
+    assert unwrapper.resets == 1, 'the timer starts again from timer_start'
+    assert host.records(lay.ACCEL_ANG_RATE)[1].timer != before
+
+
+def test_rate_override_at_run_time(sim, host):
+    sim.set_rate(400.0)
+    start_stream(host, lay.ACCEL_ANG_RATE)
+    host.pump(0.3)
+    stop_stream(host)
+    records = host.records(lay.ACCEL_ANG_RATE)
+    step = TPS * (1 + 40e-6) / 400.0
+    assert len(records) > 40
+    assert all(abs((b.timer - a.timer) % 2**32 - step) <= 1 for a, b in pairwise(records))
 
 
 def test_polled_commands_interleave_with_the_stream(sim, host):

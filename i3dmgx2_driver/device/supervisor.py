@@ -170,12 +170,12 @@ class DeviceSupervisor:
 
     @property
     def link(self) -> DeviceLink | None:
-        """The current link, or None while disconnected."""
+        """Return the current link, or None while disconnected."""
         return self._link
 
     @property
     def expected_rate_hz(self) -> float | None:
-        """The rate the divider gives, once known."""
+        """Return the rate the divider gives, once known."""
         return RATE_BASE_HZ / self.divider if self.divider else None
 
     def parser_stats(self) -> dict[str, int]:
@@ -388,7 +388,8 @@ class DeviceSupervisor:
             return operation(link)
         finally:
             try:
-                self.start_continuous(link)
-                self.state = State.STREAMING
+                if not self._stop.is_set():
+                    self.start_continuous(link)
+                    self.state = State.STREAMING
             finally:
                 self._paused.clear()

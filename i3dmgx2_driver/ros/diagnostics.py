@@ -178,7 +178,7 @@ def stream_status(state: State, measured_hz: float | None, expected_hz: float | 
                   published: int, lost: int, lost_in_period: int, device_resets: int,
                   other_records: int, mag_published: int, operation: str = '') -> Status:
     """
-    Judge the IMU stream over the last period: is it there, and at its rate?
+    Judge the IMU stream over the last period: whether it arrives, at its rate.
 
     STALE when no record arrived in the period (there is no data to judge),
     WARN when paused or the measured rate is off by more than 5 %.
@@ -453,7 +453,7 @@ class DiagnosticsPublisher:
         return statuses
 
     def hardware_id(self) -> str:
-        """The device's serial number once known, else ''."""
+        """Return the device's serial number once known, else ''."""
         info = self.node.supervisor.info
         return info.serial_number if info is not None and info.serial_number else ''
 

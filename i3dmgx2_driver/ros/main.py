@@ -28,7 +28,7 @@ import threading
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from .imu_node import ImuDriverNode
@@ -55,7 +55,10 @@ def main(args: list[str] | None = None) -> int:
     previous = {sig: signal.signal(sig, request_stop)
                 for sig in (signal.SIGINT, signal.SIGTERM)}
     node = None
-    executor = SingleThreadedExecutor()
+    # Several threads, so that a long service call (a 30 s gyro bias capture)
+    # holds only its own callback group: diagnostics keep ticking, parameters
+    # answer, and a signal is acted on at once rather than after the call.
+    executor = MultiThreadedExecutor(num_threads=4)
     try:
         try:
             node = ImuDriverNode()

@@ -106,7 +106,7 @@ SPECS: list[Spec] = [
     Spec('gyro_bias_sampling_ms', Parameter.Type.INTEGER, 10000,
          'Sampling time (ms) of ~/capture_gyro_bias (0xCD); the sensor must stay still that '
          'long. The protocol advises 10000..30000; down to 100 is accepted for tests and the '
-         'simulator, at the cost of a noisier bias. Can be changed at run time.',
+         'simulator, at the cost of a noisier bias.',
          (100, 30000), read_only=False),
     Spec('capture_gyro_bias_on_start', Parameter.Type.BOOL, False,
          'Capture the gyro bias once, right after streaming first starts (the sensor must '
@@ -115,8 +115,9 @@ SPECS: list[Spec] = [
          'Seconds between polls of the temperatures (0xD1), published on imu/temperature; '
          '0: off.', (0.0, 3600.0)),
     Spec('capture_file', Parameter.Type.STRING, '',
-         "Write every byte read from the port, with its receive time, to this capture file "
-         "(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '': off.",
+         'Write every byte read from the port, with its receive time, to this capture file '
+         '(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '
+         "'': off.",
          empty_ok=True),
 ]
 
@@ -150,7 +151,7 @@ class DriverConfig:
 
     @property
     def data_rate_hz(self) -> float | None:
-        """The rate to set, or None to leave the device as it is."""
+        """Return the rate to set, or None to leave the device as it is."""
         return self.data_rate or None
 
 

@@ -195,8 +195,20 @@ class DeviceServices:
         """Stop waiting (the capture at start, the rate window); the link aborts the rest."""
         self._stop.set()
 
+    def wait_idle(self, timeout: float) -> bool:
+        """
+        Wait until no operation runs (after the supervisor stopped); True if none does.
+
+        At shutdown, so that a call cut short by the link's abort still gets
+        its answer out before the node (and its service) is destroyed.
+        """
+        if not self._busy.acquire(timeout=timeout):
+            return False
+        self._busy.release()
+        return True
+
     def calibration(self) -> tuple[Calibration | None, Calibration | None]:
-        """The last capture attempt and the last accepted capture, for diagnostics."""
+        """Return the last capture attempt and the last accepted capture (diagnostics)."""
         return self.last_capture, self.good_capture
 
     # -- service callbacks (executor) ---------------------------------------
@@ -306,7 +318,7 @@ class DeviceServices:
         return ok, report
 
     def _device_steps(self, link: DeviceLink) -> list[Step]:
-        """The steps that need the device alone (runs with the stream stopped)."""
+        """Run the steps that need the device alone (with the stream stopped)."""
         steps: list[Step] = []
         accel = None
         try:

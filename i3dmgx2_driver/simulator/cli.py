@@ -17,8 +17,9 @@ Command line of the simulator: a 3DM-GX2 on a pseudo-terminal for a driver to op
 
 The first line printed is ``port: <path>`` (flushed at once), so that a script
 or a person can hand the path to the driver (``port:=<path>``); then a status
-line every few seconds. SIGINT and SIGTERM stop it cleanly with exit status 0,
-so that it can run under a launch file or a test harness.
+line every few seconds. SIGINT, SIGTERM and SIGHUP stop it cleanly with exit
+status 0 (the port symlink is removed), so that it can run under a launch file
+or a test harness.
 """
 
 import argparse
@@ -83,6 +84,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='timer at power-up (default: 5 s before the rollover)')
     device.add_argument('--latency-ms', type=_non_negative, default=2.0,
                         help='radio latency (default: 2 ms)')
+    device.add_argument('--wire-baud', type=int, default=115200,
+                        help='serial line baud: each packet arrives its wire time late '
+                             '(default: 115200; 0: at once)')
     device.add_argument('--line-rate-limit', action='store_true',
                         help='skip streamed cycles a 115200-baud line could not carry')
     device.add_argument('--seed', type=int, help='seed for reproducible noise and faults')
@@ -149,6 +153,7 @@ def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
         motion=MotionConfig(static=args.static), faults=faults, nan_mag=args.nan_mag,
         mag_nan_probability=args.mag_nan_probability, clock_ppm=args.ppm,
         timer_start=args.timer_start, latency_s=args.latency_ms / 1000.0,
+        wire_baud=args.wire_baud or None,
         symlink=args.symlink, limit_to_line_rate=args.line_rate_limit,
         # A demo may run for hours: keep no ground truth, only the counters.
         truth_limit=0)
@@ -179,13 +184,13 @@ def _say(text: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the simulator until SIGINT, SIGTERM or ``--duration``; return 0."""
+    """Run the simulator until SIGINT, SIGTERM, SIGHUP or ``--duration``; return 0."""
     args = build_parser().parse_args(argv)
     config = config_from_args(args)
     stop = threading.Event()
     previous = {}
     if threading.current_thread() is threading.main_thread():
-        for signum in (signal.SIGINT, signal.SIGTERM):
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             previous[signum] = signal.signal(signum, lambda *_: stop.set())
     try:
         with PtySimulator(config) as sim:

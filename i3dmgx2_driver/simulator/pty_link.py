@@ -31,7 +31,11 @@ Design points, each for a reason:
   persist between the driver's opens.
 * ``sim.port`` is a symlink in a private directory, so the path stays the same
   when an unplug replaces the pty (the real ``/dev/ttyUSB0`` comes back under
-  the same name too).
+  the same name too). It points to ``/proc/<pid>/fd/<slave>``, not to
+  ``/dev/pts/N``: if the simulator is killed before it removes the link, the
+  link dangles, where a link to ``/dev/pts/N`` would lead a still-running
+  driver into whichever new pseudo-terminal reuses the number (seen in practice
+  on a shared machine).
 * The master runs in packet mode (TIOCPKT), which reports the input flush that
   pyserial does on every open: that is how the simulator knows the host has
   (re)opened the port, for the "poll before streaming" quirk.
@@ -42,6 +46,7 @@ Design points, each for a reason:
   bytes are lost, as on a real line, and counted.
 """
 
+import atexit
 import collections
 import collections.abc
 import dataclasses
@@ -118,6 +123,11 @@ class SimulatorConfig:
     firmware_version: int = 2103
     #: Radio latency (s) between the sensor sending a packet and the host getting it.
     latency_s: float = 0.002
+    #: Baud rate of the serial line between the base station and the host: a
+    #: packet's last byte arrives its wire time (10 bits a byte) after its first,
+    #: so each packet is written that much later (throughput is not limited;
+    #: see ``limit_to_line_rate``). None: bytes arrive at once, as over USB.
+    wire_baud: int | None = 115200
     #: Each packet is written in a random number of chunks in this range.
     chunks: tuple[int, int] = (1, 3)
     #: Pause between the chunks of one packet (s), so that reads see them apart.
@@ -130,6 +140,9 @@ class SimulatorConfig:
     limit_to_line_rate: bool = False
     #: When the writer falls this far behind (s), it skips cycles instead of bursting.
     max_lag_s: float = 1.0
+    #: Point the port symlink at /proc/<pid>/fd/<slave> rather than /dev/pts/N, so
+    #: that it dangles when the simulator dies, however it dies (see _open_pty).
+    link_via_proc: bool = True
 
     def __post_init__(self) -> None:
         """Reject settings that cannot work, naming the field."""
@@ -158,9 +171,10 @@ class SentRecord(NamedTuple):
 
     #: Position in the order of production (0, 1, ...), across every source.
     index: int
-    #: Wall-clock time (time.time()) of the sample it carries.
+    #: Wall-clock time (time.time()) of the sample it carries: its calculation cycle.
     sample_time: float
-    #: Wall-clock time right after its last byte was written; None if never written whole.
+    #: Wall-clock time right after its last byte was written (a reader may see the
+    #: bytes a moment earlier); None if never written whole.
     write_time: float | None
     #: Raw uint32 timer of the record (None for records without one).
     timer: int | None
@@ -301,10 +315,10 @@ class PtySimulator:
         self._polled_since_open = False
         self._ignore_next_continuous = config.faults.ignore_first_continuous
         self._actions: list[tuple[float, int, collections.abc.Callable[[], None]]] = []
-        self._replug_at: float | None = None
 
         self._master: int | None = None
         self._slave: int | None = None
+        self._link_target: str | None = None
         self._parser = CommandStreamParser()
         self._wake_r, self._wake_w = -1, -1
         self._dir: str | None = None
@@ -325,6 +339,7 @@ class PtySimulator:
         """Create the port, power the sensor up and start the threads."""
         if self._started:
             raise RuntimeError('the simulator is already started')
+        self._stop.clear()
         if self.config.symlink:
             self.port = os.path.abspath(self.config.symlink)
             if os.path.lexists(self.port) and not os.path.islink(self.port):
@@ -343,6 +358,8 @@ class PtySimulator:
             self._foreign.power_up(now - 1000.0 * self._fault_rng.random())
             self._schedule_faults(self._faults, now, None)
         self._started = True
+        # An interpreter that exits without stop() still removes the port.
+        atexit.register(self.stop)
         self._threads = [
             threading.Thread(target=self._rx_loop, name='gx2sim-rx', daemon=True),
             threading.Thread(target=self._tx_loop, name='gx2sim-tx', daemon=True),
@@ -371,6 +388,7 @@ class PtySimulator:
             shutil.rmtree(self._dir, ignore_errors=True)
             self._dir = None
         self._started = False
+        atexit.unregister(self.stop)
 
     def __enter__(self) -> 'Self':
         """Start (if not yet started) for a ``with`` block."""
@@ -395,13 +413,20 @@ class PtySimulator:
         fcntl.ioctl(master, _TIOCPKT, struct.pack('i', 1))
         os.set_blocking(master, False)
         device = os.ttyname(slave)
+        # Through /proc, the link dangles once this process is gone, even if it
+        # was killed before it could remove it: a stale link never leads a
+        # driver to whatever pseudo-terminal reuses the number later.
+        target = f'/proc/{os.getpid()}/fd/{slave}'
+        if not self.config.link_via_proc or not os.path.exists(target):
+            target = device
         temporary = f'{self.port}.{os.getpid()}.new'
         if os.path.lexists(temporary):
             os.unlink(temporary)
-        os.symlink(device, temporary)
+        os.symlink(target, temporary)
         os.replace(temporary, self.port)
         with self._io_lock:
             self._master, self._slave, self.device = master, slave, device
+            self._link_target = target
         with self.lock:
             self._parser = CommandStreamParser()
             self._polled_since_open = False
@@ -415,10 +440,10 @@ class PtySimulator:
                         os.close(fd)
                     except OSError:
                         pass
-            device = self.device
-            self._master = self._slave = self.device = None
+            target = self._link_target
+            self._master = self._slave = self.device = self._link_target = None
         self._plugged.clear()
-        if self.port and os.path.islink(self.port) and os.readlink(self.port) == device:
+        if self.port and os.path.islink(self.port) and os.readlink(self.port) == target:
             try:
                 os.unlink(self.port)
             except FileNotFoundError:
@@ -760,6 +785,9 @@ class PtySimulator:
     def _enqueue(self, reply: Reply, source: str, address: int) -> None:
         """Queue a packet the sensor sends at ``reply.due`` (lock held)."""
         delay = self.config.latency_s
+        if self.config.wire_baud:
+            size = len(reply.data) + framing.HEADER_SIZE + framing.DATA_TRAILER_SIZE
+            delay += size * 10.0 / self.config.wire_baud
         if self._faults.jitter_ms > 0:
             delay += self._fault_rng.uniform(0.0, self._faults.jitter_ms / 1000.0)
         self._seq += 1
