@@ -54,8 +54,8 @@ from i3dmgx2_driver.codec.commands import decode_record
 from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.framing import HEADER_SIZE
 from i3dmgx2_driver.codec.orientation import ENU, orientation
-from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
-from i3dmgx2_driver.codec.timer import TimerUnwrapper
+from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation, TICKS_PER_SECOND
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 from i3dmgx2_driver.ros.conversions import STANDARD_GRAVITY
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import rclpy
@@ -251,7 +251,7 @@ class FaultDriver(threading.Thread):
     """Inject random faults into the simulator until told to stop."""
 
     WEIGHTS = (('unplug', 2.0), ('stall_short', 1.5), ('stall', 2.0), ('stall_long', 0.4),
-               ('noise', 3.0), ('quirks', 1.0), ('power_cycle', 0.6))
+               ('noise', 3.0), ('quirks', 1.0), ('power_cycle', 1.0))
 
     def __init__(self, sim: PtySimulator, cfg: CampaignConfig, rng: random.Random) -> None:
         super().__init__(name='soak-faults', daemon=True)
@@ -259,6 +259,8 @@ class FaultDriver(threading.Thread):
         self.cfg = cfg
         self.rng = rng
         self.events: list[FaultEvent] = []
+        #: Power-up times of the sensor's power cycles (simulator wall clock).
+        self.power_ups: list[float] = []
         self.unsafe_garbage_bytes = 0
         self.unsafe_garbage_bursts = 0
         self._unsafe = False
@@ -271,8 +273,11 @@ class FaultDriver(threading.Thread):
     def run(self) -> None:
         """Draw and inject events until stopped."""
         low, high = self.cfg.event_gap
+        # Every kind once first, in random order, so that a short run meets them all.
+        first = list(self._kinds)
+        self.rng.shuffle(first)
         while not self._halt.wait(self.rng.uniform(low, high)):
-            kind = self.rng.choices(self._kinds, self._weights)[0]
+            kind = first.pop() if first else self.rng.choices(self._kinds, self._weights)[0]
             getattr(self, '_' + kind)()
 
     def stop(self) -> None:
@@ -305,8 +310,8 @@ class FaultDriver(threading.Thread):
         self.sim.unplug(None)
         detail = f'{seconds:.2f} s'
         if self.rng.random() < 0.3:
-            self._power_cycle_now(self.rng.random() < 0.7)
-            detail += ', sensor power-cycled meanwhile'
+            detail += ', sensor power-cycled meanwhile: ' + self._power_cycle_now(
+                self.rng.random() < 0.7)
         self._sleep(seconds)
         self.sim.replug()
         self.events.append(FaultEvent('unplug', start, time.time(), detail))
@@ -357,18 +362,36 @@ class FaultDriver(threading.Thread):
         self.events.append(FaultEvent('quirks', start, start,
                                       f'ignore first continuous, polled first={polled_first}'))
 
-    def _power_cycle_now(self, streaming: bool) -> None:
+    def _power_cycle_now(self, streaming: bool) -> str:
+        """
+        Power-cycle the sensor; return how its timer restarted.
+
+        A real timer restarts from zero, which is behind where it was unless
+        the sensor had run for more than half the timer's range (about 109 s)
+        since it last wrapped: then zero is *ahead* of it modulo 2^32, and only
+        the host's clock can tell a restart from a jump forward. The simulated
+        timer restarts at ``timer_start``: set here to 1..100 s behind or
+        ahead of the timer now, half the time each, so that short runs meet
+        both cases.
+        """
+        ahead = self.rng.random() < 0.5
+        offset = self.rng.uniform(1.0, 100.0) * TICKS_PER_SECOND * (1 if ahead else -1)
+        with self.sim.lock:
+            sensor = self.sim.sensor
+            sensor.timer_start = (sensor.timer_at(time.time()) + round(offset)) % TIMER_MODULUS
         self.sim.power_cycle()
+        with self.sim.lock:
+            self.power_ups.append(self.sim.sensor.power_up_time)
         if streaming:
             self.sim.set_faults(already_streaming=False)
             self.sim.set_faults(already_streaming=True)
+        return (f'timer restarted {offset / TICKS_PER_SECOND:+.1f} s from where it was, '
+                + ('streaming at once' if streaming else 'polled'))
 
     def _power_cycle(self) -> None:
         start = time.time()
-        streaming = self.rng.random() < 0.5
-        self._power_cycle_now(streaming)
-        self.events.append(FaultEvent('power_cycle', start, start,
-                                      'already streaming' if streaming else 'polled'))
+        detail = self._power_cycle_now(self.rng.random() < 0.5)
+        self.events.append(FaultEvent('power_cycle', start, start, detail))
 
 
 def harness():
@@ -421,6 +444,7 @@ class RunData:
     unsafe_garbage_bytes: int
     unsafe_garbage_bursts: int
     divider: int
+    power_ups: list[float]
     node_output: str
     started: float
 
@@ -513,7 +537,8 @@ def run_campaign(cfg: CampaignConfig) -> 'CampaignResult':
             exit_code=exit_code, exit_seconds=exit_seconds, recovered=recovered,
             unsafe_garbage_bytes=driver.unsafe_garbage_bytes,
             unsafe_garbage_bursts=driver.unsafe_garbage_bursts,
-            divider=sim.sensor.eeprom.get(0xFCA2, 512), node_output=node.output(),
+            divider=sim.sensor.eeprom.get(0xFCA2, 512), power_ups=list(driver.power_ups),
+            node_output=node.output(),
             started=started)
     finally:
         # Each step on its own: a failure in one must not leave the node process behind.
@@ -576,7 +601,7 @@ class Windows:
                 close = entry['close'] if entry['close'] is not None else end
                 self.spans.append((entry['flush'][1], close))
         self.spans.sort()
-        self._starts = [s for s, _ in self.spans]
+        self.starts = [s for s, _ in self.spans]
         self.unplugs = sorted(unplugs)
         self.margin = margin
         self.settle = settle
@@ -585,7 +610,7 @@ class Windows:
         """Whether bytes written at ``t`` were surely read by the node (see the rules)."""
         if t is None:
             return False
-        i = bisect.bisect_right(self._starts, t) - 1
+        i = bisect.bisect_right(self.starts, t) - 1
         if i < 0:
             return False
         start, close = self.spans[i]
@@ -612,33 +637,34 @@ def _percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * (len(ordered) - 1) + 0.5))]
 
 
-def expected_lost(published: list[Sent], windows: Windows, divider: int) -> tuple[int, int]:
+def expected_gaps(published: list[Sent], windows: Windows, divider: int,
+                  power_ups: list[float]) -> tuple[int, int]:
     """
-    Replay the node's gap counter over the published records (its own formula).
+    Return the (lost, device resets) the node should count over the published records.
 
-    Returns (lost, device resets): within one connection, each forward step of
-    the unwrapped timer counts ``round(step / (384 * divider)) - 1`` lost
-    records when positive; a backward step is a device reset.
+    Consecutive published records of one connection (the node starts afresh at
+    each) either straddle a power-up of the sensor, a device reset, or do not:
+    then the node counts ``round(step / (384 * divider)) - 1`` lost records
+    when that is positive, ``step`` being the timer step in ticks (its own
+    formula, for the rate the divider gives).
     """
     expected = 384 * divider
-    unwrapper = TimerUnwrapper()
+    ups = sorted(power_ups)
     lost = resets = 0
     last = None
     span = None
     for sent in published:
-        i = bisect.bisect_right(windows._starts, sent.write_time) - 1
-        if i != span:
-            span = i
-            unwrapper.reset()
-            last = None
-        ticks = unwrapper.update(sent.timer)
-        if unwrapper.last_was_reset:
+        i = bisect.bisect_right(windows.starts, sent.write_time) - 1
+        if i != span or last is None:
+            span, last = i, sent
+            continue
+        j = bisect.bisect_right(ups, last.sample_time)
+        if j < len(ups) and ups[j] <= sent.sample_time:
             resets += 1
-        elif last is not None:
-            gap = round((ticks - last) / expected) - 1
-            if gap > 0:
-                lost += gap
-        last = ticks
+        else:
+            gap = round(((sent.timer - last.timer) % TIMER_MODULUS) / expected) - 1
+            lost += max(gap, 0)
+        last = sent
     return lost, resets
 
 
@@ -812,12 +838,12 @@ def analyse(data: RunData) -> CampaignResult:
            'at least the bytes of the corrupted packets read, less their 0xAA/0x21 bytes')
     published_sorted = sorted((s for s, _ in matched if s.index not in duplicates),
                               key=lambda s: s.index)
-    lost, resets = expected_lost(published_sorted, windows, data.divider)
+    lost, resets = expected_gaps(published_sorted, windows, data.divider, data.power_ups)
     bounds('lost', nstats.get('lost'), lost, lost,
-           f'the node own gap formula (divider {data.divider}) replayed over the published '
-           f'records, restarted at each connection: exact')
+           f'timer steps between published records of one connection and one power-up, '
+           f'as cycles of the divider ({data.divider}) less one: exact')
     bounds('device_resets', nstats.get('device_resets'), resets, resets,
-           'backward timer steps in the published records of one connection: exact')
+           'published records of one connection on either side of a sensor power-up: exact')
     check('nothing left unpublished', nstats.get('unpublished', 0) == 0,
           f'{nstats.get("unpublished")} records dropped by a failed publish')
 
