@@ -64,7 +64,7 @@ class Result(NamedTuple):
 # -- statistics ------------------------------------------------------------------------------
 
 def percentile(values: list[float], q: float) -> float:
-    """The ``q`` percentile (0..100) by linear interpolation; NaN for no values."""
+    """Return the q-th percentile of the values, q in 0..100, interpolated; NaN for none."""
     if not values:
         return math.nan
     ordered = sorted(values)
@@ -81,11 +81,11 @@ class Summary(NamedTuple):
     mean: float
     p50: float
     p99: float
-    max: float
+    max_: float
 
     def ms(self) -> str:
         """Format as milliseconds: ``p50 / p99 / max``."""
-        return (f'{self.p50 * 1e3:.3f} / {self.p99 * 1e3:.3f} / {self.max * 1e3:.3f} ms '
+        return (f'{self.p50 * 1e3:.3f} / {self.p99 * 1e3:.3f} / {self.max_ * 1e3:.3f} ms '
                 f'(n={self.n})')
 
 
@@ -98,7 +98,7 @@ def summarise(values: list[float]) -> Summary:
 
 
 def std_dev(values: list[float]) -> float:
-    """Population standard deviation (NaN for fewer than two values)."""
+    """Return the population standard deviation (NaN for fewer than two values)."""
     if len(values) < 2:
         return math.nan
     mean = sum(values) / len(values)
@@ -145,7 +145,7 @@ def _has_distribution(metadata: Any, name: str) -> bool:
 
 
 def markdown_table(results: list[Result]) -> str:
-    """The results as a Markdown table: metric, value, target, met?."""
+    """Return the results as a Markdown table: metric, value, target, met?."""
     lines = ['| metric | value | target | met? |', '|---|---|---|---|']
     for result in results:
         met = {True: 'yes', False: '**no**', None: '-'}[result.met]
@@ -154,7 +154,7 @@ def markdown_table(results: list[Result]) -> str:
 
 
 def machine_table() -> str:
-    """The machine information as a Markdown table."""
+    """Return the machine information as a Markdown table."""
     lines = ['| machine | |', '|---|---|']
     lines += [f'| {name} | {value} |' for name, value in machine_info()]
     return '\n'.join(lines)
@@ -208,11 +208,14 @@ class _Child:
         os.close(handle)
         self.name = Path(argv[1]).name
         # Standard error goes to a file: a pipe nobody reads could fill and block the child.
-        self._stderr = tempfile.TemporaryFile(mode='w+')
-        self.proc = subprocess.Popen(
-            [*argv, self.out_flag, self.out_path],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
-            text=True, env=child_env(), cwd=str(REPO))
+        handle, self._stderr_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.err')
+        try:
+            self.proc = subprocess.Popen(
+                [*argv, self.out_flag, self.out_path],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=handle,
+                text=True, env=child_env(), cwd=str(REPO))
+        finally:
+            os.close(handle)
         self.ready_line = self._wait_line(ready_prefix, timeout)
         self._lines: list[str] = []
         self._reader = threading.Thread(target=self._read_rest, daemon=True)
@@ -230,9 +233,9 @@ class _Child:
         raise RuntimeError(f'{self.name} did not start: {self.errors()}')
 
     def errors(self) -> str:
-        """What the process wrote to standard error so far."""
-        self._stderr.seek(0)
-        return self._stderr.read()
+        """Return what the process wrote to standard error so far."""
+        with open(self._stderr_path, errors='replace') as handle:
+            return handle.read()
 
     def _read_rest(self) -> None:
         for line in self.proc.stdout:
@@ -258,6 +261,7 @@ class _Child:
             raise RuntimeError(f'{self.name} saved nothing: {self.errors()}') from exc
         finally:
             os.unlink(self.out_path)
+            os.unlink(self._stderr_path)
 
 
 class TruthEntry(NamedTuple):
@@ -299,7 +303,7 @@ class SimProcess(_Child):
         return document
 
     def written_stream(self) -> list[TruthEntry]:
-        """The valid streamed packets that were written whole."""
+        """Return the valid streamed packets that were written whole."""
         return [e for e in self.truth
                 if e.source == 'stream' and e.valid and e.write_time is not None]
 
@@ -354,7 +358,7 @@ class InProcessNode:
 
     def __init__(self, port: str, **params: Any) -> None:
         import rclpy
-        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.executors import MultiThreadedExecutor
         from rclpy.parameter import Parameter
         from rclpy.signals import SignalHandlerOptions
 
@@ -371,7 +375,8 @@ class InProcessNode:
             context=self.context,
             parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
         self.node.on_published = self._on_published
-        self.executor = SingleThreadedExecutor(context=self.context)
+        # As main.py spins it: several threads, so that a long service call holds only its own.
+        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, name='bench-executor', daemon=True)
@@ -380,14 +385,14 @@ class InProcessNode:
     def _on_published(self, record: Any, read_time: float, stamp: float,
                       clock: Any = time.time) -> None:
         now = clock()
-        self.published.append(Published(record.timer, read_time, stamp,
-                                         *self._stamp_parts(stamp), now))
+        sec, nanosec = self._stamp_parts(stamp)
+        self.published.append(Published(record.timer, read_time, stamp, sec, nanosec, now))
 
     def _spin(self) -> None:
         while not self._stop.is_set() and self.context.ok():
             try:
                 self.executor.spin_once(timeout_sec=0.1)
-            except Exception:  # noqa: B902 - the context is shut down under us at close()
+            except Exception:  # the context is shut down under us at close()
                 break
 
     def wait_published(self, count: int, timeout: float = 20.0) -> bool:
@@ -419,7 +424,7 @@ class InProcessNode:
 
 
 def stamp_key(sec: int, nanosec: int) -> int:
-    """A stamp as integer nanoseconds, for matching."""
+    """Return a stamp as integer nanoseconds, for matching."""
     return sec * 1_000_000_000 + nanosec
 
 
@@ -459,7 +464,7 @@ def subscriber_latencies(truth: list[TruthEntry], published: list[Published],
 
 
 def standard_args(description: str, default_seconds: float, quick_seconds: float) -> Any:
-    """The command line every benchmark script shares: --quick, --seconds."""
+    """Parse the command line every benchmark script shares: --quick, --seconds."""
     import argparse
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument('--quick', action='store_true', help='short runs (a smoke test)')
@@ -483,14 +488,17 @@ class NodeProcess:
         for name, value in params.items():
             text = str(value).lower() if isinstance(value, bool) else str(value)
             argv += ['-p', f'{name}:={text}']
-        self.log = tempfile.NamedTemporaryFile(prefix='i3dmgx2-bench-node-', suffix='.log',
-                                               delete=False)
-        self.proc = subprocess.Popen(argv, stdout=self.log, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, env=child_env(), cwd=str(REPO))
+        handle, self.log_path = tempfile.mkstemp(prefix='i3dmgx2-bench-node-', suffix='.log')
+        try:
+            self.proc = subprocess.Popen(argv, stdout=handle, stderr=subprocess.STDOUT,
+                                         stdin=subprocess.DEVNULL, env=child_env(),
+                                         cwd=str(REPO))
+        finally:
+            os.close(handle)
 
     def output(self) -> str:
-        """What the node printed so far."""
-        with open(self.log.name, errors='replace') as handle:
+        """Return what the node printed so far."""
+        with open(self.log_path, errors='replace') as handle:
             return handle.read()
 
     def wait_for_output(self, text: str, timeout: float = 20.0) -> bool:
@@ -517,12 +525,35 @@ class NodeProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-        self.log.close()
         return self.proc.returncode
 
     def remove_log(self) -> None:
         """Delete the output file."""
         try:
-            os.unlink(self.log.name)
+            os.unlink(self.log_path)
         except OSError:
             pass
+
+
+class LoadProcess(_Child):
+    """Parameter requests (and a slow service) against the node from another process."""
+
+    def __init__(self, slow_service: str = '', in_flight: int = 4) -> None:
+        self._argv = [sys.executable, str(BENCH_DIR / 'param_load.py'),
+                      '--in-flight', str(in_flight)]
+        if slow_service:
+            self._argv += ['--slow-service', slow_service]
+        self.counts: dict[str, int] = {}
+        self.started = False
+
+    def start(self) -> None:
+        """Start loading the node (returns once the requests flow)."""
+        super().__init__(self._argv, 'ready', timeout=30.0)
+        self.started = True
+
+    def stop(self, timeout: float = 15.0) -> dict[str, int]:
+        """Stop; return and keep how many requests of each kind were answered."""
+        if self.started:
+            self.counts = super().stop(timeout)
+            self.started = False
+        return self.counts

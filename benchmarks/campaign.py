@@ -97,10 +97,14 @@ class CampaignConfig:
     quiet: float = 4.0
     #: How long before a close or an unplug a record may still be legitimately unread (s).
     unread_margin: float = 0.5
-    #: Largest |stamp - true sample time| accepted (s); lenient for a loaded machine.
+    #: Largest |stamp - true sample time| accepted (s), at the 99th percentile and at
+    #: worst; lenient for a loaded machine (a clean run shows a few ms).
+    stamp_p99_tolerance: float = 0.1
     stamp_tolerance: float = 1.0
     #: Include long stalls (longer than the node's stall recovery: it reopens the port).
     long_stalls: bool = True
+    #: The node's temperature_period: 0xD1 polls interleaved with the stream (0: none).
+    temperature_period: float = 1.0
     #: Where progress lines go (None: nowhere).
     log: Any = print
 
@@ -470,7 +474,7 @@ def run_campaign(cfg: CampaignConfig) -> 'CampaignResult':
     subscriber = Subscriber()
     params = {'port': sim.port, 'address': cfg.address, 'read_timeout': cfg.read_timeout,
               'reconnect_interval': cfg.reconnect_interval, 'qos_depth': 1000,
-              'qos_reliability': 'reliable'}
+              'qos_reliability': 'reliable', 'temperature_period': cfg.temperature_period}
     node = ros_harness.NodeProcess(params, command=NODE_COMMAND,
                                    env=ros_harness.ros_env({STATS_ENV: stats_path}))
     rss: list[tuple[float, int]] = []
@@ -775,10 +779,12 @@ def analyse(data: RunData) -> CampaignResult:
           f'quaternion the codec computes from the record matrix (ENU)')
     errors = [abs(row[1] * 1e-9 - sent.sample_time) for sent, row in matched]
     worst = max(errors) if errors else 0.0
-    check('stamps close to the sample times', worst <= cfg.stamp_tolerance,
+    p99 = _percentile(errors, 0.99) if errors else 0.0
+    check('stamps close to the sample times',
+          worst <= cfg.stamp_tolerance and p99 <= cfg.stamp_p99_tolerance,
           f'|stamp - true sample time|: median {_percentile(errors, 0.5) * 1e3:.2f} ms, '
-          f'p99 {_percentile(errors, 0.99) * 1e3:.2f} ms, max {worst * 1e3:.2f} ms '
-          f'(limit {cfg.stamp_tolerance * 1e3:.0f} ms)')
+          f'p99 {p99 * 1e3:.2f} ms (limit {cfg.stamp_p99_tolerance * 1e3:.0f}), max '
+          f'{worst * 1e3:.2f} ms (limit {cfg.stamp_tolerance * 1e3:.0f})')
 
     # -- counters -------------------------------------------------------------------------
     def count(pred, only_read: bool) -> int:
@@ -852,8 +858,12 @@ def analyse(data: RunData) -> CampaignResult:
     lines.append('== i3dmgx2 soak and fault campaign ==')
     lines.append(f'fault phase {cfg.minutes:g} min at {cfg.rate_hz:g} Hz (simulator rate '
                  f'override), seed {cfg.seed}, node read_timeout {cfg.read_timeout:g} s, '
-                 f'reconnect_interval {cfg.reconnect_interval:g} s, then {cfg.quiet:g} s quiet')
+                 f'reconnect_interval {cfg.reconnect_interval:g} s, temperature_period '
+                 f'{cfg.temperature_period:g} s, then {cfg.quiet:g} s quiet')
     lines.append('fault events: ' + ', '.join(f'{k} {n}' for k, n in sorted(kinds.items())))
+    for event in data.events:
+        if 'power' in event.detail or event.kind == 'power_cycle':
+            lines.append(f'  {event.start - data.started:7.2f} s {event.kind}: {event.detail}')
     lines.append(f'node: {sup.get("connections")} connections ({sup.get("reconnects")} '
                  f'reconnects), {sup.get("stalls")} stalls, published {published}, '
                  f'lost {nstats.get("lost")}, device resets {nstats.get("device_resets")}, '

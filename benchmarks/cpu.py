@@ -59,13 +59,13 @@ def run(seconds: float) -> list[Result]:
     results = []
     for rate in (100.0, 1000.0):
         percent, received = measure(rate, seconds)
+        metric = f'CPU of the node process at {rate:.0f} Hz (% of one core)'
+        value = f'{percent:.2f} % ({received} messages received by the subscriber)'
         if rate == 100.0:
-            results.append(Result('CPU of the node process at 100 Hz (% of one core)',
-                                  f'{percent:.2f} %', f'<= {TARGET_PERCENT_100HZ:g} %',
+            results.append(Result(metric, value, f'<= {TARGET_PERCENT_100HZ:g} %',
                                   percent <= TARGET_PERCENT_100HZ))
         else:
-            results.append(Result(f'CPU of the node process at {rate:.0f} Hz (% of one core)',
-                                  f'{percent:.2f} %'))
+            results.append(Result(metric, value))
     return results
 
 
@@ -75,7 +75,7 @@ def main() -> None:
     results = run(args.seconds)
     report('CPU', results,
            [f'{args.seconds:g} s window after {WARM_UP_S:g} s of warm-up; user + system time '
-            f'of all the node\'s threads; a subscriber in another process.'],
+            "of all the node's threads; a subscriber in another process."],
            None if args.no_output else 'cpu.md')
 
 

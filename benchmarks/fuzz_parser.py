@@ -22,8 +22,8 @@ test/fixtures/gx2_real_0xcc_records.txt; otherwise hypothesis, with a large
 example budget. Every input goes through:
 
 * ``SensorStreamParser``: wireless with no address filter and with one,
-  wired, each fed in pseudo-random chunks, and once more with ``expect_ping``
-  and ``idle`` calls mixed in;
+  wired, each fed in pseudo-random chunks, and once more with ``expect_ping``,
+  ``idle`` and ``reset`` calls mixed in;
 * ``CommandStreamParser``, wireless and wired;
 * ``decode_record``, ``decode_data_packet``, ``decode_wired_record``,
   ``decode_command_packet`` and ``decode_command`` on the whole input and on
@@ -186,7 +186,8 @@ def run_sensor_parser(data: bytes, chunks: list[bytes], wireless: bool,
     """
     Feed ``chunks`` to a SensorStreamParser and check every property on the way.
 
-    With ``pings``, ``expect_ping`` and ``idle`` are called between chunks.
+    With ``pings``, ``expect_ping``, ``idle`` and (rarely) ``reset`` are called
+    between chunks.
     Returns the events and the final counters.
     """
     parser = stream.SensorStreamParser(address=address, wireless=wireless)
@@ -198,6 +199,9 @@ def run_sensor_parser(data: bytes, chunks: list[bytes], wireless: bool,
     for chunk in chunks:
         if pings and rng.random() < 0.2:
             parser.expect_ping()
+        if pings and rng.random() < 0.03:
+            parser.reset()  # a reconnect: what was held is dropped (and counted as skipped)
+            cursor = fed
         try:
             new = parser.feed(chunk)
             fed += len(chunk)

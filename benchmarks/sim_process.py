@@ -34,16 +34,17 @@ from pathlib import Path
 import signal
 import sys
 import threading
+from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from i3dmgx2_driver.simulator import (  # noqa: E402 - after the path is set
-    FaultConfig, MotionConfig, PtySimulator, SimulatorConfig,
-)
+REPO = Path(__file__).resolve().parents[1]
 
 
-def build_config(spec: dict) -> SimulatorConfig:
-    """Turn a JSON dict into a simulator configuration."""
+def build_config(spec: dict) -> Any:
+    """Turn a JSON dict into a SimulatorConfig."""
+    if str(REPO) not in sys.path:
+        sys.path.insert(0, str(REPO))
+    from i3dmgx2_driver.simulator import FaultConfig, MotionConfig, SimulatorConfig
+
     spec = dict(spec)
     faults = FaultConfig(**spec.pop('faults', {}))
     motion = MotionConfig(**spec.pop('motion', {}))
@@ -52,7 +53,7 @@ def build_config(spec: dict) -> SimulatorConfig:
     return SimulatorConfig(faults=faults, motion=motion, **spec)
 
 
-def dump_truth(sim: PtySimulator, path: str) -> None:
+def dump_truth(sim: Any, path: str) -> None:
     """Write the ground truth and the counters as one JSON document."""
     rows = [[entry.timer, entry.sample_time, entry.write_time, entry.valid, entry.source]
             for entry in sim.truth]
@@ -80,7 +81,10 @@ def main(argv: list[str] | None = None) -> int:
         stop.set()
 
     threading.Thread(target=watch_stdin, daemon=True).start()
-    sim = PtySimulator(build_config(json.loads(args.config)))
+    config = build_config(json.loads(args.config))
+    from i3dmgx2_driver.simulator import PtySimulator
+
+    sim = PtySimulator(config)
     sim.start()
     try:
         print(f'port: {sim.port}', flush=True)

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-A subscriber in another process: when did each Imu message arrive?
+A subscriber in another process: notes when each Imu message arrives.
 
 Subscribes to ``imu/raw_data`` (reliable, deep history, so that nothing is
 dropped on its side), and notes the wall-clock time at the start of each

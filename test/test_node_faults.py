@@ -86,8 +86,9 @@ def test_corrupted_stream_publishes_only_valid_records_once():
     FaultConfig(ignore_first_continuous=True),
     FaultConfig(needs_polled_first=True),
     FaultConfig(command_loss_probability=0.3),
+    FaultConfig(nack_probability=0.4),
 ], ids=['already-streaming', 'ignores-first-continuous', 'needs-polled-first',
-        'commands-lost'])
+        'commands-lost', 'nacks'])
 def test_start_up_quirks(faults):
     with PtySimulator(SimulatorConfig(seed=22, faults=faults)) as sim:
         listener, node = run_node(sim)
@@ -96,6 +97,12 @@ def test_start_up_quirks(faults):
             assert len(got) >= 50, node.output()
             assert all(entry is not None and entry.valid
                        for _, entry in published_records(listener, sim))
+            if faults.nack_probability:
+                rejected = [h for h in sim.host_log if h.outcome == 'rejected: busy']
+                assert rejected, 'the fault never fired'
+                # Every NACKed request was sent again and got through.
+                delivered = {h.raw for h in sim.host_log if h.outcome == 'delivered'}
+                assert {h.raw for h in rejected} <= delivered | {b'\xfa'}
             assert node.stop()[0] == 0
         finally:
             node.close()

@@ -22,7 +22,11 @@ The device timer, by contrast, ticks evenly (±0.01 %) at the moment of each
 sample. So the stamp is the device time mapped onto the host clock by a line
 fitted to the *lower envelope* of (host read time - device time): the
 minimum delay over each one-second window is nearly constant, the mean is
-not. The slope of that line is the device clock's drift.
+not. The line is the one below every window's minimum that comes closest to
+them on average: the edge of their lower convex hull that spans their mean
+time (the linear-programming estimate of Moon, Skelly and Towsley, 1999). It
+rests on the least-delayed samples, which a least-squares line would not.
+Its slope is the device clock's drift.
 
 Usable from the very first message (the first stamp is the read time less
 the wire time), it only gets better, it never runs backwards, it never stamps
@@ -114,18 +118,23 @@ class DeviceClock:
             self._offset = excess - self._drift * t
 
     def _fit(self) -> None:
+        """Put the line on the lower-hull edge of the envelope points at their mean time."""
         points = self._points
-        n = len(points)
-        if n < 2:
+        if len(points) < 2:
             return
-        mean_t = sum(p[0] for p in points) / n
-        mean_e = sum(p[1] for p in points) / n
-        var = sum((p[0] - mean_t) ** 2 for p in points)
-        if var <= 0.0:
-            return
-        slope = sum((p[0] - mean_t) * (p[1] - mean_e) for p in points) / var
-        intercept = mean_e - slope * mean_t
-        # Shift the line down so that no envelope point lies below it.
-        lowest = min(p[1] - (intercept + slope * p[0]) for p in points)
-        self._drift = slope
-        self._offset = intercept + min(lowest, 0.0)
+        # The points come in time order (one per window), so one pass builds the hull.
+        hull: list[tuple[float, float]] = []
+        for point in points:
+            while len(hull) >= 2 and _cross(hull[-2], hull[-1], point) <= 0.0:
+                hull.pop()
+            hull.append(point)
+        mean_t = sum(p[0] for p in points) / len(points)
+        edge = next(i for i in range(1, len(hull)) if hull[i][0] >= mean_t)
+        (t0, e0), (t1, e1) = hull[edge - 1], hull[edge]
+        self._drift = (e1 - e0) / (t1 - t0)
+        self._offset = e0 - self._drift * t0
+
+
+def _cross(a: tuple[float, float], b: tuple[float, float], c: tuple[float, float]) -> float:
+    """Positive when a -> b -> c turns left (b lies below the chord a-c)."""
+    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])

@@ -106,6 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='chance that a data packet is lost on the radio')
     faults.add_argument('--command-loss', type=_probability, default=0.0, metavar='P',
                         help='chance that an ACKed command never reaches the sensor')
+    faults.add_argument('--nack', type=_probability, default=0.0, metavar='P',
+                        help='chance that the base station NACKs a good command packet')
     faults.add_argument('--already-streaming', action='store_true',
                         help='the sensor streams 0xCC from power-up')
     faults.add_argument('--ignore-first-continuous', action='store_true',
@@ -142,7 +144,7 @@ def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
         corrupt_checksum_probability=args.corrupt_checksum,
         corrupt_length_probability=args.corrupt_length,
         foreign_probability=args.foreign, drop_probability=args.drop,
-        command_loss_probability=args.command_loss,
+        command_loss_probability=args.command_loss, nack_probability=args.nack,
         already_streaming=args.already_streaming,
         ignore_first_continuous=args.ignore_first_continuous,
         needs_polled_first=args.needs_polled_first, jitter_ms=args.jitter_ms,

@@ -79,6 +79,9 @@ class FaultConfig:
     drop_probability: float = 0.0
     #: Chance, per command, that the base station ACKs but the sensor never hears it.
     command_loss_probability: float = 0.0
+    #: Chance, per command packet, that the base station rejects a good packet
+    #: with a NACK (busy radio) and sends nothing over the air.
+    nack_probability: float = 0.0
     #: The sensor ignores the first request to stream (0xC4 with a command).
     ignore_first_continuous: bool = False
     #: Thesis quirk: a request to stream is ignored unless a polled request came

@@ -735,7 +735,13 @@ class PtySimulator:
         """ACK a command packet and pass it on over the radio (lock held)."""
         # The base station ACKs every well-formed packet: it only checks the
         # framing and sends it over the air, whoever it is for. The ACK goes out
-        # first; the sensor's answer is queued behind it.
+        # first; the sensor's answer is queued behind it. A busy base station
+        # (fault) NACKs a good packet instead and sends nothing.
+        if self._command_rng.random() < self._faults.nack_probability:
+            self._write_raw(bytes((framing.NACK,)))
+            self._log(HostCommand(now, 'rejected', packet.address, None, packet.command,
+                                  'rejected: busy'), nacks=1)
+            return
         self._write_raw(bytes((framing.ACK,)))
         try:
             command: Command | None = decode_command(packet.command)

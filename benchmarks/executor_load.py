@@ -1,0 +1,68 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Issue #6: parameter requests and a slow service must not delay publishing.
+
+The node streams at 100 Hz (in this process, timed as in latency.py) while
+another process keeps parameter requests (get, set, list, describe) in
+flight against it as fast as it answers, and, in the last run, also calls
+the node's ``~/self_test`` service (std_srvs/Trigger, seconds long) in a
+loop. Reported: the latency write -> publish() returned without load, with
+the parameter load, and with both; and how many requests were served.
+"""
+
+from bench_common import (
+    isolate_ros_domain, LoadProcess, report, Result, standard_args,
+)
+from latency import LatencyRun, TARGET_P99_S
+
+SLOW_SERVICE = 'self_test'
+
+
+def run(seconds: float) -> list[Result]:
+    """Measure without load, with parameter load, and with a slow service too."""
+    isolate_ros_domain()
+    results = []
+    runs = (('no load', None),
+            ('parameter requests from another process', LoadProcess()),
+            (f'parameter requests + ~/{SLOW_SERVICE} calls in a loop',
+             LoadProcess(slow_service=SLOW_SERVICE)))
+    for label, load in runs:
+        measured = LatencyRun(100.0, seconds, load=load)
+        pub = measured.to_publish
+        results.append(Result(f'latency write -> publish() at 100 Hz, {label}: '
+                              f'p50 / p99 / max', pub.ms(), 'p99 <= 0.100 ms',
+                              pub.p99 <= TARGET_P99_S))
+        if load is not None:
+            served = ', '.join(f'{name} {count / seconds:.0f}/s'
+                               for name, count in sorted(load.counts.items()))
+            results.append(Result(f'  requests answered during that run ({label})',
+                                  served or 'none'))
+    return results
+
+
+def main() -> None:
+    """Run from the command line."""
+    args = standard_args(__doc__.splitlines()[1], 30.0, 8.0)
+    results = run(args.seconds)
+    report('Publishing under executor load (issue #6)', results,
+           [f'{args.seconds:g} s per run; 4 parameter requests kept in flight; '
+            f'~/{SLOW_SERVICE} pauses the stream while it talks to the device, so fewer '
+            f'records are published in that run.'],
+           None if args.no_output else 'executor_load.md')
+
+
+if __name__ == '__main__':
+    main()

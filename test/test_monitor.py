@@ -1,0 +1,51 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The monitor tool shows the node's data, as the README's first command does."""
+
+import subprocess
+import sys
+
+from i3dmgx2_driver.ros.monitor import roll_pitch_yaw
+from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+import pytest
+from ros_harness import isolate_ros_domain, NodeProcess, REPO, ros_env
+
+
+def test_roll_pitch_yaw_of_known_quaternions():
+    assert roll_pitch_yaw(0.0, 0.0, 0.0, 1.0) == (0.0, 0.0, 0.0)
+    half = 2 ** -0.5
+    assert roll_pitch_yaw(0.0, 0.0, half, half) == pytest.approx((0.0, 0.0, 1.5707963))
+    assert roll_pitch_yaw(half, 0.0, 0.0, half) == pytest.approx((1.5707963, 0.0, 0.0))
+
+
+def test_monitor_prints_rate_and_values_of_a_running_node():
+    isolate_ros_domain()
+    with PtySimulator(SimulatorConfig(seed=51)) as sim:
+        node = NodeProcess({'port': sim.port, 'address': 95})
+        try:
+            assert node.wait_for_output('streaming 0xCC'), node.output()
+            out = subprocess.run(
+                [sys.executable, '-m', 'i3dmgx2_driver.ros.monitor', '--duration', '4'],
+                env=ros_env(), cwd=REPO, capture_output=True, text=True, timeout=60)
+            assert out.returncode == 0, out.stdout + out.stderr
+            lines = [line for line in out.stdout.splitlines() if ' Hz ' in line]
+            assert lines, out.stdout
+            assert 'accel [' in lines[-1] and '(imu_link)' in lines[-1]
+            rate = float(lines[-1].split('Hz')[0])
+            assert 50.0 < rate < 150.0
+            assert out.stdout.splitlines()[-1].endswith('messages received')
+            assert node.stop()[0] == 0
+        finally:
+            node.close()

@@ -1,0 +1,92 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Opening the port: each failure becomes an error a user can act on.
+
+pyserial is replaced by a factory that raises what pyserial raises (this
+fakes the serial library, not ROS), except for the busy-port case, which
+uses a real pseudo-terminal opened twice.
+"""
+
+import errno
+import os
+import tty
+
+from i3dmgx2_driver.device.port import (
+    PortBusy, PortDisconnected, PortError, PortMissing, PortPermissionDenied, SerialPort,
+)
+import pytest
+import serial
+
+
+def failing(exc: Exception):
+    """Return a serial factory that raises ``exc`` as pyserial would."""
+    def factory(**kwargs):
+        raise exc
+    return factory
+
+
+@pytest.mark.parametrize('exc, kind, words', [
+    (serial.SerialException(errno.EACCES, "could not open port /dev/ttyUSB0: [Errno 13] "
+                            "Permission denied: '/dev/ttyUSB0'"), PortPermissionDenied,
+     'add your user to the dialout group'),
+    (serial.SerialException(errno.ENOENT, "could not open port /dev/ttyUSB0: [Errno 2] "
+                            "No such file or directory: '/dev/ttyUSB0'"), PortMissing,
+     'is the base station plugged in'),
+    (serial.SerialException(errno.EAGAIN, 'Could not exclusively lock port /dev/ttyUSB0: '
+                            '[Errno 11] Resource temporarily unavailable'), PortBusy,
+     'in use by another process'),
+    (OSError(errno.EIO, 'Input/output error'), PortError, 'cannot open serial port'),
+], ids=['permission', 'missing', 'busy', 'other'])
+def test_open_errors_say_what_to_do(exc, kind, words):
+    with pytest.raises(kind) as info:
+        SerialPort('/dev/ttyUSB0', serial_factory=failing(exc))
+    assert words in str(info.value)
+    assert '/dev/ttyUSB0' in str(info.value)
+
+
+def test_a_missing_path_is_reported_as_missing(tmp_path):
+    with pytest.raises(PortMissing):
+        SerialPort(str(tmp_path / 'ttyUSB9'))
+
+
+def test_exclusive_open_refuses_a_second_user():
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    first = SerialPort(path)
+    try:
+        with pytest.raises(PortBusy):
+            SerialPort(path)
+    finally:
+        first.close()
+        os.close(slave)
+        os.close(master)
+
+
+def test_reads_after_the_other_end_closed_raise_disconnected():
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    port = SerialPort(os.ttyname(slave))
+    os.close(slave)
+    try:
+        os.write(master, b'\xaa\x07')
+        assert port.read_some(1.0) == b'\xaa\x07'
+        os.close(master)
+        with pytest.raises(PortDisconnected):
+            for _ in range(3):
+                port.read_some(1.0)
+    finally:
+        port.close()
