@@ -16,8 +16,6 @@
 
 import itertools
 import json
-import os
-from pathlib import Path
 import threading
 import time
 import warnings
@@ -30,27 +28,6 @@ from i3dmgx2_driver.capture import (
 from i3dmgx2_driver.codec import DataPacket, SensorStreamParser
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation, TICKS_PER_SECOND
 import pytest
-
-REPO = Path(__file__).resolve().parents[1]
-FIXTURE_NAME = 'gx2_real_0xcc_records.txt'
-
-
-def _fixture_path():
-    """Find the real-records fixture as test_codec_fixtures.py does."""
-    candidates = []
-    if os.environ.get('I3DMGX2_FIXTURES'):
-        candidates.append(Path(os.environ['I3DMGX2_FIXTURES']) / FIXTURE_NAME)
-    candidates += [REPO / 'test' / 'fixtures' / FIXTURE_NAME,
-                   REPO.parent / 'shared' / 'fixtures' / FIXTURE_NAME]
-    for path in candidates:
-        if path.is_file():
-            return path
-    pytest.fail(f'{FIXTURE_NAME} not found; looked in: ' + ', '.join(map(str, candidates)))
-
-
-@pytest.fixture(scope='module')
-def fixture_path():
-    return _fixture_path()
 
 
 CHUNKS = [

@@ -30,10 +30,9 @@ next to the repository, or in the directory named by ``I3DMGX2_FIXTURES``.
 
 import itertools
 import math
-import os
-from pathlib import Path
 import re
 
+from fixture_files import real_records_path
 from i3dmgx2_driver.codec import (
     DataPacket, decode_data_packet, encode_data_packet, encode_record, SensorStreamParser,
 )
@@ -46,8 +45,6 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-FIXTURE_NAME = 'gx2_real_0xcc_records.txt'
-REPO = Path(__file__).resolve().parents[1]
 ADDRESS = 95
 
 # Measured worst angles between the accelerometer's "up" and the "up" of the sensor's own
@@ -56,18 +53,6 @@ ADDRESS = 95
 # says 88; z_down reads pitch -12.6 where the accelerometer says -1.6). A wrong convention is
 # far off: the transposed M misses by 34 to 48 degrees, a sign error by about 170.
 UP_TOLERANCE_DEG = {'red': 14.0, 'green': 5.0, 'blue': 14.0, 'set1': 5.0}
-
-
-def _fixture_path():
-    candidates = []
-    if os.environ.get('I3DMGX2_FIXTURES'):
-        candidates.append(Path(os.environ['I3DMGX2_FIXTURES']) / FIXTURE_NAME)
-    candidates += [REPO / 'test' / 'fixtures' / FIXTURE_NAME,
-                   REPO.parent / 'shared' / 'fixtures' / FIXTURE_NAME]
-    for path in candidates:
-        if path.is_file():
-            return path
-    pytest.fail(f'{FIXTURE_NAME} not found; looked in: ' + ', '.join(map(str, candidates)))
 
 
 class PoseSet:
@@ -85,7 +70,7 @@ class PoseSet:
 def _load():
     sets = []
     pattern = re.compile(r'^## set (\w+): ([xyz])_(up|down)\w* .*: (\d+) records$')
-    for raw_line in _fixture_path().read_text().splitlines():
+    for raw_line in real_records_path().read_text().splitlines():
         text = raw_line.strip()
         if text.startswith('## set'):
             match = pattern.match(text)

@@ -16,7 +16,6 @@
 
 import itertools
 import math
-import os
 from pathlib import Path
 import struct
 
@@ -31,28 +30,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-FIXTURE_NAME = 'gx2_real_0xcc_records.txt'
 G = 9.80665
 PERIOD = (1 << 32) / TICKS_PER_SECOND
-
-
-def _fixture_path():
-    """Find the real-records fixture as test_codec_fixtures.py does."""
-    candidates = []
-    if os.environ.get('I3DMGX2_FIXTURES'):
-        candidates.append(Path(os.environ['I3DMGX2_FIXTURES']) / FIXTURE_NAME)
-    candidates += [REPO / 'test' / 'fixtures' / FIXTURE_NAME,
-                   REPO.parent / 'shared' / 'fixtures' / FIXTURE_NAME]
-    for path in candidates:
-        if path.is_file():
-            return path
-    pytest.fail(f'{FIXTURE_NAME} not found; looked in: ' + ', '.join(map(str, candidates)))
-
-
-@pytest.fixture(scope='module')
-def fixture_path():
-    return _fixture_path()
 
 
 @pytest.fixture(scope='module')
