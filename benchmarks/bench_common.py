@@ -144,6 +144,41 @@ def _has_distribution(metadata: Any, name: str) -> bool:
     return True
 
 
+class OtherLoad:
+    """
+    How much CPU everything but this process and its children used meanwhile.
+
+    Benchmarks share the machine: this tells whether other work was running.
+    The whole machine's busy time comes from /proc/stat; this process's and
+    its waited-for children's from os.times().
+    """
+
+    def __init__(self) -> None:
+        self._start = (self._machine_busy(), self._own(), time.monotonic())
+
+    @staticmethod
+    def _machine_busy() -> float:
+        try:
+            with open('/proc/stat') as handle:
+                fields = [int(v) for v in handle.readline().split()[1:]]
+        except (OSError, ValueError):
+            return math.nan
+        idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
+        return (sum(fields[:8]) - idle) / os.sysconf('SC_CLK_TCK')
+
+    @staticmethod
+    def _own() -> float:
+        times = os.times()
+        return times.user + times.system + times.children_user + times.children_system
+
+    def cores(self) -> float:
+        """Average number of cores other processes kept busy since construction."""
+        busy0, own0, wall0 = self._start
+        wall = time.monotonic() - wall0
+        other = (self._machine_busy() - busy0) - (self._own() - own0)
+        return max(other, 0.0) / wall if wall > 0 else math.nan
+
+
 def markdown_table(results: list[Result]) -> str:
     """Return the results as a Markdown table: metric, value, target, met?."""
     lines = ['| metric | value | target | met? |', '|---|---|---|---|']
@@ -161,8 +196,12 @@ def machine_table() -> str:
 
 
 def report(title: str, results: list[Result], notes: list[str] = (),
-           output: str | None = None) -> str:
+           output: str | None = None, other_load: OtherLoad | None = None) -> str:
     """Print the results (and machine) as Markdown; also write them to ``output``."""
+    notes = list(notes)
+    if other_load is not None:
+        notes.append(f'Other processes kept {other_load.cores():.2f} of {os.cpu_count()} '
+                     f'cores busy on average during the run.')
     text = '\n'.join([f'## {title}', '', machine_table(), '', markdown_table(results), '',
                       *[f'- {note}' for note in notes]]).rstrip() + '\n'
     print(text, flush=True)
@@ -474,6 +513,7 @@ def standard_args(description: str, default_seconds: float, quick_seconds: float
     parser.add_argument('--no-output', action='store_true',
                         help='do not write benchmarks/output/')
     args = parser.parse_args()
+    args.other_load = OtherLoad()
     if args.seconds is None:
         args.seconds = quick_seconds if args.quick else default_seconds
     return args

@@ -800,7 +800,10 @@ def analyse(data: RunData) -> CampaignResult:
                      if s.write_time is not None and windows.near_flush(s.write_time))
     pings_failed = sum(1 for h in data.host_log if h.outcome == 'ping failed')
     acks_sent = [h for h in data.host_log if h.kind == 'packet']
-    slack_aa = marks_corrupt + data.unsafe_garbage_bytes + tail_marks
+    # Bytes that may start a spurious ACK/NACK (the parser reports no answers from
+    # inside a packet that failed its checksum or length): 0xAA/0x21 garbage, and
+    # the tail of a packet cut by a flush, whose start is gone.
+    stray = data.unsafe_garbage_bytes + tail_marks
     rows = []
 
     def bounds(name: str, value: int | None, low: int, high: int, rule: str) -> None:
@@ -814,7 +817,7 @@ def analyse(data: RunData) -> CampaignResult:
            'each checksum-corrupted packet the node read is one failure, no other')
     bounds('length_failures', parser.get('length_failures'),
            count(fault_is('length'), True),
-           count(fault_is('length'), False) + slack_aa,
+           count(fault_is('length'), False) + stray + marks_corrupt,
            'each length-corrupted packet read is one; any other 0xAA byte (in 0xAA garbage, '
            'inside a corrupted packet, in a packet cut by a flush) may add one')
     bounds('foreign_frames', parser.get('foreign_frames'), count(fault_is('foreign'), True),
@@ -827,13 +830,14 @@ def analyse(data: RunData) -> CampaignResult:
     acks_read = sum(1 for h in acks_sent if windows.read(h.time))
     acks_all = sum(1 for h in acks_sent if h.time >= first_open)
     bounds('acks', parser.get('acks'), max(0, acks_read - data.unsafe_garbage_bursts),
-           acks_all + slack_aa,
+           acks_all + stray,
            'each ACK the base station wrote while the node read is one (less one per 0xAA-'
-           'garbage burst, whose 0x07 may follow it); each stray 0xAA may add one')
+           'garbage burst, whose 0x07 may follow it); each 0xAA of 0xAA-garbage or of a '
+           'packet cut by a flush may add one, none inside a corrupted packet')
     bounds('nacks', parser.get('nacks'), 0,
-           sim.get('nacks', 0) + pings_failed + slack_aa,
-           'NACKs written, failed-ping answers arriving late and stray 0x21 bytes (same '
-           'sources as stray 0xAA) are the only ones')
+           sim.get('nacks', 0) + pings_failed + stray,
+           'NACKs written, failed-ping answers arriving late, and 0x21 bytes of 0xAA-garbage '
+           'or of a packet cut by a flush are the only ones (none inside a corrupted packet)')
     bytes_read = sum(s.size for s in data.truth if windows.read(s.write_time))
     bounds('bytes_in', parser.get('bytes_in'), bytes_read, sim.get('bytes_written', 0),
            'at least every packet written while the node read, at most all bytes written')

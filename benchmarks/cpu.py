@@ -76,7 +76,8 @@ def main() -> None:
     report('CPU', results,
            [f'{args.seconds:g} s window after {WARM_UP_S:g} s of warm-up; user + system time '
             "of all the node's threads; a subscriber in another process."],
-           None if args.no_output else 'cpu.md')
+           None if args.no_output else 'cpu.md',
+           other_load=args.other_load)
 
 
 if __name__ == '__main__':

@@ -17,11 +17,17 @@ Issue #6: parameter requests and a slow service must not delay publishing.
 
 The node streams at 100 Hz (in this process, timed as in latency.py) while
 another process keeps parameter requests (get, set, list, describe) in
-flight against it as fast as it answers, and, in the last run, also calls
+flight against it as fast as it answers, and, in another run, also calls
 the node's ``~/self_test`` service (std_srvs/Trigger, seconds long) in a
 loop. Reported: the latency write -> publish() returned without load, with
-the parameter load, and with both; and how many requests were served.
+the parameter load, and with both; and how many requests were served. A
+control run replaces the requests by two CPU-bound processes that never
+talk to the node: on a 2-core machine the requests cost what any two busy
+processes cost (the CPU is shared), and nothing more.
 """
+
+import subprocess
+import sys
 
 from bench_common import (
     isolate_ros_domain, LoadProcess, report, Result, standard_args,
@@ -31,6 +37,28 @@ from latency import LatencyRun, TARGET_P99_S
 SLOW_SERVICE = 'self_test'
 
 
+class CpuBurners:
+    """Control load: processes that only burn CPU, nothing to do with ROS."""
+
+    def __init__(self, count: int = 2) -> None:
+        self.count = count
+        self.counts: dict[str, int] = {}
+        self._procs: list[subprocess.Popen] = []
+
+    def start(self) -> None:
+        """Start the busy processes."""
+        self._procs = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+                       for _ in range(self.count)]
+
+    def stop(self) -> dict[str, int]:
+        """Kill them."""
+        for proc in self._procs:
+            proc.kill()
+            proc.wait()
+        self._procs = []
+        return self.counts
+
+
 def run(seconds: float) -> list[Result]:
     """Measure without load, with parameter load, and with a slow service too."""
     isolate_ros_domain()
@@ -38,14 +66,15 @@ def run(seconds: float) -> list[Result]:
     runs = (('no load', None),
             ('parameter requests from another process', LoadProcess()),
             (f'parameter requests + ~/{SLOW_SERVICE} calls in a loop',
-             LoadProcess(slow_service=SLOW_SERVICE)))
+             LoadProcess(slow_service=SLOW_SERVICE)),
+            ('control: 2 CPU-bound processes, no requests', CpuBurners(2)))
     for label, load in runs:
         measured = LatencyRun(100.0, seconds, load=load)
         pub = measured.to_publish
         results.append(Result(f'latency write -> publish() at 100 Hz, {label}: '
                               f'p50 / p99 / max', pub.ms(), 'p99 <= 0.100 ms',
                               pub.p99 <= TARGET_P99_S))
-        if load is not None:
+        if isinstance(load, LoadProcess):
             served = ', '.join(f'{name} {count / seconds:.0f}/s'
                                for name, count in sorted(load.counts.items()))
             results.append(Result(f'  requests answered during that run ({label})',
@@ -61,7 +90,8 @@ def main() -> None:
            [f'{args.seconds:g} s per run; 4 parameter requests kept in flight; '
             f'~/{SLOW_SERVICE} pauses the stream while it talks to the device, so fewer '
             f'records are published in that run.'],
-           None if args.no_output else 'executor_load.md')
+           None if args.no_output else 'executor_load.md',
+           other_load=args.other_load)
 
 
 if __name__ == '__main__':

@@ -46,10 +46,10 @@ class LatencyRun:
     """One measured run: the latencies to publish() and to a remote subscriber."""
 
     def __init__(self, rate_hz: float, seconds: float, node_params: dict | None = None,
-                 load: object = None) -> None:
+                 load: object = None, subscribe: bool = True) -> None:
         self.rate_hz = rate_hz
         sim = SimProcess(rate_hz=rate_hz)
-        subscriber = SubscriberProcess()
+        subscriber = SubscriberProcess() if subscribe else None
         node = None
         try:
             node = InProcessNode(sim.port, **(node_params or {}))
@@ -68,7 +68,7 @@ class LatencyRun:
         finally:
             if node is not None:
                 node.close()
-            rows = subscriber.stop()
+            rows = subscriber.stop() if subscriber is not None else []
             sim.stop()
         self.published = measured
         self.to_publish = summarise(write_latencies(sim.truth, measured))
@@ -102,6 +102,10 @@ def run(seconds: float) -> list[Result]:
         results.append(Result(
             f'latency write -> subscriber callback (other process), {label}: p50 / p99 / max',
             sub.ms()))
+    alone = LatencyRun(100.0, seconds, subscribe=False)
+    results.append(Result(
+        'latency write -> publish() returned, 100 Hz, nobody subscribed: p50 / p99 / max',
+        alone.to_publish.ms()))
     return results
 
 
@@ -113,7 +117,8 @@ def main() -> None:
            [f'{args.seconds:g} s per rate after {WARM_UP_S:g} s of warm-up; simulated device, '
             f'node and subscriber in three processes.',
             'Original C++ node (thesis): 0.99 ms mean, 1.16 ms max.'],
-           None if args.no_output else 'latency.md')
+           None if args.no_output else 'latency.md',
+           other_load=args.other_load)
 
 
 if __name__ == '__main__':

@@ -32,7 +32,7 @@ import sys
 import time
 
 from bench_common import (
-    BENCH_DIR, child_env, machine_table, markdown_table, OUTPUT_DIR, REPO, Result,
+    BENCH_DIR, child_env, machine_table, markdown_table, OtherLoad, OUTPUT_DIR, REPO, Result,
 )
 import cpu
 import executor_load
@@ -68,6 +68,7 @@ def main() -> int:
     quick = args.quick
     started = time.monotonic()
     load_before = os.getloadavg()[0]
+    other = OtherLoad()
     steps = [
         ('codec', lambda: codec_results(quick)),
         ('latency', lambda: latency.run(8.0 if quick else 30.0)),
@@ -92,7 +93,8 @@ def main() -> int:
         markdown_table(results), '',
         f'- Run: `python benchmarks/run_all.py{" --quick" if quick else ""}`, '
         f'{minutes:.1f} min; load average (1 min) {load_before:.2f} before, '
-        f'{load_after:.2f} after.',
+        f'{load_after:.2f} after; other processes kept {other.cores():.2f} of '
+        f'{os.cpu_count()} cores busy on average meanwhile.',
         '- Latency: `time.time()` right after the simulator (its own process) wrote a '
         "packet's last byte to the pty, to right after `publish()` returned in the node.",
         '- Original C++ node (thesis): 0.99 ms mean, 1.16 ms max.',

@@ -97,6 +97,8 @@ def run(seconds: float, rates: tuple[float, ...] = RATES) -> list[Result]:
             f'{measured.written} / {measured.published}; '
             f'{measured.received} / {measured.sent_after_match}'
             f' ({measured.achieved:.0f}/s; lost {measured.lost}'
+            + (f', {measured.overflow} of them overflowing the pty while the node was not '
+               f'reading' if measured.overflow else '')
             + (f', simulator fell behind by {measured.sim_late}' if measured.sim_late else '')
             + ')'))
     results.insert(0, Result('highest sustained rate with no record lost (pty, no baud limit)',
@@ -112,7 +114,8 @@ def main() -> None:
     report('Sustained rate', results,
            [f'Rates swept: {", ".join(f"{r:.0f}" for r in RATES)} Hz, {args.seconds:g} s each; '
             f'node QoS reliable, depth 1000; subscriber reliable, depth 5000.'],
-           None if args.no_output else 'throughput.md')
+           None if args.no_output else 'throughput.md',
+           other_load=args.other_load)
 
 
 if __name__ == '__main__':

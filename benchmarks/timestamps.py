@@ -114,7 +114,8 @@ def main() -> None:
             f'0..{JITTER_MS:g} ms random; device clock 40 ppm fast.',
             f'Device-time mean offset: the {RADIO_LATENCY_S * 1e3:g} ms radio latency, '
             f'which the host cannot observe.'],
-           None if args.no_output else 'timestamps.md')
+           None if args.no_output else 'timestamps.md',
+           other_load=args.other_load)
 
 
 if __name__ == '__main__':

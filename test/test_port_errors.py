@@ -39,10 +39,10 @@ def failing(exc: Exception):
 
 
 @pytest.mark.parametrize('exc, kind, words', [
-    (serial.SerialException(errno.EACCES, "could not open port /dev/ttyUSB0: [Errno 13] "
+    (serial.SerialException(errno.EACCES, 'could not open port /dev/ttyUSB0: [Errno 13] '
                             "Permission denied: '/dev/ttyUSB0'"), PortPermissionDenied,
      'add your user to the dialout group'),
-    (serial.SerialException(errno.ENOENT, "could not open port /dev/ttyUSB0: [Errno 2] "
+    (serial.SerialException(errno.ENOENT, 'could not open port /dev/ttyUSB0: [Errno 2] '
                             "No such file or directory: '/dev/ttyUSB0'"), PortMissing,
      'is the base station plugged in'),
     (serial.SerialException(errno.EAGAIN, 'Could not exclusively lock port /dev/ttyUSB0: '

@@ -211,9 +211,9 @@ class SensorStreamParser:
         address = self.address
         n = len(buf)
         i = 0
-        # Inside a packet that failed its checksum, 0xAA and 0x21 are its
-        # bytes, not the base station's answers: report no ACK/NACK there
-        # (a valid packet starting inside it is still found).
+        # Inside a packet that failed its checksum or its length byte, 0xAA and
+        # 0x21 are its bytes, not the base station's answers: report no
+        # ACK/NACK there (a valid packet starting inside it is still found).
         quiet_end = self._quiet
         while i < n:
             if buf[i] != ACK:
@@ -241,6 +241,10 @@ class SensorStreamParser:
             if entry is None or buf[i + 5] != entry[0] + 1 or buf[i + 2] or buf[i + 6]:
                 stats.length_failures += 1
                 stats.bytes_skipped += 1
+                if entry is not None and not buf[i + 2] and not buf[i + 6]:
+                    # Only the length byte is wrong: the packet is as long as
+                    # its echo byte says, and its bytes are no answers either.
+                    quiet_end = max(quiet_end, i + HEADER_SIZE + entry[0] + DATA_TRAILER_SIZE)
                 i += 1
                 continue
             end = i + HEADER_SIZE + entry[0]

@@ -17,8 +17,8 @@ The driver node: device records in, sensor_msgs out, on time.
 
 The node owns the ROS side only. A ``DeviceSupervisor`` (device layer)
 keeps the sensor streaming; its reader thread calls :meth:`_on_record` for
-every valid record, which stamps it, fills preallocated messages and
-publishes at once. The executor is left free for parameters, services and
+every valid record, which stamps it, packs its messages and publishes at
+once. The executor is left free for parameters, services and
 diagnostics, and nothing it does can delay a sample.
 """
 
