@@ -248,9 +248,10 @@ class DeviceSupervisor:
         link.stop_streaming()
         time.sleep(0.05)
         link.port.flush_input()
-        link.start()
+        # Re-anchor the consumer before the first record of this link can reach it.
         if self._on_connect is not None:
             self._on_connect()
+        link.start()
         if link.wireless:
             self.ping_ok = link.ping(timeout=0.3, retries=2)
             if not self.ping_ok:
