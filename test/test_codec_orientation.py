@@ -337,3 +337,12 @@ def test_euler_pitch_clamped_past_90_degrees():
     """A float32 M13 a hair beyond -1 or 1 gives pitch +-90 degrees, not a math error."""
     assert o.euler_from_matrix((0, 0, -1.0000001, 0, 1, 0, 1, 0, 0))[1] == math.pi / 2
     assert o.euler_from_matrix((0, 0, 1.0000001, 0, 1, 0, -1, 0, 0))[1] == -math.pi / 2
+
+
+def test_a_matrix_that_is_no_rotation_gives_no_orientation():
+    """Garbage with a valid checksum must not pass for an attitude."""
+    for matrix in ([0.0] * 9, [2.0] * 9, [1.0, 0, 0, 0, 0, 0, 0, 0, 0]):
+        assert all(math.isnan(c) for c in o.shepperd(matrix))
+    # float32 rounding of a real rotation is still a rotation
+    assert abs(sum(c * c for c in o.shepperd([1.0000001, 0, 0, 0, 0.9999999, 0, 0, 0, 1])) - 1) \
+        < 1e-12

@@ -62,6 +62,11 @@ def shepperd(m: Sequence[float]) -> Quaternion:
     quaternions.
     """
     m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
+    # A rotation's elements square-sum to 3; far from that (a zero matrix,
+    # garbage that passed a checksum) there is no orientation to give.
+    if not 2.5 < m00 * m00 + m01 * m01 + m02 * m02 + m10 * m10 + m11 * m11 + m12 * m12 \
+            + m20 * m20 + m21 * m21 + m22 * m22 < 3.5:
+        return Quaternion(math.nan, math.nan, math.nan, math.nan)
     trace = m00 + m11 + m22
     if trace >= m00 and trace >= m11 and trace >= m22:
         s = 2.0 * math.sqrt(max(1.0 + trace, 0.0)) or math.nan
