@@ -20,6 +20,7 @@ never see another run's messages. Nothing here mocks ROS: the node process
 publishes through Fast DDS and the test process subscribes through it.
 """
 
+from collections.abc import Sequence
 import os
 import random
 import signal
@@ -28,7 +29,6 @@ import sys
 import tempfile
 import threading
 import time
-from typing import Dict, List, Optional, Sequence, Tuple
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -37,7 +37,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def ros_env(extra: Optional[Dict[str, str]] = None) -> Dict[str, str]:
+def ros_env(extra: dict[str, str] | None = None) -> dict[str, str]:
     """Environment for a node process: this repo on PYTHONPATH, same domain."""
     env = dict(os.environ)
     env['PYTHONPATH'] = REPO + (os.pathsep + env['PYTHONPATH'] if env.get('PYTHONPATH') else '')
@@ -59,7 +59,7 @@ def isolate_ros_domain() -> int:
     return int(domain)
 
 
-def param_args(params: Dict[str, object]) -> List[str]:
+def param_args(params: dict[str, object]) -> list[str]:
     """Turn a dict into ``--ros-args -p name:=value`` arguments."""
     args = ['--ros-args']
     for name, value in params.items():
@@ -74,10 +74,10 @@ def param_args(params: Dict[str, object]) -> List[str]:
 class NodeProcess:
     """The driver node in its own process, with its output in a file."""
 
-    def __init__(self, params: Dict[str, object], extra_args: Sequence[str] = (),
-                 command: Optional[Sequence[str]] = None,
-                 env: Optional[Dict[str, str]] = None) -> None:
-        self.log_file = tempfile.NamedTemporaryFile(
+    def __init__(self, params: dict[str, object], extra_args: Sequence[str] = (),
+                 command: Sequence[str] | None = None,
+                 env: dict[str, str] | None = None) -> None:
+        self.log_file = tempfile.NamedTemporaryFile(  # noqa: SIM115 - closed in close()
             prefix='i3dmgx2-node-', suffix='.log', delete=False)
         base = list(command) if command else [sys.executable, '-m', 'i3dmgx2_driver.ros.main']
         self.argv = base + param_args(params) + list(extra_args)
@@ -87,7 +87,7 @@ class NodeProcess:
 
     def output(self) -> str:
         """Everything the node printed so far."""
-        with open(self.log_file.name, 'r', errors='replace') as handle:
+        with open(self.log_file.name, errors='replace') as handle:
             return handle.read()
 
     def wait_for_output(self, text: str, timeout: float = 20.0) -> bool:
@@ -101,7 +101,7 @@ class NodeProcess:
             time.sleep(0.05)
         return False
 
-    def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> Tuple[int, float]:
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> tuple[int, float]:
         """Send ``sig``; return the exit code and how long the exit took."""
         start = time.monotonic()
         if self.proc.poll() is None:
@@ -132,7 +132,7 @@ class NodeProcess:
 class Listener:
     """An rclpy node in the test process that records what it receives."""
 
-    def __init__(self, topics: Dict[str, type], reliable: bool = True, depth: int = 1000,
+    def __init__(self, topics: dict[str, type], reliable: bool = True, depth: int = 1000,
                  namespace: str = '') -> None:
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
@@ -142,7 +142,7 @@ class Listener:
             history=HistoryPolicy.KEEP_LAST, depth=depth,
             reliability=ReliabilityPolicy.RELIABLE if reliable
             else ReliabilityPolicy.BEST_EFFORT)
-        self.messages: Dict[str, List[Tuple[float, object]]] = {t: [] for t in topics}
+        self.messages: dict[str, list[tuple[float, object]]] = {t: [] for t in topics}
         self._lock = threading.Lock()
         for topic, msg_type in topics.items():
             self.node.create_subscription(
@@ -162,12 +162,12 @@ class Listener:
         with self._lock:
             self.messages[topic].append((time.time(), msg))
 
-    def received(self, topic: str) -> List[object]:
+    def received(self, topic: str) -> list[object]:
         """Return the messages of ``topic`` received so far."""
         with self._lock:
             return [m for _, m in self.messages[topic]]
 
-    def wait_for(self, topic: str, count: int, timeout: float = 20.0) -> List[object]:
+    def wait_for(self, topic: str, count: int, timeout: float = 20.0) -> list[object]:
         """Wait until ``count`` messages of ``topic`` arrived; return them all."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:

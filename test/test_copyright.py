@@ -79,7 +79,7 @@ APACHE2_LICENSE_PARTS = (
 
 # The same as ament_copyright's: 'copyright', optional '(c)', years or year ranges, holder.
 _YEARS = r'\d{4}(?:-\d{4})?(?:,\s*\d{4}(?:-\d{4})?)*'
-COPYRIGHT_LINE = re.compile(r'^Copyright(?:\s+\(c\))?\s+(%s),?\s+(\S.*)$' % _YEARS,
+COPYRIGHT_LINE = re.compile(rf'^Copyright(?:\s+\(c\))?\s+({_YEARS}),?\s+(\S.*)$',
                             re.IGNORECASE)
 
 
@@ -130,7 +130,7 @@ def check_repository(root):
     for path in source_files(root):
         problem = check_source_header(path.read_text(encoding='utf-8'))
         if problem:
-            errors.append('%s: %s' % (path.relative_to(root), problem))
+            errors.append(f'{path.relative_to(root)}: {problem}')
     license_path = Path(root, 'LICENSE')
     if not license_path.is_file():
         errors.append('LICENSE: file not found')
@@ -140,7 +140,7 @@ def check_repository(root):
         for part in APACHE2_LICENSE_PARTS:
             position = text.find(part, position)
             if position == -1:
-                errors.append('LICENSE: not the Apache License 2.0 (no %r)' % part)
+                errors.append(f'LICENSE: not the Apache License 2.0 (no {part!r})')
                 break
     contributing_path = Path(root, 'CONTRIBUTING.md')
     if not contributing_path.is_file():

@@ -33,7 +33,7 @@ def test_flake8(monkeypatch):
     monkeypatch.chdir(REPO_ROOT)
     rc, errors = main_with_errors(argv=_excludes())
     assert rc == 0, \
-        'Found %d code style errors / warnings:\n' % len(errors) + \
+        f'Found {len(errors)} code style errors / warnings:\n' + \
         '\n'.join(errors)
 
 
@@ -66,4 +66,4 @@ def test_flake8_plugins_are_active(tmp_path, monkeypatch):
         'D403': 'flake8-docstrings',
     }
     missing = {code: plugin for code, plugin in expected.items() if code not in codes}
-    assert not missing, 'flake8 plugins not active: %s (got %s)' % (missing, sorted(codes))
+    assert not missing, f'flake8 plugins not active: {missing} (got {sorted(codes)})'

@@ -20,6 +20,7 @@ range; good ones do what they say (data rate, params file, namespace and
 remapping, QoS).
 """
 
+import itertools
 import os
 
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
@@ -139,7 +140,7 @@ def test_data_rate_written_verified_and_persisted():
             assert sim.sensor.eeprom[0xFCA2] == 1024
             # Spacing of the device timer: 384 ticks per divider unit (+ clock error).
             timers = [t.timer for t in sim.truth[-10:] if t.source == 'stream']
-            steps = {(b - a) % 2**32 for a, b in zip(timers, timers[1:], strict=False)}
+            steps = {(b - a) % 2**32 for a, b in itertools.pairwise(timers)}
             assert all(abs(s - 384 * 1024) < 50 for s in steps)
             assert node.stop()[0] == 0
         finally:
