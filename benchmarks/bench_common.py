@@ -31,7 +31,6 @@ import math
 import os
 from pathlib import Path
 import platform
-import random
 import signal
 import subprocess
 import sys
@@ -43,8 +42,11 @@ from typing import Any, NamedTuple
 BENCH_DIR = Path(__file__).resolve().parent
 REPO = BENCH_DIR.parent
 OUTPUT_DIR = BENCH_DIR / 'output'
-if str(REPO) not in sys.path:
-    sys.path.insert(0, str(REPO))
+for _path in (str(REPO), str(REPO / 'test')):
+    if _path not in sys.path:
+        sys.path.insert(0, _path)
+
+import ros_harness  # noqa: E402 - test/ is on the path only from here on
 
 #: Node address the simulator and the node agree on.
 ADDRESS = 95
@@ -215,25 +217,13 @@ def report(title: str, results: list[Result], notes: list[str] = (),
 
 # -- processes -------------------------------------------------------------------------------
 
-def isolate_ros_domain() -> int:
-    """Use a random ROS domain on localhost only, for this process and its children."""
-    domain = os.environ.get('I3DMGX2_BENCH_DOMAIN')
-    if domain is None:
-        domain = str(random.SystemRandom().randint(1, 100))
-        os.environ['I3DMGX2_BENCH_DOMAIN'] = domain
-    os.environ['ROS_DOMAIN_ID'] = domain
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    return int(domain)
+# The tests' helpers: one domain policy and one child environment for both.
+isolate_ros_domain = ros_harness.isolate_ros_domain
 
 
 def child_env() -> dict[str, str]:
     """Environment of a child process: this repository first on PYTHONPATH."""
-    env = dict(os.environ)
-    env['PYTHONPATH'] = str(REPO) + (os.pathsep + env['PYTHONPATH']
-                                     if env.get('PYTHONPATH') else '')
-    env['PYTHONUNBUFFERED'] = '1'
-    env['RCUTILS_COLORIZED_OUTPUT'] = '0'
-    return env
+    return ros_harness.ros_env()
 
 
 class _Child:
