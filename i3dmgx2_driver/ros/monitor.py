@@ -108,7 +108,11 @@ def main(argv: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        # The spinning thread must be out of rclpy's C++ before the interpreter
+        # exits, or the process aborts ("terminate called without an active
+        # exception"): stop the executor, join the thread, then tear down.
         executor.shutdown(timeout_sec=1.0)
+        spinner.join(timeout=5.0)
         node.destroy_node()
         rclpy.try_shutdown()
     print(f'{received} messages received', flush=True)
