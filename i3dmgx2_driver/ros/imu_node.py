@@ -135,6 +135,11 @@ class ImuDriverNode(Node):
             self.clock_model.reset()
             self.stats.last_ticks = None
 
+    def forget_last_sample(self) -> None:
+        """Let the next record start afresh: a deliberate pause is no packet loss."""
+        with self._publish_lock:
+            self.stats.last_ticks = None
+
     def _expected_ticks(self) -> int | None:
         divider = self.supervisor.divider
         return 384 * divider if divider else None

@@ -244,8 +244,7 @@ class DeviceServices:
         pause is the operation's doing, not the radio's.
         """
         node: Any = self.node
-        with node._publish_lock:
-            node.stats.last_ticks = None
+        node.forget_last_sample()
 
     def capture_gyro_bias(self) -> tuple[bool, str]:
         """Capture the gyro bias (0xCD) with the stream paused; return (success, message)."""
