@@ -217,6 +217,25 @@ def report(title: str, results: list[Result], notes: list[str] = (),
 
 # -- processes -------------------------------------------------------------------------------
 
+def stop_on_signal_or_eof() -> threading.Event:
+    """
+    Return an event set by SIGINT, SIGTERM or the end of standard input.
+
+    The benchmark's helper processes stop on any of them, so a benchmark that
+    dies (and closes their stdin) never leaves them running.
+    """
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+
+    def watch_stdin() -> None:
+        sys.stdin.read()
+        stop.set()
+
+    threading.Thread(target=watch_stdin, daemon=True).start()
+    return stop
+
+
 # The tests' helpers: one domain policy and one child environment for both.
 isolate_ros_domain = ros_harness.isolate_ros_domain
 

@@ -25,10 +25,10 @@ how many requests of each kind were answered as JSON and exits.
 
 import argparse
 import json
-import signal
 import sys
 import threading
 
+from bench_common import stop_on_signal_or_eof
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import (
     DescribeParameters, GetParameters, ListParameters, SetParameters,
@@ -65,15 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--slow-service', default='',
                         help='also call this Trigger service of the node in a loop')
     args = parser.parse_args(argv)
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
-
-    def watch_stdin() -> None:
-        sys.stdin.read()
-        stop.set()
-
-    threading.Thread(target=watch_stdin, daemon=True).start()
+    stop = stop_on_signal_or_eof()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('i3dmgx2_benchmark_load')
     executor = MultiThreadedExecutor(num_threads=2)

@@ -24,11 +24,10 @@ SIGTERM, SIGINT or end of standard input, writes the rows
 
 import argparse
 import json
-import signal
 import sys
-import threading
 import time
 
+from bench_common import stop_on_signal_or_eof
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -43,15 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--topic', default='imu/raw_data')
     parser.add_argument('--depth', type=int, default=5000)
     args = parser.parse_args(argv)
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
-
-    def watch_stdin() -> None:
-        sys.stdin.read()
-        stop.set()
-
-    threading.Thread(target=watch_stdin, daemon=True).start()
+    stop = stop_on_signal_or_eof()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('i3dmgx2_benchmark_subscriber')
     rows: list[tuple[int, int, float]] = []
