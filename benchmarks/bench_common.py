@@ -552,14 +552,7 @@ class NodeProcess:
 
     def wait_for_output(self, text: str, timeout: float = 20.0) -> bool:
         """Wait until ``text`` appears in the node's output."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if text in self.output():
-                return True
-            if self.proc.poll() is not None:
-                break
-            time.sleep(0.05)
-        return text in self.output()
+        return ros_harness.wait_for_text(self.output, self.proc, text, timeout)
 
     def cpu_seconds(self) -> float:
         """CPU time (user + system, all threads) the node used so far."""

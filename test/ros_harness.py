@@ -20,7 +20,7 @@ never see another run's messages. Nothing here mocks ROS: the node process
 publishes through Fast DDS and the test process subscribes through it.
 """
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 import os
 import random
 import signal
@@ -71,6 +71,18 @@ def param_args(params: dict[str, object]) -> list[str]:
     return args
 
 
+def wait_for_text(output: Callable[[], str], proc: subprocess.Popen, text: str, timeout: float) -> bool:
+    """Wait until ``text`` is in ``output()``, or ``proc`` ended; return whether it is."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if text in output():
+            return True
+        if proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    return text in output()
+
+
 class NodeProcess:
     """The driver node in its own process, with its output in a file."""
 
@@ -92,14 +104,7 @@ class NodeProcess:
 
     def wait_for_output(self, text: str, timeout: float = 20.0) -> bool:
         """Wait until ``text`` appears in the node's output."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if text in self.output():
-                return True
-            if self.proc.poll() is not None:
-                return text in self.output()
-            time.sleep(0.05)
-        return False
+        return wait_for_text(self.output, self.proc, text, timeout)
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> tuple[int, float]:
         """Send ``sig``; return the exit code and how long the exit took."""
