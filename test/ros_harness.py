@@ -71,7 +71,8 @@ def param_args(params: dict[str, object]) -> list[str]:
     return args
 
 
-def wait_for_text(output: Callable[[], str], proc: subprocess.Popen, text: str, timeout: float) -> bool:
+def wait_for_text(output: Callable[[], str], proc: subprocess.Popen, text: str,
+                  timeout: float) -> bool:
     """Wait until ``text`` is in ``output()``, or ``proc`` ended; return whether it is."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
