@@ -123,6 +123,12 @@ class NodeProcess:
         """Wait for the process to end by itself; return its exit code."""
         return self.proc.wait(timeout)
 
+    def __enter__(self) -> 'NodeProcess':
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
     def close(self) -> None:
         """Kill the process if it still runs and remove its log."""
         if self.proc.poll() is None:
@@ -188,6 +194,12 @@ class Listener:
         with self._lock:
             for topic in self.messages:
                 self.messages[topic].clear()
+
+    def __enter__(self) -> 'Listener':
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
 
     def close(self) -> None:
         """Stop spinning and shut the context down."""

@@ -188,7 +188,7 @@ def test_the_node_logs_the_low_latency_state_once():
     with PtySimulator(seed=2) as sim:
         node = NodeProcess({'port': sim.port, 'address': 95, 'reconnect_interval': 0.2,
                             'read_timeout': 0.5})
-        try:
+        with node:
             assert node.wait_for_output('streaming 0xCC', timeout=30.0), node.output()
             connections = sim.stats.port_opens
             sim.unplug(seconds=0.5)
@@ -204,5 +204,3 @@ def test_the_node_logs_the_low_latency_state_once():
                 or 'not supported' in lines[0], lines[0]
             code, _ = node.stop()
             assert code == 0
-        finally:
-            node.close()

@@ -34,7 +34,7 @@ def test_monitor_prints_rate_and_values_of_a_running_node():
     isolate_ros_domain()
     with PtySimulator(SimulatorConfig(seed=51)) as sim:
         node = NodeProcess({'port': sim.port, 'address': 95})
-        try:
+        with node:
             assert node.wait_for_output('streaming 0xCC'), node.output()
             out = subprocess.run(
                 [sys.executable, '-m', 'i3dmgx2_driver.ros.monitor', '--duration', '4'],
@@ -47,5 +47,3 @@ def test_monitor_prints_rate_and_values_of_a_running_node():
             assert 10.0 < rate < 400.0  # the simulator streams 100 Hz; loaded CI is bursty
             assert out.stdout.splitlines()[-1].endswith('messages received')
             assert node.stop()[0] == 0
-        finally:
-            node.close()

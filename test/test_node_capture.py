@@ -54,13 +54,10 @@ def test_capture_holds_every_packet_and_parses_back(tmp_path):
     with PtySimulator(SimulatorConfig(seed=71, faults=faults)) as sim:
         listener = Listener({'imu/raw_data': Imu})
         node = NodeProcess({'port': sim.port, 'address': 95, 'capture_file': str(path)})
-        try:
+        with listener, node:
             assert len(listener.wait_for('imu/raw_data', 200, timeout=30)) >= 200, \
                 node.output()
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
         truth = sim.truth
     header, chunks = read_capture(path)
     assert (header['port'], header['address'], header['baud'], header['wireless']) == \
@@ -97,7 +94,7 @@ def test_capture_that_cannot_be_written_is_dropped_and_the_driver_runs_on(tmp_pa
         listener = Listener({'imu/raw_data': Imu})
         node = NodeProcess({'port': sim.port, 'address': 95, 'capture_file': str(path)},
                            command=[sys.executable, '-c', LIMITED_NODE])
-        try:
+        with listener, node:
             assert node.wait_for_output('capture is off', timeout=30), node.output()
             listener.clear()
             assert len(listener.wait_for('imu/raw_data', 100, timeout=15)) >= 100, \
@@ -105,9 +102,6 @@ def test_capture_that_cannot_be_written_is_dropped_and_the_driver_runs_on(tmp_pa
             assert node.proc.poll() is None
             assert node.stop()[0] == 0
             output = node.output()
-        finally:
-            node.close()
-            listener.close()
     assert output.count('capture is off') == 1, output
     assert 'the driver keeps running without it' in output
     assert 'Traceback' not in output, output

@@ -42,12 +42,9 @@ def rig():
         listener = Listener({'/diagnostics': DiagnosticArray})
         node = NodeProcess({'port': sim.port, 'address': 95, 'read_timeout': 0.5,
                             'reconnect_interval': 0.3})
-        try:
+        with listener, node:
             yield sim, listener, node
             assert node.stop()[0] == 0, node.output()
-        finally:
-            node.close()
-            listener.close()
 
 
 def by_name(array):

@@ -60,7 +60,7 @@ def test_corrupted_stream_publishes_only_valid_records_once():
                          drop_probability=0.02)
     with PtySimulator(SimulatorConfig(seed=21, faults=faults)) as sim:
         listener, node = run_node(sim)
-        try:
+        with listener, node:
             listener.wait_for('imu/raw_data', 400, timeout=40)
             assert node.stop()[0] == 0
             pairs = published_records(listener, sim)
@@ -76,9 +76,6 @@ def test_corrupted_stream_publishes_only_valid_records_once():
                    and indices[0] <= t.index <= indices[-1]]
             faults_seen = {t.fault for t in bad}
             assert {'checksum', 'length', 'foreign'} <= faults_seen
-        finally:
-            node.close()
-            listener.close()
 
 
 @pytest.mark.parametrize('faults', [
@@ -92,7 +89,7 @@ def test_corrupted_stream_publishes_only_valid_records_once():
 def test_start_up_quirks(faults):
     with PtySimulator(SimulatorConfig(seed=22, faults=faults)) as sim:
         listener, node = run_node(sim)
-        try:
+        with listener, node:
             got = listener.wait_for('imu/raw_data', 50, timeout=30)
             assert len(got) >= 50, node.output()
             assert all(entry is not None and entry.valid
@@ -104,15 +101,12 @@ def test_start_up_quirks(faults):
                 delivered = {h.raw for h in sim.host_log if h.outcome == 'delivered'}
                 assert {h.raw for h in rejected} <= delivered | {b'\xfa'}
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
 
 
 def test_stall_is_recovered_by_rerequesting_continuous():
     with PtySimulator(SimulatorConfig(seed=23)) as sim:
         listener, node = run_node(sim)
-        try:
+        with listener, node:
             assert len(listener.wait_for('imu/raw_data', 50, timeout=30)) >= 50
             requests_before = len(sim.wait_for_commands(lambda c: c.code == 0xC4,
                                                         timeout=0.1))
@@ -127,30 +121,24 @@ def test_stall_is_recovered_by_rerequesting_continuous():
                 > requests_before
             assert 'no data for' in node.output()
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
 
 
 def test_radio_stall_then_resume():
     faults = FaultConfig(stall_at=1.5, stall_seconds=1.5)
     with PtySimulator(SimulatorConfig(seed=24, faults=faults)) as sim:
         listener, node = run_node(sim)
-        try:
+        with listener, node:
             time.sleep(3.5)
             listener.clear()
             assert len(listener.wait_for('imu/raw_data', 50, timeout=30)) >= 50, node.output()
             assert node.proc.poll() is None
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
 
 
 def test_unplug_and_replug_reconnects_every_time():
     with PtySimulator(SimulatorConfig(seed=25)) as sim:
         listener, node = run_node(sim)
-        try:
+        with listener, node:
             assert len(listener.wait_for('imu/raw_data', 30, timeout=30)) >= 30
             for _ in range(2):
                 sim.unplug(seconds=1.0)
@@ -160,20 +148,20 @@ def test_unplug_and_replug_reconnects_every_time():
                 assert len(got) >= 30, node.output()
             output = node.output()
             assert 'disconnected' in output or 'Input/output error' in output
+            # The identity is read at every connection but logged only once.
+            assert output.count('device: model') == 1, output
+            assert sim.stats.port_opens >= 3
             assert node.proc.poll() is None
             pairs = published_records(listener, sim)
             assert all(entry is not None and entry.valid for _, entry in pairs)
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
 
 
 def test_port_missing_at_start_then_appears():
     link = os.path.join(tempfile.mkdtemp(prefix='i3dmgx2-late-'), 'ttyGX2')
     listener = Listener({'imu/raw_data': Imu})
     node = NodeProcess({'port': link, 'address': 95, 'reconnect_interval': 0.3})
-    try:
+    with listener, node:
         assert node.wait_for_output('does not exist'), node.output()
         assert node.proc.poll() is None
         with PtySimulator(SimulatorConfig(seed=26, symlink=link)):
@@ -181,9 +169,6 @@ def test_port_missing_at_start_then_appears():
                 node.output()
         assert node.output().count('does not exist') == 1, 'the warning is not throttled'
         assert node.stop()[0] == 0
-    finally:
-        node.close()
-        listener.close()
 
 
 def test_silent_device_is_reported_and_retried():
@@ -191,21 +176,19 @@ def test_silent_device_is_reported_and_retried():
     # and every request times out, forever, without a crash.
     with PtySimulator(SimulatorConfig(seed=27, address=96)) as sim:
         node = NodeProcess({'port': sim.port, 'address': 95, 'reconnect_interval': 0.3})
-        try:
+        with node:
             assert node.wait_for_output('does not answer', timeout=30), node.output()
             assert node.wait_for_output('device not answering', timeout=30), node.output()
             assert node.proc.poll() is None
             code, took = node.stop()
             assert code == 0 and took < 2.0
-        finally:
-            node.close()
 
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_signal_stops_stream_closes_port_exits_zero(sig):
     with PtySimulator(SimulatorConfig(seed=28)) as sim:
         listener, node = run_node(sim)
-        try:
+        with listener, node:
             assert len(listener.wait_for('imu/raw_data', 20, timeout=30)) >= 20
             sent_before = time.time()
             code, took = node.stop(sig)
@@ -213,6 +196,3 @@ def test_signal_stops_stream_closes_port_exits_zero(sig):
             assert took < 2.0
             assert [t for t, c in sim.commands if c.code == 0xFA and t >= sent_before]
             assert sim.wait_until(lambda: sim.streaming == 0, timeout=2)
-        finally:
-            node.close()
-            listener.close()

@@ -98,14 +98,11 @@ def test_installed_node_publishes(prefix):
         node = NodeProcess({'port': sim.port, 'address': 95},
                            command=[str(prefix / 'lib' / 'i3dmgx2_driver' / 'node')],
                            env=installed_env(prefix))
-        try:
+        with listener, node:
             got = listener.wait_for('imu/raw_data', 20, timeout=30)
             assert len(got) >= 20, node.output()
             assert str(prefix) in node.proc.args[0]
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
 
 
 def test_installed_simulator_prints_its_port(prefix):

@@ -58,11 +58,9 @@ def _domain():
 ], ids=lambda v: str(v)[:40])
 def test_bad_parameter_stops_node_with_message(params, expected):
     node = NodeProcess(params)
-    try:
+    with node:
         assert node.wait(timeout=30) == 2
         assert expected in node.output(), node.output()
-    finally:
-        node.close()
 
 
 def test_params_file_is_read():
@@ -73,24 +71,19 @@ def test_params_file_is_read():
             {}, extra_args=['--params-file', os.path.join(REPO, 'config', 'i3dmgx2.yaml'),
                             '-p', f'port:={sim.port}', '-p', 'address:=95',
                             '-p', 'frame_id:=from_cli'])
-        try:
+        with listener, node:
             got = listener.wait_for('imu/raw_data', 10, timeout=30)
             assert len(got) >= 10, node.output()
             assert got[0].header.frame_id == 'from_cli'
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
 
 
 def test_params_file_without_address_is_refused():
     node = NodeProcess({}, extra_args=[
         '--params-file', os.path.join(REPO, 'config', 'i3dmgx2.yaml')])
-    try:
+    with node:
         assert node.wait(timeout=30) == 2
         assert "parameter 'address' is required" in node.output()
-    finally:
-        node.close()
 
 
 def test_namespace_moves_every_topic():
@@ -98,13 +91,10 @@ def test_namespace_moves_every_topic():
         listener = Listener({'/robot1/imu/raw_data': Imu})
         node = NodeProcess({'port': sim.port, 'address': 95},
                            extra_args=['-r', '__ns:=/robot1'])
-        try:
+        with listener, node:
             assert len(listener.wait_for('/robot1/imu/raw_data', 10, timeout=30)) >= 10, \
                 node.output()
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
 
 
 def test_best_effort_qos_reaches_best_effort_subscriber():
@@ -112,13 +102,10 @@ def test_best_effort_qos_reaches_best_effort_subscriber():
         listener = Listener({'imu/raw_data': Imu}, reliable=False)
         node = NodeProcess({'port': sim.port, 'address': 95,
                             'qos_reliability': 'best_effort', 'qos_depth': 5})
-        try:
+        with listener, node:
             assert len(listener.wait_for('imu/raw_data', 10, timeout=30)) >= 10, \
                 node.output()
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
 
 
 def eeprom_writes(sim):
@@ -129,7 +116,7 @@ def test_data_rate_written_verified_and_persisted():
     with PtySimulator(SimulatorConfig(seed=34)) as sim:
         listener = Listener({'imu/raw_data': Imu})
         node = NodeProcess({'port': sim.port, 'address': 95, 'data_rate': 50.0})
-        try:
+        with listener, node:
             assert len(listener.wait_for('imu/raw_data', 20, timeout=30)) >= 20
             writes = eeprom_writes(sim)
             assert [c.arguments() for c in writes] == [{'address': 0xFCA2, 'value': 1024}]
@@ -143,16 +130,10 @@ def test_data_rate_written_verified_and_persisted():
             steps = {(b - a) % 2**32 for a, b in itertools.pairwise(timers)}
             assert all(abs(s - 384 * 1024) < 50 for s in steps)
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
         # The same rate again: nothing written.
         listener = Listener({'imu/raw_data': Imu})
         node = NodeProcess({'port': sim.port, 'address': 95, 'data_rate': 50.0})
-        try:
+        with listener, node:
             assert len(listener.wait_for('imu/raw_data', 5, timeout=30)) >= 5
             assert len(eeprom_writes(sim)) == 1
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()

@@ -50,13 +50,10 @@ def rig():
         node = NodeProcess({'port': sim.port, 'address': 95,
                             'gyro_bias_sampling_ms': SAMPLING_MS,
                             'capture_gyro_bias_on_start': True})
-        try:
+        with listener, node:
             assert node.wait_for_output('gyro bias captured over', timeout=30), node.output()
             yield sim, listener, node
             assert node.stop()[0] == 0, node.output()
-        finally:
-            node.close()
-            listener.close()
 
 
 def call(listener, name, timeout=30.0):

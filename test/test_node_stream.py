@@ -204,7 +204,7 @@ def test_ned_convention_and_host_time():
         listener = Listener({'imu/raw_data': Imu})
         node = NodeProcess({'port': sim.port, 'address': 95, 'frame_convention': 'ned',
                             'time_source': 'host', 'publish_mag': False})
-        try:
+        with listener, node:
             messages = listener.wait_for('imu/raw_data', 100, timeout=30)
             received = {id(m): t for t, m in listener.messages['imu/raw_data']}
             assert len(messages) >= 100, node.output()
@@ -223,6 +223,3 @@ def test_ned_convention_and_host_time():
                 # Host stamps: the read time, after the packet was written.
                 assert entry.write_time - 0.001 <= stamp_seconds(msg) <= received[id(msg)]
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()

@@ -39,15 +39,12 @@ def test_temperature_is_polled_and_published_while_streaming():
                              '/diagnostics': DiagnosticArray})
         node = NodeProcess({'port': sim.port, 'address': 95, 'temperature_period': 0.2,
                             'frame_id': 'gx2'})
-        try:
+        with listener, node:
             temps = listener.wait_for('imu/temperature', 8, timeout=30)
             assert len(temps) >= 8, node.output()
             arrays = listener.wait_for('/diagnostics', 2, timeout=10)
             imu = listener.received('imu/raw_data')
             assert node.stop()[0] == 0
-        finally:
-            node.close()
-            listener.close()
         for msg in temps:
             assert 23.0 < msg.temperature < 29.0
             assert msg.variance == 0.0
