@@ -236,6 +236,19 @@ def stop_on_signal_or_eof() -> threading.Event:
     return stop
 
 
+def spin_until(stop: threading.Event, executor: Any, node: Any, save: Any) -> None:
+    """Spin ``executor`` until ``stop`` is set; then ``save()`` and tear ROS down."""
+    import rclpy
+    try:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        save()
+        executor.shutdown(timeout_sec=0.5)
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
 # The tests' helpers: one domain policy and one child environment for both.
 isolate_ros_domain = ros_harness.isolate_ros_domain
 

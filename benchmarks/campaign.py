@@ -58,12 +58,14 @@ from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation, TICKS_PER_S
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 from i3dmgx2_driver.ros.conversions import STANDARD_GRAVITY
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
 
 REPO = Path(__file__).resolve().parents[1]
+if str(REPO / 'test') not in sys.path:
+    sys.path.insert(0, str(REPO / 'test'))
+
+import ros_harness  # noqa: E402, I100 - the tests' node and listener helpers, from test/
+
 STATS_ENV = 'I3DMGX2_SOAK_STATS'
 NODE_COMMAND = (sys.executable, '-m', 'benchmarks.instrumented_node')
 _KEY = struct.Struct('<6d')
@@ -172,29 +174,14 @@ def compact(entry) -> Sent:
                 len(entry.packet))
 
 
-class Subscriber:
-    """A real rclpy subscriber that keeps each Imu message's values, stamp and orientation."""
+class Subscriber(ros_harness.Listener):
+    """The tests' rclpy listener, keeping each Imu message's values, stamp and orientation."""
 
     def __init__(self, depth: int = 10000) -> None:
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('i3dmgx2_soak_listener', context=self.context)
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                         reliability=ReliabilityPolicy.RELIABLE)
         self.rows: list[tuple[bytes, int, bytes, float]] = []
-        self.node.create_subscription(Imu, 'imu/raw_data', self._store, qos)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
+        super().__init__({'imu/raw_data': Imu}, depth=depth)
 
-    def _spin(self) -> None:
-        try:
-            self.executor.spin()
-        except Exception:  # the context is shut down under us at close()
-            pass
-
-    def _store(self, msg: Imu) -> None:
+    def _store(self, topic: str, msg: Imu) -> None:
         la, av, o = msg.linear_acceleration, msg.angular_velocity, msg.orientation
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         self.rows.append((_KEY.pack(la.x, la.y, la.z, av.x, av.y, av.z), stamp,
@@ -208,13 +195,6 @@ class Subscriber:
     def publishers(self) -> int:
         """Return how many publishers of the topic this subscriber's node knows of."""
         return self.node.count_publishers('imu/raw_data')
-
-    def close(self) -> None:
-        """Stop spinning and shut the context down."""
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=2.0)
 
 
 class TruthCollector(threading.Thread):
@@ -398,14 +378,6 @@ class FaultDriver(threading.Thread):
         self.events.append(FaultEvent('power_cycle', start, start, detail))
 
 
-def harness():
-    """Return test/ros_harness.py, the node process and ROS domain helpers of the tests."""
-    if str(REPO / 'test') not in sys.path:
-        sys.path.insert(0, str(REPO / 'test'))
-    import ros_harness
-    return ros_harness
-
-
 def read_rss_kib(pid: int) -> int | None:
     """Return the VmRSS of a process (KiB), None if it is gone."""
     try:
@@ -456,7 +428,6 @@ class RunData:
 def run_campaign(cfg: CampaignConfig) -> 'CampaignResult':
     """Run the whole campaign; return its checks and report."""
     log = cfg.log or (lambda text: None)
-    ros_harness = harness()
     ros_harness.isolate_ros_domain()
     workdir = tempfile.mkdtemp(prefix='i3dmgx2-soak-')
     stats_path = os.path.join(workdir, 'node_stats.json')

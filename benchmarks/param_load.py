@@ -28,7 +28,7 @@ import json
 import sys
 import threading
 
-from bench_common import stop_on_signal_or_eof
+from bench_common import spin_until, stop_on_signal_or_eof
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import (
     DescribeParameters, GetParameters, ListParameters, SetParameters,
@@ -108,15 +108,12 @@ def main(argv: list[str] | None = None) -> int:
         send(index)
     if slow is not None:
         call_slow()
-    try:
-        while not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
-    finally:
+
+    def save() -> None:
         with lock, open(args.out, 'w') as handle:
             json.dump(counts, handle)
-        executor.shutdown(timeout_sec=0.5)
-        node.destroy_node()
-        rclpy.try_shutdown()
+
+    spin_until(stop, executor, node, save)
     return 0
 
 

@@ -27,7 +27,7 @@ import json
 import sys
 import time
 
-from bench_common import stop_on_signal_or_eof
+from bench_common import spin_until, stop_on_signal_or_eof
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -59,15 +59,12 @@ def main(argv: list[str] | None = None) -> int:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     print('ready', flush=True)
-    try:
-        while not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
-    finally:
+
+    def save() -> None:
         with open(args.out, 'w') as handle:
             json.dump(rows, handle)
-        executor.shutdown(timeout_sec=0.5)
-        node.destroy_node()
-        rclpy.try_shutdown()
+
+    spin_until(stop, executor, node, save)
     return 0
 
 
