@@ -58,7 +58,10 @@ trap 'exit 130' INT TERM
 
 if [ -z "$PORT" ]; then
   echo '[demo] no --port given: starting the simulated 3DM-GX2 and base station'
-  "$I3DMGX2_LIB/simulator" --address "$ADDRESS" --quiet > "$WORK/simulator.out" 2>&1 &
+  # In its own session, so that Ctrl-C reaches the node first and the sensor goes away
+  # only after the node has stopped its stream and closed the port (see cleanup).
+  $(command -v setsid || true) "$I3DMGX2_LIB/simulator" --address "$ADDRESS" --quiet \
+    > "$WORK/simulator.out" 2>&1 &
   SIM_PID=$!
   for _ in $(seq 100); do
     PORT="$(sed -n 's/^port: //p' "$WORK/simulator.out" | head -n 1)"

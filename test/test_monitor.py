@@ -14,8 +14,10 @@
 
 """The monitor tool shows the node's data, as the README's first command does."""
 
+import signal
 import subprocess
 import sys
+import time
 
 from i3dmgx2_driver.ros.monitor import roll_pitch_yaw
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
@@ -47,3 +49,22 @@ def test_monitor_prints_rate_and_values_of_a_running_node():
             assert 10.0 < rate < 400.0  # the simulator streams 100 Hz; loaded CI is bursty
             assert out.stdout.splitlines()[-1].endswith('messages received')
             assert node.stop()[0] == 0
+
+
+def test_monitor_stops_cleanly_on_ctrl_c():
+    isolate_ros_domain()
+    with PtySimulator(SimulatorConfig(seed=52)) as sim, \
+            NodeProcess({'port': sim.port, 'address': 95}) as node:
+        assert node.wait_for_output('streaming 0xCC'), node.output()
+        monitor = subprocess.Popen(
+            [sys.executable, '-m', 'i3dmgx2_driver.ros.monitor'], env=ros_env(), cwd=REPO,
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and ' Hz ' not in monitor.stdout.readline():
+            pass
+        monitor.send_signal(signal.SIGINT)
+        out, err = monitor.communicate(timeout=30)
+        assert monitor.returncode == 0, err
+        assert 'Traceback' not in err, err
+        assert out.splitlines()[-1].endswith('messages received')
+        assert node.stop()[0] == 0

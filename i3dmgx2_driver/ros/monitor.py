@@ -76,6 +76,14 @@ class Monitor(Node):
             return self.latest, count
 
 
+def _spin(executor: SingleThreadedExecutor) -> None:
+    """Spin until Ctrl-C shuts the context down (rclpy's handler) or main stops it."""
+    try:
+        executor.spin()
+    except ExternalShutdownException:
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     """Print the IMU topic's rate and values until Ctrl-C or --duration."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -90,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     node = Monitor(args.topic, args.best_effort)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner = threading.Thread(target=_spin, args=(executor,), daemon=True)
     spinner.start()
     start = last = time.monotonic()
     received = 0
