@@ -29,6 +29,7 @@ import threading
 import time
 from typing import Any, NamedTuple
 
+from .observer import LineObserver, QUIET_AFTER
 from .port import PortDisconnected, SerialPort
 from ..codec import commands, layouts
 from ..codec.framing import DataPacket, encode_command_packet
@@ -83,11 +84,14 @@ class DeviceLink:
     every data packet not claimed by a pending request. ``on_bytes``, if
     given, receives every read's bytes as read, before they are parsed (a
     raw capture); it runs in the reader thread and must not raise or block.
+    ``observer``, if given, is fed every read while no packet of ours has
+    arrived for ``QUIET_AFTER`` s (never while records flow).
     """
 
     def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
                  wireless: bool = True, read_timeout: float = 0.2,
-                 on_bytes: BytesCallback | None = None) -> None:
+                 on_bytes: BytesCallback | None = None,
+                 observer: LineObserver | None = None) -> None:
         self.port = port
         self.address = address
         self.wireless = wireless
@@ -95,6 +99,7 @@ class DeviceLink:
                                          wireless=wireless)
         self._on_record = on_record
         self._on_bytes = on_bytes
+        self._observer = observer
         self._read_timeout = read_timeout
         self._pending: _Pending | None = None
         self._lock = threading.Lock()
@@ -128,6 +133,7 @@ class DeviceLink:
     def _run(self) -> None:
         parser = self.parser
         read = self.port.read_some
+        observer = self._observer
         while not self._stop.is_set():
             timeout = 0.02 if parser.pending == 1 else self._read_timeout
             try:
@@ -140,6 +146,8 @@ class DeviceLink:
             now = time.time()
             if data and self._on_bytes is not None:
                 self._on_bytes(data, now)
+            if observer is not None and now - self.last_data_time > QUIET_AFTER:
+                observer.feed(data, now, self.last_data_time)
             events = parser.feed(data) if data else parser.idle()
             for event in events:
                 self._dispatch(event, now)
@@ -212,6 +220,8 @@ class DeviceLink:
         with self._lock:
             nacks = 0
             for _ in range(retries):
+                if self._stop.is_set():
+                    raise DeviceTimeout('the link is shutting down')
                 pending = _Pending(reply_code)
                 self._pending = pending
                 try:

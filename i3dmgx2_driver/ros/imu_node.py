@@ -33,15 +33,17 @@ from sensor_msgs.msg import Imu, MagneticField
 
 from .conversions import mag_is_valid, MessageFactory
 from .diagnostics import DiagnosticsPublisher
-from .parameters import declare_parameters, driver_config, DriverConfig
+from .parameters import declare_parameters, driver_config, DriverConfig, SPECS
 from .raw_capture import RawCapture
 from .services import DeviceServices
 from .temperature import TemperaturePoller
+from .unknown_parameters import warn_unknown_parameters
 from ..codec.framing import DATA_TRAILER_SIZE, DataPacket, HEADER_SIZE
 from ..codec.layouts import ACCEL_ANG_RATE_MAG_ORIENTATION, LAYOUTS
 from ..codec.records import AccelAngRateMagOrientation
 from ..codec.timer import TimerUnwrapper
 from ..device.clock import DeviceClock
+from ..device.port import check_port_path, PortError
 from ..device.supervisor import DeviceSupervisor, SupervisorConfig
 
 #: Bits per byte on the line: start, 8 data, stop.
@@ -75,9 +77,18 @@ class ImuDriverNode(Node):
 
     def __init__(self, node_name: str = 'i3dmgx2_driver', **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        self.values = declare_parameters(self)
+        try:
+            self.values = declare_parameters(self)
+        finally:
+            # Also when a required one is missing: 'adress' explains 'address'.
+            warn_unknown_parameters(self, [spec.name for spec in SPECS])
         self.config: DriverConfig = driver_config(self.values)
         cfg = self.config
+        # A path that is no serial port stops the node here (PortUnusable), like a
+        # bad parameter value, before anything is started.
+        check_port_path(cfg.port)
+        #: Why the port can never work, once the supervisor found out (main exits 2).
+        self.fatal_error: PortError | None = None
         qos = QoSProfile(
             history=HistoryPolicy.KEEP_LAST, depth=cfg.qos_depth,
             reliability=(ReliabilityPolicy.RELIABLE if cfg.qos_reliability == 'reliable'
@@ -115,7 +126,8 @@ class ImuDriverNode(Node):
                 low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
                 reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz),
             on_record=self._on_record, log=self.get_logger(), on_connect=self._on_connect,
-            on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None)
+            on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
+            on_fatal=self._on_fatal)
         self.device_services = DeviceServices(self)
         self.temperature = TemperaturePoller(self, cfg.temperature_period, qos)
         self.diagnostics = DiagnosticsPublisher(
@@ -127,6 +139,10 @@ class ImuDriverNode(Node):
             f'frame {self.messages.frame_id} ({cfg.frame_convention}), '
             f'time source {cfg.time_source}')
         self.supervisor.start()
+
+    def _on_fatal(self, error: PortError) -> None:
+        """The port can never work: let the entry point say so and exit."""
+        self.fatal_error = error
 
     def _on_connect(self) -> None:
         """Re-anchor time on a new link: the device may have been power-cycled."""

@@ -19,7 +19,9 @@ SIGINT and SIGTERM are handled here rather than by rclpy, so that the
 driver can stop the device's stream (0xFA) and close the port while ROS is
 still up, then shut ROS down: a clean exit (code 0) well within 2 s. An
 invalid parameter exits with code 2 and a message that names it and its
-valid range.
+valid range; so does a port that can never work (a path that is no serial
+port), with one FATAL line that says what the path is and how to find the
+right one.
 """
 
 import signal
@@ -33,6 +35,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from .imu_node import ImuDriverNode
 from .parameters import ParameterError
+from ..device.port import PortUnusable
 
 EXIT_BAD_PARAMETER = 2
 #: How often the main loop looks at the stop flag (s); signals wake it anyway.
@@ -59,15 +62,20 @@ def main(args: list[str] | None = None) -> int:
     # holds only its own callback group: diagnostics keep ticking, parameters
     # answer, and a signal is acted on at once rather than after the call.
     executor = MultiThreadedExecutor(num_threads=4)
+    code = 0
     try:
         try:
             node = ImuDriverNode()
-        except ParameterError as exc:
+        except (ParameterError, PortUnusable) as exc:
             rclpy.logging.get_logger('i3dmgx2_driver').fatal(str(exc))
             return EXIT_BAD_PARAMETER
         executor.add_node(node)
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=_SPIN_PERIOD)
+            if node.fatal_error is not None:
+                node.get_logger().fatal(str(node.fatal_error))
+                code = EXIT_BAD_PARAMETER
+                break
     finally:
         if node is not None:
             node.shutdown()
@@ -77,7 +85,7 @@ def main(args: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    return 0
+    return code
 
 
 if __name__ == '__main__':
