@@ -124,7 +124,7 @@ def judge(window: Window, port: str, address: int, wireless: bool,
     if span >= SILENCE_AFTER and not window.bytes_in:
         if wireless:
             return Finding(SILENCE, (
-                f'not one byte from {port} in {span:.1f} s, not even the base station\'s '
+                f"not one byte from {port} in {span:.1f} s, not even the base station's "
                 f'ACK of a command: is a powered 3DM-GX2 base station on this port? A wired '
                 f'sensor needs -p wireless:=false'))
         return Finding(SILENCE, (

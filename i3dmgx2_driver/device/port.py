@@ -95,7 +95,7 @@ def port_hint() -> str:
             f'finds the base station and the sensor address); set -p port:=<path>')
 
 
-def terminal_majors(drivers: str = TTY_DRIVERS) -> list[tuple[int, int, int]] | None:
+def terminal_majors(drivers: str | None = None) -> list[tuple[int, int, int]] | None:
     """
     Return (major, first minor, last minor) of every terminal driver.
 
@@ -103,7 +103,7 @@ def terminal_majors(drivers: str = TTY_DRIVERS) -> list[tuple[int, int, int]] | 
     then nothing is concluded from a character device's numbers.
     """
     try:
-        with open(drivers) as handle:
+        with open(drivers or TTY_DRIVERS) as handle:
             lines = handle.read().splitlines()
     except OSError:
         return None
@@ -154,7 +154,7 @@ def describe_non_terminal(mode: int, rdev: int = 0,
     return None
 
 
-def check_port_path(path: str, drivers: str = TTY_DRIVERS) -> None:
+def check_port_path(path: str, drivers: str | None = None) -> None:
     """
     Raise :class:`PortNotSerial` if ``path`` exists and is surely no serial port.
 
@@ -236,7 +236,8 @@ def _classify(path: str, exc: Exception) -> PortError:
     if code in (errno.ENOTTY, errno.EISDIR) or 'Inappropriate ioctl' in text:
         # What check_port_path could not tell (no list of terminal drivers).
         try:
-            what = describe_non_terminal(os.stat(path).st_mode, ranges=[])
+            info = os.stat(path)
+            what = describe_non_terminal(info.st_mode, info.st_rdev, ranges=[])
         except OSError:
             what = None
         return PortNotSerial(_not_serial_message(path, what or 'no terminal device'))

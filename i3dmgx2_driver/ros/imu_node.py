@@ -141,7 +141,7 @@ class ImuDriverNode(Node):
         self.supervisor.start()
 
     def _on_fatal(self, error: PortError) -> None:
-        """The port can never work: let the entry point say so and exit."""
+        """Note that the port can never work: the entry point says so and exits."""
         self.fatal_error = error
 
     def _on_connect(self) -> None:
