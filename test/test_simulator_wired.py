@@ -75,7 +75,7 @@ def stop_wired_stream(host: Host) -> None:
 
 
 def test_the_wired_sensor_reader_knows_every_command_but_the_ping():
-    assert WIRED_COMMANDS == set(lay.LAYOUTS) - {lay.PING}
+    assert set(lay.LAYOUTS) - {lay.PING} == WIRED_COMMANDS
     reader = CommandStreamParser(wireless=False, codes=WIRED_COMMANDS)
     # A packet for 0xE5 whose length byte (0x02 stands in for it) would start a false
     # ping in a reader that knew 0x02, swallowing the 0xE5 behind it.
