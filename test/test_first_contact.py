@@ -131,6 +131,36 @@ def test_a_wired_setting_on_a_silent_base_station_says_wireless_true():
             assert node.stop()[0] == 0
 
 
+def test_a_wireless_setting_on_a_streaming_wired_sensor_says_wireless_false():
+    # The wired sensor does not understand packets, so its stream goes on.
+    config = SimulatorConfig(wireless=False, seed=156, streaming_at_start=True)
+    with PtySimulator(config) as sim:
+        listener = Listener({'imu/raw_data': Imu})
+        node = NodeProcess({'port': sim.port, 'address': 95})
+        with listener, node:
+            assert node.wait_for_output('set -p wireless:=false', timeout=20), node.output()
+            assert node.stop()[0] == 0
+            line = lines_with(node.output(), 'set -p wireless:=false')[0]
+            assert f'{sim.port} sends wired (unframed) records' in line
+            assert listener.received('imu/raw_data') == []
+            assert 'streaming' not in node.output()
+
+
+def test_a_wireless_setting_on_a_polled_wired_sensor_says_wireless_false():
+    # A wired sensor gives no ACK for a packet, where a base station would; it may
+    # answer a command byte inside a packet (0xC2 of a polled request) as a raw
+    # command, in a wired record. Either way the fix is named.
+    with PtySimulator(SimulatorConfig(wireless=False, seed=157)) as sim:
+        node = NodeProcess({'port': sim.port, 'address': 95})
+        with node:
+            assert node.wait_for_output('-p wireless:=false', timeout=20), node.output()
+            line = lines_with(node.output(), '-p wireless:=false')[0]
+            assert (f"not one byte from {sim.port} in 3.0 s, not even the base station's ACK"
+                    in line) or f'{sim.port} sends wired (unframed) records' in line, line
+            assert node.stop()[0] == 0
+            assert 'streaming' not in node.output()
+
+
 # -- another address on the air ------------------------------------------------
 
 def test_packets_from_another_address_are_named_and_streaming_never_announced():
