@@ -83,14 +83,18 @@ class DeviceLink:
     every data packet not claimed by a pending request. ``on_bytes``, if
     given, receives every read's bytes as read, before they are parsed (a
     raw capture); it runs in the reader thread and must not raise or block.
+    ``streamed`` is the command byte of the streamed record: a polled reply
+    of that code is both the reply and a record of the stream.
     """
 
     def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
                  wireless: bool = True, read_timeout: float = 0.2,
-                 on_bytes: BytesCallback | None = None) -> None:
+                 on_bytes: BytesCallback | None = None,
+                 streamed: int = layouts.ACCEL_ANG_RATE_MAG_ORIENTATION) -> None:
         self.port = port
         self.address = address
         self.wireless = wireless
+        self.streamed = streamed
         self.parser = SensorStreamParser(address=address if wireless else None,
                                          wireless=wireless)
         self._on_record = on_record
@@ -154,7 +158,7 @@ class DeviceLink:
             if pending is not None and pending.code == code:
                 pending.reply = event.record
                 pending.done.set()
-                if code != layouts.ACCEL_ANG_RATE_MAG_ORIENTATION:
+                if code != self.streamed:
                     return
             self.records += 1
             self._on_record(event, now)
