@@ -43,20 +43,18 @@ from typing import Any, NamedTuple
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .observer import Finding, LineObserver
 from .port import PortDisconnected, PortError, PortUnusable, SerialPort
-from ..codec import commands, layouts
+from ..codec import commands, layouts, streams
+# The divider arithmetic is the codec's; its names stay importable from here.
+from ..codec.data_rate import (  # noqa: F401
+    divider_for_rate, MAX_DIVIDER, MAX_RATE_HZ, MIN_DIVIDER, MIN_RATE_HZ, RATE_BASE_HZ,
+    RATE_DIVIDER_ADDRESS,
+)
 
-#: EEPROM word holding the data-rate divider: rate = 51200 / x Hz.
-RATE_DIVIDER_ADDRESS = 0xFCA2
-#: Base of the data-rate divider.
-RATE_BASE_HZ = 51200.0
-#: Valid range of the divider (about 300 Hz down to 1 Hz).
-MIN_DIVIDER = 170
-MAX_DIVIDER = 51200
-#: Lowest and highest data rate the divider can give.
-MIN_RATE_HZ = RATE_BASE_HZ / MAX_DIVIDER
-MAX_RATE_HZ = RATE_BASE_HZ / MIN_DIVIDER
-#: The record the driver streams.
-STREAM_COMMAND = layouts.ACCEL_ANG_RATE_MAG_ORIENTATION
+#: The record streamed unless the configuration names another.
+STREAM_COMMAND = streams.DEFAULT.code
+#: Records polled before continuous mode is first asked for (see _initialise);
+#: the first one that is not the streamed record is used.
+WARM_UP_POLLS = (layouts.ACCEL_ANG_RATE, layouts.EULER_ANGLES)
 
 IDENTIFIER_NAMES = ('model_number', 'serial_number', 'model_name', 'options')
 #: A condition that persists (a missing port, a silent sensor) is said once,
@@ -100,14 +98,11 @@ class SupervisorConfig:
     stall_timeout: float = 1.0
     reconnect_interval: float = 1.0
     data_rate_hz: float | None = None
+    #: Command byte of the record to stream (one of codec.streams.STREAMS).
+    stream: int = STREAM_COMMAND
     request_timeout: float = 0.5
     request_retries: int = 3
     continuous_retries: int = 5
-
-
-def divider_for_rate(rate_hz: float) -> int:
-    """Return the EEPROM divider for a data rate, clamped to the valid range."""
-    return max(MIN_DIVIDER, min(MAX_DIVIDER, round(RATE_BASE_HZ / rate_hz)))
 
 
 class Throttle:
@@ -167,6 +162,10 @@ class DeviceSupervisor:
         self.divider: int | None = None
         self.low_latency_state = ''
         self.ping_ok: bool | None = None
+        #: The stream's use of the line at the device's rate (once the rate is known),
+        #: and, when it does not fit, what to do about it ('' when it fits).
+        self.line_use = ''
+        self.line_warning = ''
         self.parser_totals: dict[str, int] = {}
         self._info_logged: DeviceInfo | None = None
         #: The port can never work (a path that is no serial port): why.
@@ -270,7 +269,7 @@ class DeviceSupervisor:
         observer = LineObserver(cfg.port, cfg.address, cfg.wireless, cfg.baud,
                                 self._on_finding)
         link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless,
-                          on_bytes=self._on_bytes, observer=observer)
+                          on_bytes=self._on_bytes, streamed=cfg.stream, observer=observer)
         self._link = link
         self.connections += 1
         if self.connections > 1:
@@ -309,24 +308,52 @@ class DeviceSupervisor:
                                    f'the radio channel')
         # The thesis author found continuous mode unreliable as the very first
         # command: a couple of polled requests first make it dependable.
+        # (A record other than the streamed one: a reply of the streamed code would
+        # also reach the consumer, as a record of the stream.)
+        warm_up = next(code for code in WARM_UP_POLLS if code != self.config.stream)
         for _ in range(2):
             try:
-                link.request(bytes((layouts.ACCEL_ANG_RATE,)), layouts.ACCEL_ANG_RATE,
+                link.request(bytes((warm_up,)), warm_up,
                              timeout=self.config.request_timeout, retries=2)
             except DeviceTimeout:
                 pass
         self._identify(link)
         self._configure_rate(link)
+        self._check_line()
         if self.start_continuous(link):
-            self._announce_streaming(link)
+            self._announce_streaming()
 
-    def _announce_streaming(self, link: DeviceLink) -> None:
+    def _announce_streaming(self) -> None:
         """Say that records flow: called only once one has arrived on this link."""
         self.state = State.STREAMING
         self.advice = ''
-        self._log.info(f'streaming 0xCC from node {self.config.address} on {self.config.port}'
+        stream = streams.BY_CODE[self.config.stream]
+        self._log.info(f'streaming {stream.label} from node {self.config.address} on '
+                       f'{self.config.port}'
                        + (f' at {self.expected_rate_hz:.1f} Hz' if self.divider else '')
                        + ' (first record received)')
+
+    def _check_line(self) -> None:
+        """
+        Warn when the device's rate is more than the line carries for the stream.
+
+        A requested rate that does not fit was refused before the node
+        started; this catches a device already set (data_rate 0) to a rate the
+        stream cannot keep, which would otherwise show only as records missing.
+        """
+        if not self.divider:
+            return
+        cfg = self.config
+        stream = streams.BY_CODE[cfg.stream]
+        budget = streams.line_budget(stream, self.expected_rate_hz, cfg.baud, cfg.wireless)
+        self.line_use = streams.describe(budget)
+        if budget.fits:
+            self.line_warning = ''
+            return
+        self.line_warning = ('the device is set to a rate the line cannot carry, records '
+                             'will be skipped: ' + streams.advice(stream, budget))
+        if self._throttle.allow('line'):
+            self._log.warning(self.line_warning)
 
     def _identify(self, link: DeviceLink) -> None:
         cfg = self.config
@@ -392,7 +419,7 @@ class DeviceSupervisor:
 
     def start_continuous(self, link: DeviceLink) -> bool:
         """
-        Ask for continuous 0xCC until records actually arrive.
+        Ask for continuous mode of the configured record until records actually arrive.
 
         Returns True once a record has arrived, False if the supervisor is
         stopping first; raises DeviceTimeout when none comes.
@@ -402,7 +429,7 @@ class DeviceSupervisor:
         for _ in range(cfg.continuous_retries):
             before = link.records
             try:
-                link.request(commands.set_continuous(STREAM_COMMAND), layouts.SET_CONTINUOUS,
+                link.request(commands.set_continuous(cfg.stream), layouts.SET_CONTINUOUS,
                              cfg.request_timeout, 1)
             except DeviceTimeout:
                 pass  # the reply may be lost while the stream started: look for records

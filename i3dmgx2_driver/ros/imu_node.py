@@ -38,23 +38,13 @@ from .raw_capture import RawCapture
 from .services import DeviceServices
 from .temperature import TemperaturePoller
 from .unknown_parameters import warn_unknown_parameters
-from ..codec.framing import DATA_TRAILER_SIZE, DataPacket, HEADER_SIZE
-from ..codec.layouts import ACCEL_ANG_RATE_MAG_ORIENTATION, LAYOUTS
-from ..codec.records import AccelAngRateMagOrientation
+from ..codec import line_budget
+from ..codec.data_rate import ticks_per_cycle
+from ..codec.framing import DataPacket
 from ..codec.timer import TimerUnwrapper
 from ..device.clock import DeviceClock
 from ..device.port import check_port_path, PortError
 from ..device.supervisor import DeviceSupervisor, SupervisorConfig
-
-#: Bits per byte on the line: start, 8 data, stop.
-_BITS_PER_BYTE = 10
-
-
-def wire_time(baud: int, wireless: bool) -> float:
-    """Seconds the 0xCC packet (or wired record) takes on the serial line."""
-    record = LAYOUTS[ACCEL_ANG_RATE_MAG_ORIENTATION].record_size
-    size = HEADER_SIZE + record + DATA_TRAILER_SIZE if wireless else record + 2
-    return size * _BITS_PER_BYTE / baud
 
 
 class StreamStats:
@@ -73,7 +63,7 @@ class StreamStats:
 
 
 class ImuDriverNode(Node):
-    """Publish the 3DM-GX2's 0xCC records as sensor_msgs/Imu and MagneticField."""
+    """Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField."""
 
     def __init__(self, node_name: str = 'i3dmgx2_driver', **kwargs) -> None:
         super().__init__(node_name, **kwargs)
@@ -93,18 +83,20 @@ class ImuDriverNode(Node):
             history=HistoryPolicy.KEEP_LAST, depth=cfg.qos_depth,
             reliability=(ReliabilityPolicy.RELIABLE if cfg.qos_reliability == 'reliable'
                          else ReliabilityPolicy.BEST_EFFORT))
+        self.stream = cfg.stream_choice
+        self._record_type = self.stream.record_type
         self.imu_pub = self.create_publisher(Imu, 'imu/raw_data', qos)
         self.mag_pub = (self.create_publisher(MagneticField, 'imu/mag', qos)
-                        if cfg.publish_mag else None)
+                        if cfg.publish_mag and self.stream.mag else None)
         self.messages = MessageFactory(
             cfg.frame_id, cfg.frame_convention, cfg.orientation_stddev,
             cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
-            cfg.magnetic_field_stddev)
+            cfg.magnetic_field_stddev, self.stream)
         self.stats = StreamStats()
         self.unwrapper = TimerUnwrapper()
         self.clock_model = DeviceClock()
         self._use_device_time = cfg.time_source == 'device'
-        self._wire_time = wire_time(cfg.baud, cfg.wireless)
+        self._wire_time = line_budget.wire_time(self.stream.code, cfg.baud, cfg.wireless)
         self._publish_lock = threading.Lock()
         # Publish the messages ready-serialized (conversions.py says why) when they read
         # back right with this middleware; otherwise as message objects.
@@ -124,7 +116,8 @@ class ImuDriverNode(Node):
             SupervisorConfig(
                 port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
                 low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
-                reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz),
+                reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
+                stream=self.stream.code),
             on_record=self._on_record, log=self.get_logger(), on_connect=self._on_connect,
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
             on_fatal=self._on_fatal)
@@ -136,7 +129,8 @@ class ImuDriverNode(Node):
             operation=lambda: self.device_services.operation)
         self.get_logger().info(
             f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
-            f'frame {self.messages.frame_id} ({cfg.frame_convention}), '
+            f'stream {self.stream.label}, frame {self.messages.frame_id} '
+            f'({cfg.frame_convention}), '
             f'time source {cfg.time_source}')
         self.supervisor.start()
 
@@ -158,12 +152,12 @@ class ImuDriverNode(Node):
 
     def _expected_ticks(self) -> int | None:
         divider = self.supervisor.divider
-        return 384 * divider if divider else None
+        return ticks_per_cycle(divider) if divider else None
 
     def _on_record(self, packet: DataPacket, read_time: float) -> None:
         """Stamp and publish one record (runs in the reader thread)."""
         record = packet.record
-        if type(record) is not AccelAngRateMagOrientation:
+        if type(record) is not self._record_type:
             self.stats.other_records += 1
             return
         with self._publish_lock:
@@ -196,6 +190,7 @@ class ImuDriverNode(Node):
             if not stats.first_time:
                 stats.first_time = read_time
             stats.last_time = read_time
+            # mag_pub exists only for streams with a field (named 'mag' in each layout).
             if self.mag_pub is not None and mag_is_valid(record.mag):
                 self.mag_pub.publish(self._mag_message(record.mag, stamp))
                 stats.mag_published += 1
