@@ -415,7 +415,7 @@ class InProcessNode:
 
     The executor runs in a thread of its own, the node's reader thread
     publishes, and ``published`` gets one entry per Imu message through the
-    node's ``on_published`` hook, called right after ``publish()`` returned:
+    core's ``on_published`` hook, called right after ``publish()`` returned:
     the record's timer (to match the ground truth), the time the reader got
     its last byte, the stamp, and ``time.time()`` at that moment, the clock
     the simulator stamps its writes with.
@@ -439,7 +439,7 @@ class InProcessNode:
         self.node = ImuDriverNode(
             context=self.context,
             parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
-        self.node.on_published = self._on_published
+        self.node.core.on_published = self._on_published
         # As main.py spins it: several threads, so that a long service call holds only its own.
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.executor.add_node(self.node)

@@ -36,7 +36,7 @@ import threading
 import time
 
 from i3dmgx2_driver.device.port import SerialPort
-from i3dmgx2_driver.ros import imu_node
+from i3dmgx2_driver.ros import driver_core, imu_node
 from i3dmgx2_driver.ros import main as node_main
 
 #: Environment variable naming the JSON file the counters go to.
@@ -75,8 +75,8 @@ class ObservedPort(SerialPort):
 
 
 def _snapshot(node: imu_node.ImuDriverNode, final: bool) -> dict:
-    stats = node.stats
-    supervisor = node.supervisor
+    stats = node.core.stats
+    supervisor = node.core.supervisor
     with _events_lock:
         events = list(_events)
     return {
@@ -121,8 +121,8 @@ def main() -> int:
     if not os.environ.get(STATS_ENV):
         print(f'{STATS_ENV} must name the file for the counters', file=sys.stderr)
         return 2
-    imu_node.DeviceSupervisor = functools.partial(imu_node.DeviceSupervisor,
-                                                  port_factory=ObservedPort)
+    driver_core.DeviceSupervisor = functools.partial(driver_core.DeviceSupervisor,
+                                                     port_factory=ObservedPort)
     node_main.ImuDriverNode = ObservedNode
     return node_main.main()
 

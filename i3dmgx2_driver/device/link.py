@@ -88,13 +88,17 @@ class DeviceLink:
     of that code is both the reply and a record of the stream.
     ``observer``, if given, is fed every read while no packet of ours has
     arrived for ``QUIET_AFTER`` s (never while records flow).
+    ``cancel``, if given and set, makes requests give up within tens of
+    milliseconds while the reader goes on (the stream is being stopped, the
+    port kept: nobody waits for the answers any more).
     """
 
     def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
                  wireless: bool = True, read_timeout: float = 0.2,
                  on_bytes: BytesCallback | None = None,
                  streamed: int = layouts.ACCEL_ANG_RATE_MAG_ORIENTATION,
-                 observer: LineObserver | None = None) -> None:
+                 observer: LineObserver | None = None,
+                 cancel: threading.Event | None = None) -> None:
         self.port = port
         self.address = address
         self.wireless = wireless
@@ -109,6 +113,7 @@ class DeviceLink:
         self._lock = threading.Lock()
         self._write_lock = threading.Lock()
         self._stop = threading.Event()
+        self._cancel = cancel if cancel is not None else threading.Event()
         self._thread: threading.Thread | None = None
         self.disconnected = threading.Event()
         self.error: str | None = None
@@ -224,23 +229,17 @@ class DeviceLink:
         with self._lock:
             nacks = 0
             for _ in range(retries):
-                if self._stop.is_set():
-                    raise DeviceTimeout('the link is shutting down')
+                self._check_cancelled()
                 pending = _Pending(reply_code)
                 self._pending = pending
                 try:
                     self.send(command)
-                    deadline = time.monotonic() + timeout
-                    while not pending.nacked.is_set():
-                        left = deadline - time.monotonic()
-                        if left <= 0 or pending.done.wait(min(left, 0.02)):
-                            break
+                    self._wait(pending, timeout)
                 finally:
                     self._pending = None
                 if self.disconnected.is_set():
                     raise PortDisconnected(self.error or 'device disconnected')
-                if self._stop.is_set():
-                    raise DeviceTimeout('the link is shutting down')
+                self._check_cancelled()
                 if pending.done.is_set():
                     return pending.reply
                 if pending.nacked.is_set():
@@ -249,6 +248,20 @@ class DeviceLink:
             if nacks == retries:
                 raise DeviceNack(f'{name}: the base station rejected it {retries} times')
             raise DeviceTimeout(f'{name}: no reply after {retries} tries')
+
+    def _wait(self, pending: _Pending, timeout: float, nack_ends: bool = True) -> None:
+        """Wait for a reply, a NACK (if ``nack_ends``), a cancel or the timeout."""
+        deadline = time.monotonic() + timeout
+        while not (nack_ends and pending.nacked.is_set()) and not self._cancel.is_set():
+            left = deadline - time.monotonic()
+            if left <= 0 or pending.done.wait(min(left, 0.02)):
+                break
+
+    def _check_cancelled(self) -> None:
+        if self._stop.is_set():
+            raise DeviceTimeout('the link is shutting down')
+        if self._cancel.is_set():
+            raise DeviceTimeout('cancelled: the stream is being stopped')
 
     def ping(self, timeout: float = 0.5, retries: int = 3) -> bool:
         """Ask the base station whether the sensor answers over the radio."""
@@ -260,11 +273,12 @@ class DeviceLink:
                     self.parser.expect_ping()
                     with self._write_lock:
                         self.port.write(commands.ping(self.address))
-                    pending.done.wait(timeout)
+                    self._wait(pending, timeout, nack_ends=False)
                 finally:
                     self._pending = None
                 if self.disconnected.is_set():
                     raise PortDisconnected(self.error or 'device disconnected')
+                self._check_cancelled()
                 if pending.reply is not None:
                     return bool(pending.reply.ok)
             return False

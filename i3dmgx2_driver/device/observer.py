@@ -152,6 +152,8 @@ class LineObserver:
         self.wireless = wireless
         self.baud = baud
         self._on_finding = on_finding
+        #: The latest finding on this link, if any (kept across windows).
+        self.last_finding: Finding | None = None
         self._epoch: float | None = None
         self._start = 0.0
         self._next_judge = 0.0
@@ -195,5 +197,6 @@ class LineObserver:
         self._next_judge = now + JUDGE_EVERY
         finding = judge(self.window(now), self.port, self.address, self.wireless, self.baud)
         if finding is not None:
+            self.last_finding = finding
             self._on_finding(finding)
         return finding

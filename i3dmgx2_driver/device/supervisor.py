@@ -30,6 +30,15 @@ that is no serial port) is said once and ends the supervisor, with
 arrives, a ``LineObserver`` says what the line carries instead (another
 address, the other framing, unreadable bytes, silence). Streaming is
 announced when the first record has arrived, never before.
+
+The same steps are offered as phases for a managed (lifecycle) node, which
+brings the device up in order and must know at each step whether it
+worked: :meth:`DeviceSupervisor.connect` (port, quiet, identity, rate; no
+stream), :meth:`~DeviceSupervisor.start_streaming` (the stream, then the
+thread that keeps it going), :meth:`~DeviceSupervisor.stop_streaming`
+(0xFA, the port stays open) and :meth:`~DeviceSupervisor.stop` (the port
+closed). The plain node's :meth:`~DeviceSupervisor.start` runs them all in
+the thread, retrying forever instead of failing.
 """
 
 from collections.abc import Callable
@@ -69,6 +78,8 @@ class State(str, enum.Enum):
 
     CONNECTING = 'connecting'
     INITIALISING = 'initialising'
+    #: Port open and the device quiet, not streaming (a managed node, inactive).
+    READY = 'ready'
     STREAMING = 'streaming'
     STALLED = 'stalled'
     PAUSED = 'paused'
@@ -153,6 +164,8 @@ class DeviceSupervisor:
         self._paused = threading.Event()
         self._thread: threading.Thread | None = None
         self._link: DeviceLink | None = None
+        #: Guards who owns ``_link``: the thread opening one, or a caller releasing it.
+        self._link_lock = threading.Lock()
         self.state = State.CONNECTING
         self.connections = 0
         self.reconnects = 0
@@ -173,12 +186,20 @@ class DeviceSupervisor:
         #: What the line observer last found while nothing of ours arrived ('' once
         #: records flow), for diagnostics.
         self.advice = ''
+        self._observer: LineObserver | None = None
 
     # -- life cycle ----------------------------------------------------
+    #
+    # ``_stop`` set means "no stream wanted now": the thread ends, and every
+    # request on the link gives up within a few tens of milliseconds (the
+    # link is made with it as its ``cancel`` event). Whoever set it decides
+    # what becomes of the port: stop() closes it, stop_streaming() keeps it.
 
     def start(self) -> None:
-        """Start the supervisor thread."""
-        self._thread = threading.Thread(target=self._run, name='gx2-supervisor', daemon=True)
+        """Start the supervisor thread: open, initialise, stream, recover, forever."""
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, args=(self._link,),
+                                        name='gx2-supervisor', daemon=True)
         self._thread.start()
 
     def stop(self, timeout: float = 1.5) -> None:
@@ -189,7 +210,87 @@ class DeviceSupervisor:
             link.abort()
         if self._thread is not None:
             self._thread.join(timeout)
+        self._release(send_stop=True)
         self.state = State.STOPPED
+
+    def connect(self) -> None:
+        """
+        Open the port and bring the device to a known state, without streaming.
+
+        The configure phase of a managed node: open the port exclusively,
+        quiet any stream, ping, make the polled requests, read the identity
+        and set the data rate if asked. Raises PortError (missing, busy,
+        denied: the port is not open) or DeviceTimeout (the device is silent
+        or refused the rate: the port is closed again) with a message that
+        says why. Bounded: a silent device is given up after the ping and
+        the polled requests (about 3 s), a talking one answers in well under
+        a second.
+        """
+        self._stop.clear()
+        link = self._open()
+        try:
+            self._initialise(link, require_answer=True)
+        except BaseException:
+            self._release(send_stop=False)
+            self.state = State.STOPPED
+            raise
+        self.state = State.READY
+
+    def start_streaming(self) -> None:
+        """
+        Start the stream now, then keep it going in the supervisor thread.
+
+        The activate phase of a managed node: returns once records arrive,
+        raises DeviceTimeout or PortError if they do not (the port stays
+        open unless it is gone). A link lost since :meth:`connect` is reopened
+        and initialised first. From then on stalls and unplugs are recovered
+        as :meth:`start` recovers them.
+        """
+        if self._thread is not None and self._thread.is_alive():
+            raise DeviceTimeout('the supervisor is still stopping: try again')
+        self._stop.clear()
+        link = self._link
+        try:
+            if link is None or link.disconnected.is_set():
+                self._release(send_stop=False)
+                link = self._open()
+                self._initialise(link)
+            self._begin_stream(link)
+        except PortError:
+            self._release(send_stop=False)
+            self.state = State.DISCONNECTED
+            raise
+        except DeviceTimeout:
+            if self._link is not None:
+                self._quiet(self._link)
+            raise
+        self.start()
+
+    def stop_streaming(self, timeout: float = 1.5) -> None:
+        """
+        Stop the stream (0xFA) and the supervisor thread; keep the port open.
+
+        The deactivate phase of a managed node. If the port was lost while
+        streaming it stays closed (DISCONNECTED) until the next start.
+        """
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        link = self._link
+        if link is not None and not link.disconnected.is_set():
+            self._quiet(link)
+
+    def _quiet(self, link: DeviceLink) -> None:
+        """Stop the device's stream and drop what is in flight; the state is READY."""
+        try:
+            link.stop_streaming()
+            time.sleep(0.05)
+            link.port.flush_input()
+            self.state = State.READY
+        except PortError as exc:
+            self._warn(type(exc).__name__, str(exc))
+            self._release(send_stop=False)
+            self.state = State.DISCONNECTED
 
     @property
     def link(self) -> DeviceLink | None:
@@ -223,37 +324,40 @@ class DeviceSupervisor:
         self.advice = finding.message
         self._warn(f'observed {finding.kind}', finding.message)
 
-    def _run(self) -> None:
+    def _run(self, link: DeviceLink | None) -> None:
+        """Stream and recover until stopped; ``link``: one already streaming, or None."""
         while not self._stop.is_set():
-            self.state = State.CONNECTING
-            link = None
             try:
-                link = self._open()
-                self._initialise(link)
+                if link is None:
+                    self.state = State.CONNECTING
+                    link = self._open()
+                    self._initialise(link)
+                    self._begin_stream(link)
                 self._watch(link)
             except PortUnusable as exc:
                 self._fail(exc)
             except PortError as exc:
-                # An unplug is an event; a port that stays missing is a condition.
-                period = EVENT_PERIOD if isinstance(exc, PortDisconnected) else None
-                self._warn(type(exc).__name__, f'{exc} (retrying every '
-                                               f'{self.config.reconnect_interval:g} s)', period)
-            except DeviceTimeout as exc:
                 if not self._stop.is_set():
+                    # An unplug is an event; a port that stays missing is a condition.
+                    period = EVENT_PERIOD if isinstance(exc, PortDisconnected) else None
+                    self._warn(type(exc).__name__,
+                               f'{exc} (retrying every {self.config.reconnect_interval:g} s)',
+                               period)
+            except DeviceTimeout as exc:
+                if not self._stop.is_set():  # else: cut short on purpose
                     self._warn('timeout', f'device not answering: {exc}')
-            finally:
-                if link is not None:
-                    self._close(link, send_stop=self._stop.is_set())
             if self._stop.is_set():
-                break
+                break  # whoever stopped us decides about the port
+            self._release(send_stop=False)
+            link = None
             self.state = State.DISCONNECTED
             self._stop.wait(self.config.reconnect_interval)
-        self.state = State.STOPPED
 
     def _fail(self, exc: PortUnusable) -> None:
         """Give up for good: say why once, stop, and let the entry point exit."""
         self.fatal_error = exc
         self.last_error = str(exc)
+        self.state = State.STOPPED
         self._stop.set()
         if self._on_fatal is not None:
             self._on_fatal(exc)  # the entry point says it, once, as it exits
@@ -266,17 +370,28 @@ class DeviceSupervisor:
         if port.low_latency_state != self.low_latency_state:
             self.low_latency_state = port.low_latency_state
             self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
-        observer = LineObserver(cfg.port, cfg.address, cfg.wireless, cfg.baud,
-                                self._on_finding)
+        observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
+                                                 cfg.baud, self._on_finding)
         link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless,
-                          on_bytes=self._on_bytes, streamed=cfg.stream, observer=observer)
-        self._link = link
+                          on_bytes=self._on_bytes, streamed=cfg.stream, observer=observer,
+                          cancel=self._stop)
+        with self._link_lock:
+            if self._stop.is_set():
+                # Stopped while opening: the caller has released the link already.
+                port.close()
+                raise PortDisconnected(f'{cfg.port}: closed, the driver is stopping')
+            self._link = link
         self.connections += 1
         if self.connections > 1:
             self.reconnects += 1
         return link
 
-    def _close(self, link: DeviceLink, send_stop: bool) -> None:
+    def _release(self, send_stop: bool) -> None:
+        """Close the current link, if any (once, whichever thread gets here first)."""
+        with self._link_lock:
+            link, self._link = self._link, None
+        if link is None:
+            return
         link.stop()
         if send_stop:
             try:
@@ -286,10 +401,16 @@ class DeviceSupervisor:
         link.port.close()
         for key, value in link.parser.stats.as_dict().items():
             self.parser_totals[key] = self.parser_totals.get(key, 0) + value
-        self._link = None
 
-    def _initialise(self, link: DeviceLink) -> None:
-        """Quiet the device, learn what it is, and start the stream."""
+    def _initialise(self, link: DeviceLink, require_answer: bool = False) -> None:
+        """
+        Quiet the device and learn what it is (the stream is not started).
+
+        ``require_answer``: raise DeviceTimeout at once if the device answered
+        neither the ping nor the polled requests, rather than going on to
+        time out on every later request (a configure transition must fail
+        soon, with the reason; the plain node just retries).
+        """
         self.state = State.INITIALISING
         link.port.flush_input()
         link.stop_streaming()
@@ -317,9 +438,22 @@ class DeviceSupervisor:
                              timeout=self.config.request_timeout, retries=2)
             except DeviceTimeout:
                 pass
+        if require_answer and not self.ping_ok and not link.parser.stats.good_frames:
+            silent = (f'node {self.config.address} is silent: no answer to the base station '
+                      f'ping or to polled requests (check it is powered, its address and the '
+                      f'radio channel)' if link.wireless else
+                      f'the sensor on {self.config.port} is silent: no answer to polled '
+                      f'requests (check it is powered and the baud rate)')
+            # What the line carried instead says what to change (address, framing, baud).
+            seen = self._observer.last_finding if self._observer is not None else None
+            raise DeviceTimeout(silent + (f'; observed on the line: {seen.message}'
+                                          if seen is not None else ''))
         self._identify(link)
         self._configure_rate(link)
         self._check_line()
+
+    def _begin_stream(self, link: DeviceLink) -> None:
+        """Start continuous mode on an initialised link; announce it once records arrive."""
         if self.start_continuous(link):
             self._announce_streaming()
 

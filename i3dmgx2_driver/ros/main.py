@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Entry point of ``ros2 run i3dmgx2_driver node``.
+Entry point of ``ros2 run i3dmgx2_driver node``, and the run loop of both executables.
 
 SIGINT and SIGTERM are handled here rather than by rclpy, so that the
 driver can stop the device's stream (0xFA) and close the port while ROS is
@@ -21,12 +21,19 @@ still up, then shut ROS down: a clean exit (code 0) well within 2 s. An
 invalid parameter exits with code 2 and a message that names it and its
 valid range; so does a port that can never work (a path that is no serial
 port), with one FATAL line that says what the path is and how to find the
-right one.
+right one: at once when the node is made, or later when the node reports it
+as ``fatal_error``. :func:`run` does all of it for any driver node class (the plain
+node here, the managed node in ``lifecycle_node.py``): the class is made
+with no arguments and provides ``shutdown()`` and ``finished`` (True once
+it is done by itself, as a managed node after its shutdown transition).
 """
 
+from collections.abc import Callable
 import signal
 import sys
 import threading
+import time
+from typing import Any
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
@@ -40,10 +47,13 @@ from ..device.port import PortUnusable
 EXIT_BAD_PARAMETER = 2
 #: How often the main loop looks at the stop flag (s); signals wake it anyway.
 _SPIN_PERIOD = 0.1
+#: Once a node is finished by itself, how long to keep spinning (s), so that
+#: the reply to the request that finished it still goes out.
+_FINISH_GRACE = 0.3
 
 
-def main(args: list[str] | None = None) -> int:
-    """Run the driver node until SIGINT or SIGTERM."""
+def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
+    """Run the node ``make_node()`` returns until SIGINT, SIGTERM or it is finished."""
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:
@@ -65,17 +75,22 @@ def main(args: list[str] | None = None) -> int:
     code = 0
     try:
         try:
-            node = ImuDriverNode()
+            node = make_node()
         except (ParameterError, PortUnusable) as exc:
             rclpy.logging.get_logger('i3dmgx2_driver').fatal(str(exc))
             return EXIT_BAD_PARAMETER
         executor.add_node(node)
-        while not stop.is_set() and rclpy.ok():
+        while not stop.is_set() and rclpy.ok() and not node.finished:
             executor.spin_once(timeout_sec=_SPIN_PERIOD)
-            if node.fatal_error is not None:
-                node.get_logger().fatal(str(node.fatal_error))
+            fatal = getattr(node, 'fatal_error', None)
+            if fatal is not None:
+                node.get_logger().fatal(str(fatal))
                 code = EXIT_BAD_PARAMETER
                 break
+        grace = time.monotonic() + _FINISH_GRACE
+        while node.finished and not stop.is_set() and time.monotonic() < grace \
+                and rclpy.ok():
+            executor.spin_once(timeout_sec=0.05)
     finally:
         if node is not None:
             node.shutdown()
@@ -86,6 +101,11 @@ def main(args: list[str] | None = None) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     return code
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the driver node until SIGINT or SIGTERM."""
+    return run(ImuDriverNode, args)
 
 
 if __name__ == '__main__':

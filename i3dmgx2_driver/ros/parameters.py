@@ -227,7 +227,9 @@ def _declare(node: Node, spec: Spec) -> Any:
     problem = f'parameter {spec.name!r} must be {_valid_range(spec)}'
     _accept_integer(node, spec)
     try:
-        if spec.default is _REQUIRED:
+        if node.has_parameter(spec.name):
+            pass  # a managed node configured again: read what is there
+        elif spec.default is _REQUIRED:
             node.declare_parameter(spec.name, spec.kind, _descriptor(spec))
         else:
             node.declare_parameter(spec.name, spec.default, _descriptor(spec))
@@ -270,7 +272,13 @@ def _check(spec: Spec, value: Any) -> Any:
 
 
 def declare_parameters(node: Node, extra: tuple[Spec, ...] = ()) -> dict:
-    """Declare every parameter on ``node``; return the validated values by name."""
+    """
+    Declare every parameter on ``node``; return the validated values by name.
+
+    Parameters declared already (by an earlier call that failed, or by the
+    last configure of a managed node) are read, not declared again, and
+    checked all the same: the same bad value gives the same message.
+    """
     values = {}
     for spec in (*SPECS, *extra):
         values[spec.name] = _check(spec, _declare(node, spec))

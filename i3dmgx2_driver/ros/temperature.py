@@ -25,8 +25,10 @@ for it. Polls are skipped while the stream is not running (connecting, or
 paused for a capture or the self test).
 """
 
+from collections.abc import Callable
 import threading
 import time
+from typing import Any
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.node import Node
@@ -50,12 +52,17 @@ class TemperaturePoller:
     """
     Publish the accelerometer temperature on ``imu/temperature`` every ``period`` s.
 
-    ``node`` provides ``supervisor`` and ``messages.frame_id`` (the IMU frame).
-    ``period`` 0 disables it: no publisher, no thread.
+    ``node`` makes the publisher (with ``create_publisher``, by default its
+    own: a managed node passes its lifecycle publisher factory) and logs;
+    ``driver`` (the DriverCore) provides ``supervisor`` and
+    ``messages.frame_id`` (the IMU frame). ``period`` 0 disables it: no
+    publisher, no thread.
     """
 
-    def __init__(self, node: Node, period: float, qos: QoSProfile | int = 10) -> None:
+    def __init__(self, node: Node, driver: Any, period: float, qos: QoSProfile | int = 10,
+                 create_publisher: Callable[..., Any] | None = None) -> None:
         self.node = node
+        self.driver = driver
         self.period = period
         self.published = 0
         self.failures = 0
@@ -66,9 +73,10 @@ class TemperaturePoller:
         self._thread: threading.Thread | None = None
         self.publisher = None
         if period > 0:
-            self.publisher = node.create_publisher(Temperature, 'imu/temperature', qos)
+            create = create_publisher or node.create_publisher
+            self.publisher = create(Temperature, 'imu/temperature', qos)
             self._msg = Temperature()
-            self._msg.header.frame_id = node.messages.frame_id
+            self._msg.header.frame_id = driver.messages.frame_id
             self._msg.variance = 0.0
             self._thread = threading.Thread(target=self._run, name='gx2-temperature',
                                             daemon=True)
@@ -85,13 +93,22 @@ class TemperaturePoller:
         if self._thread is not None:
             self._thread.join(timeout=0.1)
 
+    def destroy(self) -> None:
+        """Stop, and remove the publisher from the node (the managed node's cleanup)."""
+        self.stop()
+        if self.publisher is not None:
+            destroy = getattr(self.node, 'destroy_lifecycle_publisher',
+                              self.node.destroy_publisher)
+            destroy(self.publisher)
+            self.publisher = None
+
     def _run(self) -> None:
         while not self._stop.wait(self.period):
             self.poll()
 
     def poll(self) -> bool:
         """Read the temperatures once and publish; False if skipped or failed."""
-        supervisor = self.node.supervisor
+        supervisor = self.driver.supervisor
         link = supervisor.link
         if link is None or supervisor.state is not State.STREAMING:
             return False
@@ -108,8 +125,11 @@ class TemperaturePoller:
         msg = self._msg
         msg.temperature = self.latest
         set_stamp(msg.header, read_time)
+        publisher = self.publisher
+        if publisher is None:
+            return False  # destroyed under this poll (the managed node's cleanup)
         try:
-            self.publisher.publish(msg)
+            publisher.publish(msg)
         except RCLError:
             return False  # ROS is shutting down
         self.published += 1

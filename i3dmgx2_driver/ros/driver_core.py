@@ -1,0 +1,275 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The driver behind both executables: device records in, sensor_msgs out, on time.
+
+:class:`DriverCore` is everything the driver does for one configuration:
+the publishers, the message factory, stamping and loss counting, the
+device supervisor, the services, the temperature poller and the raw
+capture. It lives on an rclpy node it does not own: the plain node
+(``imu_node.py``) makes one at start and starts its supervisor at once; the
+managed node (``lifecycle_node.py``) makes one at each configure, with
+lifecycle publishers, drives the supervisor's phases from its transitions
+and destroys the core at cleanup. Neither holds a copy of this code.
+
+The supervisor's reader thread calls :meth:`DriverCore._on_record` for
+every valid record, which stamps it, packs its messages and publishes at
+once. The executor is left free for parameters, services and diagnostics,
+and nothing it does can delay a sample.
+
+The first-contact checks live here too, so that both executables run them:
+:func:`load_config` names every parameter override the node does not
+declare, and the core refuses a port path that can never work
+(:class:`~..device.port.PortUnusable`, before anything is started), and
+keeps in :attr:`DriverCore.fatal_error` the one the supervisor finds later.
+"""
+
+from collections.abc import Callable
+import sys
+import threading
+import time
+
+from rclpy._rclpy_pybind11 import RCLError
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Imu, MagneticField
+
+from .conversions import mag_is_valid, MessageFactory
+from .parameters import declare_parameters, driver_config, DriverConfig, SPECS
+from .raw_capture import RawCapture
+from .services import DeviceServices
+from .temperature import TemperaturePoller
+from .unknown_parameters import warn_unknown_parameters
+from ..codec import line_budget
+from ..codec.data_rate import ticks_per_cycle
+from ..codec.framing import DataPacket
+from ..codec.timer import TimerUnwrapper
+from ..device.clock import DeviceClock
+from ..device.port import check_port_path, PortError
+from ..device.supervisor import DeviceSupervisor, SupervisorConfig
+
+
+def load_config(node: Node) -> DriverConfig:
+    """
+    Declare and validate the parameters on ``node``; return the configuration.
+
+    Raises ParameterError for a missing or bad one. Every override whose
+    name the node does not declare is named in a warning first, with the
+    closest real name, also when a required one is missing ('adress'
+    explains why 'address' is).
+    """
+    try:
+        values = declare_parameters(node)
+    finally:
+        warn_unknown_parameters(node, [spec.name for spec in SPECS])
+    return driver_config(values)
+
+
+class StreamStats:
+    """What the node saw of the stream: for diagnostics and tests."""
+
+    def __init__(self) -> None:
+        self.published = 0
+        self.unpublished = 0
+        self.mag_published = 0
+        self.lost = 0
+        self.other_records = 0
+        self.device_resets = 0
+        self.first_time = 0.0
+        self.last_time = 0.0
+        self.last_ticks: int | None = None
+
+
+def publisher_qos(config: DriverConfig) -> QoSProfile:
+    """Return the QoS the parameters ask for, for every data publisher."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=config.qos_depth,
+        reliability=(ReliabilityPolicy.RELIABLE if config.qos_reliability == 'reliable'
+                     else ReliabilityPolicy.BEST_EFFORT))
+
+
+class DriverCore:
+    """
+    Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField.
+
+    ``node`` is the rclpy node the publishers, services and logs belong to;
+    ``config`` the validated parameters. ``lifecycle``: make the data
+    publishers with ``node.create_lifecycle_publisher`` (they publish only
+    while the node is active) and start with :attr:`publishing` off.
+    ``refusal`` tells the services why they must refuse now ('' to serve).
+    The core starts nothing: its owner drives :attr:`supervisor`. A port
+    path that exists but is no serial port raises PortUnusable here, before
+    anything is made.
+    """
+
+    def __init__(self, node: Node, config: DriverConfig, lifecycle: bool = False,
+                 refusal: Callable[[], str] | None = None) -> None:
+        check_port_path(config.port)
+        self.node = node
+        self.config = cfg = config
+        #: Why the port can never work, once the supervisor found out.
+        self.fatal_error: PortError | None = None
+        qos = publisher_qos(cfg)
+        self.stream = cfg.stream_choice
+        self._record_type = self.stream.record_type
+        create = node.create_lifecycle_publisher if lifecycle else node.create_publisher
+        self.imu_pub = create(Imu, 'imu/raw_data', qos)
+        self.mag_pub = (create(MagneticField, 'imu/mag', qos)
+                        if cfg.publish_mag and self.stream.mag else None)
+        self.messages = MessageFactory(
+            cfg.frame_id, cfg.frame_convention, cfg.orientation_stddev,
+            cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
+            cfg.magnetic_field_stddev, self.stream)
+        self.stats = StreamStats()
+        self.unwrapper = TimerUnwrapper()
+        self.clock_model = DeviceClock()
+        #: Whether records are published: always for the plain node; while
+        #: active for the managed one (records still in flight after a
+        #: deactivate are counted as unpublished, not as published).
+        self.publishing = not lifecycle
+        self._use_device_time = cfg.time_source == 'device'
+        self._wire_time = line_budget.wire_time(self.stream.code, cfg.baud, cfg.wireless)
+        self._publish_lock = threading.Lock()
+        # Publish the messages ready-serialized (conversions.py says why) when they read
+        # back right with this middleware; otherwise as message objects.
+        if self.messages.serialized_matches():
+            self._imu_message, self._mag_message = (self.messages.imu_cdr,
+                                                    self.messages.mag_cdr)
+        else:
+            self._imu_message, self._mag_message = (self.messages.fill_imu,
+                                                    self.messages.fill_mag)
+        #: Called in the reader thread right after each Imu message is published, with
+        #: (record, read time, stamp): for benchmarks and tests. None costs nothing.
+        self.on_published = None
+        self.raw_capture = RawCapture(
+            cfg.capture_file, node.get_logger(), port=cfg.port, address=cfg.address,
+            baud=cfg.baud, wireless=cfg.wireless, node=node.get_fully_qualified_name())
+        self.supervisor = DeviceSupervisor(
+            SupervisorConfig(
+                port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
+                low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
+                reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
+                stream=self.stream.code),
+            on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
+            on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
+            on_fatal=self._on_fatal)
+        self.device_services = DeviceServices(node, self, refusal=refusal)
+        self.temperature = TemperaturePoller(node, self, cfg.temperature_period, qos,
+                                             create_publisher=create)
+        node.get_logger().info(
+            f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
+            f'stream {self.stream.label}, frame {self.messages.frame_id} '
+            f'({cfg.frame_convention}), '
+            f'time source {cfg.time_source}')
+
+    def _on_fatal(self, error: PortError) -> None:
+        """Note that the port can never work: the entry point says so, once, and ends."""
+        self.fatal_error = error
+
+    def _on_connect(self) -> None:
+        """Re-anchor time on a new link: the device may have been power-cycled."""
+        with self._publish_lock:
+            self.unwrapper.reset()
+            self.clock_model.reset()
+            self.stats.last_ticks = None
+
+    def forget_last_sample(self) -> None:
+        """Let the next record start afresh: a deliberate pause is no packet loss."""
+        with self._publish_lock:
+            self.stats.last_ticks = None
+
+    def _expected_ticks(self) -> int | None:
+        divider = self.supervisor.divider
+        return ticks_per_cycle(divider) if divider else None
+
+    def _on_record(self, packet: DataPacket, read_time: float) -> None:
+        """Stamp and publish one record (runs in the reader thread)."""
+        record = packet.record
+        if type(record) is not self._record_type:
+            self.stats.other_records += 1
+            return
+        if not self.publishing:
+            self.stats.unpublished += 1
+            return
+        with self._publish_lock:
+            stats = self.stats
+            ticks = self.unwrapper.update(record.timer, read_time)
+            if self.unwrapper.last_was_reset:
+                stats.device_resets += 1
+                self.clock_model.reset()
+            elif stats.last_ticks is not None:
+                expected = self._expected_ticks()
+                if expected:
+                    gap = round((ticks - stats.last_ticks) / expected) - 1
+                    if gap > 0:
+                        stats.lost += gap
+            stats.last_ticks = ticks
+            if self._use_device_time:
+                stamp = self.clock_model.stamp(ticks, read_time, self._wire_time)
+            else:
+                stamp = read_time
+            try:
+                self.imu_pub.publish(self._imu_message(record, stamp))
+            except RCLError:
+                # ROS is shutting down under the reader: nothing left to publish to.
+                stats.unpublished += 1
+                return
+            on_published = self.on_published
+            if on_published is not None:
+                on_published(record, read_time, stamp)
+            stats.published += 1
+            if not stats.first_time:
+                stats.first_time = read_time
+            stats.last_time = read_time
+            # mag_pub exists only for streams with a field (named 'mag' in each layout).
+            if self.mag_pub is not None and mag_is_valid(record.mag):
+                self.mag_pub.publish(self._mag_message(record.mag, stamp))
+                stats.mag_published += 1
+
+    def shutdown(self, report: bool = True) -> None:
+        """Stop the device stream and close the port (bounded in time); log it if ``report``."""
+        start = time.monotonic()
+        self.device_services.stop()
+        self.temperature.stop()
+        self.supervisor.stop()
+        self.device_services.wait_idle(1.0)
+        self.raw_capture.close()
+        if not report:
+            return
+        message = (f'stopped: {self.stats.published} records published, port closed '
+                   f'({time.monotonic() - start:.2f} s)')
+        if self.node.context.ok():
+            self.node.get_logger().info(message)
+        else:
+            # After SIGINT the context is gone and /rosout with it: plain stderr.
+            print(f'[i3dmgx2_driver] {message}', file=sys.stderr, flush=True)
+
+    def destroy(self) -> None:
+        """
+        Remove the core's publishers and services from the node (after shutdown).
+
+        For the managed node's cleanup: a later configure makes a new core
+        with the parameters then in force.
+        """
+        node = self.node
+        self.device_services.destroy()
+        self.temperature.destroy()
+        for publisher in (self.imu_pub, self.mag_pub):
+            if publisher is None:
+                continue
+            if hasattr(node, 'destroy_lifecycle_publisher'):
+                node.destroy_lifecycle_publisher(publisher)
+            else:
+                node.destroy_publisher(publisher)
