@@ -135,3 +135,16 @@ def test_judge_is_quiet_on_a_short_or_empty_window():
     assert judge(Window(2.0, 0, {}, 0, 0), PORT, 95, True, 115200) is None
     assert judge(Window(5.0, 900, {95: 3}, 0, 0), PORT, 95, True, 115200) is None
     assert judge(Window(5.0, 900, {}, 1, 0), PORT, 95, True, 115200) is None  # one is chance
+
+
+def test_a_resumed_observer_starts_a_fresh_window():
+    watcher, _ = observer(address=95)
+    assert run(watcher, [b''] * 25) == []  # 2.4 s of silence
+    watcher.pause()
+    assert not watcher.active
+    watcher.resume()
+    # The window restarts: 2.4 s more of silence is still no finding.
+    assert run(watcher, [b''] * 25, start=110.0) == []
+    assert watcher.last_finding is None
+    assert run(watcher, [b''] * 7, start=112.5)[0].kind == obs.SILENCE
+    assert watcher.last_finding.kind == obs.SILENCE

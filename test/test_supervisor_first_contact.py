@@ -91,3 +91,25 @@ def test_configure_of_a_silent_address_says_what_is_heard_instead():
     assert 'observed on the line: packets arrive from node 95' in text
     assert 'set -p address:=95' in text
     assert not [m for level, m in log.lines if 'streaming' in m]
+
+
+def test_a_long_operation_with_the_stream_paused_is_no_silence():
+    # Wired: the stop (0xFA) gets no reply, so for the operation's 4 s not one byte
+    # comes; the driver asked for that quiet, and the observer must not call it silence.
+    config = SimulatorConfig(wireless=False, seed=159)
+    with PtySimulator(config) as sim:
+        sup, log = supervisor(sim.port, wireless=False)
+        sup.start()
+        try:
+            deadline = threading.Event()
+            for _ in range(100):
+                if sup.state is State.STREAMING:
+                    break
+                deadline.wait(0.1)
+            assert sup.state is State.STREAMING, log.lines
+            sup.run_paused(lambda link: deadline.wait(4.0))
+            assert sup.state is State.STREAMING
+        finally:
+            sup.stop()
+    assert not [m for level, m in log.lines if 'not one byte' in m], log.lines
+    assert sup.advice == ''

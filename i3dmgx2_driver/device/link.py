@@ -155,7 +155,8 @@ class DeviceLink:
             now = time.time()
             if data and self._on_bytes is not None:
                 self._on_bytes(data, now)
-            if observer is not None and now - self.last_data_time > QUIET_AFTER:
+            if observer is not None and observer.active \
+                    and now - self.last_data_time > QUIET_AFTER:
                 observer.feed(data, now, self.last_data_time)
             events = parser.feed(data) if data else parser.idle()
             for event in events:

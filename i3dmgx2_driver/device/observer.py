@@ -27,7 +27,9 @@ window, which starts afresh whenever a packet of ours arrives, and reports a
 :class:`Finding` that names what it observed and the parameter to change.
 
 It costs nothing once records flow: the link does not call it then (the
-reader thread is the latency path).
+reader thread is the latency path). It is paused while the driver itself
+keeps the device quiet (a service operation, a managed node inactive), when
+silence is no symptom.
 """
 
 from collections import Counter
@@ -154,6 +156,9 @@ class LineObserver:
         self._on_finding = on_finding
         #: The latest finding on this link, if any (kept across windows).
         self.last_finding: Finding | None = None
+        #: False while the driver keeps the device quiet on purpose: the link
+        #: then feeds nothing, and the next window starts when it resumes.
+        self.active = True
         self._epoch: float | None = None
         self._start = 0.0
         self._next_judge = 0.0
@@ -172,6 +177,15 @@ class LineObserver:
         self._wired_records = 0
         self._bytes = 0
         self._base = (self._packets.stats.bytes_skipped, self._wired.stats.bytes_skipped)
+
+    def pause(self) -> None:
+        """Stop observing: the device is quiet on purpose."""
+        self.active = False
+
+    def resume(self) -> None:
+        """Observe again, from a fresh window."""
+        self._epoch = None
+        self.active = True
 
     def window(self, now: float) -> Window:
         """Return what the current window saw up to ``now``."""

@@ -235,6 +235,7 @@ class DeviceSupervisor:
             self.state = State.STOPPED
             raise
         self.state = State.READY
+        self._observe(False)
 
     def start_streaming(self) -> None:
         """
@@ -249,6 +250,7 @@ class DeviceSupervisor:
         if self._thread is not None and self._thread.is_alive():
             raise DeviceTimeout('the supervisor is still stopping: try again')
         self._stop.clear()
+        self._observe(True)
         link = self._link
         try:
             if link is None or link.disconnected.is_set():
@@ -287,10 +289,20 @@ class DeviceSupervisor:
             time.sleep(0.05)
             link.port.flush_input()
             self.state = State.READY
+            self._observe(False)
         except PortError as exc:
             self._warn(type(exc).__name__, str(exc))
             self._release(send_stop=False)
             self.state = State.DISCONNECTED
+
+    def _observe(self, on: bool) -> None:
+        """Resume or pause the line observer: silence is a symptom only while we ask."""
+        observer = self._observer
+        if observer is not None:
+            if on:
+                observer.resume()
+            else:
+                observer.pause()
 
     @property
     def link(self) -> DeviceLink | None:
@@ -621,12 +633,14 @@ class DeviceSupervisor:
             raise DeviceTimeout(f'device not streaming (state: {self.state.value})')
         self._paused.set()
         self.state = State.PAUSED
+        self._observe(False)  # a long operation (a 30 s bias capture) is quiet on purpose
         try:
             link.stop_streaming()
             time.sleep(0.05)
             return operation(link)
         finally:
             try:
+                self._observe(True)
                 if not self._stop.is_set():
                     self.start_continuous(link)
                     self.state = State.STREAMING
