@@ -43,9 +43,6 @@ from ..codec.data_rate import (  # noqa: F401
 
 #: The record streamed unless the configuration names another.
 STREAM_COMMAND = streams.DEFAULT.code
-#: Records polled before continuous mode is first asked for (see _initialise);
-#: the first one that is not the streamed record is used.
-WARM_UP_POLLS = (layouts.ACCEL_ANG_RATE, layouts.EULER_ANGLES)
 
 IDENTIFIER_NAMES = ('model_number', 'serial_number', 'model_name', 'options')
 
@@ -221,7 +218,7 @@ class DeviceSupervisor:
             self.low_latency_state = port.low_latency_state
             self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
         link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless,
-                          on_bytes=self._on_bytes, streamed=cfg.stream)
+                          on_bytes=self._on_bytes)
         self._link = link
         self.connections += 1
         if self.connections > 1:
@@ -259,12 +256,9 @@ class DeviceSupervisor:
                                    f'the radio channel')
         # The thesis author found continuous mode unreliable as the very first
         # command: a couple of polled requests first make it dependable.
-        # (A record other than the streamed one: a reply of the streamed code would
-        # also reach the consumer, as a record of the stream.)
-        warm_up = next(code for code in WARM_UP_POLLS if code != self.config.stream)
         for _ in range(2):
             try:
-                link.request(bytes((warm_up,)), warm_up,
+                link.request(bytes((layouts.ACCEL_ANG_RATE,)), layouts.ACCEL_ANG_RATE,
                              timeout=self.config.request_timeout, retries=2)
             except DeviceTimeout:
                 pass
@@ -364,6 +358,9 @@ class DeviceSupervisor:
         """Ask for continuous mode of the configured record until records actually arrive."""
         cfg = self.config
         period = 1.0 / self.expected_rate_hz if self.divider else 0.01
+        # From now on a record of the streamed code is a sample, even one that also
+        # answers a polled request.
+        link.streamed = cfg.stream
         for _ in range(cfg.continuous_retries):
             before = link.records
             try:
@@ -422,6 +419,9 @@ class DeviceSupervisor:
         self.state = State.PAUSED
         try:
             link.stop_streaming()
+            # Paused, a polled record of the streamed code (a self test's 0xC2, with
+            # the built-in test skewing it) is a reply only, never a sample.
+            link.streamed = None
             time.sleep(0.05)
             return operation(link)
         finally:
