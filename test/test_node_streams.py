@@ -34,7 +34,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from i3dmgx2_driver.codec import streams
 from i3dmgx2_driver.codec.data_rate import RATE_DIVIDER_ADDRESS
-from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
+from i3dmgx2_driver.simulator import FaultConfig, MotionConfig, PtySimulator, SimulatorConfig
 import numpy as np
 import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
@@ -157,19 +157,10 @@ def test_values_exact_and_missing_marked(run):
         else:
             assert tuple(q) == (0.0, 0.0, 0.0, 0.0)
             assert list(msg.orientation_covariance) == MISSING
-
-
-def test_gravity_points_up(run):
-    """REP-145 at rest, for streams with both acceleration and orientation."""
-    stream, convention = run['stream'], run['convention']
-    if not (stream.accel and stream.orientation):
-        pytest.skip('needs acceleration and orientation')
-    msg = run['imu'][-1]
-    q = msg.orientation
-    world = Rotation.from_quat([q.x, q.y, q.z, q.w]).apply(
-        [msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z])
-    up = G if convention == 'enu' else -G
-    assert world[2] == pytest.approx(up, abs=0.5)
+        if stream.accel and stream.orientation:
+            # REP-145 at rest: gravity's reaction along the world's up (down in NED).
+            world = Rotation.from_quat(q).apply(a)
+            assert world[2] == pytest.approx(G if convention == 'enu' else -G, abs=0.5)
 
 
 def test_mag_topic_exactly_when_the_record_has_a_field(run):
@@ -331,3 +322,32 @@ def test_loss_is_counted_from_the_timer_for_every_record(stream):
                 listener, lambda s: int(values(s)['published']) >= published)
             assert int(values(status)['lost (timer gaps)']) == dropped
             assert node.stop()[0] == 0
+
+
+@pytest.mark.usefixtures('_domain')
+def test_polled_records_of_the_streamed_code_are_not_samples_while_paused():
+    """The self test polls 0xC2 with the built-in test skewing it: never published."""
+    from std_srvs.srv import Trigger
+
+    stream = streams.BY_NAME['inertial']
+    with PtySimulator(SimulatorConfig(seed=54, motion=MotionConfig(static=True))) as sim, \
+            Listener({'imu/raw_data': Imu}) as listener:
+        node = NodeProcess({'port': sim.port, 'address': 95, 'stream': 'inertial'})
+        with node:
+            assert len(listener.wait_for('imu/raw_data', 50, timeout=30)) >= 50, node.output()
+            client = listener.node.create_client(Trigger, '/i3dmgx2_driver/self_test')
+            assert client.wait_for_service(timeout_sec=30)
+            future = client.call_async(Trigger.Request())
+            deadline = time.monotonic() + 60
+            while not future.done() and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert future.done(), node.output()
+            assert 'accel & angular rate respond (0xC2)' in future.result().message
+            count = len(listener.received('imu/raw_data'))
+            assert len(listener.wait_for('imu/raw_data', count + 50, timeout=30)) > count
+            assert node.stop()[0] == 0
+        polled = [t for t in sim.truth if t.source == 'reply'
+                  and type(t.record) is stream.record_type]
+        assert len(polled) > 5  # the start-up polls and the self test's
+        pairs = match(listener.received('imu/raw_data'), stream_truth(sim, stream), 'enu')
+        assert all(entry is not None for _, entry in pairs), 'a polled reply was published'

@@ -84,8 +84,9 @@ class DeviceLink:
     every data packet not claimed by a pending request. ``on_bytes``, if
     given, receives every read's bytes as read, before they are parsed (a
     raw capture); it runs in the reader thread and must not raise or block.
-    ``streamed`` is the command byte of the streamed record: a polled reply
-    of that code is both the reply and a record of the stream.
+    ``streamed`` is the command byte of the record being streamed, None
+    while the device is not streaming (the supervisor sets it): a polled
+    reply of that code is then both the reply and a record of the stream.
     ``observer``, if given, is fed every read while no packet of ours has
     arrived for ``QUIET_AFTER`` s (never while records flow).
     ``cancel``, if given and set, makes requests give up within tens of
@@ -96,7 +97,7 @@ class DeviceLink:
     def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
                  wireless: bool = True, read_timeout: float = 0.2,
                  on_bytes: BytesCallback | None = None,
-                 streamed: int = layouts.ACCEL_ANG_RATE_MAG_ORIENTATION,
+                 streamed: int | None = None,
                  observer: LineObserver | None = None,
                  cancel: threading.Event | None = None) -> None:
         self.port = port

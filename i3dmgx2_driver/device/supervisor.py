@@ -61,9 +61,6 @@ from ..codec.data_rate import (  # noqa: F401
 
 #: The record streamed unless the configuration names another.
 STREAM_COMMAND = streams.DEFAULT.code
-#: Records polled before continuous mode is first asked for (see _initialise);
-#: the first one that is not the streamed record is used.
-WARM_UP_POLLS = (layouts.ACCEL_ANG_RATE, layouts.EULER_ANGLES)
 
 IDENTIFIER_NAMES = ('model_number', 'serial_number', 'model_name', 'options')
 #: A condition that persists (a missing port, a silent sensor) is said once,
@@ -385,8 +382,7 @@ class DeviceSupervisor:
         observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
                                                  cfg.baud, self._on_finding)
         link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless,
-                          on_bytes=self._on_bytes, streamed=cfg.stream, observer=observer,
-                          cancel=self._stop)
+                          on_bytes=self._on_bytes, observer=observer, cancel=self._stop)
         with self._link_lock:
             if self._stop.is_set():
                 # Stopped while opening: the caller has released the link already.
@@ -441,12 +437,9 @@ class DeviceSupervisor:
                                    f'the radio channel')
         # The thesis author found continuous mode unreliable as the very first
         # command: a couple of polled requests first make it dependable.
-        # (A record other than the streamed one: a reply of the streamed code would
-        # also reach the consumer, as a record of the stream.)
-        warm_up = next(code for code in WARM_UP_POLLS if code != self.config.stream)
         for _ in range(2):
             try:
-                link.request(bytes((warm_up,)), warm_up,
+                link.request(bytes((layouts.ACCEL_ANG_RATE,)), layouts.ACCEL_ANG_RATE,
                              timeout=self.config.request_timeout, retries=2)
             except DeviceTimeout:
                 pass
@@ -572,6 +565,9 @@ class DeviceSupervisor:
         """
         cfg = self.config
         period = 1.0 / self.expected_rate_hz if self.divider else 0.01
+        # From now on a record of the streamed code is a sample, even one that also
+        # answers a polled request.
+        link.streamed = cfg.stream
         for _ in range(cfg.continuous_retries):
             before = link.records
             try:
@@ -636,6 +632,9 @@ class DeviceSupervisor:
         self._observe(False)  # a long operation (a 30 s bias capture) is quiet on purpose
         try:
             link.stop_streaming()
+            # Paused, a polled record of the streamed code (a self test's 0xC2, with
+            # the built-in test skewing it) is a reply only, never a sample.
+            link.streamed = None
             time.sleep(0.05)
             return operation(link)
         finally:
