@@ -34,11 +34,13 @@ from collections.abc import Callable
 import sys
 import threading
 import time
+from typing import NamedTuple
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Imu, MagneticField
+from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from .conversions import mag_is_valid, MessageFactory
 from .parameters import DriverConfig
@@ -54,6 +56,10 @@ from ..device.supervisor import DeviceSupervisor, SupervisorConfig
 
 #: Bits per byte on the line: start, 8 data, stop.
 _BITS_PER_BYTE = 10
+#: Whether ready-serialized messages read back right, by the message factory's
+#: settings: checked once per process, because a managed node makes a core at
+#: every configure and rclpy's deserialize_message keeps a little memory per call.
+_SERIALIZED_MATCHES: dict[tuple, bool] = {}
 
 
 def wire_time(baud: int, wireless: bool) -> float:
@@ -78,6 +84,14 @@ class StreamStats:
         self.last_ticks: int | None = None
 
 
+class Publishers(NamedTuple):
+    """The data publishers; None where the parameters turn a topic off."""
+
+    imu: Publisher
+    mag: Publisher | None
+    temperature: Publisher | None
+
+
 def publisher_qos(config: DriverConfig) -> QoSProfile:
     """Return the QoS the parameters ask for, for every data publisher."""
     return QoSProfile(
@@ -86,43 +100,66 @@ def publisher_qos(config: DriverConfig) -> QoSProfile:
                      else ReliabilityPolicy.BEST_EFFORT))
 
 
+def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False) -> Publishers:
+    """
+    Make the data publishers on ``node``: lifecycle publishers if ``lifecycle``.
+
+    A managed node makes them once and keeps them across configure/cleanup
+    cycles: destroying a publisher while a multi-threaded executor builds
+    its wait set can crash the executor in rclpy (Jazzy), because the
+    publisher's QoS event handlers are waitables whose invalid handles it
+    does not skip (ros2/rclpy#1284). Its parameters are read-only, so the
+    publishers it made first are the ones every later configure needs.
+    """
+    qos = publisher_qos(config)
+    create = node.create_lifecycle_publisher if lifecycle else node.create_publisher
+    return Publishers(
+        create(Imu, 'imu/raw_data', qos),
+        create(MagneticField, 'imu/mag', qos) if config.publish_mag else None,
+        create(Temperature, 'imu/temperature', qos) if config.temperature_period > 0
+        else None)
+
+
 class DriverCore:
     """
     Publish the 3DM-GX2's 0xCC records as sensor_msgs/Imu and MagneticField.
 
-    ``node`` is the rclpy node the publishers, services and logs belong to;
-    ``config`` the validated parameters. ``lifecycle``: make the data
-    publishers with ``node.create_lifecycle_publisher`` (they publish only
-    while the node is active) and start with :attr:`publishing` off.
+    ``node`` is the rclpy node the services and logs belong to; ``config``
+    the validated parameters. ``publishers``: the data publishers to use
+    (a managed node's lifecycle publishers, see :func:`create_publishers`);
+    by default the core makes plain ones. ``publishing`` False: records are
+    counted, not published, until the owner turns :attr:`publishing` on.
     ``refusal`` tells the services why they must refuse now ('' to serve).
     The core starts nothing: its owner drives :attr:`supervisor`.
     """
 
-    def __init__(self, node: Node, config: DriverConfig, lifecycle: bool = False,
+    def __init__(self, node: Node, config: DriverConfig,
+                 publishers: Publishers | None = None, publishing: bool = True,
                  refusal: Callable[[], str] | None = None) -> None:
         self.node = node
         self.config = cfg = config
-        qos = publisher_qos(cfg)
-        create = node.create_lifecycle_publisher if lifecycle else node.create_publisher
-        self.imu_pub = create(Imu, 'imu/raw_data', qos)
-        self.mag_pub = create(MagneticField, 'imu/mag', qos) if cfg.publish_mag else None
-        self.messages = MessageFactory(
-            cfg.frame_id, cfg.frame_convention, cfg.orientation_stddev,
-            cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
-            cfg.magnetic_field_stddev)
+        self.publishers = publishers or create_publishers(node, cfg)
+        self.imu_pub = self.publishers.imu
+        self.mag_pub = self.publishers.mag
+        settings = (cfg.frame_id, cfg.frame_convention, cfg.orientation_stddev,
+                    cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
+                    cfg.magnetic_field_stddev)
+        self.messages = MessageFactory(*settings)
         self.stats = StreamStats()
         self.unwrapper = TimerUnwrapper()
         self.clock_model = DeviceClock()
         #: Whether records are published: always for the plain node; while
         #: active for the managed one (records still in flight after a
         #: deactivate are counted as unpublished, not as published).
-        self.publishing = not lifecycle
+        self.publishing = publishing
         self._use_device_time = cfg.time_source == 'device'
         self._wire_time = wire_time(cfg.baud, cfg.wireless)
         self._publish_lock = threading.Lock()
         # Publish the messages ready-serialized (conversions.py says why) when they read
         # back right with this middleware; otherwise as message objects.
-        if self.messages.serialized_matches():
+        if settings not in _SERIALIZED_MATCHES:
+            _SERIALIZED_MATCHES[settings] = self.messages.serialized_matches()
+        if _SERIALIZED_MATCHES[settings]:
             self._imu_message, self._mag_message = (self.messages.imu_cdr,
                                                     self.messages.mag_cdr)
         else:
@@ -142,8 +179,8 @@ class DriverCore:
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None)
         self.device_services = DeviceServices(node, self, refusal=refusal)
-        self.temperature = TemperaturePoller(node, self, cfg.temperature_period, qos,
-                                             create_publisher=create)
+        self.temperature = TemperaturePoller(node, self, cfg.temperature_period,
+                                             self.publishers.temperature)
         node.get_logger().info(
             f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
             f'frame {self.messages.frame_id} ({cfg.frame_convention}), '
@@ -228,18 +265,10 @@ class DriverCore:
 
     def destroy(self) -> None:
         """
-        Remove the core's publishers and services from the node (after shutdown).
+        Remove the core's services from the node (after shutdown).
 
-        For the managed node's cleanup: a later configure makes a new core
-        with the parameters then in force.
+        For the managed node's cleanup: a later configure makes a new core.
+        The publishers stay: they belong to whoever made them (see
+        :func:`create_publishers` for why a managed node keeps them).
         """
-        node = self.node
         self.device_services.destroy()
-        self.temperature.destroy()
-        for publisher in (self.imu_pub, self.mag_pub):
-            if publisher is None:
-                continue
-            if hasattr(node, 'destroy_lifecycle_publisher'):
-                node.destroy_lifecycle_publisher(publisher)
-            else:
-                node.destroy_publisher(publisher)
