@@ -48,10 +48,14 @@ for _path in (str(REPO), str(REPO / 'test')):
 
 import ros_harness  # noqa: E402 - test/ is on the path only from here on
 
+from i3dmgx2_driver.codec import layouts, line_budget  # noqa: E402, I100 - likewise
+
 #: Node address the simulator and the node agree on.
 ADDRESS = 95
-#: Highest rate of 88-byte packets a 115200-baud 8N1 line carries (11,520 bytes/s).
-LINE_MAX_RATE_HZ = 11520 / 88
+#: Highest rate of 0xCC packets (88 bytes through the base station) a 115200-baud line
+#: carries (11,520 bytes/s), from the codec's layout table.
+LINE_MAX_RATE_HZ = (line_budget.line_bytes_per_second(115200)
+                    / line_budget.packet_size(layouts.ACCEL_ANG_RATE_MAG_ORIENTATION, True))
 
 
 class Result(NamedTuple):

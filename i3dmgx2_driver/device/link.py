@@ -83,6 +83,9 @@ class DeviceLink:
     every data packet not claimed by a pending request. ``on_bytes``, if
     given, receives every read's bytes as read, before they are parsed (a
     raw capture); it runs in the reader thread and must not raise or block.
+    ``streamed`` is the command byte of the record being streamed, None
+    while the device is not streaming (the supervisor sets it): a polled
+    reply of that code is then both the reply and a record of the stream.
     ``cancel``, if given and set, makes requests give up within tens of
     milliseconds while the reader goes on (the stream is being stopped, the
     port kept: nobody waits for the answers any more).
@@ -91,10 +94,12 @@ class DeviceLink:
     def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
                  wireless: bool = True, read_timeout: float = 0.2,
                  on_bytes: BytesCallback | None = None,
+                 streamed: int | None = None,
                  cancel: threading.Event | None = None) -> None:
         self.port = port
         self.address = address
         self.wireless = wireless
+        self.streamed = streamed
         self.parser = SensorStreamParser(address=address if wireless else None,
                                          wireless=wireless)
         self._on_record = on_record
@@ -159,7 +164,7 @@ class DeviceLink:
             if pending is not None and pending.code == code:
                 pending.reply = event.record
                 pending.done.set()
-                if code != layouts.ACCEL_ANG_RATE_MAG_ORIENTATION:
+                if code != self.streamed:
                     return
             self.records += 1
             self._on_record(event, now)

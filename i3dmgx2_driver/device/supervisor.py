@@ -43,20 +43,15 @@ from typing import Any, NamedTuple
 
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .port import PortDisconnected, PortError, SerialPort
-from ..codec import commands, layouts
+from ..codec import commands, layouts, streams
+# The divider arithmetic is the codec's; its names stay importable from here.
+from ..codec.data_rate import (  # noqa: F401
+    divider_for_rate, MAX_DIVIDER, MAX_RATE_HZ, MIN_DIVIDER, MIN_RATE_HZ, RATE_BASE_HZ,
+    RATE_DIVIDER_ADDRESS,
+)
 
-#: EEPROM word holding the data-rate divider: rate = 51200 / x Hz.
-RATE_DIVIDER_ADDRESS = 0xFCA2
-#: Base of the data-rate divider.
-RATE_BASE_HZ = 51200.0
-#: Valid range of the divider (about 300 Hz down to 1 Hz).
-MIN_DIVIDER = 170
-MAX_DIVIDER = 51200
-#: Lowest and highest data rate the divider can give.
-MIN_RATE_HZ = RATE_BASE_HZ / MAX_DIVIDER
-MAX_RATE_HZ = RATE_BASE_HZ / MIN_DIVIDER
-#: The record the driver streams.
-STREAM_COMMAND = layouts.ACCEL_ANG_RATE_MAG_ORIENTATION
+#: The record streamed unless the configuration names another.
+STREAM_COMMAND = streams.DEFAULT.code
 
 IDENTIFIER_NAMES = ('model_number', 'serial_number', 'model_name', 'options')
 
@@ -97,14 +92,11 @@ class SupervisorConfig:
     stall_timeout: float = 1.0
     reconnect_interval: float = 1.0
     data_rate_hz: float | None = None
+    #: Command byte of the record to stream (one of codec.streams.STREAMS).
+    stream: int = STREAM_COMMAND
     request_timeout: float = 0.5
     request_retries: int = 3
     continuous_retries: int = 5
-
-
-def divider_for_rate(rate_hz: float) -> int:
-    """Return the EEPROM divider for a data rate, clamped to the valid range."""
-    return max(MIN_DIVIDER, min(MAX_DIVIDER, round(RATE_BASE_HZ / rate_hz)))
 
 
 class Throttle:
@@ -161,6 +153,10 @@ class DeviceSupervisor:
         self.divider: int | None = None
         self.low_latency_state = ''
         self.ping_ok: bool | None = None
+        #: The stream's use of the line at the device's rate (once the rate is known),
+        #: and, when it does not fit, what to do about it ('' when it fits).
+        self.line_use = ''
+        self.line_warning = ''
         self.parser_totals: dict[str, int] = {}
         self._info_logged: DeviceInfo | None = None
 
@@ -260,6 +256,7 @@ class DeviceSupervisor:
         """Stop the device's stream and drop what is in flight; the state is READY."""
         try:
             link.stop_streaming()
+            link.streamed = None  # a polled record is a reply only now
             time.sleep(0.05)
             link.port.flush_input()
             self.state = State.READY
@@ -393,13 +390,38 @@ class DeviceSupervisor:
                 f'(check it is powered and the baud rate)')
         self._identify(link)
         self._configure_rate(link)
+        self._check_line()
 
     def _begin_stream(self, link: DeviceLink) -> None:
         """Start continuous mode on an initialised link; log it."""
         self.start_continuous(link)
         self.state = State.STREAMING
-        self._log.info(f'streaming 0xCC from node {self.config.address} on {self.config.port}'
+        stream = streams.BY_CODE[self.config.stream]
+        self._log.info(f'streaming {stream.label} from node {self.config.address} on '
+                       f'{self.config.port}'
                        + (f' at {self.expected_rate_hz:.1f} Hz' if self.divider else ''))
+
+    def _check_line(self) -> None:
+        """
+        Warn when the device's rate is more than the line carries for the stream.
+
+        A requested rate that does not fit was refused before the node
+        started; this catches a device already set (data_rate 0) to a rate the
+        stream cannot keep, which would otherwise show only as records missing.
+        """
+        if not self.divider:
+            return
+        cfg = self.config
+        stream = streams.BY_CODE[cfg.stream]
+        budget = streams.line_budget(stream, self.expected_rate_hz, cfg.baud, cfg.wireless)
+        self.line_use = streams.describe(budget)
+        if budget.fits:
+            self.line_warning = ''
+            return
+        self.line_warning = ('the device is set to a rate the line cannot carry, records '
+                             'will be skipped: ' + streams.advice(stream, budget))
+        if self._throttle.allow('line'):
+            self._log.warning(self.line_warning)
 
     def _identify(self, link: DeviceLink) -> None:
         cfg = self.config
@@ -462,13 +484,16 @@ class DeviceSupervisor:
             f'{wanted}); this persists across power cycles')
 
     def start_continuous(self, link: DeviceLink) -> None:
-        """Ask for continuous 0xCC until records actually arrive."""
+        """Ask for continuous mode of the configured record until records actually arrive."""
         cfg = self.config
         period = 1.0 / self.expected_rate_hz if self.divider else 0.01
+        # From now on a record of the streamed code is a sample, even one that also
+        # answers a polled request.
+        link.streamed = cfg.stream
         for _ in range(cfg.continuous_retries):
             before = link.records
             try:
-                link.request(commands.set_continuous(STREAM_COMMAND), layouts.SET_CONTINUOUS,
+                link.request(commands.set_continuous(cfg.stream), layouts.SET_CONTINUOUS,
                              cfg.request_timeout, 1)
             except DeviceTimeout:
                 pass  # the reply may be lost while the stream started: look for records
@@ -523,6 +548,9 @@ class DeviceSupervisor:
         self.state = State.PAUSED
         try:
             link.stop_streaming()
+            # Paused, a polled record of the streamed code (a self test's 0xC2, with
+            # the built-in test skewing it) is a reply only, never a sample.
+            link.streamed = None
             time.sleep(0.05)
             return operation(link)
         finally:

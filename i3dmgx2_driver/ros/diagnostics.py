@@ -179,14 +179,19 @@ def rate_level(measured_hz: float | None, expected_hz: float | None,
 def stream_status(state: State, measured_hz: float | None, expected_hz: float | None,
                   received_in_period: int, period: float, silent_for: float | None,
                   published: int, lost: int, lost_in_period: int, device_resets: int,
-                  other_records: int, mag_published: int, operation: str = '') -> Status:
+                  other_records: int, mag_published: int, operation: str = '',
+                  stream: str = '', line_use: str = '', line_warning: str = '') -> Status:
     """
     Judge the IMU stream over the last period: whether it arrives, at its rate.
 
     STALE when no record arrived in the period (there is no data to judge),
-    WARN when paused or the measured rate is off by more than 5 %.
+    WARN when paused or the measured rate is off by more than 5 %, and WARN
+    whenever the device's rate is more than the line carries for the stream
+    (``line_warning``): records are being skipped, whatever the rate shows.
     """
-    if state is State.PAUSED:
+    if line_warning and state is not State.PAUSED:
+        level, message = WARN, line_warning
+    elif state is State.PAUSED:
         level, message = WARN, f'no data: stream paused for {operation or "a device operation"}'
     elif state is State.READY:
         level, message = OK, 'no data: stream stopped on purpose (node inactive)'
@@ -196,6 +201,8 @@ def stream_status(state: State, measured_hz: float | None, expected_hz: float | 
     else:
         level, message = rate_level(measured_hz, expected_hz)
     return Status(level, 'stream', message, (
+        ('stream', stream or 'n/a'),
+        ('line use', line_use or 'rate unknown'),
         ('measured rate (Hz)', _fmt(measured_hz, 2)),
         ('configured rate (Hz)', _fmt(expected_hz, 2)),
         ('records in last period', str(received_in_period)),
@@ -479,7 +486,8 @@ class DiagnosticsPublisher:
             stream_status(state, measured, sup.expected_rate_hz, received, period,
                           silent_for, published, stats.lost, lost_in_period,
                           stats.device_resets, stats.other_records, stats.mag_published,
-                          services.operation),
+                          services.operation, core.stream.label, sup.line_use,
+                          sup.line_warning),
             radio_status(cfg.wireless, radio, fresh),
             parser_status(parser, self._last_parser),
             device_status(sup.info, sup.connections > 0, cfg.address, sup.divider,

@@ -47,26 +47,17 @@ from .parameters import DriverConfig
 from .raw_capture import RawCapture
 from .services import DeviceServices
 from .temperature import TemperaturePoller
-from ..codec.framing import DATA_TRAILER_SIZE, DataPacket, HEADER_SIZE
-from ..codec.layouts import ACCEL_ANG_RATE_MAG_ORIENTATION, LAYOUTS
-from ..codec.records import AccelAngRateMagOrientation
+from ..codec import line_budget
+from ..codec.data_rate import ticks_per_cycle
+from ..codec.framing import DataPacket
 from ..codec.timer import TimerUnwrapper
 from ..device.clock import DeviceClock
 from ..device.supervisor import DeviceSupervisor, SupervisorConfig
 
-#: Bits per byte on the line: start, 8 data, stop.
-_BITS_PER_BYTE = 10
 #: Whether ready-serialized messages read back right, by the message factory's
 #: settings: checked once per process, because a managed node makes a core at
 #: every configure and rclpy's deserialize_message keeps a little memory per call.
 _SERIALIZED_MATCHES: dict[tuple, bool] = {}
-
-
-def wire_time(baud: int, wireless: bool) -> float:
-    """Seconds the 0xCC packet (or wired record) takes on the serial line."""
-    record = LAYOUTS[ACCEL_ANG_RATE_MAG_ORIENTATION].record_size
-    size = HEADER_SIZE + record + DATA_TRAILER_SIZE if wireless else record + 2
-    return size * _BITS_PER_BYTE / baud
 
 
 class StreamStats:
@@ -115,14 +106,16 @@ def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False)
     create = node.create_lifecycle_publisher if lifecycle else node.create_publisher
     return Publishers(
         create(Imu, 'imu/raw_data', qos),
-        create(MagneticField, 'imu/mag', qos) if config.publish_mag else None,
+        # Only streams with a field (named 'mag' in each layout) have a magnetometer topic.
+        create(MagneticField, 'imu/mag', qos)
+        if config.publish_mag and config.stream_choice.mag else None,
         create(Temperature, 'imu/temperature', qos) if config.temperature_period > 0
         else None)
 
 
 class DriverCore:
     """
-    Publish the 3DM-GX2's 0xCC records as sensor_msgs/Imu and MagneticField.
+    Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField.
 
     ``node`` is the rclpy node the services and logs belong to; ``config``
     the validated parameters. ``publishers``: the data publishers to use
@@ -138,12 +131,14 @@ class DriverCore:
                  refusal: Callable[[], str] | None = None) -> None:
         self.node = node
         self.config = cfg = config
+        self.stream = cfg.stream_choice
+        self._record_type = self.stream.record_type
         self.publishers = publishers or create_publishers(node, cfg)
         self.imu_pub = self.publishers.imu
         self.mag_pub = self.publishers.mag
         settings = (cfg.frame_id, cfg.frame_convention, cfg.orientation_stddev,
                     cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
-                    cfg.magnetic_field_stddev)
+                    cfg.magnetic_field_stddev, self.stream)
         self.messages = MessageFactory(*settings)
         self.stats = StreamStats()
         self.unwrapper = TimerUnwrapper()
@@ -153,7 +148,7 @@ class DriverCore:
         #: deactivate are counted as unpublished, not as published).
         self.publishing = publishing
         self._use_device_time = cfg.time_source == 'device'
-        self._wire_time = wire_time(cfg.baud, cfg.wireless)
+        self._wire_time = line_budget.wire_time(self.stream.code, cfg.baud, cfg.wireless)
         self._publish_lock = threading.Lock()
         # Publish the messages ready-serialized (conversions.py says why) when they read
         # back right with this middleware; otherwise as message objects.
@@ -175,7 +170,8 @@ class DriverCore:
             SupervisorConfig(
                 port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
                 low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
-                reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz),
+                reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
+                stream=self.stream.code),
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None)
         self.device_services = DeviceServices(node, self, refusal=refusal)
@@ -183,7 +179,8 @@ class DriverCore:
                                              self.publishers.temperature)
         node.get_logger().info(
             f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
-            f'frame {self.messages.frame_id} ({cfg.frame_convention}), '
+            f'stream {self.stream.label}, frame {self.messages.frame_id} '
+            f'({cfg.frame_convention}), '
             f'time source {cfg.time_source}')
 
     def _on_connect(self) -> None:
@@ -200,12 +197,12 @@ class DriverCore:
 
     def _expected_ticks(self) -> int | None:
         divider = self.supervisor.divider
-        return 384 * divider if divider else None
+        return ticks_per_cycle(divider) if divider else None
 
     def _on_record(self, packet: DataPacket, read_time: float) -> None:
         """Stamp and publish one record (runs in the reader thread)."""
         record = packet.record
-        if type(record) is not AccelAngRateMagOrientation:
+        if type(record) is not self._record_type:
             self.stats.other_records += 1
             return
         if not self.publishing:
@@ -241,6 +238,7 @@ class DriverCore:
             if not stats.first_time:
                 stats.first_time = read_time
             stats.last_time = read_time
+            # mag_pub exists only for streams with a field (named 'mag' in each layout).
             if self.mag_pub is not None and mag_is_valid(record.mag):
                 self.mag_pub.publish(self._mag_message(record.mag, stamp))
                 stats.mag_published += 1

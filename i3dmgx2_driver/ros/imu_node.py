@@ -30,7 +30,7 @@ from .parameters import declare_parameters, driver_config, DriverConfig
 
 
 class ImuDriverNode(Node):
-    """Publish the 3DM-GX2's 0xCC records as sensor_msgs/Imu and MagneticField."""
+    """Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField."""
 
     def __init__(self, node_name: str = 'i3dmgx2_driver', **kwargs) -> None:
         super().__init__(node_name, **kwargs)
