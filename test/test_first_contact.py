@@ -37,7 +37,9 @@ import tty
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess, REPO
+from ros_harness import (
+    isolate_ros_domain, LIFECYCLE_COMMAND, LifecycleClient, Listener, NodeProcess, REPO,
+)
 from sensor_msgs.msg import Imu
 
 pytestmark = pytest.mark.slow
@@ -293,3 +295,26 @@ def test_a_missing_port_is_said_once_and_an_error_on_diagnostics():
         missing = lines_with(node.output(), 'does not exist')
         assert len(missing) == 1, node.output()
         assert PORT_HINT in missing[0] and 'retrying every 0.2 s' in missing[0]
+
+
+# -- the managed node: configure fails with the same words ----------------------
+
+def test_managed_configure_refuses_a_path_that_is_no_serial_port(tmp_path):
+    path = tmp_path / 'passwd'
+    path.write_text('root:x:0:0\n')
+    params = {'port': str(path), 'address': 95, 'data_rat': 200.0}
+    with Listener({}) as listener, \
+            NodeProcess(params, command=LIFECYCLE_COMMAND) as node, NodeProcess(params) as plain:
+        client = LifecycleClient(listener)
+        assert client.wait_ready(), node.output()
+        for _ in range(2):  # the same words every time, and the node lives on
+            assert not client.change('configure')
+            assert client.state() == 'unconfigured'
+        assert plain.wait(timeout=30) == 2, plain.output()
+        fatal = lines_with(plain.output(), '[FATAL]')[0]
+        words = fatal[fatal.index("parameter 'port'"):]
+        output = node.output()
+        assert output.count(f'configure failed: {words}') == 2, output
+        # An unknown name is said once, at start, however often configure runs.
+        assert len(lines_with(output, "unknown parameter 'data_rat'")) == 1, output
+        assert node.stop()[0] == 0

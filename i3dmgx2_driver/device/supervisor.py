@@ -283,6 +283,7 @@ class DeviceSupervisor:
         """Stop the device's stream and drop what is in flight; the state is READY."""
         try:
             link.stop_streaming()
+            link.streamed = None  # a polled record is a reply only now
             time.sleep(0.05)
             link.port.flush_input()
             self.state = State.READY

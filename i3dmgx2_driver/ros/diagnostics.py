@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterable, Mapping
 import math
 import time
 from typing import Any, NamedTuple
+import weakref
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy._rclpy_pybind11 import RCLError
@@ -430,7 +431,8 @@ class DiagnosticsPublisher:
         self.period = period
         self._driver = driver
         self._lifecycle = lifecycle
-        self._core: Any = None
+        #: The core the last tick reported on (weakly: a core dropped at cleanup goes).
+        self._core: Callable[[], Any] = lambda: None
         self._last_tick = time.monotonic()
         self._forget()
         self.publisher = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
@@ -453,8 +455,8 @@ class DiagnosticsPublisher:
         if self._lifecycle is not None:
             statuses.append(lifecycle_status(
                 self._lifecycle(), core.supervisor.state if core is not None else None))
-        if core is not self._core:
-            self._core = core
+        if core is not self._core():
+            self._core = weakref.ref(core) if core is not None else (lambda: None)
             self._forget()
         if core is None:
             self._last_tick = time.monotonic()

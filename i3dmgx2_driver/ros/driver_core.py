@@ -40,11 +40,13 @@ from collections.abc import Callable
 import sys
 import threading
 import time
+from typing import NamedTuple
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Imu, MagneticField
+from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from .conversions import mag_is_valid, MessageFactory
 from .parameters import declare_parameters, driver_config, DriverConfig, SPECS
@@ -59,6 +61,11 @@ from ..codec.timer import TimerUnwrapper
 from ..device.clock import DeviceClock
 from ..device.port import check_port_path, PortError
 from ..device.supervisor import DeviceSupervisor, SupervisorConfig
+
+#: Whether ready-serialized messages read back right, by the message factory's
+#: settings: checked once per process, because a managed node makes a core at
+#: every configure and rclpy's deserialize_message keeps a little memory per call.
+_SERIALIZED_MATCHES: dict[tuple, bool] = {}
 
 
 def load_config(node: Node) -> DriverConfig:
@@ -92,6 +99,14 @@ class StreamStats:
         self.last_ticks: int | None = None
 
 
+class Publishers(NamedTuple):
+    """The data publishers; None where the parameters turn a topic off."""
+
+    imu: Publisher
+    mag: Publisher | None
+    temperature: Publisher | None
+
+
 def publisher_qos(config: DriverConfig) -> QoSProfile:
     """Return the QoS the parameters ask for, for every data publisher."""
     return QoSProfile(
@@ -100,51 +115,75 @@ def publisher_qos(config: DriverConfig) -> QoSProfile:
                      else ReliabilityPolicy.BEST_EFFORT))
 
 
+def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False) -> Publishers:
+    """
+    Make the data publishers on ``node``: lifecycle publishers if ``lifecycle``.
+
+    A managed node makes them once and keeps them across configure/cleanup
+    cycles: destroying a publisher while a multi-threaded executor builds
+    its wait set can crash the executor in rclpy (Jazzy), because the
+    publisher's QoS event handlers are waitables whose invalid handles it
+    does not skip (ros2/rclpy#1284). Its parameters are read-only, so the
+    publishers it made first are the ones every later configure needs.
+    """
+    qos = publisher_qos(config)
+    create = node.create_lifecycle_publisher if lifecycle else node.create_publisher
+    return Publishers(
+        create(Imu, 'imu/raw_data', qos),
+        # Only streams with a field (named 'mag' in each layout) have a magnetometer topic.
+        create(MagneticField, 'imu/mag', qos)
+        if config.publish_mag and config.stream_choice.mag else None,
+        create(Temperature, 'imu/temperature', qos) if config.temperature_period > 0
+        else None)
+
+
 class DriverCore:
     """
     Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField.
 
-    ``node`` is the rclpy node the publishers, services and logs belong to;
-    ``config`` the validated parameters. ``lifecycle``: make the data
-    publishers with ``node.create_lifecycle_publisher`` (they publish only
-    while the node is active) and start with :attr:`publishing` off.
+    ``node`` is the rclpy node the services and logs belong to; ``config``
+    the validated parameters. ``publishers``: the data publishers to use
+    (a managed node's lifecycle publishers, see :func:`create_publishers`);
+    by default the core makes plain ones. ``publishing`` False: records are
+    counted, not published, until the owner turns :attr:`publishing` on.
     ``refusal`` tells the services why they must refuse now ('' to serve).
     The core starts nothing: its owner drives :attr:`supervisor`. A port
     path that exists but is no serial port raises PortUnusable here, before
     anything is made.
     """
 
-    def __init__(self, node: Node, config: DriverConfig, lifecycle: bool = False,
+    def __init__(self, node: Node, config: DriverConfig,
+                 publishers: Publishers | None = None, publishing: bool = True,
                  refusal: Callable[[], str] | None = None) -> None:
         check_port_path(config.port)
         self.node = node
         self.config = cfg = config
         #: Why the port can never work, once the supervisor found out.
         self.fatal_error: PortError | None = None
-        qos = publisher_qos(cfg)
         self.stream = cfg.stream_choice
         self._record_type = self.stream.record_type
-        create = node.create_lifecycle_publisher if lifecycle else node.create_publisher
-        self.imu_pub = create(Imu, 'imu/raw_data', qos)
-        self.mag_pub = (create(MagneticField, 'imu/mag', qos)
-                        if cfg.publish_mag and self.stream.mag else None)
-        self.messages = MessageFactory(
-            cfg.frame_id, cfg.frame_convention, cfg.orientation_stddev,
-            cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
-            cfg.magnetic_field_stddev, self.stream)
+        self.publishers = publishers or create_publishers(node, cfg)
+        self.imu_pub = self.publishers.imu
+        self.mag_pub = self.publishers.mag
+        settings = (cfg.frame_id, cfg.frame_convention, cfg.orientation_stddev,
+                    cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
+                    cfg.magnetic_field_stddev, self.stream)
+        self.messages = MessageFactory(*settings)
         self.stats = StreamStats()
         self.unwrapper = TimerUnwrapper()
         self.clock_model = DeviceClock()
         #: Whether records are published: always for the plain node; while
         #: active for the managed one (records still in flight after a
         #: deactivate are counted as unpublished, not as published).
-        self.publishing = not lifecycle
+        self.publishing = publishing
         self._use_device_time = cfg.time_source == 'device'
         self._wire_time = line_budget.wire_time(self.stream.code, cfg.baud, cfg.wireless)
         self._publish_lock = threading.Lock()
         # Publish the messages ready-serialized (conversions.py says why) when they read
         # back right with this middleware; otherwise as message objects.
-        if self.messages.serialized_matches():
+        if settings not in _SERIALIZED_MATCHES:
+            _SERIALIZED_MATCHES[settings] = self.messages.serialized_matches()
+        if _SERIALIZED_MATCHES[settings]:
             self._imu_message, self._mag_message = (self.messages.imu_cdr,
                                                     self.messages.mag_cdr)
         else:
@@ -166,8 +205,8 @@ class DriverCore:
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
             on_fatal=self._on_fatal)
         self.device_services = DeviceServices(node, self, refusal=refusal)
-        self.temperature = TemperaturePoller(node, self, cfg.temperature_period, qos,
-                                             create_publisher=create)
+        self.temperature = TemperaturePoller(node, self, cfg.temperature_period,
+                                             self.publishers.temperature)
         node.get_logger().info(
             f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
             f'stream {self.stream.label}, frame {self.messages.frame_id} '
@@ -175,8 +214,14 @@ class DriverCore:
             f'time source {cfg.time_source}')
 
     def _on_fatal(self, error: PortError) -> None:
-        """Note that the port can never work: the entry point says so, once, and ends."""
+        """
+        Say once that the port can never work; the supervisor has stopped.
+
+        The plain node's run loop then exits with code 2; a managed node stays
+        up, its connection ERROR on /diagnostics, for its manager to act on.
+        """
         self.fatal_error = error
+        self.node.get_logger().fatal(str(error))
 
     def _on_connect(self) -> None:
         """Re-anchor time on a new link: the device may have been power-cycled."""
@@ -258,18 +303,10 @@ class DriverCore:
 
     def destroy(self) -> None:
         """
-        Remove the core's publishers and services from the node (after shutdown).
+        Remove the core's services from the node (after shutdown).
 
-        For the managed node's cleanup: a later configure makes a new core
-        with the parameters then in force.
+        For the managed node's cleanup: a later configure makes a new core.
+        The publishers stay: they belong to whoever made them (see
+        :func:`create_publishers` for why a managed node keeps them).
         """
-        node = self.node
         self.device_services.destroy()
-        self.temperature.destroy()
-        for publisher in (self.imu_pub, self.mag_pub):
-            if publisher is None:
-                continue
-            if hasattr(node, 'destroy_lifecycle_publisher'):
-                node.destroy_lifecycle_publisher(publisher)
-            else:
-                node.destroy_publisher(publisher)

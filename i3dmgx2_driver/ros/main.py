@@ -82,10 +82,8 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
         executor.add_node(node)
         while not stop.is_set() and rclpy.ok() and not node.finished:
             executor.spin_once(timeout_sec=_SPIN_PERIOD)
-            fatal = getattr(node, 'fatal_error', None)
-            if fatal is not None:
-                node.get_logger().fatal(str(fatal))
-                code = EXIT_BAD_PARAMETER
+            if getattr(node, 'fatal_error', None) is not None:
+                code = EXIT_BAD_PARAMETER  # said once, as the node found it
                 break
         grace = time.monotonic() + _FINISH_GRACE
         while node.finished and not stop.is_set() and time.monotonic() < grace \

@@ -25,14 +25,13 @@ for it. Polls are skipped while the stream is not running (connecting, or
 paused for a capture or the self test).
 """
 
-from collections.abc import Callable
 import threading
 import time
 from typing import Any
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.publisher import Publisher
 from sensor_msgs.msg import Temperature
 
 from .conversions import set_stamp
@@ -52,15 +51,14 @@ class TemperaturePoller:
     """
     Publish the accelerometer temperature on ``imu/temperature`` every ``period`` s.
 
-    ``node`` makes the publisher (with ``create_publisher``, by default its
-    own: a managed node passes its lifecycle publisher factory) and logs;
-    ``driver`` (the DriverCore) provides ``supervisor`` and
-    ``messages.frame_id`` (the IMU frame). ``period`` 0 disables it: no
-    publisher, no thread.
+    ``node`` logs; ``publisher`` publishes (the driver core makes it, a
+    lifecycle publisher on a managed node); ``driver`` (the DriverCore)
+    provides ``supervisor`` and ``messages.frame_id`` (the IMU frame).
+    ``period`` 0 disables it: no thread (and no publisher is needed).
     """
 
-    def __init__(self, node: Node, driver: Any, period: float, qos: QoSProfile | int = 10,
-                 create_publisher: Callable[..., Any] | None = None) -> None:
+    def __init__(self, node: Node, driver: Any, period: float,
+                 publisher: Publisher | None) -> None:
         self.node = node
         self.driver = driver
         self.period = period
@@ -71,10 +69,8 @@ class TemperaturePoller:
         self._stop = threading.Event()
         self._throttle = Throttle(WARN_PERIOD)
         self._thread: threading.Thread | None = None
-        self.publisher = None
-        if period > 0:
-            create = create_publisher or node.create_publisher
-            self.publisher = create(Temperature, 'imu/temperature', qos)
+        self.publisher = publisher
+        if period > 0 and publisher is not None:
             self._msg = Temperature()
             self._msg.header.frame_id = driver.messages.frame_id
             self._msg.variance = 0.0
@@ -92,15 +88,6 @@ class TemperaturePoller:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=0.1)
-
-    def destroy(self) -> None:
-        """Stop, and remove the publisher from the node (the managed node's cleanup)."""
-        self.stop()
-        if self.publisher is not None:
-            destroy = getattr(self.node, 'destroy_lifecycle_publisher',
-                              self.node.destroy_publisher)
-            destroy(self.publisher)
-            self.publisher = None
 
     def _run(self) -> None:
         while not self._stop.wait(self.period):
@@ -125,11 +112,8 @@ class TemperaturePoller:
         msg = self._msg
         msg.temperature = self.latest
         set_stamp(msg.header, read_time)
-        publisher = self.publisher
-        if publisher is None:
-            return False  # destroyed under this poll (the managed node's cleanup)
         try:
-            publisher.publish(msg)
+            self.publisher.publish(msg)
         except RCLError:
             return False  # ROS is shutting down
         self.published += 1
