@@ -198,7 +198,8 @@ def test_port_is_a_stable_symlink_to_a_raw_pty(sim):
     assert stat.S_ISCHR(os.stat(sim.port).st_mode)
     # Through /proc/<pid>/fd: a link left by a killed simulator dangles instead of
     # leading to whatever pseudo-terminal reuses the number.
-    assert os.readlink(sim.port) == f'/proc/{os.getpid()}/fd/{sim._slave}'
+    assert os.readlink(sim.port) == sim.link_target
+    assert sim.link_target.startswith(f'/proc/{os.getpid()}/fd/')
 
 
 def test_a_killed_simulator_leaves_no_usable_port(tmp_path):
@@ -499,3 +500,17 @@ def test_symlink_option_and_cleanup(tmp_path):
         with Host(sim) as host:
             assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
     assert not os.path.lexists(path)
+
+
+def test_the_public_names_are_importable_from_the_package_and_pty_link():
+    """The split into modules keeps every import that code and tests rely on."""
+    import i3dmgx2_driver.simulator as package
+    from i3dmgx2_driver.simulator import pty_link
+    for name in ('PtySimulator', 'SimulatorConfig', 'SentRecord', 'HostCommand',
+                 'SimulatorStats'):
+        assert getattr(pty_link, name) is getattr(package, name)
+    assert pty_link.LINE_BYTES_PER_SECOND == 11520
+    assert pty_link.PORT_NAME == 'ttyGX2'
+    assert pty_link.DEFAULT_STREAM == lay.ACCEL_ANG_RATE_MAG_ORIENTATION
+    assert set(package.__all__) >= {'FaultConfig', 'Motion', 'MotionConfig', 'Reply',
+                                    'SimulatedSensor'}

@@ -128,3 +128,25 @@ class FaultConfig:
             if getattr(self, name):
                 raise ValueError(f'{name} is a fault of the radio or the base station; '
                                  f'a wired sensor has neither (got {getattr(self, name)!r})')
+
+
+class Stall:
+    """
+    The window of silence in effect: nothing gets through either way.
+
+    Wireless, the radio is silent; wired, the sensor hangs. Not locked
+    itself: the simulator's lock guards it.
+    """
+
+    def __init__(self) -> None:
+        self.start = 0.0
+        self.end = 0.0
+
+    def begin(self, start: float, seconds: float) -> None:
+        """Be silent from ``start`` for ``seconds``."""
+        self.start = start
+        self.end = start + seconds
+
+    def covers(self, t: float) -> bool:
+        """Whether time ``t`` falls in the silence."""
+        return self.start <= t < self.end
