@@ -285,14 +285,15 @@ class PtySimulator:
     def _do_unplug(self, seconds: float | None) -> None:
         if self._pty.master is None:
             return
-        self._pty.pull_out()
         with self.lock:
             self._record.count(unplugs=1)
             if not self.config.wireless:
-                # The cable feeds a wired sensor: it goes dark with the port.
+                # The cable feeds a wired sensor: it goes dark with the port
+                # (first, so that whoever sees the port gone sees it off too).
                 self._tx.clear()
                 self.sensor.power_off()
                 self._note_streaming(time.time())
+        self._pty.pull_out()
         if seconds is not None:
             self._post(seconds, self._do_replug)
 
