@@ -21,7 +21,10 @@ happen. Each transition is one call into the core, bounded in time, and
 logged in one line:
 
 - configure: check the parameters (a bad one fails with the plain node's
-  words), make the core (lifecycle publishers: silent until active), open
+  words; a name the node does not know is warned about once, at start) and
+  the port path (one that exists but is no serial port fails with the
+  plain node's words, and what the line carries instead of answers is part
+  of a silent sensor's reason), make the core (lifecycle publishers: silent until active), open
   the port exclusively, quiet the device, read its identity, set the data
   rate if asked. A missing or busy port, or a silent sensor, fails the
   transition with the reason and leaves nothing open; configure again later.
@@ -51,11 +54,11 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from .diagnostics import DiagnosticsPublisher
-from .driver_core import create_publishers, DriverCore, Publishers
+from .driver_core import create_publishers, DriverCore, load_config, Publishers
 from .main import run
 from .parameters import declare_parameters, driver_config, ParameterError
 from ..device.link import DeviceTimeout
-from ..device.port import PortError
+from ..device.port import check_port_path, PortError, PortUnusable
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
@@ -103,9 +106,10 @@ class LifecycleDriverNode(LifecycleNode):
         self._transition_lock = threading.RLock()
         self._finished = threading.Event()
         try:
-            # Declared now so that ``ros2 param`` shows them before configure;
-            # configure checks them again and reports what is wrong.
-            declare_parameters(self)
+            # Declared now so that ``ros2 param`` shows them before configure, and
+            # names the node does not know are said once; configure checks them
+            # again and reports what is wrong.
+            load_config(self)
         except ParameterError:
             pass
         self.diagnostics = DiagnosticsPublisher(self, lambda: self.core,
@@ -138,6 +142,11 @@ class LifecycleDriverNode(LifecycleNode):
         try:
             config = driver_config(declare_parameters(self))
         except ParameterError as exc:
+            log.error(f'configure failed: {exc}')
+            return FAILURE
+        try:
+            check_port_path(config.port)  # the words of the plain node's exit 2
+        except PortUnusable as exc:
             log.error(f'configure failed: {exc}')
             return FAILURE
         if self._data_publishers is None:
