@@ -128,8 +128,10 @@ class PortProbe(NamedTuple):
     #: True: a base station answered; False: none did; None: not probed that far.
     base_station: bool | None
     sensors: tuple[SensorFound, ...]
-    #: Addresses pinged, and how long the probe took (s).
+    #: Addresses pinged, and how long that took (s).
     pinged: int
+    ping_seconds: float
+    #: How long the whole probe took (s).
     seconds: float
 
 
@@ -182,6 +184,7 @@ class _Prober:
         self.link: DeviceLink | None = None
         self.base_station: bool | None = None
         self.pinged = 0
+        self.ping_seconds = 0.0
 
     # -- what the reader thread sees ------------------------------------
 
@@ -268,6 +271,13 @@ class _Prober:
 
     def _sweep(self, link: DeviceLink, addresses: list[int]) -> list[int]:
         """Ping each address; return those whose sensor answered."""
+        start = time.monotonic()
+        try:
+            return self._ping_each(link, addresses)
+        finally:
+            self.ping_seconds += time.monotonic() - start
+
+    def _ping_each(self, link: DeviceLink, addresses: list[int]) -> list[int]:
         cfg = self.config
         answered = []
         silent = 0
@@ -293,7 +303,7 @@ class _Prober:
         return answered
 
     def _wired(self, link: DeviceLink, found_by: str) -> list[SensorFound]:
-        """A sensor on the line itself, if one answers; as a list of 0 or 1."""
+        """Return the sensor on the line itself, if one answers, as a list of 0 or 1."""
         self._progress('identify', 0, 1)
         sensor = self._identify(link, None, found_by)
         self._progress('identify', 1, 1)
@@ -410,7 +420,7 @@ def probe_port(path: str, config: ProbeConfig | None = None,
     except PortError as exc:
         status = {PortBusy: 'busy', PortMissing: 'missing',
                   PortPermissionDenied: 'denied'}.get(type(exc), 'error')
-        return PortProbe(path, status, str(exc), None, (), 0, time.monotonic() - start)
+        return PortProbe(path, status, str(exc), None, (), 0, 0.0, time.monotonic() - start)
     prober = _Prober(port, cfg, progress)
     status, message, sensors = 'probed', '', []
     try:
@@ -421,4 +431,4 @@ def probe_port(path: str, config: ProbeConfig | None = None,
         prober.close()
         port.close()
     return PortProbe(path, status, message, prober.base_station, tuple(sensors),
-                     prober.pinged, time.monotonic() - start)
+                     prober.pinged, prober.ping_seconds, time.monotonic() - start)

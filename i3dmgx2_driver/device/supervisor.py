@@ -205,7 +205,8 @@ class DeviceSupervisor:
             except PortError as exc:
                 self._warn(type(exc).__name__, str(exc))
             except DeviceTimeout as exc:
-                self._warn('timeout', f'device not answering: {exc}')
+                self._warn('timeout', f'device not answering: {exc} (wrong port or address? '
+                                      f'ros2 run i3dmgx2_driver discover finds sensors)')
             finally:
                 if link is not None:
                     self._close(link, send_stop=self._stop.is_set())
@@ -257,7 +258,7 @@ class DeviceSupervisor:
             if not self.ping_ok:
                 self._warn('ping', f'node {self.config.address} does not answer the base '
                                    f'station ping: check it is powered, its address and '
-                                   f'the radio channel')
+                                   f'the radio channel (ros2 run i3dmgx2_driver discover)')
         # The thesis author found continuous mode unreliable as the very first
         # command: a couple of polled requests first make it dependable.
         for _ in range(2):
@@ -292,7 +293,8 @@ class DeviceSupervisor:
             firmware = ''
         info = DeviceInfo(*texts, firmware)
         if not any(info):
-            self._warn('identity', 'the device did not tell its identity (0xEA, 0xE9)')
+            self._warn('identity', 'the device did not tell its identity (0xEA, 0xE9): right '
+                                   'port? ros2 run i3dmgx2_driver discover finds sensors')
             return
         self.info = info
         if info != self._info_logged:

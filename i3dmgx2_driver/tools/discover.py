@@ -41,6 +41,8 @@ EXIT_NONE = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
+#: What to do about a port in use.
+BUSY_HINT = ' (the driver? fuser -v {path} names the process); skipped'
 #: Wired sensors need no address, but the node requires one: any valid one does.
 WIRED_ADDRESS = 1
 
@@ -90,6 +92,11 @@ def build_parser() -> argparse.ArgumentParser:
                         metavar='SECONDS',
                         help='listen this long for sensors that already stream '
                              f'(default {ProbeConfig.listen_s})')
+    parser.add_argument('--ping-timeout', type=_seconds, default=ProbeConfig.ping_timeout,
+                        metavar='SECONDS',
+                        help='wait this long for a base station to answer a ping before '
+                             'taking the port for one without a base station '
+                             f'(default {ProbeConfig.ping_timeout})')
     parser.add_argument('--stop-streams', action='store_true',
                         help='stop a streaming sensor to read it (it is restarted), '
                              'rather than asking it while it streams')
@@ -136,6 +143,7 @@ def _port_dict(port: PortInfo, probe: PortProbe | None) -> dict[str, Any]:
             'message': probe.message or None,
             'base_station': probe.base_station,
             'pinged': probe.pinged,
+            'ping_seconds': round(probe.ping_seconds, 3),
             'seconds': round(probe.seconds, 3),
             'sensors': [_sensor_dict(port.stable_path, s) for s in probe.sensors],
         })
@@ -152,7 +160,7 @@ def _table(rows: list[list[str]], out: TextIO, indent: str = '  ') -> None:
 def print_ports(ports: Sequence[PortInfo], probing: set[str], out: TextIO) -> None:
     """Print the port list, saying which ports will be probed."""
     if not ports:
-        out.write('No serial ports found. Is the base station (or the sensor\'s USB cable) '
+        out.write("No serial ports found. Is the base station (or the sensor's USB cable) "
                   'plugged in? dmesg tells what the kernel saw.\n')
         return
     rows = [['device', 'stable path', 'usb id', 'description', 'looks like', '']]
@@ -178,7 +186,9 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
     commands = []
     for port, probe in results:
         if probe.status != 'probed':
-            out.write(f'{port.device}: {probe.message}\n')
+            hint = BUSY_HINT.format(path=shlex.quote(port.device)) \
+                if probe.status == 'busy' else ''
+            out.write(f'{port.device}: {probe.message}{hint}\n')
             continue
         if not probe.sensors:
             what = {True: 'a base station, but no sensor answered',
@@ -216,11 +226,11 @@ def print_hints(results: Sequence[tuple[PortInfo, PortProbe]], addresses: Sequen
     out.write('\nNo sensor found. Check that the sensor is on (battery), then:\n')
     swept = [p for _, p in results if p.base_station and p.pinged]
     if swept and len(addresses) < 65534:
-        per_ping = sum(p.seconds for p in swept) / sum(p.pinged for p in swept)
+        per_ping = sum(p.ping_seconds for p in swept) / sum(p.pinged for p in swept)
         out.write(f'  - its address may not be the factory one: --addresses 1-65534 '
-                  f'(about {per_ping * 65534 / 60:.0f} min at this port\'s pace)\n')
+                  f'(about {per_ping * 65534 / 60:.1f} min at the pace seen here)\n')
     out.write('  - sensor and base station may be on different radio channels '
-              '(MicroStrain\'s software sets them)\n'
+              "(MicroStrain's software sets them)\n"
               '  - a wired sensor or another port: --all probes every listed port\n')
 
 
@@ -262,7 +272,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args.json and not args.port:
         print_ports(ports, probing, out)
     config = ProbeConfig(addresses=args.addresses, baud=args.baud, listen_s=args.listen,
-                         stop_streams=args.stop_streams)
+                         ping_timeout=args.ping_timeout, stop_streams=args.stop_streams)
     progress = _ProgressLine(sys.stderr, sys.stderr.isatty() and not args.json)
     results = []
     try:
@@ -276,7 +286,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERRUPTED
     found = sum(len(probe.sensors) for _, probe in results)
     if args.json:
-        probes = dict((port.device, probe) for port, probe in results)
+        probes = {port.device: probe for port, probe in results}
         json.dump({'found': found,
                    'ports': [_port_dict(p, probes.get(p.device)) for p in ports]}, out, indent=2)
         out.write('\n')
