@@ -197,11 +197,13 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
             pinged = f' (pinged {probe.pinged} addresses)' if probe.base_station else ''
             out.write(f'{port.device}: {what}{pinged}, {probe.seconds:.1f} s\n')
             continue
-        out.write(f'{port.device}: {len(probe.sensors)} sensor(s), {probe.seconds:.1f} s\n')
+        count = len(probe.sensors)
+        out.write(f'{port.device}: {count} sensor{"s" if count > 1 else ""}, '
+                  f'{probe.seconds:.1f} s\n')
         for sensor in probe.sensors:
             info = sensor.info
             rows.append([
-                port.stable_path, 'wireless' if sensor.wireless else 'wired',
+                port.device, 'wireless' if sensor.wireless else 'wired',
                 str(sensor.address) if sensor.wireless else '-',
                 (info.serial_number or '?') if info else '?',
                 (info.model_name or info.model_number or '?') if info else '?',
