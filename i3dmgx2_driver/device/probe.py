@@ -90,7 +90,8 @@ class SensorFound(NamedTuple):
 
     #: Node address behind a base station; None for a wired sensor.
     address: int | None
-    #: 'stream' (heard streaming), 'ping' (answered a ping) or 'wired'.
+    #: 'stream' (heard streaming), 'ping' (answered a ping) or 'wired' (answered
+    #: a request on a port without a base station).
     found_by: str
     #: Identity and firmware, None if the sensor did not tell them.
     info: DeviceInfo | None
@@ -244,7 +245,7 @@ class _Prober:
                 wired = None
         if wired is not None:
             self.base_station = False
-            return self._wired(self._open_link(wireless=False), found_by='wired')
+            return self._wired(self._open_link(wireless=False), found_by='stream')
         if streaming:
             self.base_station = True
         answered = self._sweep(link, [a for a in cfg.addresses if a not in streaming])
