@@ -112,3 +112,13 @@ def test_installed_simulator_prints_its_port(prefix):
     out, _ = proc.communicate(timeout=30)
     assert proc.returncode == 0, out
     assert out.splitlines()[0].startswith('port: /')
+
+
+def test_installed_discover_finds_a_simulated_sensor(prefix):
+    with PtySimulator(SimulatorConfig(seed=42, address=42, serial_number='2042')) as sim:
+        result = subprocess.run([str(prefix / 'lib' / 'i3dmgx2_driver' / 'discover'),
+                                 '--port', sim.port], env=installed_env(prefix), cwd='/',
+                                capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert result.stdout.splitlines()[-1].strip() == \
+        f'ros2 run i3dmgx2_driver node --ros-args -p port:={sim.port} -p address:=42'

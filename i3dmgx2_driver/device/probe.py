@@ -233,8 +233,8 @@ class _Prober:
     def run(self) -> list[SensorFound]:
         """Listen, sweep, identify; return the sensors found."""
         cfg = self.config
-        link = self._open_link(wireless=True)
         self._wired_parser = SensorStreamParser(wireless=False)
+        link = self._open_link(wireless=True)
         self._listen(cfg.listen_s)
         self._wired_parser = None
         with self._heard_lock:
