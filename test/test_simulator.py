@@ -56,14 +56,24 @@ def code_of(record) -> int:
 
 
 class Host:
-    """The host end of the line: a pyserial port, the codec's parser, a log of events."""
+    """
+    The host end of the line: a pyserial port, the codec's parser, a log of events.
+
+    ``wireless`` (default: what the simulator is) selects the framing the host
+    speaks: command packets and the wireless parser, or raw commands and the
+    wired parser.
+    """
 
     def __init__(self, sim: PtySimulator, address: int = ADDRESS,
-                 timeout: float = 0.02) -> None:
+                 timeout: float = 0.02, wireless: bool | None = None) -> None:
         self.sim = sim
         self.address = address
+        self.wireless = getattr(sim, 'wireless', True) if wireless is None else wireless
         self.serial = serial.Serial(sim.port, 115200, timeout=timeout)
-        self.parser = SensorStreamParser(address)
+        #: After the open, which flushed whatever the port held before.
+        self.opened = time.time()
+        self.parser = SensorStreamParser(address if self.wireless else None,
+                                         wireless=self.wireless)
         #: (receive time, event) of everything parsed so far.
         self.events = []
         #: Every byte received, for a second look with another parser.
@@ -79,7 +89,10 @@ class Host:
         self.close()
 
     def send(self, command: bytes, address: int | None = None) -> None:
-        """Send a command packet (built by the codec)."""
+        """Send a command packet (built by the codec), or the bare command when wired."""
+        if not self.wireless:
+            self.serial.write(command)
+            return
         packet = encode_command_packet(self.address if address is None else address, command)
         self.serial.write(packet)
 

@@ -102,12 +102,23 @@ class SimulatorConfig:
 
     #: Node address of the sensor (factory: last two digits of its serial number).
     address: int = 95
+    #: True: a wireless sensor behind its base station (packets, ACK/NACK, ping).
+    #: False: a wired sensor on the port itself: raw command bytes in, wired
+    #: records (echo, data, checksum) out, no ACK/NACK, no ping (see PtySimulator).
+    wireless: bool = True
     #: Serial number the sensor reports (identifier 1).
     serial_number: str = '3095'
     #: Calculation rate (Hz) overriding the EEPROM divider: for benchmarks beyond 300 Hz.
     rate_hz: float | None = None
-    #: Command byte the sensor streams from power-up (True: 0xCC; False/0: polled).
+    #: Command byte the sensor streams from power-up (True: 0xCC; False/0: polled):
+    #: the EEPROM auto-start word 0xFCA6 (MSB 0x80 wireless, 0x00 wired).
     streaming_at_start: bool | int = False
+    #: EEPROM data-rate divider (0xFCA2) at power-up, 170..51200 (rate 51200 / divider
+    #: Hz); None: the factory 512 (100 Hz), or what ``eeprom`` says.
+    divider: int | None = None
+    #: EEPROM words at power-up (address -> value), as a sensor set up earlier
+    #: would keep them; ``divider`` and ``streaming_at_start`` win over these.
+    eeprom: dict[int, int] = dataclasses.field(default_factory=dict)
     #: Seed of every random choice (noise, faults, chunking), for reproducible runs.
     seed: int | None = None
     motion: MotionConfig = dataclasses.field(default_factory=MotionConfig)
@@ -155,6 +166,20 @@ class SimulatorConfig:
             raise ValueError('rate_hz must be positive')
         if self.latency_s < 0 or self.chunk_gap_s < 0:
             raise ValueError('latency_s and chunk_gap_s must not be negative')
+        if self.divider is not None and not sns.MIN_DIVIDER <= self.divider <= sns.MAX_DIVIDER:
+            raise ValueError(f'divider must be in {sns.MIN_DIVIDER}..{sns.MAX_DIVIDER} '
+                             f'(rate 51200 / divider Hz), got {self.divider}')
+        for address, value in self.eeprom.items():
+            if not (0 <= address <= 0xFFFF and 0 <= value <= 0xFFFF):
+                raise ValueError(f'eeprom words are uint16 at uint16 addresses, got '
+                                 f'{address!r}: {value!r}')
+        code = self.start_stream
+        if code and code not in sns.STREAMABLE:
+            valid = ', '.join(f'0x{c:02X}' for c in sorted(sns.STREAMABLE))
+            raise ValueError(f'streaming_at_start: 0x{code:02X} cannot be streamed; '
+                             f'streamable records: {valid}')
+        if not self.wireless:
+            self.faults.check_wired()
 
     @property
     def start_stream(self) -> int:
@@ -164,6 +189,16 @@ class SimulatorConfig:
         if self.streaming_at_start is True:
             return DEFAULT_STREAM
         return int(self.streaming_at_start)
+
+    @property
+    def power_up_eeprom(self) -> dict[int, int]:
+        """EEPROM words the sensor starts with, presets applied (on top of the factory ones)."""
+        words = dict(self.eeprom)
+        if self.divider is not None:
+            words[sns.RATE_DIVIDER_ADDRESS] = self.divider
+        if self.start_stream:
+            words[sns.AUTOSTART_ADDRESS] = (0x8000 if self.wireless else 0) | self.start_stream
+        return words
 
 
 class SentRecord(NamedTuple):
@@ -193,10 +228,17 @@ class SentRecord(NamedTuple):
 
 
 class HostCommand(NamedTuple):
-    """One thing the host sent, as the base station saw it, and what came of it."""
+    """
+    One thing the host sent, as the base station (or wired sensor) saw it, and what came of it.
+
+    Wireless: every command packet, every rejected one and every ping. Wired:
+    every command the sensor recognised in the byte stream (``kind`` 'wired',
+    ``address`` None); the bytes it could not take for a command are only
+    counted (``SimulatorStats.host_bytes_ignored``).
+    """
 
     time: float
-    #: 'packet' (command packet), 'rejected' (NACKed) or 'ping'.
+    #: 'packet' (command packet), 'rejected' (NACKed), 'ping' or 'wired'.
     kind: str
     address: int | None
     #: The decoded command, or None if it did not decode.
@@ -214,6 +256,7 @@ class SimulatorStats:
         'acks', 'bytes_read', 'bytes_written', 'commands_ignored', 'commands_lost',
         'commands_other_address', 'commands_received', 'corrupted_checksum',
         'corrupted_length', 'dropped', 'foreign', 'garbage_bursts', 'garbage_bytes',
+        'host_bytes_ignored',
         'late_skipped', 'line_rate_skipped', 'nacks', 'overflow_bytes', 'overflow_packets',
         'packets_written', 'pings', 'port_opens', 'records_sent', 'replies_sent', 'stalled',
         'unplugged_lost', 'unplugs')
@@ -251,12 +294,32 @@ class _Outgoing(NamedTuple):
 
 class PtySimulator:
     """
-    A 3DM-GX2 and its wireless base station on a pseudo-terminal.
+    A 3DM-GX2 and its wireless base station on a pseudo-terminal, or a wired 3DM-GX2.
 
     Use as a context manager, or call :meth:`start` and :meth:`stop`. After
     start, ``port`` is the path to open (stable across unplugs). The ground
-    truth (``truth``, ``commands``, ``host_log``, ``stats``) is thread-safe to
-    read at any time; the properties return copies.
+    truth (``truth``, ``commands``, ``host_log``, ``stats``, ``stream_changes``)
+    is thread-safe to read at any time; the properties return copies.
+
+    Wired (``SimulatorConfig(wireless=False)``), the sensor sits on the port
+    itself and reads the host's bytes as a plain stream: it picks out the
+    command bytes it knows (every command but the wireless ping) followed by
+    their confirmation and argument bytes, ignores and counts every other byte
+    (``stats.host_bytes_ignored``), and answers with wired records (echo, data,
+    uint16 checksum). No ACK, no NACK, no ping answer, no LQI/RSSI. So a driver
+    that sends packets to a wired sensor gets no ACK, and wired replies only to
+    the commands that happen to sit whole inside its packets (a packet for
+    0xC2 holds the byte 0xC2: the sensor answers it, wired; a header byte that
+    happens to be a command byte may swallow the start of the next packet):
+    exactly what a byte-reading device would do. (protocol.md says wired
+    sensors accept packets too; this model is the stricter firmware, so that a
+    driver set up for the wrong framing shows it at once.) The other way round,
+    the wireless base station takes only packets and pings: raw commands are
+    skipped as garbage and unanswered, though a sensor already streaming is
+    heard. Unplugging a wired sensor's cable powers it off: it comes back
+    from power-up (timer restarted, EEPROM auto-start) when plugged in again.
+    The radio faults (command loss, NACK, foreign packets, corrupted length
+    bytes) do not exist wired and are refused.
     """
 
     def __init__(self, config: SimulatorConfig | None = None, **overrides: Any) -> None:
@@ -272,16 +335,11 @@ class PtySimulator:
                 motion_config, nan_mag=config.nan_mag or motion_config.nan_mag,
                 mag_nan_probability=config.mag_nan_probability or
                 motion_config.mag_nan_probability)
-        eeprom = {}
-        if config.start_stream:
-            if config.start_stream not in sns.STREAMABLE:
-                raise ValueError(f'0x{config.start_stream:02X} cannot be streamed')
-            eeprom[sns.AUTOSTART_ADDRESS] = 0x8000 | config.start_stream
         #: The device model; touch it only while holding ``sim.lock``.
         self.sensor = SimulatedSensor(
             config.address, config.serial_number, Motion(motion_config),
             clock_ppm=config.clock_ppm, timer_start=config.timer_start, rate_hz=config.rate_hz,
-            firmware_version=config.firmware_version, eeprom=eeprom,
+            firmware_version=config.firmware_version, eeprom=config.power_up_eeprom,
             seed=seeds.getrandbits(64))
         self._foreign = SimulatedSensor(
             self._foreign_address(config.faults), '0000', Motion(MotionConfig(static=True)),
@@ -306,6 +364,7 @@ class PtySimulator:
         self._truth_index = 0
         self._commands: list[tuple[float, Command]] = []
         self._host_log: list[HostCommand] = []
+        self._stream_changes: list[tuple[float, int]] = []
         self._stats = SimulatorStats()
         self._outbox: list[_Outgoing] = []
         self._seq = 0
@@ -319,7 +378,7 @@ class PtySimulator:
         self._master: int | None = None
         self._slave: int | None = None
         self._link_target: str | None = None
-        self._parser = CommandStreamParser()
+        self._parser = self._new_parser()
         self._wake_r, self._wake_w = -1, -1
         self._dir: str | None = None
         self._threads: list[threading.Thread] = []
@@ -355,6 +414,7 @@ class PtySimulator:
         with self.lock:
             self.start_time = now
             self.sensor.power_up(now)
+            self._note_streaming(now)
             self._foreign.power_up(now - 1000.0 * self._fault_rng.random())
             self._schedule_faults(self._faults, now, None)
         self._started = True
@@ -428,7 +488,7 @@ class PtySimulator:
             self._master, self._slave, self.device = master, slave, device
             self._link_target = target
         with self.lock:
-            self._parser = CommandStreamParser()
+            self._parser = self._new_parser()
             self._polled_since_open = False
         self._plugged.set()
 
@@ -460,7 +520,8 @@ class PtySimulator:
 
         The pty closes (the host's reads and writes fail), the symlink goes,
         and a new pty appears at the same path after the delay (None: only on
-        :meth:`replug`). The sensor is wireless and keeps running meanwhile.
+        :meth:`replug`). A wireless sensor keeps running meanwhile; a wired one
+        loses its power and starts again from power-up when plugged back in.
         Returns once the port is gone.
         """
         self._post(0.0, lambda: self._do_unplug(seconds))
@@ -483,11 +544,21 @@ class PtySimulator:
         self._close_pty()
         with self.lock:
             self._stats.unplugs += 1
+            if not self.config.wireless:
+                # The cable feeds a wired sensor: it goes dark with the port.
+                self._outbox.clear()
+                self.sensor.power_off()
+                self._note_streaming(time.time())
         if seconds is not None:
             self._post(seconds, self._do_replug)
 
     def _do_replug(self) -> None:
         if self._master is None and not self._stop.is_set():
+            if not self.config.wireless:
+                with self.lock:
+                    self.sensor.power_up(time.time())
+                    self._note_streaming(time.time())
+                    self._tx_wake.notify_all()
             self._open_pty()
             with self.lock:
                 self._changed.notify_all()
@@ -517,10 +588,13 @@ class PtySimulator:
 
         Scheduled faults (``stall_at``, ``unplug_at``) given here count from
         now. Turning ``already_streaming`` on makes the sensor stream 0xCC now.
+        A wired simulator refuses the radio's faults (ValueError).
         """
         with self.lock:
             old = self._faults
             new = faults if faults is not None else dataclasses.replace(old, **changes)
+            if not self.config.wireless:
+                new.check_wired()
             self._faults = new
             self._foreign.address = self._foreign_address(new)
             if new.ignore_first_continuous and not old.ignore_first_continuous:
@@ -528,6 +602,7 @@ class PtySimulator:
             now = time.time()
             if new.already_streaming and not old.already_streaming and self._started:
                 self.sensor.start_streaming(DEFAULT_STREAM, now)
+                self._note_streaming(now)
             if self._started:
                 self._schedule_faults(new, now, None if faults is not None else changes)
             self._tx_wake.notify_all()
@@ -565,6 +640,7 @@ class PtySimulator:
         with self.lock:
             self._outbox.clear()  # what the old power cycle had not sent is gone
             self.sensor.power_up(time.time())
+            self._note_streaming(time.time())
             self._tx_wake.notify_all()
 
     # -- ground truth -----------------------------------------------------------------------
@@ -604,6 +680,44 @@ class PtySimulator:
         """Command byte the sensor streams now, 0 when polled."""
         with self.lock:
             return self.sensor.streaming
+
+    @property
+    def stream_changes(self) -> list[tuple[float, int]]:
+        """
+        (time, command byte or 0) each time the sensor's stream changed (a copy).
+
+        The first entry is the power-up state. A start, stop or change of
+        stream (0xC4, 0xFA, power cycle, unplugging a wired sensor) adds one;
+        asking for the record already streamed adds none. A test proves that
+        an interrupted stream was restarted by finding a 0 followed by a code.
+        """
+        with self.lock:
+            return list(self._stream_changes)
+
+    @property
+    def wireless(self) -> bool:
+        """Whether this is a base station with a wireless sensor (False: a wired sensor)."""
+        return self.config.wireless
+
+    @property
+    def eeprom(self) -> dict[int, int]:
+        """Return the sensor's EEPROM words now (a copy): presets and what the host wrote."""
+        with self.lock:
+            return dict(self.sensor.eeprom)
+
+    def commands_of(self, *codes: int) -> list[tuple[float, Command]]:
+        """(time, command) of the commands with these command bytes the sensor received."""
+        with self.lock:
+            return [entry for entry in self._commands if entry[1].code in codes]
+
+    def eeprom_writes(self) -> list[tuple[float, Command]]:
+        """
+        Every EEPROM write (0xE4) the sensor received, whether or not it stored it.
+
+        Empty proves that nothing was written to the EEPROM. (A write the radio
+        lost never reached the sensor; ``host_log`` still shows it was sent.)
+        """
+        return self.commands_of(lay.WRITE_EEPROM)
 
     def wait_until(self, condition: collections.abc.Callable[[], bool],
                    timeout: float = 5.0) -> bool:
@@ -706,6 +820,7 @@ class PtySimulator:
         # that the ground truth already shows a command when the host sees its ACK.
         with self.lock:
             self._stats.bytes_read += len(data) - 1
+            skipped = self._parser.stats.bytes_skipped
             for event in self._parser.feed(data[1:]):
                 if isinstance(event, framing.CommandPacket):
                     self._on_command_packet(event, now)
@@ -714,7 +829,30 @@ class PtySimulator:
                                           f'rejected: {event.reason}'), nacks=1)
                     self._write_raw(bytes((framing.NACK,)))
                 elif isinstance(event, RawCommand):
-                    self._on_raw_command(event.command, now)
+                    if self.config.wireless:
+                        self._on_raw_command(event.command, now)
+                    else:
+                        self._on_wired_command(event.command, now)
+            self._stats.host_bytes_ignored += self._parser.stats.bytes_skipped - skipped
+
+    def _new_parser(self) -> CommandStreamParser:
+        """Reader of the host's bytes: a base station's, or a wired sensor's."""
+        if self.config.wireless:
+            return CommandStreamParser()
+        return CommandStreamParser(wireless=False, codes=sns.WIRED_COMMANDS)
+
+    def _on_wired_command(self, raw: bytes, now: float) -> None:
+        """Act on a command a wired sensor read from the line (lock held); nothing to ACK."""
+        try:
+            command: Command | None = decode_command(raw)
+        except CodecError:
+            command = None
+        if self._stalled(now):
+            outcome, counter = 'stalled', 'commands_lost'
+        else:
+            outcome = self._deliver(command, raw, now)
+            counter = 'commands_received' if outcome == 'delivered' else 'commands_ignored'
+        self._log(HostCommand(now, 'wired', None, command, raw, outcome), **{counter: 1})
 
     def _on_raw_command(self, raw: bytes, now: float) -> None:
         """Answer a ping for the base station (lock held)."""
@@ -776,8 +914,15 @@ class PtySimulator:
         ignored_before = self.sensor.ignored
         for reply in self.sensor.handle(command, now):
             self._enqueue(reply, 'reply', self.sensor.address)
+        self._note_streaming(now)
         self._tx_wake.notify_all()
         return 'ignored' if self.sensor.ignored != ignored_before else 'delivered'
+
+    def _note_streaming(self, now: float) -> None:
+        """Record the sensor's stream if it changed (lock held)."""
+        code = self.sensor.streaming
+        if not self._stream_changes or self._stream_changes[-1][1] != code:
+            self._stream_changes.append((now, code))
 
     def _log(self, entry: HostCommand, **counters: int) -> None:
         with self.lock:
@@ -792,13 +937,25 @@ class PtySimulator:
         """Queue a packet the sensor sends at ``reply.due`` (lock held)."""
         delay = self.config.latency_s
         if self.config.wire_baud:
-            size = len(reply.data) + framing.HEADER_SIZE + framing.DATA_TRAILER_SIZE
-            delay += size * 10.0 / self.config.wire_baud
+            delay += self._frame_size(len(reply.data)) * 10.0 / self.config.wire_baud
         if self._faults.jitter_ms > 0:
             delay += self._fault_rng.uniform(0.0, self._faults.jitter_ms / 1000.0)
         self._seq += 1
         heapq.heappush(self._outbox, _Outgoing(reply.due, self._seq, reply.due + delay,
                                                reply, source, address))
+
+    def _frame_size(self, record_size: int) -> int:
+        """Bytes on the line for a record of ``record_size`` bytes (echo and data)."""
+        if self.config.wireless:
+            return record_size + framing.HEADER_SIZE + framing.DATA_TRAILER_SIZE
+        return record_size + 2  # the wired checksum
+
+    def _frame(self, reply: Reply, address: int) -> bytes:
+        """Return the bytes the host gets for one record: a data packet, or a wired record."""
+        if not self.config.wireless:
+            return framing.encode_wired_record(reply.data)
+        lqi, rssi = self.sensor.link_quality()
+        return framing.encode_data_packet(address, reply.data, lqi, rssi)
 
     def _tx_loop(self) -> None:
         while not self._stop.is_set():
@@ -837,8 +994,7 @@ class PtySimulator:
         with self.lock:
             faults = self._faults
             rng = self._fault_rng
-            lqi, rssi = self.sensor.link_quality()
-            packet = framing.encode_data_packet(item.address, reply.data, lqi, rssi)
+            packet = self._frame(reply, item.address)
             fault = None
             if self._stalled(item.send):
                 fault = flt.FAULT_STALL
@@ -883,10 +1039,12 @@ class PtySimulator:
 
     def _garbage(self, faults: FaultConfig) -> bytes:
         rng = self._fault_rng
+        significant = (flt.SIGNIFICANT_BYTES if self.config.wireless
+                       else flt.WIRED_SIGNIFICANT_BYTES)
         out = bytearray()
         for _ in range(rng.randint(1, faults.garbage_max_bytes)):
             byte = rng.randrange(256)
-            while faults.garbage_safe and byte in flt.SIGNIFICANT_BYTES:
+            while faults.garbage_safe and byte in significant:
                 byte = rng.randrange(256)
             out.append(byte)
         return bytes(out)
@@ -895,8 +1053,12 @@ class PtySimulator:
         """Flip one bit the checksum covers (record data) or of the checksum itself."""
         rng = self._fault_rng
         data = bytearray(packet)
-        record_end = len(data) - 4
-        positions = [*range(framing.HEADER_SIZE + 1, record_end), len(data) - 2, len(data) - 1]
+        if self.config.wireless:
+            record_end = len(data) - 4
+            positions = [*range(framing.HEADER_SIZE + 1, record_end),
+                         len(data) - 2, len(data) - 1]
+        else:  # all but the echo byte, which tells a wired parser the record's size
+            positions = list(range(1, len(data)))
         data[rng.choice(positions)] ^= 1 << rng.randrange(8)
         return bytes(data)
 
