@@ -17,10 +17,11 @@
 
 And it leaves every sensor as it found it.
 
-Each simulator is one base station with one sensor on its own pseudo-terminal;
-several run side by side. "As found" is read from the simulator's record of
-every command the sensor received: only reads (0xE9, 0xEA, 0xE5), no EEPROM
-write, and a stream that is still (or again) the same record.
+Each simulator is one base station with one sensor (or one wired sensor) on
+its own pseudo-terminal; several run side by side. "As found" is read from the
+simulator's record of every command the sensor received: only reads (0xE9,
+0xEA, 0xE5), no EEPROM write, and a stream that never changed, or that was
+stopped and restarted with the same record.
 """
 
 import json
@@ -46,6 +47,19 @@ from ros_harness import REPO
 READS = {lay.FIRMWARE_VERSION, lay.DEVICE_IDENTIFIER, lay.READ_EEPROM}
 #: A probe as patient as a loaded test machine needs; the defaults otherwise.
 PATIENT = {'ping_timeout': 1.0, 'request_timeout': 0.5}
+
+
+def left_as_found(sim: PtySimulator, restarted: bool = False) -> None:
+    """Assert that the sensor got no write and streams what it streamed at power-up."""
+    assert sim.eeprom_writes() == []
+    streams = [code for _, code in sim.stream_changes]
+    start = streams[0]
+    if restarted:
+        assert streams == [start, 0, start], 'stopped once, restarted with the same record'
+    else:
+        assert streams == [start], 'the stream was never touched'
+        assert set(codes(sim)) <= READS
+    assert sim.streaming == start
 
 
 def info(serial: str) -> DeviceInfo:
@@ -109,9 +123,9 @@ def test_probe_finds_each_sensor_and_leaves_it_as_it_was():
         assert 0 < sensor.lqi <= 255 and 0 < sensor.rssi <= 255
 
         # Left as found: only reads, and the stream never stopped.
-        assert set(codes(polled)) == READS and polled.streaming == 0
-        assert set(codes(streaming)) == READS
-        assert streaming.streaming == lay.ACCEL_ANG_RATE
+        assert set(codes(polled)) == READS and set(codes(streaming)) == READS
+        left_as_found(polled)
+        left_as_found(streaming)
         assert streaming.wait_until(
             lambda: streaming.stats.records_sent > records_before + 100, timeout=10)
         for sim in (polled, streaming):
@@ -168,8 +182,7 @@ def test_stop_streams_restarts_the_same_record():
         assert set(received[stop + 1:-1]) <= READS | {lay.STOP_CONTINUOUS}
         assert sim.commands[-1][1].code == lay.SET_CONTINUOUS
         assert sim.commands[-1][1].args == (lay.EULER_ANGLES,)
-        assert sim.streaming == lay.EULER_ANGLES
-        assert lay.WRITE_EEPROM not in received
+        left_as_found(sim, restarted=True)
 
 
 def test_a_sensor_that_cannot_answer_while_streaming_is_stopped_read_and_restarted():
@@ -192,10 +205,40 @@ def test_a_sensor_that_cannot_answer_while_streaming_is_stopped_read_and_restart
         [sensor] = found.sensors
         assert (sensor.found_by, sensor.info, sensor.streaming, sensor.restarted) == \
             ('stream', info('2017'), lay.ACCEL_ANG_RATE_MAG, True)
-        assert sim.streaming == lay.ACCEL_ANG_RATE_MAG
         assert sim.commands[-1][1].code == lay.SET_CONTINUOUS
         assert sim.commands[-1][1].args == (lay.ACCEL_ANG_RATE_MAG,)
-        assert lay.WRITE_EEPROM not in codes(sim)
+        left_as_found(sim, restarted=True)
+
+
+def test_the_rate_is_the_sensors_own():
+    with PtySimulator(SimulatorConfig(address=3, serial_number='2003', seed=77,
+                                      divider=256)) as sim:
+        [sensor] = probe_port(sim.port, ProbeConfig(**PATIENT)).sensors
+        assert (sensor.address, sensor.divider, sensor.rate_hz) == (3, 256, 200.0)
+        left_as_found(sim)
+
+
+def test_a_wired_sensor_is_found_without_a_base_station():
+    with PtySimulator(SimulatorConfig(wireless=False, serial_number='5001', seed=78)) as sim:
+        found = probe_port(sim.port, ProbeConfig(request_timeout=0.5))
+        assert (found.base_station, found.pinged) == (False, 3)
+        assert found.sensors == (SensorFound(None, 'wired', info('5001'), 512, 0, False,
+                                             None, None),)
+        assert not found.sensors[0].wireless
+        left_as_found(sim)
+
+
+@pytest.mark.parametrize('stop_streams', [False, True], ids=['combined', 'stop-streams'])
+def test_a_streaming_wired_sensor_is_found_by_its_stream(stop_streams):
+    with PtySimulator(SimulatorConfig(wireless=False, serial_number='5002', seed=79,
+                                      streaming_at_start=lay.EULER_ANGLES,
+                                      divider=1024)) as sim:
+        found = probe_port(sim.port, ProbeConfig(stop_streams=stop_streams,
+                                                 request_timeout=0.5))
+        assert (found.base_station, found.pinged) == (False, 0), 'no ping: it streams wired'
+        assert found.sensors == (SensorFound(None, 'stream', info('5002'), 1024,
+                                             lay.EULER_ANGLES, stop_streams, None, None),)
+        left_as_found(sim, restarted=stop_streams)
 
 
 def test_command_lines():
@@ -217,20 +260,27 @@ def test_command_line_reports_every_port_as_json():
             PtySimulator(SimulatorConfig(address=17, serial_number='2017', seed=82,
                                          streaming_at_start=0xCC)) as b, \
             PtySimulator(SimulatorConfig(address=4242, seed=83)) as none, \
-            PtySimulator(SimulatorConfig(address=7, seed=84)) as busy:
+            PtySimulator(SimulatorConfig(address=7, seed=84)) as busy, \
+            PtySimulator(SimulatorConfig(wireless=False, serial_number='5003', seed=88)) as wired:
         holder = SerialPort(busy.port)
         try:
             result = run_discover('--json', '--port', a.port, '--port', b.port,
-                                  '--port', none.port, '--port', busy.port)
+                                  '--port', none.port, '--port', busy.port,
+                                  '--port', wired.port)
         finally:
             holder.close()
         assert result.returncode == 0, result.stderr
         assert result.stderr == '', 'no progress when not on a terminal'
         report = json.loads(result.stdout)
-        assert report['found'] == 2
+        assert report['found'] == 3
         ports = {p['device']: p for p in report['ports']}
-        assert [ports[s.port]['status'] for s in (a, b, none, busy)] == \
-            ['probed', 'probed', 'probed', 'busy']
+        assert [ports[s.port]['status'] for s in (a, b, none, busy, wired)] == \
+            ['probed', 'probed', 'probed', 'busy', 'probed']
+        [third] = ports[wired.port]['sensors']
+        assert (third['link'], third['address'], third['serial_number'], third['command']) == \
+            ('wired', None, '5003', f'ros2 run i3dmgx2_driver node --ros-args '
+                                    f'-p port:={wired.port} -p wireless:=false -p address:=1')
+        assert ports[wired.port]['base_station'] is False
         assert ports[none.port]['sensors'] == [] and ports[none.port]['base_station'] is True
         assert busy.port in ports[busy.port]['message']
         [first] = ports[a.port]['sensors']
@@ -245,9 +295,9 @@ def test_command_line_reports_every_port_as_json():
         [second] = ports[b.port]['sensors']
         assert (second['address'], second['found_by'], second['streaming'],
                 second['stream_restarted']) == (17, 'stream', '0xCC', False)
-        assert b.streaming == 0xCC
-        for sim in (a, b, none):
-            assert set(codes(sim)) <= READS
+        for sim in (a, b, none, busy, wired):
+            left_as_found(sim)
+        assert busy.host_log == []
 
 
 def test_command_line_prints_the_driver_command_and_exit_status():
