@@ -72,12 +72,16 @@ def main() -> int:
     results = []
     cases = [('factory range 1..99, one polled sensor (95)', {}),
              ('factory range, one sensor streaming 0xCC at 100 Hz', {'streaming_at_start': 204}),
-             ('factory range, no sensor there (address 4242)', {'address': 4242})]
+             ('factory range, no sensor there (address 4242)', {'address': 4242}),
+             ('a wired sensor (no base station: 3 silent pings, then asked directly)',
+              {'wireless': False})]
     for name, spec in cases:
         sim = SimProcess(**spec)
         try:
             totals, sweeps, found = _probe_times(sim.port, args.runs, config)
             pings = 98 if spec.get('streaming_at_start') else 99
+            if spec.get('wireless') is False:
+                pings = config.silent_pings
             results.append(_row(name, totals, sweeps, pings, found))
             if not spec:
                 start = time.monotonic()
