@@ -73,7 +73,7 @@ def main() -> int:
     cases = [('factory range 1..99, one polled sensor (95)', {}),
              ('factory range, one sensor streaming 0xCC at 100 Hz', {'streaming_at_start': 204}),
              ('factory range, no sensor there (address 4242)', {'address': 4242}),
-             ('a wired sensor (no base station: 3 silent pings, then asked directly)',
+             ('a wired sensor (no base station: 2 silent pings, then asked directly)',
               {'wireless': False})]
     for name, spec in cases:
         sim = SimProcess(**spec)

@@ -73,11 +73,11 @@ class ProbeConfig:
     #: Seconds to listen for sensors that already stream (one packet is enough).
     listen_s: float = 0.5
     #: Seconds to wait for the answer to a ping, until a base station has answered one.
-    ping_timeout: float = 0.25
+    ping_timeout: float = 0.5
     #: Seconds to wait for it once a base station is known to be there.
     answer_timeout: float = 1.0
     #: This many unanswered pings first: no base station on the port.
-    silent_pings: int = 3
+    silent_pings: int = 2
     request_timeout: float = 0.3
     request_retries: int = 3
     #: Stop a streaming sensor to read it (and restart it), instead of trying

@@ -222,15 +222,19 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
             out.write(f'    note: {sensor.note}\n')
 
 
-def print_hints(results: Sequence[tuple[PortInfo, PortProbe]], addresses: Sequence[int],
+def print_hints(results: Sequence[tuple[PortInfo, PortProbe]], config: ProbeConfig,
                 out: TextIO) -> None:
     """Say what to try next when nothing was found."""
+    addresses = list(config.addresses)
     out.write('\nNo sensor found. Check that the sensor is on (battery), then:\n')
     swept = [p for _, p in results if p.base_station and p.pinged]
     if swept and len(addresses) < 65534:
         per_ping = sum(p.ping_seconds for p in swept) / sum(p.pinged for p in swept)
         out.write(f'  - its address may not be the factory one: --addresses 1-65534 '
                   f'(about {per_ping * 65534 / 60:.1f} min at the pace seen here)\n')
+    if any(p.base_station is False for _, p in results):
+        out.write(f'  - a base station slower than {config.ping_timeout:g} s to answer a ping: '
+                  f'--ping-timeout 2\n')
     out.write('  - sensor and base station may be on different radio channels '
               "(MicroStrain's software sets them)\n"
               '  - a wired sensor or another port: --all probes every listed port\n')
@@ -297,7 +301,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             out.write('\n')
         print_results(results, out)
         if not found:
-            print_hints(results, args.addresses, out)
+            print_hints(results, config, out)
     elif ports:
         out.write('\nNo port looks like a base station or USB-serial cable: --all probes '
                   'them all, --port PATH one.\n')
