@@ -45,6 +45,7 @@ setup(
             'replay = i3dmgx2_driver.tools.replay:main',
             'plot = i3dmgx2_driver.tools.plot:main',
             'monitor = i3dmgx2_driver.ros.monitor:main',
+            'discover = i3dmgx2_driver.tools.discover:main',
         ],
     },
 )

@@ -72,7 +72,8 @@ def installed_env(prefix) -> dict:
 
 def test_layout_is_what_ros2_expects(prefix):
     lib = prefix / 'lib' / 'i3dmgx2_driver'
-    for exe in ('node', 'lifecycle_node', 'simulator', 'replay', 'plot', 'monitor'):
+    for exe in ('node', 'lifecycle_node', 'simulator', 'replay', 'plot', 'monitor',
+                'discover'):
         assert os.access(lib / exe, os.X_OK), f'{exe} is not an executable in {lib}'
     share = prefix / 'share'
     assert (share / 'ament_index' / 'resource_index' / 'packages' / 'i3dmgx2_driver').exists()
@@ -129,3 +130,13 @@ def test_installed_simulator_prints_its_port(prefix):
     out, _ = proc.communicate(timeout=30)
     assert proc.returncode == 0, out
     assert out.splitlines()[0].startswith('port: /')
+
+
+def test_installed_discover_finds_a_simulated_sensor(prefix):
+    with PtySimulator(SimulatorConfig(seed=42, address=42, serial_number='2042')) as sim:
+        result = subprocess.run([str(prefix / 'lib' / 'i3dmgx2_driver' / 'discover'),
+                                 '--port', sim.port], env=installed_env(prefix), cwd='/',
+                                capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert result.stdout.splitlines()[-1].strip() == \
+        f'ros2 run i3dmgx2_driver node --ros-args -p port:={sim.port} -p address:=42'

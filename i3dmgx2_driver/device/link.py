@@ -267,26 +267,49 @@ class DeviceLink:
 
     def ping(self, timeout: float = 0.5, retries: int = 3) -> bool:
         """Ask the base station whether the sensor answers over the radio."""
+        for _ in range(retries):
+            answer = self.ping_once(self.address, timeout)
+            if answer is not None:
+                return answer
+        return False
+
+    def ping_once(self, address: int, timeout: float) -> bool | None:
+        """
+        Ping ``address`` once: True (link OK), False (0x21: no such node).
+
+        None means no answer at all, which a base station never gives: a
+        wired sensor, or nothing, is on the port (what discovery needs to
+        tell apart from a node that is not there).
+        """
         with self._lock:
-            for _ in range(retries):
-                pending = _Pending(layouts.PING)
-                self._pending = pending
-                try:
-                    self.parser.expect_ping()
-                    with self._write_lock:
-                        self.port.write(commands.ping(self.address))
-                    self._wait(pending, timeout, nack_ends=False)
-                finally:
-                    self._pending = None
-                if self.disconnected.is_set():
-                    raise PortDisconnected(self.error or 'device disconnected')
-                self._check_cancelled()
-                if pending.reply is not None:
-                    return bool(pending.reply.ok)
-            return False
+            pending = _Pending(layouts.PING)
+            self._pending = pending
+            try:
+                self.parser.expect_ping()
+                with self._write_lock:
+                    self.port.write(commands.ping(address))
+                self._wait(pending, timeout, nack_ends=False)
+            finally:
+                self._pending = None
+            if self.disconnected.is_set():
+                raise PortDisconnected(self.error or 'device disconnected')
+            self._check_cancelled()
+            return None if pending.reply is None else bool(pending.reply.ok)
 
     def stop_streaming(self, repeats: int = 3, gap: float = 0.02) -> None:
         """Send 0xFA several times: it has no reply and the radio may drop it."""
         for _ in range(repeats):
             self.send(commands.stop_continuous())
             time.sleep(gap)
+
+    def retarget(self, address: int | None) -> None:
+        """
+        Speak to another node behind the same base station from now on.
+
+        For discovery, which visits several nodes over one open port. None
+        accepts data packets from every node (listening for sensors that
+        already stream); requests need an address again before they are sent.
+        """
+        self.address = address
+        if self.wireless:
+            self.parser.address = address

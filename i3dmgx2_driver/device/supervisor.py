@@ -355,7 +355,9 @@ class DeviceSupervisor:
                                period)
             except DeviceTimeout as exc:
                 if not self._stop.is_set():  # else: cut short on purpose
-                    self._warn('timeout', f'device not answering: {exc}')
+                    self._warn('timeout', f'device not answering: {exc} (wrong port or '
+                                          f'address? ros2 run i3dmgx2_driver discover '
+                                          f'finds sensors)')
             if self._stop.is_set():
                 break  # whoever stopped us decides about the port
             self._release(send_stop=False)
@@ -516,7 +518,8 @@ class DeviceSupervisor:
         if self._stop.is_set():
             return
         if not any(info):
-            self._warn('identity', 'the device did not tell its identity (0xEA, 0xE9)')
+            self._warn('identity', 'the device did not tell its identity (0xEA, 0xE9): right '
+                                   'port? ros2 run i3dmgx2_driver discover finds sensors')
             return
         self.info = info
         if info != self._info_logged:

@@ -13,8 +13,8 @@
 # limitations under the License.
 
 """
-Command-line tools around captures: ``replay`` and ``plot``.
+Command-line tools: ``replay`` and ``plot`` around captures, ``discover``.
 
-They work on bytes and files only, never on ROS, so that a capture can be
-replayed into a driver, or looked at, on any machine with Python.
+They never use ROS, so that a capture can be replayed into a driver, or
+looked at, and a sensor found, on any machine with Python.
 """

@@ -1,0 +1,312 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Find the sensors: which port, which address, so nobody has to guess.
+
+Lists the serial ports, probes the ones that look like a MicroStrain base
+station or a USB-serial cable (every one given with ``--port``, every listed
+one with ``--all``), and prints what answered with the exact command that
+starts the driver for it. Probing leaves each sensor as it was found: see
+``device/probe.py``. Exit status: 0 a sensor was found, 1 none, 2 bad
+arguments.
+"""
+
+import argparse
+from collections.abc import Sequence
+import json
+import shlex
+import sys
+import time
+from typing import Any, TextIO
+
+from ..device.port_listing import BY_ID_DIR, describe_path, list_ports, PortInfo
+from ..device.probe import (
+    FACTORY_ADDRESSES, parse_addresses, PortProbe, probe_port, ProbeConfig, SensorFound,
+)
+
+EXIT_FOUND = 0
+EXIT_NONE = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+#: What to do about a port in use.
+BUSY_HINT = ' (the driver? fuser -v {path} names the process); skipped'
+#: Wired sensors need no address, but the node requires one: any valid one does.
+WIRED_ADDRESS = 1
+
+
+def node_command(path: str, sensor: SensorFound) -> str:
+    """Return the ``ros2 run`` line that starts the driver for ``sensor``."""
+    head = f'ros2 run i3dmgx2_driver node --ros-args -p port:={shlex.quote(path)}'
+    if sensor.wireless:
+        return f'{head} -p address:={sensor.address}'
+    return f'{head} -p wireless:=false -p address:={WIRED_ADDRESS}'
+
+
+def _addresses(text: str) -> list[int]:
+    try:
+        return parse_addresses(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number of seconds') from None
+    if not 0.0 <= value <= 60.0:
+        raise argparse.ArgumentTypeError(f'{text!r}: give 0..60 seconds')
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command line of ``discover``."""
+    parser = argparse.ArgumentParser(
+        prog='discover',
+        description='Find 3DM-GX2 sensors: the serial port of their base station (or cable) '
+                    'and their node address, and the command that starts the driver.',
+        epilog='Exit status: 0 a sensor was found, 1 none was, 2 bad arguments.')
+    parser.add_argument('--port', action='append', metavar='PATH',
+                        help='probe this port only (repeatable); default: the listed ports '
+                             'that look like a base station or USB-serial cable')
+    parser.add_argument('--all', action='store_true',
+                        help='probe every listed port, not only the likely ones')
+    parser.add_argument('--addresses', type=_addresses, metavar='LIST',
+                        default=list(FACTORY_ADDRESSES),
+                        help='node addresses to ping, e.g. 95, 1-65534 or 3,7,10-20 '
+                             '(default: 1-99, the factory addresses)')
+    parser.add_argument('--listen', type=_seconds, default=ProbeConfig.listen_s,
+                        metavar='SECONDS',
+                        help='listen this long for sensors that already stream '
+                             f'(default {ProbeConfig.listen_s})')
+    parser.add_argument('--ping-timeout', type=_seconds, default=ProbeConfig.ping_timeout,
+                        metavar='SECONDS',
+                        help='wait this long for a base station to answer a ping before '
+                             'taking the port for one without a base station '
+                             f'(default {ProbeConfig.ping_timeout})')
+    parser.add_argument('--stop-streams', action='store_true',
+                        help='stop a streaming sensor to read it (it is restarted), '
+                             'rather than asking it while it streams')
+    parser.add_argument('--baud', type=int, default=ProbeConfig.baud,
+                        help=f'serial baud rate (default {ProbeConfig.baud})')
+    parser.add_argument('--json', action='store_true',
+                        help='print the result as JSON (for scripts)')
+    parser.add_argument('--by-id-dir', default=BY_ID_DIR, help=argparse.SUPPRESS)
+    return parser
+
+
+# -- output --------------------------------------------------------------------
+
+def _sensor_dict(path: str, sensor: SensorFound) -> dict[str, Any]:
+    info = sensor.info
+    return {
+        'address': sensor.address,
+        'link': 'wireless' if sensor.wireless else 'wired',
+        'found_by': sensor.found_by,
+        'model_number': info.model_number if info else None,
+        'serial_number': info.serial_number if info else None,
+        'model_name': info.model_name if info else None,
+        'options': info.options if info else None,
+        'firmware': info.firmware if info else None,
+        'rate_divider': sensor.divider,
+        'rate_hz': round(sensor.rate_hz, 3) if sensor.rate_hz else None,
+        'streaming': f'0x{sensor.streaming:02X}' if sensor.streaming else None,
+        'stream_restarted': sensor.restarted,
+        'lqi': sensor.lqi,
+        'rssi': sensor.rssi,
+        'note': sensor.note or None,
+        'command': node_command(path, sensor),
+    }
+
+
+def _port_dict(port: PortInfo, probe: PortProbe | None) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        'device': port.device, 'by_id': port.by_id, 'usb_id': port.usb_id,
+        'description': port.description or None, 'looks_like': port.kind,
+        'status': probe.status if probe else 'not probed',
+    }
+    if probe is not None:
+        out.update({
+            'message': probe.message or None,
+            'base_station': probe.base_station,
+            'pinged': probe.pinged,
+            'ping_seconds': round(probe.ping_seconds, 3),
+            'seconds': round(probe.seconds, 3),
+            'sensors': [_sensor_dict(port.stable_path, s) for s in probe.sensors],
+        })
+    return out
+
+
+def _table(rows: list[list[str]], out: TextIO, indent: str = '  ') -> None:
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    for row in rows:
+        out.write(indent + '  '.join(cell.ljust(w) for cell, w in zip(row, widths, strict=True))
+                  .rstrip() + '\n')
+
+
+def print_ports(ports: Sequence[PortInfo], probing: set[str], out: TextIO) -> None:
+    """Print the port list, saying which ports will be probed."""
+    if not ports:
+        out.write("No serial ports found. Is the base station (or the sensor's USB cable) "
+                  'plugged in? dmesg tells what the kernel saw.\n')
+        return
+    rows = [['device', 'stable path', 'usb id', 'description', 'looks like', '']]
+    for port in ports:
+        rows.append([port.device, port.by_id or '-', port.usb_id or '-',
+                     port.description or '-', port.kind or '-',
+                     'probe' if port.device in probing else 'skip'])
+    out.write('Serial ports:\n')
+    _table(rows, out)
+
+
+def _state(sensor: SensorFound) -> str:
+    if not sensor.streaming:
+        return 'polled'
+    state = f'streaming 0x{sensor.streaming:02X}'
+    return state + ' (restarted)' if sensor.restarted else state
+
+
+def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) -> None:
+    """Print what each port held, a table of sensors, and the commands."""
+    rows = [['port', 'link', 'address', 'serial', 'model', 'firmware', 'rate', 'state',
+             'found by']]
+    commands = []
+    for port, probe in results:
+        if probe.status != 'probed':
+            hint = BUSY_HINT.format(path=shlex.quote(port.device)) \
+                if probe.status == 'busy' else ''
+            out.write(f'{port.device}: {probe.message}{hint}\n')
+            continue
+        if not probe.sensors:
+            what = {True: 'a base station, but no sensor answered',
+                    False: 'no base station and no wired sensor answered',
+                    None: 'nothing answered'}[probe.base_station]
+            pinged = f' (pinged {probe.pinged} addresses)' if probe.base_station else ''
+            out.write(f'{port.device}: {what}{pinged}, {probe.seconds:.1f} s\n')
+            continue
+        count = len(probe.sensors)
+        out.write(f'{port.device}: {count} sensor{"s" if count > 1 else ""}, '
+                  f'{probe.seconds:.1f} s\n')
+        for sensor in probe.sensors:
+            info = sensor.info
+            rows.append([
+                port.device, 'wireless' if sensor.wireless else 'wired',
+                str(sensor.address) if sensor.wireless else '-',
+                (info.serial_number or '?') if info else '?',
+                (info.model_name or info.model_number or '?') if info else '?',
+                (info.firmware or '?') if info else '?',
+                f'{sensor.rate_hz:.1f} Hz' if sensor.rate_hz else '?',
+                _state(sensor), sensor.found_by])
+            commands.append((sensor, node_command(port.stable_path, sensor)))
+    if not commands:
+        return
+    out.write('\n')
+    _table(rows, out)
+    out.write('\nStart the driver with:\n')
+    for sensor, command in commands:
+        out.write(f'  {command}\n')
+        if sensor.note:
+            out.write(f'    note: {sensor.note}\n')
+
+
+def print_hints(results: Sequence[tuple[PortInfo, PortProbe]], config: ProbeConfig,
+                out: TextIO) -> None:
+    """Say what to try next when nothing was found."""
+    addresses = list(config.addresses)
+    out.write('\nNo sensor found. Check that the sensor is on (battery), then:\n')
+    swept = [p for _, p in results if p.base_station and p.pinged]
+    if swept and len(addresses) < 65534:
+        per_ping = sum(p.ping_seconds for p in swept) / sum(p.pinged for p in swept)
+        out.write(f'  - its address may not be the factory one: --addresses 1-65534 '
+                  f'(about {per_ping * 65534 / 60:.1f} min at the pace seen here)\n')
+    if any(p.base_station is False for _, p in results):
+        out.write(f'  - a base station slower than {config.ping_timeout:g} s to answer a ping: '
+                  f'--ping-timeout 2\n')
+    out.write('  - sensor and base station may be on different radio channels '
+              "(MicroStrain's software sets them)\n"
+              '  - a wired sensor or another port: --all probes every listed port\n')
+
+
+class _ProgressLine:
+    """One self-overwriting status line on a terminal; silent elsewhere."""
+
+    def __init__(self, out: TextIO, enabled: bool) -> None:
+        self.out = out
+        self.enabled = enabled
+        self.port = ''
+        self._last = 0.0
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        now = time.monotonic()
+        if not self.enabled or (done not in (0, total) and now - self._last < 0.05):
+            return
+        self._last = now
+        text = {'listen': 'listening for streams', 'ping': f'pinging {done}/{total}',
+                'identify': f'reading sensor {min(done + 1, total)}/{total}'}[stage]
+        self.out.write(f'\r\x1b[K{self.port}: {text}')
+        self.out.flush()
+
+    def clear(self) -> None:
+        if self.enabled:
+            self.out.write('\r\x1b[K')
+            self.out.flush()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``discover``; return the exit status."""
+    args = build_parser().parse_args(argv)
+    out = sys.stdout
+    if args.port:
+        ports = [describe_path(path, args.by_id_dir) for path in args.port]
+        probing = {p.device for p in ports}
+    else:
+        ports = list_ports(args.by_id_dir)
+        probing = {p.device for p in ports if p.likely or args.all}
+    if not args.json and not args.port:
+        print_ports(ports, probing, out)
+    config = ProbeConfig(addresses=args.addresses, baud=args.baud, listen_s=args.listen,
+                         ping_timeout=args.ping_timeout, stop_streams=args.stop_streams)
+    progress = _ProgressLine(sys.stderr, sys.stderr.isatty() and not args.json)
+    results = []
+    try:
+        for port in ports:
+            if port.device in probing:
+                progress.port = port.device
+                results.append((port, probe_port(port.device, config, progress)))
+                progress.clear()
+    except KeyboardInterrupt:
+        progress.clear()  # the port is closed on the way out; nothing was changed
+        return EXIT_INTERRUPTED
+    found = sum(len(probe.sensors) for _, probe in results)
+    if args.json:
+        probes = {port.device: probe for port, probe in results}
+        json.dump({'found': found,
+                   'ports': [_port_dict(p, probes.get(p.device)) for p in ports]}, out, indent=2)
+        out.write('\n')
+    elif results:
+        if not args.port:
+            out.write('\n')
+        print_results(results, out)
+        if not found:
+            print_hints(results, config, out)
+    elif ports:
+        out.write('\nNo port looks like a base station or USB-serial cable: --all probes '
+                  'them all, --port PATH one.\n')
+    return EXIT_FOUND if found else EXIT_NONE
+
+
+if __name__ == '__main__':
+    sys.exit(main())
