@@ -180,7 +180,8 @@ def test_silent_device_is_reported_and_retried():
             assert node.wait_for_output('does not answer', timeout=30), node.output()
             assert node.wait_for_output('device not answering', timeout=30), node.output()
             assert 'does not answer the base station ping: check it is powered, its address ' \
-                   'and the radio channel (ros2 run i3dmgx2_driver discover)' in node.output()
+                   '(ros2 run i3dmgx2_driver discover lists the nodes on the air) and the ' \
+                   'radio channel' in node.output()
             assert node.proc.poll() is None
             code, took = node.stop()
             assert code == 0 and took < 2.0
