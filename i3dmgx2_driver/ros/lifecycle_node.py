@@ -22,19 +22,20 @@ logged in one line:
 
 - configure: check the parameters (a bad one fails with the plain node's
   words; a name the node does not know is warned about once, at start) and
-  the port path (one that exists but is no serial port fails with the
-  plain node's words, and what the line carries instead of answers is part
-  of a silent sensor's reason), make the core (lifecycle publishers: silent until active), open
-  the port exclusively, quiet the device, read its identity, set the data
-  rate if asked. A missing or busy port, or a silent sensor, fails the
-  transition with the reason and leaves nothing open; configure again later.
+  the port path (one that exists but is no serial port fails with the plain
+  node's words), make the core (lifecycle publishers: silent until active),
+  open the port exclusively, quiet the device, read its identity, set the
+  data rate if asked. A missing or busy port, or a silent sensor (with what
+  the line carries instead of answers), fails the transition with the
+  reason and leaves nothing open; configure again later.
 - activate: start the stream and return once records arrive; from then on
   stalls and unplugs are recovered as the plain node recovers them, and
   the node stays active throughout (diagnostics say it is recovering).
 - deactivate: stop publishing and the stream (0xFA); the port stays open;
   the services answer that the node is inactive.
 - cleanup: close the port (another process may open it at once) and remove
-  the core's publishers and services.
+  the core's services; the publishers stay for the next configure
+  (:func:`~.driver_core.create_publishers` says why).
 - shutdown, from any state: stop the stream, close the port; the process
   then exits 0. SIGINT and SIGTERM do the same through the shutdown
   transition, within 2 s, even in the middle of a configure.
