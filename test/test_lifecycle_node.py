@@ -288,7 +288,7 @@ def test_signal_in_each_state_stops_the_stream_and_exits_zero(state, sig):
             assert [t for t, c in sim.commands if c.code == 0xFA and t >= sent_before]
         assert sim.wait_until(lambda: sim.streaming == 0, timeout=2)
         assert port_is_free(sim.port)
-        assert goal_states(listener)[-1] == 'finalized'
+        assert goal_states(listener)[-1] == 'finalized', node.output()
 
 
 def test_signal_during_a_slow_configure_exits_zero_within_2_s():

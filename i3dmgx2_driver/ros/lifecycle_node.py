@@ -69,6 +69,11 @@ DEVICE_ERRORS = (PortError, DeviceTimeout)
 #: How long a signal waits for a transition under way to end (s); the
 #: device was cut off first, so it ends within milliseconds.
 TRANSITION_WAIT = 1.0
+#: How long the process stays up after a signal's shutdown transition (s), so
+#: that its transition events reach the subscribers before the middleware
+#: goes: a sample still in shared memory when the writer's process exits is
+#: lost, and a bringup manager would never see ``finalized``.
+EVENT_GRACE = 0.25
 
 Transition = Callable[[Any, LifecycleState], TransitionCallbackReturn]
 
@@ -260,6 +265,7 @@ class LifecycleDriverNode(LifecycleNode):
             if locked and not self._finished.is_set():
                 try:
                     self.trigger_shutdown()
+                    time.sleep(EVENT_GRACE)
                 except RCLError:
                     pass  # in a transition state: release below without the state machine
         finally:
