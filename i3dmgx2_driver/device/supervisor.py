@@ -195,6 +195,10 @@ class DeviceSupervisor:
     def start(self) -> None:
         """Start the supervisor thread: open, initialise, stream, recover, forever."""
         self._stop.clear()
+        self._spawn()
+
+    def _spawn(self) -> None:
+        """Start the thread on the current link (None: it opens one)."""
         self._thread = threading.Thread(target=self._run, args=(self._link,),
                                         name='gx2-supervisor', daemon=True)
         self._thread.start()
@@ -263,7 +267,10 @@ class DeviceSupervisor:
             if self._link is not None:
                 self._quiet(self._link)
             raise
-        self.start()
+        if self._stop.is_set():
+            # stop() came while the stream was starting: it has the port; no thread.
+            raise DeviceTimeout('the driver stopped while the stream was starting')
+        self._spawn()
 
     def stop_streaming(self, timeout: float = 1.5) -> None:
         """

@@ -22,19 +22,20 @@ logged in one line:
 
 - configure: check the parameters (a bad one fails with the plain node's
   words; a name the node does not know is warned about once, at start) and
-  the port path (one that exists but is no serial port fails with the
-  plain node's words, and what the line carries instead of answers is part
-  of a silent sensor's reason), make the core (lifecycle publishers: silent until active), open
-  the port exclusively, quiet the device, read its identity, set the data
-  rate if asked. A missing or busy port, or a silent sensor, fails the
-  transition with the reason and leaves nothing open; configure again later.
+  the port path (one that exists but is no serial port fails with the plain
+  node's words), make the core (lifecycle publishers: silent until active),
+  open the port exclusively, quiet the device, read its identity, set the
+  data rate if asked. A missing or busy port, or a silent sensor (with what
+  the line carries instead of answers), fails the transition with the
+  reason and leaves nothing open; configure again later.
 - activate: start the stream and return once records arrive; from then on
   stalls and unplugs are recovered as the plain node recovers them, and
   the node stays active throughout (diagnostics say it is recovering).
 - deactivate: stop publishing and the stream (0xFA); the port stays open;
   the services answer that the node is inactive.
 - cleanup: close the port (another process may open it at once) and remove
-  the core's publishers and services.
+  the core's services; the publishers stay for the next configure
+  (:func:`~.driver_core.create_publishers` says why).
 - shutdown, from any state: stop the stream, close the port; the process
   then exits 0. SIGINT and SIGTERM do the same through the shutdown
   transition, within 2 s, even in the middle of a configure.
@@ -68,6 +69,11 @@ DEVICE_ERRORS = (PortError, DeviceTimeout)
 #: How long a signal waits for a transition under way to end (s); the
 #: device was cut off first, so it ends within milliseconds.
 TRANSITION_WAIT = 1.0
+#: How long the process stays up after a signal's shutdown transition (s), so
+#: that its transition events reach the subscribers before the middleware
+#: goes: a sample still in shared memory when the writer's process exits is
+#: lost, and a bringup manager would never see ``finalized``.
+EVENT_GRACE = 0.25
 
 Transition = Callable[[Any, LifecycleState], TransitionCallbackReturn]
 
@@ -259,6 +265,7 @@ class LifecycleDriverNode(LifecycleNode):
             if locked and not self._finished.is_set():
                 try:
                     self.trigger_shutdown()
+                    time.sleep(EVENT_GRACE)
                 except RCLError:
                     pass  # in a transition state: release below without the state machine
         finally:
