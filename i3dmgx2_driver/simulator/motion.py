@@ -36,6 +36,8 @@ import math
 import random
 from typing import NamedTuple
 
+from i3dmgx2_driver.codec.orientation import matrix_from_euler
+
 Vector3 = tuple[float, float, float]
 Matrix3 = tuple[float, float, float, float, float, float, float, float, float]
 
@@ -107,22 +109,6 @@ class Measurement(NamedTuple):
     angular_rate: Vector3
     mag: Vector3
     truth: TrueState
-
-
-def matrix_from_euler(roll: float, pitch: float, yaw: float) -> Matrix3:
-    """
-    Return M (earth NED to sensor) for aircraft ZYX Euler angles.
-
-    It is the product Rx(roll) * Ry(pitch) * Rz(yaw) of frame rotations, so
-    that pitch = asin(-M13), roll = atan2(M23, M33) and yaw = atan2(M12, M11),
-    exactly as protocol.md reads them back.
-    """
-    sr, cr = math.sin(roll), math.cos(roll)
-    sp, cp = math.sin(pitch), math.cos(pitch)
-    sy, cy = math.sin(yaw), math.cos(yaw)
-    return (cp * cy, cp * sy, -sp,
-            sr * sp * cy - cr * sy, sr * sp * sy + cr * cy, sr * cp,
-            cr * sp * cy + sr * sy, cr * sp * sy - sr * cy, cr * cp)
 
 
 def mat_vec(m: Matrix3, v: Vector3) -> Vector3:
