@@ -228,7 +228,7 @@ class Transmitter:
         return [data[a:b] for a, b in itertools.pairwise([0, *cuts, len(data)])]
 
     def _write(self, data: bytes) -> tuple[str | None, float | None]:
-        """Write one frame in chunks; return (fault or None, time after its last byte)."""
+        """Write one frame in chunks; return (fault or None, time its last byte was written)."""
         written, write_time = self._port.write_chunks(self._split(data),
                                                       self._config.chunk_gap_s)
         if write_time is None:
