@@ -65,12 +65,19 @@ def _open(port):
 
 
 def _read_until(ser, done, timeout=10.0, parser=None):
-    """Read until ``done(events)`` (or timeout); return events, arrival times, parser."""
+    """
+    Read until ``done(events)`` (or timeout); return events, arrival times, parser.
+
+    Each read returns what has arrived, as the driver's does, rather than
+    waiting out the serial timeout for more: a replay that closes the pty
+    once everything was read would otherwise hang up inside a read that
+    already holds the last packets, and pyserial drops them with its error.
+    """
     parser = parser or SensorStreamParser(address=ADDRESS)
     events, arrivals = [], []
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline and not done(events):
-        data = ser.read(4096)
+        data = ser.read(max(1, ser.in_waiting))
         new = parser.feed(data) if data else parser.idle()
         now = time.monotonic()
         events += new
