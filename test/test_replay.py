@@ -109,9 +109,9 @@ def test_unread_bytes_sees_what_was_just_written():
     The replay waits for its reader by this count before it closes the pty.
 
     Plain FIONREAD read 0 right after a write to the master most of the time
-    (the bytes were still in the tty's flip buffer): the replay then closed
-    the pty while its reader was still reading, which failed the CLI test
-    below under load.
+    (the bytes were still in the tty's flip buffer), so a drain() called
+    just after the last write could end, and the pty close, before the
+    reader had those bytes.
     """
     master, slave = os.openpty()
     try:
