@@ -51,18 +51,40 @@ def test_monitor_prints_rate_and_values_of_a_running_node():
             assert node.stop()[0] == 0
 
 
-def test_monitor_stops_cleanly_on_ctrl_c():
+#: Starts the monitor with SIGINT at the disposition given as argv[1], as a shell would
+#: leave it: 'default' (a terminal) or 'ignored' (a background job of a script, as CI
+#: runs the tests); exec keeps an ignored signal ignored, so the monitor inherits it.
+MONITOR_WITH_SIGINT = (
+    'import os, signal, sys\n'
+    "signal.signal(signal.SIGINT, signal.SIG_IGN if sys.argv[1] == 'ignored' "
+    'else signal.SIG_DFL)\n'
+    "os.execv(sys.executable, [sys.executable, '-m', 'i3dmgx2_driver.ros.monitor'])\n")
+
+
+@pytest.mark.parametrize(('sent', 'sigint'), [
+    (signal.SIGINT, 'default'), (signal.SIGINT, 'ignored'), (signal.SIGTERM, 'default')],
+    ids=['ctrl_c', 'ctrl_c_started_ignoring_sigint', 'sigterm'])
+def test_monitor_stops_cleanly_on_ctrl_c(sent, sigint):
+    """
+    Ctrl-C or SIGTERM ends the monitor with its summary, however SIGINT was set when it started.
+
+    rclpy's handler shuts the context down on both signals; Python raises
+    KeyboardInterrupt only for SIGINT at its default disposition. The monitor
+    must stop on the context's shutdown alone: one that waits for
+    KeyboardInterrupt printed its last message forever when the test suite
+    ran as a background job (SIGINT ignored) or on SIGTERM.
+    """
     isolate_ros_domain()
     with PtySimulator(SimulatorConfig(seed=52)) as sim, \
             NodeProcess({'port': sim.port, 'address': 95}) as node:
         assert node.wait_for_output('streaming 0xCC'), node.output()
         monitor = subprocess.Popen(
-            [sys.executable, '-m', 'i3dmgx2_driver.ros.monitor'], env=ros_env(), cwd=REPO,
+            [sys.executable, '-c', MONITOR_WITH_SIGINT, sigint], env=ros_env(), cwd=REPO,
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline and ' Hz ' not in monitor.stdout.readline():
             pass
-        monitor.send_signal(signal.SIGINT)
+        monitor.send_signal(sent)
         out, err = monitor.communicate(timeout=30)
         assert monitor.returncode == 0, err
         assert 'Traceback' not in err, err

@@ -25,6 +25,7 @@ import signal
 import subprocess
 import sys
 import time
+import tty
 
 from i3dmgx2_driver.capture import CaptureWriter
 from i3dmgx2_driver.codec import (
@@ -32,7 +33,7 @@ from i3dmgx2_driver.codec import (
     encode_record, Nack, SensorStreamParser,
 )
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
-from i3dmgx2_driver.tools.replay import Replayer, schedule
+from i3dmgx2_driver.tools.replay import Replayer, schedule, unread_bytes
 import pytest
 import serial
 
@@ -64,12 +65,19 @@ def _open(port):
 
 
 def _read_until(ser, done, timeout=10.0, parser=None):
-    """Read until ``done(events)`` (or timeout); return events, arrival times, parser."""
+    """
+    Read until ``done(events)`` (or timeout); return events, arrival times, parser.
+
+    Each read returns what has arrived, as the driver's does, rather than
+    waiting out the serial timeout for more: a replay that closes the pty
+    once everything was read would otherwise hang up inside a read that
+    already holds the last packets, and pyserial drops them with its error.
+    """
     parser = parser or SensorStreamParser(address=ADDRESS)
     events, arrivals = [], []
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline and not done(events):
-        data = ser.read(4096)
+        data = ser.read(max(1, ser.in_waiting))
         new = parser.feed(data) if data else parser.idle()
         now = time.monotonic()
         events += new
@@ -94,6 +102,30 @@ def test_schedule_paces_from_the_first_chunk_and_caps_gaps():
     assert schedule([10.0, 10.5, 10.4, 40.0]) == [0.0, 0.5, 0.5, 30.1]
     assert schedule([10.0, 10.5, 40.0], max_gap=2.0) == [0.0, 0.5, 2.5]
     assert schedule([]) == []
+
+
+def test_unread_bytes_sees_what_was_just_written():
+    """
+    The replay waits for its reader by this count before it closes the pty.
+
+    Plain FIONREAD read 0 right after a write to the master most of the time
+    (the bytes were still in the tty's flip buffer), so a drain() called
+    just after the last write could end, and the pty close, before the
+    reader had those bytes.
+    """
+    master, slave = os.openpty()
+    try:
+        tty.setraw(slave)
+        for _ in range(2000):
+            os.write(master, b'\xaa' * 88)
+            assert unread_bytes(slave) > 0
+            got = b''
+            while len(got) < 88:
+                got += os.read(slave, 4096)
+            assert unread_bytes(slave) == 0
+    finally:
+        os.close(master)
+        os.close(slave)
 
 
 def test_replay_delivers_exactly_the_packets_in_order():

@@ -19,19 +19,23 @@ A test can start at any record and rate: the record streams from power-up
 (EEPROM auto-start) at the divider preset in the EEPROM. In line-rate mode a
 record the line is still busy for is skipped, judged on the device's own
 schedule: at the highest rate that fits nothing is skipped however late the
-simulator's threads run, and beyond what the line carries the records that
-get through come at the line's packet rate.
+simulator's threads run, nor for the replies to commands sent meanwhile, and
+beyond what the line carries the records that get through come at the line's
+packet rate.
 """
 
 import itertools
 import math
 
+from i3dmgx2_driver.codec import commands as cmd
+from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec import line_budget, streams
 from i3dmgx2_driver.codec.data_rate import rate_of_divider
 from i3dmgx2_driver.codec.timer import TimerUnwrapper
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
 from test_simulator import assert_host_saw_exactly_valid_truth, Host, stop_stream
+from test_simulator_wired import assert_wired_host_saw_exactly_valid_truth, stop_wired_stream
 
 
 def preset(stream: streams.Stream, divider: int, **config) -> PtySimulator:
@@ -82,3 +86,30 @@ def test_beyond_the_line_records_are_skipped_down_to_the_line_rate(stream):
         assert every == {0xCC: 3, 0xC2: 2}[stream.code]
         assert (len(sent) - 1) / span == pytest.approx(rate / every, rel=0.01)
         assert_host_saw_exactly_valid_truth(host, sim)
+
+
+def test_replies_interleave_without_costing_a_record_of_a_stream_that_fits():
+    """
+    Wired inertial at 299.4 Hz fills 2.69 ms of each 3.34 ms cycle; a reply comes in between.
+
+    Each 20-byte identifier reply takes 1.74 ms of line, sent when its command
+    arrives, where the stream leaves 0.65 ms a cycle free: a reply overlaps
+    the next cycle whenever that begins less than 1.74 ms after it. A stream
+    record is skipped only for the stream's own previous record (protocol.md:
+    replies are interleaved with the stream), so none of the 40 costs a
+    record; an accounting that let replies take the line from the stream
+    skipped a record for each of the 40 when tried.
+    """
+    stream = streams.BY_NAME['inertial']
+    with preset(stream, 171, wireless=False) as sim, Host(sim) as host:
+        assert host.pump_until(lambda: len(host.records(stream.code)) >= 10)
+        for i in range(40):
+            reply = host.request(cmd.device_identifier(i % 4), code=lay.DEVICE_IDENTIFIER)
+            assert reply.selector == i % 4
+        stop_wired_stream(host)
+        assert sim.stats.line_rate_skipped == 0
+        assert_wired_host_saw_exactly_valid_truth(host, sim)
+        unwrap = TimerUnwrapper()
+        ticks = [unwrap.update(r.timer) for r in host.records(stream.code)]
+        steps = {round((b - a) / (384 * 171)) for a, b in itertools.pairwise(ticks)}
+        assert steps == {1}, 'a cycle is missing'

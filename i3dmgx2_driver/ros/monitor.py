@@ -76,12 +76,23 @@ class Monitor(Node):
             return self.latest, count
 
 
-def _spin(executor: SingleThreadedExecutor) -> None:
-    """Spin until Ctrl-C shuts the context down (rclpy's handler) or main stops it."""
+def _spin(executor: SingleThreadedExecutor, stopped: threading.Event) -> None:
+    """
+    Spin until Ctrl-C or SIGTERM shuts the context down (rclpy's handler) or main stops it.
+
+    ``stopped`` tells the printing loop that no message will come any more.
+    rclpy's signal handler shuts the context down on SIGINT and SIGTERM, but
+    Python raises KeyboardInterrupt only if SIGINT had its default handler
+    when the process started: one started ignoring it (a background job of a
+    script, as CI runs tests) or sent SIGTERM would otherwise print the last
+    message again forever.
+    """
     try:
         executor.spin()
     except ExternalShutdownException:
         pass
+    finally:
+        stopped.set()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -98,13 +109,16 @@ def main(argv: list[str] | None = None) -> int:
     node = Monitor(args.topic, args.best_effort)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    spinner = threading.Thread(target=_spin, args=(executor,), daemon=True)
+    stopped = threading.Event()
+    spinner = threading.Thread(target=_spin, args=(executor, stopped), daemon=True)
     spinner.start()
     start = last = time.monotonic()
     received = 0
     try:
         while not args.duration or time.monotonic() - start < args.duration:
-            time.sleep(args.period)
+            if stopped.wait(args.period):
+                received += node.take()[1]
+                break
             msg, count = node.take()
             now = time.monotonic()
             received += count

@@ -40,8 +40,9 @@ class SentRecord(NamedTuple):
     index: int
     #: Wall-clock time (time.time()) of the sample it carries: its calculation cycle.
     sample_time: float
-    #: Wall-clock time right after its last byte was written (a reader may see the
-    #: bytes a moment earlier); None if never written whole.
+    #: Wall-clock time just before the write that carried its last byte: no reader
+    #: has the whole packet earlier (a read may follow it closely); None if never
+    #: written whole.
     write_time: float | None
     #: Raw uint32 timer of the record (None for records without one).
     timer: int | None

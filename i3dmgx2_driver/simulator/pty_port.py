@@ -139,28 +139,36 @@ class PtyPort:
 
     def write_chunks(self, chunks: list[bytes], gap: float) -> tuple[int, float | None]:
         """
-        Write chunks ``gap`` seconds apart; return (bytes written, time after the last).
+        Write chunks ``gap`` seconds apart; return (bytes written, time of the last write).
 
-        The time is None when the port is unplugged. Fewer bytes than given
-        means the buffer was full (nobody reads): the rest is lost.
+        The time is read just *before* the write that hands the last byte to
+        the pty: no reader can have the whole frame earlier, so a host's read
+        time is never before it. A time read after that write could be late
+        by however long this thread was descheduled in between (milliseconds
+        on a loaded machine), and a reader would then seem to have the bytes
+        before they were written. None when the port is unplugged. Fewer
+        bytes than given means the buffer was full (nobody reads): the rest
+        is lost.
         """
         written = 0
         with self.io_lock:
             master = self.master
             if master is None:
                 return 0, None
+            last_write = time.time()
             try:
                 for index, chunk in enumerate(chunks):
                     if index and gap:
                         time.sleep(gap)
                     view = memoryview(chunk)
                     while view:
+                        last_write = time.time()
                         count = os.write(master, view)
                         written += count
                         view = view[count:]
             except OSError:
                 pass  # the buffer is full (nobody reads): the rest is lost
-            return written, time.time()
+            return written, last_write
 
     def write(self, data: bytes) -> int | None:
         """Write a few bytes at once; return how many (None: unplugged)."""

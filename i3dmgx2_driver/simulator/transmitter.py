@@ -92,7 +92,8 @@ class Transmitter:
         self._chunk_rng = chunk_rng
         self._outbox: list[Outgoing] = []
         self._seq = 0
-        self._line_free_at = 0.0
+        #: When the stream's last record leaves the line, by the device's schedule.
+        self._stream_line_free_at = 0.0
 
     def enqueue(self, reply: Reply, source: str, address: int) -> None:
         """Queue a record the sensor sends at ``reply.due``."""
@@ -158,17 +159,21 @@ class Transmitter:
             elif faults.drop_probability and rng.random() < faults.drop_probability:
                 fault = flt.FAULT_DROPPED
             elif config.limit_to_line_rate and item.source == 'stream' \
-                    and item.send < self._line_free_at - 1e-9:
-                # The device's UART is still sending the previous packet when this
-                # record is ready: the device skips it. Judged on the device's own
-                # schedule (send times), never on when this thread happened to run.
+                    and item.send < self._stream_line_free_at - 1e-9:
+                # The device's UART is still sending the stream's previous record
+                # when this one is ready: the device skips it. Judged on the
+                # device's own schedule (send times), never on when this thread
+                # happened to run. Only the stream's own records count: a reply
+                # to a command is interleaved with the stream (protocol.md,
+                # combined mode) and never costs a record of a stream that fits,
+                # such as the first cycle after the 0xC4 that started it.
                 fault = flt.FAULT_LINE_RATE
             if fault is not None:
                 self._record.add(reply, None, packet, item.address, False, fault, item.source)
                 return
-            if config.limit_to_line_rate:
-                self._line_free_at = (max(item.send, self._line_free_at)
-                                      + len(packet) / LINE_BYTES_PER_SECOND)
+            if config.limit_to_line_rate and item.source == 'stream':
+                self._stream_line_free_at = (max(item.send, self._stream_line_free_at)
+                                             + len(packet) / LINE_BYTES_PER_SECOND)
             if faults.garbage_probability and rng.random() < faults.garbage_probability:
                 garbage = self._garbage(faults)
                 self._write(garbage)
@@ -228,7 +233,7 @@ class Transmitter:
         return [data[a:b] for a, b in itertools.pairwise([0, *cuts, len(data)])]
 
     def _write(self, data: bytes) -> tuple[str | None, float | None]:
-        """Write one frame in chunks; return (fault or None, time after its last byte)."""
+        """Write one frame in chunks; return (fault or None, time its last byte was written)."""
         written, write_time = self._port.write_chunks(self._split(data),
                                                       self._config.chunk_gap_s)
         if write_time is None:

@@ -74,6 +74,23 @@ def _hex(data: bytes) -> str:
     return data.hex(' ')
 
 
+def unread_bytes(fd: int) -> int:
+    """
+    Return how many bytes wait to be read on the terminal ``fd`` (a pty slave): 0 only if none.
+
+    FIONREAD alone counts only what the line discipline holds: bytes just
+    written to the master sit in the tty's flip buffer until a kernel worker
+    moves them, and meanwhile count as 0 (most of the time, right after a
+    write), so a replay that waited for its reader by FIONREAD could close
+    the pty under it. Polling ``fd`` first makes the kernel finish that move
+    whenever the line discipline is empty: 0 then means that nothing written
+    is left unread. A nonzero count may leave out bytes still on their way.
+    """
+    select.select([fd], [], [], 0)
+    raw = fcntl.ioctl(fd, termios.FIONREAD, b'\0\0\0\0')
+    return struct.unpack('i', raw)[0]
+
+
 class ReplayStats:
     """What a replay did, for the log and for tests."""
 
@@ -207,14 +224,13 @@ class Replayer:
         return self._finished.wait(timeout)
 
     def pending_output(self) -> int:
-        """Bytes played but not yet read by the driver (0 after stop)."""
+        """Bytes played but not yet read by the driver (0 only if none; 0 after stop)."""
         if self._slave < 0:
             return 0
         try:
-            raw = fcntl.ioctl(self._slave, termios.FIONREAD, b'\0\0\0\0')
-        except OSError:
+            return unread_bytes(self._slave)
+        except (OSError, ValueError):
             return 0
-        return struct.unpack('i', raw)[0]
 
     def drain(self, timeout: float, abort: threading.Event | None = None) -> bool:
         """Wait up to ``timeout`` s for the driver to read what was played."""
