@@ -590,6 +590,38 @@ class NodeProcess:
             pass
 
 
+class TimedNodeProcess(_Child):
+    """
+    The real driver process, timed from inside (``latency_node.py``).
+
+    ``params`` are the node's ROS parameters; ``flags`` go to latency_node.py
+    (``--stages``, ``--no-gc-freeze``, ...). After :meth:`stop`, ``rows`` holds
+    one tuple per Imu message: (timer, read time, publish() returned, stage
+    marks...), ``gc`` every collection (generation, start, duration), and
+    ``threads`` each thread's scheduling policy, priority and CPUs.
+    """
+
+    def __init__(self, port: str, flags: tuple[str, ...] = (), **params: Any) -> None:
+        params = {'port': port, 'address': ADDRESS, **params}
+        argv = [sys.executable, str(BENCH_DIR / 'latency_node.py'), *flags,
+                *ros_harness.param_args(params)]
+        super().__init__(argv, 'ready', timeout=30.0)
+        self.pid = self.proc.pid
+        self.rows: list[tuple] = []
+        self.gc: list[tuple[int, float, float]] = []
+        self.threads: dict[str, dict] = {}
+        self.gc_frozen = 0
+
+    def stop(self, timeout: float = 15.0) -> dict:
+        """Stop the node as SIGTERM stops it; keep what it saved."""
+        document = super().stop(timeout)
+        self.rows = [tuple(row) for row in document['rows']]
+        self.gc = [tuple(event) for event in document['gc']]
+        self.threads = document['threads']
+        self.gc_frozen = document['gc_frozen']
+        return document
+
+
 class LoadProcess(_Child):
     """Parameter requests (and a slow service) against the node from another process."""
 

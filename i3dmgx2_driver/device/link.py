@@ -30,6 +30,7 @@ import time
 from typing import Any, NamedTuple
 
 from .port import PortDisconnected, SerialPort
+from .realtime import apply_to_current_thread, NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
 from ..codec import commands, layouts
 from ..codec.framing import DataPacket, encode_command_packet
 from ..codec.records import PingReply
@@ -83,11 +84,14 @@ class DeviceLink:
     every data packet not claimed by a pending request. ``on_bytes``, if
     given, receives every read's bytes as read, before they are parsed (a
     raw capture); it runs in the reader thread and must not raise or block.
+    ``thread_policy`` is applied by the reader thread to itself before its
+    first read; ``policy_outcome`` then says what the scheduler granted.
     """
 
     def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
                  wireless: bool = True, read_timeout: float = 0.2,
-                 on_bytes: BytesCallback | None = None) -> None:
+                 on_bytes: BytesCallback | None = None,
+                 thread_policy: ThreadPolicy = NORMAL_SCHEDULING) -> None:
         self.port = port
         self.address = address
         self.wireless = wireless
@@ -106,6 +110,11 @@ class DeviceLink:
         self.last_data_time = 0.0
         self.records = 0
         self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
+        self._thread_policy = thread_policy
+        #: What the scheduler granted the reader thread (set once it runs).
+        self.policy_outcome = PolicyOutcome()
+        #: Set by the reader thread once its policy is applied, before its first read.
+        self.running = threading.Event()
 
     # -- reader thread -------------------------------------------------
 
@@ -126,6 +135,9 @@ class DeviceLink:
         self._wake_pending()
 
     def _run(self) -> None:
+        if self._thread_policy.requested:
+            self.policy_outcome = apply_to_current_thread(self._thread_policy)
+        self.running.set()
         parser = self.parser
         read = self.port.read_some
         while not self._stop.is_set():

@@ -20,20 +20,29 @@ reads the device's identity, sets the data rate if asked, and starts
 continuous mode, retrying each step because commands get lost over the
 radio. It then watches the stream: a stall re-requests continuous mode and
 then reopens the port; an unplug reopens it every ``reconnect_interval``,
-forever. The reader thread inside the link does the publishing; this thread
-never touches a sample.
+forever, and at once when the port reappears. The reader thread inside the
+link does the publishing; this thread never touches a sample.
+
+A reconnect to a sensor already identified is short: what the driver knows
+(identity, data-rate divider) is not asked again. One serial-number read
+confirms it is the same sensor (the wireless sensor keeps streaming while
+the base station is unplugged, so its records usually flow already; if not,
+continuous mode is requested). Records are published from the moment they
+arrive. Another serial number, or no answer, gets the full dialogue.
 """
 
 from collections.abc import Callable
 from dataclasses import dataclass
 import enum
 import logging
+import os
 import threading
 import time
 from typing import Any, NamedTuple
 
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .port import PortDisconnected, PortError, SerialPort
+from .realtime import NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
 from ..codec import commands, layouts
 
 #: EEPROM word holding the data-rate divider: rate = 51200 / x Hz.
@@ -50,6 +59,12 @@ MAX_RATE_HZ = RATE_BASE_HZ / MIN_DIVIDER
 STREAM_COMMAND = layouts.ACCEL_ANG_RATE_MAG_ORIENTATION
 
 IDENTIFIER_NAMES = ('model_number', 'serial_number', 'model_name', 'options')
+#: Device identifier selector of the serial number (0xEA).
+SERIAL_NUMBER_SELECTOR = IDENTIFIER_NAMES.index('serial_number')
+#: How often a missing port is looked for (s), so that it is reopened as soon as it is back.
+PORT_WATCH_S = 0.02
+#: Pause between a port reappearing and opening it (s): udev sets its permissions meanwhile.
+PORT_SETTLE_S = 0.02
 
 
 class State(str, enum.Enum):
@@ -89,6 +104,14 @@ class SupervisorConfig:
     request_timeout: float = 0.5
     request_retries: int = 3
     continuous_retries: int = 5
+    #: Scheduling of the reader thread (SCHED_FIFO priority, CPU).
+    thread_policy: ThreadPolicy = NORMAL_SCHEDULING
+    #: Reconnect to a known sensor with one serial-number read (False: the full dialogue).
+    fast_reconnect: bool = True
+    #: Per try and tries of that read: short, so that a reply lost in a stall is asked
+    #: again soon after the radio is back.
+    resume_timeout: float = 0.1
+    resume_retries: int = 5
 
 
 def divider_for_rate(rate_hz: float) -> int:
@@ -150,6 +173,10 @@ class DeviceSupervisor:
         self.ping_ok: bool | None = None
         self.parser_totals: dict[str, int] = {}
         self._info_logged: DeviceInfo | None = None
+        self._policy_logged = PolicyOutcome()
+        #: How each connection got streaming: 'full' (the whole dialogue) or 'resumed'.
+        self.last_start = ''
+        self.resumes = 0
 
     # -- life cycle ----------------------------------------------------
 
@@ -198,10 +225,12 @@ class DeviceSupervisor:
         while not self._stop.is_set():
             self.state = State.CONNECTING
             link = None
+            stalled = False
             try:
                 link = self._open()
                 self._initialise(link)
                 self._watch(link)
+                stalled = True
             except PortError as exc:
                 self._warn(type(exc).__name__, str(exc))
             except DeviceTimeout as exc:
@@ -212,8 +241,23 @@ class DeviceSupervisor:
             if self._stop.is_set():
                 break
             self.state = State.DISCONNECTED
-            self._stop.wait(self.config.reconnect_interval)
+            if not stalled:  # a port closed for a stall is still there: reopen it at once
+                self._wait_to_reopen()
         self.state = State.STOPPED
+
+    def _wait_to_reopen(self) -> None:
+        """Wait ``reconnect_interval``; a missing port is reopened the moment it is back."""
+        deadline = time.monotonic() + self.config.reconnect_interval
+        path = self.config.port
+        if os.path.exists(path):
+            self._stop.wait(self.config.reconnect_interval)
+            return
+        while not self._stop.wait(PORT_WATCH_S):
+            if os.path.exists(path):
+                self._stop.wait(PORT_SETTLE_S)
+                return
+            if time.monotonic() >= deadline:
+                return
 
     def _open(self) -> DeviceLink:
         cfg = self.config
@@ -222,7 +266,7 @@ class DeviceSupervisor:
             self.low_latency_state = port.low_latency_state
             self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
         link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless,
-                          on_bytes=self._on_bytes)
+                          on_bytes=self._on_bytes, thread_policy=cfg.thread_policy)
         self._link = link
         self.connections += 1
         if self.connections > 1:
@@ -242,16 +286,22 @@ class DeviceSupervisor:
         self._link = None
 
     def _initialise(self, link: DeviceLink) -> None:
-        """Quiet the device, learn what it is, and start the stream."""
+        """Quiet the device, learn what it is, and start the stream (or resume it)."""
         self.state = State.INITIALISING
         link.port.flush_input()
+        known = self.info.serial_number if self.info is not None else ''
+        if self.config.fast_reconnect and known:
+            self._start_reader(link)
+            if self._resume(link, known):
+                return
         link.stop_streaming()
         time.sleep(0.05)
         link.port.flush_input()
-        # Re-anchor the consumer before the first record of this link can reach it.
-        if self._on_connect is not None:
-            self._on_connect()
-        link.start()
+        if link.running.is_set():
+            # The reader runs already (a resume that was not confirmed): anchor afresh.
+            self._anchor()
+        else:
+            self._start_reader(link)
         if link.wireless:
             self.ping_ok = link.ping(timeout=0.3, retries=2)
             if not self.ping_ok:
@@ -270,8 +320,65 @@ class DeviceSupervisor:
         self._configure_rate(link)
         self.start_continuous(link)
         self.state = State.STREAMING
+        self.last_start = 'full'
         self._log.info(f'streaming 0xCC from node {self.config.address} on {self.config.port}'
                        + (f' at {self.expected_rate_hz:.1f} Hz' if self.divider else ''))
+
+    def _anchor(self) -> None:
+        """Let the consumer re-anchor before the first record of a new link reaches it."""
+        if self._on_connect is not None:
+            self._on_connect()
+
+    def _start_reader(self, link: DeviceLink) -> None:
+        """Anchor the consumer, start the reader thread, log what its scheduling became."""
+        self._anchor()
+        link.start()
+        if not link.running.wait(1.0):
+            return
+        outcome = link.policy_outcome
+        if outcome != self._policy_logged:
+            self._policy_logged = outcome
+            if outcome.applied:
+                self._log.info(f'reader thread: {", ".join(outcome.applied)}')
+            if outcome.refused:
+                self._log.warning('reader thread: ' + '; '.join(outcome.refused)
+                                  + '; it runs with normal scheduling otherwise')
+
+    def _resume(self, link: DeviceLink, known_serial: str) -> bool:
+        """
+        Confirm with one serial-number read that the known sensor is back; keep it streaming.
+
+        Returns False (the caller runs the full dialogue) when the sensor does
+        not answer or another serial number does.
+        """
+        cfg = self.config
+        try:
+            reply = link.request(commands.device_identifier(SERIAL_NUMBER_SELECTOR),
+                                 layouts.DEVICE_IDENTIFIER, cfg.resume_timeout,
+                                 cfg.resume_retries)
+        except DeviceTimeout:
+            if self._throttle.allow('resume'):
+                self._log.info(f'node {cfg.address} did not confirm its serial number: '
+                               f'starting it in full')
+            return False
+        serial = reply.text.strip(' \x00')
+        if serial != known_serial:
+            self._log.warning(f'another sensor answers as node {cfg.address}: serial '
+                              f'{serial or "?"}, not {known_serial}; identifying it in full')
+            self.info = None
+            return False
+        period = 1.0 / self.expected_rate_hz if self.divider else 0.01
+        deadline = time.monotonic() + min(2 * period, 0.1)
+        while not link.records and time.monotonic() < deadline and not self._stop.is_set():
+            time.sleep(0.002)
+        if not link.records:
+            self.start_continuous(link)  # it was power-cycled meanwhile
+        self.state = State.STREAMING
+        self.last_start = 'resumed'
+        self.resumes += 1
+        self._log.info(f'streaming 0xCC again from node {cfg.address} on {cfg.port}: same '
+                       f'sensor (serial {serial}), identity and data rate not asked again')
+        return True
 
     def _identify(self, link: DeviceLink) -> None:
         cfg = self.config

@@ -42,6 +42,7 @@ from ..codec.layouts import ACCEL_ANG_RATE_MAG_ORIENTATION, LAYOUTS
 from ..codec.records import AccelAngRateMagOrientation
 from ..codec.timer import TimerUnwrapper
 from ..device.clock import DeviceClock
+from ..device.realtime import ThreadPolicy
 from ..device.supervisor import DeviceSupervisor, SupervisorConfig
 
 #: Bits per byte on the line: start, 8 data, stop.
@@ -113,7 +114,8 @@ class ImuDriverNode(Node):
             SupervisorConfig(
                 port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
                 low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
-                reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz),
+                reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
+                thread_policy=ThreadPolicy(cfg.realtime_priority, cfg.cpu_affinity)),
             on_record=self._on_record, log=self.get_logger(), on_connect=self._on_connect,
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None)
         self.device_services = DeviceServices(self)

@@ -33,6 +33,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from .imu_node import ImuDriverNode
 from .parameters import ParameterError
+from ..device import realtime
 
 EXIT_BAD_PARAMETER = 2
 #: How often the main loop looks at the stop flag (s); signals wake it anyway.
@@ -66,6 +67,8 @@ def main(args: list[str] | None = None) -> int:
             rclpy.logging.get_logger('i3dmgx2_driver').fatal(str(exc))
             return EXIT_BAD_PARAMETER
         executor.add_node(node)
+        # Start-up is over: freeze its heap and shorten the lock switch interval (realtime.py).
+        realtime.settle_interpreter()
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=_SPIN_PERIOD)
     finally:

@@ -37,6 +37,7 @@ from rclpy.parameter import Parameter
 
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.orientation import CONVENTIONS
+from ..device.realtime import MAX_PRIORITY
 from ..device.supervisor import MAX_RATE_HZ, MIN_RATE_HZ
 
 TIME_SOURCES = ('device', 'host')
@@ -114,6 +115,13 @@ SPECS: list[Spec] = [
     Spec('temperature_period', Parameter.Type.DOUBLE, 0.0,
          'Seconds between polls of the temperatures (0xD1), published on imu/temperature; '
          '0: off.', (0.0, 3600.0)),
+    Spec('realtime_priority', Parameter.Type.INTEGER, 0,
+         'SCHED_FIFO priority of the thread that reads the port and publishes; 0: normal '
+         'scheduling. Where the system refuses it (no rtprio limit) one warning is logged and '
+         'the thread runs as usual.', (0, MAX_PRIORITY)),
+    Spec('cpu_affinity', Parameter.Type.INTEGER, -1,
+         'CPU the thread that reads the port and publishes runs on; -1: any. A CPU this '
+         'process may not use is logged once and ignored.', (-1, 1023)),
     Spec('capture_file', Parameter.Type.STRING, '',
          'Write every byte read from the port, with its receive time, to this capture file '
          '(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '
@@ -147,6 +155,8 @@ class DriverConfig:
     gyro_bias_sampling_ms: int
     capture_gyro_bias_on_start: bool
     temperature_period: float
+    realtime_priority: int
+    cpu_affinity: int
     capture_file: str
 
     @property
