@@ -598,7 +598,8 @@ class TimedNodeProcess(_Child):
     (``--stages``, ``--no-gc-freeze``, ...). After :meth:`stop`, ``rows`` holds
     one tuple per Imu message: (timer, read time, publish() returned, stage
     marks...), ``gc`` every collection (generation, start, duration), and
-    ``threads`` each thread's scheduling policy, priority and CPUs.
+    ``threads`` each thread's scheduling policy, priority and CPUs, ``opens``
+    the time of every open of the port.
     """
 
     def __init__(self, port: str, flags: tuple[str, ...] = (), **params: Any) -> None:
@@ -611,10 +612,12 @@ class TimedNodeProcess(_Child):
         self.gc: list[tuple[int, float, float]] = []
         self.threads: dict[str, dict] = {}
         self.gc_frozen = 0
+        self.opens: list[float] = []
 
     def stop(self, timeout: float = 15.0) -> dict:
         """Stop the node as SIGTERM stops it; keep what it saved."""
         document = super().stop(timeout)
+        self.opens = document['opens']
         self.rows = [tuple(row) for row in document['rows']]
         self.gc = [tuple(event) for event in document['gc']]
         self.threads = document['threads']

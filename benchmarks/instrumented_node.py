@@ -20,9 +20,10 @@ from the outside: a ROS timer that writes the node's ``stats``, the parser
 counters summed over every connection (``supervisor.parser_stats()``) and the
 supervisor's counters to the file named by ``$I3DMGX2_SOAK_STATS`` twice a
 second and once more after shutdown; and a serial port that notes the time
-of every open, input flush and close, which tell the campaign when the node
-could read the port (records written outside those windows may be lost
-legitimately). Nothing on the path of a sample is changed.
+of every open, input flush and close, and the node's re-anchoring (its
+reader publishes every record from then on), which tell the campaign when
+the node could read the port (records written outside those windows may be
+lost legitimately). Nothing on the path of a sample is changed.
 
 Usage: ``I3DMGX2_SOAK_STATS=out.json python -m benchmarks.instrumented_node
 --ros-args -p port:=... -p address:=...``.
@@ -109,6 +110,11 @@ class ObservedNode(imu_node.ImuDriverNode):
         self._stats_path = os.environ[STATS_ENV]
         self.create_timer(DUMP_PERIOD, lambda: _write(self._stats_path,
                                                       _snapshot(self, False)))
+
+    def _on_connect(self) -> None:
+        """Re-anchor as the node does, then note when: every record is published from now."""
+        super()._on_connect()
+        _note('anchor')
 
     def shutdown(self) -> None:
         """Shut down as the node does, then write the final counters."""

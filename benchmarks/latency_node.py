@@ -29,7 +29,7 @@ does and the rows are written as JSON to ``--out``.
 
 ``--no-<lever>`` switches off one of the driver's own measures that are not
 parameters (``LEVERS``: the frozen start-up heap, the short lock switch
-interval, the fast reconnect), for A/B runs; the parameters
+interval, the fast reconnect, the prompt reopen), for A/B runs; the parameters
 (``realtime_priority``, ``cpu_affinity``) are passed as ``-p`` as usual.
 The JSON also holds every port open (time) for the reconnect benchmark.
 
@@ -57,7 +57,7 @@ from i3dmgx2_driver.codec.stream import SensorStreamParser  # noqa: E402
 from i3dmgx2_driver.device import port as port_module  # noqa: E402
 from i3dmgx2_driver.device import realtime  # noqa: E402
 from i3dmgx2_driver.device.clock import DeviceClock  # noqa: E402
-from i3dmgx2_driver.device.supervisor import SupervisorConfig  # noqa: E402
+from i3dmgx2_driver.device.port import SerialPort  # noqa: E402
 from i3dmgx2_driver.ros import imu_node  # noqa: E402
 from i3dmgx2_driver.ros import main as node_main  # noqa: E402
 from i3dmgx2_driver.ros.conversions import MessageFactory  # noqa: E402
@@ -76,13 +76,14 @@ def _without_switch_interval() -> None:
     realtime.shorten_switch_interval = lambda *args: None
 
 
-def _without_fast_reconnect() -> None:
-    imu_node.SupervisorConfig = functools.partial(SupervisorConfig, fast_reconnect=False)
+def _supervisor_without(**switches: bool) -> None:
+    imu_node.SupervisorConfig = functools.partial(imu_node.SupervisorConfig, **switches)
 
 
 #: The driver's own measures that an A/B run may switch off: flag -> how.
 LEVERS = {'gc-freeze': _without_gc_freeze, 'switch-interval': _without_switch_interval,
-          'fast-reconnect': _without_fast_reconnect}
+          'fast-reconnect': lambda: _supervisor_without(fast_reconnect=False),
+          'prompt-reopen': lambda: _supervisor_without(prompt_reopen=False)}
 
 
 def _timed(function, marks: list[float], index: int, clock=time.time):
@@ -134,6 +135,18 @@ class GcLog:
             self.events.append((info['generation'], self._start, now - self._start))
 
 
+def note_port_opens(opens: list[float]) -> None:
+    """Note the time right after every successful open of the port."""
+    original = SerialPort.__init__
+
+    @functools.wraps(original)
+    def observed(self, *args, **kwargs) -> None:
+        original(self, *args, **kwargs)
+        opens.append(time.time())
+
+    SerialPort.__init__ = observed
+
+
 def _thread_policy() -> dict:
     """Scheduling policy, priority and CPUs of every thread of this process."""
     out = {}
@@ -167,6 +180,8 @@ def main() -> int:
         install_stage_timers(marks)
     gc_log = GcLog()
     gc.callbacks.append(gc_log)
+    opens: list[float] = []
+    note_port_opens(opens)
     rows: list[tuple] = []
     ready = threading.Event()
 
@@ -190,7 +205,8 @@ def main() -> int:
             super().shutdown()
             document = {'fields': ['timer', 'read', 'published', *STAGES, 'cpu_published'],
                         'rows': rows, 'gc': gc_log.events, 'threads': policy,
-                        'gc_frozen': gc.get_freeze_count(), 'pid': os.getpid()}
+                        'gc_frozen': gc.get_freeze_count(), 'pid': os.getpid(),
+                        'opens': opens}
             with open(args.out, 'w') as handle:
                 json.dump(document, handle)
 

@@ -108,6 +108,9 @@ class SupervisorConfig:
     thread_policy: ThreadPolicy = NORMAL_SCHEDULING
     #: Reconnect to a known sensor with one serial-number read (False: the full dialogue).
     fast_reconnect: bool = True
+    #: Reopen a port the moment it reappears, and a port closed for a stall at once
+    #: (False: always wait ``reconnect_interval``).
+    prompt_reopen: bool = True
     #: Per try and tries of that read: short, so that a reply lost in a stall is asked
     #: again soon after the radio is back.
     resume_timeout: float = 0.1
@@ -241,15 +244,15 @@ class DeviceSupervisor:
             if self._stop.is_set():
                 break
             self.state = State.DISCONNECTED
-            if not stalled:  # a port closed for a stall is still there: reopen it at once
-                self._wait_to_reopen()
+            if not (stalled and self.config.prompt_reopen):
+                self._wait_to_reopen()  # a port closed for a stall is still there
         self.state = State.STOPPED
 
     def _wait_to_reopen(self) -> None:
         """Wait ``reconnect_interval``; a missing port is reopened the moment it is back."""
         deadline = time.monotonic() + self.config.reconnect_interval
         path = self.config.port
-        if os.path.exists(path):
+        if not self.config.prompt_reopen or os.path.exists(path):
             self._stop.wait(self.config.reconnect_interval)
             return
         while not self._stop.wait(PORT_WATCH_S):
