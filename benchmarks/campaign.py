@@ -859,8 +859,9 @@ def analyse(data: RunData) -> CampaignResult:
     lines.append('Reconciliation rules. "Read" means written whole at least '
                  f'{windows.settle * 1e3:.0f} ms after the node last started its reader afresh '
                  f'on a connection (after the stop-and-flush of the full start-up, or the '
-                 f'flush of a reconnect to the known sensor) and at least {cfg.unread_margin:g} s before the close of that '
-                 f'connection or the next unplug; "written" means written whole after the node '
+                 f'flush of a reconnect to the known sensor) and at least '
+                 f'{cfg.unread_margin:g} s before the close of that connection or the next '
+                 f'unplug; "written" means written whole after the node '
                  f'first opened the port. A record written at any other time may be lost '
                  f'legitimately (unplugged, flushed by the stop-and-flush at a (re)open, '
                  f'unread at a close); stalls and drops are never written.')
