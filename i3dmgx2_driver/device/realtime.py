@@ -63,7 +63,7 @@ NORMAL_SCHEDULING = ThreadPolicy()
 
 
 class PolicyOutcome(NamedTuple):
-    """What the scheduler granted and refused, each as short phrases for the log."""
+    """What the scheduler granted (short phrases) and refused (a sentence each, for the log)."""
 
     applied: tuple[str, ...] = ()
     refused: tuple[str, ...] = ()
@@ -74,31 +74,29 @@ def apply_to_current_thread(policy: ThreadPolicy) -> PolicyOutcome:
     Apply ``policy`` to the calling thread; return what was applied and what refused.
 
     Never raises: a refusal leaves that part of the thread's scheduling as it
-    was, and its phrase says what was refused, why, and how to allow it.
+    was, and its sentence says what was refused, why, and how to allow it.
     """
     applied: list[str] = []
     refused: list[str] = []
     if policy.realtime_priority > 0:
+        priority = policy.realtime_priority
         try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(policy.realtime_priority))
-            applied.append(f'SCHED_FIFO priority {policy.realtime_priority}')
-        except AttributeError:
-            refused.append('realtime_priority: SCHED_FIFO is not available on this platform')
-        except OSError as exc:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+            applied.append(f'SCHED_FIFO priority {priority}')
+        except (AttributeError, OSError) as exc:
+            reason = getattr(exc, 'strerror', None) or 'not available on this platform'
             refused.append(
-                f'realtime_priority {policy.realtime_priority}: SCHED_FIFO refused '
-                f'({exc.strerror}); allow it with an rtprio limit of at least '
-                f'{policy.realtime_priority} (ulimit -r, /etc/security/limits.conf)')
+                f'realtime_priority {priority} refused ({reason}): the reader thread keeps '
+                f'normal scheduling; allow SCHED_FIFO with an rtprio limit of at least '
+                f'{priority} (ulimit -r, /etc/security/limits.conf)')
     if policy.cpu >= 0:
         try:
             os.sched_setaffinity(0, {policy.cpu})
             applied.append(f'CPU {policy.cpu}')
-        except AttributeError:
-            refused.append('cpu_affinity: not available on this platform')
-        except (OSError, ValueError) as exc:
-            reason = getattr(exc, 'strerror', None) or str(exc)
-            refused.append(f'cpu_affinity {policy.cpu}: refused ({reason}); this process may '
-                           f'use CPUs {_allowed_cpus()}')
+        except (AttributeError, OSError, ValueError) as exc:
+            reason = getattr(exc, 'strerror', None) or str(exc) or 'not available'
+            refused.append(f'cpu_affinity {policy.cpu} refused ({reason}): the reader thread '
+                           f'may run on any of CPUs {_allowed_cpus()}')
     return PolicyOutcome(tuple(applied), tuple(refused))
 
 

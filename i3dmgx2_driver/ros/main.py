@@ -19,7 +19,8 @@ SIGINT and SIGTERM are handled here rather than by rclpy, so that the
 driver can stop the device's stream (0xFA) and close the port while ROS is
 still up, then shut ROS down: a clean exit (code 0) well within 2 s. An
 invalid parameter exits with code 2 and a message that names it and its
-valid range.
+valid range. Once the node is up, the start-up heap is frozen and the
+interpreter lock switch interval shortened (device/realtime.py says why).
 """
 
 import signal
@@ -68,7 +69,10 @@ def main(args: list[str] | None = None) -> int:
             return EXIT_BAD_PARAMETER
         executor.add_node(node)
         # Start-up is over: freeze its heap and shorten the lock switch interval (realtime.py).
-        realtime.settle_interpreter()
+        frozen = realtime.settle_interpreter()
+        node.get_logger().info(
+            f'start-up heap frozen ({frozen} objects), interpreter lock switch interval '
+            f'{sys.getswitchinterval() * 1e3:g} ms')
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=_SPIN_PERIOD)
     finally:
