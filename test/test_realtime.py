@@ -181,9 +181,9 @@ def test_the_interpreter_is_settled_after_start_up():
 
 
 def test_the_node_settles_its_interpreter():
-    with PtySimulator(SimulatorConfig(seed=43)) as sim:
-        with NodeProcess({'port': sim.port, 'address': 95}) as node:
-            assert node.wait_for_output('start-up heap frozen (', timeout=30), node.output()
-            assert (f'interpreter lock switch interval {SWITCH_INTERVAL_S * 1e3:g} ms'
-                    in node.output())
-            assert node.stop()[0] == 0
+    with PtySimulator(SimulatorConfig(seed=43)) as sim, \
+            NodeProcess({'port': sim.port, 'address': 95}) as node:
+        assert node.wait_for_output('start-up heap frozen (', timeout=30), node.output()
+        assert (f'interpreter lock switch interval {SWITCH_INTERVAL_S * 1e3:g} ms'
+                in node.output())
+        assert node.stop()[0] == 0
