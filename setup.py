@@ -40,6 +40,7 @@ setup(
     entry_points={
         'console_scripts': [
             'node = i3dmgx2_driver.ros.main:main',
+            'lifecycle_node = i3dmgx2_driver.ros.lifecycle_node:main',
             'simulator = i3dmgx2_driver.simulator.cli:main',
             'replay = i3dmgx2_driver.tools.replay:main',
             'plot = i3dmgx2_driver.tools.plot:main',

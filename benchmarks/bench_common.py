@@ -48,10 +48,14 @@ for _path in (str(REPO), str(REPO / 'test')):
 
 import ros_harness  # noqa: E402 - test/ is on the path only from here on
 
+from i3dmgx2_driver.codec import layouts, line_budget  # noqa: E402, I100 - likewise
+
 #: Node address the simulator and the node agree on.
 ADDRESS = 95
-#: Highest rate of 88-byte packets a 115200-baud 8N1 line carries (11,520 bytes/s).
-LINE_MAX_RATE_HZ = 11520 / 88
+#: Highest rate of 0xCC packets (88 bytes through the base station) a 115200-baud line
+#: carries (11,520 bytes/s), from the codec's layout table.
+LINE_MAX_RATE_HZ = (line_budget.line_bytes_per_second(115200)
+                    / line_budget.packet_size(layouts.ACCEL_ANG_RATE_MAG_ORIENTATION, True))
 
 
 class Result(NamedTuple):
@@ -411,7 +415,7 @@ class InProcessNode:
 
     The executor runs in a thread of its own, the node's reader thread
     publishes, and ``published`` gets one entry per Imu message through the
-    node's ``on_published`` hook, called right after ``publish()`` returned:
+    core's ``on_published`` hook, called right after ``publish()`` returned:
     the record's timer (to match the ground truth), the time the reader got
     its last byte, the stamp, and ``time.time()`` at that moment, the clock
     the simulator stamps its writes with.
@@ -435,7 +439,7 @@ class InProcessNode:
         self.node = ImuDriverNode(
             context=self.context,
             parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
-        self.node.on_published = self._on_published
+        self.node.core.on_published = self._on_published
         # As main.py spins it: several threads, so that a long service call holds only its own.
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.executor.add_node(self.node)

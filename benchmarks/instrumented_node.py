@@ -37,7 +37,7 @@ import threading
 import time
 
 from i3dmgx2_driver.device.port import SerialPort
-from i3dmgx2_driver.ros import imu_node
+from i3dmgx2_driver.ros import driver_core, imu_node
 from i3dmgx2_driver.ros import main as node_main
 
 #: Environment variable naming the JSON file the counters go to.
@@ -76,8 +76,8 @@ class ObservedPort(SerialPort):
 
 
 def _snapshot(node: imu_node.ImuDriverNode, final: bool) -> dict:
-    stats = node.stats
-    supervisor = node.supervisor
+    stats = node.core.stats
+    supervisor = node.core.supervisor
     with _events_lock:
         events = list(_events)
     return {
@@ -102,6 +102,14 @@ def _write(path: str, document: dict) -> None:
     os.replace(temporary, path)
 
 
+class ObservedCore(driver_core.DriverCore):
+    """The driver core, noting when it re-anchors: every record is published from then on."""
+
+    def _on_connect(self) -> None:
+        super()._on_connect()
+        _note('anchor')
+
+
 class ObservedNode(imu_node.ImuDriverNode):
     """The driver node, writing its counters to a file as it runs."""
 
@@ -110,11 +118,6 @@ class ObservedNode(imu_node.ImuDriverNode):
         self._stats_path = os.environ[STATS_ENV]
         self.create_timer(DUMP_PERIOD, lambda: _write(self._stats_path,
                                                       _snapshot(self, False)))
-
-    def _on_connect(self) -> None:
-        """Re-anchor as the node does, then note when: every record is published from now."""
-        super()._on_connect()
-        _note('anchor')
 
     def shutdown(self) -> None:
         """Shut down as the node does, then write the final counters."""
@@ -127,8 +130,9 @@ def main() -> int:
     if not os.environ.get(STATS_ENV):
         print(f'{STATS_ENV} must name the file for the counters', file=sys.stderr)
         return 2
-    imu_node.DeviceSupervisor = functools.partial(imu_node.DeviceSupervisor,
-                                                  port_factory=ObservedPort)
+    driver_core.DeviceSupervisor = functools.partial(driver_core.DeviceSupervisor,
+                                                     port_factory=ObservedPort)
+    imu_node.DriverCore = ObservedCore
     node_main.ImuDriverNode = ObservedNode
     return node_main.main()
 

@@ -58,7 +58,7 @@ from i3dmgx2_driver.device import port as port_module  # noqa: E402
 from i3dmgx2_driver.device import realtime  # noqa: E402
 from i3dmgx2_driver.device.clock import DeviceClock  # noqa: E402
 from i3dmgx2_driver.device.port import SerialPort  # noqa: E402
-from i3dmgx2_driver.ros import imu_node  # noqa: E402
+from i3dmgx2_driver.ros import driver_core, imu_node  # noqa: E402
 from i3dmgx2_driver.ros import main as node_main  # noqa: E402
 from i3dmgx2_driver.ros.conversions import MessageFactory  # noqa: E402
 
@@ -77,7 +77,7 @@ def _without_switch_interval() -> None:
 
 
 def _supervisor_without(**switches: bool) -> None:
-    imu_node.SupervisorConfig = functools.partial(imu_node.SupervisorConfig, **switches)
+    driver_core.SupervisorConfig = functools.partial(driver_core.SupervisorConfig, **switches)
 
 
 #: The driver's own measures that an A/B run may switch off: flag -> how.
@@ -190,7 +190,7 @@ def main() -> int:
 
         def __init__(self, *a, **k) -> None:
             super().__init__(*a, **k)
-            self.on_published = self._note
+            self.core.on_published = self._note
 
         def _note(self, record, read_time: float, stamp: float, clock=time.time) -> None:
             now = clock()

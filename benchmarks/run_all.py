@@ -17,7 +17,8 @@ Every benchmark, one table: ``python benchmarks/run_all.py [--quick]``.
 
 Runs the codec throughput (``codec_throughput.py``, in a process of its own
 because it pins itself to one core), then latency, sustained rate, CPU,
-timestamps and publishing under executor load, and prints one Markdown table
+timestamps, publishing under executor load and every stream at the line's
+limit, and prints one Markdown table
 (metric, value, target, met?) with the machine it ran on; the same text goes
 to ``benchmarks/output/results.md``. The full run takes about 15 minutes,
 ``--quick`` about 3. The figures depend on the machine and on whatever else
@@ -37,6 +38,7 @@ from bench_common import (
 import cpu
 import executor_load
 import latency
+import streams
 import throughput
 import timestamps
 
@@ -77,6 +79,7 @@ def main() -> int:
         ('CPU', lambda: cpu.run(8.0 if quick else 30.0)),
         ('timestamps', lambda: timestamps.run(15.0 if quick else 60.0)),
         ('executor load', lambda: executor_load.run(8.0 if quick else 30.0)),
+        ('streams', lambda: streams.run(6.0 if quick else 20.0)[0]),
     ]
     results: list[Result] = []
     for name, step in steps:

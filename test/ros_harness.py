@@ -29,12 +29,17 @@ import sys
 import tempfile
 import threading
 import time
+from typing import ClassVar
 
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+#: How ``NodeProcess`` starts the managed node from the source tree.
+LIFECYCLE_COMMAND = (sys.executable, '-m', 'i3dmgx2_driver.ros.lifecycle_node')
 
 
 def ros_env(extra: dict[str, str] | None = None) -> dict[str, str]:
@@ -212,3 +217,59 @@ class Listener:
 def stamp_seconds(msg: object) -> float:
     """Return a message header's stamp in seconds."""
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+class LifecycleClient:
+    """
+    Drive a managed node through the standard lifecycle_msgs services.
+
+    What a bringup manager or ``ros2 lifecycle set`` does: ``ChangeState``
+    and ``GetState`` on ``<node>/change_state`` and ``<node>/get_state``,
+    from the (spinning) node of a :class:`Listener`.
+    """
+
+    TRANSITIONS: ClassVar[dict[str, int]] = {
+        'configure': Transition.TRANSITION_CONFIGURE,
+        'cleanup': Transition.TRANSITION_CLEANUP,
+        'activate': Transition.TRANSITION_ACTIVATE,
+        'deactivate': Transition.TRANSITION_DEACTIVATE,
+    }
+
+    def __init__(self, listener: Listener, node: str = '/i3dmgx2_driver') -> None:
+        self._change = listener.node.create_client(ChangeState, f'{node}/change_state')
+        self._get = listener.node.create_client(GetState, f'{node}/get_state')
+
+    def wait_ready(self, timeout: float = 30.0) -> bool:
+        """Wait until both services are there."""
+        return (self._change.wait_for_service(timeout_sec=timeout)
+                and self._get.wait_for_service(timeout_sec=timeout))
+
+    @staticmethod
+    def _result(future: object, timeout: float) -> object:
+        deadline = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert future.done(), f'no answer within {timeout} s'
+        return future.result()
+
+    def change_async(self, transition: str) -> object:
+        """
+        Request a transition by name; return the future of the response.
+
+        'shutdown' goes by label: its id depends on the state it leaves.
+        """
+        request = ChangeState.Request()
+        if transition in self.TRANSITIONS:
+            request.transition.id = self.TRANSITIONS[transition]
+        else:
+            request.transition.label = transition
+        return self._change.call_async(request)
+
+    def change(self, transition: str, timeout: float = 30.0) -> bool:
+        """Request a transition by name; return whether it succeeded."""
+        return self._result(self.change_async(transition), timeout).success
+
+    def state(self, timeout: float = 10.0) -> str:
+        """Return the label of the node's current state."""
+        return self._result(self._get.call_async(GetState.Request()),
+                            timeout).current_state.label

@@ -199,3 +199,16 @@ def test_to_message_prefixes_names_and_sets_levels():
     assert msgs[1].level == DiagnosticStatus.STALE
     assert {m.hardware_id for m in msgs} == {'3095'}
     assert (msgs[0].values[0].key, msgs[0].values[0].value) == ('k', 'v')
+
+
+def test_a_stream_that_does_not_fit_the_line_is_a_warning_whatever_the_rate():
+    use = '0xCC at 299.4 Hz: 88 B packets, 26,349 of 11,520 bytes/s (229% of the line)'
+    warning = 'the device is set to a rate the line cannot carry, records will be skipped: ...'
+    status = stream(stream='0xCC (full)', line_use=use, line_warning=warning)
+    assert (status.level, status.message) == (d.WARN, warning)
+    assert status.value('stream') == '0xCC (full)'
+    assert status.value('line use') == use
+    # Paused says why there is no data; it fits: the rate decides.
+    assert stream(state=State.PAUSED, line_warning=warning).message.startswith('no data')
+    assert stream(stream='0xC2 (inertial)', line_use='fits').level == d.OK
+    assert stream().value('line use') == 'rate unknown'

@@ -55,17 +55,17 @@ def test_published_samples_leave_no_tracked_objects_behind():
             Parameter('port', value=port), Parameter('address', value=95),
             Parameter('publish_mag', value=False)])
         deadline = time.monotonic() + 30.0
-        while node.stats.published < 100 and time.monotonic() < deadline:
+        while node.core.stats.published < 100 and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert node.stats.published >= 100, 'the node did not stream'
+        assert node.core.stats.published >= 100, 'the node did not stream'
         gc.collect()
         gc.disable()
         try:
-            published, tracked = node.stats.published, gc.get_count()[0]
-            while node.stats.published < published + SAMPLES \
+            published, tracked = node.core.stats.published, gc.get_count()[0]
+            while node.core.stats.published < published + SAMPLES \
                     and time.monotonic() < deadline + 30.0:
                 time.sleep(0.05)
-            published, tracked = (node.stats.published - published,
+            published, tracked = (node.core.stats.published - published,
                                   gc.get_count()[0] - tracked)
         finally:
             gc.enable()

@@ -50,8 +50,17 @@ def _domain():
     ({'address': 95, 'data_rate': 400.0}, "parameter 'data_rate' must be 0 (leave the device"),
     ({'address': 95, 'qos_depth': 0}, "parameter 'qos_depth' must be 1..1000"),
     ({'address': 95, 'baud': 1200}, "parameter 'baud' must be 9600..921600"),
-    ({'address': 95, 'read_timeout': 1},
-     "parameter 'read_timeout' must be 0.1..60, written as a floating-point number"),
+    # An integer stands for a double (300 for 300.0), within the range still.
+    ({'address': 95, 'read_timeout': 100}, "parameter 'read_timeout' must be 0.1..60"),
+    # But a double where an integer is wanted is refused.
+    ({'address': 95.0}, "parameter 'address' must be 1..65534, written as an integer"),
+    ({'address': 95, 'stream': 'fast'},
+     "parameter 'stream' must be one of 'full', 'inertial_orientation', 'inertial_mag', "
+     "'inertial', 'euler', 'stabilised', or a command byte: 0xCC, 0xC8, 0xCB, 0xC2, 0xCF, "
+     "0xD2, got 'fast'"),
+    # rcl reads 0xC5 as the integer 197: the message shows the byte as typed.
+    ({'address': 95, 'stream': '0xC5'}, "parameter 'stream' must be one of 'full'"),
+    ({'address': 95, 'stream': '0xC5'}, "got '0xC5'"),
     ({'address': 95, 'orientation_stddev': -1.0},
      "parameter 'orientation_stddev' must be 0..10"),
     ({'address': 95, 'frame_id': "''"}, "parameter 'frame_id' must be a non-empty string"),

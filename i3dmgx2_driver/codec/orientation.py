@@ -153,3 +153,19 @@ def euler_from_matrix(m: Sequence[float]) -> Vector3:
     roll = math.atan2(m[5], m[8])
     yaw = math.atan2(m[1], m[0])
     return (roll, pitch, yaw)
+
+
+def matrix_from_euler(roll: float, pitch: float, yaw: float) -> Matrix3:
+    """
+    Return M (v_sensor = M * v_earth) from the aircraft ZYX angles of 0xCE/0xCF.
+
+    The inverse of :func:`euler_from_matrix`: M = Rx(roll)^T Ry(pitch)^T
+    Rz(yaw)^T, the earth-to-sensor rotation, so that an Euler record and a
+    matrix record of the same attitude give the same orientation.
+    """
+    sr, cr = math.sin(roll), math.cos(roll)
+    sp, cp = math.sin(pitch), math.cos(pitch)
+    sy, cy = math.sin(yaw), math.cos(yaw)
+    return (cp * cy, cp * sy, -sp,
+            sr * sp * cy - cr * sy, sr * sp * sy + cr * cy, sr * cp,
+            cr * sp * cy + sr * sy, cr * sp * sy - sr * cy, cr * cp)

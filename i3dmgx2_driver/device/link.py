@@ -84,6 +84,12 @@ class DeviceLink:
     every data packet not claimed by a pending request. ``on_bytes``, if
     given, receives every read's bytes as read, before they are parsed (a
     raw capture); it runs in the reader thread and must not raise or block.
+    ``streamed`` is the command byte of the record being streamed, None
+    while the device is not streaming (the supervisor sets it): a polled
+    reply of that code is then both the reply and a record of the stream.
+    ``cancel``, if given and set, makes requests give up within tens of
+    milliseconds while the reader goes on (the stream is being stopped, the
+    port kept: nobody waits for the answers any more).
     ``thread_policy`` is applied by the reader thread to itself before its
     first read; ``policy_outcome`` then says what the scheduler granted.
     """
@@ -91,10 +97,13 @@ class DeviceLink:
     def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
                  wireless: bool = True, read_timeout: float = 0.2,
                  on_bytes: BytesCallback | None = None,
+                 streamed: int | None = None,
+                 cancel: threading.Event | None = None,
                  thread_policy: ThreadPolicy = NORMAL_SCHEDULING) -> None:
         self.port = port
         self.address = address
         self.wireless = wireless
+        self.streamed = streamed
         self.parser = SensorStreamParser(address=address if wireless else None,
                                          wireless=wireless)
         self._on_record = on_record
@@ -104,11 +113,14 @@ class DeviceLink:
         self._lock = threading.Lock()
         self._write_lock = threading.Lock()
         self._stop = threading.Event()
+        self._cancel = cancel if cancel is not None else threading.Event()
         self._thread: threading.Thread | None = None
         self.disconnected = threading.Event()
         self.error: str | None = None
         self.last_data_time = 0.0
         self.records = 0
+        #: Command byte of the last record handed to ``on_record`` (None before one).
+        self.last_code: int | None = None
         self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
         self._thread_policy = thread_policy
         #: What the scheduler granted the reader thread (set once it runs).
@@ -166,9 +178,10 @@ class DeviceLink:
             if pending is not None and pending.code == code:
                 pending.reply = event.record
                 pending.done.set()
-                if code != layouts.ACCEL_ANG_RATE_MAG_ORIENTATION:
+                if code != self.streamed:
                     return
             self.records += 1
+            self.last_code = code
             self._on_record(event, now)
         elif isinstance(event, Ack):
             if self._pending is not None:
@@ -228,17 +241,12 @@ class DeviceLink:
                 self._pending = pending
                 try:
                     self.send(command)
-                    deadline = time.monotonic() + timeout
-                    while not pending.nacked.is_set():
-                        left = deadline - time.monotonic()
-                        if left <= 0 or pending.done.wait(min(left, 0.02)):
-                            break
+                    self._wait(pending, timeout)
                 finally:
                     self._pending = None
                 if self.disconnected.is_set():
                     raise PortDisconnected(self.error or 'device disconnected')
-                if self._stop.is_set():
-                    raise DeviceTimeout('the link is shutting down')
+                self._check_cancelled()
                 if pending.done.is_set():
                     return pending.reply
                 if pending.nacked.is_set():
@@ -247,6 +255,20 @@ class DeviceLink:
             if nacks == retries:
                 raise DeviceNack(f'{name}: the base station rejected it {retries} times')
             raise DeviceTimeout(f'{name}: no reply after {retries} tries')
+
+    def _wait(self, pending: _Pending, timeout: float, nack_ends: bool = True) -> None:
+        """Wait for a reply, a NACK (if ``nack_ends``), a cancel or the timeout."""
+        deadline = time.monotonic() + timeout
+        while not (nack_ends and pending.nacked.is_set()) and not self._cancel.is_set():
+            left = deadline - time.monotonic()
+            if left <= 0 or pending.done.wait(min(left, 0.02)):
+                break
+
+    def _check_cancelled(self) -> None:
+        if self._stop.is_set():
+            raise DeviceTimeout('the link is shutting down')
+        if self._cancel.is_set():
+            raise DeviceTimeout('cancelled: the stream is being stopped')
 
     def ping(self, timeout: float = 0.5, retries: int = 3) -> bool:
         """Ask the base station whether the sensor answers over the radio."""
@@ -258,11 +280,12 @@ class DeviceLink:
                     self.parser.expect_ping()
                     with self._write_lock:
                         self.port.write(commands.ping(self.address))
-                    pending.done.wait(timeout)
+                    self._wait(pending, timeout, nack_ends=False)
                 finally:
                     self._pending = None
                 if self.disconnected.is_set():
                     raise PortDisconnected(self.error or 'device disconnected')
+                self._check_cancelled()
                 if pending.reply is not None:
                     return bool(pending.reply.ok)
             return False

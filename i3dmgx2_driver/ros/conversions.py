@@ -13,10 +13,18 @@
 # limitations under the License.
 
 """
-From a 0xCC record to sensor_msgs: units, frames and covariances.
+From a streamed record to sensor_msgs: units, frames and covariances.
 
 Kept apart from the node so the arithmetic can be tested without a port, and
 so the node's reader thread does nothing but fill preallocated messages.
+
+Which quantities a record carries comes from its row in the stream table
+(``codec/streams.py``, read off the command table's layouts); here each
+becomes its part of the message. A quantity the record lacks is marked as
+sensor_msgs/Imu defines it: zeros, and -1 in element 0 of its covariance.
+An orientation comes from the matrix M (0xCC, 0xC8) or from the Euler angles
+(0xCF) through the same matrix, so both give the same quaternion for the
+same attitude, in either convention.
 
 On the hot path the node publishes each message already serialized:
 :meth:`MessageFactory.imu_cdr` packs the same Imu that :meth:`fill_imu` fills
@@ -25,22 +33,32 @@ attribute writes and rclpy's conversion of the message object to C, the
 largest share of the driver's own time from a packet read to ``publish()``
 returned. The bytes are checked against rclpy's own serializer once at
 start-up (:meth:`MessageFactory.serialized_matches`), and the tests check them
-on many records.
+on many records of every stream.
 """
 
 from collections.abc import Sequence
 import math
+from operator import attrgetter
 import struct
+from typing import Any
 
 from sensor_msgs.msg import Imu, MagneticField
 
-from ..codec.orientation import body_vector, ENU, orientation
-from ..codec.records import AccelAngRateMagOrientation
+from ..codec import streams
+from ..codec.orientation import body_vector, ENU, matrix_from_euler, orientation, Quaternion
+from ..codec.streams import Stream
 
 #: Standard gravity (m/s^2 per g), the factor the device's g units use.
 STANDARD_GRAVITY = 9.80665
 #: Tesla per Gauss.
 TESLA_PER_GAUSS = 1e-4
+#: Covariance of a quantity the message does not carry (sensor_msgs/Imu).
+MISSING_COVARIANCE = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+_ZERO3 = (0.0, 0.0, 0.0)
+#: Orientation of a record without one: zeros, as sensor_msgs/Imu asks.
+_NO_ORIENTATION = Quaternion(0.0, 0.0, 0.0, 0.0)
+#: Orientation of a matrix that is no rotation (garbage): the identity, marked unknown.
+_UNREADABLE_ORIENTATION = Quaternion(0.0, 0.0, 0.0, 1.0)
 
 
 def frame_id_for(frame_id: str, convention: str) -> str:
@@ -73,10 +91,24 @@ def set_stamp(header, stamp: float) -> None:
 
 #: Encapsulation header of a serialized message: plain CDR, little endian.
 CDR_LE = b'\x00\x01\x00\x00'
-#: A fixed record for the start-up check of the serialized messages.
-_PROBE = AccelAngRateMagOrientation(
-    (0.125, -0.5, -1.0), (0.01, -0.02, 0.03), (0.2, -0.1, 0.4),
-    (0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0), 123456)
+#: Field values of the fixed records for the start-up check of the serialized messages.
+_PROBE_FIELDS = {
+    'accel': (0.125, -0.5, -1.0), 'angular_rate': (0.01, -0.02, 0.03),
+    'mag': (0.2, -0.1, 0.4), 'matrix': (0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0),
+    'roll': 0.5, 'pitch': -0.25, 'yaw': 2.0, 'timer': 123456,
+}
+
+
+def probe_records(stream: Stream) -> list[Any]:
+    """Return records of ``stream`` for checks: a plain one, one with a NaN attitude."""
+    record_type = stream.record_type
+    record = record_type(**{name: _PROBE_FIELDS[name] for name in record_type._fields})
+    out = [record]
+    if stream.orientation == streams.MATRIX:
+        out.append(record._replace(matrix=(math.nan,) * 9))
+    elif stream.orientation == streams.EULER:
+        out.append(record._replace(roll=math.nan, pitch=math.nan, yaw=math.nan))
+    return out
 
 
 def _cdr_header(frame_id: str) -> tuple[str, bytes]:
@@ -93,25 +125,42 @@ def _cdr_header(frame_id: str) -> tuple[str, bytes]:
 
 class MessageFactory:
     """
-    Fill ``Imu`` and ``MagneticField`` messages from 0xCC records.
+    Fill ``Imu`` and ``MagneticField`` messages from the records of one stream.
 
     The messages are allocated once and refilled for every record: publish()
     serialises them at once, and allocating on the hot path costs latency.
+    What each part of the Imu comes from is chosen once, here, from the
+    stream's row of the table; the per-record work is only the arithmetic.
     """
 
     def __init__(self, frame_id: str, convention: str, orientation_stddev: float,
                  angular_velocity_stddev: float, linear_acceleration_stddev: float,
-                 magnetic_field_stddev: float) -> None:
+                 magnetic_field_stddev: float, stream: Stream = streams.DEFAULT) -> None:
         self.convention = convention
+        self.stream = stream
         self.frame_id = frame_id_for(frame_id, convention)
-        self._orientation_cov = diagonal_covariance(orientation_stddev)
-        self._invalid_orientation_cov = [-1.0] + [0.0] * 8
-        self._orientation_valid = True
+        # Each Imu part: how to get it from a record, and its covariance (missing: -1).
+        if stream.orientation == streams.MATRIX:
+            self._attitude = attrgetter('matrix')
+        elif stream.orientation == streams.EULER:
+            angles = attrgetter('roll', 'pitch', 'yaw')
+            self._attitude = lambda record: matrix_from_euler(*angles(record))
+        else:
+            self._attitude = None
+        self._rate = attrgetter(stream.angular_rate) if stream.angular_rate else None
+        self._accel = attrgetter(stream.accel) if stream.accel else None
+        self._orientation_cov = (tuple(diagonal_covariance(orientation_stddev))
+                                 if self._attitude else MISSING_COVARIANCE)
+        self._angular_velocity_cov = (tuple(diagonal_covariance(angular_velocity_stddev))
+                                      if self._rate else MISSING_COVARIANCE)
+        self._linear_acceleration_cov = (tuple(diagonal_covariance(linear_acceleration_stddev))
+                                         if self._accel else MISSING_COVARIANCE)
         imu = Imu()
         imu.header.frame_id = self.frame_id
         imu.orientation_covariance = self._orientation_cov
-        imu.angular_velocity_covariance = diagonal_covariance(angular_velocity_stddev)
-        imu.linear_acceleration_covariance = diagonal_covariance(linear_acceleration_stddev)
+        imu.angular_velocity_covariance = self._angular_velocity_cov
+        imu.linear_acceleration_covariance = self._linear_acceleration_cov
+        self._shown_orientation_cov = self._orientation_cov
         self.imu = imu
         mag = MagneticField()
         mag.header.frame_id = self.frame_id
@@ -123,53 +172,56 @@ class MessageFactory:
         header, self._frame_cdr = _cdr_header(self.frame_id)
         self._imu_struct = struct.Struct(f'<4s{header}37d')
         self._mag_struct = struct.Struct(f'<4s{header}12d')
-        self._angular_velocity_cov = tuple(imu.angular_velocity_covariance)
-        self._linear_acceleration_cov = tuple(imu.linear_acceleration_covariance)
         self._magnetic_field_cov = tuple(mag.magnetic_field_covariance)
 
-    def fill_imu(self, record: AccelAngRateMagOrientation, stamp: float) -> Imu:
+    def orientation(self, record: Any) -> tuple[Quaternion, tuple[float, ...]]:
+        """Return the record's orientation and its covariance (both marked when missing)."""
+        if self._attitude is None:
+            return _NO_ORIENTATION, MISSING_COVARIANCE
+        q = orientation(self._attitude(record), self.convention)
+        if math.isnan(q.w):
+            # REP-145 / sensor_msgs: -1 in the first element: no orientation.
+            return _UNREADABLE_ORIENTATION, MISSING_COVARIANCE
+        return q, self._orientation_cov
+
+    def angular_velocity(self, record: Any) -> tuple[float, float, float]:
+        """Return the record's angular rate (rad/s) in the convention's body axes."""
+        if self._rate is None:
+            return _ZERO3
+        return body_vector(self._rate(record), self.convention)
+
+    def linear_acceleration(self, record: Any) -> tuple[float, float, float]:
+        """Return the record's acceleration (m/s^2) in the convention's body axes."""
+        if self._accel is None:
+            return _ZERO3
+        a = body_vector(self._accel(record), self.convention)
+        g = STANDARD_GRAVITY
+        return (a[0] * g, a[1] * g, a[2] * g)
+
+    def fill_imu(self, record: Any, stamp: float) -> Imu:
         """Refill and return the Imu message for ``record``."""
         imu = self.imu
-        convention = self.convention
         set_stamp(imu.header, stamp)
-        q = orientation(record.matrix, convention)
-        valid = not math.isnan(q.w)
-        if valid != self._orientation_valid:
-            # REP-145 / sensor_msgs: -1 in the first element: no orientation.
-            imu.orientation_covariance = (self._orientation_cov if valid
-                                          else self._invalid_orientation_cov)
-            self._orientation_valid = valid
+        q, q_cov = self.orientation(record)
+        if q_cov is not self._shown_orientation_cov:
+            imu.orientation_covariance = q_cov
+            self._shown_orientation_cov = q_cov
         o = imu.orientation
-        if valid:
-            o.x, o.y, o.z, o.w = q
-        else:
-            o.x, o.y, o.z, o.w = 0.0, 0.0, 0.0, 1.0
-        w = body_vector(record.angular_rate, convention)
+        o.x, o.y, o.z, o.w = q
         av = imu.angular_velocity
-        av.x, av.y, av.z = w
-        a = body_vector(record.accel, convention)
+        av.x, av.y, av.z = self.angular_velocity(record)
         la = imu.linear_acceleration
-        la.x = a[0] * STANDARD_GRAVITY
-        la.y = a[1] * STANDARD_GRAVITY
-        la.z = a[2] * STANDARD_GRAVITY
+        la.x, la.y, la.z = self.linear_acceleration(record)
         return imu
 
-    def imu_cdr(self, record: AccelAngRateMagOrientation, stamp: float) -> bytes:
+    def imu_cdr(self, record: Any, stamp: float) -> bytes:
         """Return the Imu message of :meth:`fill_imu`, serialized (CDR bytes)."""
-        convention = self.convention
         sec, nanosec = stamp_parts(stamp)
-        q = orientation(record.matrix, convention)
-        if math.isnan(q.w):
-            q, q_cov = (0.0, 0.0, 0.0, 1.0), self._invalid_orientation_cov
-        else:
-            q_cov = self._orientation_cov
-        w = body_vector(record.angular_rate, convention)
-        a = body_vector(record.accel, convention)
-        g = STANDARD_GRAVITY
+        q, q_cov = self.orientation(record)
         return self._imu_struct.pack(
             CDR_LE, sec, nanosec, len(self._frame_cdr), self._frame_cdr,
-            *q, *q_cov, *w, *self._angular_velocity_cov,
-            a[0] * g, a[1] * g, a[2] * g, *self._linear_acceleration_cov)
+            *q, *q_cov, *self.angular_velocity(record), *self._angular_velocity_cov,
+            *self.linear_acceleration(record), *self._linear_acceleration_cov)
 
     def mag_cdr(self, mag_gauss: Sequence[float], stamp: float) -> bytes:
         """Return the MagneticField message of :meth:`fill_mag`, serialized (CDR bytes)."""
@@ -192,13 +244,14 @@ class MessageFactory:
         from rclpy.serialization import deserialize_message
 
         stamp = 1_700_000_000.123456789
-        nan_matrix = (math.nan,) * 9
-        for record in (_PROBE, _PROBE._replace(matrix=nan_matrix), _PROBE):
+        probes = probe_records(self.stream)
+        for record in (*probes, probes[0]):
             data = self.imu_cdr(record, stamp)
             if deserialize_message(data, Imu) != self.fill_imu(record, stamp):
                 return False
-        data = self.mag_cdr(_PROBE.mag, stamp)
-        return deserialize_message(data, MagneticField) == self.fill_mag(_PROBE.mag, stamp)
+        field = _PROBE_FIELDS['mag']
+        data = self.mag_cdr(field, stamp)
+        return deserialize_message(data, MagneticField) == self.fill_mag(field, stamp)
 
     def fill_mag(self, mag_gauss: Sequence[float], stamp: float) -> MagneticField:
         """Refill and return the MagneticField message (caller skips NaN)."""

@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterable, Mapping
 import math
 import time
 from typing import Any, NamedTuple
+import weakref
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy._rclpy_pybind11 import RCLError
@@ -130,6 +131,8 @@ def connection_status(port: str, address: int, wireless: bool, state: State,
     """
     if state is State.STREAMING:
         level, message = OK, 'streaming'
+    elif state is State.READY:
+        level, message = OK, 'port open, device quiet: not streaming (node inactive)'
     elif state is State.PAUSED:
         level, message = OK, 'stream paused for a device operation'
     elif state is State.STALLED:
@@ -176,21 +179,30 @@ def rate_level(measured_hz: float | None, expected_hz: float | None,
 def stream_status(state: State, measured_hz: float | None, expected_hz: float | None,
                   received_in_period: int, period: float, silent_for: float | None,
                   published: int, lost: int, lost_in_period: int, device_resets: int,
-                  other_records: int, mag_published: int, operation: str = '') -> Status:
+                  other_records: int, mag_published: int, operation: str = '',
+                  stream: str = '', line_use: str = '', line_warning: str = '') -> Status:
     """
     Judge the IMU stream over the last period: whether it arrives, at its rate.
 
     STALE when no record arrived in the period (there is no data to judge),
-    WARN when paused or the measured rate is off by more than 5 %.
+    WARN when paused or the measured rate is off by more than 5 %, and WARN
+    whenever the device's rate is more than the line carries for the stream
+    (``line_warning``): records are being skipped, whatever the rate shows.
     """
-    if state is State.PAUSED:
+    if line_warning and state is not State.PAUSED:
+        level, message = WARN, line_warning
+    elif state is State.PAUSED:
         level, message = WARN, f'no data: stream paused for {operation or "a device operation"}'
+    elif state is State.READY:
+        level, message = OK, 'no data: stream stopped on purpose (node inactive)'
     elif received_in_period == 0:
         since = f' for {silent_for:.1f} s' if silent_for is not None else ' yet'
         level, message = STALE, f'no data{since}'
     else:
         level, message = rate_level(measured_hz, expected_hz)
     return Status(level, 'stream', message, (
+        ('stream', stream or 'n/a'),
+        ('line use', line_use or 'rate unknown'),
         ('measured rate (Hz)', _fmt(measured_hz, 2)),
         ('configured rate (Hz)', _fmt(expected_hz, 2)),
         ('records in last period', str(received_in_period)),
@@ -334,6 +346,28 @@ def calibration_status(last: Calibration | None, good: Calibration | None,
                   tuple(values))
 
 
+def lifecycle_status(label: str, state: State | None) -> Status:
+    """
+    Say which lifecycle state the managed node is in, and whether that is well.
+
+    Unconfigured and inactive are states a bringup manager chose: OK. Active
+    is OK while the stream runs (or is paused for a service), WARN while the
+    supervisor recovers it (stalled, disconnected, reconnecting): the node
+    stays active through it. ``state`` is the supervisor's, None with no
+    configuration.
+    """
+    device = state.value if state is not None else 'no port (not configured)'
+    values = (('lifecycle state', label), ('device state', device))
+    if label == 'active':
+        if state in (State.STREAMING, State.PAUSED):
+            return Status(OK, 'lifecycle', 'active', values)
+        return Status(WARN, 'lifecycle', f'active, recovering the stream: {device}', values)
+    text = {'unconfigured': 'unconfigured: port closed, waiting for configure',
+            'inactive': 'inactive: port open, not streaming, waiting for activate',
+            'finalized': 'finalized: shutting down'}.get(label, f'{label} (in transition)')
+    return Status(OK, 'lifecycle', text, values)
+
+
 def to_message(statuses: Iterable[Status], hardware_id: str) -> list[DiagnosticStatus]:
     """Turn statuses into ``DiagnosticStatus`` messages, names prefixed."""
     out = []
@@ -374,44 +408,55 @@ class RateMeter:
 
 class DiagnosticsPublisher:
     """
-    Publish the node's diagnostics on ``/diagnostics`` every :data:`PERIOD` s.
+    Publish the driver's diagnostics on ``/diagnostics`` every :data:`PERIOD` s.
 
-    ``node`` is the ImuDriverNode (its supervisor, stream stats and clock
-    model are read, never changed). ``calibration`` and ``temperature`` and
-    ``capture`` are callables the other features provide; they default to
-    "nothing to report". The timer runs in its own callback group, so a
+    ``driver`` returns the DriverCore to report on (its supervisor, stream
+    stats, clock model, services, temperature and capture are read, never
+    changed), or None while there is none (a managed node before configure).
+    ``lifecycle``, for a managed node, returns its lifecycle state's label,
+    reported first. The timer runs in its own callback group, so a
     multi-threaded executor keeps it ticking during a long service call.
     """
 
-    def __init__(self, node: Node, period: float = PERIOD,
-                 calibration: Callable[[], tuple[Calibration | None, Calibration | None]]
-                 | None = None,
-                 temperature: Callable[[], float | None] | None = None,
-                 capture: Callable[[], str] | None = None,
-                 operation: Callable[[], str] | None = None) -> None:
+    def __init__(self, node: Node, driver: Callable[[], Any],
+                 lifecycle: Callable[[], str] | None = None, period: float = PERIOD) -> None:
         self.node = node
         self.period = period
-        self._calibration = calibration or (lambda: (None, None))
-        self._temperature = temperature or (lambda: None)
-        self._capture = capture or (lambda: 'off')
-        self._operation = operation or (lambda: '')
-        self._rate = RateMeter()
+        self._driver = driver
+        self._lifecycle = lifecycle
+        #: The core the last tick reported on (weakly: a core dropped at cleanup goes).
+        self._core: Callable[[], Any] = lambda: None
         self._last_tick = time.monotonic()
+        self._forget()
+        self.publisher = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.timer = node.create_timer(period, self.tick,
+                                       callback_group=MutuallyExclusiveCallbackGroup())
+
+    def _forget(self) -> None:
+        """Start the per-period comparisons afresh (a new core counts from zero)."""
+        self._rate = RateMeter()
         self._last_published = 0
         self._last_lost = 0
         self._last_parser: dict[str, int] | None = None
         self._last_good_frames = 0
         self._last_radio: RadioStats | None = None
-        self.publisher = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.timer = node.create_timer(period, self.tick,
-                                       callback_group=MutuallyExclusiveCallbackGroup())
 
     def collect(self) -> list[Status]:
-        """Read the node's state and build every status (advances the period)."""
-        node: Any = self.node
-        sup = node.supervisor
-        cfg = node.config
-        stats = node.stats
+        """Read the driver's state and build every status (advances the period)."""
+        core = self._driver()
+        statuses = []
+        if self._lifecycle is not None:
+            statuses.append(lifecycle_status(
+                self._lifecycle(), core.supervisor.state if core is not None else None))
+        if core is not self._core():
+            self._core = weakref.ref(core) if core is not None else (lambda: None)
+            self._forget()
+        if core is None:
+            self._last_tick = time.monotonic()
+            return statuses
+        sup = core.supervisor
+        cfg = core.config
+        stats = core.stats
         now = time.monotonic()
         period = now - self._last_tick
         self._last_tick = now
@@ -431,20 +476,22 @@ class DiagnosticsPublisher:
         if radio is None:
             radio = self._last_radio  # disconnected: show the last link's numbers
         self._last_radio = radio
-        clock = node.clock_model
-        last, good = self._calibration()
-        statuses = [
+        clock = core.clock_model
+        services = core.device_services
+        last, good = services.calibration()
+        statuses += [
             connection_status(cfg.port, cfg.address, cfg.wireless, state, sup.connections,
                               sup.reconnects, sup.stalls, sup.last_error,
-                              sup.low_latency_state, sup.ping_ok, self._capture()),
+                              sup.low_latency_state, sup.ping_ok, core.raw_capture.describe()),
             stream_status(state, measured, sup.expected_rate_hz, received, period,
                           silent_for, published, stats.lost, lost_in_period,
                           stats.device_resets, stats.other_records, stats.mag_published,
-                          self._operation()),
+                          services.operation, core.stream.label, sup.line_use,
+                          sup.line_warning),
             radio_status(cfg.wireless, radio, fresh),
             parser_status(parser, self._last_parser),
             device_status(sup.info, sup.connections > 0, cfg.address, sup.divider,
-                          sup.expected_rate_hz, self._temperature()),
+                          sup.expected_rate_hz, core.temperature.latest),
             time_status(cfg.time_source, clock.samples, clock.offset, clock.drift_ppm,
                         clock.anchors - 1, stats.device_resets),
             calibration_status(last, good, time.time()),
@@ -454,7 +501,8 @@ class DiagnosticsPublisher:
 
     def hardware_id(self) -> str:
         """Return the device's serial number once known, else ''."""
-        info = self.node.supervisor.info
+        core = self._driver()
+        info = core.supervisor.info if core is not None else None
         return info.serial_number if info is not None and info.serial_number else ''
 
     def tick(self) -> None:

@@ -13,19 +13,26 @@
 # limitations under the License.
 
 """
-Entry point of ``ros2 run i3dmgx2_driver node``.
+Entry point of ``ros2 run i3dmgx2_driver node``, and the run loop of both executables.
 
 SIGINT and SIGTERM are handled here rather than by rclpy, so that the
 driver can stop the device's stream (0xFA) and close the port while ROS is
 still up, then shut ROS down: a clean exit (code 0) well within 2 s. An
 invalid parameter exits with code 2 and a message that names it and its
-valid range. Once the node is up, the start-up heap is frozen and the
-interpreter lock switch interval shortened (device/realtime.py says why).
+valid range. :func:`run` does all of it for any driver node class (the plain
+node here, the managed node in ``lifecycle_node.py``): the class is made
+with no arguments and provides ``shutdown()`` and ``finished`` (True once
+it is done by itself, as a managed node after its shutdown transition).
+Once the node is made, the start-up heap is frozen and the interpreter lock
+switch interval shortened (device/realtime.py says why).
 """
 
+from collections.abc import Callable
 import signal
 import sys
 import threading
+import time
+from typing import Any
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
@@ -39,10 +46,13 @@ from ..device import realtime
 EXIT_BAD_PARAMETER = 2
 #: How often the main loop looks at the stop flag (s); signals wake it anyway.
 _SPIN_PERIOD = 0.1
+#: Once a node is finished by itself, how long to keep spinning (s), so that
+#: the reply to the request that finished it still goes out.
+_FINISH_GRACE = 0.3
 
 
-def main(args: list[str] | None = None) -> int:
-    """Run the driver node until SIGINT or SIGTERM."""
+def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
+    """Run the node ``make_node()`` returns until SIGINT, SIGTERM or it is finished."""
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:
@@ -63,7 +73,7 @@ def main(args: list[str] | None = None) -> int:
     executor = MultiThreadedExecutor(num_threads=4)
     try:
         try:
-            node = ImuDriverNode()
+            node = make_node()
         except ParameterError as exc:
             rclpy.logging.get_logger('i3dmgx2_driver').fatal(str(exc))
             return EXIT_BAD_PARAMETER
@@ -73,8 +83,12 @@ def main(args: list[str] | None = None) -> int:
         node.get_logger().info(
             f'start-up heap frozen ({frozen} objects), interpreter lock switch interval '
             f'{sys.getswitchinterval() * 1e3:g} ms')
-        while not stop.is_set() and rclpy.ok():
+        while not stop.is_set() and rclpy.ok() and not node.finished:
             executor.spin_once(timeout_sec=_SPIN_PERIOD)
+        grace = time.monotonic() + _FINISH_GRACE
+        while node.finished and not stop.is_set() and time.monotonic() < grace \
+                and rclpy.ok():
+            executor.spin_once(timeout_sec=0.05)
     finally:
         if node is not None:
             node.shutdown()
@@ -85,6 +99,11 @@ def main(args: list[str] | None = None) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     return 0
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the driver node until SIGINT or SIGTERM."""
+    return run(ImuDriverNode, args)
 
 
 if __name__ == '__main__':

@@ -23,6 +23,7 @@ becomes one ``ParameterError`` whose message names the parameter and its
 valid range, and the node stops. Nothing falls back to a default silently.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 import math
 from typing import Any, NamedTuple
@@ -35,10 +36,11 @@ from rclpy.exceptions import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from ..codec import streams
+from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.orientation import CONVENTIONS
 from ..device.realtime import MAX_PRIORITY
-from ..device.supervisor import MAX_RATE_HZ, MIN_RATE_HZ
 
 TIME_SOURCES = ('device', 'host')
 RELIABILITIES = ('reliable', 'best_effort')
@@ -61,6 +63,8 @@ class Spec(NamedTuple):
     read_only: bool = True
     #: A string that may be empty ('' switches a feature off).
     empty_ok: bool = False
+    #: For a string: the text an integer override stands for (rcl reads 0xC2 as 194).
+    from_integer: Callable[[int], str] | None = None
 
 
 SPECS: list[Spec] = [
@@ -72,6 +76,11 @@ SPECS: list[Spec] = [
     Spec('baud', Parameter.Type.INTEGER, 115200, 'Serial baud rate.', (9600, 921600)),
     Spec('wireless', Parameter.Type.BOOL, True,
          'True: through a wireless base station (packets, ACK/NACK); false: wired sensor.'),
+    Spec('stream', Parameter.Type.STRING, streams.DEFAULT.name,
+         'What the sensor streams: a stream name, or the command byte of its record as '
+         "text (e.g. '0xC2'); see Choosing a stream. With data_rate it must fit the "
+         'serial line, or the node refuses to start.',
+         from_integer=lambda code: f'0x{code:02X}'),
     Spec('frame_id', Parameter.Type.STRING, 'imu_link',
          'Frame of the published messages (_ned is appended in the ned convention).'),
     Spec('frame_convention', Parameter.Type.STRING, 'enu',
@@ -100,7 +109,8 @@ SPECS: list[Spec] = [
          'Publish sensor_msgs/MagneticField on imu/mag (NaN readings are skipped).'),
     Spec('data_rate', Parameter.Type.DOUBLE, 0.0,
          f'Data rate (Hz) to write to the device (EEPROM 0xFCA2, persists); 0: leave the '
-         f'device as it is; otherwise {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f}.',
+         f'device as it is; otherwise {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f}, and the stream '
+         f'must fit the serial line at that rate (see Choosing a stream).',
          (0.0, round(MAX_RATE_HZ, 1))),
     Spec('low_latency', Parameter.Type.BOOL, True,
          'Put the serial port in Linux low-latency mode (USB adapters) when it supports it.'),
@@ -138,6 +148,7 @@ class DriverConfig:
     address: int
     baud: int
     wireless: bool
+    stream: str
     frame_id: str
     frame_convention: str
     orientation_stddev: float
@@ -164,12 +175,19 @@ class DriverConfig:
         """Return the rate to set, or None to leave the device as it is."""
         return self.data_rate or None
 
+    @property
+    def stream_choice(self) -> streams.Stream:
+        """Return the stream the ``stream`` parameter names."""
+        return streams.parse(self.stream)
+
 
 def _valid_range(spec: Spec) -> str:
     if spec.choices:
         return 'one of ' + ', '.join(repr(c) for c in spec.choices)
     if spec.empty_ok:
         return "a string, or '' (off)"
+    if spec.name == 'stream':
+        return streams.valid_text()
     if spec.name == 'data_rate':
         return f'0 (leave the device as it is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz'
     if spec.limits is not None:
@@ -192,10 +210,36 @@ def _descriptor(spec: Spec) -> ParameterDescriptor:
     return descriptor
 
 
+def _accept_integer(node: Node, spec: Spec) -> None:
+    """
+    Let ``300`` stand for ``300.0`` where a floating-point number is wanted.
+
+    rcl types ``-p data_rate:=300`` (and ``300`` in a YAML file or a launch
+    file) as an integer, and rclpy refuses an integer for a parameter whose
+    default is a double. Users type rates and deviations as integers, so the
+    override is made a double before the parameter is declared; an integer
+    parameter given a double stays an error. Likewise rcl reads
+    ``stream:=0xC2`` as the integer 194: a string parameter that takes
+    command bytes gets its text back.
+    """
+    overrides = node._parameter_overrides
+    given = overrides.get(spec.name)
+    if given is None or given.type_ != Parameter.Type.INTEGER:
+        return
+    if spec.kind == Parameter.Type.DOUBLE:
+        overrides[spec.name] = Parameter(spec.name, Parameter.Type.DOUBLE, float(given.value))
+    elif spec.kind == Parameter.Type.STRING and spec.from_integer is not None:
+        overrides[spec.name] = Parameter(spec.name, Parameter.Type.STRING,
+                                         spec.from_integer(given.value))
+
+
 def _declare(node: Node, spec: Spec) -> Any:
     problem = f'parameter {spec.name!r} must be {_valid_range(spec)}'
+    _accept_integer(node, spec)
     try:
-        if spec.default is _REQUIRED:
+        if node.has_parameter(spec.name):
+            pass  # a managed node configured again: read what is there
+        elif spec.default is _REQUIRED:
             node.declare_parameter(spec.name, spec.kind, _descriptor(spec))
         else:
             node.declare_parameter(spec.name, spec.default, _descriptor(spec))
@@ -229,11 +273,22 @@ def _check(spec: Spec, value: Any) -> Any:
         raise ParameterError(problem)
     if spec.name == 'data_rate' and value and not MIN_RATE_HZ <= value <= MAX_RATE_HZ:
         raise ParameterError(problem)
+    if spec.name == 'stream':
+        try:
+            streams.parse(value)
+        except ValueError:
+            raise ParameterError(problem) from None
     return value
 
 
 def declare_parameters(node: Node, extra: tuple[Spec, ...] = ()) -> dict:
-    """Declare every parameter on ``node``; return the validated values by name."""
+    """
+    Declare every parameter on ``node``; return the validated values by name.
+
+    Parameters declared already (by an earlier call that failed, or by the
+    last configure of a managed node) are read, not declared again, and
+    checked all the same: the same bad value gives the same message.
+    """
     values = {}
     for spec in (*SPECS, *extra):
         values[spec.name] = _check(spec, _declare(node, spec))
@@ -241,6 +296,27 @@ def declare_parameters(node: Node, extra: tuple[Spec, ...] = ()) -> dict:
 
 
 def driver_config(values: dict) -> DriverConfig:
-    """Build the driver's configuration from validated values."""
+    """Build the driver's configuration from validated values; check the line budget."""
     fields = DriverConfig.__dataclass_fields__
-    return DriverConfig(**{name: values[name] for name in fields})
+    config = DriverConfig(**{name: values[name] for name in fields})
+    check_line_budget(config)
+    return config
+
+
+def check_line_budget(config: DriverConfig) -> None:
+    """
+    Refuse a stream and data rate the serial line cannot carry.
+
+    The sensor would skip records to keep up, and the rate seen would be far
+    below the one asked for with no error anywhere. With ``data_rate`` 0 the
+    rate is the device's and is known only once connected: the supervisor
+    warns then.
+    """
+    if config.data_rate_hz is None:
+        return
+    stream = config.stream_choice
+    budget = streams.line_budget(stream, config.data_rate_hz, config.baud, config.wireless)
+    if not budget.fits:
+        raise ParameterError(f"parameter 'data_rate' ({config.data_rate:g} Hz) does not fit "
+                             f'the line with stream {stream.name!r}: '
+                             + streams.advice(stream, budget))

@@ -164,14 +164,21 @@ def poll_inertial(link: DeviceLink, count: int = POLLS, timeout: float = 0.5,
 
 class DeviceServices:
     """
-    The ``~/capture_gyro_bias`` and ``~/self_test`` services of an ImuDriverNode.
+    The ``~/capture_gyro_bias`` and ``~/self_test`` services of the driver.
 
-    ``node`` provides ``supervisor``, ``stats`` (records published, with
-    read times), ``config`` and the ``gyro_bias_sampling_ms`` parameter.
+    ``node`` provides the services, the logger and the
+    ``gyro_bias_sampling_ms`` parameter; ``driver`` (the DriverCore) the
+    ``supervisor``, ``stats`` (records published, with read times),
+    ``config`` and ``forget_last_sample``. ``refusal``, if given, returns
+    why a call must be refused now ('' to serve it): a managed node that is
+    not active answers so at once.
     """
 
-    def __init__(self, node: Node) -> None:
+    def __init__(self, node: Node, driver: Any,
+                 refusal: Callable[[], str] | None = None) -> None:
         self.node = node
+        self.driver = driver
+        self._refusal = refusal or (lambda: '')
         self._log = node.get_logger()
         self._busy = threading.Lock()
         self._stop = threading.Event()
@@ -186,7 +193,7 @@ class DeviceServices:
         self.self_test_service = node.create_service(
             Trigger, '~/self_test', self._on_self_test, callback_group=group)
         self._start_thread: threading.Thread | None = None
-        if getattr(node, 'config', None) is not None and node.config.capture_gyro_bias_on_start:
+        if driver.config.capture_gyro_bias_on_start:
             self._start_thread = threading.Thread(
                 target=self._capture_on_start, name='gx2-bias-on-start', daemon=True)
             self._start_thread.start()
@@ -194,6 +201,12 @@ class DeviceServices:
     def stop(self) -> None:
         """Stop waiting (the capture at start, the rate window); the link aborts the rest."""
         self._stop.set()
+
+    def destroy(self) -> None:
+        """Stop, and remove the services from the node (the managed node's cleanup)."""
+        self.stop()
+        self.node.destroy_service(self.capture_service)
+        self.node.destroy_service(self.self_test_service)
 
     def wait_idle(self, timeout: float) -> bool:
         """
@@ -227,6 +240,9 @@ class DeviceServices:
 
     def _exclusive(self, name: str, body: Callable[[], tuple[bool, str]]) -> tuple[bool, str]:
         """Run one operation at a time; refuse at once when another runs."""
+        refusal = self._refusal()
+        if refusal:
+            return False, f'refused: {refusal}'
         if not self._busy.acquire(blocking=False):
             return False, f'refused: {self.operation or "another operation"} is in progress'
         self.operation = name
@@ -243,8 +259,7 @@ class DeviceServices:
         Called while the stream is still stopped: the timer gap across the
         pause is the operation's doing, not the radio's.
         """
-        node: Any = self.node
-        node.forget_last_sample()
+        self.driver.forget_last_sample()
 
     def capture_gyro_bias(self) -> tuple[bool, str]:
         """Capture the gyro bias (0xCD) with the stream paused; return (success, message)."""
@@ -266,7 +281,7 @@ class DeviceServices:
         started = time.time()
         try:
             accel_before, reply, accel_after, rate_after = \
-                self.node.supervisor.run_paused(operation)
+                self.driver.supervisor.run_paused(operation)
         except OPERATION_ERRORS as exc:
             summary = f'no capture: {exc}'
             self.last_capture = Calibration(started, False, None, sampling_ms, summary)
@@ -292,7 +307,7 @@ class DeviceServices:
 
     def _capture_on_start(self) -> None:
         """Wait for the first streaming start, then capture once (own thread)."""
-        supervisor = self.node.supervisor
+        supervisor = self.driver.supervisor
         while supervisor.state is not State.STREAMING:
             if self._stop.wait(0.1):
                 return
@@ -305,9 +320,8 @@ class DeviceServices:
         return self._exclusive('self test', self._self_test)
 
     def _self_test(self) -> tuple[bool, str]:
-        node: Any = self.node
         try:
-            steps = node.supervisor.run_paused(self._device_steps)
+            steps = self.driver.supervisor.run_paused(self._device_steps)
         except OPERATION_ERRORS as exc:
             steps = [Step('device operation', False, f'could not complete: {exc}')]
         steps.append(self._measure_rate())
@@ -376,12 +390,11 @@ class DeviceServices:
 
     def _measure_rate(self) -> Step:
         """Measure the published rate over :data:`RATE_WINDOW` after the stream resumed."""
-        node: Any = self.node
-        stats = node.stats
+        stats = self.driver.stats
         count, first = stats.published, stats.last_time
         if self._stop.wait(RATE_WINDOW):
             return Step('data rate', False, 'driver shutting down')
         measured = None
         if stats.published > count and stats.last_time > first:
             measured = (stats.published - count) / (stats.last_time - first)
-        return rate_step(measured, node.supervisor.expected_rate_hz)
+        return rate_step(measured, self.driver.supervisor.expected_rate_hz)

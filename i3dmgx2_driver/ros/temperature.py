@@ -27,10 +27,11 @@ paused for a capture or the self test).
 
 import threading
 import time
+from typing import Any
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.publisher import Publisher
 from sensor_msgs.msg import Temperature
 
 from .conversions import set_stamp
@@ -50,12 +51,16 @@ class TemperaturePoller:
     """
     Publish the accelerometer temperature on ``imu/temperature`` every ``period`` s.
 
-    ``node`` provides ``supervisor`` and ``messages.frame_id`` (the IMU frame).
-    ``period`` 0 disables it: no publisher, no thread.
+    ``node`` logs; ``publisher`` publishes (the driver core makes it, a
+    lifecycle publisher on a managed node); ``driver`` (the DriverCore)
+    provides ``supervisor`` and ``messages.frame_id`` (the IMU frame).
+    ``period`` 0 disables it: no thread (and no publisher is needed).
     """
 
-    def __init__(self, node: Node, period: float, qos: QoSProfile | int = 10) -> None:
+    def __init__(self, node: Node, driver: Any, period: float,
+                 publisher: Publisher | None) -> None:
         self.node = node
+        self.driver = driver
         self.period = period
         self.published = 0
         self.failures = 0
@@ -64,11 +69,10 @@ class TemperaturePoller:
         self._stop = threading.Event()
         self._throttle = Throttle(WARN_PERIOD)
         self._thread: threading.Thread | None = None
-        self.publisher = None
-        if period > 0:
-            self.publisher = node.create_publisher(Temperature, 'imu/temperature', qos)
+        self.publisher = publisher
+        if period > 0 and publisher is not None:
             self._msg = Temperature()
-            self._msg.header.frame_id = node.messages.frame_id
+            self._msg.header.frame_id = driver.messages.frame_id
             self._msg.variance = 0.0
             self._thread = threading.Thread(target=self._run, name='gx2-temperature',
                                             daemon=True)
@@ -91,7 +95,7 @@ class TemperaturePoller:
 
     def poll(self) -> bool:
         """Read the temperatures once and publish; False if skipped or failed."""
-        supervisor = self.node.supervisor
+        supervisor = self.driver.supervisor
         link = supervisor.link
         if link is None or supervisor.state is not State.STREAMING:
             return False

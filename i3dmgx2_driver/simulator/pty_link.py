@@ -845,13 +845,16 @@ class PtySimulator:
             elif faults.drop_probability and rng.random() < faults.drop_probability:
                 fault = flt.FAULT_DROPPED
             elif self.config.limit_to_line_rate and item.source == 'stream' \
-                    and time.time() < self._line_free_at:
+                    and item.send < self._line_free_at - 1e-9:
+                # The device's UART is still sending the previous packet when this
+                # record is ready: the device skips it. Judged on the device's own
+                # schedule (send times), never on when this thread happened to run.
                 fault = flt.FAULT_LINE_RATE
             if fault is not None:
                 self._add_truth(reply, None, packet, item.address, False, fault, item.source)
                 return
             if self.config.limit_to_line_rate:
-                self._line_free_at = (max(time.time(), self._line_free_at)
+                self._line_free_at = (max(item.send, self._line_free_at)
                                       + len(packet) / LINE_BYTES_PER_SECOND)
             if faults.garbage_probability and rng.random() < faults.garbage_probability:
                 garbage = self._garbage(faults)

@@ -1,0 +1,274 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The driver behind both executables: device records in, sensor_msgs out, on time.
+
+:class:`DriverCore` is everything the driver does for one configuration:
+the publishers, the message factory, stamping and loss counting, the
+device supervisor, the services, the temperature poller and the raw
+capture. It lives on an rclpy node it does not own: the plain node
+(``imu_node.py``) makes one at start and starts its supervisor at once; the
+managed node (``lifecycle_node.py``) makes one at each configure, with
+lifecycle publishers, drives the supervisor's phases from its transitions
+and destroys the core at cleanup. Neither holds a copy of this code.
+
+The supervisor's reader thread calls :meth:`DriverCore._on_record` for
+every valid record, which stamps it, packs its messages and publishes at
+once. The executor is left free for parameters, services and diagnostics,
+and nothing it does can delay a sample.
+"""
+
+from collections.abc import Callable
+import sys
+import threading
+import time
+from typing import NamedTuple
+
+from rclpy._rclpy_pybind11 import RCLError
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Imu, MagneticField, Temperature
+
+from .conversions import mag_is_valid, MessageFactory
+from .parameters import DriverConfig
+from .raw_capture import RawCapture
+from .services import DeviceServices
+from .temperature import TemperaturePoller
+from ..codec import line_budget
+from ..codec.data_rate import ticks_per_cycle
+from ..codec.framing import DataPacket
+from ..codec.timer import TimerUnwrapper
+from ..device.clock import DeviceClock
+from ..device.realtime import ThreadPolicy
+from ..device.supervisor import DeviceSupervisor, SupervisorConfig
+
+#: Whether ready-serialized messages read back right, by the message factory's
+#: settings: checked once per process, because a managed node makes a core at
+#: every configure and rclpy's deserialize_message keeps a little memory per call.
+_SERIALIZED_MATCHES: dict[tuple, bool] = {}
+
+
+class StreamStats:
+    """What the node saw of the stream: for diagnostics and tests."""
+
+    def __init__(self) -> None:
+        self.published = 0
+        self.unpublished = 0
+        self.mag_published = 0
+        self.lost = 0
+        self.other_records = 0
+        self.device_resets = 0
+        self.first_time = 0.0
+        self.last_time = 0.0
+        self.last_ticks: int | None = None
+
+
+class Publishers(NamedTuple):
+    """The data publishers; None where the parameters turn a topic off."""
+
+    imu: Publisher
+    mag: Publisher | None
+    temperature: Publisher | None
+
+
+def publisher_qos(config: DriverConfig) -> QoSProfile:
+    """Return the QoS the parameters ask for, for every data publisher."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=config.qos_depth,
+        reliability=(ReliabilityPolicy.RELIABLE if config.qos_reliability == 'reliable'
+                     else ReliabilityPolicy.BEST_EFFORT))
+
+
+def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False) -> Publishers:
+    """
+    Make the data publishers on ``node``: lifecycle publishers if ``lifecycle``.
+
+    A managed node makes them once and keeps them across configure/cleanup
+    cycles: destroying a publisher while a multi-threaded executor builds
+    its wait set can crash the executor in rclpy (Jazzy), because the
+    publisher's QoS event handlers are waitables whose invalid handles it
+    does not skip (ros2/rclpy#1284). Its parameters are read-only, so the
+    publishers it made first are the ones every later configure needs.
+    """
+    qos = publisher_qos(config)
+    create = node.create_lifecycle_publisher if lifecycle else node.create_publisher
+    return Publishers(
+        create(Imu, 'imu/raw_data', qos),
+        # Only streams with a field (named 'mag' in each layout) have a magnetometer topic.
+        create(MagneticField, 'imu/mag', qos)
+        if config.publish_mag and config.stream_choice.mag else None,
+        create(Temperature, 'imu/temperature', qos) if config.temperature_period > 0
+        else None)
+
+
+class DriverCore:
+    """
+    Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField.
+
+    ``node`` is the rclpy node the services and logs belong to; ``config``
+    the validated parameters. ``publishers``: the data publishers to use
+    (a managed node's lifecycle publishers, see :func:`create_publishers`);
+    by default the core makes plain ones. ``publishing`` False: records are
+    counted, not published, until the owner turns :attr:`publishing` on.
+    ``refusal`` tells the services why they must refuse now ('' to serve).
+    The core starts nothing: its owner drives :attr:`supervisor`.
+    """
+
+    def __init__(self, node: Node, config: DriverConfig,
+                 publishers: Publishers | None = None, publishing: bool = True,
+                 refusal: Callable[[], str] | None = None) -> None:
+        self.node = node
+        self.config = cfg = config
+        self.stream = cfg.stream_choice
+        self._record_type = self.stream.record_type
+        self.publishers = publishers or create_publishers(node, cfg)
+        self.imu_pub = self.publishers.imu
+        self.mag_pub = self.publishers.mag
+        settings = (cfg.frame_id, cfg.frame_convention, cfg.orientation_stddev,
+                    cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
+                    cfg.magnetic_field_stddev, self.stream)
+        self.messages = MessageFactory(*settings)
+        self.stats = StreamStats()
+        self.unwrapper = TimerUnwrapper()
+        self.clock_model = DeviceClock()
+        #: Whether records are published: always for the plain node; while
+        #: active for the managed one (records still in flight after a
+        #: deactivate are counted as unpublished, not as published).
+        self.publishing = publishing
+        self._use_device_time = cfg.time_source == 'device'
+        self._wire_time = line_budget.wire_time(self.stream.code, cfg.baud, cfg.wireless)
+        self._publish_lock = threading.Lock()
+        # Publish the messages ready-serialized (conversions.py says why) when they read
+        # back right with this middleware; otherwise as message objects.
+        if settings not in _SERIALIZED_MATCHES:
+            _SERIALIZED_MATCHES[settings] = self.messages.serialized_matches()
+        if _SERIALIZED_MATCHES[settings]:
+            self._imu_message, self._mag_message = (self.messages.imu_cdr,
+                                                    self.messages.mag_cdr)
+        else:
+            self._imu_message, self._mag_message = (self.messages.fill_imu,
+                                                    self.messages.fill_mag)
+        #: Called in the reader thread right after each Imu message is published, with
+        #: (record, read time, stamp): for benchmarks and tests. None costs nothing.
+        self.on_published = None
+        self.raw_capture = RawCapture(
+            cfg.capture_file, node.get_logger(), port=cfg.port, address=cfg.address,
+            baud=cfg.baud, wireless=cfg.wireless, node=node.get_fully_qualified_name())
+        self.supervisor = DeviceSupervisor(
+            SupervisorConfig(
+                port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
+                low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
+                reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
+                stream=self.stream.code,
+                thread_policy=ThreadPolicy(cfg.realtime_priority, cfg.cpu_affinity)),
+            on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
+            on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None)
+        self.device_services = DeviceServices(node, self, refusal=refusal)
+        self.temperature = TemperaturePoller(node, self, cfg.temperature_period,
+                                             self.publishers.temperature)
+        node.get_logger().info(
+            f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
+            f'stream {self.stream.label}, frame {self.messages.frame_id} '
+            f'({cfg.frame_convention}), '
+            f'time source {cfg.time_source}')
+
+    def _on_connect(self) -> None:
+        """Re-anchor time on a new link: the device may have been power-cycled."""
+        with self._publish_lock:
+            self.unwrapper.reset()
+            self.clock_model.reset()
+            self.stats.last_ticks = None
+
+    def forget_last_sample(self) -> None:
+        """Let the next record start afresh: a deliberate pause is no packet loss."""
+        with self._publish_lock:
+            self.stats.last_ticks = None
+
+    def _expected_ticks(self) -> int | None:
+        divider = self.supervisor.divider
+        return ticks_per_cycle(divider) if divider else None
+
+    def _on_record(self, packet: DataPacket, read_time: float) -> None:
+        """Stamp and publish one record (runs in the reader thread)."""
+        record = packet.record
+        if type(record) is not self._record_type:
+            self.stats.other_records += 1
+            return
+        if not self.publishing:
+            self.stats.unpublished += 1
+            return
+        with self._publish_lock:
+            stats = self.stats
+            ticks = self.unwrapper.update(record.timer, read_time)
+            if self.unwrapper.last_was_reset:
+                stats.device_resets += 1
+                self.clock_model.reset()
+            elif stats.last_ticks is not None:
+                expected = self._expected_ticks()
+                if expected:
+                    gap = round((ticks - stats.last_ticks) / expected) - 1
+                    if gap > 0:
+                        stats.lost += gap
+            stats.last_ticks = ticks
+            if self._use_device_time:
+                stamp = self.clock_model.stamp(ticks, read_time, self._wire_time)
+            else:
+                stamp = read_time
+            try:
+                self.imu_pub.publish(self._imu_message(record, stamp))
+            except RCLError:
+                # ROS is shutting down under the reader: nothing left to publish to.
+                stats.unpublished += 1
+                return
+            on_published = self.on_published
+            if on_published is not None:
+                on_published(record, read_time, stamp)
+            stats.published += 1
+            if not stats.first_time:
+                stats.first_time = read_time
+            stats.last_time = read_time
+            # mag_pub exists only for streams with a field (named 'mag' in each layout).
+            if self.mag_pub is not None and mag_is_valid(record.mag):
+                self.mag_pub.publish(self._mag_message(record.mag, stamp))
+                stats.mag_published += 1
+
+    def shutdown(self, report: bool = True) -> None:
+        """Stop the device stream and close the port (bounded in time); log it if ``report``."""
+        start = time.monotonic()
+        self.device_services.stop()
+        self.temperature.stop()
+        self.supervisor.stop()
+        self.device_services.wait_idle(1.0)
+        self.raw_capture.close()
+        if not report:
+            return
+        message = (f'stopped: {self.stats.published} records published, port closed '
+                   f'({time.monotonic() - start:.2f} s)')
+        if self.node.context.ok():
+            self.node.get_logger().info(message)
+        else:
+            # After SIGINT the context is gone and /rosout with it: plain stderr.
+            print(f'[i3dmgx2_driver] {message}', file=sys.stderr, flush=True)
+
+    def destroy(self) -> None:
+        """
+        Remove the core's services from the node (after shutdown).
+
+        For the managed node's cleanup: a later configure makes a new core.
+        The publishers stay: they belong to whoever made them (see
+        :func:`create_publishers` for why a managed node keeps them).
+        """
+        self.device_services.destroy()

@@ -1,0 +1,269 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The managed driver node (REP-2004): a bringup manager brings the sensor up in steps.
+
+Same parameters, topics, services and diagnostics as the plain node, from
+the same :class:`~.driver_core.DriverCore`; what differs is when things
+happen. Each transition is one call into the core, bounded in time, and
+logged in one line:
+
+- configure: check the parameters (a bad one fails with the plain node's
+  words), make the core (lifecycle publishers: silent until active), open
+  the port exclusively, quiet the device, read its identity, set the data
+  rate if asked. A missing or busy port, or a silent sensor, fails the
+  transition with the reason and leaves nothing open; configure again later.
+- activate: start the stream and return once records arrive; from then on
+  stalls and unplugs are recovered as the plain node recovers them, and
+  the node stays active throughout (diagnostics say it is recovering).
+- deactivate: stop publishing and the stream (0xFA); the port stays open;
+  the services answer that the node is inactive.
+- cleanup: close the port (another process may open it at once) and remove
+  the core's publishers and services.
+- shutdown, from any state: stop the stream, close the port; the process
+  then exits 0. SIGINT and SIGTERM do the same through the shutdown
+  transition, within 2 s, even in the middle of a configure.
+
+``/diagnostics`` runs in every state and reports the lifecycle state first.
+"""
+
+from collections.abc import Callable
+import functools
+import sys
+import threading
+import time
+import traceback
+from typing import Any
+
+from rclpy._rclpy_pybind11 import RCLError
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+
+from .diagnostics import DiagnosticsPublisher
+from .driver_core import create_publishers, DriverCore, Publishers
+from .main import run
+from .parameters import declare_parameters, driver_config, ParameterError
+from ..device.link import DeviceTimeout
+from ..device.port import PortError
+
+SUCCESS = TransitionCallbackReturn.SUCCESS
+FAILURE = TransitionCallbackReturn.FAILURE
+ERROR = TransitionCallbackReturn.ERROR
+#: What a transition can fail with that is the device's or the port's doing.
+DEVICE_ERRORS = (PortError, DeviceTimeout)
+#: How long a signal waits for a transition under way to end (s); the
+#: device was cut off first, so it ends within milliseconds.
+TRANSITION_WAIT = 1.0
+
+Transition = Callable[[Any, LifecycleState], TransitionCallbackReturn]
+
+
+def transition(name: str) -> Callable[[Transition], Transition]:
+    """
+    Run a transition callback under the node's transition lock; log a crash.
+
+    rclpy turns an exception in a callback into ERROR without a word; here
+    the traceback is logged first, so that the error processing that follows
+    has a cause anyone can read.
+    """
+    def wrap(method: Transition) -> Transition:
+        @functools.wraps(method)
+        def run(self: 'LifecycleDriverNode', state: LifecycleState) -> TransitionCallbackReturn:
+            with self._transition_lock:
+                try:
+                    return method(self, state)
+                except Exception:  # noqa: B902 - logged, then rclpy's error processing
+                    self.get_logger().error(
+                        f'{name} failed unexpectedly:\n{traceback.format_exc()}')
+                    return ERROR
+        return run
+    return wrap
+
+
+class LifecycleDriverNode(LifecycleNode):
+    """The 3DM-GX2 driver as a managed node; the core exists from configure to cleanup."""
+
+    def __init__(self, node_name: str = 'i3dmgx2_driver', **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        #: The driver, from a successful configure to cleanup or shutdown; else None.
+        self.core: DriverCore | None = None
+        #: Made at the first configure and kept (create_publishers says why).
+        self._data_publishers: Publishers | None = None
+        self._transition_lock = threading.RLock()
+        self._finished = threading.Event()
+        try:
+            # Declared now so that ``ros2 param`` shows them before configure;
+            # configure checks them again and reports what is wrong.
+            declare_parameters(self)
+        except ParameterError:
+            pass
+        self.diagnostics = DiagnosticsPublisher(self, lambda: self.core,
+                                                lifecycle=self.state_label)
+
+    # -- state ---------------------------------------------------------------
+
+    def state_label(self) -> str:
+        """Return the label of the current lifecycle state ('unconfigured', 'active', ...)."""
+        # rclpy (Jazzy) has no public getter; the state machine is rcl's own.
+        return self._state_machine.current_state[1]
+
+    @property
+    def finished(self) -> bool:
+        """Whether the shutdown transition has run: the process may exit."""
+        return self._finished.is_set()
+
+    def _refusal(self) -> str:
+        """Why the services must refuse now ('' when active)."""
+        label = self.state_label()
+        return '' if label == 'active' else f'the node is {label}: activate it first'
+
+    # -- transitions -----------------------------------------------------------
+
+    @transition('configure')
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Check the parameters, open the port, bring the device to a known state."""
+        start = time.monotonic()
+        log = self.get_logger()
+        try:
+            config = driver_config(declare_parameters(self))
+        except ParameterError as exc:
+            log.error(f'configure failed: {exc}')
+            return FAILURE
+        if self._data_publishers is None:
+            self._data_publishers = create_publishers(self, config, lifecycle=True)
+        core = DriverCore(self, config, publishers=self._data_publishers, publishing=False,
+                          refusal=self._refusal)
+        self.core = core
+        try:
+            core.supervisor.connect()
+        except DEVICE_ERRORS as exc:
+            self._release()
+            log.error(f'configure failed: {exc}')
+            return FAILURE
+        sup = core.supervisor
+        rate = f', {sup.expected_rate_hz:.1f} Hz' if sup.expected_rate_hz else ''
+        log.info(f'configure: {config.port} open, node {config.address} ready{rate} '
+                 f'({time.monotonic() - start:.2f} s)')
+        return SUCCESS
+
+    @transition('activate')
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable the publishers, start the stream; fail if no record comes."""
+        start = time.monotonic()
+        core = self.core
+        result = super().on_activate(state)
+        if result != SUCCESS or core is None:
+            return FAILURE
+        core.forget_last_sample()  # the pause since the last activation is no loss
+        core.publishing = True
+        try:
+            core.supervisor.start_streaming()
+        except DEVICE_ERRORS as exc:
+            core.publishing = False
+            super().on_deactivate(state)
+            self.get_logger().error(f'activate failed: {exc}')
+            return FAILURE
+        self.get_logger().info(f'activate: streaming ({time.monotonic() - start:.2f} s)')
+        return SUCCESS
+
+    @transition('deactivate')
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop publishing and the stream (0xFA); keep the port."""
+        start = time.monotonic()
+        core = self.core
+        super().on_deactivate(state)
+        if core is not None:
+            core.publishing = False
+            core.supervisor.stop_streaming()
+            core.device_services.wait_idle(1.0)
+        self.get_logger().info(f'deactivate: stream stopped (0xFA), port kept open '
+                               f'({time.monotonic() - start:.2f} s)')
+        return SUCCESS
+
+    @transition('cleanup')
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Close the port and drop the core."""
+        self._release('cleanup')
+        return SUCCESS
+
+    @transition('shutdown')
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop the stream and close the port, whatever the state; then the process exits."""
+        self._release(f'shutdown (from {state.label})')
+        self._finished.set()
+        return SUCCESS
+
+    @transition('error processing')
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release everything after a failed transition: back to unconfigured."""
+        self._release(f'error processing (after {state.label})')
+        return SUCCESS
+
+    def _release(self, what: str | None = None) -> None:
+        """Stop the core and remove it; log one line saying so when ``what`` is given."""
+        core, self.core = self.core, None
+        start = time.monotonic()
+        if core is None:
+            if what:
+                self.get_logger().info(f'{what}: nothing open')
+            return
+        core.publishing = False
+        published = core.stats.published
+        core.shutdown(report=False)
+        core.destroy()
+        if what:
+            self.get_logger().info(
+                f'{what}: stream stopped, port closed, {published} records published '
+                f'({time.monotonic() - start:.2f} s)')
+
+    # -- process end -------------------------------------------------------------
+
+    def shutdown(self) -> None:
+        """
+        On SIGINT or SIGTERM: release the device at once, then take the shutdown transition.
+
+        The device goes first, without waiting for the transition lock: a
+        configure or activate under way then fails within milliseconds
+        instead of finishing its retries. The shutdown transition follows
+        (so that ``transition_event`` tells a bringup manager), unless it
+        has run already.
+        """
+        if self._finished.is_set():
+            return
+        core = self.core
+        if core is not None:
+            core.publishing = False
+            core.supervisor.stop()
+        locked = self._transition_lock.acquire(timeout=TRANSITION_WAIT)
+        try:
+            if locked and not self._finished.is_set():
+                try:
+                    self.trigger_shutdown()
+                except RCLError:
+                    pass  # in a transition state: release below without the state machine
+        finally:
+            if locked:
+                self._transition_lock.release()
+        if not self._finished.is_set():
+            self._release('shutdown')
+            self._finished.set()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run i3dmgx2_driver lifecycle_node``: run until shut down."""
+    return run(LifecycleDriverNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
