@@ -599,16 +599,18 @@ class TimedNodeProcess(_Child):
     The real driver process, timed from inside (``latency_node.py``).
 
     ``params`` are the node's ROS parameters; ``flags`` go to latency_node.py
-    (``--stages``, ``--no-gc-freeze``, ...). After :meth:`stop`, ``rows`` holds
+    (``--stages``, ``--no-gc-freeze``, ...), or to another ``script`` that
+    saves the same document (``publish_floor.py``). After :meth:`stop`, ``rows`` holds
     one tuple per Imu message: (timer, read time, publish() returned, stage
     marks...), ``gc`` every collection (generation, start, duration), and
     ``threads`` each thread's scheduling policy, priority and CPUs, ``opens``
     the time of every open of the port.
     """
 
-    def __init__(self, port: str, flags: tuple[str, ...] = (), **params: Any) -> None:
+    def __init__(self, port: str, flags: tuple[str, ...] = (),
+                 script: str = 'latency_node.py', **params: Any) -> None:
         params = {'port': port, 'address': ADDRESS, **params}
-        argv = [sys.executable, str(BENCH_DIR / 'latency_node.py'), *flags,
+        argv = [sys.executable, str(BENCH_DIR / script), *flags,
                 *ros_harness.param_args(params)]
         super().__init__(argv, 'ready', timeout=30.0)
         self.pid = self.proc.pid

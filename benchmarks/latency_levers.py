@@ -54,7 +54,9 @@ from bench_common import (
 #: Seconds of streaming left out at the start (start-up, DDS discovery).
 WARM_UP_S = 3.0
 
-#: name -> (flags of latency_node.py, node parameters, what it is).
+#: name -> (flags of the timed process, node parameters, what it is). Flags starting with
+#: ``script=`` name another process than latency_node.py; 'floor' configurations need a
+#: simulator that streams from power-up.
 CONFIGS: dict[str, tuple[tuple[str, ...], dict[str, Any], str]] = {
     'default': ((), {}, 'the driver as shipped'),
     'no-gc-freeze': (('--no-gc-freeze',), {}, 'start-up heap not frozen'),
@@ -63,6 +65,14 @@ CONFIGS: dict[str, tuple[tuple[str, ...], dict[str, Any], str]] = {
     'cpu1': ((), {'cpu_affinity': 1}, 'reader thread on CPU 1'),
     'fifo-cpu1': ((), {'realtime_priority': 50, 'cpu_affinity': 1},
                   'reader thread SCHED_FIFO 50 on CPU 1'),
+    'fifo-no-gc-freeze': (('--no-gc-freeze',), {'realtime_priority': 50},
+                          'SCHED_FIFO 50, start-up heap not frozen'),
+    'fifo-switch-5ms': (('--no-switch-interval',), {'realtime_priority': 50},
+                        'SCHED_FIFO 50, lock switch interval 5 ms'),
+    'floor': (('script=publish_floor.py',), {},
+              'floor: a thread that only reads and publishes fixed bytes'),
+    'floor-fifo': (('script=publish_floor.py', '--realtime-priority', '50'), {},
+                   'floor, SCHED_FIFO 50'),
 }
 STAGE_NAMES = ('select', 'read', 'parse', 'stamp', 'pack', 'publish', 'off_cpu')
 
@@ -83,13 +93,17 @@ class RunResult(NamedTuple):
 def run_once(config: str, seconds: float, rate_hz: float, stages: bool) -> RunResult:
     """Run one configuration for ``seconds`` after the warm-up; return its figures."""
     flags, params, _ = CONFIGS[config]
-    if stages:
+    if stages and not any(f.startswith('script=') for f in flags):
         flags = (*flags, '--stages')
-    sim = SimProcess(rate_hz=rate_hz)
+    script = next((f.split('=', 1)[1] for f in flags if f.startswith('script=')),
+                  'latency_node.py')
+    flags = tuple(f for f in flags if not f.startswith('script='))
+    floor = script != 'latency_node.py'
+    sim = SimProcess(rate_hz=rate_hz, streaming_at_start=floor)
     subscriber = SubscriberProcess()
     node = None
     try:
-        node = TimedNodeProcess(sim.port, flags, **params)
+        node = TimedNodeProcess(sim.port, flags, script=script, **params)
         time.sleep(WARM_UP_S)
         t0, cpu0 = time.time(), process_cpu_seconds(node.pid)
         time.sleep(seconds)
@@ -107,7 +121,7 @@ def run_once(config: str, seconds: float, rate_hz: float, stages: bool) -> RunRe
     kernel = [r[1] - written[r[0]] for r in rows]
     driver = [r[2] - r[1] for r in rows]
     by_stage: dict[str, list[float]] = {name: [] for name in STAGE_NAMES}
-    if stages:
+    if stages and len(rows[0] if rows else ()) > 3:
         for r in rows:
             select_t, read_t, parse_t, stamp_t, pack_t, cpu_select, cpu_published = r[3:10]
             marks = (written[r[0]], select_t, read_t, parse_t, stamp_t, pack_t, r[2])
@@ -201,8 +215,10 @@ def main(argv: list[str] | None = None) -> int:
         for config in configs:
             for name in STAGE_NAMES:
                 values = [v for r in results[config] for v in r.stages[name]]
-                s = summarise(values)
-                lines.append(f'| {config}: {labels[name]} | {_ms(s)} | {s.mean * 1e3:.4f} |')
+                if values:
+                    s = summarise(values)
+                    lines.append(f'| {config}: {labels[name]} | {_ms(s)} | '
+                                 f'{s.mean * 1e3:.4f} |')
     lines += ['', f'- `python benchmarks/latency_levers.py {" ".join(argv or sys.argv[1:])}`: '
               f'{args.rounds} rounds x {len(configs)} configurations, {args.seconds:g} s '
               f'measured per run after {WARM_UP_S:g} s; {minutes:.1f} min; load average '
