@@ -427,6 +427,7 @@ class InProcessNode:
         from rclpy.parameter import Parameter
         from rclpy.signals import SignalHandlerOptions
 
+        from i3dmgx2_driver.device import realtime
         from i3dmgx2_driver.ros.conversions import stamp_parts
         from i3dmgx2_driver.ros.imu_node import ImuDriverNode
 
@@ -440,9 +441,11 @@ class InProcessNode:
             context=self.context,
             parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
         self.node.core.on_published = self._on_published
-        # As main.py spins it: several threads, so that a long service call holds only its own.
+        # As main.py spins it: several threads, so that a long service call holds only its own,
+        # and the interpreter settled as main.py settles it.
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.executor.add_node(self.node)
+        realtime.settle_interpreter()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, name='bench-executor', daemon=True)
         self._thread.start()
