@@ -29,8 +29,9 @@ does and the rows are written as JSON to ``--out``.
 
 ``--no-<lever>`` switches off one of the driver's own measures that are not
 parameters (``LEVERS``: the frozen start-up heap, the short lock switch
-interval, the fast reconnect, the prompt reopen), for A/B runs; the parameters
-(``realtime_priority``, ``cpu_affinity``) are passed as ``-p`` as usual.
+interval, the fast reconnect, the prompt reopen), for A/B runs; the parameter
+``realtime_priority`` is passed as ``-p`` as usual. ``--reader-cpu N`` pins
+the reader thread to CPU N (a lever measured and left out of the driver).
 The JSON also holds every port open (time) for the reconnect benchmark.
 
 Usage: ``latency_node.py [--stages] [--no-gc-freeze] --out OUT.json --ros-args -p ...``.
@@ -57,6 +58,7 @@ from i3dmgx2_driver.codec.stream import SensorStreamParser  # noqa: E402
 from i3dmgx2_driver.device import port as port_module  # noqa: E402
 from i3dmgx2_driver.device import realtime  # noqa: E402
 from i3dmgx2_driver.device.clock import DeviceClock  # noqa: E402
+from i3dmgx2_driver.device.link import DeviceLink  # noqa: E402
 from i3dmgx2_driver.device.port import SerialPort  # noqa: E402
 from i3dmgx2_driver.ros import driver_core, imu_node  # noqa: E402
 from i3dmgx2_driver.ros import main as node_main  # noqa: E402
@@ -147,6 +149,18 @@ def note_port_opens(opens: list[float]) -> None:
     SerialPort.__init__ = observed
 
 
+def pin_reader(cpu: int) -> None:
+    """Make every reader thread pin itself to ``cpu`` before its first read."""
+    run = DeviceLink._run
+
+    @functools.wraps(run)
+    def pinned(self) -> None:
+        os.sched_setaffinity(0, {cpu})
+        run(self)
+
+    DeviceLink._run = pinned
+
+
 def _thread_policy() -> dict:
     """Scheduling policy, priority and CPUs of every thread of this process."""
     out = {}
@@ -169,12 +183,16 @@ def main() -> int:
     for lever in LEVERS:
         parser.add_argument(f'--no-{lever}', action='store_true',
                             help=f'switch off the {lever} measure')
+    parser.add_argument('--reader-cpu', type=int, default=-1,
+                        help='pin the reader thread to this CPU')
     args, ros_args = parser.parse_known_args()
     for lever, switch_off in LEVERS.items():
         if getattr(args, f'no_{lever.replace("-", "_")}'):
             switch_off()
     # The latest time of each stage, written by the reader thread only.
     marks = [0.0] * len(STAGES)
+    if args.reader_cpu >= 0:
+        pin_reader(args.reader_cpu)
     stages = args.stages
     if stages:
         install_stage_timers(marks)

@@ -93,12 +93,14 @@ def main() -> int:
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     rows: list[tuple[int, float, float]] = []
-    policy = realtime.ThreadPolicy(args.realtime_priority, args.cpu)
+    policy = realtime.ThreadPolicy(args.realtime_priority)
     fd = os.open(port, os.O_RDWR | os.O_NOCTTY)
 
     threads: dict[str, dict] = {}
 
     def reader() -> None:
+        if args.cpu >= 0:
+            os.sched_setaffinity(0, {args.cpu})
         realtime.apply_to_current_thread(policy)
         threads['gx2-reader'] = {'policy': os.sched_getscheduler(0),
                                  'priority': os.sched_getparam(0).sched_priority,

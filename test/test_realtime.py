@@ -15,11 +15,11 @@
 """
 The latency levers, checked for what they do (never for how fast).
 
-``realtime_priority`` and ``cpu_affinity`` put the reader thread, and only
-it, under SCHED_FIFO on the CPU asked for, as the kernel reports; where the
-kernel refuses (here: a node started without CAP_SYS_NICE and with an rtprio
-limit of 0), one clear warning is logged, once across reconnects, and the
-driver streams as usual. The node freezes its start-up heap and shortens
+``realtime_priority`` puts the reader thread, and only it, under SCHED_FIFO
+at the priority asked for, as the kernel reports; where the kernel refuses
+(here: a node started without CAP_SYS_NICE and with an rtprio limit of 0),
+one clear warning is logged, once across reconnects, and the driver streams
+as usual. The node freezes its start-up heap and shortens
 the interpreter lock switch interval.
 """
 
@@ -43,14 +43,13 @@ def _domain():
     isolate_ros_domain()
 
 
-def _in_a_thread(policy: ThreadPolicy) -> tuple[PolicyOutcome, int, int, set[int]]:
+def _in_a_thread(policy: ThreadPolicy) -> tuple[PolicyOutcome, int, int]:
     """Apply ``policy`` in a fresh thread; return the outcome and what the kernel reports."""
     out = []
 
     def run() -> None:
         outcome = apply_to_current_thread(policy)
-        out.append((outcome, os.sched_getscheduler(0), os.sched_getparam(0).sched_priority,
-                    os.sched_getaffinity(0)))
+        out.append((outcome, os.sched_getscheduler(0), os.sched_getparam(0).sched_priority))
 
     thread = threading.Thread(target=run)
     thread.start()
@@ -63,14 +62,13 @@ def _fifo_allowed() -> bool:
     return not outcome.refused
 
 
-def _thread_policies(pid: int) -> dict[int, tuple[int, int, set[int]]]:
-    """Policy, priority and CPUs of every thread of process ``pid``."""
+def _thread_policies(pid: int) -> dict[int, tuple[int, int]]:
+    """Policy and priority of every thread of process ``pid``."""
     out = {}
     for name in os.listdir(f'/proc/{pid}/task'):
         tid = int(name)
         try:
-            out[tid] = (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority,
-                        os.sched_getaffinity(tid))
+            out[tid] = (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority)
         except OSError:
             continue
     return out
@@ -89,31 +87,18 @@ def _refusing_command() -> list[str]:
 
 
 def test_nothing_asked_changes_nothing():
-    before = (os.sched_getscheduler(0), os.sched_getaffinity(0))
-    outcome, policy, _, cpus = _in_a_thread(ThreadPolicy())
+    before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    outcome, policy, priority = _in_a_thread(ThreadPolicy())
     assert outcome == PolicyOutcome((), ())
-    assert (policy, cpus) == before
-
-
-def test_a_cpu_that_does_not_exist_is_refused_and_the_thread_keeps_its_cpus():
-    allowed = os.sched_getaffinity(0)
-    outcome, _, _, cpus = _in_a_thread(ThreadPolicy(cpu=1023))
-    assert outcome.applied == ()
-    assert len(outcome.refused) == 1
-    assert outcome.refused[0].startswith('cpu_affinity 1023 refused (')
-    assert outcome.refused[0].endswith(
-        'the reader thread may run on any of CPUs '
-        + ','.join(str(cpu) for cpu in sorted(allowed)))
-    assert cpus == allowed
+    assert (policy, priority) == before
 
 
 def test_the_policy_applies_to_the_calling_thread_only():
     if not _fifo_allowed():
         pytest.skip('this system refuses SCHED_FIFO to this process')
-    cpu = max(os.sched_getaffinity(0))
-    outcome, policy, priority, cpus = _in_a_thread(ThreadPolicy(realtime_priority=7, cpu=cpu))
-    assert outcome == PolicyOutcome(('SCHED_FIFO priority 7', f'CPU {cpu}'), ())
-    assert (policy, priority, cpus) == (os.SCHED_FIFO, 7, {cpu})
+    outcome, policy, priority = _in_a_thread(ThreadPolicy(realtime_priority=7))
+    assert outcome == PolicyOutcome(('SCHED_FIFO priority 7',), ())
+    assert (policy, priority) == (os.SCHED_FIFO, 7)
     assert os.sched_getscheduler(0) == os.SCHED_OTHER
 
 
@@ -128,7 +113,7 @@ def test_refused_realtime_priority_logs_one_line_and_streaming_goes_on():
             assert sim.wait_for_port(10)
             listener.clear()
             assert len(listener.wait_for('imu/raw_data', 30, timeout=30)) >= 30, node.output()
-            policies = {policy for policy, _, _ in _thread_policies(node.proc.pid).values()}
+            policies = {policy for policy, _ in _thread_policies(node.proc.pid).values()}
             assert policies == {os.SCHED_OTHER}
             assert node.stop()[0] == 0
             refusals = [line for line in node.output().splitlines()
@@ -141,28 +126,27 @@ def test_refused_realtime_priority_logs_one_line_and_streaming_goes_on():
                 '(ulimit -r, /etc/security/limits.conf)')
 
 
-def test_granted_realtime_priority_and_cpu_apply_to_the_reader_thread_only():
+def test_granted_realtime_priority_applies_to_the_reader_thread_only():
     if not _fifo_allowed():
         pytest.skip('this system refuses SCHED_FIFO to this process')
-    cpu = max(os.sched_getaffinity(0))
     with PtySimulator(SimulatorConfig(seed=42)) as sim:
         node = NodeProcess({'port': sim.port, 'address': 95, 'realtime_priority': 30,
-                            'cpu_affinity': cpu, 'reconnect_interval': 0.3})
+                            'reconnect_interval': 0.3})
         with Listener({'imu/raw_data': Imu}) as listener, node:
             assert len(listener.wait_for('imu/raw_data', 30, timeout=30)) >= 30, node.output()
 
             def fifo_threads() -> list:
-                return [(p, prio, cpus) for p, prio, cpus
-                        in _thread_policies(node.proc.pid).values() if p == os.SCHED_FIFO]
+                return [(p, prio) for p, prio in _thread_policies(node.proc.pid).values()
+                        if p == os.SCHED_FIFO]
 
-            assert fifo_threads() == [(os.SCHED_FIFO, 30, {cpu})]
-            assert f'reader thread: SCHED_FIFO priority 30, CPU {cpu}' in node.output()
+            assert fifo_threads() == [(os.SCHED_FIFO, 30)]
+            assert 'reader thread: SCHED_FIFO priority 30' in node.output()
             # A new connection gets a new reader thread, with the same policy.
             sim.unplug(seconds=0.5)
             assert sim.wait_for_port(10)
             listener.clear()
             assert len(listener.wait_for('imu/raw_data', 30, timeout=30)) >= 30, node.output()
-            assert fifo_threads() == [(os.SCHED_FIFO, 30, {cpu})]
+            assert fifo_threads() == [(os.SCHED_FIFO, 30)]
             assert node.output().count('reader thread: SCHED_FIFO') == 1
             assert node.stop()[0] == 0
 

@@ -21,10 +21,12 @@ CPU), the interpreter lock (another thread of the node may hold it), and the
 garbage collector (a full collection walks every object the process has).
 The README's latency section measures each of these levers.
 
-- :class:`ThreadPolicy` asks for SCHED_FIFO and a CPU for the reader thread.
-  The kernel may refuse (an unprivileged user without an ``rtprio`` limit,
+- :class:`ThreadPolicy` asks for SCHED_FIFO for the reader thread. The
+  kernel may refuse (an unprivileged user without an ``rtprio`` limit,
   another platform): the reader then runs as it would have, and
   :func:`apply_to_current_thread` says why in one sentence for the log.
+  (Pinning the reader thread to a CPU was measured too, and left out: it
+  did not help, with or without SCHED_FIFO.)
 - :func:`settle_interpreter` freezes what start-up allocated, so that a
   collection never walks rclpy's and the driver's long-lived objects again,
   and shortens the interval after which a thread waiting for the interpreter
@@ -45,17 +47,15 @@ MAX_PRIORITY = 99
 
 
 class ThreadPolicy(NamedTuple):
-    """What the reader thread asks of the scheduler; the defaults ask for nothing."""
+    """What the reader thread asks of the scheduler; the default asks for nothing."""
 
     #: SCHED_FIFO priority 1..99; 0 leaves the thread under the normal policy.
     realtime_priority: int = 0
-    #: The CPU to run on; -1 lets the scheduler choose.
-    cpu: int = -1
 
     @property
     def requested(self) -> bool:
         """Whether anything is asked at all."""
-        return self.realtime_priority > 0 or self.cpu >= 0
+        return self.realtime_priority > 0
 
 
 #: Ask nothing of the scheduler.
@@ -89,22 +89,7 @@ def apply_to_current_thread(policy: ThreadPolicy) -> PolicyOutcome:
                 f'realtime_priority {priority} refused ({reason}): the reader thread keeps '
                 f'normal scheduling; allow SCHED_FIFO with an rtprio limit of at least '
                 f'{priority} (ulimit -r, /etc/security/limits.conf)')
-    if policy.cpu >= 0:
-        try:
-            os.sched_setaffinity(0, {policy.cpu})
-            applied.append(f'CPU {policy.cpu}')
-        except (AttributeError, OSError, ValueError) as exc:
-            reason = getattr(exc, 'strerror', None) or str(exc) or 'not available'
-            refused.append(f'cpu_affinity {policy.cpu} refused ({reason}): the reader thread '
-                           f'may run on any of CPUs {_allowed_cpus()}')
     return PolicyOutcome(tuple(applied), tuple(refused))
-
-
-def _allowed_cpus() -> str:
-    try:
-        return ','.join(str(cpu) for cpu in sorted(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return 'unknown'
 
 
 def freeze_startup_heap() -> int:

@@ -173,7 +173,7 @@ class DriverCore:
                 low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
                 reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
                 stream=self.stream.code,
-                thread_policy=ThreadPolicy(cfg.realtime_priority, cfg.cpu_affinity)),
+                thread_policy=ThreadPolicy(cfg.realtime_priority)),
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None)
         self.device_services = DeviceServices(node, self, refusal=refusal)

@@ -129,9 +129,6 @@ SPECS: list[Spec] = [
          'SCHED_FIFO priority of the thread that reads the port and publishes; 0: normal '
          'scheduling. Where the system refuses it (no rtprio limit) one warning is logged and '
          'the thread runs as usual.', (0, MAX_PRIORITY)),
-    Spec('cpu_affinity', Parameter.Type.INTEGER, -1,
-         'CPU the thread that reads the port and publishes runs on; -1: any. A CPU this '
-         'process may not use is logged once and ignored.', (-1, 1023)),
     Spec('capture_file', Parameter.Type.STRING, '',
          'Write every byte read from the port, with its receive time, to this capture file '
          '(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '
@@ -167,7 +164,6 @@ class DriverConfig:
     capture_gyro_bias_on_start: bool
     temperature_period: float
     realtime_priority: int
-    cpu_affinity: int
     capture_file: str
 
     @property
