@@ -24,13 +24,16 @@ which runs in this process; the scenarios, repeated every round:
   wireless sensor keeps streaming), then plugged back in;
 - unplug + power cycle: the same, and the sensor restarts meanwhile (it
   comes back not streaming);
-- long stall: 7 s of radio silence, longer than the stall recovery (1 s, then
-  five requests for continuous mode), so the driver reopens the port;
-- short stall: 2 s of radio silence, recovered without reopening.
+- long stall: 6.5 to 7.5 s of radio silence, longer than the stall recovery
+  (1 s, then five requests for continuous mode), so the driver reopens the
+  port;
+- short stall: 1.5 to 2.5 s of radio silence, recovered without reopening.
 
 Figures: from the port back (``replug()`` returned) or the radio back (end of
 the stall) to the first Imu message ``publish()`` returned after it; from the
-port opened again to that message; and the commands the driver sent in the
+port opened again to that message; the valid records the sensor wrote after
+the port or radio was back that were lost before the first one published (at
+100 Hz, one every 10 ms); and the commands the driver sent in the
 3 s after the port came back (from the simulator's host command log). Each
 round runs the driver as shipped (a known sensor is confirmed with one
 serial-number read; a port is reopened the moment it is back), with the
@@ -61,8 +64,10 @@ MODES = {'fast': ((), 'as shipped'),
                     'full dialogue, reopen every reconnect_interval (before issue 12)')}
 #: How long the base station stays unplugged (s): uniform in this range.
 UNPLUG_S = (1.5, 2.5)
-LONG_STALL_S = 7.0
-SHORT_STALL_S = 2.0
+#: Stall lengths (s), uniform in these ranges (so that stalls end at any phase of the
+#: sensor's sample clock).
+LONG_STALL_S = (6.5, 7.5)
+SHORT_STALL_S = (1.5, 2.5)
 #: Time given to the driver to stream again after each scenario (s).
 SETTLE_S = 4.0
 SCENARIOS = ('unplug', 'unplug + power cycle', 'long stall', 'short stall')
@@ -107,7 +112,8 @@ def run_scenarios(sim: PtySimulator, rng: random.Random) -> list[Trial]:
     time.sleep(SETTLE_S)
     trials.append(Trial('unplug + power cycle', back,
                         _commands_since(sim, back, back + 3.0)))
-    for name, seconds in (('long stall', LONG_STALL_S), ('short stall', SHORT_STALL_S)):
+    for name, lengths in (('long stall', LONG_STALL_S), ('short stall', SHORT_STALL_S)):
+        seconds = rng.uniform(*lengths)
         start = time.time()
         sim.stall(seconds)
         back = start + seconds
@@ -122,11 +128,14 @@ class Figures(NamedTuple):
     to_publish: dict[tuple[str, str], list[float]]
     open_to_publish: dict[tuple[str, str], list[float]]
     commands: dict[tuple[str, str], tuple[str, ...]]
+    #: Valid records the sensor wrote after the port or radio was back, before the first
+    #: one that was published: the data lost to the reconnect itself.
+    lost: dict[tuple[str, str], list[int]]
 
 
 def measure(rounds: int, seed: int) -> Figures:
     """Run the rounds; return the figures."""
-    figures = Figures({}, {}, {})
+    figures = Figures({}, {}, {}, {})
     rng = random.Random(seed)
     for round_ in range(rounds):
         for mode, (flags, _) in MODES.items():
@@ -138,13 +147,22 @@ def measure(rounds: int, seed: int) -> Figures:
                     trials = run_scenarios(sim, rng)
                 finally:
                     node.stop()
+                written = [(e.write_time, e.timer) for e in sim.truth
+                           if e.source == 'stream' and e.valid and e.write_time is not None]
             published = sorted(row[2] for row in node.rows)
+            published_timers = {row[0] for row in node.rows}
             for trial in trials:
                 key = (trial.scenario, mode)
                 first = next((t for t in published if t > trial.back), None)
                 if first is None:
                     continue
                 figures.to_publish.setdefault(key, []).append(first - trial.back)
+                after = [timer for t, timer in sorted(written) if t >= trial.back]
+                lost = next((i for i, timer in enumerate(after) if timer in published_timers),
+                            len(after))
+                figures.lost.setdefault(key, []).append(lost)
+                print(f'   {trial.scenario}: first message {(first - trial.back) * 1e3:.1f} ms '
+                      f'after the port or radio was back', file=sys.stderr, flush=True)
                 opened = [t for t in node.opens if trial.back <= t <= first]
                 if opened:
                     figures.open_to_publish.setdefault(key, []).append(first - opened[0])
@@ -157,6 +175,12 @@ def _ms(values: list[float] | None) -> str:
         return '-'
     return (f'{statistics.median(values) * 1e3:.0f} / {max(values) * 1e3:.0f} ms '
             f'(n={len(values)})')
+
+
+def _count(values: list[int] | None) -> str:
+    if not values:
+        return '-'
+    return f'{statistics.median(values):g} / {max(values)}'
 
 
 def _commands(names: tuple[str, ...]) -> str:
@@ -185,6 +209,9 @@ def main(argv: list[str] | None = None) -> int:
         if 'unplug' in scenario:
             cells = ' | '.join(_ms(figures.open_to_publish.get((scenario, m))) for m in modes)
             lines.append(f'| {scenario} | port opened -> first message published | {cells} |')
+        cells = ' | '.join(_count(figures.lost.get((scenario, m))) for m in modes)
+        lines.append(f'| {scenario} | records written after it was back, lost before the first '
+                     f'one published | {cells} |')
     heading = ' | '.join(MODES[m][1] for m in modes)
     lines += ['', f'| commands sent in the 3 s after the port or radio was back | {heading} |',
               '|---|' + '---|' * len(modes)]
