@@ -607,7 +607,8 @@ class TimedNodeProcess(_Child):
     one tuple per Imu message: (timer, read time, publish() returned, stage
     marks...), ``gc`` every collection (generation, start, duration), and
     ``threads`` each thread's scheduling policy, priority and CPUs, ``opens``
-    the time of every open of the port.
+    the time of every open of the port, ``full_collection`` how long a full
+    garbage collection took at the end (s).
     """
 
     def __init__(self, port: str, flags: tuple[str, ...] = (),
@@ -622,11 +623,13 @@ class TimedNodeProcess(_Child):
         self.threads: dict[str, dict] = {}
         self.gc_frozen = 0
         self.opens: list[float] = []
+        self.full_collection = math.nan
 
     def stop(self, timeout: float = 15.0) -> dict:
         """Stop the node as SIGTERM stops it; keep what it saved."""
         document = super().stop(timeout)
         self.opens = document['opens']
+        self.full_collection = document.get('full_collection', math.nan)
         self.rows = [tuple(row) for row in document['rows']]
         self.gc = [tuple(event) for event in document['gc']]
         self.threads = document['threads']

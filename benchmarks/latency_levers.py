@@ -42,6 +42,7 @@ import gc
 import itertools
 import os
 import random
+import statistics
 import sys
 import time
 from typing import Any, NamedTuple
@@ -69,6 +70,9 @@ CONFIGS: dict[str, tuple[tuple[str, ...], dict[str, Any], str]] = {
                           'SCHED_FIFO 50, start-up heap not frozen'),
     'fifo-switch-5ms': (('--no-switch-interval',), {'realtime_priority': 50},
                         'SCHED_FIFO 50, lock switch interval 5 ms'),
+    'spin-1s': (('--spin-period', '1.0'), {}, 'main loop wakes every 1 s, not 0.1 s'),
+    'fifo-spin-1s': (('--spin-period', '1.0'), {'realtime_priority': 50},
+                     'SCHED_FIFO 50, main loop wakes every 1 s'),
     'floor': (('script=publish_floor.py',), {},
               'floor: a thread that only reads and publishes fixed bytes'),
     'floor-fifo': (('script=publish_floor.py', '--realtime-priority', '50'), {},
@@ -88,6 +92,7 @@ class RunResult(NamedTuple):
     collections: list[tuple[int, float, float]]
     threads: dict[str, dict]
     gc_frozen: int
+    full_collection: float
 
 
 def run_once(config: str, seconds: float, rate_hz: float, stages: bool) -> RunResult:
@@ -134,7 +139,7 @@ def run_once(config: str, seconds: float, rate_hz: float, stages: bool) -> RunRe
     collections = [e for e in node.gc if t0 <= e[1] <= t1]
     return RunResult(end_to_end, kernel, driver, by_stage,
                      100.0 * (cpu1 - cpu0) / (t1 - t0), collections, node.threads,
-                     node.gc_frozen)
+                     node.gc_frozen, node.full_collection)
 
 
 def _ms(summary: Summary) -> str:
@@ -187,8 +192,9 @@ def main(argv: list[str] | None = None) -> int:
     lines = [f'## Latency levers, {args.rate:g} Hz', '', machine_table(), '',
              '| configuration | end to end p50 / p99 / max (ms) | kernel p50 / p99 / max | '
              'driver p50 / p99 / max | driver p99 per round | e2e p99 / kernel p99 | '
-             'CPU % | GC runs (max ms) | reader thread |',
-             '|---|---|---|---|---|---|---|---|---|']
+             'CPU % | collections: gen 0/1/2 (longest ms) | a full collection (ms) | '
+             'reader thread |',
+             '|---|---|---|---|---|---|---|---|---|---|']
     for config in configs:
         runs = results[config]
         e2e = summarise([v for r in runs for v in r.end_to_end])
@@ -198,10 +204,13 @@ def main(argv: list[str] | None = None) -> int:
         cpu = sum(r.cpu_percent for r in runs) / len(runs)
         collections = [e for r in runs for e in r.collections]
         longest = max((e[2] for e in collections), default=0.0)
+        by_generation = '/'.join(str(sum(1 for e in collections if e[0] == g)) for g in range(3))
+        full = statistics.median(r.full_collection for r in runs)
         lines.append(
             f'| {config}: {CONFIGS[config][2]} | {_ms(e2e)} | {_ms(kernel)} | {_ms(driver)} | '
             f'{per_round} | {e2e.p99 / kernel.p99:.2f} | {cpu:.2f} | '
-            f'{len(collections)} ({longest * 1e3:.2f}) | {_reader_policy(runs[-1].threads)} |')
+            f'{by_generation} ({longest * 1e3:.2f}) | {full * 1e3:.2f} | '
+            f'{_reader_policy(runs[-1].threads)} |')
     if args.stages:
         lines += ['', '| stage (one sample) | p50 / p99 / max (ms) | mean (ms) |', '|---|---|---|']
         labels = {'select': 'last byte written -> select() returned (kernel wake-up, GIL)',

@@ -185,6 +185,8 @@ def main() -> int:
                             help=f'switch off the {lever} measure')
     parser.add_argument('--reader-cpu', type=int, default=-1,
                         help='pin the reader thread to this CPU')
+    parser.add_argument('--spin-period', type=float, default=None,
+                        help="the main loop's spin_once timeout (s), instead of main.py's")
     args, ros_args = parser.parse_known_args()
     for lever, switch_off in LEVERS.items():
         if getattr(args, f'no_{lever.replace("-", "_")}'):
@@ -193,9 +195,12 @@ def main() -> int:
     marks = [0.0] * len(STAGES)
     if args.reader_cpu >= 0:
         pin_reader(args.reader_cpu)
+    if args.spin_period is not None:
+        node_main._SPIN_PERIOD = args.spin_period
     stages = args.stages
     if stages:
         install_stage_timers(marks)
+    started = time.monotonic()
     gc_log = GcLog()
     gc.callbacks.append(gc_log)
     opens: list[float] = []
@@ -220,11 +225,18 @@ def main() -> int:
 
         def shutdown(self) -> None:
             policy = _thread_policy()
+            # What a full collection costs now: what one would add to a sample it delays.
+            gc.callbacks.remove(gc_log)
+            stats_before = gc.get_stats()
+            start = time.perf_counter()
+            gc.collect()
+            full_collection = time.perf_counter() - start
             super().shutdown()
             document = {'fields': ['timer', 'read', 'published', *STAGES, 'cpu_published'],
                         'rows': rows, 'gc': gc_log.events, 'threads': policy,
                         'gc_frozen': gc.get_freeze_count(), 'pid': os.getpid(),
-                        'opens': opens}
+                        'opens': opens, 'full_collection': full_collection,
+                        'gc_stats': stats_before, 'lifetime': time.monotonic() - started}
             with open(args.out, 'w') as handle:
                 json.dump(document, handle)
 
