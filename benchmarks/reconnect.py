@@ -31,9 +31,7 @@ which runs in this process; the scenarios, repeated every round:
 
 Figures: from the port back (``replug()`` returned) or the radio back (end of
 the stall) to the first Imu message ``publish()`` returned after it; from the
-port opened again to that message; the valid records the sensor wrote after
-the port or radio was back that were lost before the first one published (at
-100 Hz, one every 10 ms); and the commands the driver sent in the
+port opened again to that message; and the commands the driver sent in the
 3 s after the port came back (from the simulator's host command log). Each
 round runs the driver as shipped (a known sensor is confirmed with one
 serial-number read; a port is reopened the moment it is back), with the
@@ -128,14 +126,11 @@ class Figures(NamedTuple):
     to_publish: dict[tuple[str, str], list[float]]
     open_to_publish: dict[tuple[str, str], list[float]]
     commands: dict[tuple[str, str], tuple[str, ...]]
-    #: Valid records the sensor wrote after the port or radio was back, before the first
-    #: one that was published: the data lost to the reconnect itself.
-    lost: dict[tuple[str, str], list[int]]
 
 
 def measure(rounds: int, seed: int) -> Figures:
     """Run the rounds; return the figures."""
-    figures = Figures({}, {}, {}, {})
+    figures = Figures({}, {}, {})
     rng = random.Random(seed)
     for round_ in range(rounds):
         for mode, (flags, _) in MODES.items():
@@ -147,20 +142,13 @@ def measure(rounds: int, seed: int) -> Figures:
                     trials = run_scenarios(sim, rng)
                 finally:
                     node.stop()
-                written = [(e.write_time, e.timer) for e in sim.truth
-                           if e.source == 'stream' and e.valid and e.write_time is not None]
             published = sorted(row[2] for row in node.rows)
-            published_timers = {row[0] for row in node.rows}
             for trial in trials:
                 key = (trial.scenario, mode)
                 first = next((t for t in published if t > trial.back), None)
                 if first is None:
                     continue
                 figures.to_publish.setdefault(key, []).append(first - trial.back)
-                after = [timer for t, timer in sorted(written) if t >= trial.back]
-                lost = next((i for i, timer in enumerate(after) if timer in published_timers),
-                            len(after))
-                figures.lost.setdefault(key, []).append(lost)
                 print(f'   {trial.scenario}: first message {(first - trial.back) * 1e3:.1f} ms '
                       f'after the port or radio was back', file=sys.stderr, flush=True)
                 opened = [t for t in node.opens if trial.back <= t <= first]
@@ -175,12 +163,6 @@ def _ms(values: list[float] | None) -> str:
         return '-'
     return (f'{statistics.median(values) * 1e3:.0f} / {max(values) * 1e3:.0f} ms '
             f'(n={len(values)})')
-
-
-def _count(values: list[int] | None) -> str:
-    if not values:
-        return '-'
-    return f'{statistics.median(values):g} / {max(values)}'
 
 
 def _commands(names: tuple[str, ...]) -> str:
@@ -209,9 +191,6 @@ def main(argv: list[str] | None = None) -> int:
         if 'unplug' in scenario:
             cells = ' | '.join(_ms(figures.open_to_publish.get((scenario, m))) for m in modes)
             lines.append(f'| {scenario} | port opened -> first message published | {cells} |')
-        cells = ' | '.join(_count(figures.lost.get((scenario, m))) for m in modes)
-        lines.append(f'| {scenario} | records written after it was back, lost before the first '
-                     f'one published | {cells} |')
     heading = ' | '.join(MODES[m][1] for m in modes)
     lines += ['', f'| commands sent in the 3 s after the port or radio was back | {heading} |',
               '|---|' + '---|' * len(modes)]
