@@ -203,3 +203,14 @@ def test_stamps_stay_finite_and_ordered_over_a_long_run():
     assert all(math.isfinite(s) for s in stamps)
     settled = errors_after(samples, stamps, settle=60.0)
     assert statistics.pstdev(settled) < 30e-6
+
+
+def test_stamps_held_back_by_the_read_time_still_increase_at_epoch_times():
+    """Two records read at once, both clamped to it: still ordered, even in nanoseconds."""
+    clock = DeviceClock()
+    now = 1_795_445_978.0607114  # a float64 here cannot step by less than 2.4e-7 s
+    first = clock.stamp(1_000_000, now, WIRE)
+    # The next cycle (5 ms later by the device) read in the same read as the first.
+    second = clock.stamp(1_000_000 + TICKS_PER_SECOND // 200, now, WIRE)
+    assert second > first
+    assert round(second * 1e9) > round(first * 1e9)

@@ -157,19 +157,10 @@ def test_values_exact_and_missing_marked(run):
         else:
             assert tuple(q) == (0.0, 0.0, 0.0, 0.0)
             assert list(msg.orientation_covariance) == MISSING
-
-
-def test_gravity_points_up(run):
-    """REP-145 at rest, for streams with both acceleration and orientation."""
-    stream, convention = run['stream'], run['convention']
-    if not (stream.accel and stream.orientation):
-        pytest.skip('needs acceleration and orientation')
-    msg = run['imu'][-1]
-    q = msg.orientation
-    world = Rotation.from_quat([q.x, q.y, q.z, q.w]).apply(
-        [msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z])
-    up = G if convention == 'enu' else -G
-    assert world[2] == pytest.approx(up, abs=0.5)
+        if stream.accel and stream.orientation:
+            # REP-145 at rest: gravity's reaction along the world's up (down in NED).
+            world = Rotation.from_quat(q).apply(a)
+            assert world[2] == pytest.approx(G if convention == 'enu' else -G, abs=0.5)
 
 
 def test_mag_topic_exactly_when_the_record_has_a_field(run):
@@ -261,9 +252,9 @@ def values(status) -> dict:
 
 @pytest.mark.usefixtures('_domain')
 def test_a_device_preset_to_a_rate_that_does_not_fit_is_warned_about():
-    sim = PtySimulator(SimulatorConfig(seed=51))
-    sim.sensor.eeprom[RATE_DIVIDER_ADDRESS] = 171  # 299.4 Hz, set before this driver came
-    with sim, Listener({'/diagnostics': DiagnosticArray, 'imu/raw_data': Imu}) as listener:
+    config = SimulatorConfig(seed=51, divider=171)  # 299.4 Hz, set before this driver came
+    topics = {'/diagnostics': DiagnosticArray, 'imu/raw_data': Imu}
+    with PtySimulator(config) as sim, Listener(topics) as listener:
         node = NodeProcess({'port': sim.port, 'address': 95})
         with node:
             assert node.wait_for_output('streaming 0xCC', timeout=30), node.output()
@@ -310,9 +301,9 @@ def test_integers_stand_for_doubles_and_the_rate_fits():
 @pytest.mark.usefixtures('_domain')
 @pytest.mark.parametrize('stream', ['inertial', 'euler'])
 def test_loss_is_counted_from_the_timer_for_every_record(stream):
-    sim = PtySimulator(SimulatorConfig(seed=53, faults=FaultConfig(drop_probability=0.05)))
-    sim.sensor.eeprom[RATE_DIVIDER_ADDRESS] = 256  # 200 Hz from power-up
-    with sim, Listener({'/diagnostics': DiagnosticArray, 'imu/raw_data': Imu}) as listener:
+    config = SimulatorConfig(seed=53, divider=256, faults=FaultConfig(drop_probability=0.05))
+    topics = {'/diagnostics': DiagnosticArray, 'imu/raw_data': Imu}
+    with PtySimulator(config) as sim, Listener(topics) as listener:
         node = NodeProcess({'port': sim.port, 'address': 95, 'stream': stream})
         with node:
             assert len(listener.wait_for('imu/raw_data', 400, timeout=30)) >= 400, \
@@ -359,3 +350,28 @@ def test_polled_records_of_the_streamed_code_are_not_samples_while_paused():
         assert len(polled) > 5  # the start-up polls and the self test's
         pairs = match(listener.received('imu/raw_data'), stream_truth(sim, stream), 'enu')
         assert all(entry is not None for _, entry in pairs), 'a polled reply was published'
+
+
+@pytest.mark.usefixtures('_domain')
+def test_the_wired_line_carries_inertial_at_the_full_300_hz():
+    """31-byte wired records at 299.4 Hz: 9,281 bytes/s, which fits (wireless would not)."""
+    stream = streams.BY_NAME['inertial']
+    config = SimulatorConfig(wireless=False, seed=55, limit_to_line_rate=True)
+    with PtySimulator(config) as sim, Listener({'imu/raw_data': Imu}) as listener:
+        node = NodeProcess({'port': sim.port, 'address': 95, 'wireless': False,
+                            'stream': '0xC2', 'data_rate': 300})
+        with node:
+            got = listener.wait_for('imu/raw_data', 600, timeout=30)
+            assert len(got) >= 600, node.output()
+            assert 'streaming 0xC2 (inertial)' in node.output()
+            assert 'at 299.4 Hz' in node.output()
+            assert node.stop()[0] == 0
+        assert sim.stats.line_rate_skipped == 0
+        truth = stream_truth(sim, stream)
+        pairs = match(got, truth, 'enu')
+        assert all(entry is not None for _, entry in pairs)
+        indices = [entry.index for _, entry in pairs]
+        window = [t.index for t in truth if indices[0] <= t.index <= indices[-1]]
+        assert window == indices, 'a record was skipped'
+        errors = np.array([stamp_seconds(m) - e.sample_time for m, e in pairs])
+        assert 0.0 <= np.median(errors) < 0.005

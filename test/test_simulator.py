@@ -56,14 +56,24 @@ def code_of(record) -> int:
 
 
 class Host:
-    """The host end of the line: a pyserial port, the codec's parser, a log of events."""
+    """
+    The host end of the line: a pyserial port, the codec's parser, a log of events.
+
+    ``wireless`` (default: what the simulator is) selects the framing the host
+    speaks: command packets and the wireless parser, or raw commands and the
+    wired parser.
+    """
 
     def __init__(self, sim: PtySimulator, address: int = ADDRESS,
-                 timeout: float = 0.02) -> None:
+                 timeout: float = 0.02, wireless: bool | None = None) -> None:
         self.sim = sim
         self.address = address
+        self.wireless = getattr(sim, 'wireless', True) if wireless is None else wireless
         self.serial = serial.Serial(sim.port, 115200, timeout=timeout)
-        self.parser = SensorStreamParser(address)
+        #: After the open, which flushed whatever the port held before.
+        self.opened = time.time()
+        self.parser = SensorStreamParser(address if self.wireless else None,
+                                         wireless=self.wireless)
         #: (receive time, event) of everything parsed so far.
         self.events = []
         #: Every byte received, for a second look with another parser.
@@ -79,7 +89,10 @@ class Host:
         self.close()
 
     def send(self, command: bytes, address: int | None = None) -> None:
-        """Send a command packet (built by the codec)."""
+        """Send a command packet (built by the codec), or the bare command when wired."""
+        if not self.wireless:
+            self.serial.write(command)
+            return
         packet = encode_command_packet(self.address if address is None else address, command)
         self.serial.write(packet)
 
@@ -185,7 +198,8 @@ def test_port_is_a_stable_symlink_to_a_raw_pty(sim):
     assert stat.S_ISCHR(os.stat(sim.port).st_mode)
     # Through /proc/<pid>/fd: a link left by a killed simulator dangles instead of
     # leading to whatever pseudo-terminal reuses the number.
-    assert os.readlink(sim.port) == f'/proc/{os.getpid()}/fd/{sim._slave}'
+    assert os.readlink(sim.port) == sim.link_target
+    assert sim.link_target.startswith(f'/proc/{os.getpid()}/fd/')
 
 
 def test_a_killed_simulator_leaves_no_usable_port(tmp_path):
@@ -486,3 +500,17 @@ def test_symlink_option_and_cleanup(tmp_path):
         with Host(sim) as host:
             assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
     assert not os.path.lexists(path)
+
+
+def test_the_public_names_are_importable_from_the_package_and_pty_link():
+    """The split into modules keeps every import that code and tests rely on."""
+    import i3dmgx2_driver.simulator as package
+    from i3dmgx2_driver.simulator import pty_link
+    for name in ('PtySimulator', 'SimulatorConfig', 'SentRecord', 'HostCommand',
+                 'SimulatorStats'):
+        assert getattr(pty_link, name) is getattr(package, name)
+    assert pty_link.LINE_BYTES_PER_SECOND == 11520
+    assert pty_link.PORT_NAME == 'ttyGX2'
+    assert pty_link.DEFAULT_STREAM == lay.ACCEL_ANG_RATE_MAG_ORIENTATION
+    assert set(package.__all__) >= {'FaultConfig', 'Motion', 'MotionConfig', 'Reply',
+                                    'SimulatedSensor'}

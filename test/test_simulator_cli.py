@@ -118,3 +118,59 @@ def test_cli_config_from_arguments():
     assert config.faults.foreign_probability == 0.1 and config.faults.needs_polled_first
     assert (config.faults.unplug_at, config.faults.unplug_seconds) == (3.0, 1.0)
     assert config.clock_ppm == -20.0 and config.truth_limit == 0
+
+
+def test_cli_wired_divider_and_stream_options():
+    args = cli.build_parser().parse_args(['--wired', '--divider', '170', '--stream', '0xcc'])
+    config = cli.config_from_args(args)
+    assert config.wireless is False
+    assert config.divider == 170 and config.streaming_at_start == 0xCC
+    assert config.power_up_eeprom == {0xFCA2: 170, 0xFCA6: 0x00CC}
+    defaults = cli.config_from_args(cli.build_parser().parse_args([]))
+    assert defaults.wireless is True and defaults.divider is None
+    assert defaults.streaming_at_start is False
+    assert cli.config_from_args(cli.build_parser().parse_args(
+        ['--divider', '0x200', '--stream', '194'])).power_up_eeprom == {
+            0xFCA2: 512, 0xFCA6: 0x80C2}
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--divider', '169'],
+     'argument --divider: the data-rate divider is an integer in 170..51200 '
+     '(rate 51200/N Hz: 301.2..1 Hz), got 169'),
+    (['--divider', '51201'], 'in 170..51200'),
+    (['--divider', 'fast'], 'got fast'),
+    (['--stream', '0xC4'],
+     'argument --stream: 0xC4 is not a record the sensor can stream; streamable: 0xC1, 0xC2, '
+     '0xC3, 0xC5, 0xC6, 0xC7, 0xC8, 0xCB, 0xCC, 0xCE, 0xCF, 0xD1, 0xD2, 0xD3'),
+    (['--stream', 'cc'], 'cc is not a record the sensor can stream'),
+    (['--wired', '--nack', '0.1'],
+     'nack_probability is a fault of the radio or the base station; a wired sensor has '
+     'neither'),
+    (['--wired', '--foreign', '0.1'], 'foreign_probability'),
+])
+def test_cli_refuses_bad_presets_with_a_clear_message(argv, message, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(argv)
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_cli_wired_sensor_streams_its_preset_record(tmp_path):
+    link = tmp_path / 'gx2'
+    process = launch('--wired', '--stream', '0xC2', '--divider', '256', '--symlink', str(link),
+                     '--status-interval', '0.3')
+    try:
+        assert read_line(process) == f'port: {link}'
+        with Host(_Port(str(link)), wireless=False) as host:
+            assert host.pump_until(lambda: len(host.records(lay.ACCEL_ANG_RATE)) >= 5, 10.0)
+            assert host.request(cmd.read_eeprom(0xFCA2)).value == 256
+            assert host.parser.stats.checksum_failures == 0
+        status = read_line(process)
+        assert ' wired ' in status and 'streaming=0xC2' in status and 'rate=200Hz' in status
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=20) == 0, process.stderr.read()
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()

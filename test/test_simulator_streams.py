@@ -27,7 +27,7 @@ import itertools
 import math
 
 from i3dmgx2_driver.codec import line_budget, streams
-from i3dmgx2_driver.codec.data_rate import RATE_DIVIDER_ADDRESS, rate_of_divider
+from i3dmgx2_driver.codec.data_rate import rate_of_divider
 from i3dmgx2_driver.codec.timer import TimerUnwrapper
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
@@ -36,10 +36,8 @@ from test_simulator import assert_host_saw_exactly_valid_truth, Host, stop_strea
 
 def preset(stream: streams.Stream, divider: int, **config) -> PtySimulator:
     """Return a simulator that streams ``stream`` at ``divider`` from power-up."""
-    sim = PtySimulator(SimulatorConfig(streaming_at_start=stream.code, seed=stream.code,
-                                       limit_to_line_rate=True, **config))
-    sim.sensor.eeprom[RATE_DIVIDER_ADDRESS] = divider
-    return sim
+    return PtySimulator(SimulatorConfig(streaming_at_start=stream.code, divider=divider,
+                                        seed=stream.code, limit_to_line_rate=True, **config))
 
 
 @pytest.mark.parametrize('stream', streams.STREAMS, ids=lambda s: s.name)

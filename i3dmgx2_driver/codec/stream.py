@@ -327,10 +327,15 @@ class CommandStreamParser:
     finds any valid packet there, but it reports no further rejections and
     takes no 0x02 for an unframed ping (a length byte or checksum byte 0x02
     would otherwise start a false ping that swallows the next packet's start).
+
+    ``codes`` narrows the unframed commands a reader knows (default: every
+    command of the table): a wired sensor knows no wireless ping, and must not
+    take a 0x02 inside a stray packet for the start of one.
     """
 
-    def __init__(self, wireless: bool = True) -> None:
+    def __init__(self, wireless: bool = True, codes: frozenset[int] | None = None) -> None:
         self.wireless = wireless
+        self.codes = frozenset(LAYOUTS) if codes is None else frozenset(codes)
         self.stats = ParserStats()
         self._buf = bytearray()
         # Bytes still to come of the last rejected packet (see the class doc).
@@ -391,7 +396,7 @@ class CommandStreamParser:
             out.append(CommandPacket((buf[i + 3] << 8) | buf[i + 4],
                                      bytes(buf[i + HEADER_SIZE:end])))
             return end + 2 - i
-        layout = LAYOUTS.get(code)
+        layout = LAYOUTS.get(code) if code in self.codes else None
         if layout is None or (self.wireless and (code != PING or self._quiet)):
             stats.bytes_skipped += 1
             return 1

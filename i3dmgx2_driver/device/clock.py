@@ -38,6 +38,10 @@ from collections import deque
 
 from ..codec.records import TICKS_PER_SECOND
 
+#: Least step between two stamps: 1 us. A float64 near today's epoch (1.8e9 s) cannot
+#: hold a step below 2.4e-7 s, and a message stamp counts whole nanoseconds.
+MIN_STEP = 1e-6
+
 
 class DeviceClock:
     """
@@ -97,7 +101,7 @@ class DeviceClock:
             self._offset -= stamp - latest
             stamp = latest
         if stamp <= self._last_stamp:
-            stamp = self._last_stamp + 1e-9
+            stamp = self._last_stamp + MIN_STEP
         self._last_stamp = stamp
         self.samples += 1
         return stamp

@@ -13,25 +13,27 @@
 # limitations under the License.
 
 """
-A simulated 3DM-GX2 and wireless base station, for tests, benchmarks and demos.
+A simulated 3DM-GX2 (wireless with its base station, or wired), for tests and demos.
 
 ``SimulatedSensor`` is the device model (no I/O); ``PtySimulator`` puts it
 behind a pseudo-terminal that a driver opens like a real serial port, with
 faults from ``FaultConfig`` and the ground truth of every packet in
-``SentRecord`` entries. ``python -m i3dmgx2_driver.simulator`` runs it from a
-shell. Pure Python on top of the codec: the simulator and the driver share
-one implementation of every byte.
+``SentRecord`` entries. One module per part: ``config`` (how it is set up),
+``sensor`` and ``motion`` (the device), ``base_station`` (wireless: ACK/NACK,
+ping) or ``wired_line`` (a wired sensor's own line), ``transmitter`` (the
+records on their way: timing and faults), ``pty_port`` (the pseudo-terminal,
+its symlink, unplugging), ``ground_truth`` (the record of it all), and
+``pty_link`` (``PtySimulator``, which puts them together).
+``python -m i3dmgx2_driver.simulator`` runs it from a shell. Pure Python on
+top of the codec: the simulator and the driver share one implementation of
+every byte.
 """
 
+from .config import SimulatorConfig
 from .faults import FaultConfig
+from .ground_truth import HostCommand, SentRecord, SimulatorStats
 from .motion import Motion, MotionConfig
-from .pty_link import (
-    HostCommand,
-    PtySimulator,
-    SentRecord,
-    SimulatorConfig,
-    SimulatorStats,
-)
+from .pty_link import PtySimulator
 from .sensor import Reply, SimulatedSensor
 
 __all__ = [

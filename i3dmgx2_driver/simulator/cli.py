@@ -30,6 +30,7 @@ import time
 from .faults import FaultConfig
 from .motion import MotionConfig
 from .pty_link import PtySimulator, SimulatorConfig
+from .sensor import MAX_DIVIDER, MIN_DIVIDER, STREAMABLE
 
 
 def _probability(text: str) -> float:
@@ -60,16 +61,50 @@ def _address(text: str) -> int:
     return value
 
 
+def _divider(text: str) -> int:
+    try:
+        value = int(text, 0)
+    except ValueError:
+        value = None
+    if value is None or not MIN_DIVIDER <= value <= MAX_DIVIDER:
+        raise argparse.ArgumentTypeError(
+            f'the data-rate divider is an integer in {MIN_DIVIDER}..{MAX_DIVIDER} '
+            f'(rate 51200/N Hz: {51200 / MIN_DIVIDER:.1f}..{51200 / MAX_DIVIDER:g} Hz), '
+            f'got {text}')
+    return value
+
+
+def _streamable(text: str) -> int:
+    valid = ', '.join(f'0x{code:02X}' for code in sorted(STREAMABLE))
+    try:
+        value = int(text, 0)
+    except ValueError:
+        value = None
+    if value not in STREAMABLE:
+        raise argparse.ArgumentTypeError(
+            f'{text} is not a record the sensor can stream; streamable: {valid}')
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser (separate so that docs and tests can use it)."""
     parser = argparse.ArgumentParser(
         prog='simulator',
-        description='Simulated MicroStrain 3DM-GX2 with its wireless base station on a '
-                    'pseudo-terminal. Prints "port: PATH" first; open PATH like a serial '
-                    'port at 115200 baud.')
+        description='Simulated MicroStrain 3DM-GX2 with its wireless base station (or, '
+                    'with --wired, a wired 3DM-GX2) on a pseudo-terminal. Prints '
+                    '"port: PATH" first; open PATH like a serial port at 115200 baud.')
     device = parser.add_argument_group('device')
     device.add_argument('--address', type=_address, default=95,
                         help='node address of the sensor (default: 95)')
+    device.add_argument('--wired', action='store_true',
+                        help='a wired sensor on the port, no base station: raw commands in, '
+                             'wired records (echo, data, checksum) out, no ACK/NACK, no ping')
+    device.add_argument('--divider', type=_divider, metavar='N',
+                        help=f'EEPROM data-rate divider at power-up, {MIN_DIVIDER}..'
+                             f'{MAX_DIVIDER} (rate 51200/N Hz; factory: 512, 100 Hz)')
+    device.add_argument('--stream', type=_streamable, metavar='CODE',
+                        help='stream this record from power-up (EEPROM auto-start), e.g. '
+                             '0xC2; one of ' + ', '.join(f'0x{c:02X}' for c in sorted(STREAMABLE)))
     device.add_argument('--serial', default='3095', help='serial number (default: 3095)')
     device.add_argument('--rate', type=_positive, metavar='HZ',
                         help='calculation rate overriding the EEPROM divider (benchmarks)')
@@ -151,7 +186,9 @@ def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
         stall_at=args.stall_at, stall_seconds=args.stall_for,
         unplug_at=args.unplug_at, unplug_seconds=args.unplug_for)
     return SimulatorConfig(
-        address=args.address, serial_number=args.serial, rate_hz=args.rate, seed=args.seed,
+        address=args.address, wireless=not args.wired, divider=args.divider,
+        streaming_at_start=args.stream or False,
+        serial_number=args.serial, rate_hz=args.rate, seed=args.seed,
         motion=MotionConfig(static=args.static), faults=faults, nan_mag=args.nan_mag,
         mag_nan_probability=args.mag_nan_probability, clock_ppm=args.ppm,
         timer_start=args.timer_start, latency_s=args.latency_ms / 1000.0,
@@ -165,14 +202,16 @@ def status_line(sim: PtySimulator, elapsed: float) -> str:
     """One line on what the simulator has done so far."""
     stats = sim.stats
     streaming = f'0x{sim.streaming:02X}' if sim.streaming else 'no'
+    link = (f'acks={stats.acks} nacks={stats.nacks}' if sim.wireless
+            else 'wired')
     line = (f'[{elapsed:8.1f} s] records={stats.records_sent} replies={stats.replies_sent} '
-            f'commands={stats.commands_received} acks={stats.acks} nacks={stats.nacks} '
+            f'commands={stats.commands_received} {link} '
             f'streaming={streaming} rate={sim.sensor.rate_hz:g}Hz '
             f'port={"plugged" if sim.plugged else "unplugged"} opens={stats.port_opens}')
     extra = {name: value for name, value in stats.as_dict().items() if value and name in (
         'garbage_bytes', 'corrupted_checksum', 'corrupted_length', 'foreign', 'dropped',
         'stalled', 'unplugged_lost', 'overflow_packets', 'commands_lost', 'commands_ignored',
-        'line_rate_skipped', 'late_skipped')}
+        'line_rate_skipped', 'late_skipped', 'host_bytes_ignored')}
     if extra:
         line += ' ' + ' '.join(f'{k}={v}' for k, v in extra.items())
     return line
@@ -187,8 +226,12 @@ def _say(text: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the simulator until SIGINT, SIGTERM, SIGHUP or ``--duration``; return 0."""
-    args = build_parser().parse_args(argv)
-    config = config_from_args(args)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        config = config_from_args(args)
+    except ValueError as error:  # a combination argparse cannot see, e.g. --wired --nack
+        parser.error(str(error))
     stop = threading.Event()
     previous = {}
     if threading.current_thread() is threading.main_thread():

@@ -25,10 +25,21 @@ the quirks of the firmware when it is asked to stream too early.
 
 import dataclasses
 
+from i3dmgx2_driver.codec import layouts as lay
+
 #: Bytes that a parser of the host side takes for an answer of the base
 #: station (ACK / start of packet, NACK, ping OK), and the data flags, which
 #: right after an ACK look like a packet header; "safe" garbage avoids them.
 SIGNIFICANT_BYTES = frozenset((0xAA, 0x21, 0x02, 0x07))
+
+#: The same for a wired line, where the host parser takes any echo byte for the
+#: start of a record (and 0x02/0x21 for a ping answer when it expects one).
+WIRED_SIGNIFICANT_BYTES = frozenset(lay.RECORD_SIZES) | frozenset((0x02, 0x21))
+
+#: Faults of the radio and the base station: a wired sensor has neither, and no
+#: length byte to corrupt.
+WIRELESS_ONLY = ('command_loss_probability', 'nack_probability', 'foreign_probability',
+                 'corrupt_length_probability')
 
 #: Fault labels of SentRecord.fault, one per way a data packet can fail.
 FAULT_CHECKSUM = 'checksum'
@@ -110,3 +121,32 @@ class FaultConfig:
         for name in ('jitter_ms', 'stall_seconds', 'unplug_seconds'):
             if getattr(self, name) < 0:
                 raise ValueError(f'{name} must not be negative')
+
+    def check_wired(self) -> None:
+        """Reject the faults a wired sensor cannot have, naming the field."""
+        for name in WIRELESS_ONLY:
+            if getattr(self, name):
+                raise ValueError(f'{name} is a fault of the radio or the base station; '
+                                 f'a wired sensor has neither (got {getattr(self, name)!r})')
+
+
+class Stall:
+    """
+    The window of silence in effect: nothing gets through either way.
+
+    Wireless, the radio is silent; wired, the sensor hangs. Not locked
+    itself: the simulator's lock guards it.
+    """
+
+    def __init__(self) -> None:
+        self.start = 0.0
+        self.end = 0.0
+
+    def begin(self, start: float, seconds: float) -> None:
+        """Be silent from ``start`` for ``seconds``."""
+        self.start = start
+        self.end = start + seconds
+
+    def covers(self, t: float) -> bool:
+        """Whether time ``t`` falls in the silence."""
+        return self.start <= t < self.end

@@ -74,6 +74,10 @@ STREAMABLE = frozenset(
     if layout.reply and layout.reply[-1].name == 'timer'
     and not layout.request and not layout.confirm)
 
+#: Commands a wired sensor recognises in its byte stream: every command of the
+#: table but the wireless ping, which only a base station answers.
+WIRED_COMMANDS = frozenset(code for code in lay.LAYOUTS if code != lay.PING)
+
 _ACCEL_COUNTS_PER_G = 32768 / 5.0           # +-5 g over the 16-bit A/D range
 _GYRO_COUNTS_PER_RAD_S = 32768 / 5.235988   # +-300 deg/s
 _A2D_ZERO = 32768.0
@@ -185,6 +189,16 @@ class SimulatedSensor:
         self.streaming = 0
         if autostart in STREAMABLE:
             self.start_streaming(autostart, t)
+
+    def power_off(self) -> None:
+        """
+        Lose power (a wired sensor fed by its cable): the stream stops.
+
+        The EEPROM and the non-volatile biases stay; :meth:`power_up` starts
+        again from them.
+        """
+        self.streaming = 0
+        self._pending_gyro = None
 
     @property
     def rate_hz(self) -> float:

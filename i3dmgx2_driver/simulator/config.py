@@ -1,0 +1,138 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+How a simulated 3DM-GX2 is set up: sensor, link, presets, timing and faults.
+
+One dataclass, checked when it is made, so that a test or the command line
+learns of a setting that cannot work before anything starts, with the field
+named. The EEPROM presets (``divider``, ``eeprom``, ``streaming_at_start``)
+are the state a sensor set up earlier would power up in.
+"""
+
+import dataclasses
+
+from i3dmgx2_driver.codec import layouts as lay
+
+from . import sensor as sns
+from .faults import FaultConfig
+from .motion import MotionConfig
+
+#: Record streamed when "already streaming" is asked for without a command.
+DEFAULT_STREAM = lay.ACCEL_ANG_RATE_MAG_ORIENTATION
+
+
+@dataclasses.dataclass
+class SimulatorConfig:
+    """Everything a simulated base station and sensor can be set up with."""
+
+    #: Node address of the sensor (factory: last two digits of its serial number).
+    address: int = 95
+    #: True: a wireless sensor behind its base station (packets, ACK/NACK, ping).
+    #: False: a wired sensor on the port itself: raw command bytes in, wired
+    #: records (echo, data, checksum) out, no ACK/NACK, no ping (see PtySimulator).
+    wireless: bool = True
+    #: Serial number the sensor reports (identifier 1).
+    serial_number: str = '3095'
+    #: Calculation rate (Hz) overriding the EEPROM divider: for benchmarks beyond 300 Hz.
+    rate_hz: float | None = None
+    #: Command byte the sensor streams from power-up (True: 0xCC; False/0: polled):
+    #: the EEPROM auto-start word 0xFCA6 (MSB 0x80 wireless, 0x00 wired).
+    streaming_at_start: bool | int = False
+    #: EEPROM data-rate divider (0xFCA2) at power-up, 170..51200 (rate 51200 / divider
+    #: Hz); None: the factory 512 (100 Hz), or what ``eeprom`` says.
+    divider: int | None = None
+    #: EEPROM words at power-up (address -> value), as a sensor set up earlier
+    #: would keep them; ``divider`` and ``streaming_at_start`` win over these.
+    eeprom: dict[int, int] = dataclasses.field(default_factory=dict)
+    #: Seed of every random choice (noise, faults, chunking), for reproducible runs.
+    seed: int | None = None
+    motion: MotionConfig = dataclasses.field(default_factory=MotionConfig)
+    faults: FaultConfig = dataclasses.field(default_factory=FaultConfig)
+    #: Shortcut for ``motion.nan_mag``: no magnetometer, NaN fields (Inertia-Link).
+    nan_mag: bool = False
+    #: Shortcut for ``motion.mag_nan_probability``: NaN on that share of cycles.
+    mag_nan_probability: float = 0.0
+    #: Error of the sensor's clock (ppm; positive: its timer runs fast).
+    clock_ppm: float = 40.0
+    #: Timer at power-up (None: 5 s before the 32-bit rollover).
+    timer_start: int | None = None
+    firmware_version: int = 2103
+    #: Radio latency (s) between the sensor sending a packet and the host getting it.
+    latency_s: float = 0.002
+    #: Baud rate of the serial line between the base station and the host: a
+    #: packet's last byte arrives its wire time (10 bits a byte) after its first,
+    #: so each packet is written that much later (throughput is not limited;
+    #: see ``limit_to_line_rate``). None: bytes arrive at once, as over USB.
+    wire_baud: int | None = 115200
+    #: Each packet is written in a random number of chunks in this range.
+    chunks: tuple[int, int] = (1, 3)
+    #: Pause between the chunks of one packet (s), so that reads see them apart.
+    chunk_gap_s: float = 0.0
+    #: Fixed path for the port symlink (None: a private temporary directory).
+    symlink: str | None = None
+    #: Most truth entries kept (None: all; 0: none, for long demos).
+    truth_limit: int | None = None
+    #: Skip streamed cycles the 115200-baud line could not carry, as the device does.
+    limit_to_line_rate: bool = False
+    #: When the writer falls this far behind (s), it skips cycles instead of bursting.
+    max_lag_s: float = 1.0
+    #: Point the port symlink at /proc/<pid>/fd/<slave> rather than /dev/pts/N, so
+    #: that it dangles when the simulator dies, however it dies (see _open_pty).
+    link_via_proc: bool = True
+
+    def __post_init__(self) -> None:
+        """Reject settings that cannot work, naming the field."""
+        if not 1 <= self.address <= 65534:
+            raise ValueError(f'address must be in 1..65534, got {self.address}')
+        low, high = self.chunks
+        if not 1 <= low <= high:
+            raise ValueError(f'chunks must be (min, max) with 1 <= min <= max, got {self.chunks}')
+        if self.rate_hz is not None and self.rate_hz <= 0:
+            raise ValueError('rate_hz must be positive')
+        if self.latency_s < 0 or self.chunk_gap_s < 0:
+            raise ValueError('latency_s and chunk_gap_s must not be negative')
+        if self.divider is not None and not sns.MIN_DIVIDER <= self.divider <= sns.MAX_DIVIDER:
+            raise ValueError(f'divider must be in {sns.MIN_DIVIDER}..{sns.MAX_DIVIDER} '
+                             f'(rate 51200 / divider Hz), got {self.divider}')
+        for address, value in self.eeprom.items():
+            if not (0 <= address <= 0xFFFF and 0 <= value <= 0xFFFF):
+                raise ValueError(f'eeprom words are uint16 at uint16 addresses, got '
+                                 f'{address!r}: {value!r}')
+        code = self.start_stream
+        if code and code not in sns.STREAMABLE:
+            valid = ', '.join(f'0x{c:02X}' for c in sorted(sns.STREAMABLE))
+            raise ValueError(f'streaming_at_start: 0x{code:02X} cannot be streamed; '
+                             f'streamable records: {valid}')
+        if not self.wireless:
+            self.faults.check_wired()
+
+    @property
+    def start_stream(self) -> int:
+        """Command byte streamed from power-up, 0 for none."""
+        if self.faults.already_streaming and not self.streaming_at_start:
+            return DEFAULT_STREAM
+        if self.streaming_at_start is True:
+            return DEFAULT_STREAM
+        return int(self.streaming_at_start)
+
+    @property
+    def power_up_eeprom(self) -> dict[int, int]:
+        """EEPROM words the sensor starts with, presets applied (on top of the factory ones)."""
+        words = dict(self.eeprom)
+        if self.divider is not None:
+            words[sns.RATE_DIVIDER_ADDRESS] = self.divider
+        if self.start_stream:
+            words[sns.AUTOSTART_ADDRESS] = (0x8000 if self.wireless else 0) | self.start_stream
+        return words
