@@ -64,7 +64,7 @@ class StreamRun:
             measured = node.published[first:]
             sim.silence()
             node.wait_quiet()
-            self.node_lost = node.node.stats.lost
+            self.node_lost = node.node.core.stats.lost
         finally:
             if node is not None:
                 node.close()

@@ -16,26 +16,72 @@
 Launch the 3DM-GX2 driver with the installed parameter file.
 
     ros2 launch i3dmgx2_driver i3dmgx2.launch.py port:=/dev/ttyUSB0 address:=95
+    ros2 launch i3dmgx2_driver i3dmgx2.launch.py address:=95 managed:=true
+    ros2 launch i3dmgx2_driver i3dmgx2.launch.py address:=95 managed:=true autostart:=true
 
 Topics land under the ``imu`` namespace as REP-145 asks (``imu/raw_data``,
 ``imu/mag``, ``imu/temperature``); ``namespace:=robot1`` moves them all to
 ``/robot1/imu/...``. Values given here override the parameter file.
+
+``managed:=true`` starts the managed (lifecycle) node instead of the plain
+one, with the same name, parameters and topics. It starts unconfigured, for
+a bringup manager (or ``ros2 lifecycle set``) to drive; ``autostart:=true``
+lets this launch file drive it instead: configure at once, activate once
+configure has succeeded (and only then: a configure that fails leaves it
+unconfigured, and a later deactivate is not undone).
 """
 
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
+from launch.conditions import IfCondition, UnlessCondition
+from launch.events import matches_action
+from launch.substitutions import AndSubstitution, LaunchConfiguration
+from launch_ros.actions import LifecycleNode, Node
+from launch_ros.event_handlers import OnStateTransition
+from launch_ros.events.lifecycle import ChangeState
 from launch_ros.parameter_descriptions import ParameterValue
+from lifecycle_msgs.msg import Transition
 
 
 def generate_launch_description() -> LaunchDescription:
-    """Declare the arguments and the driver node."""
+    """Declare the arguments and the driver node, plain or managed."""
     params_file = os.path.join(
         get_package_share_directory('i3dmgx2_driver'), 'config', 'i3dmgx2.yaml')
+    managed = LaunchConfiguration('managed')
+    # What both executables are started with.
+    common = {
+        'package': 'i3dmgx2_driver',
+        'name': 'i3dmgx2_driver',
+        'namespace': LaunchConfiguration('namespace'),
+        'output': 'screen',
+        'emulate_tty': True,
+        'parameters': [
+            LaunchConfiguration('params_file'),
+            {
+                'port': LaunchConfiguration('port'),
+                'address': ParameterValue(LaunchConfiguration('address'), value_type=int),
+            },
+        ],
+    }
+    plain_node = Node(executable='node', condition=UnlessCondition(managed), **common)
+    managed_node = LifecycleNode(executable='lifecycle_node', condition=IfCondition(managed),
+                                 **common)
+    autostart = IfCondition(AndSubstitution(managed, LaunchConfiguration('autostart')))
+    configure = EmitEvent(
+        event=ChangeState(lifecycle_node_matcher=matches_action(managed_node),
+                          transition_id=Transition.TRANSITION_CONFIGURE),
+        condition=autostart)
+    activate_once_configured = RegisterEventHandler(
+        OnStateTransition(
+            target_lifecycle_node=managed_node, start_state='configuring',
+            goal_state='inactive',
+            entities=[EmitEvent(event=ChangeState(
+                lifecycle_node_matcher=matches_action(managed_node),
+                transition_id=Transition.TRANSITION_ACTIVATE))]),
+        condition=autostart)
     return LaunchDescription([
         DeclareLaunchArgument('port', default_value='/dev/ttyUSB0',
                               description='Serial port of the base station'),
@@ -46,19 +92,14 @@ def generate_launch_description() -> LaunchDescription:
                               description='Namespace of the node and its topics'),
         DeclareLaunchArgument('params_file', default_value=params_file,
                               description='Parameter file'),
-        Node(
-            package='i3dmgx2_driver',
-            executable='node',
-            name='i3dmgx2_driver',
-            namespace=LaunchConfiguration('namespace'),
-            output='screen',
-            emulate_tty=True,
-            parameters=[
-                LaunchConfiguration('params_file'),
-                {
-                    'port': LaunchConfiguration('port'),
-                    'address': ParameterValue(LaunchConfiguration('address'), value_type=int),
-                },
-            ],
-        ),
+        DeclareLaunchArgument('managed', default_value='false',
+                              description='true: start the managed (lifecycle) node, '
+                                          'unconfigured, for a bringup manager to drive'),
+        DeclareLaunchArgument('autostart', default_value='false',
+                              description='With managed:=true, configure and activate it '
+                                          'from this launch file'),
+        plain_node,
+        managed_node,
+        activate_once_configured,
+        configure,
     ])

@@ -240,9 +240,36 @@ class LifecycleClient:
         self._get = listener.node.create_client(GetState, f'{node}/get_state')
 
     def wait_ready(self, timeout: float = 30.0) -> bool:
-        """Wait until both services are there."""
-        return (self._change.wait_for_service(timeout_sec=timeout)
-                and self._get.wait_for_service(timeout_sec=timeout))
+        """
+        Wait until both services are there and have answered once.
+
+        A service found is not yet a service that can answer: the server
+        drops a response when it has not matched this client's response
+        reader within 100 ms (rmw_fastrtps, ros2/rmw_fastrtps#390, #467),
+        which a loaded machine makes likely for the first request. So each
+        service is asked something harmless (the state; a transition that
+        does not exist, which rcl_lifecycle answers with a failure and one
+        warning in the node's log) until it answers, before any real request.
+        """
+        deadline = time.monotonic() + timeout
+        if not (self._change.wait_for_service(timeout_sec=timeout)
+                and self._get.wait_for_service(timeout_sec=timeout)):
+            return False
+        probes = ((self._get, GetState.Request()),
+                  (self._change, ChangeState.Request(
+                      transition=Transition(label='no_such_transition'))))
+        for client, request in probes:
+            while True:
+                future = client.call_async(request)
+                answer_by = min(deadline, time.monotonic() + 2.0)
+                while not future.done() and time.monotonic() < answer_by:
+                    time.sleep(0.01)
+                if future.done():
+                    break
+                client.remove_pending_request(future)
+                if time.monotonic() >= deadline:
+                    return False
+        return True
 
     @staticmethod
     def _result(future: object, timeout: float) -> object:

@@ -48,6 +48,7 @@ def connection(state, **changes):
     (State.DISCONNECTED, {'last_error': 'serial port gone'}, d.ERROR),
     (State.CONNECTING, {'connections': 2, 'reconnects': 1, 'last_error': 'x'}, d.ERROR),
     (State.STOPPED, {}, d.ERROR),
+    (State.READY, {}, d.OK),  # a managed node, inactive: quiet on purpose
 ])
 def test_connection_levels(state, changes, level):
     status = connection(state, **changes)
@@ -212,3 +213,28 @@ def test_a_stream_that_does_not_fit_the_line_is_a_warning_whatever_the_rate():
     assert stream(state=State.PAUSED, line_warning=warning).message.startswith('no data')
     assert stream(stream='0xC2 (inertial)', line_use='fits').level == d.OK
     assert stream().value('line use') == 'rate unknown'
+
+
+def test_stream_stopped_on_purpose_is_no_staleness():
+    status = d.stream_status(State.READY, None, 100.0, 0, 1.0, 30.0, 500, 0, 0, 0, 0, 0)
+    assert status.level == d.OK
+    assert 'node inactive' in status.message
+
+
+@pytest.mark.parametrize('label, state, level, words', [
+    ('unconfigured', None, d.OK, 'waiting for configure'),
+    ('inactive', State.READY, d.OK, 'waiting for activate'),
+    ('active', State.STREAMING, d.OK, 'active'),
+    ('active', State.PAUSED, d.OK, 'active'),
+    ('active', State.STALLED, d.WARN, 'recovering the stream: stalled'),
+    ('active', State.DISCONNECTED, d.WARN, 'recovering the stream: disconnected'),
+    ('active', State.INITIALISING, d.WARN, 'recovering the stream: initialising'),
+    ('configuring', State.INITIALISING, d.OK, 'configuring (in transition)'),
+])
+def test_lifecycle_status(label, state, level, words):
+    status = d.lifecycle_status(label, state)
+    assert status.level == level, status
+    assert words in status.message
+    assert status.value('lifecycle state') == label
+    assert status.value('device state') == (state.value if state else
+                                            'no port (not configured)')

@@ -17,8 +17,10 @@ The launch file, read as code: ``launch`` is not on PyPI, so it cannot run here.
 
 What can be checked without it is checked: it compiles, declares the
 arguments the README documents (``address`` without a default), starts the
-``node`` executable of this package, passes the installed params file and
-puts the node under the ``namespace`` argument.
+``node`` executable of this package, or ``lifecycle_node`` with
+``managed:=true``, passes the installed params file, puts the node under the
+``namespace`` argument, and with ``autostart:=true`` configures the managed
+node and activates it once configured.
 """
 
 import ast
@@ -39,26 +41,80 @@ def keywords(call: ast.Call) -> dict:
     return {k.arg: k.value.value for k in call.keywords if isinstance(k.value, ast.Constant)}
 
 
-def test_launch_file_declares_the_documented_arguments():
+def parse() -> tuple[str, ast.AST]:
     with open(LAUNCH) as handle:
-        tree = ast.parse(handle.read(), LAUNCH)
+        source = handle.read()
+    return source, ast.parse(source, LAUNCH)
+
+
+def assigned(tree: ast.AST, name: str) -> ast.AST:
+    """Return the value assigned to ``name`` (once) in the launch file."""
+    (value,) = [n.value for n in ast.walk(tree) if isinstance(n, ast.Assign)
+                and [getattr(t, 'id', None) for t in n.targets] == [name]]
+    return value
+
+
+def test_launch_file_declares_the_documented_arguments():
+    _, tree = parse()
     compile(tree, LAUNCH, 'exec')
     declared = {c.args[0].value: keywords(c) for c in calls(tree, 'DeclareLaunchArgument')}
-    assert set(declared) == {'port', 'address', 'namespace', 'params_file'}
+    assert set(declared) == {'port', 'address', 'namespace', 'params_file', 'managed',
+                             'autostart'}
     assert 'default_value' not in declared['address'], 'address must have no default'
     assert declared['port']['default_value'] == '/dev/ttyUSB0'
+    # The plain node unless asked; a managed node waits for its manager unless asked.
+    assert declared['managed']['default_value'] == 'false'
+    assert declared['autostart']['default_value'] == 'false'
     generate = [f for f in ast.walk(tree) if isinstance(f, ast.FunctionDef)]
     assert [f.name for f in generate] == ['generate_launch_description']
 
 
 def test_launch_file_starts_this_packages_node_with_the_params_file():
-    with open(LAUNCH) as handle:
-        source = handle.read()
-    tree = ast.parse(source)
-    (node,) = calls(tree, 'Node')
-    assert keywords(node) == {'package': 'i3dmgx2_driver', 'executable': 'node',
-                              'name': 'i3dmgx2_driver', 'output': 'screen',
-                              'emulate_tty': True}
-    assert "LaunchConfiguration('namespace')" in ast.get_source_segment(source, node)
+    source, tree = parse()
+    common = assigned(tree, 'common')
+    assert {k.value: v.value for k, v in zip(common.keys, common.values, strict=True)
+            if isinstance(v, ast.Constant)} == {
+        'package': 'i3dmgx2_driver', 'name': 'i3dmgx2_driver', 'output': 'screen',
+        'emulate_tty': True}
+    common_text = ast.get_source_segment(source, common)
+    assert "'namespace': LaunchConfiguration('namespace')" in common_text
+    assert "LaunchConfiguration('params_file')" in common_text
     assert "'config', 'i3dmgx2.yaml'" in source
     assert os.path.exists(os.path.join(REPO, 'config', 'i3dmgx2.yaml'))
+
+
+def test_managed_option_chooses_the_lifecycle_node_instead_of_the_plain_one():
+    source, tree = parse()
+    assert ast.get_source_segment(source, assigned(tree, 'managed')) == \
+        "LaunchConfiguration('managed')"
+    (plain,) = calls(tree, 'Node')
+    (managed,) = calls(tree, 'LifecycleNode')
+    for call, executable, condition in ((plain, 'node', 'UnlessCondition(managed)'),
+                                        (managed, 'lifecycle_node', 'IfCondition(managed)')):
+        assert keywords(call) == {'executable': executable}
+        text = ast.get_source_segment(source, call)
+        assert f'condition={condition}' in text and '**common' in text
+    # Both executables are console entry points colcon installs.
+    with open(os.path.join(REPO, 'setup.py')) as handle:
+        setup = handle.read()
+    assert "'node = i3dmgx2_driver.ros.main:main'" in setup
+    assert "'lifecycle_node = i3dmgx2_driver.ros.lifecycle_node:main'" in setup
+
+
+def test_autostart_configures_then_activates_only_after_a_successful_configure():
+    source, tree = parse()
+    assert ast.get_source_segment(source, assigned(tree, 'autostart')) == \
+        "IfCondition(AndSubstitution(managed, LaunchConfiguration('autostart')))"
+    events = {ast.get_source_segment(source, c.keywords[1].value): c
+              for c in calls(tree, 'ChangeState')}
+    assert set(events) == {'Transition.TRANSITION_CONFIGURE',
+                           'Transition.TRANSITION_ACTIVATE'}
+    for call in events.values():
+        assert ast.get_source_segment(source, call.keywords[0].value) == \
+            'matches_action(managed_node)'
+    (handler,) = calls(tree, 'OnStateTransition')
+    assert keywords(handler) == {'start_state': 'configuring', 'goal_state': 'inactive'}
+    handler_text = ast.get_source_segment(source, handler)
+    assert 'TRANSITION_ACTIVATE' in handler_text and 'TRANSITION_CONFIGURE' not in handler_text
+    for name in ('configure', 'activate_once_configured'):
+        assert 'condition=autostart' in ast.get_source_segment(source, assigned(tree, name))

@@ -52,6 +52,8 @@ EVENTS = '/i3dmgx2_driver/transition_event'
 TOPICS = {'imu/raw_data': Imu, EVENTS: TransitionEvent, '/diagnostics': DiagnosticArray}
 #: Quiet time in which no Imu message may arrive (s); the simulator streams at 100 Hz.
 QUIET = 1.0
+#: Every test starts node processes and waits on them: seconds each.
+pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(autouse=True)
@@ -286,7 +288,7 @@ def test_signal_in_each_state_stops_the_stream_and_exits_zero(state, sig):
             assert [t for t, c in sim.commands if c.code == 0xFA and t >= sent_before]
         assert sim.wait_until(lambda: sim.streaming == 0, timeout=2)
         assert port_is_free(sim.port)
-        assert goal_states(listener)[-1] == 'finalized'
+        assert goal_states(listener)[-1] == 'finalized', node.output()
 
 
 def test_signal_during_a_slow_configure_exits_zero_within_2_s():
@@ -338,7 +340,6 @@ def process_resources(pid: int) -> tuple[int, int, int]:
             int(fields['VmRSS'].split()[0]))
 
 
-@pytest.mark.slow
 def test_repeated_cycles_leak_no_threads_descriptors_or_memory():
     warm_up, cycles = 5, 20
     with PtySimulator(SimulatorConfig(seed=60)) as sim, Listener(TOPICS) as listener, \

@@ -31,7 +31,7 @@ import sys
 
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess, REPO
+from ros_harness import isolate_ros_domain, LifecycleClient, Listener, NodeProcess, REPO
 from sensor_msgs.msg import Imu
 
 COLCON = os.path.join(os.path.dirname(sys.executable), 'colcon')
@@ -72,7 +72,7 @@ def installed_env(prefix) -> dict:
 
 def test_layout_is_what_ros2_expects(prefix):
     lib = prefix / 'lib' / 'i3dmgx2_driver'
-    for exe in ('node', 'simulator', 'replay', 'plot'):
+    for exe in ('node', 'lifecycle_node', 'simulator', 'replay', 'plot', 'monitor'):
         assert os.access(lib / exe, os.X_OK), f'{exe} is not an executable in {lib}'
     share = prefix / 'share'
     assert (share / 'ament_index' / 'resource_index' / 'packages' / 'i3dmgx2_driver').exists()
@@ -103,6 +103,23 @@ def test_installed_node_publishes(prefix):
             assert len(got) >= 20, node.output()
             assert str(prefix) in node.proc.args[0]
             assert node.stop()[0] == 0
+
+
+def test_installed_lifecycle_node_is_driven_through_its_services(prefix):
+    isolate_ros_domain()
+    with PtySimulator(SimulatorConfig(seed=42)) as sim:
+        listener = Listener({'imu/raw_data': Imu})
+        node = NodeProcess({'port': sim.port, 'address': 95},
+                           command=[str(prefix / 'lib' / 'i3dmgx2_driver' / 'lifecycle_node')],
+                           env=installed_env(prefix))
+        with listener, node:
+            client = LifecycleClient(listener)
+            assert client.wait_ready(), node.output()
+            assert client.change('configure') and client.change('activate'), node.output()
+            got = listener.wait_for('imu/raw_data', 20, timeout=30)
+            assert len(got) >= 20, node.output()
+            assert client.change('deactivate') and client.change('shutdown'), node.output()
+            assert node.wait(timeout=10) == 0, node.output()
 
 
 def test_installed_simulator_prints_its_port(prefix):

@@ -173,3 +173,28 @@ def test_stop_streaming_cuts_a_pending_request_short():
         assert failures and 'cancelled' in failures[0]
         assert held(sim.port)
         sup.stop()
+
+
+def test_stop_while_the_stream_starts_leaves_the_port_closed():
+    # A signal during activate: stop() comes while start_streaming() waits for records.
+    with PtySimulator(SimulatorConfig(seed=76)) as sim:
+        sup = supervisor(sim.port, Records())
+        sup.connect()
+        sim.stall(5.0)
+        errors = []
+
+        def activate():
+            try:
+                sup.start_streaming()
+            except DeviceTimeout as exc:
+                errors.append(str(exc))
+
+        thread = threading.Thread(target=activate)
+        thread.start()
+        time.sleep(0.3)
+        sup.stop()
+        thread.join(timeout=2.0)
+        assert not thread.is_alive()
+        assert errors and 'stopped while the stream was starting' in errors[0]
+        time.sleep(0.5)  # time enough for a supervisor thread to open the port again
+        assert sup.link is None and not held(sim.port)

@@ -29,6 +29,7 @@ import threading
 import time
 from typing import Any, NamedTuple
 
+from .observer import LineObserver, QUIET_AFTER
 from .port import PortDisconnected, SerialPort
 from .realtime import apply_to_current_thread, NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
 from ..codec import commands, layouts
@@ -87,6 +88,8 @@ class DeviceLink:
     ``streamed`` is the command byte of the record being streamed, None
     while the device is not streaming (the supervisor sets it): a polled
     reply of that code is then both the reply and a record of the stream.
+    ``observer``, if given, is fed every read while no packet of ours has
+    arrived for ``QUIET_AFTER`` s (never while records flow).
     ``cancel``, if given and set, makes requests give up within tens of
     milliseconds while the reader goes on (the stream is being stopped, the
     port kept: nobody waits for the answers any more).
@@ -98,6 +101,7 @@ class DeviceLink:
                  wireless: bool = True, read_timeout: float = 0.2,
                  on_bytes: BytesCallback | None = None,
                  streamed: int | None = None,
+                 observer: LineObserver | None = None,
                  cancel: threading.Event | None = None,
                  thread_policy: ThreadPolicy = NORMAL_SCHEDULING) -> None:
         self.port = port
@@ -108,6 +112,7 @@ class DeviceLink:
                                          wireless=wireless)
         self._on_record = on_record
         self._on_bytes = on_bytes
+        self._observer = observer
         self._read_timeout = read_timeout
         self._pending: _Pending | None = None
         self._lock = threading.Lock()
@@ -152,6 +157,7 @@ class DeviceLink:
         self.running.set()
         parser = self.parser
         read = self.port.read_some
+        observer = self._observer
         while not self._stop.is_set():
             timeout = 0.02 if parser.pending == 1 else self._read_timeout
             try:
@@ -164,6 +170,9 @@ class DeviceLink:
             now = time.time()
             if data and self._on_bytes is not None:
                 self._on_bytes(data, now)
+            if observer is not None and observer.active \
+                    and now - self.last_data_time > QUIET_AFTER:
+                observer.feed(data, now, self.last_data_time)
             events = parser.feed(data) if data else parser.idle()
             for event in events:
                 self._dispatch(event, now)
@@ -237,6 +246,7 @@ class DeviceLink:
         with self._lock:
             nacks = 0
             for _ in range(retries):
+                self._check_cancelled()
                 pending = _Pending(reply_code)
                 self._pending = pending
                 try:

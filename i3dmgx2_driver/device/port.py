@@ -16,15 +16,25 @@
 The serial port: open it exclusively, make it fast, read what has arrived.
 
 Errors are sorted into what a user can act on (the port does not exist, is
-not theirs to open, is in use), because "could not open port" alone sends
-people to the wrong fix. Reads return whatever bytes are waiting as soon as
-any arrive, so the last byte of a packet reaches the parser without waiting
-for a fixed read size or a polling interval.
+not theirs to open, is in use, is no serial port at all), because "could not
+open port" alone sends people to the wrong fix. Two kinds differ in what the
+driver does next: what may come back (an unplugged adapter, a port another
+process holds) is retried, while a path that exists but is no terminal device
+(a regular file, a directory, ``/dev/null``) can never work and is a
+:class:`PortUnusable`, which ends the driver. :func:`check_port_path` tells
+the two apart without opening anything, so that every entry point can refuse
+such a path before it starts. Reads return whatever bytes are waiting as soon
+as any arrive, so the last byte of a packet reaches the parser without
+waiting for a fixed read size or a polling interval.
 """
 
 import errno
+import glob
+import grp
 import os
+import pwd
 import select
+import stat
 import termios
 from typing import Any
 
@@ -51,8 +61,166 @@ class PortDisconnected(PortError):
     """The device went away while open (unplugged, or the pty closed)."""
 
 
+class PortUnusable(PortError):
+    """
+    The port can never work for this process: say so once and stop.
+
+    Retrying cannot help (nothing the user plugs in turns a regular file
+    into a serial port), so entry points end with exit code 2, as for a bad
+    parameter value, instead of retrying every second forever.
+    """
+
+
+class PortNotSerial(PortUnusable):
+    """The path exists but is no terminal device (a file, a directory, /dev/null)."""
+
+
 #: How much one read takes at most; a few packets' worth.
 READ_SIZE = 4096
+#: The kernel's list of terminal drivers: name, node, major, minors, type.
+TTY_DRIVERS = '/proc/tty/drivers'
+#: Where Linux lists serial adapters by a stable name, and the usual nodes.
+_BY_ID = '/dev/serial/by-id/*'
+_USUAL_PORTS = ('/dev/ttyUSB*', '/dev/ttyACM*')
+
+
+def port_hint() -> str:
+    """Say how to find the right port: what is present now, and the tools."""
+    found = sorted(glob.glob(_BY_ID)) or sorted(
+        path for pattern in _USUAL_PORTS for path in glob.glob(pattern))
+    present = (f'Serial ports present now: {", ".join(found[:4])}'
+               + (', ...' if len(found) > 4 else '')) if found \
+        else 'No USB serial port is present now'
+    return (f'{present} (ls /dev/serial/by-id/ names them; ros2 run i3dmgx2_driver discover '
+            f'finds the base station and the sensor address); set -p port:=<path>')
+
+
+def terminal_majors(drivers: str | None = None) -> list[tuple[int, int, int]] | None:
+    """
+    Return (major, first minor, last minor) of every terminal driver.
+
+    None when the kernel's list cannot be read (not Linux, or /proc hidden):
+    then nothing is concluded from a character device's numbers.
+    """
+    try:
+        with open(drivers or TTY_DRIVERS) as handle:
+            lines = handle.read().splitlines()
+    except OSError:
+        return None
+    ranges = []
+    for line in lines:
+        fields = line.split()
+        if len(fields) < 5:
+            continue
+        try:
+            major = int(fields[-3])
+            low, _, high = fields[-2].partition('-')
+            ranges.append((major, int(low), int(high or low)))
+        except ValueError:
+            continue
+    return ranges
+
+
+def _is_terminal(rdev: int, ranges: list[tuple[int, int, int]] | None) -> bool | None:
+    if ranges is None:
+        return None
+    major, minor = os.major(rdev), os.minor(rdev)
+    return any(m == major and low <= minor <= high for m, low, high in ranges)
+
+
+def describe_non_terminal(mode: int, rdev: int = 0,
+                          ranges: list[tuple[int, int, int]] | None = None) -> str | None:
+    """
+    Say what a file of this ``st_mode`` is, if it surely is no terminal; else None.
+
+    A character device counts as a terminal when the kernel lists its major
+    and minor among the terminal drivers (``ranges``, from
+    :func:`terminal_majors`), so that no other device (``/dev/null``, a
+    watchdog, whose mere opening has effects) is ever opened to find out.
+    Without the list a character device is given the benefit of the doubt.
+    """
+    if stat.S_ISREG(mode):
+        return 'a regular file'
+    if stat.S_ISDIR(mode):
+        return 'a directory'
+    if stat.S_ISFIFO(mode):
+        return 'a named pipe (FIFO)'
+    if stat.S_ISSOCK(mode):
+        return 'a socket'
+    if stat.S_ISBLK(mode):
+        return f'a block device ({os.major(rdev)}:{os.minor(rdev)}, a disk)'
+    if stat.S_ISCHR(mode) and _is_terminal(rdev, ranges) is False:
+        return f'a character device ({os.major(rdev)}:{os.minor(rdev)}) that is not a terminal'
+    return None
+
+
+def check_port_path(path: str, drivers: str | None = None) -> None:
+    """
+    Raise :class:`PortNotSerial` if ``path`` exists and is surely no serial port.
+
+    Returns quietly for a terminal device, and for a path that does not
+    exist or cannot be examined: an adapter may be plugged in later, and
+    opening it says what is wrong. Opens nothing. Every entry point that
+    opens the port calls this first (the node, the managed node's configure
+    transition), and :class:`SerialPort` does too.
+    """
+    try:
+        info = os.stat(path)
+    except (OSError, ValueError):
+        return
+    ranges = terminal_majors(drivers) if stat.S_ISCHR(info.st_mode) else None
+    what = describe_non_terminal(info.st_mode, info.st_rdev, ranges)
+    if what is not None:
+        raise PortNotSerial(_not_serial_message(path, what))
+
+
+def _not_serial_message(path: str, what: str) -> str:
+    shown = path
+    real = os.path.realpath(path)
+    if real != os.path.abspath(path):
+        shown = f'{path} (a link to {real})'
+    return (f"parameter 'port': {shown} is {what}, not a serial port, so it can never work. "
+            f'{port_hint()}')
+
+
+def _owning_group(path: str) -> tuple[str, int] | None:
+    """Return the name and mode of the group that owns ``path``, if it can be read."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return None
+    try:
+        name = grp.getgrgid(info.st_gid).gr_name
+    except KeyError:
+        name = str(info.st_gid)
+    return name, info.st_mode
+
+
+def _in_group_database(group: str) -> bool:
+    """Whether this user is a member of ``group`` by the group database."""
+    try:
+        user = pwd.getpwuid(os.getuid())
+        entry = grp.getgrnam(group)
+    except KeyError:
+        return False
+    return user.pw_gid == entry.gr_gid or user.pw_name in entry.gr_mem
+
+
+def _permission_message(path: str) -> str:
+    owner = _owning_group(path)
+    text = f'permission denied opening {path}: '
+    if owner is None:
+        return text + ('add your user to the dialout group (sudo usermod -aG dialout $USER, '
+                       'then log in again)')
+    group, mode = owner
+    if not mode & stat.S_IRGRP:
+        return text + (f'only its owner may open it (mode {stat.S_IMODE(mode):04o}); a udev '
+                       f'rule giving it to the dialout group with mode 0660 fixes that')
+    if _in_group_database(group):
+        return text + (f'you are in the {group} group that owns it, but this session is '
+                       f'not yet: log out and in again (or run newgrp {group})')
+    return text + (f'add your user to the {group} group that owns it '
+                   f'(sudo usermod -aG {group} $USER, then log in again)')
 
 
 def _classify(path: str, exc: Exception) -> PortError:
@@ -60,13 +228,19 @@ def _classify(path: str, exc: Exception) -> PortError:
     text = str(exc)
     if code == errno.ENOENT or 'No such file' in text:
         return PortMissing(f'serial port {path} does not exist: is the base station '
-                           f'plugged in, and is the path right?')
+                           f'plugged in, and is the path right? {port_hint()}')
     if code == errno.EACCES or 'Permission denied' in text:
-        return PortPermissionDenied(
-            f'permission denied opening {path}: add your user to the dialout group '
-            f'(sudo usermod -aG dialout $USER, then log in again)')
+        return PortPermissionDenied(_permission_message(path))
     if code in (errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK) or 'lock' in text:
         return PortBusy(f'serial port {path} is in use by another process')
+    if code in (errno.ENOTTY, errno.EISDIR) or 'Inappropriate ioctl' in text:
+        # What check_port_path could not tell (no list of terminal drivers).
+        try:
+            info = os.stat(path)
+            what = describe_non_terminal(info.st_mode, info.st_rdev, ranges=[])
+        except OSError:
+            what = None
+        return PortNotSerial(_not_serial_message(path, what or 'no terminal device'))
     return PortError(f'cannot open serial port {path}: {text}')
 
 
@@ -83,6 +257,7 @@ class SerialPort:
     def __init__(self, path: str, baud: int = 115200, low_latency: bool = True,
                  serial_factory: Any = serial.Serial) -> None:
         self.path = path
+        check_port_path(path)
         try:
             self._serial = serial_factory(
                 port=path, baudrate=baud, bytesize=serial.EIGHTBITS,

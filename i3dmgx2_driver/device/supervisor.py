@@ -30,6 +30,14 @@ the base station is unplugged, so its records usually flow already; if not,
 continuous mode is requested). Records are published from the moment they
 arrive. Another serial number, or no answer, gets the full dialogue.
 
+What may come back (an unplugged adapter, a sensor switched off) is said
+once and reminded at most every ``REMINDER_PERIOD``; what never can (a path
+that is no serial port) is said once and ends the supervisor, with
+``fatal_error`` set for the entry point to exit on. While nothing of ours
+arrives, a ``LineObserver`` says what the line carries instead (another
+address, the other framing, unreadable bytes, silence). Streaming is
+announced when the first record has arrived, never before.
+
 The same steps are offered as phases for a managed (lifecycle) node, which
 brings the device up in order and must know at each step whether it
 worked: :meth:`DeviceSupervisor.connect` (port, quiet, identity, rate; no
@@ -50,7 +58,8 @@ import time
 from typing import Any, NamedTuple
 
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
-from .port import PortDisconnected, PortError, SerialPort
+from .observer import Finding, LineObserver
+from .port import PortDisconnected, PortError, PortUnusable, SerialPort
 from .realtime import NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
 from ..codec import commands, layouts, streams
 # The divider arithmetic is the codec's; its names stay importable from here.
@@ -69,6 +78,11 @@ SERIAL_NUMBER_SELECTOR = IDENTIFIER_NAMES.index('serial_number')
 PORT_WATCH_S = 0.02
 #: Pause between a port reappearing and opening it (s): udev sets its permissions meanwhile.
 PORT_SETTLE_S = 0.02
+#: A condition that persists (a missing port, a silent sensor) is said once,
+#: then reminded at most this often (s).
+REMINDER_PERIOD = 60.0
+#: Events that each mean something new (a stall) are logged at most this often (s).
+EVENT_PERIOD = 10.0
 
 
 class State(str, enum.Enum):
@@ -132,10 +146,10 @@ class Throttle:
         self.period = period
         self._last: dict[str, float] = {}
 
-    def allow(self, key: str) -> bool:
-        """Tell whether a message of this key may be logged now."""
+    def allow(self, key: str, period: float | None = None) -> bool:
+        """Tell whether a message of this key may be logged now (``period``: override)."""
         now = time.monotonic()
-        if now - self._last.get(key, -1e9) >= self.period:
+        if now - self._last.get(key, -1e9) >= (self.period if period is None else period):
             self._last[key] = now
             return True
         return False
@@ -151,19 +165,24 @@ class DeviceSupervisor:
     ``debug/info/warning/error`` methods (a ``logging.Logger`` by default;
     the node passes its rclpy logger). ``on_bytes`` runs in the reader
     thread with every read's raw bytes and read time (a raw capture).
+    ``on_fatal`` runs in the supervisor thread, once, when the port can
+    never work (``fatal_error`` then holds the error); the supervisor has
+    stopped by then.
     """
 
     def __init__(self, config: SupervisorConfig, on_record: RecordCallback,
                  log: Any = None, on_connect: Callable[[], None] | None = None,
                  port_factory: Callable[..., SerialPort] = SerialPort,
-                 on_bytes: BytesCallback | None = None) -> None:
+                 on_bytes: BytesCallback | None = None,
+                 on_fatal: Callable[[PortError], None] | None = None) -> None:
         self.config = config
+        self._on_fatal = on_fatal
         self._on_record = on_record
         self._on_bytes = on_bytes
         self._on_connect = on_connect
         self._log = log or logging.getLogger('i3dmgx2_driver')
         self._port_factory = port_factory
-        self._throttle = Throttle(10.0)
+        self._throttle = Throttle(REMINDER_PERIOD)
         self._stop = threading.Event()
         self._paused = threading.Event()
         self._thread: threading.Thread | None = None
@@ -185,6 +204,12 @@ class DeviceSupervisor:
         self.line_warning = ''
         self.parser_totals: dict[str, int] = {}
         self._info_logged: DeviceInfo | None = None
+        #: The port can never work (a path that is no serial port): why.
+        self.fatal_error: PortError | None = None
+        #: What the line observer last found while nothing of ours arrived ('' once
+        #: records flow), for diagnostics.
+        self.advice = ''
+        self._observer: LineObserver | None = None
         self._policy_logged = PolicyOutcome()
         #: How the last connection got streaming: 'full' (the whole dialogue) or 'resumed'.
         self.last_start = ''
@@ -200,6 +225,10 @@ class DeviceSupervisor:
     def start(self) -> None:
         """Start the supervisor thread: open, initialise, stream, recover, forever."""
         self._stop.clear()
+        self._spawn()
+
+    def _spawn(self) -> None:
+        """Start the thread on the current link (None: it opens one)."""
         self._thread = threading.Thread(target=self._run, args=(self._link,),
                                         name='gx2-supervisor', daemon=True)
         self._thread.start()
@@ -237,6 +266,7 @@ class DeviceSupervisor:
             self.state = State.STOPPED
             raise
         self.state = State.READY
+        self._observe(False)
 
     def start_streaming(self) -> None:
         """
@@ -251,6 +281,7 @@ class DeviceSupervisor:
         if self._thread is not None and self._thread.is_alive():
             raise DeviceTimeout('the supervisor is still stopping: try again')
         self._stop.clear()
+        self._observe(True)
         link = self._link
         try:
             if link is None or link.disconnected.is_set():
@@ -266,7 +297,10 @@ class DeviceSupervisor:
             if self._link is not None:
                 self._quiet(self._link)
             raise
-        self.start()
+        if self._stop.is_set():
+            # stop() came while the stream was starting: it has the port; no thread.
+            raise DeviceTimeout('the driver stopped while the stream was starting')
+        self._spawn()
 
     def stop_streaming(self, timeout: float = 1.5) -> None:
         """
@@ -290,10 +324,20 @@ class DeviceSupervisor:
             time.sleep(0.05)
             link.port.flush_input()
             self.state = State.READY
+            self._observe(False)
         except PortError as exc:
             self._warn(type(exc).__name__, str(exc))
             self._release(send_stop=False)
             self.state = State.DISCONNECTED
+
+    def _observe(self, on: bool) -> None:
+        """Resume or pause the line observer: silence is a symptom only while we ask."""
+        observer = self._observer
+        if observer is not None:
+            if on:
+                observer.resume()
+            else:
+                observer.pause()
 
     @property
     def link(self) -> DeviceLink | None:
@@ -316,10 +360,16 @@ class DeviceSupervisor:
 
     # -- the thread ----------------------------------------------------
 
-    def _warn(self, key: str, message: str) -> None:
+    def _warn(self, key: str, message: str, period: float | None = None) -> None:
+        """Log ``message`` once, then again at most every ``period`` s (a reminder)."""
         self.last_error = message
-        if self._throttle.allow(key):
+        if self._throttle.allow(key, period):
             self._log.warning(message)
+
+    def _on_finding(self, finding: Finding) -> None:
+        """Report what the line observer found (reader thread; never blocks long)."""
+        self.advice = finding.message
+        self._warn(f'observed {finding.kind}', finding.message)
 
     def _run(self, link: DeviceLink | None) -> None:
         """Stream and recover until stopped; ``link``: one already streaming, or None."""
@@ -334,9 +384,15 @@ class DeviceSupervisor:
                         self._begin_stream(link)
                 self._watch(link)
                 stalled = True
+            except PortUnusable as exc:
+                self._fail(exc)
             except PortError as exc:
                 if not self._stop.is_set():
-                    self._warn(type(exc).__name__, str(exc))
+                    # An unplug is an event; a port that stays missing is a condition.
+                    period = EVENT_PERIOD if isinstance(exc, PortDisconnected) else None
+                    self._warn(type(exc).__name__,
+                               f'{exc} (retrying every {self.config.reconnect_interval:g} s)',
+                               period)
             except DeviceTimeout as exc:
                 if not self._stop.is_set():  # else: cut short on purpose
                     self._warn('timeout', f'device not answering: {exc}')
@@ -368,14 +424,27 @@ class DeviceSupervisor:
                 self._stop.wait(PORT_SETTLE_S)
                 return
 
+    def _fail(self, exc: PortUnusable) -> None:
+        """Give up for good: say why once, stop, and let the entry point exit."""
+        self.fatal_error = exc
+        self.last_error = str(exc)
+        self.state = State.STOPPED
+        self._stop.set()
+        if self._on_fatal is not None:
+            self._on_fatal(exc)  # the entry point says it, once, as it exits
+        else:
+            self._log.error(str(exc))
+
     def _open(self) -> DeviceLink:
         cfg = self.config
         port = self._port_factory(cfg.port, cfg.baud, low_latency=cfg.low_latency)
         if port.low_latency_state != self.low_latency_state:
             self.low_latency_state = port.low_latency_state
             self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
+        observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
+                                                 cfg.baud, self._on_finding)
         link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless,
-                          on_bytes=self._on_bytes, cancel=self._stop,
+                          on_bytes=self._on_bytes, observer=observer, cancel=self._stop,
                           thread_policy=cfg.thread_policy)
         with self._link_lock:
             if self._stop.is_set():
@@ -429,7 +498,8 @@ class DeviceSupervisor:
             self.ping_ok = link.ping(timeout=0.3, retries=2)
             if not self.ping_ok:
                 self._warn('ping', f'node {self.config.address} does not answer the base '
-                                   f'station ping: check it is powered, its address and '
+                                   f'station ping: check it is powered, its address (ros2 run '
+                                   f'i3dmgx2_driver discover lists the nodes on the air) and '
                                    f'the radio channel')
         # The thesis author found continuous mode unreliable as the very first
         # command: a couple of polled requests first make it dependable.
@@ -440,12 +510,15 @@ class DeviceSupervisor:
             except DeviceTimeout:
                 pass
         if require_answer and not self.ping_ok and not link.parser.stats.good_frames:
-            raise DeviceTimeout(
-                f'node {self.config.address} is silent: no answer to the base station ping '
-                f'or to polled requests (check it is powered, its address and the radio '
-                f'channel)' if link.wireless else
-                f'the sensor on {self.config.port} is silent: no answer to polled requests '
-                f'(check it is powered and the baud rate)')
+            silent = (f'node {self.config.address} is silent: no answer to the base station '
+                      f'ping or to polled requests (check it is powered, its address and the '
+                      f'radio channel)' if link.wireless else
+                      f'the sensor on {self.config.port} is silent: no answer to polled '
+                      f'requests (check it is powered and the baud rate)')
+            # What the line carried instead says what to change (address, framing, baud).
+            seen = self._observer.last_finding if self._observer is not None else None
+            raise DeviceTimeout(silent + (f'; observed on the line: {seen.message}'
+                                          if seen is not None else ''))
         self._identify(link)
         self._configure_rate(link)
         self._check_line()
@@ -494,7 +567,7 @@ class DeviceSupervisor:
         except DeviceTimeout:
             if self._stop.is_set():
                 raise
-            if self._throttle.allow('resume'):
+            if self._throttle.allow('resume', EVENT_PERIOD):
                 self._log.info(f'node {cfg.address} did not confirm its serial number: '
                                f'starting it in full')
             return False
@@ -509,10 +582,11 @@ class DeviceSupervisor:
         while link.last_code != cfg.stream and time.monotonic() < deadline \
                 and not self._stop.is_set():
             time.sleep(0.002)
-        if link.last_code != cfg.stream:
-            # Not streaming (power-cycled meanwhile), or streaming another record.
-            self.start_continuous(link)
+        # Not streaming (power-cycled meanwhile), or streaming another record: ask for it.
+        if link.last_code != cfg.stream and not self.start_continuous(link):
+            return True  # stopping: nothing more to do here
         self.state = State.STREAMING
+        self.advice = ''
         self.last_start = 'resumed'
         self.resumes += 1
         self._log.info(f'streaming {streams.BY_CODE[cfg.stream].label} again from node '
@@ -521,14 +595,20 @@ class DeviceSupervisor:
         return True
 
     def _begin_stream(self, link: DeviceLink) -> None:
-        """Start continuous mode on an initialised link; log it."""
-        self.start_continuous(link)
+        """Start continuous mode on an initialised link; announce it once records arrive."""
+        if self.start_continuous(link):
+            self.last_start = 'full'
+            self._announce_streaming()
+
+    def _announce_streaming(self) -> None:
+        """Say that records flow: called only once one has arrived on this link."""
         self.state = State.STREAMING
-        self.last_start = 'full'
+        self.advice = ''
         stream = streams.BY_CODE[self.config.stream]
         self._log.info(f'streaming {stream.label} from node {self.config.address} on '
                        f'{self.config.port}'
-                       + (f' at {self.expected_rate_hz:.1f} Hz' if self.divider else ''))
+                       + (f' at {self.expected_rate_hz:.1f} Hz' if self.divider else '')
+                       + ' (first record received)')
 
     def _check_line(self) -> None:
         """
@@ -570,6 +650,8 @@ class DeviceSupervisor:
         except DeviceTimeout:
             firmware = ''
         info = DeviceInfo(*texts, firmware)
+        if self._stop.is_set():
+            return
         if not any(info):
             self._warn('identity', 'the device did not tell its identity (0xEA, 0xE9)')
             return
@@ -587,7 +669,7 @@ class DeviceSupervisor:
                                    layouts.READ_EEPROM, cfg.request_timeout,
                                    cfg.request_retries).value
         except DeviceTimeout:
-            if cfg.data_rate_hz is not None:
+            if cfg.data_rate_hz is not None or self._stop.is_set():
                 raise
             # Nothing to set, so streaming can go on without knowing the rate
             # (a replayed capture answers no request; lost packets and the
@@ -612,8 +694,13 @@ class DeviceSupervisor:
             f'data rate set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM 0xFCA2: {current} -> '
             f'{wanted}); this persists across power cycles')
 
-    def start_continuous(self, link: DeviceLink) -> None:
-        """Ask for continuous mode of the configured record until records actually arrive."""
+    def start_continuous(self, link: DeviceLink) -> bool:
+        """
+        Ask for continuous mode of the configured record until records actually arrive.
+
+        Returns True once a record has arrived, False if the supervisor is
+        stopping first; raises DeviceTimeout when none comes.
+        """
         cfg = self.config
         period = 1.0 / self.expected_rate_hz if self.divider else 0.01
         # From now on a record of the streamed code is a sample, even one that also
@@ -629,12 +716,12 @@ class DeviceSupervisor:
             deadline = time.monotonic() + max(0.3, 5 * period)
             while time.monotonic() < deadline and not self._stop.is_set():
                 if link.records > before:
-                    return
+                    return True
                 if link.disconnected.is_set():
                     raise PortDisconnected(link.error or 'device disconnected')
                 time.sleep(0.01)
             if self._stop.is_set():
-                return
+                return False
         raise DeviceTimeout(f'continuous mode: no records after {cfg.continuous_retries} '
                             f'requests')
 
@@ -648,18 +735,23 @@ class DeviceSupervisor:
                 raise PortDisconnected(link.error or 'device disconnected')
             if self._paused.is_set():
                 continue
-            if time.time() - link.last_data_time > stall_after:
+            quiet = time.time() - link.last_data_time
+            if self.advice and quiet < stall_after:
+                self.advice = ''  # records flow again: what was observed is past
+            if quiet > stall_after:
                 self.stalls += 1
                 self.state = State.STALLED
                 self._warn('stall', f'no data for {stall_after:.1f} s: re-requesting '
-                                    f'continuous mode')
+                                    f'continuous mode', EVENT_PERIOD)
                 try:
-                    self.start_continuous(link)
+                    resumed = self.start_continuous(link)
                 except DeviceTimeout:
-                    self._warn('stall', 'stream did not resume: reopening the port')
+                    self._warn('stall', 'stream did not resume: reopening the port',
+                               EVENT_PERIOD)
                     return
-                self.state = State.STREAMING
-                self._log.info('stream resumed')
+                if resumed:
+                    self.state = State.STREAMING
+                    self._log.info('stream resumed')
 
     # -- exclusive operations for services ------------------------------
 
@@ -675,6 +767,7 @@ class DeviceSupervisor:
             raise DeviceTimeout(f'device not streaming (state: {self.state.value})')
         self._paused.set()
         self.state = State.PAUSED
+        self._observe(False)  # a long operation (a 30 s bias capture) is quiet on purpose
         try:
             link.stop_streaming()
             # Paused, a polled record of the streamed code (a self test's 0xC2, with
@@ -684,6 +777,7 @@ class DeviceSupervisor:
             return operation(link)
         finally:
             try:
+                self._observe(True)
                 if not self._stop.is_set():
                     self.start_continuous(link)
                     self.state = State.STREAMING

@@ -121,13 +121,17 @@ def _vector(values: Iterable[float], digits: int = 5) -> str:
 
 def connection_status(port: str, address: int, wireless: bool, state: State,
                       connections: int, reconnects: int, stalls: int, last_error: str,
-                      low_latency: str, ping_ok: bool | None, capture: str) -> Status:
+                      low_latency: str, ping_ok: bool | None, capture: str,
+                      advice: str = '') -> Status:
     """
     Say whether the port is open and the device streaming.
 
     Disconnected is an ERROR (nothing can work until the port is back);
     connecting, initialising and stalled are WARN (the supervisor is on it);
-    paused for an operation the driver itself started is OK.
+    paused for an operation the driver itself started is OK. ``advice`` is
+    what the line observer found while no record arrived (another address,
+    the other framing, unreadable bytes, silence): an ERROR that says what
+    to change.
     """
     if state is State.STREAMING:
         level, message = OK, 'streaming'
@@ -135,6 +139,8 @@ def connection_status(port: str, address: int, wireless: bool, state: State,
         level, message = OK, 'port open, device quiet: not streaming (node inactive)'
     elif state is State.PAUSED:
         level, message = OK, 'stream paused for a device operation'
+    elif advice:
+        level, message = ERROR, f'no records: {advice}'
     elif state is State.STALLED:
         level, message = WARN, 'stream stalled: re-requesting continuous mode'
     elif state in (State.CONNECTING, State.INITIALISING) and not reconnects \
@@ -159,6 +165,7 @@ def connection_status(port: str, address: int, wireless: bool, state: State,
         ('base station ping', {None: 'not tried', True: 'ok', False: 'no answer'}[ping_ok]
          if wireless else 'n/a (wired)'),
         ('raw capture', capture),
+        ('observed on the line', advice or '-'),
     ))
 
 
@@ -482,7 +489,8 @@ class DiagnosticsPublisher:
         statuses += [
             connection_status(cfg.port, cfg.address, cfg.wireless, state, sup.connections,
                               sup.reconnects, sup.stalls, sup.last_error,
-                              sup.low_latency_state, sup.ping_ok, core.raw_capture.describe()),
+                              sup.low_latency_state, sup.ping_ok, core.raw_capture.describe(),
+                              sup.advice),
             stream_status(state, measured, sup.expected_rate_hz, received, period,
                           silent_for, published, stats.lost, lost_in_period,
                           stats.device_resets, stats.other_records, stats.mag_published,

@@ -28,6 +28,12 @@ The supervisor's reader thread calls :meth:`DriverCore._on_record` for
 every valid record, which stamps it, packs its messages and publishes at
 once. The executor is left free for parameters, services and diagnostics,
 and nothing it does can delay a sample.
+
+The first-contact checks live here too, so that both executables run them:
+:func:`load_config` names every parameter override the node does not
+declare, and the core refuses a port path that can never work
+(:class:`~..device.port.PortUnusable`, before anything is started), and
+keeps in :attr:`DriverCore.fatal_error` the one the supervisor finds later.
 """
 
 from collections.abc import Callable
@@ -43,15 +49,17 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from .conversions import mag_is_valid, MessageFactory
-from .parameters import DriverConfig
+from .parameters import declare_parameters, driver_config, DriverConfig, SPECS
 from .raw_capture import RawCapture
 from .services import DeviceServices
 from .temperature import TemperaturePoller
+from .unknown_parameters import warn_unknown_parameters
 from ..codec import line_budget
 from ..codec.data_rate import ticks_per_cycle
 from ..codec.framing import DataPacket
 from ..codec.timer import TimerUnwrapper
 from ..device.clock import DeviceClock
+from ..device.port import check_port_path, PortError
 from ..device.realtime import ThreadPolicy
 from ..device.supervisor import DeviceSupervisor, SupervisorConfig
 
@@ -59,6 +67,22 @@ from ..device.supervisor import DeviceSupervisor, SupervisorConfig
 #: settings: checked once per process, because a managed node makes a core at
 #: every configure and rclpy's deserialize_message keeps a little memory per call.
 _SERIALIZED_MATCHES: dict[tuple, bool] = {}
+
+
+def load_config(node: Node) -> DriverConfig:
+    """
+    Declare and validate the parameters on ``node``; return the configuration.
+
+    Raises ParameterError for a missing or bad one. Every override whose
+    name the node does not declare is named in a warning first, with the
+    closest real name, also when a required one is missing ('adress'
+    explains why 'address' is).
+    """
+    try:
+        values = declare_parameters(node)
+    finally:
+        warn_unknown_parameters(node, [spec.name for spec in SPECS])
+    return driver_config(values)
 
 
 class StreamStats:
@@ -124,14 +148,19 @@ class DriverCore:
     by default the core makes plain ones. ``publishing`` False: records are
     counted, not published, until the owner turns :attr:`publishing` on.
     ``refusal`` tells the services why they must refuse now ('' to serve).
-    The core starts nothing: its owner drives :attr:`supervisor`.
+    The core starts nothing: its owner drives :attr:`supervisor`. A port
+    path that exists but is no serial port raises PortUnusable here, before
+    anything is made.
     """
 
     def __init__(self, node: Node, config: DriverConfig,
                  publishers: Publishers | None = None, publishing: bool = True,
                  refusal: Callable[[], str] | None = None) -> None:
+        check_port_path(config.port)
         self.node = node
         self.config = cfg = config
+        #: Why the port can never work, once the supervisor found out.
+        self.fatal_error: PortError | None = None
         self.stream = cfg.stream_choice
         self._record_type = self.stream.record_type
         self.publishers = publishers or create_publishers(node, cfg)
@@ -175,7 +204,8 @@ class DriverCore:
                 stream=self.stream.code,
                 thread_policy=ThreadPolicy(cfg.realtime_priority)),
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
-            on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None)
+            on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
+            on_fatal=self._on_fatal)
         self.device_services = DeviceServices(node, self, refusal=refusal)
         self.temperature = TemperaturePoller(node, self, cfg.temperature_period,
                                              self.publishers.temperature)
@@ -184,6 +214,16 @@ class DriverCore:
             f'stream {self.stream.label}, frame {self.messages.frame_id} '
             f'({cfg.frame_convention}), '
             f'time source {cfg.time_source}')
+
+    def _on_fatal(self, error: PortError) -> None:
+        """
+        Say once that the port can never work; the supervisor has stopped.
+
+        The plain node's run loop then exits with code 2; a managed node stays
+        up, its connection ERROR on /diagnostics, for its manager to act on.
+        """
+        self.fatal_error = error
+        self.node.get_logger().fatal(str(error))
 
     def _on_connect(self) -> None:
         """Re-anchor time on a new link: the device may have been power-cycled."""

@@ -17,16 +17,18 @@ The driver node: a plain rclpy node that streams from the moment it starts.
 
 Everything the driver does is in :class:`~.driver_core.DriverCore`, shared
 with the managed node: this node declares the parameters (a bad one stops
-it at once), makes the core, publishes the diagnostics and starts the
-supervisor, which opens the port, and keeps the stream going, retrying
-forever.
+it at once, and a name it does not know is named), makes the core (a port
+path that can never work stops it at once too), publishes the diagnostics
+and starts the supervisor, which opens the port, and keeps the stream going,
+retrying forever.
 """
 
 from rclpy.node import Node
 
 from .diagnostics import DiagnosticsPublisher
-from .driver_core import DriverCore
-from .parameters import declare_parameters, driver_config, DriverConfig
+from .driver_core import DriverCore, load_config
+from .parameters import DriverConfig
+from ..device.port import PortError
 
 
 class ImuDriverNode(Node):
@@ -34,8 +36,7 @@ class ImuDriverNode(Node):
 
     def __init__(self, node_name: str = 'i3dmgx2_driver', **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        self.values = declare_parameters(self)
-        self.config: DriverConfig = driver_config(self.values)
+        self.config: DriverConfig = load_config(self)
         self.core = DriverCore(self, self.config)
         self.diagnostics = DiagnosticsPublisher(self, lambda: self.core)
         self.core.supervisor.start()
@@ -44,6 +45,11 @@ class ImuDriverNode(Node):
     def finished(self) -> bool:
         """Whether the node is done by itself: never (it runs until a signal)."""
         return False
+
+    @property
+    def fatal_error(self) -> PortError | None:
+        """Why the port can never work, once the supervisor found out (main exits 2)."""
+        return self.core.fatal_error
 
     def shutdown(self) -> None:
         """Stop the device stream and close the port (bounded in time)."""

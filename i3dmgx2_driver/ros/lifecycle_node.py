@@ -21,17 +21,21 @@ happen. Each transition is one call into the core, bounded in time, and
 logged in one line:
 
 - configure: check the parameters (a bad one fails with the plain node's
-  words), make the core (lifecycle publishers: silent until active), open
-  the port exclusively, quiet the device, read its identity, set the data
-  rate if asked. A missing or busy port, or a silent sensor, fails the
-  transition with the reason and leaves nothing open; configure again later.
+  words; a name the node does not know is warned about once, at start) and
+  the port path (one that exists but is no serial port fails with the plain
+  node's words), make the core (lifecycle publishers: silent until active),
+  open the port exclusively, quiet the device, read its identity, set the
+  data rate if asked. A missing or busy port, or a silent sensor (with what
+  the line carries instead of answers), fails the transition with the
+  reason and leaves nothing open; configure again later.
 - activate: start the stream and return once records arrive; from then on
   stalls and unplugs are recovered as the plain node recovers them, and
   the node stays active throughout (diagnostics say it is recovering).
 - deactivate: stop publishing and the stream (0xFA); the port stays open;
   the services answer that the node is inactive.
 - cleanup: close the port (another process may open it at once) and remove
-  the core's publishers and services.
+  the core's services; the publishers stay for the next configure
+  (:func:`~.driver_core.create_publishers` says why).
 - shutdown, from any state: stop the stream, close the port; the process
   then exits 0. SIGINT and SIGTERM do the same through the shutdown
   transition, within 2 s, even in the middle of a configure.
@@ -51,11 +55,11 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from .diagnostics import DiagnosticsPublisher
-from .driver_core import create_publishers, DriverCore, Publishers
+from .driver_core import create_publishers, DriverCore, load_config, Publishers
 from .main import run
 from .parameters import declare_parameters, driver_config, ParameterError
 from ..device.link import DeviceTimeout
-from ..device.port import PortError
+from ..device.port import check_port_path, PortError, PortUnusable
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
@@ -65,6 +69,11 @@ DEVICE_ERRORS = (PortError, DeviceTimeout)
 #: How long a signal waits for a transition under way to end (s); the
 #: device was cut off first, so it ends within milliseconds.
 TRANSITION_WAIT = 1.0
+#: How long the process stays up after a signal's shutdown transition (s), so
+#: that its transition events reach the subscribers before the middleware
+#: goes: a sample still in shared memory when the writer's process exits is
+#: lost, and a bringup manager would never see ``finalized``.
+EVENT_GRACE = 0.25
 
 Transition = Callable[[Any, LifecycleState], TransitionCallbackReturn]
 
@@ -103,9 +112,10 @@ class LifecycleDriverNode(LifecycleNode):
         self._transition_lock = threading.RLock()
         self._finished = threading.Event()
         try:
-            # Declared now so that ``ros2 param`` shows them before configure;
-            # configure checks them again and reports what is wrong.
-            declare_parameters(self)
+            # Declared now so that ``ros2 param`` shows them before configure, and
+            # names the node does not know are said once; configure checks them
+            # again and reports what is wrong.
+            load_config(self)
         except ParameterError:
             pass
         self.diagnostics = DiagnosticsPublisher(self, lambda: self.core,
@@ -138,6 +148,11 @@ class LifecycleDriverNode(LifecycleNode):
         try:
             config = driver_config(declare_parameters(self))
         except ParameterError as exc:
+            log.error(f'configure failed: {exc}')
+            return FAILURE
+        try:
+            check_port_path(config.port)  # the words of the plain node's exit 2
+        except PortUnusable as exc:
             log.error(f'configure failed: {exc}')
             return FAILURE
         if self._data_publishers is None:
@@ -250,6 +265,7 @@ class LifecycleDriverNode(LifecycleNode):
             if locked and not self._finished.is_set():
                 try:
                     self.trigger_shutdown()
+                    time.sleep(EVENT_GRACE)
                 except RCLError:
                     pass  # in a transition state: release below without the state machine
         finally:

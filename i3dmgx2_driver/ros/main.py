@@ -19,7 +19,10 @@ SIGINT and SIGTERM are handled here rather than by rclpy, so that the
 driver can stop the device's stream (0xFA) and close the port while ROS is
 still up, then shut ROS down: a clean exit (code 0) well within 2 s. An
 invalid parameter exits with code 2 and a message that names it and its
-valid range. :func:`run` does all of it for any driver node class (the plain
+valid range; so does a port that can never work (a path that is no serial
+port), with one FATAL line that says what the path is and how to find the
+right one: at once when the node is made, or later when the node reports it
+as ``fatal_error``. :func:`run` does all of it for any driver node class (the plain
 node here, the managed node in ``lifecycle_node.py``): the class is made
 with no arguments and provides ``shutdown()`` and ``finished`` (True once
 it is done by itself, as a managed node after its shutdown transition).
@@ -42,6 +45,7 @@ from rclpy.signals import SignalHandlerOptions
 from .imu_node import ImuDriverNode
 from .parameters import ParameterError
 from ..device import realtime
+from ..device.port import PortUnusable
 
 EXIT_BAD_PARAMETER = 2
 #: How often the main loop looks at the stop flag (s); signals wake it anyway.
@@ -71,10 +75,11 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
     # holds only its own callback group: diagnostics keep ticking, parameters
     # answer, and a signal is acted on at once rather than after the call.
     executor = MultiThreadedExecutor(num_threads=4)
+    code = 0
     try:
         try:
             node = make_node()
-        except ParameterError as exc:
+        except (ParameterError, PortUnusable) as exc:
             rclpy.logging.get_logger('i3dmgx2_driver').fatal(str(exc))
             return EXIT_BAD_PARAMETER
         executor.add_node(node)
@@ -85,6 +90,9 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
             f'{sys.getswitchinterval() * 1e3:g} ms')
         while not stop.is_set() and rclpy.ok() and not node.finished:
             executor.spin_once(timeout_sec=_SPIN_PERIOD)
+            if getattr(node, 'fatal_error', None) is not None:
+                code = EXIT_BAD_PARAMETER  # said once, as the node found it
+                break
         grace = time.monotonic() + _FINISH_GRACE
         while node.finished and not stop.is_set() and time.monotonic() < grace \
                 and rclpy.ok():
@@ -98,7 +106,7 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    return 0
+    return code
 
 
 def main(args: list[str] | None = None) -> int:
