@@ -18,21 +18,17 @@ A sample's path allocates nothing that outlives the sample.
 The garbage collector runs when the objects it tracks (tuples, lists,
 instances) grow by hundreds; a path that leaves none behind never triggers
 it, and with the start-up heap frozen a collection that other work triggers
-has next to nothing to walk. The real node runs in this process (real rclpy,
-not spinning: the executor's own work is not the sample's path) against the
-simulator in a process of its own; with the collector switched off for the
-window, the count of tracked objects is read before and after hundreds of
-published samples.
+has next to nothing to walk. The real node runs (real rclpy, not spinning:
+the executor's own work is not the sample's path) in a process of its own,
+so that nothing else allocates there, against the simulator in this one;
+with the collector switched off for the window, that process counts the
+objects it tracks before and after hundreds of published samples.
 """
 
-import gc
 import subprocess
 import sys
-import time
 
-from i3dmgx2_driver.ros.imu_node import ImuDriverNode
-import rclpy
-from rclpy.parameter import Parameter
+from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 from ros_harness import isolate_ros_domain, REPO, ros_env
 
 #: Samples measured, and the most tracked objects they may leave behind in all: the device
@@ -40,42 +36,44 @@ from ros_harness import isolate_ros_domain, REPO, ros_env
 SAMPLES = 300
 ALLOWED_GROWTH = 20
 
+#: Run in the node's own process: prints "published N tracked M".
+_MEASURE = '''
+import gc, sys, time
+import rclpy
+from rclpy.parameter import Parameter
+from i3dmgx2_driver.ros.imu_node import ImuDriverNode
+
+port, samples = sys.argv[1], int(sys.argv[2])
+rclpy.init()
+node = ImuDriverNode(parameter_overrides=[
+    Parameter('port', value=port), Parameter('address', value=95),
+    Parameter('publish_mag', value=False)])
+stats = node.core.stats
+deadline = time.monotonic() + 60.0
+while stats.published < 100 and time.monotonic() < deadline:
+    time.sleep(0.05)
+gc.collect()
+gc.disable()
+published, tracked = stats.published, gc.get_count()[0]
+while stats.published < published + samples and time.monotonic() < deadline:
+    time.sleep(0.05)
+print('published', stats.published - published, 'tracked', gc.get_count()[0] - tracked,
+      flush=True)
+gc.enable()
+node.core.shutdown(report=False)
+node.destroy_node()
+rclpy.try_shutdown()
+'''
+
 
 def test_published_samples_leave_no_tracked_objects_behind():
     isolate_ros_domain()
-    sim = subprocess.Popen([sys.executable, '-m', 'i3dmgx2_driver.simulator', '--seed', '61'],
-                           stdout=subprocess.PIPE, stdin=subprocess.PIPE, text=True,
-                           env=ros_env(), cwd=REPO)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    node = None
-    try:
-        port = sim.stdout.readline().split(': ', 1)[1].strip()
-        node = ImuDriverNode(context=context, parameter_overrides=[
-            Parameter('port', value=port), Parameter('address', value=95),
-            Parameter('publish_mag', value=False)])
-        deadline = time.monotonic() + 30.0
-        while node.core.stats.published < 100 and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert node.core.stats.published >= 100, 'the node did not stream'
-        gc.collect()
-        gc.disable()
-        try:
-            published, tracked = node.core.stats.published, gc.get_count()[0]
-            while node.core.stats.published < published + SAMPLES \
-                    and time.monotonic() < deadline + 30.0:
-                time.sleep(0.05)
-            published, tracked = (node.core.stats.published - published,
-                                  gc.get_count()[0] - tracked)
-        finally:
-            gc.enable()
-        assert published >= SAMPLES
-        assert tracked <= ALLOWED_GROWTH, \
-            f'{tracked} tracked objects left behind by {published} samples'
-    finally:
-        if node is not None:
-            node.shutdown()
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
-        sim.terminate()
-        sim.wait(10)
+    with PtySimulator(SimulatorConfig(seed=61)) as sim:
+        done = subprocess.run([sys.executable, '-c', _MEASURE, sim.port, str(SAMPLES)],
+                              capture_output=True, text=True, env=ros_env(), cwd=REPO,
+                              timeout=120)
+    words = done.stdout.split()
+    assert done.returncode == 0 and words[:1] == ['published'], done.stdout + done.stderr
+    published, tracked = int(words[1]), int(words[3])
+    assert published >= SAMPLES
+    assert tracked <= ALLOWED_GROWTH, f'{tracked} tracked objects left behind by {published}'
