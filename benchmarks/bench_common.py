@@ -427,6 +427,7 @@ class InProcessNode:
         from rclpy.parameter import Parameter
         from rclpy.signals import SignalHandlerOptions
 
+        from i3dmgx2_driver.device import realtime
         from i3dmgx2_driver.ros.conversions import stamp_parts
         from i3dmgx2_driver.ros.imu_node import ImuDriverNode
 
@@ -440,9 +441,11 @@ class InProcessNode:
             context=self.context,
             parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
         self.node.core.on_published = self._on_published
-        # As main.py spins it: several threads, so that a long service call holds only its own.
+        # As main.py spins it: several threads, so that a long service call holds only its own,
+        # and the interpreter settled as main.py settles it.
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.executor.add_node(self.node)
+        realtime.settle_interpreter()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, name='bench-executor', daemon=True)
         self._thread.start()
@@ -592,6 +595,46 @@ class NodeProcess:
             os.unlink(self.log_path)
         except OSError:
             pass
+
+
+class TimedNodeProcess(_Child):
+    """
+    The real driver process, timed from inside (``latency_node.py``).
+
+    ``params`` are the node's ROS parameters; ``flags`` go to latency_node.py
+    (``--stages``, ``--no-gc-freeze``, ...), or to another ``script`` that
+    saves the same document (``publish_floor.py``). After :meth:`stop`, ``rows`` holds
+    one tuple per Imu message: (timer, read time, publish() returned, stage
+    marks...), ``gc`` every collection (generation, start, duration), and
+    ``threads`` each thread's scheduling policy, priority and CPUs, ``opens``
+    the time of every open of the port, ``full_collection`` how long a full
+    garbage collection took at the end (s).
+    """
+
+    def __init__(self, port: str, flags: tuple[str, ...] = (),
+                 script: str = 'latency_node.py', **params: Any) -> None:
+        params = {'port': port, 'address': ADDRESS, **params}
+        argv = [sys.executable, str(BENCH_DIR / script), *flags,
+                *ros_harness.param_args(params)]
+        super().__init__(argv, 'ready', timeout=30.0)
+        self.pid = self.proc.pid
+        self.rows: list[tuple] = []
+        self.gc: list[tuple[int, float, float]] = []
+        self.threads: dict[str, dict] = {}
+        self.gc_frozen = 0
+        self.opens: list[float] = []
+        self.full_collection = math.nan
+
+    def stop(self, timeout: float = 15.0) -> dict:
+        """Stop the node as SIGTERM stops it; keep what it saved."""
+        document = super().stop(timeout)
+        self.opens = document['opens']
+        self.full_collection = document.get('full_collection', math.nan)
+        self.rows = [tuple(row) for row in document['rows']]
+        self.gc = [tuple(event) for event in document['gc']]
+        self.threads = document['threads']
+        self.gc_frozen = document['gc_frozen']
+        return document
 
 
 class LoadProcess(_Child):

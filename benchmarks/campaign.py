@@ -561,20 +561,22 @@ class Windows:
     def __init__(self, port_events: list, unplugs: list[float], end: float,
                  margin: float, settle: float = 0.05) -> None:
         by_conn: dict[int, dict] = collections.defaultdict(
-            lambda: {'flush': [], 'close': None, 'open': None})
+            lambda: {'flush': [], 'anchor': [], 'close': None, 'open': None})
         for kind, t, conn in port_events:
             entry = by_conn[conn]
-            if kind == 'flush':
-                entry['flush'].append(t)
+            if kind in ('flush', 'anchor'):
+                entry[kind].append(t)
             else:
                 entry[kind] = t
         self.flushes = sorted(t for e in by_conn.values() for t in e['flush'])
         self.opens = sorted(e['open'] for e in by_conn.values() if e['open'] is not None)
+        #: Every time the node started afresh (re-anchored: its reader publishes from then on).
+        self.anchors = sorted(t for e in by_conn.values() for t in e['anchor'])
         self.spans: list[tuple[float, float]] = []
         for entry in by_conn.values():
-            if len(entry['flush']) >= 2:
+            if entry['anchor']:
                 close = entry['close'] if entry['close'] is not None else end
-                self.spans.append((entry['flush'][1], close))
+                self.spans.append((entry['anchor'][-1], close))
         self.spans.sort()
         self.starts = [s for s, _ in self.spans]
         self.unplugs = sorted(unplugs)
@@ -617,8 +619,10 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
     """
     Return the (lost, device resets) the node should count over the published records.
 
-    Consecutive published records of one connection (the node starts afresh at
-    each) either straddle a power-up of the sensor, a device reset, or do not:
+    Consecutive published records between two anchors of the node (it starts
+    afresh at each: every connection, and again when a reconnect to a known
+    sensor fell back to the full dialogue) either straddle a power-up of the
+    sensor, a device reset, or do not:
     then the node counts ``round(step / (384 * divider)) - 1`` lost records
     when that is positive, ``step`` being the timer step in ticks (its own
     formula, for the rate the divider gives).
@@ -629,7 +633,7 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
     last = None
     span = None
     for sent in published:
-        i = bisect.bisect_right(windows.starts, sent.write_time) - 1
+        i = bisect.bisect_right(windows.anchors, sent.write_time) - 1
         if i != span or last is None:
             span, last = i, sent
             continue
@@ -853,9 +857,11 @@ def analyse(data: RunData) -> CampaignResult:
                  f'them published, at most once each)')
     lines.append('')
     lines.append('Reconciliation rules. "Read" means written whole at least '
-                 f'{windows.settle * 1e3:.0f} ms after the second input flush of a connection '
-                 f'of the node and at least {cfg.unread_margin:g} s before the close of that '
-                 f'connection or the next unplug; "written" means written whole after the node '
+                 f'{windows.settle * 1e3:.0f} ms after the node last started its reader afresh '
+                 f'on a connection (after the stop-and-flush of the full start-up, or the '
+                 f'flush of a reconnect to the known sensor) and at least '
+                 f'{cfg.unread_margin:g} s before the close of that connection or the next '
+                 f'unplug; "written" means written whole after the node '
                  f'first opened the port. A record written at any other time may be lost '
                  f'legitimately (unplugged, flushed by the stop-and-flush at a (re)open, '
                  f'unread at a close); stalls and drops are never written.')

@@ -20,9 +20,10 @@ from the outside: a ROS timer that writes the node's ``stats``, the parser
 counters summed over every connection (``supervisor.parser_stats()``) and the
 supervisor's counters to the file named by ``$I3DMGX2_SOAK_STATS`` twice a
 second and once more after shutdown; and a serial port that notes the time
-of every open, input flush and close, which tell the campaign when the node
-could read the port (records written outside those windows may be lost
-legitimately). Nothing on the path of a sample is changed.
+of every open, input flush and close, and the node's re-anchoring (its
+reader publishes every record from then on), which tell the campaign when
+the node could read the port (records written outside those windows may be
+lost legitimately). Nothing on the path of a sample is changed.
 
 Usage: ``I3DMGX2_SOAK_STATS=out.json python -m benchmarks.instrumented_node
 --ros-args -p port:=... -p address:=...``.
@@ -101,6 +102,14 @@ def _write(path: str, document: dict) -> None:
     os.replace(temporary, path)
 
 
+class ObservedCore(driver_core.DriverCore):
+    """The driver core, noting when it re-anchors: every record is published from then on."""
+
+    def _on_connect(self) -> None:
+        super()._on_connect()
+        _note('anchor')
+
+
 class ObservedNode(imu_node.ImuDriverNode):
     """The driver node, writing its counters to a file as it runs."""
 
@@ -123,6 +132,7 @@ def main() -> int:
         return 2
     driver_core.DeviceSupervisor = functools.partial(driver_core.DeviceSupervisor,
                                                      port_factory=ObservedPort)
+    imu_node.DriverCore = ObservedCore
     node_main.ImuDriverNode = ObservedNode
     return node_main.main()
 

@@ -24,8 +24,12 @@ the driver's own delay (read, parse, stamp, fill, publish) and the delay to a
 subscriber in another process (that adds DDS and the subscriber's executor).
 
 Runs at 100 Hz (the factory rate) and at the most a 115200-baud line carries
-(~131 Hz of 88-byte packets). Target: p99 of write -> publish() <= 0.1 ms
-(the original C++ node: 0.99 ms mean, 1.16 ms max).
+(~131 Hz of 88-byte packets). Targets (issue #12), about the driver itself:
+its share (read() returned -> publish() returned) p99 <= 0.1 ms and max <=
+0.5 ms at 100 Hz, and write -> publish() p99 <= 1.5 x the kernel's own p99
+(write -> read() returned) in the same run. The original C++ node: 0.99 ms
+mean, 1.16 ms max. ``latency_levers.py`` measures the driver as its own
+process, stage by stage and with each latency lever.
 """
 
 import time
@@ -36,8 +40,11 @@ from bench_common import (
     write_latencies,
 )
 
-#: p99 of last byte written -> publish() returned (s).
-TARGET_P99_S = 0.1e-3
+#: The driver's share (read() returned -> publish() returned) at 100 Hz: p99 and max (s).
+TARGET_DRIVER_P99_S = 0.1e-3
+TARGET_DRIVER_MAX_S = 0.5e-3
+#: Write -> publish() returned, p99, at most this many times the kernel's own p99.
+TARGET_KERNEL_RATIO = 1.5
 #: Seconds of streaming left out at the start (start-up, DDS discovery).
 WARM_UP_S = 2.0
 
@@ -87,17 +94,22 @@ def run(seconds: float) -> list[Result]:
     for label, rate in (('100 Hz', 100.0), (line_max, LINE_MAX_RATE_HZ)):
         measured = LatencyRun(rate, seconds)
         pub = measured.to_publish
+        ratio = pub.p99 / measured.to_read.p99
         results.append(Result(
             f'latency write -> publish() returned, {label}: p50 / p99 / max',
-            pub.ms(), 'p99 <= 0.100 ms', pub.p99 <= TARGET_P99_S))
+            f'{pub.ms()}; p99 {ratio:.2f} x the kernel p99',
+            f'p99 <= {TARGET_KERNEL_RATIO:g} x kernel p99', ratio <= TARGET_KERNEL_RATIO))
         results.append(Result(
             f'latency write -> publish() returned, {label}: mean', f'{pub.mean * 1e3:.3f} ms'))
         results.append(Result(
             f'  of which write -> read() returned (kernel pty, wake-up), {label}',
             measured.to_read.ms()))
+        driver = measured.in_driver
         results.append(Result(
             f'  of which read() returned -> publish() returned (driver), {label}',
-            measured.in_driver.ms()))
+            driver.ms(), 'p99 <= 0.100 ms, max <= 0.500 ms' if rate == 100.0 else '',
+            driver.p99 <= TARGET_DRIVER_P99_S and driver.max_ <= TARGET_DRIVER_MAX_S
+            if rate == 100.0 else None))
         sub = measured.to_subscriber
         results.append(Result(
             f'latency write -> subscriber callback (other process), {label}: p50 / p99 / max',

@@ -56,7 +56,7 @@ def _synthetic_run(published_indices: list[int], extra: list[bytes] = ()) -> Run
                       'unpublished': 0},
             'supervisor': {'connections': 1},
             'port_events': [('open', 9.0, 1), ('flush', 9.1, 1), ('flush', 9.2, 1),
-                            ('close', 12.0, 1)]}
+                            ('anchor', 9.2, 1), ('close', 12.0, 1)]}
     return RunData(
         cfg=CampaignConfig(log=None), truth=truth, truth_missed=0, messages=messages,
         events=[], node_stats=node, sim_stats={'bytes_written': 8800, 'nacks': 0},

@@ -31,6 +31,7 @@ from typing import Any, NamedTuple
 
 from .observer import LineObserver, QUIET_AFTER
 from .port import PortDisconnected, SerialPort
+from .realtime import apply_to_current_thread, NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
 from ..codec import commands, layouts
 from ..codec.framing import DataPacket, encode_command_packet
 from ..codec.records import PingReply
@@ -92,6 +93,8 @@ class DeviceLink:
     ``cancel``, if given and set, makes requests give up within tens of
     milliseconds while the reader goes on (the stream is being stopped, the
     port kept: nobody waits for the answers any more).
+    ``thread_policy`` is applied by the reader thread to itself before its
+    first read; ``policy_outcome`` then says what the scheduler granted.
     """
 
     def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
@@ -99,7 +102,8 @@ class DeviceLink:
                  on_bytes: BytesCallback | None = None,
                  streamed: int | None = None,
                  observer: LineObserver | None = None,
-                 cancel: threading.Event | None = None) -> None:
+                 cancel: threading.Event | None = None,
+                 thread_policy: ThreadPolicy = NORMAL_SCHEDULING) -> None:
         self.port = port
         self.address = address
         self.wireless = wireless
@@ -120,7 +124,14 @@ class DeviceLink:
         self.error: str | None = None
         self.last_data_time = 0.0
         self.records = 0
+        #: Command byte of the last record handed to ``on_record`` (None before one).
+        self.last_code: int | None = None
         self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
+        self._thread_policy = thread_policy
+        #: What the scheduler granted the reader thread (set once it runs).
+        self.policy_outcome = PolicyOutcome()
+        #: Set by the reader thread once its policy is applied, before its first read.
+        self.running = threading.Event()
 
     # -- reader thread -------------------------------------------------
 
@@ -141,6 +152,9 @@ class DeviceLink:
         self._wake_pending()
 
     def _run(self) -> None:
+        if self._thread_policy.requested:
+            self.policy_outcome = apply_to_current_thread(self._thread_policy)
+        self.running.set()
         parser = self.parser
         read = self.port.read_some
         observer = self._observer
@@ -176,6 +190,7 @@ class DeviceLink:
                 if code != self.streamed:
                     return
             self.records += 1
+            self.last_code = code
             self._on_record(event, now)
         elif isinstance(event, Ack):
             if self._pending is not None:

@@ -20,8 +20,15 @@ reads the device's identity, sets the data rate if asked, and starts
 continuous mode, retrying each step because commands get lost over the
 radio. It then watches the stream: a stall re-requests continuous mode and
 then reopens the port; an unplug reopens it every ``reconnect_interval``,
-forever. The reader thread inside the link does the publishing; this thread
-never touches a sample.
+forever, and at once when the port reappears. The reader thread inside the
+link does the publishing; this thread never touches a sample.
+
+A reconnect to a sensor already identified is short: what the driver knows
+(identity, data-rate divider) is not asked again. One serial-number read
+confirms it is the same sensor (the wireless sensor keeps streaming while
+the base station is unplugged, so its records usually flow already; if not,
+continuous mode is requested). Records are published from the moment they
+arrive. Another serial number, or no answer, gets the full dialogue.
 
 What may come back (an unplugged adapter, a sensor switched off) is said
 once and reminded at most every ``REMINDER_PERIOD``; what never can (a path
@@ -45,6 +52,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 import enum
 import logging
+import os
 import threading
 import time
 from typing import Any, NamedTuple
@@ -52,6 +60,7 @@ from typing import Any, NamedTuple
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .observer import Finding, LineObserver
 from .port import PortDisconnected, PortError, PortUnusable, SerialPort
+from .realtime import NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
 from ..codec import commands, layouts, streams
 # The divider arithmetic is the codec's; its names stay importable from here.
 from ..codec.data_rate import (  # noqa: F401
@@ -63,6 +72,12 @@ from ..codec.data_rate import (  # noqa: F401
 STREAM_COMMAND = streams.DEFAULT.code
 
 IDENTIFIER_NAMES = ('model_number', 'serial_number', 'model_name', 'options')
+#: Device identifier selector of the serial number (0xEA).
+SERIAL_NUMBER_SELECTOR = IDENTIFIER_NAMES.index('serial_number')
+#: How often a missing port is looked for (s), so that it is reopened as soon as it is back.
+PORT_WATCH_S = 0.02
+#: Pause between a port reappearing and opening it (s): udev sets its permissions meanwhile.
+PORT_SETTLE_S = 0.02
 #: A condition that persists (a missing port, a silent sensor) is said once,
 #: then reminded at most this often (s).
 REMINDER_PERIOD = 60.0
@@ -111,6 +126,17 @@ class SupervisorConfig:
     request_timeout: float = 0.5
     request_retries: int = 3
     continuous_retries: int = 5
+    #: Scheduling of the reader thread (SCHED_FIFO priority, CPU).
+    thread_policy: ThreadPolicy = NORMAL_SCHEDULING
+    #: Reconnect to a known sensor with one serial-number read (False: the full dialogue).
+    fast_reconnect: bool = True
+    #: Reopen a port the moment it reappears, and a port closed for a stall at once
+    #: (False: always wait ``reconnect_interval``).
+    prompt_reopen: bool = True
+    #: Per try and tries of that read: short, so that a reply lost in a stall is asked
+    #: again soon after the radio is back.
+    resume_timeout: float = 0.1
+    resume_retries: int = 5
 
 
 class Throttle:
@@ -184,6 +210,10 @@ class DeviceSupervisor:
         #: records flow), for diagnostics.
         self.advice = ''
         self._observer: LineObserver | None = None
+        self._policy_logged = PolicyOutcome()
+        #: How the last connection got streaming: 'full' (the whole dialogue) or 'resumed'.
+        self.last_start = ''
+        self.resumes = 0
 
     # -- life cycle ----------------------------------------------------
     #
@@ -344,13 +374,16 @@ class DeviceSupervisor:
     def _run(self, link: DeviceLink | None) -> None:
         """Stream and recover until stopped; ``link``: one already streaming, or None."""
         while not self._stop.is_set():
+            stalled = False
             try:
                 if link is None:
                     self.state = State.CONNECTING
                     link = self._open()
-                    self._initialise(link)
-                    self._begin_stream(link)
+                    if not self._resume(link):
+                        self._initialise(link)
+                        self._begin_stream(link)
                 self._watch(link)
+                stalled = True
             except PortUnusable as exc:
                 self._fail(exc)
             except PortError as exc:
@@ -370,7 +403,28 @@ class DeviceSupervisor:
             self._release(send_stop=False)
             link = None
             self.state = State.DISCONNECTED
-            self._stop.wait(self.config.reconnect_interval)
+            if not (stalled and self.config.prompt_reopen):
+                self._wait_to_reopen()  # a port closed for a stall is still there
+
+    def _wait_to_reopen(self) -> None:
+        """
+        Wait ``reconnect_interval``, or less: a port seen missing is reopened once it is back.
+
+        An unplugged adapter's device node goes, and comes back when it is
+        plugged in again; looking for it costs a stat() every few tens of ms.
+        """
+        interval = self.config.reconnect_interval
+        if not self.config.prompt_reopen:
+            self._stop.wait(interval)
+            return
+        deadline = time.monotonic() + interval
+        seen_missing = False
+        while not self._stop.wait(PORT_WATCH_S) and time.monotonic() < deadline:
+            if not os.path.exists(self.config.port):
+                seen_missing = True
+            elif seen_missing:
+                self._stop.wait(PORT_SETTLE_S)
+                return
 
     def _fail(self, exc: PortUnusable) -> None:
         """Give up for good: say why once, stop, and let the entry point exit."""
@@ -392,7 +446,8 @@ class DeviceSupervisor:
         observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
                                                  cfg.baud, self._on_finding)
         link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless,
-                          on_bytes=self._on_bytes, observer=observer, cancel=self._stop)
+                          on_bytes=self._on_bytes, observer=observer, cancel=self._stop,
+                          thread_policy=cfg.thread_policy)
         with self._link_lock:
             if self._stop.is_set():
                 # Stopped while opening: the caller has released the link already.
@@ -430,14 +485,17 @@ class DeviceSupervisor:
         soon, with the reason; the plain node just retries).
         """
         self.state = State.INITIALISING
-        link.port.flush_input()
+        if not link.running.is_set():
+            link.port.flush_input()
         link.stop_streaming()
+        link.streamed = None  # a polled record is a reply only now
         time.sleep(0.05)
         link.port.flush_input()
-        # Re-anchor the consumer before the first record of this link can reach it.
-        if self._on_connect is not None:
-            self._on_connect()
-        link.start()
+        if link.running.is_set():
+            # The reader runs already (a resume that was not confirmed): anchor afresh.
+            self._anchor()
+        else:
+            self._start_reader(link)
         if link.wireless:
             self.ping_ok = link.ping(timeout=0.3, retries=2)
             if not self.ping_ok:
@@ -467,9 +525,81 @@ class DeviceSupervisor:
         self._configure_rate(link)
         self._check_line()
 
+    def _anchor(self) -> None:
+        """Let the consumer re-anchor before the first record of a new link reaches it."""
+        if self._on_connect is not None:
+            self._on_connect()
+
+    def _start_reader(self, link: DeviceLink) -> None:
+        """Anchor the consumer, start the reader thread, log what its scheduling became."""
+        self._anchor()
+        link.start()
+        if not link.running.wait(1.0):
+            return
+        outcome = link.policy_outcome
+        if outcome != self._policy_logged:
+            self._policy_logged = outcome
+            if outcome.applied:
+                self._log.info(f'reader thread: {", ".join(outcome.applied)}')
+            for refusal in outcome.refused:
+                self._log.warning(refusal)
+
+    def _resume(self, link: DeviceLink) -> bool:
+        """
+        Confirm with one serial-number read that the known sensor is back; keep it streaming.
+
+        Returns False, with nothing done or the reader running, when the
+        driver knows no sensor yet (or must not resume), or when the sensor
+        does not answer or another serial number does: the caller then runs
+        the full dialogue.
+        """
+        cfg = self.config
+        known = self.info.serial_number if self.info is not None else ''
+        if not (cfg.fast_reconnect and known):
+            return False
+        self.state = State.INITIALISING
+        link.port.flush_input()
+        # Records of the stream that flows already are samples from the first one.
+        link.streamed = cfg.stream
+        self._start_reader(link)
+        try:
+            reply = link.request(commands.device_identifier(SERIAL_NUMBER_SELECTOR),
+                                 layouts.DEVICE_IDENTIFIER, cfg.resume_timeout,
+                                 cfg.resume_retries)
+        except DeviceTimeout:
+            if self._stop.is_set():
+                raise
+            if self._throttle.allow('resume', EVENT_PERIOD):
+                self._log.info(f'node {cfg.address} did not confirm its serial number: '
+                               f'starting it in full')
+            return False
+        serial = reply.text.strip(' \x00')
+        if serial != known:
+            self._log.warning(f'another sensor answers as node {cfg.address}: serial '
+                              f'{serial or "?"}, not {known}; identifying it in full')
+            self.info = None
+            return False
+        period = 1.0 / self.expected_rate_hz if self.divider else 0.01
+        deadline = time.monotonic() + min(2 * period, 0.1)
+        while link.last_code != cfg.stream and time.monotonic() < deadline \
+                and not self._stop.is_set():
+            time.sleep(0.002)
+        # Not streaming (power-cycled meanwhile), or streaming another record: ask for it.
+        if link.last_code != cfg.stream and not self.start_continuous(link):
+            return True  # stopping: nothing more to do here
+        self.state = State.STREAMING
+        self.advice = ''
+        self.last_start = 'resumed'
+        self.resumes += 1
+        self._log.info(f'streaming {streams.BY_CODE[cfg.stream].label} again from node '
+                       f'{cfg.address} on {cfg.port}: same sensor (serial {serial}), identity '
+                       f'and data rate not asked again')
+        return True
+
     def _begin_stream(self, link: DeviceLink) -> None:
         """Start continuous mode on an initialised link; announce it once records arrive."""
         if self.start_continuous(link):
+            self.last_start = 'full'
             self._announce_streaming()
 
     def _announce_streaming(self) -> None:

@@ -60,6 +60,7 @@ from ..codec.framing import DataPacket
 from ..codec.timer import TimerUnwrapper
 from ..device.clock import DeviceClock
 from ..device.port import check_port_path, PortError
+from ..device.realtime import ThreadPolicy
 from ..device.supervisor import DeviceSupervisor, SupervisorConfig
 
 #: Whether ready-serialized messages read back right, by the message factory's
@@ -200,7 +201,8 @@ class DriverCore:
                 port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
                 low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
                 reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
-                stream=self.stream.code),
+                stream=self.stream.code,
+                thread_policy=ThreadPolicy(cfg.realtime_priority)),
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
             on_fatal=self._on_fatal)

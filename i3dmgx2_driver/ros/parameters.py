@@ -40,6 +40,7 @@ from ..codec import streams
 from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.orientation import CONVENTIONS
+from ..device.realtime import MAX_PRIORITY
 
 TIME_SOURCES = ('device', 'host')
 RELIABILITIES = ('reliable', 'best_effort')
@@ -124,6 +125,10 @@ SPECS: list[Spec] = [
     Spec('temperature_period', Parameter.Type.DOUBLE, 0.0,
          'Seconds between polls of the temperatures (0xD1), published on imu/temperature; '
          '0: off.', (0.0, 3600.0)),
+    Spec('realtime_priority', Parameter.Type.INTEGER, 0,
+         'SCHED_FIFO priority of the thread that reads the port and publishes; 0: normal '
+         'scheduling. Where the system refuses it (no rtprio limit) one warning is logged and '
+         'the thread runs as usual.', (0, MAX_PRIORITY)),
     Spec('capture_file', Parameter.Type.STRING, '',
          'Write every byte read from the port, with its receive time, to this capture file '
          '(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '
@@ -158,6 +163,7 @@ class DriverConfig:
     gyro_bias_sampling_ms: int
     capture_gyro_bias_on_start: bool
     temperature_period: float
+    realtime_priority: int
     capture_file: str
 
     @property

@@ -1,0 +1,213 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Data back after a reconnect: the port (or the radio) answering again -> a message published.
+
+The real driver process (``latency_node.py``, its defaults: ``read_timeout``
+and ``reconnect_interval`` 1 s) streams from the simulated sensor at 100 Hz,
+which runs in this process; the scenarios, repeated every round:
+
+- unplug: the base station is unplugged for 1.5 to 2.5 s (at random, so that
+  a retry every ``reconnect_interval`` meets the port at any phase; the
+  wireless sensor keeps streaming), then plugged back in;
+- unplug + power cycle: the same, and the sensor restarts meanwhile (it
+  comes back not streaming);
+- long stall: 6.5 to 7.5 s of radio silence, longer than the stall recovery
+  (1 s, then five requests for continuous mode), so the driver reopens the
+  port;
+- short stall: 1.5 to 2.5 s of radio silence, recovered without reopening.
+
+Figures: from the port back (``replug()`` returned) or the radio back (end of
+the stall) to the first Imu message ``publish()`` returned after it; from the
+port opened again to that message; and the commands the driver sent in the
+3 s after the port came back (from the simulator's host command log). Each
+round runs the driver as shipped (a known sensor is confirmed with one
+serial-number read; a port is reopened the moment it is back), with the
+fast reconnect switched off (the full start-up dialogue every time), and
+with both switched off (as before issue 12), one after the other.
+
+    python benchmarks/reconnect.py --rounds 3
+"""
+
+import argparse
+import os
+import random
+import statistics
+import sys
+import time
+from typing import NamedTuple
+
+from bench_common import (
+    isolate_ros_domain, machine_table, OtherLoad, OUTPUT_DIR, TimedNodeProcess,
+)
+
+from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+
+#: mode -> flags of latency_node.py, and its column heading.
+MODES = {'fast': ((), 'as shipped'),
+         'full': (('--no-fast-reconnect',), 'full dialogue every time'),
+         'before': (('--no-fast-reconnect', '--no-prompt-reopen'),
+                    'full dialogue, reopen every reconnect_interval (before issue 12)')}
+#: How long the base station stays unplugged (s): uniform in this range.
+UNPLUG_S = (1.5, 2.5)
+#: Stall lengths (s), uniform in these ranges (so that stalls end at any phase of the
+#: sensor's sample clock).
+LONG_STALL_S = (6.5, 7.5)
+SHORT_STALL_S = (1.5, 2.5)
+#: Time given to the driver to stream again after each scenario (s).
+SETTLE_S = 4.0
+SCENARIOS = ('unplug', 'unplug + power cycle', 'long stall', 'short stall')
+
+
+class Trial(NamedTuple):
+    """One scenario once: when the port or radio was back, and the commands sent after."""
+
+    scenario: str
+    back: float
+    commands: tuple[str, ...]
+
+
+def _commands_since(sim: PtySimulator, since: float, until: float) -> tuple[str, ...]:
+    out = []
+    for entry in sim.host_log:
+        if since <= entry.time <= until and entry.command is not None:
+            code = entry.command.code
+            name = f'{code:02X}'
+            if code == 0xEA:
+                name += f'({entry.command.args[0]})'
+            out.append(name)
+    return tuple(out)
+
+
+def run_scenarios(sim: PtySimulator, rng: random.Random) -> list[Trial]:
+    """Run every scenario once on a streaming driver; return when each came back."""
+    trials = []
+    # The base station unplugged while the sensor streams on.
+    sim.unplug()
+    time.sleep(rng.uniform(*UNPLUG_S))
+    sim.replug()
+    back = time.time()
+    time.sleep(SETTLE_S)
+    trials.append(Trial('unplug', back, _commands_since(sim, back, back + 3.0)))
+    # Unplugged, and the sensor restarts meanwhile: it comes back in polled mode.
+    sim.unplug()
+    sim.power_cycle()
+    time.sleep(rng.uniform(*UNPLUG_S))
+    sim.replug()
+    back = time.time()
+    time.sleep(SETTLE_S)
+    trials.append(Trial('unplug + power cycle', back,
+                        _commands_since(sim, back, back + 3.0)))
+    for name, lengths in (('long stall', LONG_STALL_S), ('short stall', SHORT_STALL_S)):
+        seconds = rng.uniform(*lengths)
+        start = time.time()
+        sim.stall(seconds)
+        back = start + seconds
+        time.sleep(seconds + SETTLE_S)
+        trials.append(Trial(name, back, _commands_since(sim, back, back + 3.0)))
+    return trials
+
+
+class Figures(NamedTuple):
+    """Per scenario and mode: seconds to the first message, from the port back and opened."""
+
+    to_publish: dict[tuple[str, str], list[float]]
+    open_to_publish: dict[tuple[str, str], list[float]]
+    commands: dict[tuple[str, str], tuple[str, ...]]
+
+
+def measure(rounds: int, seed: int) -> Figures:
+    """Run the rounds; return the figures."""
+    figures = Figures({}, {}, {})
+    rng = random.Random(seed)
+    for round_ in range(rounds):
+        for mode, (flags, _) in MODES.items():
+            print(f'-- round {round_ + 1}/{rounds}: {mode}', file=sys.stderr, flush=True)
+            with PtySimulator(SimulatorConfig(seed=seed + round_)) as sim:
+                node = TimedNodeProcess(sim.port, flags)
+                try:
+                    time.sleep(3.0)
+                    trials = run_scenarios(sim, rng)
+                finally:
+                    node.stop()
+            published = sorted(row[2] for row in node.rows)
+            for trial in trials:
+                key = (trial.scenario, mode)
+                first = next((t for t in published if t > trial.back), None)
+                if first is None:
+                    continue
+                figures.to_publish.setdefault(key, []).append(first - trial.back)
+                print(f'   {trial.scenario}: first message {(first - trial.back) * 1e3:.1f} ms '
+                      f'after the port or radio was back', file=sys.stderr, flush=True)
+                opened = [t for t in node.opens if trial.back <= t <= first]
+                if opened:
+                    figures.open_to_publish.setdefault(key, []).append(first - opened[0])
+                figures.commands[key] = trial.commands
+    return figures
+
+
+def _ms(values: list[float] | None) -> str:
+    if not values:
+        return '-'
+    return (f'{statistics.median(values) * 1e3:.0f} / {max(values) * 1e3:.0f} ms '
+            f'(n={len(values)})')
+
+
+def _commands(names: tuple[str, ...]) -> str:
+    return ' '.join(names) if names else 'none'
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run from the command line; print and save the table."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--rounds', type=int, default=3)
+    parser.add_argument('--seed', type=int, default=1)
+    parser.add_argument('--output', default='reconnect.md')
+    args = parser.parse_args(argv)
+    isolate_ros_domain()
+    other = OtherLoad()
+    started = time.monotonic()
+    figures = measure(args.rounds, args.seed)
+    modes = list(MODES)
+    heading = ' | '.join(f'{MODES[m][1]}: median / max' for m in modes)
+    lines = ['## Data back after a reconnect (100 Hz)', '', machine_table(), '',
+             f'| scenario | from | {heading} |', '|---|---|' + '---|' * len(modes)]
+    for scenario in SCENARIOS:
+        origin = 'radio back' if 'stall' in scenario else 'port back'
+        cells = ' | '.join(_ms(figures.to_publish.get((scenario, m))) for m in modes)
+        lines.append(f'| {scenario} | {origin} -> first message published | {cells} |')
+        if 'unplug' in scenario:
+            cells = ' | '.join(_ms(figures.open_to_publish.get((scenario, m))) for m in modes)
+            lines.append(f'| {scenario} | port opened -> first message published | {cells} |')
+    heading = ' | '.join(MODES[m][1] for m in modes)
+    lines += ['', f'| commands sent in the 3 s after the port or radio was back | {heading} |',
+              '|---|' + '---|' * len(modes)]
+    for scenario in SCENARIOS:
+        cells = ' | '.join(_commands(figures.commands.get((scenario, m), ())) for m in modes)
+        lines.append(f'| {scenario} | {cells} |')
+    lines += ['', f'- `python benchmarks/reconnect.py {" ".join(argv or sys.argv[1:])}`: '
+              f'{(time.monotonic() - started) / 60.0:.1f} min; load average (1 min) '
+              f'{os.getloadavg()[0]:.2f} at the end; other processes kept {other.cores():.2f} '
+              f'of {os.cpu_count()} cores busy on average.']
+    text = '\n'.join(lines) + '\n'
+    print(text, flush=True)
+    if args.output:
+        OUTPUT_DIR.mkdir(parents=True, exist_ok=True)
+        (OUTPUT_DIR / args.output).write_text(text)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

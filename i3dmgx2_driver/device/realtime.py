@@ -1,0 +1,117 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+How the reader thread is scheduled, and what the interpreter is told at start-up.
+
+A sample waits on its way to ``publish()`` for three things besides its own
+work: the kernel scheduling the reader thread (other processes may hold the
+CPU), the interpreter lock (another thread of the node may hold it), and the
+garbage collector (a full collection walks every object the process has).
+The README's latency section measures each of these levers.
+
+- :class:`ThreadPolicy` asks for SCHED_FIFO for the reader thread. The
+  kernel may refuse (an unprivileged user without an ``rtprio`` limit,
+  another platform): the reader then runs as it would have, and
+  :func:`apply_to_current_thread` says why in one sentence for the log.
+  (Pinning the reader thread to a CPU was measured too, and left out: it
+  did not help, with or without SCHED_FIFO.)
+- :func:`settle_interpreter` freezes what start-up allocated, so that a
+  collection never walks rclpy's and the driver's long-lived objects again,
+  and shortens the interval after which a thread waiting for the interpreter
+  lock makes its holder let go.
+"""
+
+import gc
+import os
+import sys
+from typing import NamedTuple
+
+#: The interpreter lock switch interval (s) for the driver's process. CPython's default is
+#: 5 ms: a sample whose reader thread wakes while another thread holds the lock (a
+#: diagnostics callback building its message) may wait that long for it.
+SWITCH_INTERVAL_S = 0.0005
+#: Highest SCHED_FIFO priority Linux accepts.
+MAX_PRIORITY = 99
+
+
+class ThreadPolicy(NamedTuple):
+    """What the reader thread asks of the scheduler; the default asks for nothing."""
+
+    #: SCHED_FIFO priority 1..99; 0 leaves the thread under the normal policy.
+    realtime_priority: int = 0
+
+    @property
+    def requested(self) -> bool:
+        """Whether anything is asked at all."""
+        return self.realtime_priority > 0
+
+
+#: Ask nothing of the scheduler.
+NORMAL_SCHEDULING = ThreadPolicy()
+
+
+class PolicyOutcome(NamedTuple):
+    """What the scheduler granted (short phrases) and refused (a sentence each, for the log)."""
+
+    applied: tuple[str, ...] = ()
+    refused: tuple[str, ...] = ()
+
+
+def apply_to_current_thread(policy: ThreadPolicy) -> PolicyOutcome:
+    """
+    Apply ``policy`` to the calling thread; return what was applied and what refused.
+
+    Never raises: a refusal leaves that part of the thread's scheduling as it
+    was, and its sentence says what was refused, why, and how to allow it.
+    """
+    applied: list[str] = []
+    refused: list[str] = []
+    if policy.realtime_priority > 0:
+        priority = policy.realtime_priority
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+            applied.append(f'SCHED_FIFO priority {priority}')
+        except (AttributeError, OSError) as exc:
+            reason = getattr(exc, 'strerror', None) or 'not available on this platform'
+            refused.append(
+                f'realtime_priority {priority} refused ({reason}): the reader thread keeps '
+                f'normal scheduling; allow SCHED_FIFO with an rtprio limit of at least '
+                f'{priority} (ulimit -r, /etc/security/limits.conf)')
+    return PolicyOutcome(tuple(applied), tuple(refused))
+
+
+def freeze_startup_heap() -> int:
+    """
+    Collect once, then move every object alive now out of the collector's sight.
+
+    Start-up allocates the long-lived objects (modules, rclpy, message
+    classes, the node); the hot path allocates nothing that survives a
+    sample, so after this a collection has almost nothing to walk. Returns
+    how many objects were frozen.
+    """
+    gc.collect()
+    gc.freeze()
+    return gc.get_freeze_count()
+
+
+def shorten_switch_interval(interval: float = SWITCH_INTERVAL_S) -> None:
+    """Let a thread waiting for the interpreter lock get it after ``interval`` s at most."""
+    sys.setswitchinterval(interval)
+
+
+def settle_interpreter() -> int:
+    """Apply the interpreter-wide measures (see the module doc); return the frozen count."""
+    shorten_switch_interval()
+    return freeze_startup_heap()
