@@ -75,6 +75,17 @@ def rig(listener: Listener, node: NodeProcess) -> LifecycleClient:
     return client
 
 
+def bring_to(state: str, listener: Listener, node: NodeProcess) -> LifecycleClient:
+    """Take a fresh managed node to ``state`` (data flowing when active); return the client."""
+    client = rig(listener, node)
+    if state != 'unconfigured':
+        assert client.change('configure'), node.output()
+    if state == 'active':
+        assert client.change('activate'), node.output()
+        assert listener.wait_for('imu/raw_data', 10), node.output()
+    return client
+
+
 def port_is_free(path: str) -> bool:
     """Whether this process can open ``path`` exclusively right now (closed again at once)."""
     try:
@@ -254,12 +265,7 @@ def test_bad_parameter_fails_configure_with_the_plain_nodes_message(params, expe
 def test_shutdown_transition_from_each_state_exits_zero(state):
     with PtySimulator(SimulatorConfig(seed=56)) as sim, Listener(TOPICS) as listener, \
             start(sim.port) as node:
-        client = rig(listener, node)
-        if state != 'unconfigured':
-            assert client.change('configure'), node.output()
-        if state == 'active':
-            assert client.change('activate'), node.output()
-            assert listener.wait_for('imu/raw_data', 10), node.output()
+        client = bring_to(state, listener, node)
         assert client.state() == state
         assert client.change('shutdown'), node.output()
         assert node.wait(timeout=10) == 0, node.output()
@@ -274,12 +280,7 @@ def test_shutdown_transition_from_each_state_exits_zero(state):
 def test_signal_in_each_state_stops_the_stream_and_exits_zero(state, sig):
     with PtySimulator(SimulatorConfig(seed=57)) as sim, Listener(TOPICS) as listener, \
             start(sim.port) as node:
-        client = rig(listener, node)
-        if state != 'unconfigured':
-            assert client.change('configure'), node.output()
-        if state == 'active':
-            assert client.change('activate'), node.output()
-            assert listener.wait_for('imu/raw_data', 10), node.output()
+        bring_to(state, listener, node)
         sent_before = time.time()
         code, took = node.stop(sig)
         assert code == 0, node.output()

@@ -40,11 +40,12 @@ import threading
 import time
 from typing import Any, NamedTuple
 
+from .identity import DeviceInfo, IDENTIFIER_NAMES, read_firmware, read_identifier
 from .link import DeviceLink, DeviceTimeout
 from .port import (
     PortBusy, PortDisconnected, PortError, PortMissing, PortPermissionDenied, SerialPort,
 )
-from .supervisor import DeviceInfo, IDENTIFIER_NAMES, RATE_BASE_HZ, RATE_DIVIDER_ADDRESS
+from .supervisor import RATE_BASE_HZ, RATE_DIVIDER_ADDRESS
 from ..codec import commands, layouts
 from ..codec.framing import DataPacket, MAX_ADDRESS, MIN_ADDRESS
 from ..codec.stream import SensorStreamParser
@@ -345,9 +346,9 @@ class _Prober:
 
     def _read(self, link: DeviceLink) -> tuple[DeviceInfo | None, int | None]:
         """Return the identity and rate divider; (None, None) if it answers nothing."""
+        cfg = self.config
         try:
-            firmware = self._request(link, bytes((layouts.FIRMWARE_VERSION,)),
-                                     layouts.FIRMWARE_VERSION).text
+            firmware = read_firmware(link, cfg.request_timeout, cfg.request_retries)
         except DeviceTimeout:
             return None, None
         texts = [self._identifier(link, selector) for selector in range(len(IDENTIFIER_NAMES))]
@@ -359,16 +360,11 @@ class _Prober:
         return DeviceInfo(*texts, firmware), divider
 
     def _identifier(self, link: DeviceLink, selector: int) -> str:
-        # A late reply to the previous selector must not pass for this one's.
-        for _ in range(self.config.request_retries):
-            try:
-                reply = self._request(link, commands.device_identifier(selector),
-                                      layouts.DEVICE_IDENTIFIER)
-            except DeviceTimeout:
-                return ''
-            if reply.selector == selector:
-                return reply.text.strip(' \x00')
-        return ''
+        try:
+            return read_identifier(link, selector, self.config.request_timeout,
+                                   self.config.request_retries)
+        except DeviceTimeout:
+            return ''
 
     def _quiet_for(self, address: int | None, seconds: float, within: float) -> bool:
         """Wait until nothing streamed from ``address`` for ``seconds``; say if so."""

@@ -55,8 +55,12 @@ import logging
 import os
 import threading
 import time
-from typing import Any, NamedTuple
+from typing import Any
 
+# The identity's names stay importable from here.
+from .identity import (  # noqa: F401
+    DeviceInfo, IDENTIFIER_NAMES, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR,
+)
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .observer import Finding, LineObserver
 from .port import PortDisconnected, PortError, PortUnusable, SerialPort
@@ -71,9 +75,6 @@ from ..codec.data_rate import (  # noqa: F401
 #: The record streamed unless the configuration names another.
 STREAM_COMMAND = streams.DEFAULT.code
 
-IDENTIFIER_NAMES = ('model_number', 'serial_number', 'model_name', 'options')
-#: Device identifier selector of the serial number (0xEA).
-SERIAL_NUMBER_SELECTOR = IDENTIFIER_NAMES.index('serial_number')
 #: How often a missing port is looked for (s), so that it is reopened as soon as it is back.
 PORT_WATCH_S = 0.02
 #: Pause between a port reappearing and opening it (s): udev sets its permissions meanwhile.
@@ -97,16 +98,6 @@ class State(str, enum.Enum):
     PAUSED = 'paused'
     DISCONNECTED = 'disconnected'
     STOPPED = 'stopped'
-
-
-class DeviceInfo(NamedTuple):
-    """What the device says it is."""
-
-    model_number: str
-    serial_number: str
-    model_name: str
-    options: str
-    firmware: str
 
 
 @dataclass(frozen=True)
@@ -563,9 +554,8 @@ class DeviceSupervisor:
         link.streamed = cfg.stream
         self._start_reader(link)
         try:
-            reply = link.request(commands.device_identifier(SERIAL_NUMBER_SELECTOR),
-                                 layouts.DEVICE_IDENTIFIER, cfg.resume_timeout,
-                                 cfg.resume_retries)
+            serial = read_identifier(link, SERIAL_NUMBER_SELECTOR, cfg.resume_timeout,
+                                     cfg.resume_retries)
         except DeviceTimeout:
             if self._stop.is_set():
                 raise
@@ -573,7 +563,6 @@ class DeviceSupervisor:
                 self._log.info(f'node {cfg.address} did not confirm its serial number: '
                                f'starting it in full')
             return False
-        serial = reply.text.strip(' \x00')
         if serial != known:
             self._log.warning(f'another sensor answers as node {cfg.address}: serial '
                               f'{serial or "?"}, not {known}; identifying it in full')
@@ -636,22 +625,7 @@ class DeviceSupervisor:
 
     def _identify(self, link: DeviceLink) -> None:
         cfg = self.config
-        texts = []
-        for selector, _ in enumerate(IDENTIFIER_NAMES):
-            try:
-                reply = link.request(commands.device_identifier(selector),
-                                     layouts.DEVICE_IDENTIFIER, cfg.request_timeout,
-                                     cfg.request_retries)
-                texts.append(reply.text.strip(' \x00'))
-            except DeviceTimeout:
-                texts.append('')
-        try:
-            firmware = link.request(bytes((layouts.FIRMWARE_VERSION,)),
-                                    layouts.FIRMWARE_VERSION, cfg.request_timeout,
-                                    cfg.request_retries).text
-        except DeviceTimeout:
-            firmware = ''
-        info = DeviceInfo(*texts, firmware)
+        info = read_identity(link, cfg.request_timeout, cfg.request_retries)
         if self._stop.is_set():
             return
         if not any(info):
