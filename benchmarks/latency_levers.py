@@ -35,6 +35,7 @@ figures pool every round, and the spread of the per-round p99 is shown.
 
     python benchmarks/latency_levers.py --rounds 4 --seconds 20
     python benchmarks/latency_levers.py --stages --rounds 2 --configs default
+    python benchmarks/latency_levers.py --load params --configs default,switch-5ms
 """
 
 import argparse
@@ -48,8 +49,9 @@ import time
 from typing import Any, NamedTuple
 
 from bench_common import (
-    isolate_ros_domain, machine_table, OtherLoad, OUTPUT_DIR, percentile, process_cpu_seconds,
-    SimProcess, SubscriberProcess, summarise, Summary, TimedNodeProcess, written_times,
+    isolate_ros_domain, LoadProcess, machine_table, OtherLoad, OUTPUT_DIR, percentile,
+    process_cpu_seconds, SimProcess, SubscriberProcess, summarise, Summary, TimedNodeProcess,
+    written_times,
 )
 
 #: Seconds of streaming left out at the start (start-up, DDS discovery).
@@ -95,7 +97,8 @@ class RunResult(NamedTuple):
     full_collection: float
 
 
-def run_once(config: str, seconds: float, rate_hz: float, stages: bool) -> RunResult:
+def run_once(config: str, seconds: float, rate_hz: float, stages: bool,
+             load: str = '') -> RunResult:
     """Run one configuration for ``seconds`` after the warm-up; return its figures."""
     flags, params, _ = CONFIGS[config]
     if stages and not any(f.startswith('script=') for f in flags):
@@ -107,12 +110,17 @@ def run_once(config: str, seconds: float, rate_hz: float, stages: bool) -> RunRe
     sim = SimProcess(rate_hz=rate_hz, streaming_at_start=floor)
     subscriber = SubscriberProcess()
     node = None
+    busy = LoadProcess() if load == 'params' else None
     try:
         node = TimedNodeProcess(sim.port, flags, script=script, **params)
         time.sleep(WARM_UP_S)
+        if busy is not None:
+            busy.start()
         t0, cpu0 = time.time(), process_cpu_seconds(node.pid)
         time.sleep(seconds)
         t1, cpu1 = time.time(), process_cpu_seconds(node.pid)
+        if busy is not None:
+            busy.stop()
         sim.silence()
         time.sleep(0.3)
     finally:
@@ -165,6 +173,10 @@ def main(argv: list[str] | None = None) -> int:
                         help=f'comma-separated, of: {", ".join(CONFIGS)}')
     parser.add_argument('--stages', action='store_true', help='time every stage of the path')
     parser.add_argument('--seed', type=int, default=1, help='seed of the run order')
+    parser.add_argument('--load', choices=('', 'params'), default='',
+                        help='params: parameter requests kept in flight against the node from '
+                             'another process while measuring (its executor threads then '
+                             'want the interpreter lock all the time)')
     parser.add_argument('--output', default='latency_levers.md')
     args = parser.parse_args(argv)
     configs = [c for c in args.configs.split(',') if c]
@@ -182,14 +194,15 @@ def main(argv: list[str] | None = None) -> int:
         order_rng.shuffle(order)
         for config in order:
             print(f'-- round {round_ + 1}/{args.rounds}: {config}', file=sys.stderr, flush=True)
-            result = run_once(config, args.seconds, args.rate, args.stages)
+            result = run_once(config, args.seconds, args.rate, args.stages, args.load)
             results[config].append(result)
             print(f'   driver p50/p99/max {_ms(summarise(result.driver))} ms, '
                   f'end to end {_ms(summarise(result.end_to_end))} ms, '
                   f'CPU {result.cpu_percent:.2f} %', file=sys.stderr, flush=True)
             gc.collect()
     minutes = (time.monotonic() - started) / 60.0
-    lines = [f'## Latency levers, {args.rate:g} Hz', '', machine_table(), '',
+    title = f'## Latency levers, {args.rate:g} Hz' + (', parameter flood' if args.load else '')
+    lines = [title, '', machine_table(), '',
              '| configuration | end to end p50 / p99 / max (ms) | kernel p50 / p99 / max | '
              'driver p50 / p99 / max | driver p99 per round | e2e p99 / kernel p99 | '
              'CPU % | collections: gen 0/1/2 (longest ms) | a full collection (ms) | '

@@ -37,7 +37,7 @@ SAMPLES = 300
 ALLOWED_GROWTH = 20
 
 #: Run in the node's own process: prints "published N tracked M".
-_MEASURE = '''
+_MEASURE = """
 import gc, sys, time
 import rclpy
 from rclpy.parameter import Parameter
@@ -63,7 +63,7 @@ gc.enable()
 node.core.shutdown(report=False)
 node.destroy_node()
 rclpy.try_shutdown()
-'''
+"""
 
 
 def test_published_samples_leave_no_tracked_objects_behind():

@@ -117,7 +117,7 @@ class SupervisorConfig:
     request_timeout: float = 0.5
     request_retries: int = 3
     continuous_retries: int = 5
-    #: Scheduling of the reader thread (SCHED_FIFO priority, CPU).
+    #: Scheduling of the reader thread (its SCHED_FIFO priority).
     thread_policy: ThreadPolicy = NORMAL_SCHEDULING
     #: Reconnect to a known sensor with one serial-number read (False: the full dialogue).
     fast_reconnect: bool = True
