@@ -293,8 +293,20 @@ class LifecycleClient:
         return self._change.call_async(request)
 
     def change(self, transition: str, timeout: float = 30.0) -> bool:
-        """Request a transition by name; return whether it succeeded."""
-        return self._result(self.change_async(transition), timeout).success
+        """
+        Request a transition by name; return whether it succeeded.
+
+        No answer is False too (and said on stdout), so that the caller's
+        assertion shows the node's output: why it did not answer.
+        """
+        future = self.change_async(transition)
+        deadline = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if not future.done():
+            print(f'no answer to {transition!r} within {timeout} s')
+            return False
+        return future.result().success
 
     def state(self, timeout: float = 10.0) -> str:
         """Return the label of the node's current state."""
