@@ -12,9 +12,11 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
+import json
 from pathlib import Path
+import subprocess
+import sys
 
-from ament_flake8.main import main_with_errors
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -25,6 +27,26 @@ GENERATED_DIRS = ('build', 'install', 'log')
 
 def _excludes():
     return ['--exclude'] + [str(REPO_ROOT / name) for name in GENERATED_DIRS]
+
+
+def main_with_errors(argv: list[str]) -> tuple[int, list[str]]:
+    """
+    Run ament_flake8 in a fresh interpreter; return its exit code and errors.
+
+    flake8 checks files in worker processes forked from the caller. Forked
+    from the test process, they inherit whatever other tests left there (an
+    in-process rclpy context, its threads, a frozen heap) and have crashed in
+    their first garbage collection; a fresh interpreter has none of it.
+    """
+    code = ('import json, sys\n'
+            'from ament_flake8.main import main_with_errors\n'
+            'rc, errors = main_with_errors(argv=sys.argv[1:])\n'
+            'print(json.dumps([rc, errors]))\n')
+    result = subprocess.run([sys.executable, '-c', code, *argv], capture_output=True,
+                            text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    rc, errors = json.loads(result.stdout.strip().splitlines()[-1])
+    return rc, errors
 
 
 @pytest.mark.flake8
