@@ -442,10 +442,10 @@ class InProcessNode:
             parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
         self.node.core.on_published = self._on_published
         # As main.py spins it: several threads, so that a long service call holds only its own,
-        # and the interpreter settled as main.py settles it.
+        # and the start-up heap frozen as main.py freezes it.
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.executor.add_node(self.node)
-        realtime.settle_interpreter()
+        realtime.freeze_startup_heap()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, name='bench-executor', daemon=True)
         self._thread.start()

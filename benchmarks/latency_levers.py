@@ -35,7 +35,7 @@ figures pool every round, and the spread of the per-round p99 is shown.
 
     python benchmarks/latency_levers.py --rounds 4 --seconds 20
     python benchmarks/latency_levers.py --stages --rounds 2 --configs default
-    python benchmarks/latency_levers.py --load params --configs default,switch-5ms
+    python benchmarks/latency_levers.py --load params --configs default,switch-0.5ms
 """
 
 import argparse
@@ -63,15 +63,15 @@ WARM_UP_S = 3.0
 CONFIGS: dict[str, tuple[tuple[str, ...], dict[str, Any], str]] = {
     'default': ((), {}, 'the driver as shipped'),
     'no-gc-freeze': (('--no-gc-freeze',), {}, 'start-up heap not frozen'),
-    'switch-5ms': (('--no-switch-interval',), {}, 'lock switch interval 5 ms (CPython default)'),
+    'switch-0.5ms': (('--switch-interval', '0.0005'), {}, 'lock switch interval 0.5 ms'),
     'fifo': ((), {'realtime_priority': 50}, 'reader thread SCHED_FIFO 50'),
     'cpu1': (('--reader-cpu', '1'), {}, 'reader thread on CPU 1'),
     'fifo-cpu1': (('--reader-cpu', '1'), {'realtime_priority': 50},
                   'reader thread SCHED_FIFO 50 on CPU 1'),
     'fifo-no-gc-freeze': (('--no-gc-freeze',), {'realtime_priority': 50},
                           'SCHED_FIFO 50, start-up heap not frozen'),
-    'fifo-switch-5ms': (('--no-switch-interval',), {'realtime_priority': 50},
-                        'SCHED_FIFO 50, lock switch interval 5 ms'),
+    'fifo-switch-0.5ms': (('--switch-interval', '0.0005'), {'realtime_priority': 50},
+                          'SCHED_FIFO 50, lock switch interval 0.5 ms'),
     'spin-1s': (('--spin-period', '1.0'), {}, 'main loop wakes every 1 s, not 0.1 s'),
     'fifo-spin-1s': (('--spin-period', '1.0'), {'realtime_priority': 50},
                      'SCHED_FIFO 50, main loop wakes every 1 s'),
@@ -204,16 +204,18 @@ def main(argv: list[str] | None = None) -> int:
     title = f'## Latency levers, {args.rate:g} Hz' + (', parameter flood' if args.load else '')
     lines = [title, '', machine_table(), '',
              '| configuration | end to end p50 / p99 / max (ms) | kernel p50 / p99 / max | '
-             'driver p50 / p99 / max | driver p99 per round | e2e p99 / kernel p99 | '
+             'driver p50 / p99 / max | driver p99 per round | end to end p99 per round | '
+             'e2e p99 / kernel p99 | '
              'CPU % | collections: gen 0/1/2 (longest ms) | a full collection (ms) | '
              'reader thread |',
-             '|---|---|---|---|---|---|---|---|---|---|']
+             '|---|---|---|---|---|---|---|---|---|---|---|']
     for config in configs:
         runs = results[config]
         e2e = summarise([v for r in runs for v in r.end_to_end])
         kernel = summarise([v for r in runs for v in r.kernel])
         driver = summarise([v for r in runs for v in r.driver])
         per_round = ' '.join(f'{percentile(r.driver, 99) * 1e3:.3f}' for r in runs)
+        e2e_rounds = ' '.join(f'{percentile(r.end_to_end, 99) * 1e3:.3f}' for r in runs)
         cpu = sum(r.cpu_percent for r in runs) / len(runs)
         collections = [e for r in runs for e in r.collections]
         longest = max((e[2] for e in collections), default=0.0)
@@ -221,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
         full = statistics.median(r.full_collection for r in runs)
         lines.append(
             f'| {config}: {CONFIGS[config][2]} | {_ms(e2e)} | {_ms(kernel)} | {_ms(driver)} | '
-            f'{per_round} | {e2e.p99 / kernel.p99:.2f} | {cpu:.2f} | '
+            f'{per_round} | {e2e_rounds} | {e2e.p99 / kernel.p99:.2f} | {cpu:.2f} | '
             f'{by_generation} ({longest * 1e3:.2f}) | {full * 1e3:.2f} | '
             f'{_reader_policy(runs[-1].threads)} |')
     if args.stages:

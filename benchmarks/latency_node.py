@@ -28,10 +28,11 @@ on SIGTERM, SIGINT or end of standard input the node shuts down as it always
 does and the rows are written as JSON to ``--out``.
 
 ``--no-<lever>`` switches off one of the driver's own measures that are not
-parameters (``LEVERS``: the frozen start-up heap, the short lock switch
-interval, the fast reconnect, the prompt reopen), for A/B runs; the parameter
-``realtime_priority`` is passed as ``-p`` as usual. ``--reader-cpu N`` pins
-the reader thread to CPU N (a lever measured and left out of the driver).
+parameters (``LEVERS``: the frozen start-up heap, the fast reconnect, the
+prompt reopen), for A/B runs; the parameter ``realtime_priority`` is passed
+as ``-p`` as usual. Two levers measured and left out of the driver can be
+put in: ``--reader-cpu N`` pins the reader thread to CPU N,
+``--switch-interval S`` sets the interpreter lock switch interval.
 The JSON also holds every port open (time) for the reconnect benchmark.
 
 Usage: ``latency_node.py [--stages] [--no-gc-freeze] --out OUT.json --ros-args -p ...``.
@@ -74,16 +75,12 @@ def _without_gc_freeze() -> None:
     realtime.freeze_startup_heap = lambda: 0
 
 
-def _without_switch_interval() -> None:
-    realtime.shorten_switch_interval = lambda *args: None
-
-
 def _supervisor_without(**switches: bool) -> None:
     driver_core.SupervisorConfig = functools.partial(driver_core.SupervisorConfig, **switches)
 
 
 #: The driver's own measures that an A/B run may switch off: flag -> how.
-LEVERS = {'gc-freeze': _without_gc_freeze, 'switch-interval': _without_switch_interval,
+LEVERS = {'gc-freeze': _without_gc_freeze,
           'fast-reconnect': lambda: _supervisor_without(fast_reconnect=False),
           'prompt-reopen': lambda: _supervisor_without(prompt_reopen=False)}
 
@@ -185,6 +182,8 @@ def main() -> int:
                             help=f'switch off the {lever} measure')
     parser.add_argument('--reader-cpu', type=int, default=-1,
                         help='pin the reader thread to this CPU')
+    parser.add_argument('--switch-interval', type=float, default=None,
+                        help='the interpreter lock switch interval (s), instead of 5 ms')
     parser.add_argument('--spin-period', type=float, default=None,
                         help="the main loop's spin_once timeout (s), instead of main.py's")
     args, ros_args = parser.parse_known_args()
@@ -195,6 +194,8 @@ def main() -> int:
     marks = [0.0] * len(STAGES)
     if args.reader_cpu >= 0:
         pin_reader(args.reader_cpu)
+    if args.switch_interval is not None:
+        sys.setswitchinterval(args.switch_interval)
     if args.spin_period is not None:
         node_main._SPIN_PERIOD = args.spin_period
     stages = args.stages

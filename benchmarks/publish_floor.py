@@ -16,8 +16,8 @@
 The floor under the driver's share: a thread that only reads the port and publishes.
 
 A process built as the driver's is (an rclpy node, the same publisher and
-QoS, a multi-threaded executor spinning in the main thread, the interpreter
-settled as main.py settles it) whose reader thread does the least any rclpy
+QoS, a multi-threaded executor spinning in the main thread, the start-up
+heap frozen as main.py freezes it) whose reader thread does the least any rclpy
 driver must: wait in ``select()``, read, and once a whole packet is in,
 publish a ready-serialized Imu message of the same size, with no parsing,
 stamping or packing. Its read() returned -> publish() returned is what the
@@ -128,7 +128,7 @@ def main() -> int:
 
     thread = threading.Thread(target=reader, name='gx2-reader', daemon=True)
     thread.start()
-    frozen = realtime.settle_interpreter()
+    frozen = realtime.freeze_startup_heap()
 
     def watch_stdin() -> None:
         sys.stdin.read()

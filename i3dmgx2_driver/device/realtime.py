@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-How the reader thread is scheduled, and what the interpreter is told at start-up.
+How the reader thread is scheduled, and what the collector is told at start-up.
 
 A sample waits on its way to ``publish()`` for three things besides its own
 work: the kernel scheduling the reader thread (other processes may hold the
@@ -27,21 +27,17 @@ The README's latency section measures each of these levers.
   :func:`apply_to_current_thread` says why in one sentence for the log.
   (Pinning the reader thread to a CPU was measured too, and left out: it
   did not help, with or without SCHED_FIFO.)
-- :func:`settle_interpreter` freezes what start-up allocated, so that a
-  collection never walks rclpy's and the driver's long-lived objects again,
-  and shortens the interval after which a thread waiting for the interpreter
-  lock makes its holder let go.
+- :func:`freeze_startup_heap` freezes what start-up allocated, so that a
+  collection never walks rclpy's and the driver's long-lived objects again.
+  (A shorter interpreter lock switch interval was measured too, and left
+  out: under a parameter flood it made the driver's share worse without
+  SCHED_FIFO, and no better with it.)
 """
 
 import gc
 import os
-import sys
 from typing import NamedTuple
 
-#: The interpreter lock switch interval (s) for the driver's process. CPython's default is
-#: 5 ms: a sample whose reader thread wakes while another thread holds the lock (a
-#: diagnostics callback building its message) may wait that long for it.
-SWITCH_INTERVAL_S = 0.0005
 #: Highest SCHED_FIFO priority Linux accepts.
 MAX_PRIORITY = 99
 
@@ -104,14 +100,3 @@ def freeze_startup_heap() -> int:
     gc.collect()
     gc.freeze()
     return gc.get_freeze_count()
-
-
-def shorten_switch_interval(interval: float = SWITCH_INTERVAL_S) -> None:
-    """Let a thread waiting for the interpreter lock get it after ``interval`` s at most."""
-    sys.setswitchinterval(interval)
-
-
-def settle_interpreter() -> int:
-    """Apply the interpreter-wide measures (see the module doc); return the frozen count."""
-    shorten_switch_interval()
-    return freeze_startup_heap()

@@ -26,8 +26,8 @@ as ``fatal_error``. :func:`run` does all of it for any driver node class (the pl
 node here, the managed node in ``lifecycle_node.py``): the class is made
 with no arguments and provides ``shutdown()`` and ``finished`` (True once
 it is done by itself, as a managed node after its shutdown transition).
-Once the node is made, the start-up heap is frozen and the interpreter lock
-switch interval shortened (device/realtime.py says why).
+Once the node is made, the start-up heap is frozen (device/realtime.py says
+why).
 """
 
 from collections.abc import Callable
@@ -83,11 +83,9 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
             rclpy.logging.get_logger('i3dmgx2_driver').fatal(str(exc))
             return EXIT_BAD_PARAMETER
         executor.add_node(node)
-        # Start-up is over: freeze its heap and shorten the lock switch interval (realtime.py).
-        frozen = realtime.settle_interpreter()
-        node.get_logger().info(
-            f'start-up heap frozen ({frozen} objects), interpreter lock switch interval '
-            f'{sys.getswitchinterval() * 1e3:g} ms')
+        # Start-up is over: out of the collector's sight with its heap (realtime.py says why).
+        frozen = realtime.freeze_startup_heap()
+        node.get_logger().info(f'start-up heap frozen ({frozen} objects)')
         while not stop.is_set() and rclpy.ok() and not node.finished:
             executor.spin_once(timeout_sec=_SPIN_PERIOD)
             if getattr(node, 'fatal_error', None) is not None:
