@@ -210,6 +210,11 @@ def report(title: str, results: list[Result], notes: list[str] = (),
                      f'cores busy on average during the run.')
     text = '\n'.join([f'## {title}', '', machine_table(), '', markdown_table(results), '',
                       *[f'- {note}' for note in notes]]).rstrip() + '\n'
+    return emit(text, output)
+
+
+def emit(text: str, output: str | None) -> str:
+    """Print a finished report; also write it to ``output`` under benchmarks/output/."""
     print(text, flush=True)
     if output:
         OUTPUT_DIR.mkdir(parents=True, exist_ok=True)

@@ -49,7 +49,7 @@ import time
 from typing import Any, NamedTuple
 
 from bench_common import (
-    isolate_ros_domain, LoadProcess, machine_table, OtherLoad, OUTPUT_DIR, percentile,
+    emit, isolate_ros_domain, LoadProcess, machine_table, OtherLoad, percentile,
     process_cpu_seconds, SimProcess, SubscriberProcess, summarise, Summary, TimedNodeProcess,
     written_times,
 )
@@ -248,11 +248,7 @@ def main(argv: list[str] | None = None) -> int:
               f'measured per run after {WARM_UP_S:g} s; {minutes:.1f} min; load average '
               f'(1 min) {load_before:.2f} before, {os.getloadavg()[0]:.2f} after; other '
               f'processes kept {other.cores():.2f} of {os.cpu_count()} cores busy on average.']
-    text = '\n'.join(lines) + '\n'
-    print(text, flush=True)
-    if args.output:
-        OUTPUT_DIR.mkdir(parents=True, exist_ok=True)
-        (OUTPUT_DIR / args.output).write_text(text)
+    emit('\n'.join(lines) + '\n', args.output)
     return 0
 
 

@@ -50,7 +50,7 @@ import time
 from typing import NamedTuple
 
 from bench_common import (
-    isolate_ros_domain, machine_table, OtherLoad, OUTPUT_DIR, TimedNodeProcess,
+    emit, isolate_ros_domain, machine_table, OtherLoad, TimedNodeProcess,
 )
 
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
@@ -201,11 +201,7 @@ def main(argv: list[str] | None = None) -> int:
               f'{(time.monotonic() - started) / 60.0:.1f} min; load average (1 min) '
               f'{os.getloadavg()[0]:.2f} at the end; other processes kept {other.cores():.2f} '
               f'of {os.cpu_count()} cores busy on average.']
-    text = '\n'.join(lines) + '\n'
-    print(text, flush=True)
-    if args.output:
-        OUTPUT_DIR.mkdir(parents=True, exist_ok=True)
-        (OUTPUT_DIR / args.output).write_text(text)
+    emit('\n'.join(lines) + '\n', args.output)
     return 0
 
 
