@@ -23,6 +23,7 @@ the README's first command shows that data flows without the ``ros2`` CLI.
 
 import argparse
 import math
+import signal
 import sys
 import threading
 import time
@@ -31,6 +32,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
 
 
@@ -78,14 +80,12 @@ class Monitor(Node):
 
 def _spin(executor: SingleThreadedExecutor, stopped: threading.Event) -> None:
     """
-    Spin until Ctrl-C or SIGTERM shuts the context down (rclpy's handler) or main stops it.
+    Spin until main stops the executor, or something else shuts the context down.
 
-    ``stopped`` tells the printing loop that no message will come any more.
-    rclpy's signal handler shuts the context down on SIGINT and SIGTERM, but
-    Python raises KeyboardInterrupt only if SIGINT had its default handler
-    when the process started: one started ignoring it (a background job of a
-    script, as CI runs tests) or sent SIGTERM would otherwise print the last
-    message again forever.
+    ``stopped`` tells the printing loop that no message will come any more
+    (main's SIGINT/SIGTERM handler sets it too, whatever SIGINT's disposition
+    was when the process started: a background job of a script starts with
+    it ignored).
     """
     try:
         executor.spin()
@@ -105,11 +105,15 @@ def main(argv: list[str] | None = None) -> int:
                         help='subscribe best effort (for a best_effort publisher)')
     parser.add_argument('--period', type=float, default=0.5, help='seconds between lines')
     args = parser.parse_args(rclpy.utilities.remove_ros_args(argv or sys.argv)[1:])
-    rclpy.init(args=argv)
+    # Signals only set a flag, as in the driver's main: rclpy's own handler would shut the
+    # context down under the spinning thread while this one tears it down too (it crashed).
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     node = Monitor(args.topic, args.best_effort)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     stopped = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, frame: stopped.set())
     spinner = threading.Thread(target=_spin, args=(executor, stopped), daemon=True)
     spinner.start()
     start = last = time.monotonic()
