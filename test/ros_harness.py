@@ -235,14 +235,43 @@ class LifecycleClient:
         'deactivate': Transition.TRANSITION_DEACTIVATE,
     }
 
+    #: How long one get_state of :meth:`wait_ready` may take before another is sent.
+    PROBE_S = 2.0
+
     def __init__(self, listener: Listener, node: str = '/i3dmgx2_driver') -> None:
+        # change_state's client first: see wait_ready.
         self._change = listener.node.create_client(ChangeState, f'{node}/change_state')
         self._get = listener.node.create_client(GetState, f'{node}/get_state')
 
     def wait_ready(self, timeout: float = 30.0) -> bool:
-        """Wait until both services are there."""
-        return (self._change.wait_for_service(timeout_sec=timeout)
-                and self._get.wait_for_service(timeout_sec=timeout))
+        """
+        Wait until both services are there and the node has answered a get_state.
+
+        wait_for_service says only that this side has discovered the node's
+        service. The node may not yet have discovered this client: a request
+        it receives before is dropped for good (volatile), and an answer it
+        cannot match in 100 ms is too (ros2/rmw_cyclonedds#74, ros2/rmw_fastrtps#390).
+        That is how a loaded full run lost a configure: the node printed
+        nothing in 30 s. A get_state answer shows that the node has matched
+        this client's endpoints, change_state's included, which were
+        announced before get_state's on the same ordered, reliable discovery
+        channels. get_state changes nothing, so a probe the race swallowed
+        is simply asked again; the transitions under test are asked once.
+        """
+        deadline = time.monotonic() + timeout
+        if not (self._change.wait_for_service(timeout_sec=timeout)
+                and self._get.wait_for_service(timeout_sec=timeout)):
+            return False
+        while time.monotonic() < deadline:
+            future = self._get.call_async(GetState.Request())
+            probe_end = min(deadline, time.monotonic() + self.PROBE_S)
+            while not future.done() and time.monotonic() < probe_end:
+                time.sleep(0.01)
+            if future.done():
+                return True
+            self._get.remove_pending_request(future)
+            print(f'get_state unanswered in {self.PROBE_S} s: asking again')
+        return False
 
     @staticmethod
     def _result(future: object, timeout: float) -> object:
