@@ -34,6 +34,7 @@ import weakref
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from i3dmgx2_driver.device.port import PortBusy, SerialPort
 from i3dmgx2_driver.ros.lifecycle_node import LifecycleDriverNode
+from i3dmgx2_driver.ros.main import EXECUTOR_THREADS
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 from lifecycle_msgs.msg import TransitionEvent
 import pytest
@@ -359,7 +360,11 @@ def test_repeated_cycles_leak_no_threads_descriptors_or_memory():
                 samples.append(process_resources(node.proc.pid))
         threads, fds, rss = zip(*samples, strict=True)
         print(f'threads {threads}\nfds {fds}\nrss kB {rss}')
-        assert max(threads) == threads[0], 'threads accumulate'
+        # The executor's pool may still start workers up to EXECUTOR_THREADS (it
+        # starts one when callbacks overlap, seen at cycle 16 under load); one ran
+        # a transition before the first sample. A thread leaked per cycle, or
+        # every few, would exceed that.
+        assert max(threads) - threads[0] <= EXECUTOR_THREADS - 1, 'threads accumulate'
         assert max(fds) == fds[0], 'file descriptors accumulate'
         # The allocators settle over the first tens of cycles (about 25 kB a cycle at
         # first, 2 kB after a hundred: measured); a leaked core would add far more.

@@ -53,6 +53,9 @@ _SPIN_PERIOD = 0.1
 #: Once a node is finished by itself, how long to keep spinning (s), so that
 #: the reply to the request that finished it still goes out.
 _FINISH_GRACE = 0.3
+#: Worker threads of the executor. Its pool starts them one by one, as callbacks
+#: overlap, and keeps them: a node's thread count may rise by a few and stay.
+EXECUTOR_THREADS = 4
 
 
 def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
@@ -74,7 +77,7 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
     # Several threads, so that a long service call (a 30 s gyro bias capture)
     # holds only its own callback group: diagnostics keep ticking, parameters
     # answer, and a signal is acted on at once rather than after the call.
-    executor = MultiThreadedExecutor(num_threads=4)
+    executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
     code = 0
     try:
         try:

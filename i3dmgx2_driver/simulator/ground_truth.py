@@ -58,6 +58,11 @@ class SentRecord(NamedTuple):
     fault: str | None
     #: 'stream', 'reply' (to a polled command) or 'foreign' (another sensor).
     source: str
+    #: Wall-clock time just before the write of its first byte (None if never
+    #: written whole). Its chunks may be written milliseconds apart when the
+    #: writer is descheduled: a host that opens the port (flushing its input)
+    #: in between gets only the packet's tail.
+    first_write_time: float | None = None
 
 
 class HostCommand(NamedTuple):
@@ -178,11 +183,13 @@ class GroundTruth:
             self.stats.overflow_bytes += wanted - written
 
     def add(self, reply: Reply, write_time: float | None, packet: bytes, address: int,
-            valid: bool, fault: str | None, source: str) -> None:
+            valid: bool, fault: str | None, source: str,
+            first_write_time: float | None = None) -> None:
         """Record one data packet and count it."""
         entry = SentRecord(self.truth_index, reply.sample_time, write_time,
                            getattr(reply.record, 'timer', None), reply.record, packet,
-                           address, valid, fault, source)
+                           address, valid, fault, source,
+                           first_write_time if write_time is not None else None)
         self.truth_index += 1
         if self.truth is not None:
             self.truth.append(entry)

@@ -137,15 +137,17 @@ class PtyPort:
             except FileNotFoundError:
                 pass
 
-    def write_chunks(self, chunks: list[bytes], gap: float) -> tuple[int, float | None]:
+    def write_chunks(self, chunks: list[bytes],
+                     gap: float) -> tuple[int, float | None, float | None]:
         """
-        Write chunks ``gap`` seconds apart; return (bytes written, time of the last write).
+        Write chunks ``gap`` seconds apart; return (bytes written, first and last write's time).
 
-        The time is read just *before* the write that hands the last byte to
-        the pty: no reader can have the whole frame earlier, so a host's read
-        time is never before it. A time read after that write could be late
-        by however long this thread was descheduled in between (milliseconds
-        on a loaded machine), and a reader would then seem to have the bytes
+        Each time is read just *before* its write: before the one that hands
+        the first byte to the pty, and before the one that hands the last. No
+        reader can have the whole frame before the last, so a host's read time
+        is never earlier. A time read after that write could be late by
+        however long this thread was descheduled in between (milliseconds on
+        a loaded machine), and a reader would then seem to have the bytes
         before they were written. None when the port is unplugged. Fewer
         bytes than given means the buffer was full (nobody reads): the rest
         is lost.
@@ -154,8 +156,8 @@ class PtyPort:
         with self.io_lock:
             master = self.master
             if master is None:
-                return 0, None
-            last_write = time.time()
+                return 0, None, None
+            first_write = last_write = time.time()
             try:
                 for index, chunk in enumerate(chunks):
                     if index and gap:
@@ -168,7 +170,7 @@ class PtyPort:
                         view = view[count:]
             except OSError:
                 pass  # the buffer is full (nobody reads): the rest is lost
-            return written, last_write
+            return written, first_write, last_write
 
     def write(self, data: bytes) -> int | None:
         """Write a few bytes at once; return how many (None: unplugged)."""

@@ -186,19 +186,19 @@ class Transmitter:
             elif faults.corrupt_length_probability \
                     and rng.random() < faults.corrupt_length_probability:
                 packet, fault = self._bad_length(packet), flt.FAULT_LENGTH
-            error, write_time = self._write(packet)
+            error, first_write, write_time = self._write(packet)
             valid = fault is None and error is None
             self._record.add(reply, write_time, packet, item.address, valid, fault or error,
-                             item.source)
+                             item.source, first_write)
 
     def _transmit_foreign(self, code: int, send: float) -> None:
         """Write a well-formed packet of another sensor (wireless only)."""
         foreign = self._foreign
         other = foreign.record_at(code if code in sns.STREAMABLE else lay.ACCEL_ANG_RATE, send)
         packet = BaseStation.frame(other, foreign.address, foreign)
-        error, write_time = self._write(packet)
+        error, first_write, write_time = self._write(packet)
         self._record.add(other, write_time, packet, foreign.address, False,
-                         flt.FAULT_FOREIGN if error is None else error, 'foreign')
+                         flt.FAULT_FOREIGN if error is None else error, 'foreign', first_write)
 
     def _garbage(self, faults: FaultConfig) -> bytes:
         rng = self._fault_rng
@@ -232,13 +232,13 @@ class Transmitter:
         cuts = sorted(self._chunk_rng.sample(range(1, len(data)), count - 1))
         return [data[a:b] for a, b in itertools.pairwise([0, *cuts, len(data)])]
 
-    def _write(self, data: bytes) -> tuple[str | None, float | None]:
-        """Write one frame in chunks; return (fault or None, time its last byte was written)."""
-        written, write_time = self._port.write_chunks(self._split(data),
-                                                      self._config.chunk_gap_s)
+    def _write(self, data: bytes) -> tuple[str | None, float | None, float | None]:
+        """Write one frame in chunks; return (fault or None, time of its first and last write)."""
+        written, first_write, write_time = self._port.write_chunks(self._split(data),
+                                                                   self._config.chunk_gap_s)
         if write_time is None:
-            return flt.FAULT_UNPLUGGED, None
+            return flt.FAULT_UNPLUGGED, None, None
         self._record.written(len(data), written)
         if written < len(data):
-            return flt.FAULT_OVERFLOW, None
-        return None, write_time
+            return flt.FAULT_OVERFLOW, None, None
+        return None, first_write, write_time
