@@ -32,9 +32,11 @@ from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 from ros_harness import isolate_ros_domain, REPO, ros_env
 
 #: Samples measured, and the most tracked objects they may leave behind in all: the device
-#: clock keeps one point per second of data (a few in the window), nothing per sample.
+#: clock keeps one point per second of data (a few in the window), nothing per sample. A path
+#: that kept even one object per sample would leave SAMPLES behind; the bound sits far below
+#: that and well above the few the clock keeps.
 SAMPLES = 300
-ALLOWED_GROWTH = 20
+ALLOWED_GROWTH = SAMPLES // 10
 
 #: Run in the node's own process: prints "published N tracked M".
 _MEASURE = """
@@ -57,8 +59,14 @@ gc.disable()
 published, tracked = stats.published, gc.get_count()[0]
 while stats.published < published + samples and time.monotonic() < deadline:
     time.sleep(0.05)
-print('published', stats.published - published, 'tracked', gc.get_count()[0] - tracked,
-      flush=True)
+# A reading taken while the reader thread holds a backlog of packets (a loaded machine lets
+# them pile up) counts them too, six objects each, gone a moment later. The least of readings
+# spread over a few sample periods is what stayed.
+left = []
+for _ in range(12):
+    left.append(gc.get_count()[0] - tracked)
+    time.sleep(0.007)
+print('published', stats.published - published, 'tracked', min(left), flush=True)
 gc.enable()
 node.core.shutdown(report=False)
 node.destroy_node()
