@@ -20,7 +20,9 @@ arguments the README documents (``address`` without a default), starts the
 ``node`` executable of this package, or ``lifecycle_node`` with
 ``managed:=true``, passes the installed params file, puts the node under the
 ``namespace`` argument, and with ``autostart:=true`` configures the managed
-node and activates it once configured.
+node and activates it once configured. ``stream`` and ``data_rate`` reach
+the node only when given (the parameter file decides otherwise), and as
+substitutions, which launch_ros reads as YAML the way ``-p`` is read.
 """
 
 import ast
@@ -55,18 +57,22 @@ def assigned(tree: ast.AST, name: str) -> ast.AST:
 
 
 def test_launch_file_declares_the_documented_arguments():
-    _, tree = parse()
+    source, tree = parse()
     compile(tree, LAUNCH, 'exec')
     declared = {c.args[0].value: keywords(c) for c in calls(tree, 'DeclareLaunchArgument')}
     assert set(declared) == {'port', 'address', 'namespace', 'params_file', 'managed',
-                             'autostart'}
+                             'autostart', 'stream', 'data_rate'}
     assert 'default_value' not in declared['address'], 'address must have no default'
     assert declared['port']['default_value'] == '/dev/ttyUSB0'
     # The plain node unless asked; a managed node waits for its manager unless asked.
     assert declared['managed']['default_value'] == 'false'
     assert declared['autostart']['default_value'] == 'false'
-    generate = [f for f in ast.walk(tree) if isinstance(f, ast.FunctionDef)]
-    assert [f.name for f in generate] == ['generate_launch_description']
+    # Empty: as the parameter file says.
+    assert declared['stream']['default_value'] == declared['data_rate']['default_value'] == ''
+    functions = [f.name for f in ast.walk(tree) if isinstance(f, ast.FunctionDef)]
+    assert functions == ['optional_overrides', 'driver_actions', 'generate_launch_description']
+    (opaque,) = calls(tree, 'OpaqueFunction')
+    assert ast.get_source_segment(source, opaque) == 'OpaqueFunction(function=driver_actions)'
 
 
 def test_launch_file_starts_this_packages_node_with_the_params_file():
@@ -79,6 +85,9 @@ def test_launch_file_starts_this_packages_node_with_the_params_file():
     common_text = ast.get_source_segment(source, common)
     assert "'namespace': LaunchConfiguration('namespace')" in common_text
     assert "LaunchConfiguration('params_file')" in common_text
+    # After the params file, so that what is given wins.
+    assert common_text.index("LaunchConfiguration('params_file')") < \
+        common_text.index('optional_overrides(context)')
     assert "'config', 'i3dmgx2.yaml'" in source
     assert os.path.exists(os.path.join(REPO, 'config', 'i3dmgx2.yaml'))
 
@@ -118,3 +127,38 @@ def test_autostart_configures_then_activates_only_after_a_successful_configure()
     assert 'TRANSITION_ACTIVATE' in handler_text and 'TRANSITION_CONFIGURE' not in handler_text
     for name in ('configure', 'activate_once_configured'):
         assert 'condition=autostart' in ast.get_source_segment(source, assigned(tree, name))
+
+
+def _optional_overrides(arguments: dict) -> dict:
+    """Run the launch file's optional_overrides with ``arguments`` as the command line."""
+    source, tree = parse()
+    assert "OPTIONAL_PARAMETERS = ('stream', 'data_rate')" in source
+    (function,) = [f for f in ast.walk(tree) if isinstance(f, ast.FunctionDef)
+                   and f.name == 'optional_overrides']
+
+    class LaunchConfiguration:
+        """Stands in for launch's: ``launch`` is not on PyPI."""
+
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+        def perform(self, context: object) -> str:
+            return arguments[self.name]
+
+    namespace = {'LaunchConfiguration': LaunchConfiguration, 'LaunchContext': object,
+                 'OPTIONAL_PARAMETERS': ('stream', 'data_rate')}
+    exec(compile(ast.Module([function], []), LAUNCH, 'exec'), namespace)
+    return namespace['optional_overrides'](None)
+
+
+def test_stream_and_rate_reach_the_node_only_when_given_and_as_substitutions():
+    # Left out: nothing, so the parameter file's values stand.
+    assert _optional_overrides({'stream': '', 'data_rate': ''}) == {}
+    overrides = _optional_overrides({'stream': '0xC2', 'data_rate': ''})
+    assert list(overrides) == ['stream']
+    # A substitution (read as YAML by launch_ros, 0xC2 -> 194), not the text '0xC2'.
+    assert not isinstance(overrides['stream'], str)
+    assert overrides['stream'].name == 'stream'
+    overrides = _optional_overrides({'stream': 'inertial', 'data_rate': '250'})
+    assert sorted(overrides) == ['data_rate', 'stream']
+    assert overrides['data_rate'].name == 'data_rate'
