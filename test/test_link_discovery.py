@@ -81,6 +81,38 @@ def test_ping_once_tells_present_absent_and_no_base_station():
         os.close(master)
 
 
+def test_a_ping_answer_found_in_garbage_is_asked_again():
+    # Another node streams and a flush cut one of its packets: the tail (0x02 among its
+    # bytes) comes before the base station's real answer, 0x21, "node 12 is not there".
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    ping = cmd.ping(12)
+    answers = [b'\x10\x02\x33\x21', b'\x21']
+    asked = []
+
+    def base_station() -> None:
+        heard = b''
+        while answers:
+            heard += os.read(master, 64)
+            while ping in heard:
+                heard = heard.replace(ping, b'', 1)
+                asked.append(ping)
+                os.write(master, answers.pop(0))
+
+    responder = threading.Thread(target=base_station, daemon=True)
+    responder.start()
+    link = open_link(os.ttyname(slave), 12)
+    try:
+        assert link.ping_once(12, 0.5) is False
+        assert len(asked) == 2
+    finally:
+        close_link(link)
+        responder.join(1.0)
+        os.close(slave)
+        os.close(master)
+
+
 def test_retarget_moves_requests_to_another_node():
     with PtySimulator(SimulatorConfig(address=42, seed=62)) as sim:
         link = open_link(sim.port, 7)

@@ -297,18 +297,26 @@ class DeviceLink:
         tell apart from a node that is not there).
         """
         with self._lock:
-            pending = _Pending(layouts.PING)
-            self._pending = pending
-            try:
-                self.parser.expect_ping()
-                with self._write_lock:
-                    self.port.write(commands.ping(address))
-                self._wait(pending, timeout, nack_ends=False)
-            finally:
-                self._pending = None
-            if self.disconnected.is_set():
-                raise PortDisconnected(self.error or 'device disconnected')
-            self._check_cancelled()
+            for _ in range(2):
+                skipped = self.parser.stats.bytes_skipped
+                pending = _Pending(layouts.PING)
+                self._pending = pending
+                try:
+                    self.parser.expect_ping()
+                    with self._write_lock:
+                        self.port.write(commands.ping(address))
+                    self._wait(pending, timeout, nack_ends=False)
+                finally:
+                    self._pending = None
+                if self.disconnected.is_set():
+                    raise PortDisconnected(self.error or 'device disconnected')
+                self._check_cancelled()
+                # The answer is one byte, 0x02 or 0x21, found between frames. While
+                # the parser skips garbage (the tail of another node's packet cut by
+                # a flush) a byte of that garbage can pass for it; the parser is in
+                # step with the stream after it, so a second ping is trustworthy.
+                if pending.reply is None or self.parser.stats.bytes_skipped == skipped:
+                    break
             return None if pending.reply is None else bool(pending.reply.ok)
 
     def stop_streaming(self, repeats: int = 3, gap: float = 0.02) -> None:
