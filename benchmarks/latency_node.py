@@ -184,8 +184,6 @@ def main() -> int:
                         help='pin the reader thread to this CPU')
     parser.add_argument('--switch-interval', type=float, default=None,
                         help='the interpreter lock switch interval (s), instead of 5 ms')
-    parser.add_argument('--spin-period', type=float, default=None,
-                        help="the main loop's spin_once timeout (s), instead of main.py's")
     args, ros_args = parser.parse_known_args()
     for lever, switch_off in LEVERS.items():
         if getattr(args, f'no_{lever.replace("-", "_")}'):
@@ -196,8 +194,6 @@ def main() -> int:
         pin_reader(args.reader_cpu)
     if args.switch_interval is not None:
         sys.setswitchinterval(args.switch_interval)
-    if args.spin_period is not None:
-        node_main._SPIN_PERIOD = args.spin_period
     stages = args.stages
     if stages:
         install_stage_timers(marks)
