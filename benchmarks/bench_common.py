@@ -26,6 +26,7 @@ executable (to measure its CPU). Subscribers run in another process
 Benchmarks print numbers; they never fail on speed.
 """
 
+from collections.abc import Callable
 import json
 import math
 import os
@@ -536,10 +537,13 @@ def subscriber_latencies(truth: list[TruthEntry], published: list[Published],
     return out
 
 
-def standard_args(description: str, default_seconds: float, quick_seconds: float) -> Any:
-    """Parse the command line every benchmark script shares: --quick, --seconds."""
+def standard_args(description: str, default_seconds: float, quick_seconds: float,
+                  more: Callable[[Any], None] | None = None) -> Any:
+    """Parse the options every benchmark shares (--quick, --seconds); ``more`` adds its own."""
     import argparse
     parser = argparse.ArgumentParser(description=description)
+    if more is not None:
+        more(parser)
     parser.add_argument('--quick', action='store_true', help='short runs (a smoke test)')
     parser.add_argument('--seconds', type=float, default=None,
                         help=f'measuring time per run (default {default_seconds:g} s, '
@@ -556,7 +560,8 @@ def standard_args(description: str, default_seconds: float, quick_seconds: float
 class NodeProcess:
     """The driver as ``ros2 run`` starts it (``i3dmgx2_driver.ros.main``), output to a file."""
 
-    def __init__(self, port: str, **params: Any) -> None:
+    def __init__(self, port: str, tree: Path | None = None, **params: Any) -> None:
+        """Start the node of this repository, or of the checkout ``tree`` (an A/B run)."""
         params = {'port': port, 'address': ADDRESS, **params}
         argv = [sys.executable, '-m', 'i3dmgx2_driver.ros.main', '--ros-args']
         for name, value in params.items():
@@ -564,9 +569,12 @@ class NodeProcess:
             argv += ['-p', f'{name}:={text}']
         handle, self.log_path = tempfile.mkstemp(prefix='i3dmgx2-bench-node-', suffix='.log')
         try:
+            env = child_env()
+            if tree is not None:
+                env['PYTHONPATH'] = os.pathsep.join((str(tree), env.get('PYTHONPATH', '')))
             self.proc = subprocess.Popen(argv, stdout=handle, stderr=subprocess.STDOUT,
-                                         stdin=subprocess.DEVNULL, env=child_env(),
-                                         cwd=str(REPO))
+                                         stdin=subprocess.DEVNULL, env=env,
+                                         cwd=str(tree or REPO))
         finally:
             os.close(handle)
 

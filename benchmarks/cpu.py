@@ -20,8 +20,17 @@ the simulated device (its own process), with a subscriber in a third process
 so that every message really goes out through DDS. After a warm-up, the
 node's user + system CPU time (all its threads, from /proc/<pid>/stat) is
 read at the start and the end of a window. Target: <= 3 % at 100 Hz.
+
+``--against DIR`` measures another checkout of the driver (``git worktree
+add /tmp/before <commit>``) against this one at 100 Hz, interleaved round by
+round in one run, so that both see the same machine: a change's effect on
+CPU is a few tenths of a percent, less than a busy machine moves one window.
 """
 
+import argparse
+from pathlib import Path
+import statistics
+import sys
 import time
 
 from bench_common import (
@@ -33,11 +42,12 @@ TARGET_PERCENT_100HZ = 3.0
 WARM_UP_S = 5.0
 
 
-def measure(rate_hz: float, seconds: float, warm_up: float = WARM_UP_S) -> tuple[float, int]:
+def measure(rate_hz: float, seconds: float, warm_up: float = WARM_UP_S,
+            tree: Path | None = None) -> tuple[float, int]:
     """Return the node's CPU (% of one core) and how many messages the subscriber got."""
     sim = SimProcess(rate_hz=rate_hz)
     subscriber = SubscriberProcess()
-    node = NodeProcess(sim.port, qos_depth=1000)
+    node = NodeProcess(sim.port, tree=tree, qos_depth=1000)
     try:
         if not node.wait_for_output('streaming 0xCC', timeout=30.0):
             raise RuntimeError(f'the node did not start streaming:\n{node.output()}')
@@ -69,9 +79,38 @@ def run(seconds: float) -> list[Result]:
     return results
 
 
+def compare(against: Path, rounds: int, seconds: float) -> list[Result]:
+    """Measure this checkout and ``against`` at 100 Hz, alternating; return the table rows."""
+    isolate_ros_domain()
+    trees = {'this checkout': None, f'{against}': against}
+    figures: dict[str, list[float]] = {name: [] for name in trees}
+    for _ in range(rounds):
+        for name, tree in trees.items():
+            figures[name].append(measure(100.0, seconds, tree=tree)[0])
+    return [Result(f'CPU at 100 Hz, {name} (% of one core): mean (each round)',
+                   f"{statistics.mean(values):.2f} % ({', '.join(f'{v:.2f}' for v in values)})")
+            for name, values in figures.items()]
+
+
+def _ab_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--against', type=Path, default=None,
+                        help='another checkout of the driver, measured against this one at '
+                             '100 Hz (default seconds: 40)')
+    parser.add_argument('--rounds', type=int, default=4, help='rounds of --against')
+
+
 def main() -> None:
     """Run from the command line."""
-    args = standard_args(__doc__.splitlines()[1], 30.0, 8.0)
+    args = standard_args(__doc__.splitlines()[1], 30.0, 8.0, more=_ab_options)
+    if args.against is not None:
+        seconds = args.seconds if '--seconds' in sys.argv else 40.0
+        results = compare(args.against.resolve(), args.rounds, seconds)
+        report('CPU, A/B', results,
+               [f'{args.rounds} rounds, each {seconds:g} s per checkout after '
+                f'{WARM_UP_S:g} s of warm-up, the two alternating; a subscriber in another '
+                'process.'],
+               None if args.no_output else 'cpu_ab.md', other_load=args.other_load)
+        return
     results = run(args.seconds)
     report('CPU', results,
            [f'{args.seconds:g} s window after {WARM_UP_S:g} s of warm-up; user + system time '
