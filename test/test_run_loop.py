@@ -1,0 +1,76 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The run loop's executor thread: it serves, ends when halted, passes on errors.
+
+``main.run`` spins the executor in a thread of its own (blocked until it has
+work) while the main thread waits for a signal. What the main thread did
+itself before must still happen: callbacks run, a callback that raises
+stops the node and its error reaches ``run``, and a halt ends the thread
+even when nothing wakes the executor. Real rclpy, in a process of its own.
+"""
+
+import subprocess
+import sys
+
+from ros_harness import isolate_ros_domain, REPO, ros_env
+
+_SCRIPT = """
+import threading
+import rclpy
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from i3dmgx2_driver.ros.main import _Spinner
+
+rclpy.init()
+node = Node('spinner_probe')
+ran = threading.Event()
+node.create_timer(0.01, ran.set)
+executor = MultiThreadedExecutor(num_threads=2)
+executor.add_node(node)
+stop = threading.Event()
+spinner = _Spinner(executor, stop)
+spinner.start()
+print('callbacks ran', ran.wait(10.0))
+print('stopped before halt', stop.is_set())
+spinner.halt()
+print('ended by halt', not spinner._thread.is_alive(), stop.is_set())
+
+def fail():
+    raise RuntimeError('boom')
+
+node.create_timer(0.01, fail)
+stop = threading.Event()
+spinner = _Spinner(executor, stop)
+spinner.start()
+print('stopped by the error', stop.wait(10.0), repr(spinner.error))
+spinner.halt()
+executor.shutdown()
+node.destroy_node()
+rclpy.try_shutdown()
+"""
+
+
+def test_executor_thread_serves_halts_and_passes_on_a_callbacks_error():
+    isolate_ros_domain()
+    done = subprocess.run([sys.executable, '-c', _SCRIPT], capture_output=True, text=True,
+                          env=ros_env(), cwd=REPO, timeout=60)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.splitlines() == [
+        'callbacks ran True',
+        'stopped before halt False',
+        'ended by halt True True',
+        "stopped by the error True RuntimeError('boom')",
+    ], done.stdout + done.stderr
