@@ -219,9 +219,10 @@ def emit(text: str, output: str | None) -> str:
     print(text, flush=True)
     if output:
         OUTPUT_DIR.mkdir(parents=True, exist_ok=True)
-        path = OUTPUT_DIR / output
+        path = OUTPUT_DIR / output  # an absolute ``output`` stays as it is
         path.write_text(text)
-        print(f'(written to {path.relative_to(REPO)})', flush=True)
+        shown = path.relative_to(REPO) if path.is_relative_to(REPO) else path
+        print(f'(written to {shown})', flush=True)
     return text
 
 
