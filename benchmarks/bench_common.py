@@ -202,6 +202,29 @@ def machine_table() -> str:
     return '\n'.join(lines)
 
 
+class RunNote:
+    """
+    What a long benchmark run says under its table: its command, its length, its load.
+
+    Made when the run starts (the load average and the other processes'
+    CPU are measured from then); ``text()`` once it is over.
+    """
+
+    def __init__(self, script: str, argv: list[str] | None) -> None:
+        self._command = f'python benchmarks/{script} {" ".join(argv or sys.argv[1:])}'.rstrip()
+        self._other = OtherLoad()
+        self._load_before = os.getloadavg()[0]
+        self._started = time.monotonic()
+
+    def text(self, detail: str = '') -> str:
+        """Return the note's line, ``detail`` (what was run, how long each) after the command."""
+        minutes = (time.monotonic() - self._started) / 60.0
+        return (f'- `{self._command}`: {detail}{minutes:.1f} min; load average (1 min) '
+                f'{self._load_before:.2f} before, {os.getloadavg()[0]:.2f} after; other '
+                f'processes kept {self._other.cores():.2f} of {os.cpu_count()} cores busy on '
+                f'average.')
+
+
 def report(title: str, results: list[Result], notes: list[str] = (),
            output: str | None = None, other_load: OtherLoad | None = None) -> str:
     """Print the results (and machine) as Markdown; also write them to ``output``."""

@@ -49,9 +49,8 @@ import time
 from typing import Any, NamedTuple
 
 from bench_common import (
-    emit, isolate_ros_domain, LoadProcess, machine_table, OtherLoad, percentile,
-    process_cpu_seconds, SimProcess, SubscriberProcess, summarise, Summary, TimedNodeProcess,
-    written_times,
+    emit, isolate_ros_domain, LoadProcess, machine_table, percentile, process_cpu_seconds,
+    RunNote, SimProcess, SubscriberProcess, summarise, Summary, TimedNodeProcess, written_times,
 )
 
 #: Seconds of streaming left out at the start (start-up, DDS discovery).
@@ -181,9 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f'unknown configs: {", ".join(unknown)}')
     isolate_ros_domain()
-    other = OtherLoad()
-    load_before = os.getloadavg()[0]
-    started = time.monotonic()
+    note = RunNote('latency_levers.py', argv)
     order_rng = random.Random(args.seed)
     results: dict[str, list[RunResult]] = {c: [] for c in configs}
     for round_ in range(args.rounds):
@@ -197,7 +194,6 @@ def main(argv: list[str] | None = None) -> int:
                   f'end to end {_ms(summarise(result.end_to_end))} ms, '
                   f'CPU {result.cpu_percent:.2f} %', file=sys.stderr, flush=True)
             gc.collect()
-    minutes = (time.monotonic() - started) / 60.0
     title = f'## Latency levers, {args.rate:g} Hz' + (', parameter flood' if args.load else '')
     lines = [title, '', machine_table(), '',
              '| configuration | end to end p50 / p99 / max (ms) | kernel p50 / p99 / max | '
@@ -240,11 +236,8 @@ def main(argv: list[str] | None = None) -> int:
                     s = summarise(values)
                     lines.append(f'| {config}: {labels[name]} | {_ms(s)} | '
                                  f'{s.mean * 1e3:.4f} |')
-    lines += ['', f'- `python benchmarks/latency_levers.py {" ".join(argv or sys.argv[1:])}`: '
-              f'{args.rounds} rounds x {len(configs)} configurations, {args.seconds:g} s '
-              f'measured per run after {WARM_UP_S:g} s; {minutes:.1f} min; load average '
-              f'(1 min) {load_before:.2f} before, {os.getloadavg()[0]:.2f} after; other '
-              f'processes kept {other.cores():.2f} of {os.cpu_count()} cores busy on average.']
+    lines += ['', note.text(f'{args.rounds} rounds x {len(configs)} configurations, '
+                            f'{args.seconds:g} s measured per run after {WARM_UP_S:g} s; ')]
     emit('\n'.join(lines) + '\n', args.output)
     return 0
 

@@ -42,7 +42,6 @@ with both switched off (as before issue 12), one after the other.
 """
 
 import argparse
-import os
 import random
 import statistics
 import sys
@@ -50,7 +49,7 @@ import time
 from typing import NamedTuple
 
 from bench_common import (
-    emit, isolate_ros_domain, machine_table, OtherLoad, TimedNodeProcess,
+    emit, isolate_ros_domain, machine_table, RunNote, TimedNodeProcess,
 )
 
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
@@ -177,8 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--output', default='reconnect.md')
     args = parser.parse_args(argv)
     isolate_ros_domain()
-    other = OtherLoad()
-    started = time.monotonic()
+    note = RunNote('reconnect.py', argv)
     figures = measure(args.rounds, args.seed)
     modes = list(MODES)
     heading = ' | '.join(f'{MODES[m][1]}: median / max' for m in modes)
@@ -197,10 +195,7 @@ def main(argv: list[str] | None = None) -> int:
     for scenario in SCENARIOS:
         cells = ' | '.join(_commands(figures.commands.get((scenario, m), ())) for m in modes)
         lines.append(f'| {scenario} | {cells} |')
-    lines += ['', f'- `python benchmarks/reconnect.py {" ".join(argv or sys.argv[1:])}`: '
-              f'{(time.monotonic() - started) / 60.0:.1f} min; load average (1 min) '
-              f'{os.getloadavg()[0]:.2f} at the end; other processes kept {other.cores():.2f} '
-              f'of {os.cpu_count()} cores busy on average.']
+    lines += ['', note.text()]
     emit('\n'.join(lines) + '\n', args.output)
     return 0
 
