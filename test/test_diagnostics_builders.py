@@ -22,6 +22,7 @@ simulator run cannot reach cheaply (a weak radio, an implausible drift).
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from i3dmgx2_driver.device.link import RadioStats
+from i3dmgx2_driver.device.sample_clock import ClockStatus
 from i3dmgx2_driver.device.supervisor import DeviceInfo, State
 from i3dmgx2_driver.ros import diagnostics as d
 import pytest
@@ -156,14 +157,25 @@ def test_device_status():
 
 
 def test_time_status():
-    ok = d.time_status('device', 500, 1.7e9, -38.2, 1, 0)
+    clock = ClockStatus(samples=500, drift_ppm=-38.2, restarts={'start': 1, 'reset': 2},
+                        rollovers=3, gaps=4, last_restart='reset', last_reset_at=100.0)
+    ok = d.time_status('device', clock, 100.0 + d.RESET_WARNING_S + 1)
     assert ok.level == d.OK
     assert ok.value('clock drift (ppm)') == '-38.2'
-    assert ok.value('clock re-anchors') == '1'
-    assert d.time_status('device', 0, 0.0, 0.0, 0, 0).level == d.STALE
-    assert d.time_status('device', 500, 0.0, 5000.0, 0, 0).level == d.WARN
-    assert d.time_status('device', 500, 0.0, float('nan'), 0, 0).level == d.WARN
-    assert d.time_status('host', 0, 0.0, 0.0, 0, 0).level == d.OK
+    assert ok.value('fit started afresh') == 'start 1, reset 2, reconnect 0'
+    assert ok.value('last fresh start') == 'reset'
+    assert ok.value('timer rollovers') == '3'
+    assert ok.value('gaps bridged') == '4'
+    # A restart of the sensor's timer is a warning for a while, then history.
+    recent = d.time_status('device', clock, 130.0)
+    assert recent.level == d.WARN
+    assert 'restarted 30 s ago' in recent.message
+    assert d.time_status('device', ClockStatus(), 0.0).level == d.STALE
+    assert d.time_status('device', ClockStatus(samples=500, drift_ppm=5000.0), 0.0).level \
+        == d.WARN
+    assert d.time_status('device', ClockStatus(samples=500, drift_ppm=float('nan')),
+                         0.0).level == d.WARN
+    assert d.time_status('host', ClockStatus(), 0.0).level == d.OK
 
 
 def test_calibration_status():

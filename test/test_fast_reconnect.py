@@ -47,7 +47,7 @@ class Recorder:
         self.read_times: list[float] = []
         self.lines: list[tuple[str, str]] = []
 
-    def on_record(self, packet, read_time: float) -> None:
+    def on_record(self, packet, read_time: float, read_mono: float) -> None:
         with self.lock:
             self.read_times.append(read_time)
 

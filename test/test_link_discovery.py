@@ -40,13 +40,13 @@ class Collected:
         self.by_address: dict[int | None, int] = {}
         self.lock = threading.Lock()
 
-    def __call__(self, packet, now) -> None:
+    def __call__(self, packet, now, mono) -> None:
         with self.lock:
             self.by_address[packet.address] = self.by_address.get(packet.address, 0) + 1
 
 
 def open_link(path: str, address: int | None, on_record=None) -> DeviceLink:
-    link = DeviceLink(SerialPort(path), address, on_record or (lambda p, t: None),
+    link = DeviceLink(SerialPort(path), address, on_record or (lambda p, t, m: None),
                       read_timeout=0.05)
     link.start()
     return link

@@ -45,7 +45,7 @@ def supervisor(port, address=95, **kwargs):
     log = Log()
     sup = DeviceSupervisor(SupervisorConfig(port=port, address=address,
                                             reconnect_interval=0.2, **kwargs),
-                           on_record=lambda packet, now: None, log=log)
+                           on_record=lambda packet, now, mono: None, log=log)
     return sup, log
 
 
@@ -66,7 +66,7 @@ def test_the_supervisor_thread_gives_up_on_a_directory_once(tmp_path):
     done = threading.Event()
     sup = DeviceSupervisor(SupervisorConfig(port=str(tmp_path), address=95,
                                             reconnect_interval=0.1),
-                           on_record=lambda packet, now: None, log=Log(),
+                           on_record=lambda packet, now, mono: None, log=Log(),
                            on_fatal=lambda exc: (fatal.append(exc), done.set()))
     sup.start()
     assert done.wait(10)

@@ -39,7 +39,7 @@ class Records:
         self.count = 0
         self.lock = threading.Lock()
 
-    def __call__(self, packet, read_time) -> None:
+    def __call__(self, packet, read_time, read_mono) -> None:
         with self.lock:
             self.count += 1
 

@@ -80,6 +80,23 @@ class DeviceClock:
         """How much faster the host clock runs than the device's, in ppm."""
         return self._drift * 1e6
 
+    @property
+    def started(self) -> bool:
+        """Whether a sample has been stamped since the last reset (there is a line)."""
+        return self._origin is not None
+
+    def residual(self, ticks: int, host_time: float, wire_time: float = 0.0) -> float:
+        """
+        Return how far (s) a sample would sit above the line, without adding it.
+
+        Zero or a little above for a sample of the device the line was fitted
+        to (its delay is at least the envelope's); far off either way for a
+        timer that restarted. Only meaningful once :attr:`started`.
+        """
+        device = ticks / TICKS_PER_SECOND
+        t = device - (self._origin if self._origin is not None else device)
+        return (host_time - wire_time - device) - (self._offset + self._drift * t)
+
     def stamp(self, ticks: int, host_time: float, wire_time: float = 0.0) -> float:
         """
         Return the host time (s) at which the sample with ``ticks`` was taken.

@@ -38,7 +38,10 @@ from ..codec.records import PingReply
 from ..codec.stream import Ack, Nack, SensorStreamParser
 
 #: Called from the reader thread with each data packet and its read time.
-RecordCallback = Callable[[DataPacket, float], None]
+#: Called with a record, the system-clock time its last byte was read and the same
+#: instant on the monotonic clock (what intervals and the device-clock fit use: the
+#: system clock can be stepped).
+RecordCallback = Callable[[DataPacket, float, float], None]
 #: Called from the reader thread with each read's bytes and their read time.
 BytesCallback = Callable[[bytes, float], None]
 
@@ -123,6 +126,8 @@ class DeviceLink:
         self.disconnected = threading.Event()
         self.error: str | None = None
         self.last_data_time = 0.0
+        #: The same instant on the monotonic clock, for stall detection.
+        self.last_data_mono = 0.0
         self.records = 0
         #: Command byte of the last record handed to ``on_record`` (None before one).
         self.last_code: int | None = None
@@ -168,6 +173,7 @@ class DeviceLink:
                 self._wake_pending()
                 return
             now = time.time()
+            mono = time.monotonic()
             if data and self._on_bytes is not None:
                 self._on_bytes(data, now)
             if observer is not None and observer.active \
@@ -175,11 +181,12 @@ class DeviceLink:
                 observer.feed(data, now, self.last_data_time)
             events = parser.feed(data) if data else parser.idle()
             for event in events:
-                self._dispatch(event, now)
+                self._dispatch(event, now, mono)
 
-    def _dispatch(self, event: Any, now: float) -> None:
+    def _dispatch(self, event: Any, now: float, mono: float) -> None:
         if isinstance(event, DataPacket):
             self.last_data_time = now
+            self.last_data_mono = mono
             if event.lqi is not None:
                 self._note_radio(event.lqi, event.rssi)
             pending = self._pending
@@ -191,7 +198,7 @@ class DeviceLink:
                     return
             self.records += 1
             self.last_code = code
-            self._on_record(event, now)
+            self._on_record(event, now, mono)
         elif isinstance(event, Ack):
             if self._pending is not None:
                 self._pending.acked.set()

@@ -190,7 +190,7 @@ class _Prober:
 
     # -- what the reader thread sees ------------------------------------
 
-    def _on_record(self, packet: DataPacket, now: float) -> None:
+    def _on_record(self, packet: DataPacket, now: float, mono: float = 0.0) -> None:
         code = _CODE_OF_TYPE.get(type(packet.record), 0)
         with self._heard_lock:
             heard = self._heard.setdefault(packet.address, _Heard())

@@ -40,6 +40,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from ..device.link import RadioStats
+from ..device.sample_clock import ClockStatus, Restart
 from ..device.supervisor import DeviceInfo, State
 
 OK = 0
@@ -62,6 +63,8 @@ LOW_RSSI = 60
 #: A drift estimate beyond this is implausible (the device clock is good to
 #: 100 ppm, NTP slews the host's by at most 500 ppm): the stamps are suspect.
 MAX_DRIFT_PPM = 600.0
+#: How long (s) the time status stays WARN after the sensor's timer was found restarted.
+RESET_WARNING_S = 60.0
 
 #: Parser counters that mean a damaged frame, and when they grow, a WARN.
 PARSER_FAILURES = ('checksum_failures', 'length_failures')
@@ -303,27 +306,38 @@ def device_status(info: DeviceInfo | None, connected_once: bool, address: int,
                   tuple(values))
 
 
-def time_status(time_source: str, samples: int, offset: float, drift_ppm: float,
-                clock_resets: int, device_resets: int,
+def time_status(time_source: str, clock: ClockStatus, now: float,
                 max_drift_ppm: float = MAX_DRIFT_PPM) -> Status:
     """
-    Show how stamps are made; WARN when the device clock fit is implausible.
+    Show how stamps are made and what the device clock went through.
 
-    ``samples`` is how many stamps the current fit has made (0: none yet,
-    STALE with the device time source).
+    ``clock`` is the stamping clock's snapshot, ``now`` the monotonic time.
+    WARN for ``RESET_WARNING_S`` after the sensor's timer was found to have
+    restarted (a power cycle the driver may not otherwise notice), and when
+    the fit is implausible; STALE before the first sample (device time).
     """
+    samples = clock.samples
+    drift_ppm = clock.drift_ppm
+    restarts = ', '.join(f'{reason.value} {clock.restarts.get(reason.value, 0)}'
+                         for reason in Restart)
     values = (
         ('time source', time_source),
-        ('clock offset (s)', f'{offset:.6f}' if samples else 'n/a'),
         ('clock drift (ppm)', f'{drift_ppm:.1f}' if samples else 'n/a'),
         ('samples in this fit', str(samples)),
-        ('clock re-anchors', str(clock_resets)),
-        ('device resets', str(device_resets)),
+        ('fit started afresh', restarts),
+        ('last fresh start', clock.last_restart or 'n/a'),
+        ('timer rollovers', str(clock.rollovers)),
+        ('gaps bridged', str(clock.gaps)),
     )
     if time_source != 'device':
         return Status(OK, 'time', 'host time: stamps are packet read times', values)
     if not samples:
         return Status(STALE, 'time', 'no samples to align the device clock yet', values)
+    if clock.last_reset_at is not None and now - clock.last_reset_at < RESET_WARNING_S:
+        ago = now - clock.last_reset_at
+        return Status(WARN, 'time', f"the sensor's timer restarted {ago:.0f} s ago (power "
+                                    f'cycle or brown-out?): the clock fit started afresh',
+                      values)
     if not math.isfinite(drift_ppm) or abs(drift_ppm) > max_drift_ppm:
         return Status(WARN, 'time', f'implausible clock drift {drift_ppm:.0f} ppm '
                                     f'(over {max_drift_ppm:.0f}): stamps are suspect', values)
@@ -483,7 +497,6 @@ class DiagnosticsPublisher:
         if radio is None:
             radio = self._last_radio  # disconnected: show the last link's numbers
         self._last_radio = radio
-        clock = core.clock_model
         services = core.device_services
         last, good = services.calibration()
         statuses += [
@@ -500,8 +513,7 @@ class DiagnosticsPublisher:
             parser_status(parser, self._last_parser),
             device_status(sup.info, sup.connections > 0, cfg.address, sup.divider,
                           sup.expected_rate_hz, core.temperature.latest),
-            time_status(cfg.time_source, clock.samples, clock.offset, clock.drift_ppm,
-                        clock.anchors - 1, stats.device_resets),
+            time_status(cfg.time_source, core.clock_status(), now),
             calibration_status(last, good, time.time()),
         ]
         self._last_parser = parser

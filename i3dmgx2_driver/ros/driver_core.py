@@ -57,10 +57,9 @@ from .unknown_parameters import warn_unknown_parameters
 from ..codec import line_budget
 from ..codec.data_rate import ticks_per_cycle
 from ..codec.framing import DataPacket
-from ..codec.timer import TimerUnwrapper
-from ..device.clock import DeviceClock
 from ..device.port import check_port_path, PortError
 from ..device.realtime import ThreadPolicy
+from ..device.sample_clock import ClockStatus, Restart, SampleClock
 from ..device.supervisor import DeviceSupervisor, SupervisorConfig
 
 #: Whether ready-serialized messages read back right, by the message factory's
@@ -171,8 +170,8 @@ class DriverCore:
                     cfg.magnetic_field_stddev, self.stream)
         self.messages = MessageFactory(*settings)
         self.stats = StreamStats()
-        self.unwrapper = TimerUnwrapper()
-        self.clock_model = DeviceClock()
+        #: Device timer -> system-clock stamps, through resets, rollovers and gaps.
+        self.sample_clock = SampleClock()
         #: Whether records are published: always for the plain node; while
         #: active for the managed one (records still in flight after a
         #: deactivate are counted as unpublished, not as published).
@@ -226,11 +225,22 @@ class DriverCore:
         self.node.get_logger().fatal(str(error))
 
     def _on_connect(self) -> None:
-        """Re-anchor time on a new link: the device may have been power-cycled."""
+        """
+        Check the next record's time against the clock fit: a new link is up.
+
+        The sensor may have kept streaming (a wireless one, while the base
+        station was unplugged), been power-cycled, or be another sensor: its
+        first record's timer tells which (device/sample_clock.py). What the
+        outage cost is not counted as lost records.
+        """
         with self._publish_lock:
-            self.unwrapper.reset()
-            self.clock_model.reset()
+            self.sample_clock.link_changed()
             self.stats.last_ticks = None
+
+    def clock_status(self) -> ClockStatus:
+        """Return a snapshot of the stamping clock (from any thread)."""
+        with self._publish_lock:
+            return self.sample_clock.status()
 
     def forget_last_sample(self) -> None:
         """Let the next record start afresh: a deliberate pause is no packet loss."""
@@ -241,7 +251,7 @@ class DriverCore:
         divider = self.supervisor.divider
         return ticks_per_cycle(divider) if divider else None
 
-    def _on_record(self, packet: DataPacket, read_time: float) -> None:
+    def _on_record(self, packet: DataPacket, read_time: float, read_mono: float) -> None:
         """Stamp and publish one record (runs in the reader thread)."""
         record = packet.record
         if type(record) is not self._record_type:
@@ -252,10 +262,16 @@ class DriverCore:
             return
         with self._publish_lock:
             stats = self.stats
-            ticks = self.unwrapper.update(record.timer, read_time)
-            if self.unwrapper.last_was_reset:
-                stats.device_resets += 1
-                self.clock_model.reset()
+            clock = self.sample_clock
+            stamp = clock.stamp(record.timer, read_mono, self._wire_time)
+            ticks = clock.ticks
+            if clock.restarted:
+                stats.last_ticks = None
+                if clock.last_restart == Restart.RESET.value:
+                    stats.device_resets += 1
+                    self.node.get_logger().warning(
+                        "the sensor's timer restarted (a power cycle or brown-out): "
+                        'timestamps start afresh from its new clock')
             elif stats.last_ticks is not None:
                 expected = self._expected_ticks()
                 if expected:
@@ -263,9 +279,7 @@ class DriverCore:
                     if gap > 0:
                         stats.lost += gap
             stats.last_ticks = ticks
-            if self._use_device_time:
-                stamp = self.clock_model.stamp(ticks, read_time, self._wire_time)
-            else:
+            if not self._use_device_time:
                 stamp = read_time
             try:
                 self.imu_pub.publish(self._imu_message(record, stamp))

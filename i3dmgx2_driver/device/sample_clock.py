@@ -1,0 +1,239 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Sample stamps that stay true through every event that touches the device clock.
+
+:class:`~.clock.DeviceClock` fits a line from the device timer to the host
+clock; this class decides, record by record, which device time a raw 32-bit
+timer value stands for, and so whether the line still holds. The model is
+written down in docs/clock.md; in short:
+
+- The line is fitted against the host's *monotonic* clock, which nothing
+  steps. A stamp is the line's monotonic time plus the system clock's
+  offset from it, read when the stamp is made: when NTP or chrony steps the
+  system clock, the stamps follow at once, as every other node's do, and the
+  fit is not disturbed.
+- After a gap in the records (a stall, a reconnect, a stream restarted, a
+  power cycle, a rollover) the record's timer is read as the device time
+  that best matches what the monotonic clock says elapsed (whole rollovers
+  included), and that device time must land on the line: within
+  ``CONTINUE_EARLY_S`` before it and ``CONTINUE_LATE_S`` after it (plus
+  the drift estimate's error over the gap). Then the line goes on: a
+  rollover, a stall or a reconnect to a sensor that kept its timer changes
+  nothing. Otherwise the timer restarted (a power cycle, a brown-out, another
+  sensor): the fit starts afresh from this record. The timer value alone
+  cannot tell a rollover from a restart just before one; what elapsed can.
+- A gap that was taken as continuing is watched for ``PROBATION_S``: if no
+  record in that time comes within ``CONFIRM_S`` of the line, the device lost
+  time after all (a restart whose timer happened to fit), and the fit starts
+  afresh.
+
+Not thread-safe: the caller stamps from one thread (the reader) or holds a lock.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+import enum
+import time
+
+from .clock import DeviceClock
+from ..codec.records import TICKS_PER_SECOND
+from ..codec.timer import TIMER_MODULUS
+
+#: Host time (s) between two records past which the second is checked against the line.
+GAP_S = 0.1
+#: How far (s) a record after a gap may come before the line and still continue it: the
+#: line is the lower envelope of the delays, so only its own error puts a record below it.
+CONTINUE_EARLY_S = 0.003
+#: How far (s) after the line it may come: no further than the stamps may be off in the
+#: first half second after any start, so that a restart whose timer happens to fit
+#: costs no more than a fresh start would. A read delayed more than this (a busy host)
+#: restarts the fit, which then settles as after any start.
+CONTINUE_LATE_S = 0.005
+#: A record further than this (s) from the line, or before it, says the timer restarted:
+#: no read comes that late. Nearer, a late read and a restart cannot be told apart.
+RESET_S = 0.5
+#: Added to both per second of gap: what a drift error of 100 ppm makes of it.
+GAP_DRIFT = 100e-6
+#: How long (s) a continued gap is watched, and how close (s) to the line some record
+#: in that time must come for the continuation to stand.
+PROBATION_S = 0.3
+CONFIRM_S = 0.001
+
+
+class Restart(str, enum.Enum):
+    """Why the fit started afresh."""
+
+    #: The first record after the clock was made or cleared.
+    START = 'start'
+    #: The device timer restarted (a power cycle) or jumped: found by what elapsed.
+    RESET = 'reset'
+    #: A record after a gap sat a little off the line: a late read, or a restart whose
+    #: timer nearly fitted; starting afresh is right for both.
+    RESYNC = 'resync'
+    #: The supervisor reconnected to a sensor it knows to be another one.
+    RECONNECT = 'reconnect'
+
+
+def system_clock_offset() -> float:
+    """
+    Return the system (ROS) clock minus the monotonic clock, in seconds.
+
+    Read as a pair with the monotonic clock on either side, so that the
+    offset is good to a fraction of a microsecond. This is the seam through
+    which a test steps the clock the stamps follow.
+    """
+    before = time.monotonic()
+    wall = time.time()
+    after = time.monotonic()
+    return wall - 0.5 * (before + after)
+
+
+@dataclass(frozen=True)
+class ClockStatus:
+    """What the stamping clock has been through, for /diagnostics."""
+
+    samples: int = 0
+    #: How much faster the host clock runs than the device's (ppm).
+    drift_ppm: float = 0.0
+    #: Restarts of the fit by reason (Restart values), the first start included.
+    restarts: dict[str, int] = field(default_factory=dict)
+    #: Timer rollovers the fit went through (2^32 ticks, every ~218 s).
+    rollovers: int = 0
+    #: Gaps (stalls, reconnects, pauses) the fit went through unchanged.
+    gaps: int = 0
+    #: The reason of the last restart ('' before the first record).
+    last_restart: str = ''
+    #: Monotonic time (s) of the last record that found the device reset (None: never).
+    last_reset_at: float | None = None
+
+
+class SampleClock:
+    """
+    Turn (raw timer, monotonic read time) into a stamp on the system clock.
+
+    ``offset`` returns the system clock minus the monotonic clock now
+    (:func:`system_clock_offset` by default). After each :meth:`stamp`,
+    :attr:`ticks` is the record's device time in ticks since the current
+    fit started (for loss counting) and :attr:`restarted` says whether that
+    record started a fit afresh (its reason in :attr:`last_restart`).
+    """
+
+    def __init__(self, offset: Callable[[], float] = system_clock_offset,
+                 fit: DeviceClock | None = None) -> None:
+        self._system_offset = offset
+        self.fit = fit or DeviceClock()
+        self._restarts: dict[str, int] = {}
+        self.rollovers = 0
+        self.gaps = 0
+        self.last_restart = ''
+        self._last_reset_at: float | None = None
+        self.clear()
+
+    def clear(self, reason: Restart = Restart.START) -> None:
+        """Start the next record afresh, for ``reason`` (a new configuration, another sensor)."""
+        self._pending = reason
+        self._check_next = False
+        self._last_raw: int | None = None
+        self._last_host = 0.0
+        self._probation_end: float | None = None
+        self._probation_best = 0.0
+        self.ticks = 0
+        self.restarted = False
+
+    def link_changed(self, same_device: bool = True) -> None:
+        """
+        Check the next record against the line (or restart): a new link is up.
+
+        ``same_device`` False: the sensor is known to be another one, whose
+        timer has nothing to do with the line.
+        """
+        if same_device:
+            self._check_next = True
+        else:
+            self.clear(Restart.RECONNECT)
+
+    def stamp(self, raw_timer: int, read_time: float, wire_time: float = 0.0) -> float:
+        """
+        Return the system-clock time (s) at which the record was sampled.
+
+        ``read_time`` is the monotonic time its last byte was read,
+        ``wire_time`` how long the packet takes on the line.
+        """
+        host = read_time - wire_time
+        self.restarted = False
+        if self._last_raw is None:
+            self._restart(self._pending, raw_timer)
+        else:
+            self._follow(raw_timer, host, read_time, wire_time)
+        self._last_raw, self._last_host = raw_timer, host
+        return self.fit.stamp(self.ticks, read_time, wire_time) + self._system_offset()
+
+    def _follow(self, raw: int, host: float, read_time: float, wire_time: float) -> None:
+        """Place ``raw`` on the current fit, or restart the fit if it cannot be placed."""
+        step = (raw - self._last_raw) % TIMER_MODULUS
+        elapsed = host - self._last_host
+        wraps = max(0, round((elapsed * TICKS_PER_SECOND - step) / TIMER_MODULUS))
+        ticks = self.ticks + step + wraps * TIMER_MODULUS
+        rolled = wraps > 0 or raw < self._last_raw
+        gap = elapsed > GAP_S or abs(step / TICKS_PER_SECOND - elapsed) > GAP_S
+        if gap or rolled or self._check_next:
+            off = self.fit.residual(ticks, read_time, wire_time)
+            slack = GAP_DRIFT * max(elapsed, 0.0)
+            if not -CONTINUE_EARLY_S - slack <= off <= CONTINUE_LATE_S + slack:
+                sure = off < -CONTINUE_EARLY_S - slack or off > RESET_S
+                self._restart(Restart.RESET if sure else Restart.RESYNC, raw, host)
+                return
+            if gap or self._check_next:
+                self.gaps += 1
+                self._probation_end = host + PROBATION_S
+                self._probation_best = off
+            self._check_next = False
+            if rolled:
+                self.rollovers += wraps + (raw < self._last_raw)
+        elif self._probation_end is not None:
+            off = self.fit.residual(ticks, read_time, wire_time)
+            self._probation_best = min(self._probation_best, off)
+            if host >= self._probation_end:
+                self._probation_end = None
+                if self._probation_best > CONFIRM_S:
+                    # No record since the gap came near the line: the device lost time.
+                    self._restart(Restart.RESYNC, raw, host)
+                    return
+        self.ticks = ticks
+
+    def _restart(self, reason: Restart, raw: int, host: float = 0.0) -> None:
+        self.fit.reset()
+        self.ticks = raw
+        self.restarted = True
+        self.last_restart = reason.value
+        self._restarts[reason.value] = self._restarts.get(reason.value, 0) + 1
+        if reason is Restart.RESET:
+            self._last_reset_at = host
+        self._pending = Restart.START
+        self._check_next = False
+        self._probation_end = None
+
+    @property
+    def resets(self) -> int:
+        """How many times the device timer was found to have restarted."""
+        return self._restarts.get(Restart.RESET.value, 0)
+
+    def status(self) -> ClockStatus:
+        """Return a snapshot of the clock's state (safe to hand to another thread)."""
+        return ClockStatus(
+            samples=self.fit.samples, drift_ppm=self.fit.drift_ppm,
+            restarts=dict(self._restarts), rollovers=self.rollovers, gaps=self.gaps,
+            last_restart=self.last_restart, last_reset_at=self._last_reset_at)
