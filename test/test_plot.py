@@ -229,3 +229,23 @@ def test_main_plots_the_fixture_a_capture_and_a_csv(tmp_path, fixture_path):
     CaptureWriter(empty, {}).close()
     assert plot.main([str(empty), '-o', str(tmp_path / 'e.png')]) == 1
     assert not (tmp_path / 'e.png').exists()
+
+
+def test_stamp_errors_round_trip_and_plot(tmp_path, capsys):
+    """The stamp benchmark's CSV reads back exactly and plots with its events."""
+    from i3dmgx2_driver.tools.stamp_plot import read_stamp_errors, write_stamp_errors
+    rows = [(100.0 + k / 100, (-7.3 if k < 50 else -7.1) * 1e-3) for k in range(100)]
+    path = tmp_path / 'errors.csv'
+    write_stamp_errors(str(path), rows, [(100.5, 'power cycle')])
+    read = read_stamp_errors(str(path))
+    assert read.events == [(100.5, 'power cycle')]
+    assert np.allclose(read.time, [t for t, _ in rows])
+    assert np.allclose(read.error, [e for _, e in rows])
+    out = tmp_path / 'errors.png'
+    assert plot.main(['--stamp-errors', str(path), '-o', str(out)]) == 0
+    assert out.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert '100 stamp errors' in capsys.readouterr().out
+    bad = tmp_path / 'bad.csv'
+    bad.write_text('t,e\n1,2\n')
+    assert plot.main(['--stamp-errors', str(bad), '-o', str(out)]) == 1
+    assert 'time,error' in capsys.readouterr().err

@@ -28,10 +28,14 @@ time (the linear-programming estimate of Moon, Skelly and Towsley, 1999). It
 rests on the least-delayed samples, which a least-squares line would not.
 Its slope is the device clock's drift.
 
+The host clock given here must be one that nothing steps (the monotonic
+clock): :class:`~.sample_clock.SampleClock` feeds it and moves its stamps to
+the system clock. Which device time a raw timer value stands for, and when
+the fit must start afresh, is decided there too (docs/clock.md).
+
 Usable from the very first message (the first stamp is the read time less
-the wire time), it only gets better, it never runs backwards, it never stamps
-a sample later than it was read, and it starts afresh when told the device
-was reset or reconnected.
+the wire time), it only gets better, it never runs backwards, and it never
+stamps a sample later than it was read.
 """
 
 from collections import deque
@@ -59,7 +63,7 @@ class DeviceClock:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the estimate: the device restarted or the link was reopened."""
+        """Forget the estimate: the device's timer restarted, or it is another device."""
         self._points.clear()
         self._bucket: int | None = None
         self._bucket_min: tuple[float, float] = (0.0, 0.0)

@@ -177,8 +177,8 @@ class DeviceLink:
             if data and self._on_bytes is not None:
                 self._on_bytes(data, now)
             if observer is not None and observer.active \
-                    and now - self.last_data_time > QUIET_AFTER:
-                observer.feed(data, now, self.last_data_time)
+                    and mono - self.last_data_mono > QUIET_AFTER:
+                observer.feed(data, mono, self.last_data_mono)
             events = parser.feed(data) if data else parser.idle()
             for event in events:
                 self._dispatch(event, now, mono)

@@ -712,7 +712,7 @@ class DeviceSupervisor:
                 raise PortDisconnected(link.error or 'device disconnected')
             if self._paused.is_set():
                 continue
-            quiet = time.time() - link.last_data_time
+            quiet = time.monotonic() - link.last_data_mono
             if self.advice and quiet < stall_after:
                 self.advice = ''  # records flow again: what was observed is past
             if quiet > stall_after:

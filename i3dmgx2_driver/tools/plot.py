@@ -56,6 +56,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 import numpy as np
 
+from .stamp_plot import read_stamp_errors, render_stamp_errors
 from ..capture import (
     FIXTURE_ADDRESS, fixture_chunks, is_capture, load_fixture, read_capture, timeline,
 )
@@ -409,6 +410,9 @@ def _parser() -> argparse.ArgumentParser:
                         help='capture file (GX2CAP) or CSV (time,ax,ay,az,wx,wy,wz,qx,qy,'
                              'qz,qw, or `ros2 topic echo --csv /imu/raw_data` output)')
     source.add_argument('--fixture', metavar='PATH', help='plot the real-records fixture')
+    source.add_argument('--stamp-errors', metavar='CSV',
+                        help='plot a stamp-error series (time,error; benchmarks/'
+                             'stamp_faults.py writes them)')
     parser.add_argument('--address', type=int,
                         help='only records from this node address (captures)')
     parser.add_argument('--convention', choices=CONVENTIONS, default=None,
@@ -427,8 +431,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the plot command line; return the exit status."""
     args = _parser().parse_args(argv)
     convention = args.convention or ENU
-    source_path = args.fixture or args.input
+    source_path = args.fixture or args.stamp_errors or args.input
     output = args.output or os.path.splitext(os.path.basename(source_path))[0] + '.png'
+    if args.stamp_errors:
+        return _plot_stamp_errors(args.stamp_errors, output, args.title)
     try:
         if args.fixture:
             series = series_from_fixture(args.fixture, convention, args.gap)
@@ -448,6 +454,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     render(series, output, args.title)
     print(f'plot: {series.time.size} samples -> {output}')
+    return 0
+
+
+def _plot_stamp_errors(path: str, output: str, title: str | None) -> int:
+    try:
+        errors = read_stamp_errors(path)
+    except (OSError, ValueError) as exc:
+        print(f'plot: {exc}', file=sys.stderr)
+        return 1
+    if not errors.time.size:
+        print(f'plot: no rows in {path}', file=sys.stderr)
+        return 1
+    render_stamp_errors(errors, output, title)
+    print(f'plot: {errors.time.size} stamp errors -> {output}')
     return 0
 
 

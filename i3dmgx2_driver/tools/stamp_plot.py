@@ -1,0 +1,103 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Plot a stamp-error series: how far each stamp was from the true sample time.
+
+``plot --stamp-errors FILE.csv`` draws what the stamp benchmark
+(``benchmarks/stamp_faults.py``) writes: one row per record, ``time`` (the
+true sample time, s) and ``error`` (stamp minus sample time, s), with events
+(a power cycle, a clock step) as comment lines ``# event,TIME,LABEL``. The
+error is drawn in milliseconds against seconds from the first record, each
+event as a vertical line, so that a stamp that runs slow after an event (a
+slope) or jumps (a step) is plain to see.
+"""
+
+import csv
+from typing import NamedTuple
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+import numpy as np
+
+
+class StampErrors(NamedTuple):
+    """A stamp-error series and the events in it (times in s)."""
+
+    time: np.ndarray
+    error: np.ndarray
+    events: list[tuple[float, str]]
+
+
+def write_stamp_errors(path: str, rows: list[tuple[float, float]],
+                       events: list[tuple[float, str]] = ()) -> None:
+    """Write (sample time, stamp error) rows and events as the plot reads them."""
+    with open(path, 'w', newline='') as out:
+        for at, label in events:
+            out.write(f'# event,{at:.6f},{label}\n')
+        writer = csv.writer(out)
+        writer.writerow(('time', 'error'))
+        for t, e in rows:
+            writer.writerow((f'{t:.6f}', f'{e:.9f}'))
+
+
+def read_stamp_errors(path: str) -> StampErrors:
+    """Read a stamp-error CSV; raise ValueError naming what is wrong."""
+    times, errors, events = [], [], []
+    with open(path, newline='') as source:
+        header = None
+        for number, raw in enumerate(source, 1):
+            line = raw.strip()
+            if not line:
+                continue
+            if line.startswith('#'):
+                parts = line[1:].strip().split(',', 2)
+                if parts[0] == 'event' and len(parts) == 3:
+                    events.append((float(parts[1]), parts[2]))
+                continue
+            fields = line.split(',')
+            if header is None:
+                header = fields
+                if header[:2] != ['time', 'error']:
+                    raise ValueError(f'{path}: the header must start with time,error '
+                                     f'(got {line!r})')
+                continue
+            try:
+                times.append(float(fields[0]))
+                errors.append(float(fields[1]))
+            except (IndexError, ValueError):
+                raise ValueError(f'{path}:{number}: not two numbers: {line!r}') from None
+    return StampErrors(np.array(times), np.array(errors), events)
+
+
+def render_stamp_errors(series: StampErrors, output: str, title: str | None = None) -> Figure:
+    """Draw the error (ms) over time (s from the first record) to ``output`` (PNG)."""
+    fig = Figure(figsize=(10, 4.5), dpi=100)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    start = series.time[0] if series.time.size else 0.0
+    ax.plot(series.time - start, series.error * 1e3, '.', markersize=2, color='tab:blue',
+            label='stamp - true sample time')
+    for at, label in series.events:
+        ax.axvline(at - start, color='tab:red', linestyle='--', linewidth=1)
+        ax.annotate(label, (at - start, 1.0), xycoords=('data', 'axes fraction'),
+                    xytext=(3, -12), textcoords='offset points', color='tab:red',
+                    fontsize='small')
+    ax.set_xlabel('time since the first record (s)')
+    ax.set_ylabel('stamp error (ms)')
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc='lower right', fontsize='small')
+    fig.suptitle(title or 'Stamp error against the true sample time', fontsize='medium')
+    fig.savefig(output)
+    return fig
