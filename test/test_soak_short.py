@@ -99,3 +99,11 @@ def test_campaign_analysis_catches_a_corrupted_record_published():
     data = _synthetic_run(list(range(100)))
     data.truth[42] = data.truth[42]._replace(valid=False, fault='checksum')
     assert 'no corrupted, foreign or unwritten record published' in _failed(data)
+
+
+def test_campaign_analysis_catches_stamps_that_run_slow_after_a_fault():
+    """The issue #23 symptom: stamps 8 % slow from record 50 on, 40 ms behind at the end."""
+    data = _synthetic_run(list(range(100)))
+    data.messages[:] = [(key, stamp - round(max(0, i - 50) * 0.0008 * 1e9), quat, t)
+                        for i, (key, stamp, quat, t) in enumerate(data.messages)]
+    assert _failed(data) == {'stamps true through every fault'}

@@ -28,115 +28,13 @@ those, and without a trend. test_node_stamps.py runs the power cycle of the
 issue through the node process itself.
 """
 
-from collections.abc import Callable
 import dataclasses
-import threading
 import time
 
-from i3dmgx2_driver.codec import line_budget, streams
-from i3dmgx2_driver.device.sample_clock import SampleClock, system_clock_offset
-from i3dmgx2_driver.device.supervisor import DeviceSupervisor, SupervisorConfig
-from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from harness.stamp_runs import check, errors, run
 import pytest
-from stamp_series import check_series
 
 pytestmark = pytest.mark.slow
-
-
-
-class SteppedSystemClock:
-    """The system clock's offset from the monotonic one, plus a step the test sets."""
-
-    def __init__(self) -> None:
-        self.step = 0.0
-        self.applied = 0.0
-
-    def offset(self) -> float:
-        self.applied = self.step
-        return system_clock_offset() + self.step
-
-
-@dataclasses.dataclass
-class Run:
-    """What a scenario produced: stamped records, the truth, and when the event came."""
-
-    rows: list  # (accel, stamp, step applied)
-    truth: dict  # accel -> true sample time
-    event_time: float | None
-    clock: SampleClock
-    log: list
-
-
-class Log:
-    """Collect the supervisor's messages (for a failure's explanation)."""
-
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-
-    def __getattr__(self, level: str) -> Callable[[str], None]:
-        return lambda message: self.lines.append(f'{level}: {message}')
-
-
-def run(event: Callable[[PtySimulator, DeviceSupervisor, SteppedSystemClock], None] | None,
-        before: float = 3.0, after: float = 4.0, stream: int = streams.DEFAULT.code,
-        data_rate_hz: float | None = None, **sim: object) -> Run:
-    """Stream ``before`` s, apply ``event``, stream ``after`` s more; return what was seen."""
-    wire = line_budget.wire_time(stream, 115200, True)
-    system = SteppedSystemClock()
-    clock = SampleClock(offset=system.offset)
-    rows = []
-    lock = threading.Lock()
-
-    def on_record(packet, read_time: float, read_mono: float) -> None:
-        with lock:
-            stamp = clock.stamp(packet.record.timer, read_mono, wire)
-            rows.append((packet.record.accel, stamp, system.applied))
-
-    def on_connect() -> None:
-        with lock:
-            clock.link_changed()
-
-    log = Log()
-    config = dict(seed=23, **sim)
-    with PtySimulator(SimulatorConfig(**config)) as simulator:
-        sup = DeviceSupervisor(
-            SupervisorConfig(port=simulator.port, address=95, low_latency=False,
-                             stall_timeout=0.3, reconnect_interval=0.2, stream=stream,
-                             data_rate_hz=data_rate_hz),
-            on_record=on_record, on_connect=on_connect, log=log)
-        sup.start()
-        try:
-            deadline = time.monotonic() + 10.0
-            while not rows and time.monotonic() < deadline:
-                time.sleep(0.01)
-            assert rows, f'no records: {log.lines}'
-            time.sleep(before)
-            event_time = time.time() if event is not None else None
-            if event is not None:
-                event(simulator, sup, system)
-            time.sleep(after)
-        finally:
-            sup.stop()
-        truth = {t.record.accel: t.sample_time for t in simulator.truth
-                 if t.valid and t.source == 'stream'}
-    return Run(rows, truth, event_time, clock, log.lines)
-
-
-def errors(result: Run) -> list[tuple[float, float]]:
-    """(true sample time, stamp error on the stepped system clock), in order of stamping."""
-    out = []
-    for accel, stamp, step in result.rows:
-        sample_time = result.truth.get(accel)
-        if sample_time is not None:
-            out.append((sample_time, stamp - step - sample_time))
-    return out
-
-
-def check(result: Run) -> dict:
-    """Assert the error series is true after every grace; return a few figures."""
-    series = errors(result)
-    assert len(series) > 200, result.log
-    return check_series(series, result.event_time, result.log)
 
 
 def test_steady_stream_and_the_timer_rollover():

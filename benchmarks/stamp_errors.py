@@ -1,0 +1,196 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+How true the stamps stay: event by event, and stream by stream when nothing goes wrong.
+
+Event by event (``--events``): the simulated sensor streams 0xCC at 100 Hz
+through the real supervisor, link and parser, stamped as the node stamps
+(harness/stamp_runs.py); each event of issue #23 is applied while it
+streams. For each: the worst stamp error after the grace period (0.5 s after
+the stream's return), against the steady offset before the event; the rate
+error (trend of the error after the grace, ppm); the time to settle (from
+the stream's return to the last stamp more than 1 ms off); and the worst in
+the grace. The power cycle 0.4 s before the rollover is also written as a
+CSV (``--plot-csv``) for ``plot --stamp-errors``.
+
+Stream by stream (``--streams``): each stream at the highest rate its line
+budget allows, and 0xCC at 100 Hz, with radio-like delays (2 ms latency,
+the wire time at 115200 baud, a random 0..5 ms more): the standard
+deviation of the stamp error from 5 s to 60 s and after 60 s (the fit's full
+history of 60 one-second windows).
+"""
+
+from pathlib import Path
+import statistics
+import sys
+import time
+
+from bench_common import report, Result, standard_args
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from harness.stamp_runs import (  # noqa: E402 - the repository root is on the path now
+    check_series, errors, GRACE, run, TOLERANCE,
+)
+from i3dmgx2_driver.codec import line_budget, streams  # noqa: E402
+from i3dmgx2_driver.codec.records import TICKS_PER_SECOND  # noqa: E402
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS  # noqa: E402
+from i3dmgx2_driver.simulator.faults import FaultConfig  # noqa: E402
+from i3dmgx2_driver.tools.stamp_plot import write_stamp_errors  # noqa: E402
+
+#: Timer at power-up for runs that cut power near the rollover: it comes 9 s in.
+NEAR_ROLLOVER_START = TIMER_MODULUS - round(9.0 * TICKS_PER_SECOND)
+
+
+def _wait_timer(sim, before_rollover: float, timeout: float = 10.0) -> None:
+    """Return when the sensor's timer is ``before_rollover`` s before its rollover."""
+    target = TIMER_MODULUS - round(before_rollover * TICKS_PER_SECOND)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        truth = sim.truth
+        if truth and truth[-1].timer is not None and truth[-1].timer >= target - 196_608:
+            return
+        time.sleep(0.002)
+
+
+def _power_cycle_near_rollover(sim, sup, system) -> None:
+    _wait_timer(sim, 0.4)
+    sim.power_cycle(off_seconds=1.0, timer_start=20_536_380)
+
+
+def _swap_sensor(sim, sup, system) -> None:
+    sim.unplug(1.0)
+    sim.power_cycle(timer_start=1_234_567_890)
+
+
+def _pause(sim, sup, system) -> None:
+    sup.stop_streaming()
+    time.sleep(1.0)
+    sup.start_streaming()
+
+
+def _step(seconds: float):
+    def step(sim, sup, system) -> None:
+        system.step = seconds
+    return step
+
+
+#: (label, event, extra simulator settings, whether the event starts a new fit).
+EVENTS = [
+    ('timer rollover', None, {'timer_start': NEAR_ROLLOVER_START}),
+    ('power cycle, off 1 s, timer far from rollover',
+     lambda sim, sup, system: sim.power_cycle(off_seconds=1.0, timer_start=20_536_380), {}),
+    ('power cycle, off 1 s, 0.4 s before rollover', _power_cycle_near_rollover,
+     {'timer_start': NEAR_ROLLOVER_START}),
+    ('stall (radio out of range) 1.5 s', lambda sim, sup, system: sim.stall(1.5), {}),
+    ('stall 20 s', lambda sim, sup, system: sim.stall(20.0), {}),
+    ('unplug/replug (base station reset) 1 s', lambda sim, sup, system: sim.unplug(1.0), {}),
+    ('reconnect finds another sensor', _swap_sensor, {}),
+    ('rate change 100 -> 200 Hz', lambda sim, sup, system: sim.set_rate(200.0), {}),
+    ('stream stopped 1 s (deactivate/activate)', _pause, {}),
+    ('system clock stepped +1 s', _step(1.0), {}),
+    ('system clock stepped -1 s', _step(-1.0), {}),
+]
+
+
+def event_rows(after: float, plot_csv: str | None) -> list[Result]:
+    """Run every event; return the table rows."""
+    rows = []
+    for label, event, sim in EVENTS:
+        stepped = label.startswith('system clock')
+        result = run(event, before=4.0, after=after + (20.0 if 'stall 20' in label else 0.0),
+                     **sim)
+        series = errors(result)
+        event_time = None if stepped or event is None else result.event_time
+        try:
+            figures = check_series(series, event_time, label)
+            verdict = True
+        except AssertionError as failure:
+            figures, verdict = None, False
+            print(f'{label}: {failure}', file=sys.stderr)
+        status = result.clock.status()
+        restarts = ', '.join(f'{k} {v}' for k, v in sorted(status.restarts.items()))
+        if figures is None:
+            rows.append(Result(label, 'FAILED (see stderr)', '', False))
+            continue
+        back = figures['back']
+        steady = figures['steady']
+        grace = [abs(e - steady) for t, e in series if back is not None and back <= t
+                 < back + GRACE]
+        late = [t for t, e in series if back is not None and t >= back
+                and abs(e - steady) > TOLERANCE]
+        settle = (max(late) - back) if late else 0.0
+        rows.append(Result(
+            label,
+            f'{figures["worst"] * 1e3:.3f} ms; {figures["trend_ppm"]:+.1f} ppm; settled '
+            f'{settle:.2f} s; grace worst '
+            f'{(max(grace) if grace else 0.0) * 1e3:.2f} ms; fit: {restarts}; rollovers '
+            f'{status.rollovers}',
+            '<= 1 ms after 0.5 s', verdict))
+        if plot_csv and event is _power_cycle_near_rollover:
+            write_stamp_errors(plot_csv, series, [(result.event_time, 'power off 1 s')])
+            print(f'(stamp errors written to {plot_csv})', flush=True)
+    return rows
+
+
+def stream_rows(seconds: float) -> list[Result]:
+    """Steady stamp error std per stream at its highest rate, and 0xCC at 100 Hz."""
+    rows = []
+    choices = [(s, line_budget.max_rate(s.code, 115200, True)) for s in streams.STREAMS]
+    choices.append((streams.DEFAULT, 100.0))
+    for stream, rate in choices:
+        rate = round(rate, 1) if rate else 100.0
+        result = run(None, before=seconds, after=0.0, stream=stream.code, data_rate_hz=rate,
+                     latency_s=0.002, wire_baud=115200, faults=FaultConfig(jitter_ms=5.0))
+        series = errors(result)
+        start = series[0][0]
+        early = [e for t, e in series if 5.0 <= t - start < 60.0]
+        late = [e for t, e in series if t - start >= 60.0]
+        std_late = statistics.pstdev(late) if len(late) > 2 else float('nan')
+        rows.append(Result(
+            f'{stream.label} at {rate:g} Hz, radio-like delays',
+            f'std {statistics.pstdev(early) * 1e6:.1f} us (5-60 s), '
+            f'{std_late * 1e6:.1f} us (after 60 s, n={len(late)})',
+            '<= 20 us settled', std_late <= 20e-6))
+    return rows
+
+
+def main() -> None:
+    """Run from the command line."""
+    def more(parser) -> None:
+        parser.add_argument('--events', action='store_true', help='the event table only')
+        parser.add_argument('--streams', action='store_true', help='the stream table only')
+        parser.add_argument('--plot-csv', metavar='CSV',
+                            help='write the near-rollover power cycle series here')
+
+    args = standard_args(__doc__.splitlines()[1], 6.0, 3.0, more)
+    both = not (args.events or args.streams)
+    results = []
+    if args.events or both:
+        results += event_rows(args.seconds, args.plot_csv)
+    if args.streams or both:
+        results += stream_rows(30.0 if args.quick else 130.0)
+    report('Stamp errors', results,
+           [f'Events: 0xCC at 100 Hz, {args.seconds:g} s after each event; the simulated '
+            f'timer runs 40 ppm fast; stamps made as the node makes them '
+            f'(harness/stamp_runs.py).',
+            'Columns: worst |error - steady offset| after the grace; error trend (ppm); '
+            'time from the return to the last stamp over 1 ms off; worst in the grace; '
+            'why the fit started afresh.'],
+           None if args.no_output else 'stamp_errors.md', other_load=args.other_load)
+
+
+if __name__ == '__main__':
+    main()

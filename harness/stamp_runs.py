@@ -1,0 +1,178 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Stamps against the simulator's truth: the runs and the check of issue #23.
+
+:func:`run` streams from a simulated sensor through the real supervisor,
+link and parser, stamps every record with a :class:`SampleClock` wired as
+the node wires it (a record to ``stamp``, a new link to ``link_changed``),
+applies an event while the sensor streams, and returns the stamped records
+with the simulator's truth. The system clock the stamps follow is the real
+one plus a step the caller may set (:class:`SteppedSystemClock`, the seam
+the node's clock reads). :func:`check_series` is the check every stamp test
+makes of an error series, and the stamp benchmark reports the same figures.
+
+A series is (true sample time, stamp - true sample time) in stamping order.
+The steady offset is its median between the start's grace and the event
+(the radio latency less the wire time: no host-side estimate can see it).
+From ``GRACE`` after the start and after the stream's return (the first
+record sampled after the event) every stamp is within ``TOLERANCE`` of it;
+within the graces, within ``EARLY_TOLERANCE``; and after the last grace the
+error has no trend (a rate error would show as one).
+"""
+
+from collections.abc import Callable
+import dataclasses
+import statistics
+import threading
+import time
+
+from i3dmgx2_driver.codec import line_budget, streams
+from i3dmgx2_driver.device.sample_clock import SampleClock, system_clock_offset
+from i3dmgx2_driver.device.supervisor import DeviceSupervisor, SupervisorConfig
+from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+
+#: Stamps within this of the steady offset, but in the grace after a start or return.
+TOLERANCE = 0.001
+GRACE = 0.5
+EARLY_TOLERANCE = 0.005
+#: The error may trend by at most this (ppm) after the grace: a rate error shows here.
+MAX_TREND_PPM = 100.0
+
+
+def check_series(series: list[tuple[float, float]], event_time: float | None,
+                 context: object = '') -> dict:
+    """Assert the series keeps the bounds; return the worst error after a grace and more."""
+    start = series[0][0]
+    event = event_time if event_time is not None else float('inf')
+    steady = statistics.median(e for t, e in series if start + GRACE <= t < event)
+    back = next((t for t, _ in series if t > event), None)
+    graces = [start] + ([back] if back is not None else [])
+    worst = 0.0
+    settled = []
+    for t, e in series:
+        since = min(t - g for g in graces if t >= g)
+        off = abs(e - steady)
+        if since < GRACE:
+            assert off <= EARLY_TOLERANCE, (f'{t - start:.3f} s in, {since:.3f} s after a '
+                                            f'start: {off * 1e3:.3f} ms off', context)
+            continue
+        settled.append((t, e))
+        worst = max(worst, off)
+        assert off <= TOLERANCE, (f'{t - start:.3f} s in, {since:.3f} s after the last '
+                                  f'start: {off * 1e3:.3f} ms off the steady offset', context)
+    after = [(t, e) for t, e in settled if back is None or t >= back + GRACE]
+    trend = 0.0
+    if len(after) > 50:
+        trend = statistics.linear_regression([t for t, _ in after],
+                                             [e for _, e in after]).slope
+        assert abs(trend) * 1e6 < MAX_TREND_PPM, (f'stamps trend {trend * 1e6:.1f} ppm',
+                                                  context)
+    return {'worst': worst, 'steady': steady, 'back': back, 'trend_ppm': trend * 1e6}
+
+
+class SteppedSystemClock:
+    """The system clock's offset from the monotonic one, plus a step the test sets."""
+
+    def __init__(self) -> None:
+        self.step = 0.0
+        self.applied = 0.0
+
+    def offset(self) -> float:
+        self.applied = self.step
+        return system_clock_offset() + self.step
+
+
+@dataclasses.dataclass
+class Run:
+    """What a scenario produced: stamped records, the truth, and when the event came."""
+
+    rows: list  # (record, stamp, step applied)
+    truth: dict  # record -> true sample time
+    event_time: float | None
+    clock: SampleClock
+    log: list
+
+
+class Log:
+    """Collect the supervisor's messages (for a failure's explanation)."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def __getattr__(self, level: str) -> Callable[[str], None]:
+        return lambda message: self.lines.append(f'{level}: {message}')
+
+
+def run(event: Callable[[PtySimulator, DeviceSupervisor, SteppedSystemClock], None] | None,
+        before: float = 3.0, after: float = 4.0, stream: int = streams.DEFAULT.code,
+        data_rate_hz: float | None = None, **sim: object) -> Run:
+    """Stream ``before`` s, apply ``event``, stream ``after`` s more; return what was seen."""
+    wire = line_budget.wire_time(stream, 115200, True)
+    system = SteppedSystemClock()
+    clock = SampleClock(offset=system.offset)
+    rows = []
+    lock = threading.Lock()
+
+    def on_record(packet, read_time: float, read_mono: float) -> None:
+        with lock:
+            stamp = clock.stamp(packet.record.timer, read_mono, wire)
+            rows.append((packet.record, stamp, system.applied))
+
+    def on_connect() -> None:
+        with lock:
+            clock.link_changed()
+
+    log = Log()
+    config = dict(seed=23, **sim)
+    with PtySimulator(SimulatorConfig(**config)) as simulator:
+        sup = DeviceSupervisor(
+            SupervisorConfig(port=simulator.port, address=95, low_latency=False,
+                             stall_timeout=0.3, reconnect_interval=0.2, stream=stream,
+                             data_rate_hz=data_rate_hz),
+            on_record=on_record, on_connect=on_connect, log=log)
+        sup.start()
+        try:
+            deadline = time.monotonic() + 10.0
+            while not rows and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert rows, f'no records: {log.lines}'
+            time.sleep(before)
+            event_time = time.time() if event is not None else None
+            if event is not None:
+                event(simulator, sup, system)
+            time.sleep(after)
+        finally:
+            sup.stop()
+        truth = {t.record: t.sample_time for t in simulator.truth
+                 if t.valid and t.source == 'stream'}
+    return Run(rows, truth, event_time, clock, log.lines)
+
+
+def errors(result: Run) -> list[tuple[float, float]]:
+    """(true sample time, stamp error on the stepped system clock), in order of stamping."""
+    out = []
+    for record, stamp, step in result.rows:
+        sample_time = result.truth.get(record)
+        if sample_time is not None:
+            out.append((sample_time, stamp - step - sample_time))
+    return out
+
+
+def check(result: Run) -> dict:
+    """Assert a run's error series is true after every grace; return its figures."""
+    series = errors(result)
+    assert len(series) > 200, result.log
+    return check_series(series, result.event_time, result.log)
