@@ -150,8 +150,8 @@ def stream_rows(seconds: float) -> list[Result]:
     rows = []
     choices = [(s, line_budget.max_rate(s.code, 115200, True)) for s in streams.STREAMS]
     choices.append((streams.DEFAULT, 100.0))
-    for stream, rate in choices:
-        rate = round(rate, 1) if rate else 100.0
+    for stream, highest in choices:
+        rate = round(highest, 1) if highest else 100.0
         result = run(None, before=seconds, after=0.0, stream=stream.code, data_rate_hz=rate,
                      latency_s=0.002, wire_baud=115200, faults=FaultConfig(jitter_ms=5.0))
         series = errors(result)
