@@ -162,7 +162,7 @@ def run(event: Callable[[PtySimulator, DeviceSupervisor, SteppedSystemClock], No
 
 
 def errors(result: Run) -> list[tuple[float, float]]:
-    """(true sample time, stamp error on the stepped system clock), in order of stamping."""
+    """Return (true sample time, stamp error on the stepped system clock) in stamping order."""
     out = []
     for record, stamp, step in result.rows:
         sample_time = result.truth.get(record)
