@@ -149,6 +149,48 @@ def test_a_scheduled_stall_from_the_fault_config():
         assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
 
 
+def test_a_power_cycle_goes_dark_then_restarts_the_timer_where_asked():
+    """Off for 0.4 s, then polled mode with the chosen timer (issue #23's power cycle)."""
+    with simulator() as sim, Host(sim) as host:
+        start_stream(host, lay.ACCEL_ANG_RATE)
+        host.pump(0.2)
+        cut = time.time()
+        sim.power_cycle(off_seconds=0.4, timer_start=20_536_380)
+        host.pump(0.6)
+        # Dark, then polled: nothing streamed was sampled after the cut.
+        assert all(t.sample_time < cut + 0.01 for t in sim.truth if t.source == 'stream')
+        assert sim.streaming == 0
+        back = time.time()
+        start_stream(host, lay.ACCEL_ANG_RATE)
+        host.pump(0.2)
+        stop_stream(host)
+        after = [t for t in sim.truth if t.source == 'stream' and t.sample_time > cut]
+        assert after
+        # The timer counts from the chosen value at power-up (cut + 0.4 s), 40 ppm fast.
+        first = after[0]
+        expected = 20_536_380 + (first.sample_time - (cut + 0.4)) * rec.TICKS_PER_SECOND
+        assert abs(first.timer - expected) < 0.02 * rec.TICKS_PER_SECOND
+        assert first.sample_time >= back - 0.05
+        assert_host_saw_exactly_valid_truth(host, sim)
+
+
+def test_a_scheduled_power_cycle_from_the_fault_config():
+    with simulator(power_cycle_at=0.1, power_off_seconds=0.3, power_up_timer=7) as sim, \
+            Host(sim) as host:
+        assert sim.wait_until(lambda: time.time() > sim.start_time + 0.45, 2.0)
+        start_stream(host, lay.ACCEL_ANG_RATE)
+        host.pump(0.1)
+        stop_stream(host)
+        first = next(t for t in sim.truth if t.source == 'stream')
+        power_up = sim.start_time + 0.4
+        assert abs(first.timer - 7 - (first.sample_time - power_up)
+                   * rec.TICKS_PER_SECOND) < 0.02 * rec.TICKS_PER_SECOND
+    with pytest.raises(ValueError, match='power_off_seconds'):
+        FaultConfig(power_off_seconds=-1.0)
+    with simulator() as sim, pytest.raises(ValueError, match='uint32'):
+        sim.power_cycle(timer_start=1 << 32)
+
+
 def test_unplug_and_replug_at_the_same_path():
     with simulator() as sim:
         host = Host(sim)

@@ -64,7 +64,7 @@ class FaultConfig:
 
     Corruptions are exclusive per packet and checked in the order listed:
     a dropped packet is not also corrupted. Scheduled faults (``stall_at``,
-    ``unplug_at``) count seconds from when the configuration takes effect:
+    ``unplug_at``, ``power_cycle_at``) count seconds from when the configuration takes effect:
     ``PtySimulator.start()`` or ``set_faults()``.
     """
 
@@ -110,6 +110,12 @@ class FaultConfig:
     unplug_at: float | None = None
     #: How long it stays unplugged (s).
     unplug_seconds: float = 2.0
+    #: The sensor loses power this many seconds in (a brown-out, a battery swap).
+    power_cycle_at: float | None = None
+    #: How long it stays dark (s): nothing is sampled, sent or answered.
+    power_off_seconds: float = 1.0
+    #: Its timer when power returns (None: the sensor's ``timer_start``).
+    power_up_timer: int | None = None
 
     def __post_init__(self) -> None:
         """Reject settings that cannot mean anything, naming the field."""
@@ -118,7 +124,7 @@ class FaultConfig:
                 _check_probability(item.name, getattr(self, item.name))
         if self.garbage_max_bytes < 1:
             raise ValueError('garbage_max_bytes must be at least 1')
-        for name in ('jitter_ms', 'stall_seconds', 'unplug_seconds'):
+        for name in ('jitter_ms', 'stall_seconds', 'unplug_seconds', 'power_off_seconds'):
             if getattr(self, name) < 0:
                 raise ValueError(f'{name} must not be negative')
 

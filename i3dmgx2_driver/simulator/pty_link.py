@@ -47,6 +47,7 @@ from typing import Any
 
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec.commands import Command
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 
 from .base_station import BaseStation
 from .config import DEFAULT_STREAM, SimulatorConfig
@@ -356,6 +357,11 @@ class PtySimulator:
         if faults.unplug_at is not None and (asked('unplug_at') or asked('unplug_seconds')):
             seconds = faults.unplug_seconds
             self._post(faults.unplug_at, lambda: self._do_unplug(seconds))
+        if faults.power_cycle_at is not None and (
+                asked('power_cycle_at') or asked('power_off_seconds')
+                or asked('power_up_timer')):
+            off, timer = faults.power_off_seconds, faults.power_up_timer
+            self._post(faults.power_cycle_at, lambda: self.power_cycle(off, timer))
 
     def _foreign_address(self, faults: FaultConfig) -> int:
         if faults.foreign_address is not None:
@@ -373,10 +379,35 @@ class PtySimulator:
             self.sensor.set_rate_override(rate_hz, time.time())
             self._tx_wake.notify_all()
 
-    def power_cycle(self) -> None:
-        """Restart the sensor: timer from ``timer_start``, auto-start from EEPROM."""
+    def power_cycle(self, off_seconds: float = 0.0, timer_start: int | None = None) -> None:
+        """
+        Restart the sensor: dark for ``off_seconds``, then up again as from power-up.
+
+        While dark nothing is sampled, sent or answered (to the host it is a
+        radio silence). At power-up the timer starts at ``timer_start`` (None:
+        the sensor's configured ``timer_start``; a value given here stays the
+        sensor's from then on), the stream as the EEPROM auto-start says.
+        """
+        if timer_start is not None and not 0 <= timer_start < TIMER_MODULUS:
+            raise ValueError(f'timer_start must be a uint32, got {timer_start!r}')
+        if off_seconds < 0:
+            raise ValueError(f'off_seconds must not be negative, got {off_seconds!r}')
+        if off_seconds == 0:
+            self._power_up(timer_start)
+            return
+        with self.lock:
+            self._tx.clear()  # what had not been sent before the power went is gone
+            self.sensor.power_off()
+            now = time.time()
+            self._stall.begin(now, off_seconds)
+            self._note_streaming(now)
+        self._post(off_seconds, lambda: self._power_up(timer_start))
+
+    def _power_up(self, timer_start: int | None) -> None:
         with self.lock:
             self._tx.clear()  # what the old power cycle had not sent is gone
+            if timer_start is not None:
+                self.sensor.timer_start = timer_start
             self.sensor.power_up(time.time())
             self._note_streaming(time.time())
             self._tx_wake.notify_all()

@@ -44,11 +44,10 @@ from i3dmgx2_driver.codec.commands import (
 )
 from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.orientation import euler_from_matrix
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 
 from .motion import Motion, Vector3
 
-#: The timer wraps after this many ticks.
-TIMER_MODULUS = 1 << 32
 #: Ticks per second of the device timer.
 TICKS_PER_SECOND = rec.TICKS_PER_SECOND
 #: Default timer at power-up: five seconds before the rollover.
