@@ -32,6 +32,8 @@ import dataclasses
 import time
 
 from harness.stamp_runs import check, errors, run
+from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 import pytest
 
 pytestmark = pytest.mark.slow
@@ -52,6 +54,25 @@ def test_power_cycle_restarts_the_fit_and_is_reported():
     figures = check(result)
     assert figures['back'] is not None
     assert result.clock.status().restarts.get('reset') == 1
+
+
+def test_power_cycle_just_before_the_rollover_is_a_reset_not_a_rollover():
+    """
+    The issue's cut: timer 0.4 s before its rollover, dark for a second, back at 1.04 s.
+
+    The timer's fall looks like a rollover; the monotonic clock says 1.05 s
+    passed where a rollover would mean 1.445 s of device time.
+    """
+    def cut(sim, sup, system):
+        target = TIMER_MODULUS - round(0.4 * TICKS_PER_SECOND)
+        assert sim.wait_until(lambda: sim.truth[-1].timer >= target - 196_608, 10.0)
+        sim.power_cycle(off_seconds=1.0, timer_start=20_536_380)
+
+    result = run(cut, before=0.5, timer_start=TIMER_MODULUS - round(5.0 * TICKS_PER_SECOND))
+    check(result)
+    status = result.clock.status()
+    assert status.restarts == {'start': 1, 'reset': 1}
+    assert status.rollovers == 0
 
 
 def test_stall_keeps_the_fit():
