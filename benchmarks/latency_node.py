@@ -76,7 +76,7 @@ def _without_gc_freeze() -> None:
 
 
 def _supervisor_without(**switches: bool) -> None:
-    driver_core.SupervisorConfig = functools.partial(driver_core.SupervisorConfig, **switches)
+    driver_core.DeviceConfig = functools.partial(driver_core.DeviceConfig, **switches)
 
 
 #: The driver's own measures that an A/B run may switch off: flag -> how.

@@ -65,9 +65,11 @@ def _wait_timer(sim, before_rollover: float, timeout: float = 10.0) -> None:
         time.sleep(0.002)
 
 
-def _power_cycle_near_rollover(sim, sup, system) -> None:
+def _power_cycle_near_rollover(sim, sup, system) -> float:
     _wait_timer(sim, 0.4)
+    cut = time.time()
     sim.power_cycle(off_seconds=1.0, timer_start=20_536_380)
+    return cut
 
 
 def _swap_sensor(sim, sup, system) -> None:

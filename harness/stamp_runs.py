@@ -41,7 +41,8 @@ import time
 
 from i3dmgx2_driver.codec import line_budget, streams
 from i3dmgx2_driver.device.sample_clock import SampleClock, system_clock_offset
-from i3dmgx2_driver.device.supervisor import DeviceSupervisor, SupervisorConfig
+from i3dmgx2_driver.device.settings import DeviceConfig
+from i3dmgx2_driver.device.supervisor import DeviceSupervisor
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 
 #: Stamps within this of the steady offset, but in the grace after a start or return.
@@ -116,9 +117,14 @@ class Log:
         return lambda message: self.lines.append(f'{level}: {message}')
 
 
-def run(event: Callable[[PtySimulator, DeviceSupervisor, SteppedSystemClock], None] | None,
-        before: float = 3.0, after: float = 4.0, stream: int = streams.DEFAULT.code,
-        data_rate_hz: float | None = None, **sim: object) -> Run:
+#: An event: acts on the simulator, the supervisor or the system clock; may return the
+#: time.time() at which it acted, when it first waited for its moment.
+Event = Callable[[PtySimulator, DeviceSupervisor, 'SteppedSystemClock'], float | None]
+
+
+def run(event: Event | None, before: float = 3.0, after: float = 4.0,
+        stream: int = streams.DEFAULT.code, data_rate_hz: float | None = None,
+        **sim: object) -> Run:
     """Stream ``before`` s, apply ``event``, stream ``after`` s more; return what was seen."""
     wire = line_budget.wire_time(stream, 115200, True)
     system = SteppedSystemClock()
@@ -139,9 +145,9 @@ def run(event: Callable[[PtySimulator, DeviceSupervisor, SteppedSystemClock], No
     config = dict(seed=23, **sim)
     with PtySimulator(SimulatorConfig(**config)) as simulator:
         sup = DeviceSupervisor(
-            SupervisorConfig(port=simulator.port, address=95, low_latency=False,
-                             stall_timeout=0.3, reconnect_interval=0.2, stream=stream,
-                             data_rate_hz=data_rate_hz),
+            DeviceConfig(port=simulator.port, address=95, low_latency=False,
+                         stall_timeout=0.3, reconnect_interval=0.2, stream=stream,
+                         data_rate_hz=data_rate_hz),
             on_record=on_record, on_connect=on_connect, log=log)
         sup.start()
         try:
@@ -152,7 +158,9 @@ def run(event: Callable[[PtySimulator, DeviceSupervisor, SteppedSystemClock], No
             time.sleep(before)
             event_time = time.time() if event is not None else None
             if event is not None:
-                event(simulator, sup, system)
+                acted = event(simulator, sup, system)
+                if isinstance(acted, float):
+                    event_time = acted  # the event waited for its moment first
             time.sleep(after)
         finally:
             sup.stop()

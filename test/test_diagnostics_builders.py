@@ -21,22 +21,26 @@ simulator run cannot reach cheaply (a weak radio, an implausible drift).
 """
 
 from diagnostic_msgs.msg import DiagnosticStatus
+from i3dmgx2_driver.device.identity import DeviceInfo
 from i3dmgx2_driver.device.link import RadioStats
 from i3dmgx2_driver.device.sample_clock import ClockStatus
-from i3dmgx2_driver.device.supervisor import DeviceInfo, State
+from i3dmgx2_driver.device.settings import DeviceConfig
+from i3dmgx2_driver.device.status import DeviceStatus, State
 from i3dmgx2_driver.ros import diagnostics as d
+from i3dmgx2_driver.ros.calibration import Calibration
 import pytest
 
 INFO = DeviceInfo('3DM-GX2', '3095', '3DM-GX2 Wireless', '5g 300deg/s', '2.1.03')
 GOOD_RADIO = RadioStats(230, 170, 200, 150, 228.5, 168.0)
 
 
-def connection(state, **changes):
-    args = {'port': '/dev/ttyUSB0', 'address': 95, 'wireless': True, 'state': state,
-            'connections': 1, 'reconnects': 0, 'stalls': 0, 'last_error': '',
-            'low_latency': 'on', 'ping_ok': True, 'capture': 'off'}
-    args.update(changes)
-    return d.connection_status(**args)
+def connection(state, wireless=True, capture='off', **changes):
+    """Build the connection status from a settings and a device snapshot."""
+    device = {'state': state, 'connections': 1, 'reconnects': 0, 'stalls': 0,
+              'last_error': '', 'low_latency_state': 'on', 'ping_ok': True}
+    device.update(changes)
+    settings = DeviceConfig(port='/dev/ttyUSB0', address=95, wireless=wireless)
+    return d.connection_status(settings, DeviceStatus(**device), capture)
 
 
 @pytest.mark.parametrize('state, changes, level', [
@@ -59,7 +63,7 @@ def test_connection_levels(state, changes, level):
 
 def test_connection_shows_what_a_user_needs():
     status = connection(State.DISCONNECTED, last_error='serial port /dev/ttyUSB0 does not exist',
-                        reconnects=2, low_latency='refused by the port (ValueError)',
+                        reconnects=2, low_latency_state='refused by the port (ValueError)',
                         capture='/tmp/a.gx2: 3 reads, 100 bytes')
     assert 'does not exist' in status.message
     assert status.value('reconnects') == '2'
@@ -84,13 +88,20 @@ def test_rate_levels(measured, expected, level):
     assert d.rate_level(measured, expected)[0] == level
 
 
+DEVICE_FIELDS = ('expected_hz', 'line_use', 'line_warning')
+
+
 def stream(state=State.STREAMING, measured=100.0, received=100, **changes):
-    args = {'state': state, 'measured_hz': measured, 'expected_hz': 100.0,
-            'received_in_period': received, 'period': 1.0, 'silent_for': 0.01,
+    """Build the stream status from a device snapshot and what the node saw."""
+    device = {'state': state, 'divider': 512, 'expected_rate_hz': 100.0}
+    for name in DEVICE_FIELDS:
+        if name in changes:
+            device['expected_rate_hz' if name == 'expected_hz' else name] = changes.pop(name)
+    seen = {'measured_hz': measured, 'received': received, 'period': 1.0, 'silent_for': 0.01,
             'published': 1000, 'lost': 3, 'lost_in_period': 1, 'device_resets': 0,
             'other_records': 0, 'mag_published': 1000}
-    args.update(changes)
-    return d.stream_status(**args)
+    seen.update({'label' if k == 'stream' else k: v for k, v in changes.items()})
+    return d.stream_status(DeviceStatus(**device), d.StreamPeriod(**seen))
 
 
 def test_stream_ok_warn_stale():
@@ -145,15 +156,16 @@ def test_parser_warns_only_while_failures_grow():
 
 
 def test_device_status():
-    status = d.device_status(INFO, True, 95, 512, 100.0, 25.3)
+    status = d.device_status(DeviceStatus(info=INFO, connections=1, divider=512,
+                                          expected_rate_hz=100.0), 95, 25.3)
     assert status.level == d.OK
     assert status.value('serial number') == '3095'
     assert status.value('firmware') == '2.1.03'
     assert status.value('options') == '5g 300deg/s'
     assert status.value('model') == '3DM-GX2 Wireless'
     assert status.value('accel temperature (C)') == '25.3'
-    assert d.device_status(None, True, 95, 512, 100.0, None).level == d.WARN
-    assert d.device_status(None, False, 95, None, None, None).level == d.STALE
+    assert d.device_status(DeviceStatus(connections=1, divider=512), 95, None).level == d.WARN
+    assert d.device_status(DeviceStatus(), 95, None).level == d.STALE
 
 
 def test_time_status():
@@ -162,7 +174,7 @@ def test_time_status():
     ok = d.time_status('device', clock, 100.0 + d.RESET_WARNING_S + 1)
     assert ok.level == d.OK
     assert ok.value('clock drift (ppm)') == '-38.2'
-    assert ok.value('fit started afresh') == 'start 1, reset 2, reconnect 0'
+    assert ok.value('fit started afresh') == 'start 1, reset 2, resync 0, reconnect 0'
     assert ok.value('last fresh start') == 'reset'
     assert ok.value('timer rollovers') == '3'
     assert ok.value('gaps bridged') == '4'
@@ -181,12 +193,12 @@ def test_time_status():
 def test_calibration_status():
     assert d.calibration_status(None, None, 100.0).level == d.OK
     assert d.calibration_status(None, None, 100.0).value('gyro bias captured') == 'no'
-    good = d.Calibration(90.0, True, (-0.0033, -0.0217, -0.0052), 500, 'bias ...')
+    good = Calibration(90.0, True, (-0.0033, -0.0217, -0.0052), 500, 'bias ...')
     status = d.calibration_status(good, good, 100.0)
     assert status.level == d.OK
     assert status.value('gyro bias (rad/s)') == '(-0.00330, -0.02170, -0.00520)'
     assert status.value('captured (s ago)') == '10'
-    bad = d.Calibration(95.0, False, (0.2, 0.0, 0.0), 500, 'the sensor moved')
+    bad = Calibration(95.0, False, (0.2, 0.0, 0.0), 500, 'the sensor moved')
     status = d.calibration_status(bad, good, 100.0)
     assert status.level == d.WARN
     assert 'moved' in status.message
@@ -228,7 +240,7 @@ def test_a_stream_that_does_not_fit_the_line_is_a_warning_whatever_the_rate():
 
 
 def test_stream_stopped_on_purpose_is_no_staleness():
-    status = d.stream_status(State.READY, None, 100.0, 0, 1.0, 30.0, 500, 0, 0, 0, 0, 0)
+    status = stream(State.READY, measured=None, received=0, silent_for=30.0, published=500)
     assert status.level == d.OK
     assert 'node inactive' in status.message
 

@@ -33,11 +33,11 @@ import time
 import tty
 
 from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.device.identity import DeviceInfo
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.device.probe import (
     parse_addresses, probe_port, ProbeConfig, SensorFound,
 )
-from i3dmgx2_driver.device.supervisor import DeviceInfo
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 from i3dmgx2_driver.tools.discover import node_command
 import pytest

@@ -28,7 +28,9 @@ import threading
 import time
 
 from i3dmgx2_driver.codec import layouts
-from i3dmgx2_driver.device.supervisor import DeviceSupervisor, State, SupervisorConfig
+from i3dmgx2_driver.device.settings import DeviceConfig
+from i3dmgx2_driver.device.status import State
+from i3dmgx2_driver.device.supervisor import DeviceSupervisor
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess
@@ -97,7 +99,7 @@ def asked(sim: PtySimulator, since: float) -> list[tuple[int, int | None]]:
 
 def streaming_supervisor(port: str, recorder: Recorder, **config) -> DeviceSupervisor:
     config = {'port': port, 'address': 95, 'reconnect_interval': 0.3, **config}
-    supervisor = DeviceSupervisor(SupervisorConfig(**config), on_record=recorder.on_record,
+    supervisor = DeviceSupervisor(DeviceConfig(**config), on_record=recorder.on_record,
                                   log=recorder)
     supervisor.start()
     assert wait_until(lambda: supervisor.state == State.STREAMING

@@ -66,7 +66,9 @@ def test_power_cycle_just_before_the_rollover_is_a_reset_not_a_rollover():
     def cut(sim, sup, system):
         target = TIMER_MODULUS - round(0.4 * TICKS_PER_SECOND)
         assert sim.wait_until(lambda: sim.truth[-1].timer >= target - 196_608, 10.0)
+        at = time.time()
         sim.power_cycle(off_seconds=1.0, timer_start=20_536_380)
+        return at
 
     result = run(cut, before=0.5, timer_start=TIMER_MODULUS - round(5.0 * TICKS_PER_SECOND))
     check(result)

@@ -26,7 +26,9 @@ import threading
 
 from i3dmgx2_driver.device.link import DeviceTimeout
 from i3dmgx2_driver.device.port import check_port_path, PortNotSerial
-from i3dmgx2_driver.device.supervisor import DeviceSupervisor, State, SupervisorConfig
+from i3dmgx2_driver.device.settings import DeviceConfig
+from i3dmgx2_driver.device.status import State
+from i3dmgx2_driver.device.supervisor import DeviceSupervisor
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
 
@@ -43,8 +45,8 @@ class Log:
 
 def supervisor(port, address=95, **kwargs):
     log = Log()
-    sup = DeviceSupervisor(SupervisorConfig(port=port, address=address,
-                                            reconnect_interval=0.2, **kwargs),
+    sup = DeviceSupervisor(DeviceConfig(port=port, address=address,
+                                        reconnect_interval=0.2, **kwargs),
                            on_record=lambda packet, now, mono: None, log=log)
     return sup, log
 
@@ -64,8 +66,8 @@ def test_configure_refuses_a_file_with_the_words_of_the_check(tmp_path):
 def test_the_supervisor_thread_gives_up_on_a_directory_once(tmp_path):
     fatal = []
     done = threading.Event()
-    sup = DeviceSupervisor(SupervisorConfig(port=str(tmp_path), address=95,
-                                            reconnect_interval=0.1),
+    sup = DeviceSupervisor(DeviceConfig(port=str(tmp_path), address=95,
+                                        reconnect_interval=0.1),
                            on_record=lambda packet, now, mono: None, log=Log(),
                            on_fatal=lambda exc: (fatal.append(exc), done.set()))
     sup.start()

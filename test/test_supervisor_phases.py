@@ -27,7 +27,9 @@ import time
 
 from i3dmgx2_driver.device.link import DeviceTimeout
 from i3dmgx2_driver.device.port import PortBusy, PortMissing, SerialPort
-from i3dmgx2_driver.device.supervisor import DeviceSupervisor, State, SupervisorConfig
+from i3dmgx2_driver.device.settings import DeviceConfig
+from i3dmgx2_driver.device.status import State
+from i3dmgx2_driver.device.supervisor import DeviceSupervisor
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
 
@@ -60,8 +62,8 @@ def held(path: str) -> bool:
 
 
 def supervisor(port: str, records: Records, **config) -> DeviceSupervisor:
-    return DeviceSupervisor(SupervisorConfig(port=port, address=95, low_latency=False,
-                                             **config), on_record=records)
+    return DeviceSupervisor(DeviceConfig(port=port, address=95, low_latency=False,
+                                         **config), on_record=records)
 
 
 def test_phases_open_stream_quiet_and_close():

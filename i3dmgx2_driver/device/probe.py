@@ -45,8 +45,8 @@ from .link import DeviceLink, DeviceTimeout
 from .port import (
     PortBusy, PortDisconnected, PortError, PortMissing, PortPermissionDenied, SerialPort,
 )
-from .supervisor import RATE_BASE_HZ, RATE_DIVIDER_ADDRESS
 from ..codec import commands, layouts
+from ..codec.data_rate import RATE_BASE_HZ, RATE_DIVIDER_ADDRESS
 from ..codec.framing import DataPacket, MAX_ADDRESS, MIN_ADDRESS
 from ..codec.stream import SensorStreamParser
 

@@ -12,16 +12,20 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
+
 """
 Keep the device streaming: the start-up dialogue, stalls, unplugs, shutdown.
 
-The supervisor thread opens the port, quiets any stream already running,
-reads the device's identity, sets the data rate if asked, and starts
-continuous mode, retrying each step because commands get lost over the
-radio. It then watches the stream: a stall re-requests continuous mode and
+The supervisor thread opens the port and has the sensor's dialogue
+(dialogue.py: quiet, identity, data rate, continuous mode, each request
+retried because commands get lost over the radio) bring it to streaming.
+It then watches the stream: a stall re-requests continuous mode and
 then reopens the port; an unplug reopens it every ``reconnect_interval``,
 forever, and at once when the port reappears. The reader thread inside the
-link does the publishing; this thread never touches a sample.
+link does the publishing; this thread never touches a sample, and this
+module knows no command byte: what to say is the dialogue's, when to say
+it again is the supervisor's. What diagnostics and services read is one
+immutable snapshot, :meth:`DeviceSupervisor.status`.
 
 A reconnect to a sensor already identified is short: what the driver knows
 (identity, data-rate divider) is not asked again. One serial-number read
@@ -49,101 +53,26 @@ the thread, retrying forever instead of failing.
 """
 
 from collections.abc import Callable
-from dataclasses import dataclass
-import enum
 import logging
 import os
 import threading
 import time
 from typing import Any
 
-# The identity's names stay importable from here.
-from .identity import (  # noqa: F401
-    DeviceInfo, IDENTIFIER_NAMES, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR,
-)
+from .dialogue import SensorDialogue
+from .identity import DeviceInfo
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .observer import Finding, LineObserver
 from .port import PortDisconnected, PortError, PortUnusable, SerialPort
-from .realtime import NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
-from ..codec import commands, layouts, streams
-# The divider arithmetic is the codec's; its names stay importable from here.
-from ..codec.data_rate import (  # noqa: F401
-    divider_for_rate, MAX_DIVIDER, MAX_RATE_HZ, MIN_DIVIDER, MIN_RATE_HZ, RATE_BASE_HZ,
-    RATE_DIVIDER_ADDRESS,
-)
-
-#: The record streamed unless the configuration names another.
-STREAM_COMMAND = streams.DEFAULT.code
+from .realtime import PolicyOutcome
+from .settings import DeviceConfig
+from .status import DeviceStatus, State
+from .throttle import EVENT_PERIOD, Throttle
 
 #: How often a missing port is looked for (s), so that it is reopened as soon as it is back.
 PORT_WATCH_S = 0.02
 #: Pause between a port reappearing and opening it (s): udev sets its permissions meanwhile.
 PORT_SETTLE_S = 0.02
-#: A condition that persists (a missing port, a silent sensor) is said once,
-#: then reminded at most this often (s).
-REMINDER_PERIOD = 60.0
-#: Events that each mean something new (a stall) are logged at most this often (s).
-EVENT_PERIOD = 10.0
-
-
-class State(str, enum.Enum):
-    """What the supervisor is doing, for logs and diagnostics."""
-
-    CONNECTING = 'connecting'
-    INITIALISING = 'initialising'
-    #: Port open and the device quiet, not streaming (a managed node, inactive).
-    READY = 'ready'
-    STREAMING = 'streaming'
-    STALLED = 'stalled'
-    PAUSED = 'paused'
-    DISCONNECTED = 'disconnected'
-    STOPPED = 'stopped'
-
-
-@dataclass(frozen=True)
-class SupervisorConfig:
-    """How to reach the device and how patient to be with it."""
-
-    port: str
-    address: int
-    baud: int = 115200
-    wireless: bool = True
-    low_latency: bool = True
-    stall_timeout: float = 1.0
-    reconnect_interval: float = 1.0
-    data_rate_hz: float | None = None
-    #: Command byte of the record to stream (one of codec.streams.STREAMS).
-    stream: int = STREAM_COMMAND
-    request_timeout: float = 0.5
-    request_retries: int = 3
-    continuous_retries: int = 5
-    #: Scheduling of the reader thread (its SCHED_FIFO priority).
-    thread_policy: ThreadPolicy = NORMAL_SCHEDULING
-    #: Reconnect to a known sensor with one serial-number read (False: the full dialogue).
-    fast_reconnect: bool = True
-    #: Reopen a port the moment it reappears, and a port closed for a stall at once
-    #: (False: always wait ``reconnect_interval``).
-    prompt_reopen: bool = True
-    #: Per try and tries of that read: short, so that a reply lost in a stall is asked
-    #: again soon after the radio is back.
-    resume_timeout: float = 0.1
-    resume_retries: int = 5
-
-
-class Throttle:
-    """Let one message per key through every ``period`` seconds."""
-
-    def __init__(self, period: float) -> None:
-        self.period = period
-        self._last: dict[str, float] = {}
-
-    def allow(self, key: str, period: float | None = None) -> bool:
-        """Tell whether a message of this key may be logged now (``period``: override)."""
-        now = time.monotonic()
-        if now - self._last.get(key, -1e9) >= (self.period if period is None else period):
-            self._last[key] = now
-            return True
-        return False
 
 
 class DeviceSupervisor:
@@ -152,7 +81,7 @@ class DeviceSupervisor:
 
     ``on_record`` runs in the reader thread for every streamed record;
     ``on_connect`` runs in the supervisor thread each time a link is made
-    (the node re-anchors its clock there). ``log`` is any object with
+    (the node checks its clock there). ``log`` is any object with
     ``debug/info/warning/error`` methods (a ``logging.Logger`` by default;
     the node passes its rclpy logger). ``on_bytes`` runs in the reader
     thread with every read's raw bytes and read time (a raw capture).
@@ -161,7 +90,7 @@ class DeviceSupervisor:
     stopped by then.
     """
 
-    def __init__(self, config: SupervisorConfig, on_record: RecordCallback,
+    def __init__(self, config: DeviceConfig, on_record: RecordCallback,
                  log: Any = None, on_connect: Callable[[], None] | None = None,
                  port_factory: Callable[..., SerialPort] = SerialPort,
                  on_bytes: BytesCallback | None = None,
@@ -173,28 +102,22 @@ class DeviceSupervisor:
         self._on_connect = on_connect
         self._log = log or logging.getLogger('i3dmgx2_driver')
         self._port_factory = port_factory
-        self._throttle = Throttle(REMINDER_PERIOD)
+        self._throttle = Throttle()
         self._stop = threading.Event()
         self._paused = threading.Event()
         self._thread: threading.Thread | None = None
         self._link: DeviceLink | None = None
         #: Guards who owns ``_link``: the thread opening one, or a caller releasing it.
         self._link_lock = threading.Lock()
+        #: What to say to the sensor; it keeps what it learns (identity, divider).
+        self.dialogue = SensorDialogue(config, self._log, self._warn, self._stop)
         self.state = State.CONNECTING
         self.connections = 0
         self.reconnects = 0
         self.stalls = 0
         self.last_error = ''
-        self.info: DeviceInfo | None = None
-        self.divider: int | None = None
         self.low_latency_state = ''
-        self.ping_ok: bool | None = None
-        #: The stream's use of the line at the device's rate (once the rate is known),
-        #: and, when it does not fit, what to do about it ('' when it fits).
-        self.line_use = ''
-        self.line_warning = ''
         self.parser_totals: dict[str, int] = {}
-        self._info_logged: DeviceInfo | None = None
         #: The port can never work (a path that is no serial port): why.
         self.fatal_error: PortError | None = None
         #: What the line observer last found while nothing of ours arrived ('' once
@@ -206,7 +129,59 @@ class DeviceSupervisor:
         self.last_start = ''
         self.resumes = 0
 
-    # -- life cycle ----------------------------------------------------
+    # -- what others read ---------------------------------------------------------------
+
+    def status(self) -> DeviceStatus:
+        """Return the device side as one snapshot (from any thread)."""
+        dialogue = self.dialogue
+        link = self._link
+        return DeviceStatus(
+            state=self.state, connections=self.connections, reconnects=self.reconnects,
+            stalls=self.stalls, last_error=self.last_error,
+            low_latency_state=self.low_latency_state, ping_ok=dialogue.ping_ok,
+            advice=self.advice,
+            fatal_error=str(self.fatal_error) if self.fatal_error is not None else '',
+            info=dialogue.info, divider=dialogue.divider,
+            expected_rate_hz=dialogue.expected_rate_hz, line_use=dialogue.line_use,
+            line_warning=dialogue.line_warning, last_start=self.last_start,
+            resumes=self.resumes, parser=self.parser_stats(),
+            radio=link.radio if link is not None else None, connected=link is not None)
+
+    @property
+    def link(self) -> DeviceLink | None:
+        """Return the current link, or None while disconnected."""
+        return self._link
+
+    def streaming_link(self) -> DeviceLink | None:
+        """Return the link while the device streams (a poll may share it), else None."""
+        link = self._link
+        return link if link is not None and self.state is State.STREAMING else None
+
+    @property
+    def info(self) -> DeviceInfo | None:
+        """Return the device's identity, once read."""
+        return self.dialogue.info
+
+    @property
+    def divider(self) -> int | None:
+        """Return the data-rate divider, once known."""
+        return self.dialogue.divider
+
+    @property
+    def expected_rate_hz(self) -> float | None:
+        """Return the rate the divider gives, once known."""
+        return self.dialogue.expected_rate_hz
+
+    def parser_stats(self) -> dict[str, int]:
+        """Parser counters summed over every connection so far."""
+        totals = dict(self.parser_totals)
+        link = self._link
+        if link is not None:
+            for key, value in link.parser.stats.as_dict().items():
+                totals[key] = totals.get(key, 0) + value
+        return totals
+
+    # -- life cycle ----------------------------------------------------------------------
     #
     # ``_stop`` set means "no stream wanted now": the thread ends, and every
     # request on the link gives up within a few tens of milliseconds (the
@@ -310,10 +285,7 @@ class DeviceSupervisor:
     def _quiet(self, link: DeviceLink) -> None:
         """Stop the device's stream and drop what is in flight; the state is READY."""
         try:
-            link.stop_streaming()
-            link.streamed = None  # a polled record is a reply only now
-            time.sleep(0.05)
-            link.port.flush_input()
+            self.dialogue.quiet(link)
             self.state = State.READY
             self._observe(False)
         except PortError as exc:
@@ -330,26 +302,7 @@ class DeviceSupervisor:
             else:
                 observer.pause()
 
-    @property
-    def link(self) -> DeviceLink | None:
-        """Return the current link, or None while disconnected."""
-        return self._link
-
-    @property
-    def expected_rate_hz(self) -> float | None:
-        """Return the rate the divider gives, once known."""
-        return RATE_BASE_HZ / self.divider if self.divider else None
-
-    def parser_stats(self) -> dict[str, int]:
-        """Parser counters summed over every connection so far."""
-        totals = dict(self.parser_totals)
-        link = self._link
-        if link is not None:
-            for key, value in link.parser.stats.as_dict().items():
-                totals[key] = totals.get(key, 0) + value
-        return totals
-
-    # -- the thread ----------------------------------------------------
+    # -- the thread ----------------------------------------------------------------------
 
     def _warn(self, key: str, message: str, period: float | None = None) -> None:
         """Log ``message`` once, then again at most every ``period`` s (a reminder)."""
@@ -467,54 +420,20 @@ class DeviceSupervisor:
             self.parser_totals[key] = self.parser_totals.get(key, 0) + value
 
     def _initialise(self, link: DeviceLink, require_answer: bool = False) -> None:
-        """
-        Quiet the device and learn what it is (the stream is not started).
-
-        ``require_answer``: raise DeviceTimeout at once if the device answered
-        neither the ping nor the polled requests, rather than going on to
-        time out on every later request (a configure transition must fail
-        soon, with the reason; the plain node just retries).
-        """
+        """Quiet the device, start reading, and have the dialogue learn what it is."""
         self.state = State.INITIALISING
-        if not link.running.is_set():
-            link.port.flush_input()
-        link.stop_streaming()
-        link.streamed = None  # a polled record is a reply only now
-        time.sleep(0.05)
-        link.port.flush_input()
+        self.dialogue.quiet(link)
         if link.running.is_set():
             # The reader runs already (a resume that was not confirmed): anchor afresh.
             self._anchor()
         else:
             self._start_reader(link)
-        if link.wireless:
-            self.ping_ok = link.ping(timeout=0.3, retries=2)
-            if not self.ping_ok:
-                self._warn('ping', f'node {self.config.address} does not answer the base '
-                                   f'station ping: check it is powered, its address (ros2 run '
-                                   f'i3dmgx2_driver discover lists the nodes on the air) and '
-                                   f'the radio channel')
-        # The thesis author found continuous mode unreliable as the very first
-        # command: a couple of polled requests first make it dependable.
-        for _ in range(2):
-            try:
-                link.request(bytes((layouts.ACCEL_ANG_RATE,)), layouts.ACCEL_ANG_RATE,
-                             timeout=self.config.request_timeout, retries=2)
-            except DeviceTimeout:
-                pass
-        if require_answer and not self.ping_ok and not link.parser.stats.good_frames:
-            silent = (f'node {self.config.address} is silent: no answer to the base station '
-                      f'ping or to polled requests (check it is powered, its address and the '
-                      f'radio channel)' if link.wireless else
-                      f'the sensor on {self.config.port} is silent: no answer to polled '
-                      f'requests (check it is powered and the baud rate)')
-            # What the line carried instead says what to change (address, framing, baud).
-            seen = self._observer.last_finding if self._observer is not None else None
-            raise DeviceTimeout(silent + (f'; observed on the line: {seen.message}'
-                                          if seen is not None else ''))
-        self._identify(link)
-        self._configure_rate(link)
-        self._check_line()
+        self.dialogue.initialise(link, require_answer, self._observed)
+
+    def _observed(self) -> str:
+        """Say what the line observer last found on this link ('' if nothing)."""
+        seen = self._observer.last_finding if self._observer is not None else None
+        return seen.message if seen is not None else ''
 
     def _anchor(self) -> None:
         """Let the consumer re-anchor before the first record of a new link reaches it."""
@@ -537,176 +456,38 @@ class DeviceSupervisor:
 
     def _resume(self, link: DeviceLink) -> bool:
         """
-        Confirm with one serial-number read that the known sensor is back; keep it streaming.
+        Resume a known sensor after a reconnect, or return False for the full dialogue.
 
         Returns False, with nothing done or the reader running, when the
         driver knows no sensor yet (or must not resume), or when the sensor
-        does not answer or another serial number does: the caller then runs
-        the full dialogue.
+        does not answer or another serial number does.
         """
-        cfg = self.config
-        known = self.info.serial_number if self.info is not None else ''
-        if not (cfg.fast_reconnect and known):
+        if not self.dialogue.can_resume():
             return False
         self.state = State.INITIALISING
-        link.port.flush_input()
-        # Records of the stream that flows already are samples from the first one.
-        link.streamed = cfg.stream
+        self.dialogue.expect_stream(link)
         self._start_reader(link)
-        try:
-            serial = read_identifier(link, SERIAL_NUMBER_SELECTOR, cfg.resume_timeout,
-                                     cfg.resume_retries)
-        except DeviceTimeout:
-            if self._stop.is_set():
-                raise
-            if self._throttle.allow('resume', EVENT_PERIOD):
-                self._log.info(f'node {cfg.address} did not confirm its serial number: '
-                               f'starting it in full')
+        if not self.dialogue.resume(link):
             return False
-        if serial != known:
-            self._log.warning(f'another sensor answers as node {cfg.address}: serial '
-                              f'{serial or "?"}, not {known}; identifying it in full')
-            self.info = None
-            return False
-        period = 1.0 / self.expected_rate_hz if self.divider else 0.01
-        deadline = time.monotonic() + min(2 * period, 0.1)
-        while link.last_code != cfg.stream and time.monotonic() < deadline \
-                and not self._stop.is_set():
-            time.sleep(0.002)
-        # Not streaming (power-cycled meanwhile), or streaming another record: ask for it.
-        if link.last_code != cfg.stream and not self.start_continuous(link):
-            return True  # stopping: nothing more to do here
-        self.state = State.STREAMING
-        self.advice = ''
-        self.last_start = 'resumed'
-        self.resumes += 1
-        self._log.info(f'streaming {streams.BY_CODE[cfg.stream].label} again from node '
-                       f'{cfg.address} on {cfg.port}: same sensor (serial {serial}), identity '
-                       f'and data rate not asked again')
+        if not self._stop.is_set():
+            self.state = State.STREAMING
+            self.advice = ''
+            self.last_start = 'resumed'
+            self.resumes += 1
         return True
 
     def _begin_stream(self, link: DeviceLink) -> None:
         """Start continuous mode on an initialised link; announce it once records arrive."""
-        if self.start_continuous(link):
+        if self.dialogue.start_continuous(link):
             self.last_start = 'full'
-            self._announce_streaming()
-
-    def _announce_streaming(self) -> None:
-        """Say that records flow: called only once one has arrived on this link."""
-        self.state = State.STREAMING
-        self.advice = ''
-        stream = streams.BY_CODE[self.config.stream]
-        self._log.info(f'streaming {stream.label} from node {self.config.address} on '
-                       f'{self.config.port}'
-                       + (f' at {self.expected_rate_hz:.1f} Hz' if self.divider else '')
-                       + ' (first record received)')
-
-    def _check_line(self) -> None:
-        """
-        Warn when the device's rate is more than the line carries for the stream.
-
-        A requested rate that does not fit was refused before the node
-        started; this catches a device already set (data_rate 0) to a rate the
-        stream cannot keep, which would otherwise show only as records missing.
-        """
-        if not self.divider:
-            return
-        cfg = self.config
-        stream = streams.BY_CODE[cfg.stream]
-        budget = streams.line_budget(stream, self.expected_rate_hz, cfg.baud, cfg.wireless)
-        self.line_use = streams.describe(budget)
-        if budget.fits:
-            self.line_warning = ''
-            return
-        self.line_warning = ('the device is set to a rate the line cannot carry, records '
-                             'will be skipped: ' + streams.advice(stream, budget))
-        if self._throttle.allow('line'):
-            self._log.warning(self.line_warning)
-
-    def _identify(self, link: DeviceLink) -> None:
-        cfg = self.config
-        info = read_identity(link, cfg.request_timeout, cfg.request_retries)
-        if self._stop.is_set():
-            return
-        if not any(info):
-            self._warn('identity', 'the device did not tell its identity (0xEA, 0xE9): right '
-                                   'port? ros2 run i3dmgx2_driver discover finds sensors')
-            return
-        self.info = info
-        if info != self._info_logged:
-            self._info_logged = info
-            self._log.info(f'device: model {info.model_name or "?"} '
-                           f'({info.model_number or "?"}), serial {info.serial_number or "?"}, '
-                           f'firmware {info.firmware or "?"}, options {info.options or "-"}')
-
-    def _configure_rate(self, link: DeviceLink) -> None:
-        cfg = self.config
-        try:
-            current = link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
-                                   layouts.READ_EEPROM, cfg.request_timeout,
-                                   cfg.request_retries).value
-        except DeviceTimeout:
-            if cfg.data_rate_hz is not None or self._stop.is_set():
-                raise
-            # Nothing to set, so streaming can go on without knowing the rate
-            # (a replayed capture answers no request; lost packets and the
-            # rate check in diagnostics then wait for a known divider).
-            self._warn('rate', 'the device did not tell its data rate (EEPROM 0xFCA2)')
-            return
-        self.divider = current
-        if cfg.data_rate_hz is None:
-            return
-        wanted = divider_for_rate(cfg.data_rate_hz)
-        if wanted == current:
-            return
-        link.request(commands.write_eeprom(RATE_DIVIDER_ADDRESS, wanted), layouts.WRITE_EEPROM,
-                     cfg.request_timeout, cfg.request_retries)
-        readback = link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
-                                layouts.READ_EEPROM, cfg.request_timeout,
-                                cfg.request_retries).value
-        if readback != wanted:
-            raise DeviceTimeout(f'data rate: wrote divider {wanted}, read back {readback}')
-        self.divider = readback
-        self._log.warning(
-            f'data rate set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM 0xFCA2: {current} -> '
-            f'{wanted}); this persists across power cycles')
-
-    def start_continuous(self, link: DeviceLink) -> bool:
-        """
-        Ask for continuous mode of the configured record until records actually arrive.
-
-        Returns True once a record has arrived, False if the supervisor is
-        stopping first; raises DeviceTimeout when none comes.
-        """
-        cfg = self.config
-        period = 1.0 / self.expected_rate_hz if self.divider else 0.01
-        # From now on a record of the streamed code is a sample, even one that also
-        # answers a polled request.
-        link.streamed = cfg.stream
-        for _ in range(cfg.continuous_retries):
-            before = link.records
-            try:
-                link.request(commands.set_continuous(cfg.stream), layouts.SET_CONTINUOUS,
-                             cfg.request_timeout, 1)
-            except DeviceTimeout:
-                pass  # the reply may be lost while the stream started: look for records
-            deadline = time.monotonic() + max(0.3, 5 * period)
-            while time.monotonic() < deadline and not self._stop.is_set():
-                if link.records > before:
-                    return True
-                if link.disconnected.is_set():
-                    raise PortDisconnected(link.error or 'device disconnected')
-                time.sleep(0.01)
-            if self._stop.is_set():
-                return False
-        raise DeviceTimeout(f'continuous mode: no records after {cfg.continuous_retries} '
-                            f'requests')
+            self.state = State.STREAMING
+            self.advice = ''
+            self.dialogue.announce_streaming()
 
     def _watch(self, link: DeviceLink) -> None:
         """Return when the link is lost or cannot be revived; recover stalls."""
         cfg = self.config
-        period = 1.0 / self.expected_rate_hz if self.divider else 0.01
-        stall_after = max(cfg.stall_timeout, 3 * period)
+        stall_after = max(cfg.stall_timeout, 3 * self.dialogue.period)
         while not self._stop.wait(min(0.05, stall_after / 4)):
             if link.disconnected.is_set():
                 raise PortDisconnected(link.error or 'device disconnected')
@@ -721,7 +502,7 @@ class DeviceSupervisor:
                 self._warn('stall', f'no data for {stall_after:.1f} s: re-requesting '
                                     f'continuous mode', EVENT_PERIOD)
                 try:
-                    resumed = self.start_continuous(link)
+                    resumed = self.dialogue.start_continuous(link)
                 except DeviceTimeout:
                     self._warn('stall', 'stream did not resume: reopening the port',
                                EVENT_PERIOD)
@@ -730,7 +511,7 @@ class DeviceSupervisor:
                     self.state = State.STREAMING
                     self._log.info('stream resumed')
 
-    # -- exclusive operations for services ------------------------------
+    # -- exclusive operations for services ------------------------------------------------
 
     def run_paused(self, operation: Callable[[DeviceLink], Any]) -> Any:
         """
@@ -746,17 +527,12 @@ class DeviceSupervisor:
         self.state = State.PAUSED
         self._observe(False)  # a long operation (a 30 s bias capture) is quiet on purpose
         try:
-            link.stop_streaming()
-            # Paused, a polled record of the streamed code (a self test's 0xC2, with
-            # the built-in test skewing it) is a reply only, never a sample.
-            link.streamed = None
-            time.sleep(0.05)
-            return operation(link)
+            return self.dialogue.run_exclusive(link, operation)
         finally:
             try:
                 self._observe(True)
                 if not self._stop.is_set():
-                    self.start_continuous(link)
+                    self.dialogue.start_continuous(link)
                     self.state = State.STREAMING
             finally:
                 self._paused.clear()

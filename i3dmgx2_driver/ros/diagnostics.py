@@ -39,9 +39,11 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
+from .calibration import Calibration, RATE_TOLERANCE
 from ..device.link import RadioStats
 from ..device.sample_clock import ClockStatus, Restart
-from ..device.supervisor import DeviceInfo, State
+from ..device.settings import DeviceConfig
+from ..device.status import DeviceStatus, State
 
 OK = 0
 WARN = 1
@@ -53,8 +55,6 @@ LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 PREFIX = 'i3dmgx2_driver: '
 #: Period of the diagnostics (s).
 PERIOD = 1.0
-#: Measured rate within this fraction of the configured one is OK.
-RATE_TOLERANCE = 0.05
 #: Below these the radio link counts as poor. The base station reports LQI and
 #: RSSI as raw bytes with no documented scale; a good link reads about 230 and
 #: 170 (the real-records fixture, the simulator), so these are well below that.
@@ -97,20 +97,6 @@ class Status(NamedTuple):
         return None
 
 
-class Calibration(NamedTuple):
-    """The outcome of the last gyro bias capture of this session."""
-
-    #: Host time (s since the epoch) of the capture.
-    time: float
-    #: Whether the bias was accepted (the sensor stayed still).
-    accepted: bool
-    #: The captured bias (rad/s), sensor axes; None when no reply came.
-    bias: tuple[float, float, float] | None
-    sampling_ms: int
-    #: One line on what happened (why it was refused, or that it is in use).
-    summary: str
-
-
 def _fmt(value: float | None, digits: int = 3, unit: str = '') -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return 'n/a'
@@ -122,10 +108,7 @@ def _vector(values: Iterable[float], digits: int = 5) -> str:
     return '(' + ', '.join(f'{v:.{digits}f}' for v in values) + ')'
 
 
-def connection_status(port: str, address: int, wireless: bool, state: State,
-                      connections: int, reconnects: int, stalls: int, last_error: str,
-                      low_latency: str, ping_ok: bool | None, capture: str,
-                      advice: str = '') -> Status:
+def connection_status(settings: DeviceConfig, device: DeviceStatus, capture: str) -> Status:
     """
     Say whether the port is open and the device streaming.
 
@@ -134,8 +117,11 @@ def connection_status(port: str, address: int, wireless: bool, state: State,
     paused for an operation the driver itself started is OK. ``advice`` is
     what the line observer found while no record arrived (another address,
     the other framing, unreadable bytes, silence): an ERROR that says what
-    to change.
+    to change. ``capture`` says what the raw capture is doing.
     """
+    state, advice, last_error = device.state, device.advice, device.last_error
+    connections, reconnects = device.connections, device.reconnects
+    wireless = settings.wireless
     if state is State.STREAMING:
         level, message = OK, 'streaming'
     elif state is State.READY:
@@ -156,17 +142,17 @@ def connection_status(port: str, address: int, wireless: bool, state: State,
     else:
         level, message = ERROR, f'disconnected: {last_error or "port lost"}'
     return Status(level, 'connection', message, (
-        ('port', port),
-        ('node address', str(address)),
+        ('port', settings.port),
+        ('node address', str(settings.address)),
         ('link', 'wireless' if wireless else 'wired'),
         ('state', state.value),
         ('connections', str(connections)),
         ('reconnects', str(reconnects)),
-        ('stalls', str(stalls)),
+        ('stalls', str(device.stalls)),
         ('last error', last_error or '-'),
-        ('low-latency mode', low_latency or 'not opened yet'),
-        ('base station ping', {None: 'not tried', True: 'ok', False: 'no answer'}[ping_ok]
-         if wireless else 'n/a (wired)'),
+        ('low-latency mode', device.low_latency_state or 'not opened yet'),
+        ('base station ping', {None: 'not tried', True: 'ok', False: 'no answer'}[
+            device.ping_ok] if wireless else 'n/a (wired)'),
         ('raw capture', capture),
         ('observed on the line', advice or '-'),
     ))
@@ -186,11 +172,27 @@ def rate_level(measured_hz: float | None, expected_hz: float | None,
     return WARN, f'rate off by more than {tolerance:.0%}: {text}'
 
 
-def stream_status(state: State, measured_hz: float | None, expected_hz: float | None,
-                  received_in_period: int, period: float, silent_for: float | None,
-                  published: int, lost: int, lost_in_period: int, device_resets: int,
-                  other_records: int, mag_published: int, operation: str = '',
-                  stream: str = '', line_use: str = '', line_warning: str = '') -> Status:
+class StreamPeriod(NamedTuple):
+    """What the node saw of the stream over the last diagnostics period, and in all."""
+
+    #: The stream's label ('0xCC (full)').
+    label: str = ''
+    measured_hz: float | None = None
+    received: int = 0
+    #: Length of the period (s), and how long since the last record (None: none yet).
+    period: float = 1.0
+    silent_for: float | None = None
+    published: int = 0
+    lost: int = 0
+    lost_in_period: int = 0
+    device_resets: int = 0
+    other_records: int = 0
+    mag_published: int = 0
+    #: The device operation a service runs now ('' if none).
+    operation: str = ''
+
+
+def stream_status(device: DeviceStatus, seen: StreamPeriod) -> Status:
     """
     Judge the IMU stream over the last period: whether it arrives, at its rate.
 
@@ -199,30 +201,33 @@ def stream_status(state: State, measured_hz: float | None, expected_hz: float | 
     whenever the device's rate is more than the line carries for the stream
     (``line_warning``): records are being skipped, whatever the rate shows.
     """
+    state, line_warning, expected_hz = device.state, device.line_warning, \
+        device.expected_rate_hz
     if line_warning and state is not State.PAUSED:
         level, message = WARN, line_warning
     elif state is State.PAUSED:
-        level, message = WARN, f'no data: stream paused for {operation or "a device operation"}'
+        operation = seen.operation or 'a device operation'
+        level, message = WARN, f'no data: stream paused for {operation}'
     elif state is State.READY:
         level, message = OK, 'no data: stream stopped on purpose (node inactive)'
-    elif received_in_period == 0:
-        since = f' for {silent_for:.1f} s' if silent_for is not None else ' yet'
+    elif seen.received == 0:
+        since = f' for {seen.silent_for:.1f} s' if seen.silent_for is not None else ' yet'
         level, message = STALE, f'no data{since}'
     else:
-        level, message = rate_level(measured_hz, expected_hz)
+        level, message = rate_level(seen.measured_hz, expected_hz)
     return Status(level, 'stream', message, (
-        ('stream', stream or 'n/a'),
-        ('line use', line_use or 'rate unknown'),
-        ('measured rate (Hz)', _fmt(measured_hz, 2)),
+        ('stream', seen.label or 'n/a'),
+        ('line use', device.line_use or 'rate unknown'),
+        ('measured rate (Hz)', _fmt(seen.measured_hz, 2)),
         ('configured rate (Hz)', _fmt(expected_hz, 2)),
-        ('records in last period', str(received_in_period)),
-        ('period (s)', _fmt(period, 2)),
-        ('published', str(published)),
-        ('lost (timer gaps)', str(lost)),
-        ('lost in last period', str(lost_in_period)),
-        ('magnetometer published', str(mag_published)),
-        ('other records', str(other_records)),
-        ('device resets', str(device_resets)),
+        ('records in last period', str(seen.received)),
+        ('period (s)', _fmt(seen.period, 2)),
+        ('published', str(seen.published)),
+        ('lost (timer gaps)', str(seen.lost)),
+        ('lost in last period', str(seen.lost_in_period)),
+        ('magnetometer published', str(seen.mag_published)),
+        ('other records', str(seen.other_records)),
+        ('device resets', str(seen.device_resets)),
     ))
 
 
@@ -279,17 +284,16 @@ def parser_status(totals: Mapping[str, int], previous: Mapping[str, int] | None)
     return Status(OK, 'parser', 'no damaged frames in the last period', values)
 
 
-def device_status(info: DeviceInfo | None, connected_once: bool, address: int,
-                  divider: int | None, expected_hz: float | None,
-                  temperature_c: float | None) -> Status:
+def device_status(device: DeviceStatus, address: int, temperature_c: float | None) -> Status:
     """
     Show what the device said it is; WARN when it did not say.
 
     STALE before the first connection (nothing asked yet).
     """
+    info, divider, connected_once = device.info, device.divider, device.connections > 0
     values = [('node address', str(address)),
               ('rate divider (EEPROM 0xFCA2)', str(divider) if divider else 'unknown'),
-              ('configured rate (Hz)', _fmt(expected_hz, 2))]
+              ('configured rate (Hz)', _fmt(device.expected_rate_hz, 2))]
     if temperature_c is not None:
         values.append(('accel temperature (C)', _fmt(temperature_c, 1)))
     if info is None:
@@ -475,44 +479,39 @@ class DiagnosticsPublisher:
         if core is None:
             self._last_tick = time.monotonic()
             return statuses
-        sup = core.supervisor
+        device = core.supervisor.status()
         cfg = core.config
         stats = core.stats
         now = time.monotonic()
         period = now - self._last_tick
         self._last_tick = now
-        state = sup.state
         published = stats.published
-        received = published - self._last_published
+        seen = StreamPeriod(
+            label=core.stream.label,
+            measured_hz=self._rate.update(published, stats.last_time,
+                                          device.state is State.STREAMING),
+            received=published - self._last_published, period=period,
+            silent_for=time.time() - stats.last_time if stats.last_time else None,
+            published=published, lost=stats.lost, lost_in_period=stats.lost - self._last_lost,
+            device_resets=stats.device_resets, other_records=stats.other_records,
+            mag_published=stats.mag_published, operation=core.device_services.operation)
         self._last_published = published
-        lost_in_period = stats.lost - self._last_lost
         self._last_lost = stats.lost
-        measured = self._rate.update(published, stats.last_time, state is State.STREAMING)
-        silent_for = time.time() - stats.last_time if stats.last_time else None
-        parser = sup.parser_stats()
+        parser = device.parser
         fresh = parser.get('good_frames', 0) > self._last_good_frames
         self._last_good_frames = parser.get('good_frames', 0)
-        link = sup.link
-        radio = link.radio if link is not None else None
+        radio = device.radio
         if radio is None:
             radio = self._last_radio  # disconnected: show the last link's numbers
         self._last_radio = radio
         services = core.device_services
         last, good = services.calibration()
         statuses += [
-            connection_status(cfg.port, cfg.address, cfg.wireless, state, sup.connections,
-                              sup.reconnects, sup.stalls, sup.last_error,
-                              sup.low_latency_state, sup.ping_ok, core.raw_capture.describe(),
-                              sup.advice),
-            stream_status(state, measured, sup.expected_rate_hz, received, period,
-                          silent_for, published, stats.lost, lost_in_period,
-                          stats.device_resets, stats.other_records, stats.mag_published,
-                          services.operation, core.stream.label, sup.line_use,
-                          sup.line_warning),
+            connection_status(core.device_config, device, core.raw_capture.describe()),
+            stream_status(device, seen),
             radio_status(cfg.wireless, radio, fresh),
             parser_status(parser, self._last_parser),
-            device_status(sup.info, sup.connections > 0, cfg.address, sup.divider,
-                          sup.expected_rate_hz, core.temperature.latest),
+            device_status(device, cfg.address, core.temperature.latest),
             time_status(cfg.time_source, core.clock_status(), now),
             calibration_status(last, good, time.time()),
         ]

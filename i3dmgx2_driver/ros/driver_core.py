@@ -60,7 +60,8 @@ from ..codec.framing import DataPacket
 from ..device.port import check_port_path, PortError
 from ..device.realtime import ThreadPolicy
 from ..device.sample_clock import ClockStatus, Restart, SampleClock
-from ..device.supervisor import DeviceSupervisor, SupervisorConfig
+from ..device.settings import DeviceConfig
+from ..device.supervisor import DeviceSupervisor
 
 #: Whether ready-serialized messages read back right, by the message factory's
 #: settings: checked once per process, because a managed node makes a core at
@@ -195,19 +196,23 @@ class DriverCore:
         self.raw_capture = RawCapture(
             cfg.capture_file, node.get_logger(), port=cfg.port, address=cfg.address,
             baud=cfg.baud, wireless=cfg.wireless, node=node.get_fully_qualified_name())
+        #: How the device side reaches and treats the sensor.
+        self.device_config = DeviceConfig(
+            port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
+            low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
+            reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
+            stream=self.stream.code, thread_policy=ThreadPolicy(cfg.realtime_priority))
         self.supervisor = DeviceSupervisor(
-            SupervisorConfig(
-                port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
-                low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
-                reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
-                stream=self.stream.code,
-                thread_policy=ThreadPolicy(cfg.realtime_priority)),
+            self.device_config,
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
             on_fatal=self._on_fatal)
-        self.device_services = DeviceServices(node, self, refusal=refusal)
-        self.temperature = TemperaturePoller(node, self, cfg.temperature_period,
-                                             self.publishers.temperature)
+        self.device_services = DeviceServices(
+            node, self.supervisor, self._published, self.forget_last_sample,
+            capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal)
+        self.temperature = TemperaturePoller(
+            node, self.supervisor.streaming_link, self.messages.frame_id,
+            cfg.temperature_period, self.publishers.temperature)
         node.get_logger().info(
             f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
             f'stream {self.stream.label}, frame {self.messages.frame_id} '
@@ -241,6 +246,10 @@ class DriverCore:
         """Return a snapshot of the stamping clock (from any thread)."""
         with self._publish_lock:
             return self.sample_clock.status()
+
+    def _published(self) -> tuple[int, float]:
+        """Return (records published, read time of the last), for the self test's rate."""
+        return self.stats.published, self.stats.last_time
 
     def forget_last_sample(self) -> None:
         """Let the next record start afresh: a deliberate pause is no packet loss."""

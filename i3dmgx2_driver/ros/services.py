@@ -31,18 +31,18 @@ from collections.abc import Callable, Sequence
 import math
 import threading
 import time
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from .diagnostics import Calibration, RATE_TOLERANCE
+from .calibration import Calibration, RATE_TOLERANCE
 from ..codec import commands, layouts
 from ..codec.errors import CodecError
 from ..device.link import DeviceLink, DeviceTimeout
 from ..device.port import PortError
-from ..device.supervisor import State
+from ..device.status import DeviceStatus, State
 
 Vector3 = tuple[float, float, float]
 
@@ -162,22 +162,37 @@ def poll_inertial(link: DeviceLink, count: int = POLLS, timeout: float = 0.5,
     return _mean([r.accel for r in replies]), _mean([r.angular_rate for r in replies])
 
 
+class Device(Protocol):
+    """What the services need of the device side (the supervisor is one)."""
+
+    def status(self) -> DeviceStatus:
+        """Return the device side's snapshot."""
+
+    def run_paused(self, operation: Callable[[DeviceLink], Any]) -> Any:
+        """Stop the stream, run ``operation(link)``, start the stream again."""
+
+
 class DeviceServices:
     """
     The ``~/capture_gyro_bias`` and ``~/self_test`` services of the driver.
 
     ``node`` provides the services, the logger and the
-    ``gyro_bias_sampling_ms`` parameter; ``driver`` (the DriverCore) the
-    ``supervisor``, ``stats`` (records published, with read times),
-    ``config`` and ``forget_last_sample``. ``refusal``, if given, returns
-    why a call must be refused now ('' to serve it): a managed node that is
-    not active answers so at once.
+    ``gyro_bias_sampling_ms`` parameter; ``device`` the status and the
+    exclusive operations; ``published()`` returns (records published, read
+    time of the last), for the self test's rate; ``forget_last_sample()``
+    keeps a pause from counting as lost records; ``capture_on_start`` asks
+    for one capture once streaming. ``refusal``, if given, returns why a
+    call must be refused now ('' to serve it): a managed node that is not
+    active answers so at once.
     """
 
-    def __init__(self, node: Node, driver: Any,
+    def __init__(self, node: Node, device: Device, published: Callable[[], tuple[int, float]],
+                 forget_last_sample: Callable[[], None], capture_on_start: bool = False,
                  refusal: Callable[[], str] | None = None) -> None:
         self.node = node
-        self.driver = driver
+        self._device = device
+        self._published = published
+        self._forget = forget_last_sample
         self._refusal = refusal or (lambda: '')
         self._log = node.get_logger()
         self._busy = threading.Lock()
@@ -193,7 +208,7 @@ class DeviceServices:
         self.self_test_service = node.create_service(
             Trigger, '~/self_test', self._on_self_test, callback_group=group)
         self._start_thread: threading.Thread | None = None
-        if driver.config.capture_gyro_bias_on_start:
+        if capture_on_start:
             self._start_thread = threading.Thread(
                 target=self._capture_on_start, name='gx2-bias-on-start', daemon=True)
             self._start_thread.start()
@@ -259,7 +274,7 @@ class DeviceServices:
         Called while the stream is still stopped: the timer gap across the
         pause is the operation's doing, not the radio's.
         """
-        self.driver.forget_last_sample()
+        self._forget()
 
     def capture_gyro_bias(self) -> tuple[bool, str]:
         """Capture the gyro bias (0xCD) with the stream paused; return (success, message)."""
@@ -281,7 +296,7 @@ class DeviceServices:
         started = time.time()
         try:
             accel_before, reply, accel_after, rate_after = \
-                self.driver.supervisor.run_paused(operation)
+                self._device.run_paused(operation)
         except OPERATION_ERRORS as exc:
             summary = f'no capture: {exc}'
             self.last_capture = Calibration(started, False, None, sampling_ms, summary)
@@ -307,8 +322,7 @@ class DeviceServices:
 
     def _capture_on_start(self) -> None:
         """Wait for the first streaming start, then capture once (own thread)."""
-        supervisor = self.driver.supervisor
-        while supervisor.state is not State.STREAMING:
+        while self._device.status().state is not State.STREAMING:
             if self._stop.wait(0.1):
                 return
         ok, message = self.capture_gyro_bias()
@@ -321,7 +335,7 @@ class DeviceServices:
 
     def _self_test(self) -> tuple[bool, str]:
         try:
-            steps = self.driver.supervisor.run_paused(self._device_steps)
+            steps = self._device.run_paused(self._device_steps)
         except OPERATION_ERRORS as exc:
             steps = [Step('device operation', False, f'could not complete: {exc}')]
         steps.append(self._measure_rate())
@@ -390,11 +404,11 @@ class DeviceServices:
 
     def _measure_rate(self) -> Step:
         """Measure the published rate over :data:`RATE_WINDOW` after the stream resumed."""
-        stats = self.driver.stats
-        count, first = stats.published, stats.last_time
+        count, first = self._published()
         if self._stop.wait(RATE_WINDOW):
             return Step('data rate', False, 'driver shutting down')
         measured = None
-        if stats.published > count and stats.last_time > first:
-            measured = (stats.published - count) / (stats.last_time - first)
-        return rate_step(measured, self.driver.supervisor.expected_rate_hz)
+        now_count, last = self._published()
+        if now_count > count and last > first:
+            measured = (now_count - count) / (last - first)
+        return rate_step(measured, self._device.status().expected_rate_hz)

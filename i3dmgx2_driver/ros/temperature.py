@@ -25,9 +25,9 @@ for it. Polls are skipped while the stream is not running (connecting, or
 paused for a capture or the self test).
 """
 
+from collections.abc import Callable
 import threading
 import time
-from typing import Any
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.node import Node
@@ -36,9 +36,9 @@ from sensor_msgs.msg import Temperature
 
 from .conversions import set_stamp
 from ..codec import layouts
-from ..device.link import DeviceTimeout
+from ..device.link import DeviceLink, DeviceTimeout
 from ..device.port import PortError
-from ..device.supervisor import State, Throttle
+from ..device.throttle import Throttle
 
 #: Per-try timeout and tries of one poll: short, the next period tries again.
 POLL_TIMEOUT = 0.3
@@ -52,15 +52,16 @@ class TemperaturePoller:
     Publish the accelerometer temperature on ``imu/temperature`` every ``period`` s.
 
     ``node`` logs; ``publisher`` publishes (the driver core makes it, a
-    lifecycle publisher on a managed node); ``driver`` (the DriverCore)
-    provides ``supervisor`` and ``messages.frame_id`` (the IMU frame).
-    ``period`` 0 disables it: no thread (and no publisher is needed).
+    lifecycle publisher on a managed node); ``streaming_link()`` returns the
+    device link while the device streams (None otherwise: no poll then);
+    ``frame_id`` is the IMU frame. ``period`` 0 disables it: no thread (and
+    no publisher is needed).
     """
 
-    def __init__(self, node: Node, driver: Any, period: float,
-                 publisher: Publisher | None) -> None:
+    def __init__(self, node: Node, streaming_link: Callable[[], DeviceLink | None],
+                 frame_id: str, period: float, publisher: Publisher | None) -> None:
         self.node = node
-        self.driver = driver
+        self._streaming_link = streaming_link
         self.period = period
         self.published = 0
         self.failures = 0
@@ -72,7 +73,7 @@ class TemperaturePoller:
         self.publisher = publisher
         if period > 0 and publisher is not None:
             self._msg = Temperature()
-            self._msg.header.frame_id = driver.messages.frame_id
+            self._msg.header.frame_id = frame_id
             self._msg.variance = 0.0
             self._thread = threading.Thread(target=self._run, name='gx2-temperature',
                                             daemon=True)
@@ -95,9 +96,8 @@ class TemperaturePoller:
 
     def poll(self) -> bool:
         """Read the temperatures once and publish; False if skipped or failed."""
-        supervisor = self.driver.supervisor
-        link = supervisor.link
-        if link is None or supervisor.state is not State.STREAMING:
+        link = self._streaming_link()
+        if link is None:
             return False
         try:
             reply = link.request(bytes((layouts.TEMPERATURES,)), layouts.TEMPERATURES,

@@ -1,0 +1,57 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+How to reach one device and how patient to be with it.
+
+One frozen settings object for the supervisor (the port, the retry and
+recovery timing) and the dialogue (the address, the stream, the request
+timeouts): the node builds it once from its parameters.
+"""
+
+from dataclasses import dataclass
+
+from .realtime import NORMAL_SCHEDULING, ThreadPolicy
+from ..codec import streams
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    """How to reach the device and how patient to be with it."""
+
+    port: str
+    address: int
+    baud: int = 115200
+    wireless: bool = True
+    low_latency: bool = True
+    stall_timeout: float = 1.0
+    reconnect_interval: float = 1.0
+    data_rate_hz: float | None = None
+    #: Command byte of the record to stream (one of codec.streams.STREAMS).
+    stream: int = streams.DEFAULT.code
+    request_timeout: float = 0.5
+    request_retries: int = 3
+    continuous_retries: int = 5
+    #: Scheduling of the reader thread (its SCHED_FIFO priority).
+    thread_policy: ThreadPolicy = NORMAL_SCHEDULING
+    #: Reconnect to a known sensor with one serial-number read (False: the full dialogue).
+    fast_reconnect: bool = True
+    #: Reopen a port the moment it reappears, and a port closed for a stall at once
+    #: (False: always wait ``reconnect_interval``).
+    prompt_reopen: bool = True
+    #: Per try and tries of that read: short, so that a reply lost in a stall is asked
+    #: again soon after the radio is back.
+    resume_timeout: float = 0.1
+    resume_retries: int = 5

@@ -1,0 +1,146 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+SensorDialogue with a link and a simulator alone: no supervisor, no thread of its own.
+
+What the dialogue says and learns, step by step: quiet, identity and rate,
+the one EEPROM write (and none when the rate is already right), continuous
+mode until records arrive, an exclusive operation, the resume of a known
+sensor, and the refusal of a silent address with the reason.
+"""
+
+import threading
+
+from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.device.dialogue import SensorDialogue
+from i3dmgx2_driver.device.identity import read_firmware
+from i3dmgx2_driver.device.link import DeviceLink, DeviceTimeout
+from i3dmgx2_driver.device.port import SerialPort
+from i3dmgx2_driver.device.settings import DeviceConfig
+from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
+import pytest
+
+pytestmark = pytest.mark.slow
+
+
+class Log:
+    """Keep what the dialogue says."""
+
+    def __init__(self) -> None:
+        self.lines: list[tuple[str, str]] = []
+
+    def __getattr__(self, level: str):
+        return lambda message: self.lines.append((level, message))
+
+
+class Talk:
+    """A link on the simulator's port, its reader running, and a dialogue over it."""
+
+    def __init__(self, sim: PtySimulator, **config) -> None:
+        self.records = 0
+        self.log = Log()
+        self.warnings: list[tuple[str, str]] = []
+        self.cancel = threading.Event()
+        self.link = DeviceLink(SerialPort(sim.port, low_latency=False), config.get('address', 95),
+                               self._on_record, read_timeout=0.05)
+        self.dialogue = SensorDialogue(
+            DeviceConfig(port=sim.port, **{'address': 95, **config}), self.log,
+            lambda key, message, period: self.warnings.append((key, message)), self.cancel)
+        self.dialogue.quiet(self.link)
+        self.link.start()
+
+    def _on_record(self, packet, read_time, read_mono) -> None:
+        self.records += 1
+
+    def close(self) -> None:
+        self.link.stop()
+        self.link.port.close()
+
+
+def test_bring_up_learns_identity_and_rate_then_streams():
+    with PtySimulator(SimulatorConfig(seed=3)) as sim:
+        talk = Talk(sim)
+        try:
+            dialogue = talk.dialogue
+            dialogue.initialise(talk.link)
+            assert dialogue.ping_ok is True
+            assert dialogue.info.serial_number == '3095'
+            assert dialogue.divider == 512 and dialogue.expected_rate_hz == 100.0
+            assert 'fits' in dialogue.line_use or dialogue.line_use
+            assert talk.records == 0  # nothing streams before it is asked
+            assert dialogue.start_continuous(talk.link)
+            assert talk.records > 0 and sim.streaming == lay.ACCEL_ANG_RATE_MAG_ORIENTATION
+            assert sim.eeprom_writes() == []  # no rate asked: nothing written
+        finally:
+            talk.close()
+
+
+def test_the_rate_is_written_once_and_not_again_when_right():
+    with PtySimulator(SimulatorConfig(seed=4)) as sim:
+        for _ in range(2):
+            talk = Talk(sim, data_rate_hz=200.0)
+            try:
+                talk.dialogue.initialise(talk.link)
+                assert talk.dialogue.divider == 256
+            finally:
+                talk.close()
+        assert len(sim.eeprom_writes()) == 1
+        assert sim.eeprom[0xFCA2] == 256
+
+
+def test_an_exclusive_operation_runs_with_the_stream_stopped():
+    with PtySimulator(SimulatorConfig(seed=5)) as sim:
+        talk = Talk(sim)
+        try:
+            talk.dialogue.initialise(talk.link)
+            assert talk.dialogue.start_continuous(talk.link)
+            seen = []
+
+            def operation(link):
+                seen.append(sim.streaming)
+                return read_firmware(link, 0.5, 3)
+
+            assert talk.dialogue.run_exclusive(talk.link, operation) == '2.1.03'
+            assert seen == [0]
+            assert talk.dialogue.start_continuous(talk.link)
+        finally:
+            talk.close()
+
+
+def test_resume_confirms_the_same_sensor_by_its_serial_number():
+    with PtySimulator(SimulatorConfig(seed=6)) as sim:
+        talk = Talk(sim)
+        try:
+            assert not talk.dialogue.can_resume()  # nothing known yet
+            talk.dialogue.initialise(talk.link)
+            assert talk.dialogue.start_continuous(talk.link)
+            assert talk.dialogue.can_resume()
+            talk.dialogue.expect_stream(talk.link)
+            assert talk.dialogue.resume(talk.link)
+            assert any('same sensor (serial 3095)' in m for _, m in talk.log.lines)
+        finally:
+            talk.close()
+
+
+def test_a_silent_address_is_refused_with_the_reason():
+    with PtySimulator(SimulatorConfig(seed=7, faults=FaultConfig(already_streaming=True))) as sim:
+        talk = Talk(sim, address=12, request_timeout=0.1)
+        try:
+            with pytest.raises(DeviceTimeout, match=r'node 12 is silent.*seen: node 95'):
+                talk.dialogue.initialise(talk.link, require_answer=True,
+                                         observed=lambda: 'seen: node 95')
+            assert talk.warnings and talk.warnings[0][0] == 'ping'
+        finally:
+            talk.close()
