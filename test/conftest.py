@@ -22,3 +22,33 @@ import pytest
 def fixture_path():
     """Return the path of the real-records fixture."""
     return real_records_path()
+
+
+class StartsSomething(AssertionError):
+    """A test not marked slow tried to start a process or a pseudo-terminal."""
+
+
+@pytest.fixture(autouse=True)
+def _quick_tests_start_nothing(request, monkeypatch):
+    """
+    Keep ``-m 'not slow'`` a quick loop: a test not marked slow starts nothing.
+
+    No process (a node, a linter, a tool's command line) and no
+    pseudo-terminal (a simulated sensor): those are what make a test take
+    seconds and depend on the machine's load. A test that needs one is
+    marked slow.
+    """
+    if request.node.get_closest_marker('slow') is not None:
+        return
+    import os
+    import subprocess
+
+    def refuse(what):
+        def refused(*args, **kwargs):
+            raise StartsSomething(f'{request.node.nodeid} starts {what} but is not marked '
+                                  f'slow: mark it @pytest.mark.slow')
+        return refused
+
+    monkeypatch.setattr(subprocess.Popen, '__init__', refuse('a process'))
+    monkeypatch.setattr(os, 'openpty', refuse('a pseudo-terminal'))
+    monkeypatch.setattr(os, 'fork', refuse('a process'))

@@ -102,6 +102,7 @@ def test_bad_address_lists_say_what_is_valid(text, words):
         parse_addresses(text)
 
 
+@pytest.mark.slow
 def test_probe_finds_each_sensor_and_leaves_it_as_it_was():
     with PtySimulator(SimulatorConfig(address=42, serial_number='2042', seed=71)) as polled, \
             PtySimulator(SimulatorConfig(address=17, serial_number='2017', seed=72,
@@ -133,6 +134,7 @@ def test_probe_finds_each_sensor_and_leaves_it_as_it_was():
             assert len(pinged) == len(set(pinged)), 'each address is pinged once'
 
 
+@pytest.mark.slow
 def test_a_sensor_outside_the_factory_range_needs_its_range():
     with PtySimulator(SimulatorConfig(address=4242, serial_number='4242', seed=73)) as sim:
         found = probe_port(sim.port, ProbeConfig(**PATIENT))
@@ -143,6 +145,7 @@ def test_a_sensor_outside_the_factory_range_needs_its_range():
         assert [(s.address, s.info.serial_number) for s in found.sensors] == [(4242, '4242')]
 
 
+@pytest.mark.slow
 def test_a_busy_port_is_reported_and_left_alone():
     with PtySimulator(SimulatorConfig(seed=74)) as sim:
         holder = SerialPort(sim.port)
@@ -155,6 +158,7 @@ def test_a_busy_port_is_reported_and_left_alone():
         assert sim.host_log == []
 
 
+@pytest.mark.slow
 def test_a_port_with_nothing_behind_it():
     master, slave = os.openpty()
     tty.setraw(slave)
@@ -169,6 +173,7 @@ def test_a_port_with_nothing_behind_it():
     assert probe_port('/nonexistent/ttyUSB7').status == 'missing'
 
 
+@pytest.mark.slow
 def test_stop_streams_restarts_the_same_record():
     with PtySimulator(SimulatorConfig(address=17, serial_number='2017', seed=75,
                                       streaming_at_start=lay.EULER_ANGLES)) as sim:
@@ -185,6 +190,7 @@ def test_stop_streams_restarts_the_same_record():
         left_as_found(sim, restarted=True)
 
 
+@pytest.mark.slow
 def test_a_sensor_that_cannot_answer_while_streaming_is_stopped_read_and_restarted():
     # Every command is lost until the first 0xFA reaches the base station: the
     # radio of a busy stream. Combined mode fails; the stream is stopped, the
@@ -210,6 +216,7 @@ def test_a_sensor_that_cannot_answer_while_streaming_is_stopped_read_and_restart
         left_as_found(sim, restarted=True)
 
 
+@pytest.mark.slow
 def test_the_rate_is_the_sensors_own():
     with PtySimulator(SimulatorConfig(address=3, serial_number='2003', seed=77,
                                       divider=256)) as sim:
@@ -218,6 +225,7 @@ def test_the_rate_is_the_sensors_own():
         left_as_found(sim)
 
 
+@pytest.mark.slow
 def test_a_wired_sensor_is_found_without_a_base_station():
     with PtySimulator(SimulatorConfig(wireless=False, serial_number='5001', seed=78)) as sim:
         found = probe_port(sim.port, ProbeConfig(request_timeout=0.5))
@@ -228,6 +236,7 @@ def test_a_wired_sensor_is_found_without_a_base_station():
         left_as_found(sim)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('stop_streams', [False, True], ids=['combined', 'stop-streams'])
 def test_a_streaming_wired_sensor_is_found_by_its_stream(stop_streams):
     with PtySimulator(SimulatorConfig(wireless=False, serial_number='5002', seed=79,
@@ -255,6 +264,7 @@ def test_command_lines():
 # -- the command line ------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_command_line_reports_every_port_as_json():
     with PtySimulator(SimulatorConfig(address=42, serial_number='2042', seed=81)) as a, \
             PtySimulator(SimulatorConfig(address=17, serial_number='2017', seed=82,
@@ -300,6 +310,7 @@ def test_command_line_reports_every_port_as_json():
         assert busy.host_log == []
 
 
+@pytest.mark.slow
 def test_command_line_prints_the_driver_command_and_exit_status():
     with PtySimulator(SimulatorConfig(address=42, serial_number='2042', seed=85)) as sim:
         result = run_discover('--port', sim.port)
@@ -317,6 +328,7 @@ def test_command_line_prints_the_driver_command_and_exit_status():
     assert "'0-100': addresses are 1..65534" in result.stderr
 
 
+@pytest.mark.slow
 def test_progress_is_shown_on_a_terminal():
     master, slave = os.openpty()
     try:

@@ -36,6 +36,8 @@ import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
 
+pytestmark = pytest.mark.slow
+
 #: What the full start-up dialogue asks, in order (after the three 0xFA).
 FULL_DIALOGUE = [(0x02, 95), (0xC2, None), (0xC2, None), (0xEA, 0), (0xEA, 1), (0xEA, 2),
                  (0xEA, 3), (0xE9, None), (0xE5, 0xFCA2), (0xC4, 0xCC)]

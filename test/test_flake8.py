@@ -19,6 +19,8 @@ import sys
 
 import pytest
 
+pytestmark = pytest.mark.slow
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # The repository root is also the colcon workspace: leave out what colcon makes there.
 # (ament_flake8 already skips directories starting with '.' or '_', such as .venv.)

@@ -29,7 +29,10 @@ import subprocess
 import sys
 
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+import pytest
 from ros_harness import isolate_ros_domain, REPO, ros_env
+
+pytestmark = pytest.mark.slow
 
 #: Samples measured, and the most tracked objects they may leave behind in all: the device
 #: clock keeps one point per second of data (a few in the window), nothing per sample. A path

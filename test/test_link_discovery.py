@@ -32,6 +32,8 @@ from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
 
+pytestmark = pytest.mark.slow
+
 
 class Collected:
     """Every data packet the link hands over, by node address."""

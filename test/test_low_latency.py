@@ -111,6 +111,7 @@ def test_a_platform_without_it_says_so(fake_serial, refusal):
     assert port.low_latency_state == 'not supported on this platform'
 
 
+@pytest.mark.slow
 def test_a_pseudo_terminal_opens_with_low_latency_asked_and_says_it_was_refused():
     with PtySimulator(seed=1) as sim:
         port = SerialPort(sim.port, low_latency=True)
@@ -142,6 +143,7 @@ def _packet() -> bytes:
     return encode_data_packet(95, record, 200, 100)
 
 
+@pytest.mark.slow
 def test_read_some_returns_the_end_of_a_packet_as_soon_as_it_is_written(pty_pair):
     master, path = pty_pair
     packet = _packet()
@@ -171,6 +173,7 @@ def test_read_some_returns_the_end_of_a_packet_as_soon_as_it_is_written(pty_pair
         port.close()
 
 
+@pytest.mark.slow
 def test_read_some_times_out_with_nothing(pty_pair):
     _, path = pty_pair
     port = SerialPort(path, low_latency=False)

@@ -32,6 +32,7 @@ def test_roll_pitch_yaw_of_known_quaternions():
     assert roll_pitch_yaw(half, 0.0, 0.0, half) == pytest.approx((1.5707963, 0.0, 0.0))
 
 
+@pytest.mark.slow
 def test_monitor_prints_rate_and_values_of_a_running_node():
     isolate_ros_domain()
     with PtySimulator(SimulatorConfig(seed=51)) as sim:
@@ -64,6 +65,7 @@ MONITOR_WITH_SIGINT = (
 @pytest.mark.parametrize(('sent', 'sigint'), [
     (signal.SIGINT, 'default'), (signal.SIGINT, 'ignored'), (signal.SIGTERM, 'default')],
     ids=['ctrl_c', 'ctrl_c_started_ignoring_sigint', 'sigterm'])
+@pytest.mark.slow
 def test_monitor_stops_cleanly_on_ctrl_c(sent, sigint):
     """
     Ctrl-C or SIGTERM ends the monitor with its summary, however SIGINT was set when it started.

@@ -35,6 +35,8 @@ from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
 from test_node_stream import match, stream_truth
 
+pytestmark = pytest.mark.slow
+
 #: Run the node with a file size limit, as a full disk would stop the capture.
 LIMITED_NODE = (
     'import resource, signal, sys\n'

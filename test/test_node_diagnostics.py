@@ -29,6 +29,8 @@ from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess
 
+pytestmark = pytest.mark.slow
+
 PREFIX = 'i3dmgx2_driver: '
 NAMES = {'connection', 'stream', 'radio link', 'parser', 'device', 'time', 'calibration'}
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,

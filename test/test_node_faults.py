@@ -34,6 +34,8 @@ from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
 from test_node_stream import match, stream_truth
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(autouse=True)
 def _domain():

@@ -34,6 +34,8 @@ import pytest
 from ros_harness import isolate_ros_domain, LifecycleClient, Listener, NodeProcess, REPO
 from sensor_msgs.msg import Imu
 
+pytestmark = pytest.mark.slow
+
 COLCON = os.path.join(os.path.dirname(sys.executable), 'colcon')
 
 

@@ -28,6 +28,8 @@ import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess, REPO
 from sensor_msgs.msg import Imu
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(autouse=True)
 def _domain():

@@ -26,8 +26,11 @@ from collections import Counter
 from i3dmgx2_driver.capture import fixture_chunks, load_fixture
 from i3dmgx2_driver.codec.commands import decode_record
 from i3dmgx2_driver.tools.replay import Replayer, schedule
+import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
+
+pytestmark = pytest.mark.slow
 
 G = 9.80665
 

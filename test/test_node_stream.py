@@ -33,6 +33,8 @@ from ros_harness import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu, MagneticField
 
+pytestmark = pytest.mark.slow
+
 G = 9.80665
 # The device's NED world and FRD body to REP-103's ENU world and FLU body.
 NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])

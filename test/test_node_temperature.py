@@ -27,6 +27,8 @@ import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
 from sensor_msgs.msg import Imu, Temperature
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(autouse=True)
 def _domain():

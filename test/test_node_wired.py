@@ -22,8 +22,11 @@ stream from it and publish every record, exactly, without a base station.
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
+
+pytestmark = pytest.mark.slow
 
 G = 9.80665
 

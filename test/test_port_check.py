@@ -83,6 +83,7 @@ def test_a_link_to_a_file_names_both(tmp_path):
     assert f'{link} (a link to {target}) is a regular file' in refused(str(link))
 
 
+@pytest.mark.slow
 def test_a_pseudo_terminal_passes(pty_path):
     check_port_path(pty_path)
     SerialPort(pty_path).close()
@@ -139,6 +140,7 @@ def failing(code, text):
     return factory
 
 
+@pytest.mark.slow
 def test_permission_denied_names_the_group_that_owns_the_device(pty_path):
     group = 'dialout' if os.geteuid() == 0 and _has_group('dialout') else None
     if group is not None:
@@ -152,6 +154,7 @@ def test_permission_denied_names_the_group_that_owns_the_device(pty_path):
     assert f'the {owner} group' in text
 
 
+@pytest.mark.slow
 def test_permission_denied_on_an_owner_only_device_says_so(pty_path):
     os.chmod(pty_path, 0o600)
     with pytest.raises(PortPermissionDenied) as info:

@@ -62,6 +62,7 @@ def test_a_missing_path_is_reported_as_missing(tmp_path):
         SerialPort(str(tmp_path / 'ttyUSB9'))
 
 
+@pytest.mark.slow
 def test_exclusive_open_refuses_a_second_user():
     master, slave = os.openpty()
     tty.setraw(slave)
@@ -76,6 +77,7 @@ def test_exclusive_open_refuses_a_second_user():
         os.close(master)
 
 
+@pytest.mark.slow
 def test_reads_after_the_other_end_closed_raise_disconnected():
     master, slave = os.openpty()
     tty.setraw(slave)

@@ -99,6 +99,7 @@ def test_the_policy_applies_to_the_calling_thread_only():
     assert os.sched_getscheduler(0) == os.SCHED_OTHER
 
 
+@pytest.mark.slow
 def test_refused_realtime_priority_logs_one_line_and_streaming_goes_on():
     command = [*_refusing_command(), sys.executable, '-m', 'i3dmgx2_driver.ros.main']
     with PtySimulator(SimulatorConfig(seed=41)) as sim:
@@ -123,6 +124,7 @@ def test_refused_realtime_priority_logs_one_line_and_streaming_goes_on():
                 '(ulimit -r, /etc/security/limits.conf)')
 
 
+@pytest.mark.slow
 def test_granted_realtime_priority_applies_to_the_reader_thread_only():
     if not _fifo_allowed():
         pytest.skip('this system refuses SCHED_FIFO to this process')
@@ -148,6 +150,7 @@ def test_granted_realtime_priority_applies_to_the_reader_thread_only():
             assert node.stop()[0] == 0
 
 
+@pytest.mark.slow
 def test_the_start_up_heap_is_frozen():
     # In a process of its own: freezing would change this test process for good.
     code = ('import gc\n'
@@ -161,6 +164,7 @@ def test_the_start_up_heap_is_frozen():
     assert tracked < frozen / 10  # what a collection still walks
 
 
+@pytest.mark.slow
 def test_the_node_freezes_its_start_up_heap():
     with PtySimulator(SimulatorConfig(seed=43)) as sim, \
             NodeProcess({'port': sim.port, 'address': 95}) as node:

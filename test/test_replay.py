@@ -104,6 +104,7 @@ def test_schedule_paces_from_the_first_chunk_and_caps_gaps():
     assert schedule([]) == []
 
 
+@pytest.mark.slow
 def test_unread_bytes_sees_what_was_just_written():
     """
     The replay waits for its reader by this count before it closes the pty.
@@ -128,6 +129,7 @@ def test_unread_bytes_sees_what_was_just_written():
         os.close(slave)
 
 
+@pytest.mark.slow
 def test_replay_delivers_exactly_the_packets_in_order():
     chunks = _chunks()
     with Replayer(chunks, speed=0, wait_for_host=True) as replayer:
@@ -149,6 +151,7 @@ def test_replay_delivers_exactly_the_packets_in_order():
     assert not os.path.lexists(link), 'the link is removed at stop'
 
 
+@pytest.mark.slow
 def test_speed_paces_the_playback_loosely():
     chunks = _chunks(count=12, step=0.1)  # 1.2 s as recorded
     with Replayer(chunks, speed=2.0, wait_for_host=True) as replayer, \
@@ -170,6 +173,7 @@ def test_speed_paces_the_playback_loosely():
     assert arrivals[-1] - start < elapsed
 
 
+@pytest.mark.slow
 def test_command_packets_get_an_ack_even_in_a_pause_and_malformed_ones_a_nack():
     chunks = [(0.0, encode_data_packet(ADDRESS, _record(0), 1, 2)),
               (30.0, encode_data_packet(ADDRESS, _record(1), 1, 2))]
@@ -194,6 +198,7 @@ def test_command_packets_get_an_ack_even_in_a_pause_and_malformed_ones_a_nack():
         assert not replayer.finished
 
 
+@pytest.mark.slow
 def test_loop_plays_the_capture_again():
     chunks = _chunks(count=5)
     with Replayer(chunks, speed=0, loop=True, wait_for_host=True) as replayer:
@@ -207,6 +212,7 @@ def test_loop_plays_the_capture_again():
     assert parser.stats.bytes_skipped == 0
 
 
+@pytest.mark.slow
 def test_link_option_names_the_port_and_is_removed(tmp_path):
     link = tmp_path / 'ttyGX2'
     with Replayer(_chunks(count=2), speed=0, link=str(link)) as replayer:
@@ -239,6 +245,7 @@ def _start_cli(*args):
     return proc, line[len('port: '):].strip()
 
 
+@pytest.mark.slow
 def test_cli_prints_the_port_serves_the_capture_and_exits_0(tmp_path):
     capture = _write_capture(tmp_path / 'small.gx2cap', _chunks())
     proc, port = _start_cli(str(capture), '--speed', '0', '--wait-for-host', '--linger', '5')
@@ -256,12 +263,14 @@ def test_cli_prints_the_port_serves_the_capture_and_exits_0(tmp_path):
     assert not os.path.lexists(port), 'the temporary link is removed on exit'
 
 
+@pytest.mark.slow
 def test_cli_exits_0_at_the_end_with_nobody_reading(tmp_path):
     capture = _write_capture(tmp_path / 'small.gx2cap', _chunks(count=3))
     proc, _ = _start_cli(str(capture), '--speed', '0', '--linger', '0.2')
     assert proc.wait(timeout=10) == 0
 
 
+@pytest.mark.slow
 def test_cli_exits_0_on_sigterm_while_looping(tmp_path):
     capture = _write_capture(tmp_path / 'small.gx2cap', _chunks(count=3))
     proc, port = _start_cli(str(capture), '--speed', '1', '--loop')
@@ -272,6 +281,7 @@ def test_cli_exits_0_on_sigterm_while_looping(tmp_path):
     assert not os.path.lexists(port)
 
 
+@pytest.mark.slow
 def test_cli_reports_a_missing_capture():
     result = subprocess.run(
         [sys.executable, '-m', 'i3dmgx2_driver.tools.replay', '/nonexistent.gx2cap'],

@@ -25,7 +25,10 @@ even when nothing wakes the executor. Real rclpy, in a process of its own.
 import subprocess
 import sys
 
+import pytest
 from ros_harness import isolate_ros_domain, REPO, ros_env
+
+pytestmark = pytest.mark.slow
 
 _SCRIPT = """
 import threading

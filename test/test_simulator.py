@@ -206,6 +206,7 @@ def host(sim):
         yield port
 
 
+@pytest.mark.slow
 def test_port_is_a_stable_symlink_to_a_raw_pty(sim):
     assert os.path.islink(sim.port)
     assert os.path.basename(sim.port) == 'ttyGX2'
@@ -217,6 +218,7 @@ def test_port_is_a_stable_symlink_to_a_raw_pty(sim):
     assert sim.link_target.startswith(f'/proc/{os.getpid()}/fd/')
 
 
+@pytest.mark.slow
 def test_a_killed_simulator_leaves_no_usable_port(tmp_path):
     link = tmp_path / 'port'
     code = ('import os, time; from i3dmgx2_driver.simulator import PtySimulator, '
@@ -235,6 +237,7 @@ def test_a_killed_simulator_leaves_no_usable_port(tmp_path):
         serial.Serial(str(link), 115200)
 
 
+@pytest.mark.slow
 def test_every_good_command_packet_is_acked_and_a_bad_one_nacked(sim, host):
     version = host.request(cmd.encode_command(lay.FIRMWARE_VERSION))
     assert version == rec.FirmwareVersion(2103)
@@ -252,6 +255,7 @@ def test_every_good_command_packet_is_acked_and_a_bad_one_nacked(sim, host):
     assert sim.stats.acks == 1 and sim.stats.nacks == 1
 
 
+@pytest.mark.slow
 def test_binary_bytes_pass_untranslated(sim, host):
     # CR, LF, XON, XOFF and ^C inside a packet: a cooked tty would eat or translate them.
     word = host.request(cmd.write_eeprom(0x0D0A, 0x1311), code=lay.WRITE_EEPROM)
@@ -260,6 +264,7 @@ def test_binary_bytes_pass_untranslated(sim, host):
     assert sim.commands[0][1] == cmd.decode_command(cmd.write_eeprom(0x0D0A, 0x1311))
 
 
+@pytest.mark.slow
 def test_ping_answers_for_our_address_only(sim, host):
     host.parser.expect_ping()
     host.serial.write(cmd.ping(ADDRESS))
@@ -273,6 +278,7 @@ def test_ping_answers_for_our_address_only(sim, host):
     assert sim.commands == [], 'a ping is answered by the base station'
 
 
+@pytest.mark.slow
 def test_identifiers():
     config = SimulatorConfig(address=42, serial_number='4242', seed=1)
     with PtySimulator(config) as sim, Host(sim, address=42) as host:
@@ -283,6 +289,7 @@ def test_identifiers():
     assert all(len(t.text) == 16 for t in texts)
 
 
+@pytest.mark.slow
 def test_commands_for_another_address_are_acked_but_unanswered(sim, host):
     host.send(cmd.encode_command(lay.FIRMWARE_VERSION), address=ADDRESS + 1)
     assert host.pump_until(lambda: host.count(Ack) == 1)
@@ -291,6 +298,7 @@ def test_commands_for_another_address_are_acked_but_unanswered(sim, host):
     assert sim.host_log[0].outcome == 'other_address'
 
 
+@pytest.mark.slow
 def test_eeprom_rate_divider_read_write(sim, host):
     assert host.request(cmd.read_eeprom(0xFCA2)) == rec.EepromWord(512)
     assert host.request(cmd.read_eeprom(0xFCA6)) == rec.EepromWord(0)
@@ -302,6 +310,7 @@ def test_eeprom_rate_divider_read_write(sim, host):
     assert host.request(cmd.read_eeprom(0x1234)) == rec.EepromWord(0xFFFF)
 
 
+@pytest.mark.slow
 def test_continuous_0xcc_at_100_hz_with_exact_timer_spacing(sim, host):
     start_stream(host)
     started = time.monotonic()
@@ -321,6 +330,7 @@ def test_continuous_0xcc_at_100_hz_with_exact_timer_spacing(sim, host):
     assert all(abs(s - 0.01) < 1e-6 for s in spacing)
 
 
+@pytest.mark.slow
 def test_rate_follows_the_divider_and_the_override(sim, host):
     host.request(cmd.write_eeprom(0xFCA2, 1024))          # 50 Hz
     start_stream(host, lay.ACCEL_ANG_RATE)
@@ -331,6 +341,7 @@ def test_rate_follows_the_divider_and_the_override(sim, host):
     assert diffs and all(abs(d - ticks_per_cycle(1024)) <= 1 for d in diffs)
 
 
+@pytest.mark.slow
 def test_high_rate_override_for_benchmarks():
     with PtySimulator(SimulatorConfig(rate_hz=1000.0, seed=3)) as sim, Host(sim) as host:
         start_stream(host, lay.ACCEL_ANG_RATE)
@@ -345,6 +356,7 @@ def test_high_rate_override_for_benchmarks():
         assert_host_saw_exactly_valid_truth(host, sim)
 
 
+@pytest.mark.slow
 def test_timer_crosses_the_rollover():
     config = SimulatorConfig(timer_start=2**32 - int(0.3 * TPS), rate_hz=200.0, seed=2)
     with PtySimulator(config) as sim, Host(sim) as host:
@@ -359,6 +371,7 @@ def test_timer_crosses_the_rollover():
     assert all(b > a for a, b in pairwise(ticks))
 
 
+@pytest.mark.slow
 def test_default_timer_starts_five_seconds_before_the_rollover(sim, host):
     record = host.request(cmd.encode_command(lay.ACCEL_ANG_RATE))
     age = time.time() - sim.start_time
@@ -366,6 +379,7 @@ def test_default_timer_starts_five_seconds_before_the_rollover(sim, host):
     assert abs(((record.timer - expected + 2**31) % 2**32) - 2**31) < 2 * TPS
 
 
+@pytest.mark.slow
 def test_stop_with_0xfa_has_no_reply_and_0xc4_0_has_one(sim, host):
     start_stream(host, lay.ACCEL_ANG_RATE)
     host.pump(0.2)
@@ -381,6 +395,7 @@ def test_stop_with_0xfa_has_no_reply_and_0xc4_0_has_one(sim, host):
     assert sim.wait_until(lambda: not sim.streaming, 2.0)
 
 
+@pytest.mark.slow
 def test_power_cycle_restarts_the_timer_and_the_auto_start(sim, host):
     host.request(cmd.write_eeprom(0xFCA6, 0x8000 | lay.ACCEL_ANG_RATE))
     host.pump(0.2)
@@ -396,6 +411,7 @@ def test_power_cycle_restarts_the_timer_and_the_auto_start(sim, host):
     assert host.records(lay.ACCEL_ANG_RATE)[1].timer != before
 
 
+@pytest.mark.slow
 def test_rate_override_at_run_time(sim, host):
     sim.set_rate(400.0)
     start_stream(host, lay.ACCEL_ANG_RATE)
@@ -407,6 +423,7 @@ def test_rate_override_at_run_time(sim, host):
     assert all(abs((b.timer - a.timer) % 2**32 - step) <= 1 for a, b in pairwise(records))
 
 
+@pytest.mark.slow
 def test_polled_commands_interleave_with_the_stream(sim, host):
     start_stream(host, lay.ACCEL_ANG_RATE)
     assert host.request(cmd.read_eeprom(0xFCA2)) == rec.EepromWord(512)
@@ -415,6 +432,7 @@ def test_polled_commands_interleave_with_the_stream(sim, host):
     assert_host_saw_exactly_valid_truth(host, sim)
 
 
+@pytest.mark.slow
 def test_every_data_record_can_be_polled(sim, host):
     codes = sorted(c for c, layout in lay.LAYOUTS.items()
                    if layout.reply and layout.reply[-1].name == 'timer'
@@ -427,6 +445,7 @@ def test_every_data_record_can_be_polled(sim, host):
     assert_host_saw_exactly_valid_truth(host, sim)
 
 
+@pytest.mark.slow
 def test_bias_writes_are_echoed_and_stored(sim, host):
     accel = host.request(cmd.write_accel_bias((0.01, -0.02, 0.03)))
     assert accel.bias == pytest.approx((0.01, -0.02, 0.03), abs=1e-7)
@@ -437,6 +456,7 @@ def test_bias_writes_are_echoed_and_stored(sim, host):
     assert host.request(cmd.transfer_to_non_volatile(7)).quantity == 0xFFFF
 
 
+@pytest.mark.slow
 def test_gyro_bias_capture_arrives_after_the_sampling_time():
     motion = MotionConfig(static=True)
     with PtySimulator(SimulatorConfig(motion=motion, seed=11)) as sim, Host(sim) as host:
@@ -458,6 +478,7 @@ def test_gyro_bias_capture_arrives_after_the_sampling_time():
         assert error > 0.01, 'a capture while moving must be off'
 
 
+@pytest.mark.slow
 def test_built_in_test_and_temperatures(sim, host):
     assert host.request(cmd.built_in_test(0x14)) == rec.BuiltInTest(0x14)
     temps = host.request(cmd.encode_command(lay.TEMPERATURES))
@@ -465,6 +486,7 @@ def test_built_in_test_and_temperatures(sim, host):
     assert all(22.0 < c < 31.0 for c in temps.gyro_celsius)
 
 
+@pytest.mark.slow
 def test_static_sensor_flat_reads_minus_one_g_on_z():
     motion = MotionConfig(static=True, initial_attitude_deg=(0.0, 0.0, 0.0))
     with PtySimulator(SimulatorConfig(motion=motion, seed=5)) as sim, Host(sim) as host:
@@ -475,6 +497,7 @@ def test_static_sensor_flat_reads_minus_one_g_on_z():
     assert record.mag[2] > 0, 'the field dips downwards in the north hemisphere'
 
 
+@pytest.mark.slow
 def test_packets_are_written_in_chunks():
     config = SimulatorConfig(chunks=(3, 3), chunk_gap_s=0.03, seed=4)
     with PtySimulator(config) as sim, Host(sim) as host:
@@ -496,6 +519,7 @@ def test_packets_are_written_in_chunks():
     assert entry.write_time - entry.first_write_time >= 2 * 0.03
 
 
+@pytest.mark.slow
 def test_reopening_the_port_keeps_the_line_settings(sim):
     for _ in range(2):
         with Host(sim) as host:
@@ -512,6 +536,7 @@ def test_fault_config_and_simulator_config_validate():
         SimulatorConfig(chunks=(0, 2))
 
 
+@pytest.mark.slow
 def test_symlink_option_and_cleanup(tmp_path):
     path = tmp_path / 'imu'
     with PtySimulator(SimulatorConfig(symlink=str(path), seed=1)) as sim:

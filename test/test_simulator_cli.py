@@ -58,6 +58,7 @@ def read_line(process: subprocess.Popen, timeout: float = 20.0) -> str:
     return process.stdout.readline().rstrip('\n')
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
 def test_cli_prints_the_port_serves_it_and_exits_cleanly(signum):
     process = launch('--status-interval', '0.2')
@@ -79,6 +80,7 @@ def test_cli_prints_the_port_serves_it_and_exits_cleanly(signum):
             process.wait()
 
 
+@pytest.mark.slow
 def test_cli_duration_and_fixed_symlink(tmp_path):
     link = tmp_path / 'gx2'
     process = launch('--duration', '0.5', '--symlink', str(link), '--quiet',
@@ -94,6 +96,7 @@ def test_cli_duration_and_fixed_symlink(tmp_path):
     assert not os.path.lexists(link)
 
 
+@pytest.mark.slow
 def test_cli_main_in_process(capsys):
     assert cli.main(['--duration', '0.3', '--static', '--nan-mag', '--rate', '500',
                      '--garbage', '0.1', '--jitter-ms', '2']) == 0
@@ -156,6 +159,7 @@ def test_cli_refuses_bad_presets_with_a_clear_message(argv, message, capsys):
     assert message in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_cli_wired_sensor_streams_its_preset_record(tmp_path):
     link = tmp_path / 'gx2'
     process = launch('--wired', '--stream', '0xC2', '--divider', '256', '--symlink', str(link),

@@ -37,6 +37,8 @@ from test_simulator import (
     ADDRESS, assert_host_saw_exactly_valid_truth, Host, start_stream, stop_stream,
 )
 
+pytestmark = pytest.mark.slow
+
 CC = lay.ACCEL_ANG_RATE_MAG_ORIENTATION
 
 

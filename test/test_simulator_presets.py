@@ -35,6 +35,7 @@ from test_simulator import code_of, Host, start_stream, stop_stream, ticks_per_c
 CC = lay.ACCEL_ANG_RATE_MAG_ORIENTATION
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('wireless', [True, False], ids=['wireless', 'wired'])
 def test_divider_preset_is_read_back_and_sets_the_rate(wireless):
     config = SimulatorConfig(divider=1024, wireless=wireless, seed=41)
@@ -53,6 +54,7 @@ def test_divider_preset_is_read_back_and_sets_the_rate(wireless):
         assert sim.eeprom_writes() == [], 'a preset is not a write by the host'
 
 
+@pytest.mark.slow
 def test_eeprom_preset_and_its_precedence():
     config = SimulatorConfig(eeprom={0x1234: 0xBEEF, 0xFCA2: 256}, seed=42)
     with PtySimulator(config) as sim, Host(sim) as host:
@@ -68,6 +70,7 @@ def test_eeprom_preset_and_its_precedence():
     assert SimulatorConfig().power_up_eeprom == {}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('code', sorted(STREAMABLE), ids=lambda c: f'0x{c:02X}')
 def test_streaming_at_start_works_for_every_streamable_record(code):
     with PtySimulator(SimulatorConfig(streaming_at_start=code, divider=256, seed=43)) as sim:
@@ -83,6 +86,7 @@ def test_streaming_at_start_works_for_every_streamable_record(code):
         assert [c for _, c in sim.stream_changes] == [code, 0]
 
 
+@pytest.mark.slow
 def test_a_divider_beyond_the_line_301_hz_of_0xcc():
     """Divider 170 with 0xCC: 301 packets/s of 88 bytes, where the line carries ~131."""
     config = SimulatorConfig(divider=170, streaming_at_start=CC, limit_to_line_rate=True,
@@ -116,6 +120,7 @@ def test_presets_are_validated_with_clear_messages():
     assert SimulatorConfig(faults=FaultConfig(already_streaming=True)).start_stream == CC
 
 
+@pytest.mark.slow
 def test_the_record_shows_no_eeprom_write_and_a_restarted_stream():
     with PtySimulator(SimulatorConfig(streaming_at_start=CC, seed=45)) as sim, \
             Host(sim) as host:
@@ -142,6 +147,7 @@ def test_the_record_shows_no_eeprom_write_and_a_restarted_stream():
         assert sim.eeprom[0xFCA2] == 1024
 
 
+@pytest.mark.slow
 def test_a_write_lost_on_the_radio_is_in_the_host_log_only():
     with PtySimulator(SimulatorConfig(seed=46)) as sim, Host(sim) as host:
         sim.set_faults(command_loss_probability=1.0)

@@ -37,6 +37,8 @@ import pytest
 from test_simulator import assert_host_saw_exactly_valid_truth, Host, stop_stream
 from test_simulator_wired import assert_wired_host_saw_exactly_valid_truth, stop_wired_stream
 
+pytestmark = pytest.mark.slow
+
 
 def preset(stream: streams.Stream, divider: int, **config) -> PtySimulator:
     """Return a simulator that streams ``stream`` at ``divider`` from power-up."""

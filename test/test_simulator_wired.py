@@ -89,6 +89,7 @@ def test_the_wired_sensor_reader_knows_every_command_but_the_ping():
 
 # -- the wired framing, byte for byte ------------------------------------------------------
 
+@pytest.mark.slow
 def test_wired_polled_replies_are_byte_exact():
     with wired() as sim, Host(sim) as host:
         assert not host.wireless
@@ -128,6 +129,7 @@ def test_wired_polled_replies_are_byte_exact():
         assert [c.args for _, c in sim.eeprom_writes()] == [(0x0D0A, 0x1311)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('code', sorted(STREAMABLE), ids=lambda c: f'0x{c:02X}')
 def test_wired_stream_of_every_streamable_record(code):
     with wired(divider=256, streaming_at_start=code) as sim, Host(sim) as host:
@@ -143,6 +145,7 @@ def test_wired_stream_of_every_streamable_record(code):
         assert sim.eeprom[0xFCA6] == code, 'wired auto-start word: MSB 0x00'
 
 
+@pytest.mark.slow
 def test_wired_stream_on_request_and_the_record_of_it():
     with wired() as sim, Host(sim) as host:
         reply = host.request(cmd.set_continuous(lay.ACCEL_ANG_RATE), code=lay.SET_CONTINUOUS)
@@ -161,6 +164,7 @@ def test_wired_stream_on_request_and_the_record_of_it():
         assert times == [t for t, _ in sim.commands]
 
 
+@pytest.mark.slow
 def test_wired_sensor_sends_no_ack_and_answers_no_ping():
     with wired() as sim, Host(sim) as host:
         host.serial.write(cmd.ping(ADDRESS))
@@ -172,6 +176,7 @@ def test_wired_sensor_sends_no_ack_and_answers_no_ping():
         assert sim.wait_until(lambda: sim.stats.host_bytes_ignored == 3, 2.0)
 
 
+@pytest.mark.slow
 def test_packets_to_a_wired_sensor_get_wired_answers_to_the_commands_inside():
     """A driver set to wireless:=true on a wired sensor: no ACK, wired replies only."""
     with wired() as sim, Host(sim, wireless=True) as host:
@@ -203,6 +208,7 @@ def test_packets_to_a_wired_sensor_get_wired_answers_to_the_commands_inside():
         assert [c.code for _, c in sim.commands] == [0xC2, 0xC4, 0xE9, 0xFA]
 
 
+@pytest.mark.slow
 def test_raw_commands_to_the_wireless_base_station_are_ignored():
     """A driver set to wireless:=false on a base station: no answers at all."""
     with PtySimulator(SimulatorConfig(seed=32)) as sim, Host(sim, wireless=False) as host:
@@ -216,6 +222,7 @@ def test_raw_commands_to_the_wireless_base_station_are_ignored():
         assert sim.stats.acks == sim.stats.nacks == 0
 
 
+@pytest.mark.slow
 def test_a_raw_host_hears_a_base_station_that_already_streams_but_cannot_stop_it():
     config = SimulatorConfig(seed=33, streaming_at_start=lay.ACCEL_ANG_RATE)
     with PtySimulator(config) as sim, Host(sim, wireless=False) as host:
@@ -232,6 +239,7 @@ def test_a_raw_host_hears_a_base_station_that_already_streams_but_cannot_stop_it
 
 # -- faults that make sense on a wire --------------------------------------------------------
 
+@pytest.mark.slow
 def test_wired_refuses_the_radio_faults():
     for name in ('nack_probability', 'foreign_probability', 'corrupt_length_probability',
                  'command_loss_probability'):
@@ -243,6 +251,7 @@ def test_wired_refuses_the_radio_faults():
         assert sim.faults.nack_probability == 0.0
 
 
+@pytest.mark.slow
 def test_wired_drop_garbage_and_corrupt_checksum():
     faults = FaultConfig(drop_probability=0.15, garbage_probability=0.3,
                          corrupt_checksum_probability=0.15, garbage_max_bytes=10)
@@ -264,6 +273,7 @@ def test_wired_drop_garbage_and_corrupt_checksum():
         assert_wired_host_saw_exactly_valid_truth(host, sim)
 
 
+@pytest.mark.slow
 def test_safe_wired_garbage_is_skipped_byte_for_byte():
     faults = FaultConfig(garbage_probability=0.5, garbage_max_bytes=12)
     with wired(faults=faults, divider=256) as sim, Host(sim) as host:
@@ -277,6 +287,7 @@ def test_safe_wired_garbage_is_skipped_byte_for_byte():
         assert_wired_host_saw_exactly_valid_truth(host, sim)
 
 
+@pytest.mark.slow
 def test_wired_stall_silences_the_sensor_both_ways():
     with wired(streaming_at_start=lay.ACCEL_ANG_RATE) as sim, Host(sim) as host:
         assert host.pump_until(lambda: len(host.packets) >= 3)
@@ -293,6 +304,7 @@ def test_wired_stall_silences_the_sensor_both_ways():
         assert host.records(lay.FIRMWARE_VERSION) == []
 
 
+@pytest.mark.slow
 def test_unplugging_a_wired_sensor_powers_it_off_and_back_up():
     config = {'streaming_at_start': lay.ACCEL_ANG_RATE, 'timer_start': 1000}
     with wired(**config) as sim:
@@ -321,6 +333,7 @@ def test_unplugging_a_wired_sensor_powers_it_off_and_back_up():
         assert len([t for t in sim.truth if t.fault == 'unplugged']) <= 1
 
 
+@pytest.mark.slow
 def test_wired_already_streaming_line_rate_and_wire_time():
     faults = FaultConfig(already_streaming=True)
     with wired(faults=faults, divider=170, limit_to_line_rate=True) as sim, Host(sim) as host:
@@ -340,6 +353,7 @@ def test_wired_already_streaming_line_rate_and_wire_time():
 
 # -- side by side ----------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_two_simulators_side_by_side_one_wired():
     radio = PtySimulator(SimulatorConfig(address=95, seed=34,
                                          streaming_at_start=lay.ACCEL_ANG_RATE))

@@ -80,6 +80,7 @@ def test_the_supervisor_thread_gives_up_on_a_directory_once(tmp_path):
     sup.stop()
 
 
+@pytest.mark.slow
 def test_configure_of_a_silent_address_says_what_is_heard_instead():
     with PtySimulator(SimulatorConfig(seed=158, streaming_at_start=True)) as sim:
         sup, log = supervisor(sim.port, address=12)
@@ -95,6 +96,7 @@ def test_configure_of_a_silent_address_says_what_is_heard_instead():
     assert not [m for level, m in log.lines if 'streaming' in m]
 
 
+@pytest.mark.slow
 def test_a_long_operation_with_the_stream_paused_is_no_silence():
     # Wired: the stop (0xFA) gets no reply, so for the operation's 4 s not one byte
     # comes; the driver asked for that quiet, and the observer must not call it silence.

@@ -66,6 +66,7 @@ def supervisor(port: str, records: Records, **config) -> DeviceSupervisor:
                                          **config), on_record=records)
 
 
+@pytest.mark.slow
 def test_phases_open_stream_quiet_and_close():
     with PtySimulator(SimulatorConfig(seed=71, faults=FaultConfig(already_streaming=True))) as sim:
         records = Records()
@@ -112,6 +113,7 @@ def test_connect_fails_on_a_missing_port(tmp_path):
     assert sup.link is None
 
 
+@pytest.mark.slow
 def test_connect_fails_on_a_busy_port_then_succeeds():
     with PtySimulator(SimulatorConfig(seed=72)) as sim:
         sup = supervisor(sim.port, Records())
@@ -126,6 +128,7 @@ def test_connect_fails_on_a_busy_port_then_succeeds():
         sup.stop()
 
 
+@pytest.mark.slow
 def test_connect_fails_on_a_silent_sensor_and_frees_the_port():
     with PtySimulator(SimulatorConfig(seed=73, address=96)) as sim:
         sup = supervisor(sim.port, Records())
@@ -138,6 +141,7 @@ def test_connect_fails_on_a_silent_sensor_and_frees_the_port():
         assert 0xC2 in sent and 0xEA not in sent and 0xE9 not in sent, sent
 
 
+@pytest.mark.slow
 def test_start_streaming_reopens_a_port_lost_while_inactive():
     with PtySimulator(SimulatorConfig(seed=74)) as sim:
         records = Records()
@@ -151,6 +155,7 @@ def test_start_streaming_reopens_a_port_lost_while_inactive():
         sup.stop()
 
 
+@pytest.mark.slow
 def test_stop_streaming_cuts_a_pending_request_short():
     # A request to a sensor that does not answer waits out its retries (1.5 s);
     # stopping the stream makes it give up at once, the port still open.
@@ -177,6 +182,7 @@ def test_stop_streaming_cuts_a_pending_request_short():
         sup.stop()
 
 
+@pytest.mark.slow
 def test_stop_while_the_stream_starts_leaves_the_port_closed():
     # A signal during activate: stop() comes while start_streaming() waits for records.
     with PtySimulator(SimulatorConfig(seed=76)) as sim:
