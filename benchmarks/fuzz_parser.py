@@ -102,7 +102,7 @@ def _sum16(data: bytes) -> int:
 
 
 def wireless_frame(address: int, record: bytes, lqi: int, rssi: int) -> bytes:
-    """Wrap record bytes in a data packet (any 16-bit address), as protocol.md says."""
+    """Wrap record bytes in a data packet (any 16-bit address), as docs/protocol.md §3 says."""
     body = bytes((0xAA, 0x07, 0x00, address >> 8, address & 0xFF, len(record) + 1, 0x00))
     body += record
     return body + bytes((lqi, rssi)) + _sum16(body[1:]).to_bytes(2, 'big')

@@ -22,7 +22,7 @@ wireless data packets, without the envelope; we wrap them ourselves. Its
 survives the framing and the parser; at rest the accelerometer reads 1 g along
 the named axis; M is a rotation; the published ENU attitude carries the
 measured "up" to +Z; NaN magnetometer readings stay NaN; the timer rollover is
-unwrapped; the Euler angles follow protocol.md's formulas.
+unwrapped; the Euler angles follow docs/protocol.md §9's formulas.
 
 The fixture is looked up in ``test/fixtures/``, then in ``../shared/fixtures``
 next to the repository, or in the directory named by ``I3DMGX2_FIXTURES``.
@@ -274,7 +274,11 @@ def test_timer_rollover_is_unwrapped():
 
 
 def test_euler_angles_follow_protocol_formulas():
-    """euler_from_matrix is protocol.md's ZYX set: asin(-M13), atan2(M23, M33), atan2(M12, M11)."""
+    """
+    Check euler_from_matrix against docs/protocol.md §9's ZYX set.
+
+    pitch asin(-M13), roll atan2(M23, M33), yaw atan2(M12, M11).
+    """
     for record in RECORDS:
         m = record.matrix
         roll, pitch, yaw = euler_from_matrix(m)

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Golden byte vectors, written out by hand from protocol.md.
+Golden byte vectors, written out by hand from docs/protocol.md §2-§6.
 
 Every hex literal here was built from the protocol tables by hand, with its
 checksum added up in a comment; none was produced by the code under test. A
@@ -36,7 +36,7 @@ import pytest
 
 
 def h(text):
-    """Bytes from hex text with spaces (the way protocol.md writes packets)."""
+    """Bytes from hex text with spaces (the way docs/protocol.md §3 writes packets)."""
     return bytes.fromhex(text)
 
 
@@ -201,7 +201,7 @@ def test_stop_has_no_reply():
 
 
 def test_cc_sizes_match_protocol():
-    """protocol.md's worked size: 77-byte record, length byte 78, 88-byte data packet."""
+    """docs/protocol.md §3's worked size: 77-byte record, length byte 78, 88-byte data packet."""
     assert layout_of(0xCC).record_size == 77
     assert layout_of(0xCC).wired_size == 79
     assert len(FIXTURE_RECORD) == 77
@@ -253,7 +253,7 @@ def test_fixture_data_packet_through_parsers():
 
 
 def test_lqi_rssi_are_outside_the_checksum():
-    """protocol.md: the data packet checksum skips LQI and RSSI, but covers the record."""
+    """docs/protocol.md §3: the data packet checksum skips LQI and RSSI, but covers the record."""
     relinked = FIXTURE_DATA_PACKET[:-4] + h('00 FF') + FIXTURE_DATA_PACKET[-2:]
     packet = decode_data_packet(relinked)
     assert (packet.lqi, packet.rssi) == (0, 255)

@@ -15,7 +15,7 @@
 """
 Orientation: Shepperd's method against scipy, and the two frame conventions.
 
-Conventions (protocol.md and orientation.py): the device's M maps earth NED
+Conventions (docs/protocol.md §9 and orientation.py): the device's M maps earth NED
 coordinates into sensor FRD coordinates (v_sensor = M v_earth), so M's rows are
 the sensor's axes written in earth coordinates and M^T is the attitude. ROS
 wants ENU and FLU: R_enu = P M^T D. The expected values of the known poses below
@@ -306,7 +306,7 @@ def test_flat_at_rest_accel_points_up_at_any_heading(heading):
 # ---------------------------------------------------------------- Euler angles
 
 def test_euler_angles_match_scipy_zyx():
-    """protocol.md's ZYX angles of M equal scipy's intrinsic Z-Y-X angles of M^T."""
+    """docs/protocol.md §9's ZYX angles of M equal scipy's intrinsic Z-Y-X angles of M^T."""
     for matrix in RANDOM_ROTATIONS.as_matrix()[:1000]:
         roll, pitch, yaw = o.euler_from_matrix(m9(matrix.T))
         reference_yaw, reference_pitch, reference_roll = Rotation.from_matrix(

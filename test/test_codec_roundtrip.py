@@ -44,7 +44,7 @@ F32_MAX = struct.unpack('>f', bytes.fromhex('7F7FFFFF'))[0]
 F32_TINY = struct.unpack('>f', bytes.fromhex('00000001'))[0]  # smallest subnormal
 ADDRESSES = (1, 95, 0x00FF, 0x0100, 65534)
 
-#: Wired reply sizes copied again from protocol.md's command table (0: no reply).
+#: Wired reply sizes copied again from docs/protocol.md §6's command table (0: no reply).
 PROTOCOL_WIRED_SIZES = {
     0xC1: 31, 0xC2: 31, 0xC3: 31, 0xC4: 8, 0xC5: 43, 0xC6: 43, 0xC7: 19, 0xC8: 67,
     0xC9: 19, 0xCA: 19, 0xCB: 43, 0xCC: 79, 0xCD: 19, 0xCE: 19, 0xCF: 31, 0xD0: 9,
@@ -99,7 +99,7 @@ def test_same_helper_can_fail():
 
 
 def test_table_matches_protocol_sizes():
-    """Every command of protocol.md is in the table with its wired reply size."""
+    """Every command of docs/protocol.md §6 is in the table with its wired reply size."""
     assert set(LAYOUTS) == set(PROTOCOL_WIRED_SIZES) | {0x02}
     for code, size in PROTOCOL_WIRED_SIZES.items():
         assert LAYOUTS[code].wired_size == size, hex(code)

@@ -310,7 +310,7 @@ def test_wireless_garbage_and_bit_flips(items, cuts):
     Garbage and single bit flips never raise and never produce a record not sent.
 
     Exactly the intact packets come out, in order, plus those whose flip hit the LQI or
-    RSSI byte: protocol.md leaves those two out of the checksum, so such a packet is
+    RSSI byte: docs/protocol.md §3 leaves those two out of the checksum, so such a packet is
     accepted with the flipped link byte and its record intact. Every other single flip
     is caught (header, length, or the 16-bit sum, which any one-bit change alters).
     """
@@ -597,7 +597,7 @@ def test_command_parser_bad_checksum_is_rejected_once_and_the_retry_kept():
                                        CommandPacket(ADDRESS, commands.read_eeprom(0xFCA2))]
     assert parser.stats.checksum_failures == 1
     assert parser.stats.bytes_skipped == len(bad)
-    # The stop, sent three times as protocol.md advises, the first one damaged.
+    # The stop, sent three times as docs/protocol.md §4 advises, the first one damaged.
     stop = encode_command_packet(ADDRESS, commands.stop_continuous())
     parser = CommandStreamParser()
     assert parser.feed(stop[:-1] + b'\x00' + stop + stop) == [

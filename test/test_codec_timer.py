@@ -15,7 +15,7 @@
 """
 The device timer: ticks to seconds, rollover unwrapping and reset detection.
 
-protocol.md: a uint32 counting 19,660,800 ticks per second from power-up, so it
+docs/protocol.md §8: a uint32 counting 19,660,800 ticks per second from power-up, so it
 wraps every 2^32 ticks, about 218.45 s. The unwrapper takes a forward step of
 less than half the range as time passing (across a wrap or not), and anything
 else as a device reset that starts a new epoch.

@@ -15,7 +15,7 @@
 """
 The line budget and the stream table, by arithmetic alone (no ROS, no port).
 
-Sizes are checked against protocol.md's table (wired replies; a wireless
+Sizes are checked against docs/protocol.md §6's table (wired replies; a wireless
 packet is the wired reply less its 2-byte checksum, plus the 7-byte header
 and the 4-byte trailer), and every limit is checked to be the highest
 divider rate that fits: the next divider up does not.
@@ -26,7 +26,7 @@ import math
 from i3dmgx2_driver.codec import data_rate, line_budget, streams
 import pytest
 
-# protocol.md: wired reply bytes of each streamed record.
+# docs/protocol.md §6: wired reply bytes of each streamed record.
 WIRED = {0xCC: 79, 0xC8: 67, 0xCB: 43, 0xC2: 31, 0xCF: 31, 0xD2: 43}
 
 

@@ -97,7 +97,7 @@ def test_replies_interleave_without_costing_a_record_of_a_stream_that_fits():
     Each 20-byte identifier reply takes 1.74 ms of line, sent when its command
     arrives, where the stream leaves 0.65 ms a cycle free: a reply overlaps
     the next cycle whenever that begins less than 1.74 ms after it. A stream
-    record is skipped only for the stream's own previous record (protocol.md:
+    record is skipped only for the stream's own previous record (docs/protocol.md §5:
     replies are interleaved with the stream), so none of the 40 costs a
     record; an accounting that let replies take the line from the stream
     skipped a record for each of the 40 when tried.

@@ -19,7 +19,7 @@ A wired 3DM-GX2 takes raw command bytes and answers ``echo | data | checksum``; 
 sends no ACK, answers no ping, and ignores (counts) every byte that is not part of a
 command it knows. The wireless base station takes only packets and pings. Each test
 reads the port with pyserial and the codec, and checks the bytes against the ground
-truth and against values worked out by hand from protocol.md.
+truth and against values worked out by hand from docs/protocol.md §2.
 """
 
 from itertools import pairwise
@@ -93,7 +93,7 @@ def test_the_wired_sensor_reader_knows_every_command_but_the_ping():
 def test_wired_polled_replies_are_byte_exact():
     with wired() as sim, Host(sim) as host:
         assert not host.wireless
-        # Worked out by hand from protocol.md: echo, data, then the sum of all of them.
+        # Worked out by hand from docs/protocol.md §2: echo, data, then the sum of all of them.
         host.send(cmd.encode_command(lay.FIRMWARE_VERSION))
         assert host.pump_until(lambda: len(host.raw) >= 7)
         assert bytes(host.raw) == bytes.fromhex('E9 00000837 0128')   # 2103, 0xE9+0x08+0x37

@@ -16,7 +16,7 @@
 Framing: wired records and the wireless (ASPP) command and data packets.
 
 A framing only wraps bytes; what the bytes mean is the job of the command
-table. The sums follow protocol.md to the byte: a wired record sums itself,
+table. The sums follow docs/protocol.md §2-§3 to the byte: a wired record sums itself,
 a command packet sums all but its start byte, a data packet all but its
 start byte, LQI and RSSI.
 """
@@ -44,7 +44,7 @@ DATA_TRAILER_SIZE = 4
 #: Lowest and highest node address a sensor can have.
 MIN_ADDRESS = 1
 MAX_ADDRESS = 65534
-#: Longest command the base station accepts (protocol.md: 1..100 bytes).
+#: Longest command the base station accepts (docs/protocol.md §3: 1..100 bytes).
 MAX_COMMAND_SIZE = 100
 
 

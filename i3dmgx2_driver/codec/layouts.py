@@ -18,7 +18,7 @@ The command table: for each command byte, the request and reply layouts.
 Everything else in the codec is driven by this one table, in both
 directions: the driver encodes requests and decodes replies with it, the
 simulated sensor decodes requests and encodes replies with it, so the two
-cannot disagree about a single byte. Sizes in protocol.md are checked
+cannot disagree about a single byte. Sizes in docs/protocol.md §6 are checked
 against the table when the module loads.
 """
 
@@ -127,7 +127,7 @@ DEVICE_IDENTIFIER = 0xEA
 STOP_CONTINUOUS = 0xFA
 BUILT_IN_TEST = 0xFB
 
-#: Every command of protocol.md, by command byte.
+#: Every command of docs/protocol.md §6, by command byte.
 LAYOUTS: dict[int, Layout] = {layout.code: layout for layout in (
     # Ping is a base-station exchange: its one-byte answer is neither an
     # echoed record nor checksummed, so it has no record layout here.
@@ -182,13 +182,13 @@ LAYOUTS: dict[int, Layout] = {layout.code: layout for layout in (
             (Field('selector', 'B'), Field('text', '16s')), r.DeviceIdentifier,
             request=(Field('selector', 'B'),)),
     _layout(STOP_CONTINUOUS, 'stop_continuous_mode', None, None),
-    # protocol.md (!): the manual says 8 bytes but lists echo, config and
+    # docs/protocol.md §11: the manual says 8 bytes but lists echo, config and
     # checksum; we follow the listed fields, 4 bytes wired.
     _layout(BUILT_IN_TEST, 'built_in_test', (Field('config', 'B'),), r.BuiltInTest,
             _CONFIRM, (Field('config', 'B'),)),
 )}
 
-#: Wired reply sizes as protocol.md lists them, checked against the table.
+#: Wired reply sizes as docs/protocol.md §6 lists them, checked against the table.
 _PROTOCOL_WIRED_SIZES = {
     0xC1: 31, 0xC2: 31, 0xC3: 31, 0xC4: 8, 0xC5: 43, 0xC6: 43, 0xC7: 19, 0xC8: 67,
     0xC9: 19, 0xCA: 19, 0xCB: 43, 0xCC: 79, 0xCD: 19, 0xCE: 19, 0xCF: 31, 0xD0: 9,
@@ -196,7 +196,7 @@ _PROTOCOL_WIRED_SIZES = {
 }
 for _code, _size in _PROTOCOL_WIRED_SIZES.items():
     if LAYOUTS[_code].wired_size != _size:  # pragma: no cover - a table typo
-        raise AssertionError(f'layout of 0x{_code:02X} disagrees with protocol.md')
+        raise AssertionError(f'layout of 0x{_code:02X} disagrees with docs/protocol.md §6')
 
 #: Commands whose replies are framed records: echo byte -> record size.
 RECORD_SIZES: dict[int, int] = {

@@ -148,7 +148,7 @@ def matrix_from_quaternion(q: Quaternion) -> Matrix3:
 
 
 def euler_from_matrix(m: Sequence[float]) -> Vector3:
-    """Roll, pitch, yaw (rad) from M as protocol.md defines them."""
+    """Roll, pitch, yaw (rad) from M as docs/protocol.md §9 defines them."""
     pitch = math.asin(max(-1.0, min(1.0, -m[2])))
     roll = math.atan2(m[5], m[8])
     yaw = math.atan2(m[1], m[0])

@@ -27,7 +27,7 @@ from typing import NamedTuple
 Vector3 = tuple[float, float, float]
 Matrix3 = tuple[float, float, float, float, float, float, float, float, float]
 
-#: Ticks of the device timer per second (protocol.md, "Timer").
+#: Ticks of the device timer per second (docs/protocol.md §8).
 TICKS_PER_SECOND = 19_660_800
 
 
@@ -173,7 +173,7 @@ class Temperatures(NamedTuple):
 
     @property
     def accel_celsius(self) -> float:
-        """Accelerometer temperature, by the formula of protocol.md."""
+        """Accelerometer temperature, by the formula of docs/protocol.md §7."""
         return code_to_celsius(self.accel_code)
 
     @property
@@ -240,5 +240,5 @@ class BuiltInTest(NamedTuple):
 
 
 def code_to_celsius(code: int) -> float:
-    """Convert a temperature A/D code to degrees Celsius (protocol.md)."""
+    """Convert a temperature A/D code to degrees Celsius (docs/protocol.md §7)."""
     return (code * 3.3 / 4096.0 - 0.5) * 100.0

@@ -266,6 +266,6 @@ class MessageFactory:
 
 
 def mag_is_valid(mag_gauss: Sequence[float]) -> bool:
-    """Tell whether a field is a reading: NaN means "no new reading" (protocol.md)."""
+    """Tell whether a field is a reading: NaN means "no new reading" (docs/protocol.md §7)."""
     return not (math.isnan(mag_gauss[0]) or math.isnan(mag_gauss[1])
                 or math.isnan(mag_gauss[2]))

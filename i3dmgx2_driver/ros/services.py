@@ -63,7 +63,7 @@ MAX_ACCEL_CHANGE = 0.02
 GRAVITY_TOLERANCE = 0.05
 #: How long the self test measures the data rate after the stream resumes (s).
 RATE_WINDOW = 1.0
-#: Built-in test configuration bits (protocol.md, 0xFB), one step each.
+#: Built-in test configuration bits (docs/protocol.md §6, 0xFB), one step each.
 BIT_STEPS = (
     (0x04, 'magnetometer BIT', layouts.MAGNETOMETER),
     (0x08, 'reverse magnetometer BIT', layouts.MAGNETOMETER),

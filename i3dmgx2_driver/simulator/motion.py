@@ -23,7 +23,7 @@ are analytic, the body angular rate follows exactly from their derivatives
 reaction and the magnetic field are exactly consistent with it: a test can
 integrate the rates or differentiate M and must find the other.
 
-Frames follow protocol.md: earth north-east-down, sensor x forward, y right,
+Frames follow docs/protocol.md §9: earth north-east-down, sensor x forward, y right,
 z down, and ``v_sensor = M * v_earth``. Accelerations are in g (a sensor
 lying flat reads about -1 g on z), rates in rad/s, fields in Gauss. Noise is
 Gaussian and drawn from a caller-supplied ``random.Random`` so that a seed

@@ -95,7 +95,7 @@ class PtySimulator:
     the commands that happen to sit whole inside its packets (a packet for
     0xC2 holds the byte 0xC2: the sensor answers it, wired; a header byte that
     happens to be a command byte may swallow the start of the next packet):
-    exactly what a byte-reading device would do. (protocol.md says wired
+    exactly what a byte-reading device would do. (docs/protocol.md §3 says wired
     sensors accept packets too; this model is the stricter firmware, so that a
     driver set up for the wrong framing shows it at once.) The other way round,
     the wireless base station takes only packets and pings: raw commands are

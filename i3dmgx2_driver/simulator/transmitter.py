@@ -164,7 +164,7 @@ class Transmitter:
                 # when this one is ready: the device skips it. Judged on the
                 # device's own schedule (send times), never on when this thread
                 # happened to run. Only the stream's own records count: a reply
-                # to a command is interleaved with the stream (protocol.md,
+                # to a command is interleaved with the stream (docs/protocol.md §4,
                 # combined mode) and never costs a record of a stream that fits,
                 # such as the first cycle after the 0xC4 that started it.
                 fault = flt.FAULT_LINE_RATE

@@ -24,7 +24,7 @@ answers no ping. Its records go out wired: echo, data, uint16 checksum.
 So a host that sends packets to a wired sensor gets no ACK, and wired
 answers to the commands that happen to sit whole inside its packets (a
 packet for 0xC2 holds the byte 0xC2; a header or checksum byte that happens
-to be a command byte is taken for one too). protocol.md says wired sensors
+to be a command byte is taken for one too). docs/protocol.md §3 says wired sensors
 accept packets as well; this model is the stricter firmware, so that a driver
 set up for the wrong framing shows it at once.
 """

@@ -111,7 +111,7 @@ def euler_deg(q: Sequence[float]) -> tuple[float, float, float]:
     Roll, pitch, yaw (deg) of a quaternion (x, y, z, w), aircraft ZYX set.
 
     Taken from the attitude matrix (body to world) so that in the device's
-    convention it is exactly protocol.md's set from M (R = M^T). A zero or
+    convention it is exactly docs/protocol.md §9's set from M (R = M^T). A zero or
     NaN quaternion (orientation unknown) gives NaN, not an exception.
     """
     x, y, z, w = q
