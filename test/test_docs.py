@@ -13,14 +13,22 @@
 # limitations under the License.
 
 """
-The documentation of the parameters cannot drift from their declarations.
+The documentation cannot drift from the code, nor point where nothing is.
 
-The README's table is what ``scripts/parameter_table.py`` prints from the
-parameter table, and the shipped params file names every parameter, with
-values that are valid defaults.
+The README's parameter table is what ``scripts/parameter_table.py`` prints
+from the parameter table, and the shipped params file names every
+parameter, with values that are valid defaults. The README opens with the
+two commands a newcomer runs and says how to run the tests. In README.md
+and docs/*.md every relative link leads to a file that exists, every
+``#anchor`` to a heading (GitHub's slugs), every repository path named in
+code (``benchmarks/latency.py``, ``device/link.py``) to a file, and every
+page of docs/ is linked from the README, so that moving a file or renaming
+a heading fails here rather than in a reader's browser.
 """
 
+import glob
 import os
+import re
 import runpy
 
 from i3dmgx2_driver.ros.parameters import _REQUIRED, SPECS
@@ -28,6 +36,20 @@ import pytest
 import yaml
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+README = os.path.join(REPO, 'README.md')
+#: The pages checked: the README and every Markdown file in docs/.
+PAGES = [README, *sorted(glob.glob(os.path.join(REPO, 'docs', '*.md')))]
+
+#: The README's first lines, exactly: the two commands a newcomer runs.
+OPENING = '\n'.join((
+    '# i3dmgx2_driver',
+    '',
+    '```bash',
+    'bash scripts/demo.sh     # set up, then run the driver against the simulated sensor and '
+    'show its data',
+    'bash scripts/test.sh     # set up, then run every test (what CI runs)',
+    '```',
+    ''))
 
 
 def test_readme_parameter_table_is_generated_from_the_code():
@@ -55,3 +77,167 @@ def test_params_file_names_every_parameter(params_file):
         else:
             assert values[spec.name] == spec.default, spec.name
     assert set(values) <= {spec.name for spec in SPECS}
+
+
+# -- links, anchors and paths ------------------------------------------------
+
+_FENCE = re.compile(r'^\s*(```|~~~)')
+_HEADING = re.compile(r'^(#{1,6})\s+(.*?)\s*#*\s*$')
+_HTML_ANCHOR = re.compile(r'<a\s+(?:id|name)="([^"]+)"')
+_CODE_SPAN = re.compile(r'`+[^`]*`+')
+#: An inline link or image, ``[text](target)`` or ``![alt](target "title")``.
+_LINK = re.compile(r'!?\[(?:[^\[\]]|\[[^\]]*\])*\]\(\s*<?([^)\s>]+)>?(?:\s+"[^"]*")?\s*\)')
+#: A path inside the repository, as the pages name files in code and commands.
+_TOP = ('i3dmgx2_driver', 'benchmarks', 'scripts', 'test', 'config', 'launch', 'docs')
+#: Module paths relative to the package, as the pages name them (``device/link.py``).
+_PACKAGE = ('codec', 'device', 'ros', 'simulator', 'tools')
+_REPO_PATH = re.compile(
+    r'(?<![\w./-])((?:' + '|'.join(_TOP + _PACKAGE) + r')/[\w./-]*\w'
+    r'\.(?:py|sh|yaml|md|txt|png|xml|json|bin))\b')
+
+
+def split_page(text: str) -> tuple[list[str], list[str]]:
+    """Return the page's prose lines and the lines inside its fenced code blocks."""
+    prose, code = [], []
+    fence = None
+    for line in text.splitlines():
+        match = _FENCE.match(line)
+        if fence is None and match:
+            fence = match.group(1)
+        elif fence is not None and line.strip().startswith(fence):
+            fence = None
+        elif fence is None:
+            prose.append(line)
+        else:
+            code.append(line)
+    return prose, code
+
+
+def slug(heading: str) -> str:
+    """Return the anchor GitHub gives a heading: lower case, punctuation gone, '-' for ' '."""
+    text = re.sub(r'!?\[([^\]]*)\]\([^)]*\)', r'\1', heading)  # a link: its text
+    text = text.replace('`', '').replace('*', '').strip().lower()
+    return re.sub(r'[^\w\- ]', '', text).replace(' ', '-')
+
+
+def anchors(text: str) -> set[str]:
+    """Return every anchor of a page: its headings' slugs (-1, -2 for repeats), HTML ids."""
+    found: set[str] = set()
+    seen: dict[str, int] = {}
+    prose, _ = split_page(text)
+    for line in prose:
+        match = _HEADING.match(line)
+        if match:
+            base = slug(match.group(2))
+            count = seen.get(base, 0)
+            seen[base] = count + 1
+            found.add(base if count == 0 else f'{base}-{count}')
+        found.update(_HTML_ANCHOR.findall(line))
+    return found
+
+
+def links(text: str) -> list[str]:
+    """Return the targets of the page's links, outside code."""
+    prose, _ = split_page(text)
+    return [target for line in prose for target in _LINK.findall(_CODE_SPAN.sub('', line))]
+
+
+def broken_links(page: str) -> list[str]:
+    """Return 'target: why' for each relative link of ``page`` that leads nowhere."""
+    with open(page) as handle:
+        text = handle.read()
+    problems = []
+    for target in links(text):
+        if re.match(r'[a-z][a-z0-9+.-]*:', target, re.IGNORECASE):
+            continue  # http:, https:, mailto: ... not ours to check here
+        path, _, anchor = target.partition('#')
+        resolved = os.path.normpath(os.path.join(os.path.dirname(page), path)) if path \
+            else page
+        if not os.path.exists(resolved):
+            problems.append(f'{target}: no file {os.path.relpath(resolved, REPO)}')
+            continue
+        if anchor and resolved.endswith('.md'):
+            with open(resolved) as handle:
+                if anchor not in anchors(handle.read()):
+                    problems.append(f'{target}: no heading with the anchor #{anchor} in '
+                                    f'{os.path.relpath(resolved, REPO)}')
+    return problems
+
+
+def missing_paths(text: str, root: str = REPO) -> list[str]:
+    """Return the repository paths the page names (in prose or code) that do not exist."""
+    missing = []
+    for path in sorted(set(_REPO_PATH.findall(text))):
+        candidates = [os.path.join(root, path)]
+        if path.split('/', 1)[0] in _PACKAGE:
+            candidates.append(os.path.join(root, 'i3dmgx2_driver', path))
+        if not any(os.path.exists(candidate) for candidate in candidates):
+            missing.append(path)
+    return missing
+
+
+def _name(page: str) -> str:
+    return os.path.relpath(page, REPO)
+
+
+@pytest.mark.parametrize('page', PAGES, ids=_name)
+def test_relative_links_lead_to_files_and_headings_that_exist(page):
+    problems = broken_links(page)
+    assert not problems, f'{_name(page)}: ' + '; '.join(problems)
+
+
+@pytest.mark.parametrize('page', PAGES, ids=_name)
+def test_repository_paths_named_exist(page):
+    with open(page) as handle:
+        missing = missing_paths(handle.read())
+    assert not missing, f'{_name(page)} names files that do not exist: {missing}'
+
+
+def test_every_page_of_docs_is_linked_from_the_readme():
+    with open(README) as handle:
+        targets = {os.path.normpath(os.path.join(REPO, target.partition('#')[0]))
+                   for target in links(handle.read())}
+    unlinked = [_name(page) for page in PAGES[1:] if page not in targets]
+    assert not unlinked, f'README.md does not link to {unlinked}'
+
+
+def test_readme_opens_with_the_two_commands():
+    with open(README) as handle:
+        assert handle.read().startswith(OPENING)
+
+
+def test_readme_says_how_to_run_the_tests_and_the_quick_loop():
+    with open(README) as handle:
+        text = handle.read()
+    assert 'bash scripts/test.sh' in text
+    assert "-m 'not slow'" in text
+
+
+def test_slugs_are_githubs():
+    # Headings of these pages, and the anchors GitHub renders for them.
+    assert slug('Frames: ENU and NED') == 'frames-enu-and-ned'
+    assert slug('Running the reader thread under `SCHED_FIFO`') == \
+        'running-the-reader-thread-under-sched_fifo'
+    assert slug("Where a sample's time goes") == 'where-a-samples-time-goes'
+    assert slug('Tools: simulator, capture, replay') == 'tools-simulator-capture-replay'
+    assert slug('See [the map](docs/architecture.md) (draft)') == 'see-the-map-draft'
+    text = '# Title\n\n## Same\n\n```bash\n# not a heading\n```\n\n## Same\n'
+    assert anchors(text) == {'title', 'same', 'same-1'}
+
+
+def test_the_checks_find_what_is_broken(tmp_path):
+    (tmp_path / 'other.md').write_text('# Other\n\n## A part\n')
+    page = tmp_path / 'page.md'
+    page.write_text(
+        '# Page\n\n'
+        '[fine](other.md#a-part) [fine too](#page) [web](https://example.com/x#y)\n'
+        '[no file](missing.md) [no heading](other.md#nowhere) [no anchor](#gone)\n'
+        '`[in code](missing-too.md)`\n\n'
+        '```bash\n[in a block](missing-three.md)\n```\n')
+    assert [problem.split(':')[0] for problem in broken_links(str(page))] == \
+        ['missing.md', 'other.md#nowhere', '#gone']
+    (tmp_path / 'scripts').mkdir()
+    (tmp_path / 'scripts' / 'there.sh').write_text('')
+    text = ('`scripts/there.sh`, `scripts/gone.sh`, `device/link.py`, '
+            '/opt/ros/jazzy/setup.bash, `benchmarks/output/`\n')
+    assert missing_paths(text, str(tmp_path)) == ['device/link.py', 'scripts/gone.sh']
