@@ -92,7 +92,7 @@ class StreamRun:
                 and abs(self.rate / self.fits - 1.0) <= RATE_TOLERANCE)
 
     def row(self) -> str:
-        """Return the README's table row."""
+        """Return the table row of docs/benchmarks.md."""
         s = self.stream
         lost = max(self.lost, self.node_lost)
         return (f'| `{s.name}` | 0x{s.code:02X} | {self.packet} | {self.line_max:.1f} | '
@@ -107,7 +107,7 @@ TABLE_HEAD = ('| stream | record | packet bytes | line limit (Hz) | fits with 5 
 
 
 def run(seconds: float) -> tuple[list[Result], str]:
-    """Run every stream; return the result rows and the README's table."""
+    """Run every stream; return the result rows and the table of docs/benchmarks.md."""
     isolate_ros_domain()
     results, rows = [], []
     for stream in streams.STREAMS:

@@ -19,7 +19,7 @@ A sample waits on its way to ``publish()`` for three things besides its own
 work: the kernel scheduling the reader thread (other processes may hold the
 CPU), the interpreter lock (another thread of the node may hold it), and the
 garbage collector (a full collection walks every object the process has).
-The README's latency section measures each of these levers.
+docs/latency.md measures each of these levers.
 
 - :class:`ThreadPolicy` asks for SCHED_FIFO for the reader thread. The
   kernel may refuse (an unprivileged user without an ``rtprio`` limit,
