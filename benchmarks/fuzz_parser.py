@@ -81,7 +81,8 @@ class PropertyViolation(Exception):
 
 def _load_codec():
     """Import the codec (under atheris' instrumentation when it is used)."""
-    from i3dmgx2_driver.codec import commands, framing, orientation, stream, timer
+    from i3dmgx2_driver.codec import commands, framing, orientation, timer
+    from i3dmgx2_driver.codec import parser as stream
     from i3dmgx2_driver.codec.errors import CodecError
     return commands, framing, orientation, stream, timer, CodecError
 

@@ -55,7 +55,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from i3dmgx2_driver.codec.stream import SensorStreamParser  # noqa: E402
+from i3dmgx2_driver.codec.parser import SensorStreamParser  # noqa: E402
 from i3dmgx2_driver.device import port as port_module  # noqa: E402
 from i3dmgx2_driver.device import realtime  # noqa: E402
 from i3dmgx2_driver.device.clock import DeviceClock  # noqa: E402

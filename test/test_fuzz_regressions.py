@@ -34,8 +34,8 @@ from i3dmgx2_driver.codec import (
     RawCommand, RejectedPacket, SensorStreamParser,
 )
 from i3dmgx2_driver.codec.framing import DataPacket
+from i3dmgx2_driver.codec.parser import ACK_EVENT, NACK_EVENT
 from i3dmgx2_driver.codec.records import PingReply
-from i3dmgx2_driver.codec.stream import ACK_EVENT, NACK_EVENT
 import pytest
 
 FUZZ_DIR = Path(__file__).resolve().parent / 'fixtures' / 'fuzz'

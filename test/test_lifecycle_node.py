@@ -47,7 +47,7 @@ from ros_harness import (
 )
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
-from test_node_stream import match, stream_truth
+from test_node_messages import match, stream_truth
 
 EVENTS = '/i3dmgx2_driver/transition_event'
 TOPICS = {'imu/raw_data': Imu, EVENTS: TransitionEvent, '/diagnostics': DiagnosticArray}

@@ -32,7 +32,7 @@ import tty
 from typing import ClassVar
 
 from i3dmgx2_driver.codec.framing import encode_data_packet
-from i3dmgx2_driver.codec.stream import SensorStreamParser
+from i3dmgx2_driver.codec.parser import SensorStreamParser
 from i3dmgx2_driver.device import port as port_module
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.simulator import PtySimulator

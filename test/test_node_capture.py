@@ -27,13 +27,13 @@ import warnings
 from i3dmgx2_driver import __version__
 from i3dmgx2_driver.capture import read_capture, TruncatedCaptureWarning
 from i3dmgx2_driver.codec.framing import DataPacket
+from i3dmgx2_driver.codec.parser import SensorStreamParser
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
-from i3dmgx2_driver.codec.stream import SensorStreamParser
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
-from test_node_stream import match, stream_truth
+from test_node_messages import match, stream_truth
 
 pytestmark = pytest.mark.slow
 

@@ -32,7 +32,7 @@ from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
 from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
-from test_node_stream import match, stream_truth
+from test_node_messages import match, stream_truth
 
 pytestmark = pytest.mark.slow
 

@@ -29,7 +29,7 @@ from i3dmgx2_driver.codec import Ack, DataPacket, SensorStreamParser
 from i3dmgx2_driver.codec import commands as cmd
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec import records as rec
-from i3dmgx2_driver.codec.stream import PingReply
+from i3dmgx2_driver.codec.parser import PingReply
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
 import serial

@@ -33,7 +33,7 @@ from i3dmgx2_driver.codec import (
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec import records as rec
 from i3dmgx2_driver.codec.framing import encode_wired_record
-from i3dmgx2_driver.codec.stream import CommandStreamParser, RawCommand
+from i3dmgx2_driver.codec.parser import CommandStreamParser, RawCommand
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 from i3dmgx2_driver.simulator.sensor import STREAMABLE, WIRED_COMMANDS
 import pytest

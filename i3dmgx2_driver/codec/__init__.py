@@ -17,7 +17,7 @@ The 3DM-GX2 protocol as bytes: no ROS, no serial port, no clock, no numpy.
 
 The layout table (``layouts``) drives the command and record encoders and
 decoders (``commands``); ``framing`` wraps them for the wire, wired or
-wireless; ``stream`` finds frames in a byte stream; ``orientation`` and
+wireless; ``parser`` finds frames in a byte stream; ``orientation`` and
 ``timer`` interpret what the records carry.
 """
 
@@ -33,7 +33,7 @@ from .framing import (
     decode_wired_record, encode_command_packet, encode_data_packet, encode_wired_record,
     MAX_ADDRESS, MIN_ADDRESS, NACK,
 )
-from .stream import (
+from .parser import (
     Ack, CommandStreamParser, Nack, ParserStats, RawCommand, RejectedPacket,
     SensorStreamParser,
 )

@@ -34,8 +34,8 @@ from .port import PortDisconnected, SerialPort
 from .realtime import apply_to_current_thread, NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
 from ..codec import commands, layouts
 from ..codec.framing import DataPacket, encode_command_packet
+from ..codec.parser import Ack, Nack, SensorStreamParser
 from ..codec.records import PingReply
-from ..codec.stream import Ack, Nack, SensorStreamParser
 
 #: Called from the reader thread with each data packet and its read time.
 #: Called with a record, the system-clock time its last byte was read and the same

@@ -37,7 +37,7 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from ..codec.framing import DataPacket
-from ..codec.stream import SensorStreamParser
+from ..codec.parser import SensorStreamParser
 
 #: Observe only after this long without a packet of ours (s).
 QUIET_AFTER = 0.5

@@ -48,7 +48,7 @@ from .port import (
 from ..codec import commands, layouts
 from ..codec.data_rate import RATE_BASE_HZ, RATE_DIVIDER_ADDRESS
 from ..codec.framing import DataPacket, MAX_ADDRESS, MIN_ADDRESS
-from ..codec.stream import SensorStreamParser
+from ..codec.parser import SensorStreamParser
 
 #: The factory addresses: the last two digits of the serial number.
 FACTORY_ADDRESSES = range(1, 100)

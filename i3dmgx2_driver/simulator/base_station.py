@@ -31,7 +31,7 @@ from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec.commands import Command, decode_command
 from i3dmgx2_driver.codec.errors import CodecError
-from i3dmgx2_driver.codec.stream import (
+from i3dmgx2_driver.codec.parser import (
     CommandStreamParser, HostEvent, RawCommand, RejectedPacket,
 )
 

@@ -32,7 +32,7 @@ set up for the wrong framing shows it at once.
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec.commands import Command, decode_command
 from i3dmgx2_driver.codec.errors import CodecError
-from i3dmgx2_driver.codec.stream import CommandStreamParser, HostEvent, RawCommand
+from i3dmgx2_driver.codec.parser import CommandStreamParser, HostEvent, RawCommand
 
 from . import faults as flt
 from .base_station import Deliver

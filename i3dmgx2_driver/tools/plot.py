@@ -64,8 +64,8 @@ from ..codec.framing import DataPacket
 from ..codec.orientation import (
     body_vector, CONVENTIONS, ENU, matrix_from_quaternion, orientation, Quaternion,
 )
+from ..codec.parser import SensorStreamParser
 from ..codec.records import TICKS_PER_SECOND
-from ..codec.stream import SensorStreamParser
 from ..codec.timer import TIMER_MODULUS
 
 #: Standard gravity (m/s^2 per g), the factor of the device's g units (as the node uses).

@@ -56,7 +56,7 @@ from typing import Any
 
 from ..capture import FIXTURE_ADDRESS, fixture_chunks, read_capture
 from ..codec.framing import ACK, CommandPacket, NACK
-from ..codec.stream import CommandStreamParser, RejectedPacket, SensorStreamParser
+from ..codec.parser import CommandStreamParser, RejectedPacket, SensorStreamParser
 
 Chunk = tuple[float, bytes]
 

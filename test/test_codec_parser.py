@@ -33,7 +33,7 @@ from i3dmgx2_driver.codec import (
 )
 from i3dmgx2_driver.codec import commands, records
 from i3dmgx2_driver.codec.layouts import LAYOUTS, RECORD_SIZES
-from i3dmgx2_driver.codec.stream import MAX_FRAME_SIZE
+from i3dmgx2_driver.codec.parser import MAX_FRAME_SIZE
 import pytest
 
 CI = settings(max_examples=200, deadline=None, database=None,
