@@ -622,13 +622,15 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
     """
     Return the (lost, device resets) the node should count over the published records.
 
-    Consecutive published records between two anchors of the node (it starts
-    afresh at each: every connection, and again when a reconnect to a known
-    sensor fell back to the full dialogue) either straddle a power-up of the
-    sensor, a device reset, or do not:
-    then the node counts ``round(step / (384 * divider)) - 1`` lost records
-    when that is positive, ``step`` being the timer step in ticks (its own
-    formula, for the rate the divider gives).
+    Two consecutive published records straddle a power-up of the sensor or
+    do not. If they do, the node counts a device reset, whether or not it
+    reconnected in between: its clock checks the first record of every new
+    link against the fit (device/sample_clock.py). If they do not, and both
+    lie between the same two anchors of the node (it forgets the last record
+    at each: every connection, and again when a reconnect to a known sensor
+    fell back to the full dialogue), it counts ``round(step / (384 *
+    divider)) - 1`` lost records when that is positive, ``step`` being the
+    timer step in ticks (its own formula, for the rate the divider gives).
     """
     expected = 384 * divider
     ups = sorted(power_ups)
@@ -637,16 +639,14 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
     span = None
     for sent in published:
         i = bisect.bisect_right(windows.anchors, sent.write_time) - 1
-        if i != span or last is None:
-            span, last = i, sent
-            continue
-        j = bisect.bisect_right(ups, last.sample_time)
-        if j < len(ups) and ups[j] <= sent.sample_time:
-            resets += 1
-        else:
-            gap = round(((sent.timer - last.timer) % TIMER_MODULUS) / expected) - 1
-            lost += max(gap, 0)
-        last = sent
+        if last is not None:
+            j = bisect.bisect_right(ups, last.sample_time)
+            if j < len(ups) and ups[j] <= sent.sample_time:
+                resets += 1
+            elif i == span:
+                gap = round(((sent.timer - last.timer) % TIMER_MODULUS) / expected) - 1
+                lost += max(gap, 0)
+        span, last = i, sent
     return lost, resets
 
 

@@ -52,7 +52,7 @@ from .clock import DeviceClock
 from ..codec.records import TICKS_PER_SECOND
 from ..codec.timer import TIMER_MODULUS
 
-#: Host time (s) between two records past which the second is checked against the line.
+#: Device time (s) between two records past which the second is checked against the line.
 GAP_S = 0.1
 #: How far (s) a record after a gap may come before the line and still continue it: the
 #: line is the lower envelope of the delays, so only its own error puts a record below it.
@@ -188,7 +188,11 @@ class SampleClock:
         wraps = max(0, round((elapsed * TICKS_PER_SECOND - step) / TIMER_MODULUS))
         ticks = self.ticks + step + wraps * TIMER_MODULUS
         rolled = wraps > 0 or raw < self._last_raw
-        gap = elapsed > GAP_S or abs(step / TICKS_PER_SECOND - elapsed) > GAP_S
+        # A gap in device time (a stall, a pause), or host time lost beyond what a busy
+        # host delays a read by (a restart whose timer happened to continue): a reader
+        # that was merely late sees the next tick count and needs no check.
+        gap = (step / TICKS_PER_SECOND > GAP_S
+               or elapsed - step / TICKS_PER_SECOND > RESET_S)
         if gap or rolled or self._check_next:
             off = self.fit.residual(ticks, read_time, wire_time)
             slack = GAP_DRIFT * max(elapsed, 0.0)
