@@ -193,6 +193,23 @@ def test_power_cycle_whose_timer_lands_on_the_line_is_caught_on_probation():
     assert clock.status().gaps == 1
 
 
+@pytest.mark.parametrize('late', [0.15, 0.45])
+def test_a_busy_host_reading_late_keeps_the_fit(late):
+    """
+    The reader is descheduled for ``late`` s at 10 s, then reads the backlog at once.
+
+    The records' timers follow each other cycle by cycle: nothing happened to
+    the device, so they are stamped from the line (true to the microsecond),
+    not by a fit restarted from a read that came late (CI saw 135 ms off).
+    """
+    stream = [p._replace(read_time=max(p.read_time, 10.0 + late)) if p.true_time < 10.0 + late
+              and p.read_time > 10.0 else p for p in packets([Life(0.0, 20.0, 5_000_000)])]
+    clock, errors = stamp_all(stream)
+    check(errors, [])
+    assert clock.status().restarts == {'start': 1}
+    assert clock.status().gaps == 0
+
+
 @pytest.mark.parametrize('seconds', [0.3, 3.0, 30.0, 300.0])
 def test_stall_keeps_the_fit(seconds):
     """Radio out of range: the sensor's timer ran on, and the fit goes on."""
