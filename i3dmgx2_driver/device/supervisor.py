@@ -61,7 +61,7 @@ from typing import Any
 
 from .dialogue import SensorDialogue
 from .identity import DeviceInfo
-from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
+from .link import BytesCallback, DeviceLink, DeviceTimeout, LinkOptions, RecordCallback
 from .observer import Finding, LineObserver
 from .port import PortDisconnected, PortError, PortUnusable, SerialPort
 from .realtime import PolicyOutcome
@@ -389,9 +389,9 @@ class DeviceSupervisor:
             self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
         observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
                                                  cfg.baud, self._on_finding)
-        link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless,
-                          on_bytes=self._on_bytes, observer=observer, cancel=self._stop,
-                          thread_policy=cfg.thread_policy)
+        link = DeviceLink(port, cfg.address, self._on_record, LinkOptions(
+            wireless=cfg.wireless, on_bytes=self._on_bytes, observer=observer,
+            cancel=self._stop, thread_policy=cfg.thread_policy))
         with self._link_lock:
             if self._stop.is_set():
                 # Stopped while opening: the caller has released the link already.
