@@ -72,8 +72,7 @@ def test_the_supervisor_thread_gives_up_on_a_directory_once(tmp_path):
                            on_fatal=lambda exc: (fatal.append(exc), done.set()))
     sup.start()
     assert done.wait(10)
-    sup._thread.join(5)
-    assert not sup._thread.is_alive(), 'no retry: it can never work'
+    assert sup.recovery.join(5), 'no retry: it can never work'
     assert len(fatal) == 1 and fatal[0] is sup.fatal_error
     assert f'{tmp_path} is a directory, not a serial port' in str(fatal[0])
     assert sup.state is State.STOPPED
@@ -116,4 +115,4 @@ def test_a_long_operation_with_the_stream_paused_is_no_silence():
         finally:
             sup.stop()
     assert not [m for level, m in log.lines if 'not one byte' in m], log.lines
-    assert sup.advice == ''
+    assert sup.status().advice == ''
