@@ -33,17 +33,8 @@ from i3dmgx2_driver.device.report import DeviceReport
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.device.status import State
 from i3dmgx2_driver.device.watchdog import PORT_SETTLE_S, PORT_WATCH_S, ReopenWait, StallWatch
+from log_lines import Log
 import pytest
-
-
-class Log:
-    """Collect what is logged, by level."""
-
-    def __init__(self) -> None:
-        self.lines: list[tuple[str, str]] = []
-
-    def __getattr__(self, level: str):
-        return lambda message: self.lines.append((level, message))
 
 
 class FakeClock:

@@ -30,19 +30,10 @@ from i3dmgx2_driver.device.link import DeviceLink, DeviceTimeout, LinkOptions
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
+from log_lines import Log
 import pytest
 
 pytestmark = pytest.mark.slow
-
-
-class Log:
-    """Keep what the dialogue says."""
-
-    def __init__(self) -> None:
-        self.lines: list[tuple[str, str]] = []
-
-    def __getattr__(self, level: str):
-        return lambda message: self.lines.append((level, message))
 
 
 class Talk:

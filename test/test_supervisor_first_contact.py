@@ -30,17 +30,8 @@ from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.device.status import State
 from i3dmgx2_driver.device.supervisor import DeviceSupervisor
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from log_lines import Log
 import pytest
-
-
-class Log:
-    """Collect what the supervisor logs, by level."""
-
-    def __init__(self) -> None:
-        self.lines: list[tuple[str, str]] = []
-
-    def __getattr__(self, level):
-        return lambda message: self.lines.append((level, message))
 
 
 def supervisor(port, address=95, **kwargs):
