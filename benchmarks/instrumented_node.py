@@ -17,7 +17,7 @@ The real driver node, with its counters written to a JSON file for the soak camp
 
 Runs ``i3dmgx2_driver.ros.main.main()`` unchanged, with two observers added
 from the outside: a ROS timer that writes the node's ``stats``, the parser
-counters summed over every connection (``supervisor.parser_stats()``) and the
+counters summed over every connection (``supervisor.status().parser``) and the
 supervisor's counters to the file named by ``$I3DMGX2_SOAK_STATS`` twice a
 second and once more after shutdown; and a serial port that notes the time
 of every open, input flush and close, and the node's re-anchoring (its
@@ -77,7 +77,7 @@ class ObservedPort(SerialPort):
 
 def _snapshot(node: imu_node.ImuDriverNode, final: bool) -> dict:
     stats = node.core.stats
-    supervisor = node.core.supervisor
+    device = node.core.supervisor.status()
     with _events_lock:
         events = list(_events)
     return {
@@ -87,10 +87,10 @@ def _snapshot(node: imu_node.ImuDriverNode, final: bool) -> dict:
         'stats': {name: getattr(stats, name) for name in (
             'published', 'unpublished', 'mag_published', 'lost', 'other_records',
             'device_resets')},
-        'parser': supervisor.parser_stats(),
-        'supervisor': {'connections': supervisor.connections,
-                       'reconnects': supervisor.reconnects, 'stalls': supervisor.stalls,
-                       'state': supervisor.state.value, 'last_error': supervisor.last_error},
+        'parser': device.parser,
+        'supervisor': {'connections': device.connections, 'reconnects': device.reconnects,
+                       'stalls': device.stalls, 'state': device.state.value,
+                       'last_error': device.last_error},
         'port_events': events,
     }
 

@@ -106,7 +106,7 @@ def streaming_supervisor(port: str, recorder: Recorder, **config) -> DeviceSuper
     supervisor.start()
     assert wait_until(lambda: supervisor.state == State.STREAMING
                       and recorder.records_since(0.0) >= 20), recorder.lines
-    assert supervisor.last_start == 'full'
+    assert supervisor.status().last_start == 'full'
     return supervisor
 
 
@@ -119,9 +119,9 @@ def test_the_same_sensor_is_asked_its_serial_number_and_nothing_else():
             time.sleep(0.5)
             back = time.time()
             assert sim.replug()
-            assert wait_until(lambda: supervisor.resumes == 1 and
+            assert wait_until(lambda: supervisor.status().resumes == 1 and
                               recorder.records_since(back) >= 50), recorder.lines
-            assert supervisor.last_start == 'resumed'
+            assert supervisor.status().last_start == 'resumed'
             assert asked(sim, back) == [(layouts.DEVICE_IDENTIFIER, 1)]
             assert supervisor.info.serial_number == '3095'
             assert len(recorder.logged('same sensor (serial 3095)')) == 1
@@ -143,7 +143,7 @@ def test_a_power_cycled_sensor_is_asked_to_stream_again():
             assert wait_until(lambda: recorder.records_since(back) >= 50), recorder.lines
             assert asked(sim, back) == [(layouts.DEVICE_IDENTIFIER, 1),
                                         (layouts.SET_CONTINUOUS, 0xCC)]
-            assert supervisor.resumes == 1
+            assert supervisor.status().resumes == 1
         finally:
             supervisor.stop()
 
@@ -168,8 +168,8 @@ def test_another_sensor_on_the_port_gets_the_full_dialogue(tmp_path, streaming):
             sent = asked(second, 0.0)
             assert sent[0] == (layouts.DEVICE_IDENTIFIER, 1)
             assert [c for c in sent[1:] if c[0] != layouts.STOP_CONTINUOUS] == FULL_DIALOGUE
-            assert supervisor.last_start == 'full'
-            assert supervisor.resumes == 0
+            assert supervisor.status().last_start == 'full'
+            assert supervisor.status().resumes == 0
             warning = recorder.logged('another sensor answers as node 95')
             assert warning == [('warning', 'another sensor answers as node 95: serial 4711, '
                                            'not 3095; identifying it in full')]
@@ -193,7 +193,7 @@ def test_without_fast_reconnect_every_connection_gets_the_full_dialogue():
             assert wait_until(lambda: recorder.records_since(back) >= 50), recorder.lines
             sent = [c for c in asked(sim, back) if c[0] != layouts.STOP_CONTINUOUS]
             assert sent == FULL_DIALOGUE
-            assert supervisor.resumes == 0
+            assert supervisor.status().resumes == 0
         finally:
             supervisor.stop()
 
@@ -211,7 +211,7 @@ def test_a_port_that_comes_back_is_reopened_before_the_reconnect_interval():
             assert sim.replug()
             assert wait_until(lambda: recorder.records_since(back) >= 20,
                               timeout=30.0), recorder.lines
-            assert supervisor.reconnects == 1
+            assert supervisor.status().reconnects == 1
         finally:
             supervisor.stop()
 

@@ -27,7 +27,7 @@ import tty
 
 from i3dmgx2_driver.codec import commands as cmd
 from i3dmgx2_driver.codec import layouts as lay
-from i3dmgx2_driver.device.link import DeviceLink, DeviceTimeout
+from i3dmgx2_driver.device.link import DeviceLink, DeviceTimeout, LinkOptions
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
@@ -49,7 +49,7 @@ class Collected:
 
 def open_link(path: str, address: int | None, on_record=None) -> DeviceLink:
     link = DeviceLink(SerialPort(path), address, on_record or (lambda p, t, m: None),
-                      read_timeout=0.05)
+                      LinkOptions(read_timeout=0.05))
     link.start()
     return link
 

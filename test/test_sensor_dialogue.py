@@ -26,23 +26,14 @@ import threading
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.device.dialogue import SensorDialogue
 from i3dmgx2_driver.device.identity import read_firmware
-from i3dmgx2_driver.device.link import DeviceLink, DeviceTimeout
+from i3dmgx2_driver.device.link import DeviceLink, DeviceTimeout, LinkOptions
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
+from log_lines import Log
 import pytest
 
 pytestmark = pytest.mark.slow
-
-
-class Log:
-    """Keep what the dialogue says."""
-
-    def __init__(self) -> None:
-        self.lines: list[tuple[str, str]] = []
-
-    def __getattr__(self, level: str):
-        return lambda message: self.lines.append((level, message))
 
 
 class Talk:
@@ -54,7 +45,7 @@ class Talk:
         self.warnings: list[tuple[str, str]] = []
         self.cancel = threading.Event()
         self.link = DeviceLink(SerialPort(sim.port, low_latency=False), config.get('address', 95),
-                               self._on_record, read_timeout=0.05)
+                               self._on_record, LinkOptions(read_timeout=0.05))
         self.dialogue = SensorDialogue(
             DeviceConfig(port=sim.port, **{'address': 95, **config}), self.log,
             lambda key, message, period: self.warnings.append((key, message)), self.cancel)

@@ -30,17 +30,8 @@ from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.device.status import State
 from i3dmgx2_driver.device.supervisor import DeviceSupervisor
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from log_lines import Log
 import pytest
-
-
-class Log:
-    """Collect what the supervisor logs, by level."""
-
-    def __init__(self) -> None:
-        self.lines: list[tuple[str, str]] = []
-
-    def __getattr__(self, level):
-        return lambda message: self.lines.append((level, message))
 
 
 def supervisor(port, address=95, **kwargs):
@@ -72,8 +63,7 @@ def test_the_supervisor_thread_gives_up_on_a_directory_once(tmp_path):
                            on_fatal=lambda exc: (fatal.append(exc), done.set()))
     sup.start()
     assert done.wait(10)
-    sup._thread.join(5)
-    assert not sup._thread.is_alive(), 'no retry: it can never work'
+    assert sup.recovery.join(5), 'no retry: it can never work'
     assert len(fatal) == 1 and fatal[0] is sup.fatal_error
     assert f'{tmp_path} is a directory, not a serial port' in str(fatal[0])
     assert sup.state is State.STOPPED
@@ -116,4 +106,4 @@ def test_a_long_operation_with_the_stream_paused_is_no_silence():
         finally:
             sup.stop()
     assert not [m for level, m in log.lines if 'not one byte' in m], log.lines
-    assert sup.advice == ''
+    assert sup.status().advice == ''

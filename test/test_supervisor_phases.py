@@ -98,7 +98,7 @@ def test_phases_open_stream_quiet_and_close():
 
         sup.start_streaming()  # again, on the same port
         assert records.wait_for(quiet + 20) >= quiet + 20
-        assert sup.connections == 1, 'the port was reopened'
+        assert sup.status().connections == 1, 'the port was reopened'
 
         sup.stop()
         assert sup.state is State.STOPPED
@@ -151,7 +151,7 @@ def test_start_streaming_reopens_a_port_lost_while_inactive():
         assert sim.wait_for_port(10)
         sup.start_streaming()
         assert records.wait_for(20) >= 20
-        assert sup.connections == 2
+        assert sup.status().connections == 2
         sup.stop()
 
 

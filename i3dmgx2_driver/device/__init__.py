@@ -17,6 +17,8 @@ The device layer: the serial port and the protocol dialogue, no ROS.
 
 ``port`` opens the serial port and reads what is there as soon as it is
 there; ``link`` runs the reader thread and the request/reply exchanges;
-``supervisor`` keeps a link alive through stalls and unplugs; ``clock``
-turns device timer ticks into host timestamps.
+``dialogue`` says what the sensor needs to hear; ``supervisor`` keeps a
+link alive through stalls and unplugs (its pieces: ``connection``,
+``bringup``, ``recovery``, ``watchdog``, ``exclusive``, ``report``);
+``clock`` and ``sample_clock`` turn device timer ticks into host timestamps.
 """

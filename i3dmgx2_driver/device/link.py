@@ -25,6 +25,7 @@ commands both ways.
 """
 
 from collections.abc import Callable
+from dataclasses import dataclass
 import threading
 import time
 from typing import Any, NamedTuple
@@ -79,49 +80,63 @@ class _Pending:
         self.nacked = threading.Event()
 
 
+@dataclass(frozen=True)
+class LinkOptions:
+    """
+    How a link reads and whom it tells, besides the consumer of records.
+
+    ``wireless=False`` speaks to a wired sensor (no packets, no ACKs).
+    ``read_timeout`` bounds each read (s). ``on_bytes``, if given, receives
+    every read's bytes as read, before they are parsed (a raw capture); it
+    runs in the reader thread and must not raise or block. ``observer``, if
+    given, is fed every read while no packet of ours has arrived for
+    ``QUIET_AFTER`` s (never while records flow). ``cancel``, if given and
+    set, makes requests give up within tens of milliseconds while the reader
+    goes on (the stream is being stopped, the port kept: nobody waits for
+    the answers any more). ``thread_policy`` is applied by the reader thread
+    to itself before its first read.
+    """
+
+    wireless: bool = True
+    read_timeout: float = 0.2
+    on_bytes: BytesCallback | None = None
+    observer: LineObserver | None = None
+    cancel: threading.Event | None = None
+    thread_policy: ThreadPolicy = NORMAL_SCHEDULING
+
+
 class DeviceLink:
     """
     The reader thread and the exchanges of one open port.
 
-    ``address`` selects the sensor behind a base station; ``wireless=False``
-    speaks to a wired sensor (no packets, no ACKs). ``on_record`` receives
-    every data packet not claimed by a pending request. ``on_bytes``, if
-    given, receives every read's bytes as read, before they are parsed (a
-    raw capture); it runs in the reader thread and must not raise or block.
+    ``address`` selects the sensor behind a base station; ``on_record``
+    receives every data packet not claimed by a pending request; ``options``
+    say how to read and whom else to tell (:class:`LinkOptions`).
     ``streamed`` is the command byte of the record being streamed, None
-    while the device is not streaming (the supervisor sets it): a polled
+    while the device is not streaming (the dialogue sets it): a polled
     reply of that code is then both the reply and a record of the stream.
-    ``observer``, if given, is fed every read while no packet of ours has
-    arrived for ``QUIET_AFTER`` s (never while records flow).
-    ``cancel``, if given and set, makes requests give up within tens of
-    milliseconds while the reader goes on (the stream is being stopped, the
-    port kept: nobody waits for the answers any more).
-    ``thread_policy`` is applied by the reader thread to itself before its
-    first read; ``policy_outcome`` then says what the scheduler granted.
+    ``policy_outcome`` says what the scheduler granted the reader thread.
     """
 
-    def __init__(self, port: SerialPort, address: int, on_record: RecordCallback,
-                 wireless: bool = True, read_timeout: float = 0.2,
-                 on_bytes: BytesCallback | None = None,
-                 streamed: int | None = None,
-                 observer: LineObserver | None = None,
-                 cancel: threading.Event | None = None,
-                 thread_policy: ThreadPolicy = NORMAL_SCHEDULING) -> None:
+    def __init__(self, port: SerialPort, address: int | None, on_record: RecordCallback,
+                 options: LinkOptions | None = None) -> None:
+        options = options if options is not None else LinkOptions()
+        wireless = options.wireless
         self.port = port
         self.address = address
         self.wireless = wireless
-        self.streamed = streamed
+        self.streamed: int | None = None
         self.parser = SensorStreamParser(address=address if wireless else None,
                                          wireless=wireless)
         self._on_record = on_record
-        self._on_bytes = on_bytes
-        self._observer = observer
-        self._read_timeout = read_timeout
+        self._on_bytes = options.on_bytes
+        self._observer = options.observer
+        self._read_timeout = options.read_timeout
         self._pending: _Pending | None = None
         self._lock = threading.Lock()
         self._write_lock = threading.Lock()
         self._stop = threading.Event()
-        self._cancel = cancel if cancel is not None else threading.Event()
+        self._cancel = options.cancel if options.cancel is not None else threading.Event()
         self._thread: threading.Thread | None = None
         self.disconnected = threading.Event()
         self.error: str | None = None
@@ -132,7 +147,7 @@ class DeviceLink:
         #: Command byte of the last record handed to ``on_record`` (None before one).
         self.last_code: int | None = None
         self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
-        self._thread_policy = thread_policy
+        self._thread_policy = options.thread_policy
         #: What the scheduler granted the reader thread (set once it runs).
         self.policy_outcome = PolicyOutcome()
         #: Set by the reader thread once its policy is applied, before its first read.

@@ -41,7 +41,7 @@ import time
 from typing import Any, NamedTuple
 
 from .identity import DeviceInfo, IDENTIFIER_NAMES, read_firmware, read_identifier
-from .link import DeviceLink, DeviceTimeout
+from .link import DeviceLink, DeviceTimeout, LinkOptions
 from .port import (
     PortBusy, PortDisconnected, PortError, PortMissing, PortPermissionDenied, SerialPort,
 )
@@ -219,8 +219,8 @@ class _Prober:
         if self.link is not None:
             self.link.stop()
         # No address yet: a listening link takes packets from every node.
-        self.link = DeviceLink(self.port, None, self._on_record, wireless=wireless,
-                               read_timeout=0.05, on_bytes=self._on_bytes)
+        self.link = DeviceLink(self.port, None, self._on_record, LinkOptions(
+            wireless=wireless, read_timeout=0.05, on_bytes=self._on_bytes))
         self.link.start()
         return self.link
 

@@ -1,0 +1,89 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+When a stream has stalled, and when to try a port again: two small policies.
+
+Both are decisions on the monotonic clock that the recovery thread
+(recovery.py) acts on. They are apart from it so that each rule is read in
+one place and tested with a fake clock, without a thread, a port or a wait:
+
+- :class:`StallWatch`: the stream has stalled when no record came for the
+  stall timeout, or three sample periods if those are longer (a slow rate
+  is no stall); it is looked at four times per timeout, at most every 50 ms.
+- :class:`ReopenWait`: after a failure the port is tried again
+  ``reconnect_interval`` later, or sooner: an unplugged adapter's device
+  node goes and comes back when it is plugged in again, so a port seen
+  missing is reopened once it is back (after a moment for udev to set its
+  permissions). Looking for it costs a stat() every few tens of ms.
+"""
+
+from collections.abc import Callable
+import os
+import time
+
+#: How often a missing port is looked for (s), so that it is reopened as soon as it is back.
+PORT_WATCH_S = 0.02
+#: Pause between a port reappearing and opening it (s): udev sets its permissions meanwhile.
+PORT_SETTLE_S = 0.02
+
+
+class StallWatch:
+    """Tell from the last record's time whether the stream has stalled."""
+
+    def __init__(self, stall_timeout: float, period: float,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        #: Silence (s) after which the stream has stalled.
+        self.stall_after = max(stall_timeout, 3 * period)
+        #: How often to look (s).
+        self.tick = min(0.05, self.stall_after / 4)
+        self._clock = clock
+
+    def stalled(self, last_data: float) -> bool:
+        """Whether no record came for longer than ``stall_after`` (``last_data``: monotonic)."""
+        return self._clock() - last_data > self.stall_after
+
+
+class ReopenWait:
+    """
+    Wait before the port at ``path`` is tried again: ``interval`` s, or until it is back.
+
+    ``wait(seconds)`` waits and returns True when the driver stops meanwhile
+    (an Event's ``wait``); ``prompt=False`` always waits the whole interval.
+    """
+
+    def __init__(self, path: str, interval: float, prompt: bool,
+                 wait: Callable[[float], bool], exists: Callable[[str], bool] = os.path.exists,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.path = path
+        self.interval = interval
+        self.prompt = prompt
+        self._wait = wait
+        self._exists = exists
+        self._clock = clock
+
+    def __call__(self) -> None:
+        """Return when the port may be tried again, or the driver stops."""
+        if not self.prompt:
+            self._wait(self.interval)
+            return
+        deadline = self._clock() + self.interval
+        seen_missing = False
+        while not self._wait(PORT_WATCH_S) and self._clock() < deadline:
+            if not self._exists(self.path):
+                seen_missing = True
+            elif seen_missing:
+                self._wait(PORT_SETTLE_S)
+                return

@@ -1,0 +1,232 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The supervisor's pieces that need no port: policies on a fake clock, the report, the loop.
+
+StallWatch and ReopenWait decide on a clock passed in; DeviceReport is the
+one place that changes what diagnostics show; RecoveryLoop and
+ExclusiveAccess are driven here with stand-ins for the connection, the
+bring-up and the dialogue, so that what they decide is seen without a
+simulator.
+"""
+
+import threading
+
+from i3dmgx2_driver.device.exclusive import ExclusiveAccess
+from i3dmgx2_driver.device.link import DeviceTimeout
+from i3dmgx2_driver.device.observer import Finding
+from i3dmgx2_driver.device.port import PortMissing, PortNotSerial
+from i3dmgx2_driver.device.recovery import RecoveryLoop
+from i3dmgx2_driver.device.report import DeviceReport
+from i3dmgx2_driver.device.settings import DeviceConfig
+from i3dmgx2_driver.device.status import State
+from i3dmgx2_driver.device.watchdog import PORT_SETTLE_S, PORT_WATCH_S, ReopenWait, StallWatch
+from log_lines import Log
+import pytest
+
+
+class FakeClock:
+    """A monotonic clock that moves only when waited on."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+        self.waits: list[float] = []
+        self.cancelled = False
+
+    def __call__(self) -> float:
+        return self.now
+
+    def wait(self, seconds: float) -> bool:
+        """Wait as Event.wait does: True when cancelled (then at once)."""
+        if self.cancelled:
+            return True
+        self.waits.append(seconds)
+        self.now += seconds
+        return False
+
+
+# -- StallWatch ---------------------------------------------------------------------------
+
+
+def test_a_stall_is_silence_beyond_the_timeout():
+    clock = FakeClock()
+    watch = StallWatch(stall_timeout=1.0, period=0.01, clock=clock)
+    assert watch.stall_after == 1.0 and watch.tick == 0.05
+    assert not watch.stalled(clock.now - 1.0)
+    assert watch.stalled(clock.now - 1.001)
+
+
+def test_a_slow_rate_is_no_stall():
+    clock = FakeClock()
+    watch = StallWatch(stall_timeout=0.3, period=0.5, clock=clock)  # 2 Hz
+    assert watch.stall_after == pytest.approx(1.5)
+    assert not watch.stalled(clock.now - 1.0)
+
+
+def test_a_short_timeout_is_looked_at_four_times():
+    assert StallWatch(stall_timeout=0.1, period=0.001).tick == pytest.approx(0.025)
+
+
+# -- ReopenWait ---------------------------------------------------------------------------
+
+
+def test_without_prompt_reopen_the_whole_interval_is_waited():
+    clock = FakeClock()
+    ReopenWait('/dev/x', 1.0, False, clock.wait, exists=lambda path: False, clock=clock)()
+    assert clock.waits == [1.0]
+
+
+def test_a_port_that_stays_is_tried_again_after_the_interval():
+    clock = FakeClock()
+    ReopenWait('/dev/x', 1.0, True, clock.wait, exists=lambda path: True, clock=clock)()
+    assert 1.0 <= sum(clock.waits) <= 1.0 + 1.5 * PORT_WATCH_S  # within one look
+    assert set(clock.waits) == {PORT_WATCH_S}
+
+
+def test_a_port_seen_missing_is_reopened_once_it_is_back():
+    clock = FakeClock()
+    start = clock.now
+    present = iter([False] * 5 + [True])
+    ReopenWait('/dev/x', 1.0, True, clock.wait, exists=lambda path: next(present),
+               clock=clock)()
+    assert clock.waits[-1] == PORT_SETTLE_S
+    assert clock.now - start == pytest.approx(6 * PORT_WATCH_S + PORT_SETTLE_S)
+
+
+def test_a_stop_ends_the_wait_at_once():
+    clock = FakeClock()
+    clock.cancelled = True
+    ReopenWait('/dev/x', 1.0, True, clock.wait, exists=lambda path: True, clock=clock)()
+    assert clock.waits == []
+
+
+# -- DeviceReport -------------------------------------------------------------------------
+
+
+def test_streaming_is_declared_by_one_method_only():
+    report = DeviceReport(Log())
+    with pytest.raises(ValueError):
+        report.enter(State.STREAMING)
+    report.finding(Finding('silence', 'nothing on the line'))
+    assert report.advice == 'nothing on the line'
+    report.streaming('full')
+    report.streaming('resumed')
+    report.stalled()
+    report.streaming()
+    fields = report.fields()
+    assert fields['state'] is State.STREAMING and fields['advice'] == ''
+    assert fields['last_start'] == 'resumed' and fields['resumes'] == 1
+    assert fields['stalls'] == 1
+
+
+def test_a_problem_is_said_once_and_kept_as_the_last_error():
+    log = Log()
+    report = DeviceReport(log)
+    for n in range(3):
+        report.warn('missing', f'port missing ({n})')
+    assert log.lines == [('warning', 'port missing (0)')]
+    assert report.fields()['last_error'] == 'port missing (2)'
+
+
+# -- RecoveryLoop, with stand-ins ---------------------------------------------------------
+
+
+class FailingConnection:
+    """A connection whose port never opens: it raises ``error`` each time."""
+
+    def __init__(self, error: Exception) -> None:
+        self.error = error
+        self.opened = 0
+        self.released = 0
+
+    def open_link(self):
+        self.opened += 1
+        raise self.error
+
+    def release(self, send_stop: bool = False) -> None:
+        self.released += 1
+
+
+def loop_with(connection, **config):
+    log, fatal, cancel = Log(), [], threading.Event()
+    report = DeviceReport(log)
+    loop = RecoveryLoop(DeviceConfig(port='/dev/x', address=95, **config), connection,
+                        None, report, cancel, threading.Event(), fatal.append)
+    return loop, report, fatal, cancel, log
+
+
+def test_a_port_that_can_never_work_ends_the_loop_once():
+    error = PortNotSerial('/tmp: a directory, not a serial port')
+    connection = FailingConnection(error)
+    loop, report, fatal, cancel, log = loop_with(connection)
+    loop.start(None)
+    assert loop.join(5.0)
+    assert connection.opened == 1 and fatal == [error] and cancel.is_set()
+    assert report.state is State.STOPPED and report.fatal_error is error
+    assert log.lines == [], 'the entry point says it, once, as it exits'
+
+
+def test_a_missing_port_is_retried_and_said_once():
+    connection = FailingConnection(PortMissing('/dev/x: no such port'))
+    loop, report, fatal, cancel, log = loop_with(connection, reconnect_interval=0.01,
+                                                 prompt_reopen=False)
+    loop.start(None)
+    try:
+        deadline = threading.Event()
+        while connection.opened < 5 and not deadline.wait(0.01):
+            pass
+    finally:
+        cancel.set()
+        assert loop.join(5.0)
+    assert connection.opened >= 5 and not fatal
+    assert log.lines == [('warning', '/dev/x: no such port (retrying every 0.01 s)')]
+    assert report.state is State.DISCONNECTED
+
+
+# -- ExclusiveAccess, with stand-ins ------------------------------------------------------
+
+
+class Stand:
+    """Stand-ins for the connection, the dialogue and the bring-up around one link."""
+
+    def __init__(self, report: DeviceReport) -> None:
+        self.link = object()
+        self.report = report
+        self.observing: list[bool] = []
+
+    def observe(self, on: bool) -> None:
+        self.observing.append(on)
+
+    def run_exclusive(self, link, operation):
+        return operation(link)
+
+    def restart_stream(self, link) -> bool:
+        self.report.streaming()
+        return True
+
+
+def test_an_operation_has_the_sensor_paused_then_the_stream_back():
+    report = DeviceReport(Log())
+    stand = Stand(report)
+    access = ExclusiveAccess(stand, stand, stand, report, threading.Event())
+    with pytest.raises(DeviceTimeout, match='not streaming'):
+        access.run(lambda link: None)
+    report.streaming('full')
+    seen = []
+    result = access.run(lambda link: seen.append((link, report.state,
+                                                  access.paused.is_set())) or 42)
+    assert result == 42 and seen == [(stand.link, State.PAUSED, True)]
+    assert report.state is State.STREAMING and not access.paused.is_set()
+    assert stand.observing == [False, True]
