@@ -19,6 +19,6 @@ The device layer: the serial port and the protocol dialogue, no ROS.
 there; ``link`` runs the reader thread and the request/reply exchanges;
 ``dialogue`` says what the sensor needs to hear; ``supervisor`` keeps a
 link alive through stalls and unplugs (its pieces: ``connection``,
-``bringup``, ``recovery``, ``watchdog``, ``exclusive``, ``report``);
+``startup``, ``recovery``, ``watchdog``, ``exclusive``, ``report``);
 ``clock`` and ``sample_clock`` turn device timer ticks into host timestamps.
 """

@@ -23,7 +23,7 @@ exclusive operation. Each request is retried a few times because the radio
 loses commands both ways; that is part of speaking to this device. What to
 do when the dialogue fails (reopen, back off, give up) is not: the
 recovery loop (recovery.py) and the lifecycle phases (supervisor.py) decide
-that, and drive this object through the bring-up steps (bringup.py). It has
+that, and drive this object through the start-up steps (startup.py). It has
 no thread and starts none; it can be tested with a link and a simulator alone.
 
 What it learns (identity, divider, whether the ping was answered, the line's

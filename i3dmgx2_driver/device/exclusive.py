@@ -29,7 +29,7 @@ from collections.abc import Callable
 import threading
 from typing import Any
 
-from .bringup import Bringup
+from .startup import StartUp
 from .connection import Connection
 from .dialogue import SensorDialogue
 from .link import DeviceLink, DeviceTimeout
@@ -40,11 +40,11 @@ from .status import State
 class ExclusiveAccess:
     """Run one operation at a time on the link with the stream stopped."""
 
-    def __init__(self, connection: Connection, dialogue: SensorDialogue, bringup: Bringup,
+    def __init__(self, connection: Connection, dialogue: SensorDialogue, startup: StartUp,
                  report: DeviceReport, cancel: threading.Event) -> None:
         self._connection = connection
         self._dialogue = dialogue
-        self._bringup = bringup
+        self._startup = startup
         self._report = report
         self._cancel = cancel
         #: Set while an operation has the sensor: the stream is quiet on purpose.
@@ -70,6 +70,6 @@ class ExclusiveAccess:
             try:
                 self._connection.observe(True)
                 if not self._cancel.is_set():
-                    self._bringup.restart_stream(link)
+                    self._startup.restart_stream(link)
             finally:
                 self.paused.clear()

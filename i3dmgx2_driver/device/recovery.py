@@ -17,7 +17,7 @@
 The supervisor thread: keep the stream going through stalls and unplugs.
 
 :class:`RecoveryLoop` owns the one thread that opens the port, has the
-bring-up steps (bringup.py) bring the sensor to streaming, and then watches
+start-up steps (startup.py) bring the sensor to streaming, and then watches
 the stream. A stall re-requests continuous mode and then reopens the port;
 an unplug reopens it every ``reconnect_interval``, forever, and at once when
 the port reappears (watchdog.py says when). What goes wrong is said once and
@@ -29,7 +29,7 @@ no command byte and touches no sample (the link's reader thread publishes).
 from collections.abc import Callable
 import threading
 
-from .bringup import Bringup
+from .startup import StartUp
 from .connection import Connection
 from .link import DeviceLink, DeviceTimeout
 from .port import PortDisconnected, PortError, PortUnusable
@@ -50,12 +50,12 @@ class RecoveryLoop:
     the port can never work.
     """
 
-    def __init__(self, config: DeviceConfig, connection: Connection, bringup: Bringup,
+    def __init__(self, config: DeviceConfig, connection: Connection, startup: StartUp,
                  report: DeviceReport, cancel: threading.Event, paused: threading.Event,
                  on_fatal: Callable[[PortError], None]) -> None:
         self.config = config
         self._connection = connection
-        self._bringup = bringup
+        self._startup = startup
         self._report = report
         self._cancel = cancel
         self._paused = paused
@@ -90,9 +90,9 @@ class RecoveryLoop:
                 if link is None:
                     report.enter(State.CONNECTING)
                     link = self._connection.open_link()
-                    if not self._bringup.resume(link):
-                        self._bringup.initialise(link)
-                        self._bringup.begin_stream(link)
+                    if not self._startup.resume(link):
+                        self._startup.initialise(link)
+                        self._startup.begin_stream(link)
                 self._watch(link)
                 stalled = True
             except PortUnusable as exc:
@@ -129,7 +129,7 @@ class RecoveryLoop:
     def _watch(self, link: DeviceLink) -> None:
         """Return when the link is lost or cannot be revived; recover stalls."""
         report = self._report
-        watch = StallWatch(self.config.stall_timeout, self._bringup.period)
+        watch = StallWatch(self.config.stall_timeout, self._startup.period)
         while not self._cancel.wait(watch.tick):
             if link.disconnected.is_set():
                 raise PortDisconnected(link.error or 'device disconnected')
@@ -142,7 +142,7 @@ class RecoveryLoop:
             report.warn('stall', f'no data for {watch.stall_after:.1f} s: re-requesting '
                                  f'continuous mode', EVENT_PERIOD)
             try:
-                resumed = self._bringup.restart_stream(link)
+                resumed = self._startup.restart_stream(link)
             except DeviceTimeout:
                 report.warn('stall', 'stream did not resume: reopening the port', EVENT_PERIOD)
                 return

@@ -24,7 +24,7 @@ a module of its own:
   sensor (quiet, identity, rate, continuous mode, resume); no thread.
 - ``connection.py``: :class:`~.connection.Connection`, the one open link,
   opened and closed safely from any thread, counted across reconnects.
-- ``bringup.py``: :class:`~.bringup.Bringup`, the steps from an open port
+- ``startup.py``: :class:`~.startup.StartUp`, the steps from an open port
   to a stream, shared by the thread and the phases.
 - ``recovery.py``: :class:`~.recovery.RecoveryLoop`, the supervisor thread
   (stalls, unplugs, back-off), with its policies in ``watchdog.py``.
@@ -56,7 +56,7 @@ import logging
 import threading
 from typing import Any
 
-from .bringup import Bringup
+from .startup import StartUp
 from .connection import Connection
 from .dialogue import SensorDialogue
 from .exclusive import ExclusiveAccess
@@ -101,12 +101,12 @@ class DeviceSupervisor:
                                      self.report.finding, self._stop)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
         self.dialogue = SensorDialogue(config, log, self.report.warn, self._stop)
-        self._bringup = Bringup(self.connection, self.dialogue, self.report, self._stop,
+        self._startup = StartUp(self.connection, self.dialogue, self.report, self._stop,
                                 on_connect)
-        self._exclusive = ExclusiveAccess(self.connection, self.dialogue, self._bringup,
+        self._exclusive = ExclusiveAccess(self.connection, self.dialogue, self._startup,
                                           self.report, self._stop)
         self.recovery = RecoveryLoop(
-            config, self.connection, self._bringup, self.report, self._stop,
+            config, self.connection, self._startup, self.report, self._stop,
             self._exclusive.paused, on_fatal or (lambda error: log.error(str(error))))
 
     # -- what others read ---------------------------------------------------------------
@@ -191,7 +191,7 @@ class DeviceSupervisor:
         self._stop.clear()
         link = self.connection.open_link()
         try:
-            self._bringup.initialise(link, require_answer=True)
+            self._startup.initialise(link, require_answer=True)
         except BaseException:
             self.connection.release()
             self.report.enter(State.STOPPED)
@@ -218,15 +218,15 @@ class DeviceSupervisor:
             if self.connection.lost():
                 self.connection.release()
                 link = self.connection.open_link()
-                self._bringup.initialise(link)
-            self._bringup.begin_stream(link)
+                self._startup.initialise(link)
+            self._startup.begin_stream(link)
         except PortError:
             self.connection.release()
             self.report.enter(State.DISCONNECTED)
             raise
         except DeviceTimeout:
             if self.connection.link is not None:
-                self._bringup.quiet(self.connection.link)
+                self._startup.quiet(self.connection.link)
             raise
         if self._stop.is_set():
             # stop() came while the stream was starting: it has the port; no thread.
@@ -244,7 +244,7 @@ class DeviceSupervisor:
         self.recovery.join(timeout)
         link = self.connection.link
         if link is not None and not link.disconnected.is_set():
-            self._bringup.quiet(link)
+            self._startup.quiet(link)
 
     # -- for services ---------------------------------------------------------------------
 

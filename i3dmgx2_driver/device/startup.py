@@ -19,7 +19,7 @@ The steps from an open port to a stream, each as the report should tell it.
 The recovery thread (recovery.py) and the lifecycle phases
 (supervisor.py) take the same steps in different orders and with different
 answers to failure: the thread retries forever, a phase fails with the
-reason. :class:`Bringup` holds the steps once: initialise (quiet the device,
+reason. :class:`StartUp` holds the steps once: initialise (quiet the device,
 start the reader, have the dialogue learn what it is), resume a known sensor
 after a reconnect, begin the stream, take it up again on the same link,
 quiet it. Each step has the dialogue say what to say, starts the reader
@@ -39,9 +39,9 @@ from .report import DeviceReport
 from .status import State
 
 
-class Bringup:
+class StartUp:
     """
-    Take one step of the bring-up on ``connection``'s link, with ``dialogue``.
+    Take one step of the start-up on ``connection``'s link, with ``dialogue``.
 
     ``on_connect`` runs before the first record of each new link reaches
     the consumer (the node checks its clock there); ``cancel`` set means no
