@@ -48,9 +48,10 @@ import sys
 import time
 from typing import Any, NamedTuple
 
-from bench_common import (
-    emit, isolate_ros_domain, LoadProcess, machine_table, percentile, process_cpu_seconds,
-    RunNote, SimProcess, SubscriberProcess, summarise, Summary, TimedNodeProcess, written_times,
+from bench_common import emit, LoadProcess, machine_table, RunNote, TimedNodeProcess, written_times
+from harness.percentiles import percentile, summarise, Summary
+from harness.processes import (
+    isolate_ros_domain, process_cpu_seconds, SimProcess, SubscriberProcess,
 )
 
 #: Seconds of streaming left out at the start (start-up, DDS discovery).
