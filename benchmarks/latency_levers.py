@@ -15,9 +15,10 @@
 """
 Where a sample's time goes, and what each latency lever changes (issue #12).
 
-Every run starts three processes: the simulated device (``sim_process.py``,
-100 Hz by default), a subscriber (``subscriber.py``) and the real driver
-process timed from inside (``latency_node.py``). The figures per run:
+Every run starts three processes: the simulated device
+(``harness/sim_process.py``, 100 Hz by default), a subscriber
+(``harness/subscriber.py``) and the real driver process timed from inside
+(``latency_node.py``). The figures per run:
 
 - end to end: the simulator's ``time.time()`` right after it wrote a
   packet's last byte, to right after ``publish()`` returned in the node;
