@@ -22,7 +22,7 @@ package_name = 'i3dmgx2_driver'
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test']),
+    packages=find_packages(include=['i3dmgx2_driver', 'i3dmgx2_driver.*']),
     data_files=[
         ('share/ament_index/resource_index/packages',
             ['resource/' + package_name]),

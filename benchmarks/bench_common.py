@@ -13,29 +13,29 @@
 # limitations under the License.
 
 """
-What the benchmarks share: processes, the node in-process, statistics, the table.
+What only the benchmarks share: the node in-process, latencies, their options, the table.
 
 Every benchmark runs the simulated device in a process of its own
-(``sim_process.py``), as a real device is, and reads its ground truth when
-it stops: the time each packet's last byte was written and the time its
-sample was taken, keyed by the device timer. The node runs either in the
-benchmark's process (to time ``publish()`` from inside) or as the real
-executable (to measure its CPU). Subscribers run in another process
-(``subscriber.py``). Every run gets its own ROS domain on localhost only.
+(``harness.processes.SimProcess``), as a real device is, and reads its
+ground truth when it stops: the time each packet's last byte was written and
+the time its sample was taken, keyed by the device timer. The node runs
+either in the benchmark's process (:class:`InProcessNode`, to time
+``publish()`` from inside) or as the real executable (``harness.processes.
+NodeProcess``, to measure its CPU; :class:`TimedNodeProcess`, timed from
+inside). Subscribers run in another process (``harness.processes.
+SubscriberProcess``). The processes and the statistics are ``harness/``'s,
+which the tests use too; importing this module puts the repository on the
+path for them.
 
 Benchmarks print numbers; they never fail on speed.
 """
 
 from collections.abc import Callable
-import json
 import math
 import os
 from pathlib import Path
 import platform
-import signal
-import subprocess
 import sys
-import tempfile
 import threading
 import time
 from typing import Any, NamedTuple
@@ -43,16 +43,13 @@ from typing import Any, NamedTuple
 BENCH_DIR = Path(__file__).resolve().parent
 REPO = BENCH_DIR.parent
 OUTPUT_DIR = BENCH_DIR / 'output'
-for _path in (str(REPO), str(REPO / 'test')):
-    if _path not in sys.path:
-        sys.path.insert(0, _path)
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
 
-import ros_harness  # noqa: E402 - test/ is on the path only from here on
-
-from i3dmgx2_driver.codec import layouts, line_budget  # noqa: E402, I100 - likewise
-
-#: Node address the simulator and the node agree on.
-ADDRESS = 95
+from harness.processes import (  # noqa: E402 - the repository is on the path from here on
+    ADDRESS, ChildProcess, param_args, TruthEntry,
+)
+from i3dmgx2_driver.codec import layouts, line_budget  # noqa: E402
 #: Highest rate of 0xCC packets (88 bytes through the base station) a 115200-baud line
 #: carries (11,520 bytes/s), from the codec's layout table.
 LINE_MAX_RATE_HZ = (line_budget.line_bytes_per_second(115200)
@@ -66,50 +63,6 @@ class Result(NamedTuple):
     value: str
     target: str = ''
     met: bool | None = None
-
-
-# -- statistics ------------------------------------------------------------------------------
-
-def percentile(values: list[float], q: float) -> float:
-    """Return the q-th percentile of the values, q in 0..100, interpolated; NaN for none."""
-    if not values:
-        return math.nan
-    ordered = sorted(values)
-    position = (len(ordered) - 1) * q / 100.0
-    low = math.floor(position)
-    high = min(low + 1, len(ordered) - 1)
-    return ordered[low] + (ordered[high] - ordered[low]) * (position - low)
-
-
-class Summary(NamedTuple):
-    """Count, mean, p50, p99 and max of a sample."""
-
-    n: int
-    mean: float
-    p50: float
-    p99: float
-    max_: float
-
-    def ms(self) -> str:
-        """Format as milliseconds: ``p50 / p99 / max``."""
-        return (f'{self.p50 * 1e3:.3f} / {self.p99 * 1e3:.3f} / {self.max_ * 1e3:.3f} ms '
-                f'(n={self.n})')
-
-
-def summarise(values: list[float]) -> Summary:
-    """Summarise a sample (NaN everywhere when it is empty)."""
-    if not values:
-        return Summary(0, math.nan, math.nan, math.nan, math.nan)
-    return Summary(len(values), sum(values) / len(values), percentile(values, 50),
-                   percentile(values, 99), max(values))
-
-
-def std_dev(values: list[float]) -> float:
-    """Return the population standard deviation (NaN for fewer than two values)."""
-    if len(values) < 2:
-        return math.nan
-    mean = sum(values) / len(values)
-    return math.sqrt(sum((v - mean) ** 2 for v in values) / len(values))
 
 
 # -- the machine and the table ---------------------------------------------------------------
@@ -247,183 +200,6 @@ def emit(text: str, output: str | None) -> str:
         shown = path.relative_to(REPO) if path.is_relative_to(REPO) else path
         print(f'(written to {shown})', flush=True)
     return text
-
-
-# -- processes -------------------------------------------------------------------------------
-
-def stop_on_signal_or_eof() -> threading.Event:
-    """
-    Return an event set by SIGINT, SIGTERM or the end of standard input.
-
-    The benchmark's helper processes stop on any of them, so a benchmark that
-    dies (and closes their stdin) never leaves them running.
-    """
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
-
-    def watch_stdin() -> None:
-        sys.stdin.read()
-        stop.set()
-
-    threading.Thread(target=watch_stdin, daemon=True).start()
-    return stop
-
-
-def spin_until(stop: threading.Event, executor: Any, node: Any, save: Any) -> None:
-    """Spin ``executor`` until ``stop`` is set; then ``save()`` and tear ROS down."""
-    import rclpy
-    try:
-        while not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
-    finally:
-        save()
-        executor.shutdown(timeout_sec=0.5)
-        node.destroy_node()
-        rclpy.try_shutdown()
-
-
-# The tests' helpers: one domain policy and one child environment for both.
-isolate_ros_domain = ros_harness.isolate_ros_domain
-
-
-def child_env() -> dict[str, str]:
-    """Environment of a child process: this repository first on PYTHONPATH."""
-    return ros_harness.ros_env()
-
-
-class _Child:
-    """A helper process that prints a line when ready and saves JSON when stopped."""
-
-    #: The command-line option that names the JSON file the child writes.
-    out_flag = '--out'
-
-    def __init__(self, argv: list[str], ready_prefix: str, timeout: float = 20.0) -> None:
-        handle, self.out_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.json')
-        os.close(handle)
-        self.name = Path(argv[1]).name
-        # Standard error goes to a file: a pipe nobody reads could fill and block the child.
-        handle, self._stderr_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.err')
-        try:
-            self.proc = subprocess.Popen(
-                [*argv, self.out_flag, self.out_path],
-                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=handle,
-                text=True, env=child_env(), cwd=str(REPO))
-        finally:
-            os.close(handle)
-        self.ready_line = self._wait_line(ready_prefix, timeout)
-        self._lines: list[str] = []
-        self._reader = threading.Thread(target=self._read_rest, daemon=True)
-        self._reader.start()
-
-    def _wait_line(self, prefix: str, timeout: float) -> str:
-        timer = threading.Timer(timeout, self.proc.kill)
-        timer.start()
-        try:
-            for line in self.proc.stdout:
-                if line.startswith(prefix):
-                    return line.strip()
-        finally:
-            timer.cancel()
-        raise RuntimeError(f'{self.name} did not start: {self.errors()}')
-
-    def errors(self) -> str:
-        """Return what the process wrote to standard error so far."""
-        with open(self._stderr_path, errors='replace') as handle:
-            return handle.read()
-
-    def _read_rest(self) -> None:
-        for line in self.proc.stdout:
-            self._lines.append(line.strip())
-
-    def signal(self, signum: int) -> None:
-        """Send a signal if the process still runs."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signum)
-
-    def stop(self, timeout: float = 15.0) -> Any:
-        """Stop the process; return the JSON it saved."""
-        self.signal(signal.SIGTERM)
-        try:
-            self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        try:
-            with open(self.out_path) as handle:
-                return json.load(handle)
-        except (OSError, ValueError) as exc:
-            raise RuntimeError(f'{self.name} saved nothing: {self.errors()}') from exc
-        finally:
-            os.unlink(self.out_path)
-            os.unlink(self._stderr_path)
-
-
-class TruthEntry(NamedTuple):
-    """One data packet the simulator produced."""
-
-    timer: int | None
-    sample_time: float
-    write_time: float | None
-    valid: bool
-    source: str
-
-
-class SimProcess(_Child):
-    """The simulated device in its own process; ``truth`` after :meth:`stop`."""
-
-    out_flag = '--truth'
-
-    def __init__(self, **config: Any) -> None:
-        config.setdefault('address', ADDRESS)
-        config.setdefault('seed', 1)
-        super().__init__([sys.executable, str(BENCH_DIR / 'sim_process.py'),
-                          '--config', json.dumps(config)], 'port: ')
-        self.port = self.ready_line.split(': ', 1)[1]
-        self.truth: list[TruthEntry] = []
-        self.stats: dict[str, int] = {}
-
-    def silence(self, timeout: float = 5.0) -> None:
-        """Stop the sensor's packets for good (the radio goes silent)."""
-        self.signal(signal.SIGUSR1)
-        deadline = time.monotonic() + timeout
-        while 'silent' not in self._lines and time.monotonic() < deadline:
-            time.sleep(0.01)
-
-    def stop(self, timeout: float = 15.0) -> dict:
-        """Stop the simulator; fill ``truth`` and ``stats``."""
-        document = super().stop(timeout)
-        self.truth = [TruthEntry(*row) for row in document['truth']]
-        self.stats = document['stats']
-        return document
-
-    def written_stream(self) -> list[TruthEntry]:
-        """Return the valid streamed packets that were written whole."""
-        return [e for e in self.truth
-                if e.source == 'stream' and e.valid and e.write_time is not None]
-
-
-class SubscriberProcess(_Child):
-    """A subscriber to ``imu/raw_data`` in its own process."""
-
-    def __init__(self, topic: str = 'imu/raw_data') -> None:
-        super().__init__([sys.executable, str(BENCH_DIR / 'subscriber.py'),
-                          '--topic', topic], 'ready')
-        self.rows: list[tuple[int, int, float]] = []
-
-    def stop(self, timeout: float = 15.0) -> list:
-        """Stop; return and keep the rows (stamp sec, stamp nanosec, receive time)."""
-        self.rows = [tuple(row) for row in super().stop(timeout)]
-        return self.rows
-
-
-def process_cpu_seconds(pid: int) -> float:
-    """User plus system CPU time (s) of a process and all its threads so far."""
-    with open(f'/proc/{pid}/stat') as handle:
-        fields = handle.read().rsplit(')', 1)[1].split()
-    # After the command name: state is field 3, utime 14 and stime 15 (1-based).
-    utime, stime = int(fields[11]), int(fields[12])
-    return (utime + stime) / os.sysconf('SC_CLK_TCK')
 
 
 # -- the node in this process ----------------------------------------------------------------
@@ -581,60 +357,7 @@ def standard_args(description: str, default_seconds: float, quick_seconds: float
     return args
 
 
-class NodeProcess:
-    """The driver as ``ros2 run`` starts it (``i3dmgx2_driver.ros.main``), output to a file."""
-
-    def __init__(self, port: str, tree: Path | None = None, **params: Any) -> None:
-        """Start the node of this repository, or of the checkout ``tree`` (an A/B run)."""
-        params = {'port': port, 'address': ADDRESS, **params}
-        argv = [sys.executable, '-m', 'i3dmgx2_driver.ros.main', '--ros-args']
-        for name, value in params.items():
-            text = str(value).lower() if isinstance(value, bool) else str(value)
-            argv += ['-p', f'{name}:={text}']
-        handle, self.log_path = tempfile.mkstemp(prefix='i3dmgx2-bench-node-', suffix='.log')
-        try:
-            env = child_env()
-            if tree is not None:
-                env['PYTHONPATH'] = os.pathsep.join((str(tree), env.get('PYTHONPATH', '')))
-            self.proc = subprocess.Popen(argv, stdout=handle, stderr=subprocess.STDOUT,
-                                         stdin=subprocess.DEVNULL, env=env,
-                                         cwd=str(tree or REPO))
-        finally:
-            os.close(handle)
-
-    def output(self) -> str:
-        """Return what the node printed so far."""
-        with open(self.log_path, errors='replace') as handle:
-            return handle.read()
-
-    def wait_for_output(self, text: str, timeout: float = 20.0) -> bool:
-        """Wait until ``text`` appears in the node's output."""
-        return ros_harness.wait_for_text(self.output, self.proc, text, timeout)
-
-    def cpu_seconds(self) -> float:
-        """CPU time (user + system, all threads) the node used so far."""
-        return process_cpu_seconds(self.proc.pid)
-
-    def stop(self, timeout: float = 10.0) -> int:
-        """SIGINT, as Ctrl-C; return the exit code."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        return self.proc.returncode
-
-    def remove_log(self) -> None:
-        """Delete the output file."""
-        try:
-            os.unlink(self.log_path)
-        except OSError:
-            pass
-
-
-class TimedNodeProcess(_Child):
+class TimedNodeProcess(ChildProcess):
     """
     The real driver process, timed from inside (``latency_node.py``).
 
@@ -652,7 +375,7 @@ class TimedNodeProcess(_Child):
                  script: str = 'latency_node.py', **params: Any) -> None:
         params = {'port': port, 'address': ADDRESS, **params}
         argv = [sys.executable, str(BENCH_DIR / script), *flags,
-                *ros_harness.param_args(params)]
+                *param_args(params)]
         super().__init__(argv, 'ready', timeout=30.0)
         self.pid = self.proc.pid
         self.rows: list[tuple] = []
@@ -674,7 +397,7 @@ class TimedNodeProcess(_Child):
         return document
 
 
-class LoadProcess(_Child):
+class LoadProcess(ChildProcess):
     """Parameter requests (and a slow service) against the node from another process."""
 
     def __init__(self, slow_service: str = '', in_flight: int = 4) -> None:

@@ -33,9 +33,9 @@ import statistics
 import sys
 import time
 
-from bench_common import (
-    isolate_ros_domain, NodeProcess, report, Result, SimProcess, standard_args,
-    SubscriberProcess,
+from bench_common import report, Result, standard_args
+from harness.processes import (
+    ADDRESS, isolate_ros_domain, NodeProcess, SimProcess, SubscriberProcess,
 )
 
 TARGET_PERCENT_100HZ = 3.0
@@ -47,7 +47,7 @@ def measure(rate_hz: float, seconds: float, warm_up: float = WARM_UP_S,
     """Return the node's CPU (% of one core) and how many messages the subscriber got."""
     sim = SimProcess(rate_hz=rate_hz)
     subscriber = SubscriberProcess()
-    node = NodeProcess(sim.port, tree=tree, qos_depth=1000)
+    node = NodeProcess({'port': sim.port, 'address': ADDRESS, 'qos_depth': 1000}, tree=tree)
     try:
         if not node.wait_for_output('streaming 0xCC', timeout=30.0):
             raise RuntimeError(f'the node did not start streaming:\n{node.output()}')
@@ -59,7 +59,7 @@ def measure(rate_hz: float, seconds: float, warm_up: float = WARM_UP_S,
         node.stop()
         rows = subscriber.stop()
         sim.stop()
-        node.remove_log()
+        node.close()
     return 100.0 * (cpu1 - cpu0) / (wall1 - wall0), len(rows)
 
 

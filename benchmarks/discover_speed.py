@@ -35,7 +35,8 @@ import sys
 import time
 import tty
 
-from bench_common import child_env, OtherLoad, REPO, report, Result, SimProcess
+from bench_common import OtherLoad, REPO, report, Result
+from harness.processes import ros_env, SimProcess
 
 from i3dmgx2_driver.device.probe import probe_port, ProbeConfig  # noqa: I100 - after the path
 
@@ -86,7 +87,7 @@ def main() -> int:
             if not spec:
                 start = time.monotonic()
                 subprocess.run([sys.executable, '-m', 'i3dmgx2_driver.tools.discover',
-                                '--port', sim.port], env=child_env(), cwd=str(REPO),
+                                '--port', sim.port], env=ros_env(), cwd=str(REPO),
                                capture_output=True, check=True)
                 results.append(Result('the whole command on that port (interpreter start '
                                       'included)', f'{time.monotonic() - start:.2f} s'))

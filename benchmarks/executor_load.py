@@ -29,9 +29,8 @@ processes cost (the CPU is shared), and nothing more.
 import subprocess
 import sys
 
-from bench_common import (
-    isolate_ros_domain, LoadProcess, report, Result, standard_args,
-)
+from bench_common import LoadProcess, report, Result, standard_args
+from harness.processes import isolate_ros_domain
 from latency import LatencyRun, TARGET_DRIVER_P99_S
 
 SLOW_SERVICE = 'self_test'

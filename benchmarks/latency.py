@@ -35,10 +35,11 @@ process, stage by stage and with each latency lever.
 import time
 
 from bench_common import (
-    InProcessNode, isolate_ros_domain, LINE_MAX_RATE_HZ, report, Result, SimProcess,
-    stage_latencies, standard_args, subscriber_latencies, SubscriberProcess, summarise,
-    write_latencies,
+    InProcessNode, LINE_MAX_RATE_HZ, report, Result, stage_latencies, standard_args,
+    subscriber_latencies, write_latencies,
 )
+from harness.percentiles import summarise
+from harness.processes import isolate_ros_domain, SimProcess, SubscriberProcess
 
 #: The driver's share (read() returned -> publish() returned) at 100 Hz: p99 and max (s).
 TARGET_DRIVER_P99_S = 0.1e-3

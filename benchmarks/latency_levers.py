@@ -15,9 +15,10 @@
 """
 Where a sample's time goes, and what each latency lever changes (issue #12).
 
-Every run starts three processes: the simulated device (``sim_process.py``,
-100 Hz by default), a subscriber (``subscriber.py``) and the real driver
-process timed from inside (``latency_node.py``). The figures per run:
+Every run starts three processes: the simulated device
+(``harness/sim_process.py``, 100 Hz by default), a subscriber
+(``harness/subscriber.py``) and the real driver process timed from inside
+(``latency_node.py``). The figures per run:
 
 - end to end: the simulator's ``time.time()`` right after it wrote a
   packet's last byte, to right after ``publish()`` returned in the node;
@@ -48,9 +49,10 @@ import sys
 import time
 from typing import Any, NamedTuple
 
-from bench_common import (
-    emit, isolate_ros_domain, LoadProcess, machine_table, percentile, process_cpu_seconds,
-    RunNote, SimProcess, SubscriberProcess, summarise, Summary, TimedNodeProcess, written_times,
+from bench_common import emit, LoadProcess, machine_table, RunNote, TimedNodeProcess, written_times
+from harness.percentiles import percentile, summarise, Summary
+from harness.processes import (
+    isolate_ros_domain, process_cpu_seconds, SimProcess, SubscriberProcess,
 )
 
 #: Seconds of streaming left out at the start (start-up, DDS discovery).

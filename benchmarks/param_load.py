@@ -25,10 +25,10 @@ how many requests of each kind were answered as JSON and exits.
 
 import argparse
 import json
+from pathlib import Path
 import sys
 import threading
 
-from bench_common import spin_until, stop_on_signal_or_eof
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import (
     DescribeParameters, GetParameters, ListParameters, SetParameters,
@@ -37,6 +37,12 @@ import rclpy
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import Trigger
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+from harness.processes import spin_until, stop_on_signal_or_eof  # noqa: E402, I100
 
 #: Parameters asked about; ``qos_depth`` is read-only, so a set is refused (and still served).
 NAMES = ['port', 'address', 'frame_id', 'time_source', 'qos_depth', 'low_latency']

@@ -48,9 +48,8 @@ import sys
 import time
 from typing import NamedTuple
 
-from bench_common import (
-    emit, isolate_ros_domain, machine_table, RunNote, TimedNodeProcess,
-)
+from bench_common import emit, machine_table, RunNote, TimedNodeProcess
+from harness.processes import isolate_ros_domain
 
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 

@@ -33,10 +33,11 @@ import sys
 import time
 
 from bench_common import (
-    BENCH_DIR, child_env, machine_table, markdown_table, OtherLoad, OUTPUT_DIR, REPO, Result,
+    BENCH_DIR, machine_table, markdown_table, OtherLoad, OUTPUT_DIR, REPO, Result,
 )
 import cpu
 import executor_load
+from harness.processes import ros_env
 import latency
 import streams
 import throughput
@@ -50,7 +51,7 @@ def codec_results(quick: bool) -> list[Result]:
     argv = [sys.executable, str(BENCH_DIR / 'codec_throughput.py')]
     if quick:
         argv += ['--frames', '50000', '--repeat', '3']
-    done = subprocess.run(argv, capture_output=True, text=True, env=child_env(),
+    done = subprocess.run(argv, capture_output=True, text=True, env=ros_env(),
                           cwd=str(REPO), check=False)
     match = re.search(r'frames/s best ([\d,]+)', done.stdout)
     if not match:

@@ -35,7 +35,7 @@ import sys
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.campaign import CampaignConfig, run_campaign  # noqa: E402, RUF100 - after the path
+from harness.campaign import CampaignConfig, run_campaign  # noqa: E402, RUF100 - after the path
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -29,10 +29,9 @@ within 2 % of the rate that fits, nothing lost.
 
 import time
 
-from bench_common import (
-    InProcessNode, isolate_ros_domain, report, Result, SimProcess, standard_args, summarise,
-    write_latencies,
-)
+from bench_common import InProcessNode, report, Result, standard_args, write_latencies
+from harness.percentiles import summarise
+from harness.processes import isolate_ros_domain, SimProcess
 
 from i3dmgx2_driver.codec import line_budget, streams
 

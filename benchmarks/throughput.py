@@ -27,10 +27,8 @@ Target: >= 1,000 records/s with none lost.
 
 import time
 
-from bench_common import (
-    InProcessNode, isolate_ros_domain, report, Result, SimProcess, stamp_key,
-    standard_args, SubscriberProcess,
-)
+from bench_common import InProcessNode, report, Result, stamp_key, standard_args
+from harness.processes import isolate_ros_domain, SimProcess, SubscriberProcess
 
 TARGET_RATE = 1000.0
 RATES = (500.0, 1000.0, 2000.0, 4000.0, 8000.0)

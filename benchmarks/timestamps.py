@@ -30,10 +30,9 @@ over a whole run depends on its length. The mean is reported too: in device
 mode it is the simulated radio latency, which no host-side estimate can see.
 """
 
-from bench_common import (
-    InProcessNode, isolate_ros_domain, percentile, report, Result, SimProcess, standard_args,
-    std_dev,
-)
+from bench_common import InProcessNode, report, Result, standard_args
+from harness.percentiles import percentile, std_dev
+from harness.processes import isolate_ros_domain, SimProcess
 
 #: Standard deviation of (stamp - sample time) in device mode (s).
 TARGET_STD_S = 50e-6

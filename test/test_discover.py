@@ -32,6 +32,7 @@ import threading
 import time
 import tty
 
+from harness.processes import REPO
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.device.identity import DeviceInfo
 from i3dmgx2_driver.device.port import SerialPort
@@ -41,7 +42,6 @@ from i3dmgx2_driver.device.probe import (
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 from i3dmgx2_driver.tools.discover import node_command
 import pytest
-from ros_harness import REPO
 
 #: Commands that only read: what discovery may send a sensor it does not stop.
 READS = {lay.FIRMWARE_VERSION, lay.DEVICE_IDENTIFIER, lay.READ_EEPROM}

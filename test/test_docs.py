@@ -88,7 +88,8 @@ _CODE_SPAN = re.compile(r'`+[^`]*`+')
 #: An inline link or image, ``[text](target)`` or ``![alt](target "title")``.
 _LINK = re.compile(r'!?\[(?:[^\[\]]|\[[^\]]*\])*\]\(\s*<?([^)\s>]+)>?(?:\s+"[^"]*")?\s*\)')
 #: A path inside the repository, as the pages name files in code and commands.
-_TOP = ('i3dmgx2_driver', 'benchmarks', 'scripts', 'test', 'config', 'launch', 'docs')
+_TOP = ('i3dmgx2_driver', 'benchmarks', 'harness', 'scripts', 'test', 'config', 'launch',
+        'docs')
 #: Module paths relative to the package, as the pages name them (``device/link.py``).
 _PACKAGE = ('codec', 'device', 'ros', 'simulator', 'tools')
 _REPO_PATH = re.compile(

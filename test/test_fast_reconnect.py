@@ -27,13 +27,13 @@ import os
 import threading
 import time
 
+from harness.processes import isolate_ros_domain, Listener, NodeProcess
 from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.device.status import State
 from i3dmgx2_driver.device.supervisor import DeviceSupervisor
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
 
 pytestmark = pytest.mark.slow

@@ -35,11 +35,11 @@ import threading
 import tty
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
-import pytest
-from ros_harness import (
+from harness.processes import (
     isolate_ros_domain, LIFECYCLE_COMMAND, LifecycleClient, Listener, NodeProcess, REPO,
 )
+from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+import pytest
 from sensor_msgs.msg import Imu
 
 pytestmark = pytest.mark.slow

@@ -28,7 +28,7 @@ stream is chunked, and every fixture must keep the fuzzer's properties.
 import json
 from pathlib import Path
 
-from benchmarks.fuzz_parser import check_input, same
+from harness.fuzz_checks import check_input, same
 from i3dmgx2_driver.codec import (
     CommandStreamParser, decode_command_packet, decode_data_packet, decode_wired_record,
     RawCommand, RejectedPacket, SensorStreamParser,

@@ -28,9 +28,9 @@ objects it tracks before and after hundreds of published samples.
 import subprocess
 import sys
 
+from harness.processes import isolate_ros_domain, REPO, ros_env
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, REPO, ros_env
 
 pytestmark = pytest.mark.slow
 

@@ -32,6 +32,9 @@ import time
 import weakref
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from harness.processes import (
+    isolate_ros_domain, LIFECYCLE_COMMAND, LifecycleClient, Listener, NodeProcess,
+)
 from i3dmgx2_driver.device.port import PortBusy, SerialPort
 from i3dmgx2_driver.ros.lifecycle_node import LifecycleDriverNode
 from i3dmgx2_driver.ros.main import EXECUTOR_THREADS
@@ -42,9 +45,6 @@ import rclpy
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
-from ros_harness import (
-    isolate_ros_domain, LIFECYCLE_COMMAND, LifecycleClient, Listener, NodeProcess,
-)
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 from test_node_messages import match, stream_truth

@@ -185,7 +185,7 @@ def test_read_some_times_out_with_nothing(pty_pair):
 
 @pytest.mark.slow
 def test_the_node_logs_the_low_latency_state_once():
-    from ros_harness import isolate_ros_domain, NodeProcess
+    from harness.processes import isolate_ros_domain, NodeProcess
 
     isolate_ros_domain()
     with PtySimulator(seed=2) as sim:

@@ -19,10 +19,10 @@ import subprocess
 import sys
 import time
 
+from harness.processes import isolate_ros_domain, NodeProcess, REPO, ros_env
 from i3dmgx2_driver.ros.monitor import roll_pitch_yaw
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, NodeProcess, REPO, ros_env
 
 
 def test_roll_pitch_yaw_of_known_quaternions():

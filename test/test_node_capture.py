@@ -24,6 +24,7 @@ switched off while the IMU stream goes on.
 import sys
 import warnings
 
+from harness.processes import isolate_ros_domain, Listener, NodeProcess
 from i3dmgx2_driver import __version__
 from i3dmgx2_driver.capture import read_capture, TruncatedCaptureWarning
 from i3dmgx2_driver.codec.framing import DataPacket
@@ -31,7 +32,6 @@ from i3dmgx2_driver.codec.parser import SensorStreamParser
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
 from test_node_messages import match, stream_truth
 

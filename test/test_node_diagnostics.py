@@ -25,9 +25,9 @@ which comes last. Waits are generous; nothing is judged by how fast.
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from harness.processes import isolate_ros_domain, Listener, NodeProcess
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess
 
 pytestmark = pytest.mark.slow
 

@@ -32,12 +32,12 @@ import tempfile
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from harness.processes import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
 from i3dmgx2_driver.codec import streams
 from i3dmgx2_driver.codec.data_rate import RATE_DIVIDER_ADDRESS
 from i3dmgx2_driver.simulator import FaultConfig, MotionConfig, PtySimulator, SimulatorConfig
 import numpy as np
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu, MagneticField
 

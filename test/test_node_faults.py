@@ -27,10 +27,10 @@ import signal
 import tempfile
 import time
 
+from harness.processes import isolate_ros_domain, Listener, NodeProcess
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
 from test_node_messages import match, stream_truth
 

@@ -25,13 +25,14 @@ package's prefix and execute it, with nothing of the source tree on the path.
 
 import glob
 import os
+from pathlib import Path
 import shutil
 import subprocess
 import sys
 
+from harness.processes import isolate_ros_domain, LifecycleClient, Listener, NodeProcess, REPO
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, LifecycleClient, Listener, NodeProcess, REPO
 from sensor_msgs.msg import Imu
 
 pytestmark = pytest.mark.slow
@@ -83,6 +84,9 @@ def test_layout_is_what_ros2_expects(prefix):
     assert (share / 'i3dmgx2_driver' / 'config' / 'i3dmgx2.yaml').exists()
     assert (share / 'i3dmgx2_driver' / 'launch' / 'i3dmgx2.launch.py').exists()
     assert not (prefix / 'bin' / 'node').exists(), 'node must not land on PATH'
+    site = glob.glob(str(prefix / 'lib' / 'python3*' / 'site-packages'))
+    assert sorted(p.name for p in Path(site[0]).iterdir() if not p.name.endswith('-info')) \
+        == ['i3dmgx2_driver'], 'only the driver is installed: harness/ is for tests and benchmarks'
 
 
 def test_share_directory_found_through_ament_index(prefix):

@@ -25,11 +25,11 @@ sample times.
 import itertools
 import math
 
+from harness.processes import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import numpy as np
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu, MagneticField
 

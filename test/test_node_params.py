@@ -23,9 +23,9 @@ remapping, QoS).
 import itertools
 import os
 
+from harness.processes import isolate_ros_domain, Listener, NodeProcess, REPO
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess, REPO
 from sensor_msgs.msg import Imu
 
 pytestmark = pytest.mark.slow

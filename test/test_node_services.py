@@ -25,13 +25,13 @@ import re
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from harness.processes import isolate_ros_domain, Listener, NodeProcess
 from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 from i3dmgx2_driver.simulator.motion import MotionConfig
 import pytest
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
-from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 

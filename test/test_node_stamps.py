@@ -29,12 +29,12 @@ time status on /diagnostics must show the reset.
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from harness.processes import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
 from harness.stamp_runs import check_series
 from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
 from sensor_msgs.msg import Imu
 from test_node_messages import match, stream_truth
 

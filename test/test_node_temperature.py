@@ -21,10 +21,10 @@ imu/temperature only, never as IMU messages, without a gap in the stream.
 """
 
 from diagnostic_msgs.msg import DiagnosticArray
+from harness.processes import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
 from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess, stamp_seconds
 from sensor_msgs.msg import Imu, Temperature
 
 pytestmark = pytest.mark.slow

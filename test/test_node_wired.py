@@ -19,11 +19,11 @@ The wired sensor takes raw commands and answers wired records; the node must
 stream from it and publish every record, exactly, without a base station.
 """
 
+from harness.processes import isolate_ros_domain, Listener, NodeProcess
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess
 from sensor_msgs.msg import Imu
 
 pytestmark = pytest.mark.slow

@@ -28,10 +28,10 @@ import subprocess
 import sys
 import threading
 
+from harness.processes import isolate_ros_domain, Listener, NodeProcess, REPO, ros_env
 from i3dmgx2_driver.device.realtime import apply_to_current_thread, PolicyOutcome, ThreadPolicy
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
-from ros_harness import isolate_ros_domain, Listener, NodeProcess, REPO, ros_env
 from sensor_msgs.msg import Imu
 
 

@@ -25,8 +25,8 @@ even when nothing wakes the executor. Real rclpy, in a process of its own.
 import subprocess
 import sys
 
+from harness.processes import isolate_ros_domain, REPO, ros_env
 import pytest
-from ros_harness import isolate_ros_domain, REPO, ros_env
 
 pytestmark = pytest.mark.slow
 

@@ -15,7 +15,7 @@
 """
 The soak and fault campaign of benchmarks/soak.py, short: about 40 s in CI.
 
-Same code (benchmarks/campaign.py), same checks: the real node process on a
+Same code (harness/campaign.py), same checks: the real node process on a
 simulated base station that injects every fault at random, a real rclpy
 subscriber, every message matched to the ground truth, counters reconciled.
 Shorter, slower (200 Hz) and with faults closer together than the ten-minute
@@ -24,7 +24,7 @@ run. The analysis itself is checked first, on synthetic runs with known bugs.
 
 import struct
 
-from benchmarks.campaign import analyse, CampaignConfig, imu_key, run_campaign, RunData, Sent
+from harness.campaign import analyse, CampaignConfig, imu_key, run_campaign, RunData, Sent
 import pytest
 
 

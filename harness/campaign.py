@@ -15,7 +15,7 @@
 """
 The soak and fault campaign: the real node against a simulator that misbehaves.
 
-The node runs as its own process (``benchmarks/instrumented_node.py``: the
+The node runs as its own process (``harness/instrumented_node.py``: the
 real node, with its counters written to a file) on a simulated base station
 whose faults change at random all through the run: line noise (garbage, with
 and without 0xAA bytes), corrupted checksums and lengths, packets from a
@@ -39,7 +39,6 @@ import itertools
 import json
 import math
 import os
-from pathlib import Path
 import random
 import shutil
 import statistics
@@ -50,6 +49,8 @@ import threading
 import time
 from typing import Any, NamedTuple
 
+from harness.instrumented_node import STATS_ENV
+from harness.processes import isolate_ros_domain, Listener, NodeProcess, ros_env
 from i3dmgx2_driver.codec.commands import decode_record
 from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.framing import HEADER_SIZE
@@ -60,14 +61,7 @@ from i3dmgx2_driver.ros.conversions import STANDARD_GRAVITY
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 from sensor_msgs.msg import Imu
 
-REPO = Path(__file__).resolve().parents[1]
-if str(REPO / 'test') not in sys.path:
-    sys.path.insert(0, str(REPO / 'test'))
-
-import ros_harness  # noqa: E402, I100 - the tests' node and listener helpers, from test/
-
-STATS_ENV = 'I3DMGX2_SOAK_STATS'
-NODE_COMMAND = (sys.executable, '-m', 'benchmarks.instrumented_node')
+NODE_COMMAND = (sys.executable, '-m', 'harness.instrumented_node')
 _KEY = struct.Struct('<6d')
 _QUAT = struct.Struct('<4d')
 _MARKS = (0xAA, 0x21)
@@ -177,8 +171,8 @@ def compact(entry) -> Sent:
                 len(entry.packet))
 
 
-class Subscriber(ros_harness.Listener):
-    """The tests' rclpy listener, keeping each Imu message's values, stamp and orientation."""
+class Subscriber(Listener):
+    """The harness's rclpy listener, keeping each Imu message's values, stamp and orientation."""
 
     def __init__(self, depth: int = 10000) -> None:
         self.rows: list[tuple[bytes, int, bytes, float]] = []
@@ -431,7 +425,7 @@ class RunData:
 def run_campaign(cfg: CampaignConfig) -> 'CampaignResult':
     """Run the whole campaign; return its checks and report."""
     log = cfg.log or (lambda text: None)
-    ros_harness.isolate_ros_domain()
+    isolate_ros_domain()
     workdir = tempfile.mkdtemp(prefix='i3dmgx2-soak-')
     stats_path = os.path.join(workdir, 'node_stats.json')
     duration = cfg.minutes * 60.0
@@ -449,8 +443,7 @@ def run_campaign(cfg: CampaignConfig) -> 'CampaignResult':
     params = {'port': sim.port, 'address': cfg.address, 'read_timeout': cfg.read_timeout,
               'reconnect_interval': cfg.reconnect_interval, 'qos_depth': 1000,
               'qos_reliability': 'reliable', 'temperature_period': cfg.temperature_period}
-    node = ros_harness.NodeProcess(params, command=NODE_COMMAND,
-                                   env=ros_harness.ros_env({STATS_ENV: stats_path}))
+    node = NodeProcess(params, command=NODE_COMMAND, env=ros_env({STATS_ENV: stats_path}))
     rss: list[tuple[float, int]] = []
     driver = FaultDriver(sim, cfg, random.Random(cfg.seed * 7919 + 1))
     try:
@@ -608,13 +601,6 @@ class Windows:
             if i < len(times) and times[i] <= t + width:
                 return True
         return False
-
-
-def _percentile(values: list[float], q: float) -> float:
-    if not values:
-        return math.nan
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * (len(ordered) - 1) + 0.5))]
 
 
 def expected_gaps(published: list[Sent], windows: Windows, divider: int,

@@ -13,15 +13,26 @@
 # limitations under the License.
 
 """
-Test harness for the node: run it as a real process, subscribe with rclpy.
+The processes a run starts, and the rclpy ends that talk to them.
 
-Every test session gets its own ROS domain and stays on localhost, so tests
-never see another run's messages. Nothing here mocks ROS: the node process
-publishes through Fast DDS and the test process subscribes through it.
+The node runs as the real executable (:class:`NodeProcess`: ``main``, the
+managed node, an instrumented node, an installed ``node``, or the node of
+another checkout for an A/B run), the simulated device in a process of its
+own (:class:`SimProcess`, ``harness/sim_process.py``: its ground truth read
+back when it stops), and a subscriber either in another process
+(:class:`SubscriberProcess`, ``harness/subscriber.py``) or in this one
+(:class:`Listener`, with :class:`LifecycleClient` for a managed node).
+
+Every run gets its own ROS domain and stays on localhost
+(:func:`isolate_ros_domain`), so it never sees another run's messages.
+Nothing here mocks ROS: the node process publishes through Fast DDS and the
+subscriber receives through it.
 """
 
 from collections.abc import Callable, Sequence
+import json
 import os
+from pathlib import Path
 import random
 import signal
 import subprocess
@@ -29,7 +40,7 @@ import sys
 import tempfile
 import threading
 import time
-from typing import ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
@@ -38,12 +49,16 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+#: How ``NodeProcess`` starts the node from the source tree, as ``ros2 run`` does.
+NODE_COMMAND = (sys.executable, '-m', 'i3dmgx2_driver.ros.main')
 #: How ``NodeProcess`` starts the managed node from the source tree.
 LIFECYCLE_COMMAND = (sys.executable, '-m', 'i3dmgx2_driver.ros.lifecycle_node')
+#: Node address the simulator and the node agree on.
+ADDRESS = 95
 
 
 def ros_env(extra: dict[str, str] | None = None) -> dict[str, str]:
-    """Environment for a node process: this repo on PYTHONPATH, same domain."""
+    """Environment for a child process: this repo first on PYTHONPATH, same domain."""
     env = dict(os.environ)
     env['PYTHONPATH'] = REPO + (os.pathsep + env['PYTHONPATH'] if env.get('PYTHONPATH') else '')
     env['PYTHONUNBUFFERED'] = '1'
@@ -89,19 +104,40 @@ def wait_for_text(output: Callable[[], str], proc: subprocess.Popen, text: str,
     return text in output()
 
 
+def process_cpu_seconds(pid: int) -> float:
+    """User plus system CPU time (s) of a process and all its threads so far."""
+    with open(f'/proc/{pid}/stat') as handle:
+        fields = handle.read().rsplit(')', 1)[1].split()
+    # After the command name: state is field 3, utime 14 and stime 15 (1-based).
+    utime, stime = int(fields[11]), int(fields[12])
+    return (utime + stime) / os.sysconf('SC_CLK_TCK')
+
+
+# -- the node --------------------------------------------------------------------------------
+
 class NodeProcess:
-    """The driver node in its own process, with its output in a file."""
+    """
+    The driver node in its own process, with its output in a file.
+
+    ``command`` starts it (default :data:`NODE_COMMAND`); ``params`` become
+    its ``--ros-args -p``, then ``extra_args`` follow. ``tree`` runs the
+    node of another checkout (an A/B run): that tree first on PYTHONPATH,
+    and its working directory.
+    """
 
     def __init__(self, params: dict[str, object], extra_args: Sequence[str] = (),
                  command: Sequence[str] | None = None,
-                 env: dict[str, str] | None = None) -> None:
+                 env: dict[str, str] | None = None, tree: Path | None = None) -> None:
         self.log_file = tempfile.NamedTemporaryFile(  # noqa: SIM115 - closed in close()
             prefix='i3dmgx2-node-', suffix='.log', delete=False)
-        base = list(command) if command else [sys.executable, '-m', 'i3dmgx2_driver.ros.main']
+        base = list(command) if command else list(NODE_COMMAND)
         self.argv = base + param_args(params) + list(extra_args)
+        env = dict(env) if env else ros_env()
+        if tree is not None:
+            env['PYTHONPATH'] = os.pathsep.join((str(tree), env.get('PYTHONPATH', '')))
         self.proc = subprocess.Popen(
             self.argv, stdout=self.log_file, stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL, env=env or ros_env(), cwd=REPO)
+            stdin=subprocess.DEVNULL, env=env, cwd=str(tree or REPO))
 
     def output(self) -> str:
         """Everything the node printed so far."""
@@ -112,8 +148,12 @@ class NodeProcess:
         """Wait until ``text`` appears in the node's output."""
         return wait_for_text(self.output, self.proc, text, timeout)
 
+    def cpu_seconds(self) -> float:
+        """CPU time (user + system, all threads) the node used so far."""
+        return process_cpu_seconds(self.proc.pid)
+
     def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> tuple[int, float]:
-        """Send ``sig``; return the exit code and how long the exit took."""
+        """Send ``sig`` (SIGINT: as Ctrl-C); return the exit code and how long the exit took."""
         start = time.monotonic()
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
@@ -145,6 +185,166 @@ class NodeProcess:
         except OSError:
             pass
 
+
+# -- helper processes that save JSON: the simulator, a subscriber ----------------------------
+
+def stop_on_signal_or_eof() -> threading.Event:
+    """
+    Return an event set by SIGINT, SIGTERM or the end of standard input.
+
+    The helper processes stop on any of them, so a run that dies (and closes
+    their stdin) never leaves them running.
+    """
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+
+    def watch_stdin() -> None:
+        sys.stdin.read()
+        stop.set()
+
+    threading.Thread(target=watch_stdin, daemon=True).start()
+    return stop
+
+
+def spin_until(stop: threading.Event, executor: Any, node: Any, save: Any) -> None:
+    """Spin ``executor`` until ``stop`` is set; then ``save()`` and tear ROS down."""
+    try:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        save()
+        executor.shutdown(timeout_sec=0.5)
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+class ChildProcess:
+    """A helper process that prints a line when ready and saves JSON when stopped."""
+
+    #: The command-line option that names the JSON file the child writes.
+    out_flag = '--out'
+
+    def __init__(self, argv: list[str], ready_prefix: str, timeout: float = 20.0) -> None:
+        handle, self.out_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.json')
+        os.close(handle)
+        self.name = argv[2] if argv[1] == '-m' else Path(argv[1]).name
+        # Standard error goes to a file: a pipe nobody reads could fill and block the child.
+        handle, self._stderr_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.err')
+        try:
+            self.proc = subprocess.Popen(
+                [*argv, self.out_flag, self.out_path],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=handle,
+                text=True, env=ros_env(), cwd=REPO)
+        finally:
+            os.close(handle)
+        self.ready_line = self._wait_line(ready_prefix, timeout)
+        self._lines: list[str] = []
+        self._reader = threading.Thread(target=self._read_rest, daemon=True)
+        self._reader.start()
+
+    def _wait_line(self, prefix: str, timeout: float) -> str:
+        timer = threading.Timer(timeout, self.proc.kill)
+        timer.start()
+        try:
+            for line in self.proc.stdout:
+                if line.startswith(prefix):
+                    return line.strip()
+        finally:
+            timer.cancel()
+        raise RuntimeError(f'{self.name} did not start: {self.errors()}')
+
+    def errors(self) -> str:
+        """Return what the process wrote to standard error so far."""
+        with open(self._stderr_path, errors='replace') as handle:
+            return handle.read()
+
+    def _read_rest(self) -> None:
+        for line in self.proc.stdout:
+            self._lines.append(line.strip())
+
+    def signal(self, signum: int) -> None:
+        """Send a signal if the process still runs."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signum)
+
+    def stop(self, timeout: float = 15.0) -> Any:
+        """Stop the process; return the JSON it saved."""
+        self.signal(signal.SIGTERM)
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        try:
+            with open(self.out_path) as handle:
+                return json.load(handle)
+        except (OSError, ValueError) as exc:
+            raise RuntimeError(f'{self.name} saved nothing: {self.errors()}') from exc
+        finally:
+            os.unlink(self.out_path)
+            os.unlink(self._stderr_path)
+
+
+class TruthEntry(NamedTuple):
+    """One data packet the simulator produced."""
+
+    timer: int | None
+    sample_time: float
+    write_time: float | None
+    valid: bool
+    source: str
+
+
+class SimProcess(ChildProcess):
+    """The simulated device in its own process; ``truth`` after :meth:`stop`."""
+
+    out_flag = '--truth'
+
+    def __init__(self, **config: Any) -> None:
+        config.setdefault('address', ADDRESS)
+        config.setdefault('seed', 1)
+        super().__init__([sys.executable, '-m', 'harness.sim_process',
+                          '--config', json.dumps(config)], 'port: ')
+        self.port = self.ready_line.split(': ', 1)[1]
+        self.truth: list[TruthEntry] = []
+        self.stats: dict[str, int] = {}
+
+    def silence(self, timeout: float = 5.0) -> None:
+        """Stop the sensor's packets for good (the radio goes silent)."""
+        self.signal(signal.SIGUSR1)
+        deadline = time.monotonic() + timeout
+        while 'silent' not in self._lines and time.monotonic() < deadline:
+            time.sleep(0.01)
+
+    def stop(self, timeout: float = 15.0) -> dict:
+        """Stop the simulator; fill ``truth`` and ``stats``."""
+        document = super().stop(timeout)
+        self.truth = [TruthEntry(*row) for row in document['truth']]
+        self.stats = document['stats']
+        return document
+
+    def written_stream(self) -> list[TruthEntry]:
+        """Return the valid streamed packets that were written whole."""
+        return [e for e in self.truth
+                if e.source == 'stream' and e.valid and e.write_time is not None]
+
+
+class SubscriberProcess(ChildProcess):
+    """A subscriber to ``imu/raw_data`` in its own process."""
+
+    def __init__(self, topic: str = 'imu/raw_data') -> None:
+        super().__init__([sys.executable, '-m', 'harness.subscriber',
+                          '--topic', topic], 'ready')
+        self.rows: list[tuple[int, int, float]] = []
+
+    def stop(self, timeout: float = 15.0) -> list:
+        """Stop; return and keep the rows (stamp sec, stamp nanosec, receive time)."""
+        self.rows = [tuple(row) for row in super().stop(timeout)]
+        return self.rows
+
+
+# -- subscribers and clients in this process -------------------------------------------------
 
 class Listener:
     """An rclpy node in the test process that records what it receives."""

@@ -25,7 +25,7 @@ reader publishes every record from then on), which tell the campaign when
 the node could read the port (records written outside those windows may be
 lost legitimately). Nothing on the path of a sample is changed.
 
-Usage: ``I3DMGX2_SOAK_STATS=out.json python -m benchmarks.instrumented_node
+Usage: ``I3DMGX2_SOAK_STATS=out.json python -m harness.instrumented_node
 --ros-args -p port:=... -p address:=...``.
 """
 

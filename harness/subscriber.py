@@ -20,6 +20,9 @@ dropped on its side), and notes the wall-clock time at the start of each
 callback with the message's stamp. Prints ``ready`` once subscribed and, on
 SIGTERM, SIGINT or end of standard input, writes the rows
 ``[stamp_sec, stamp_nanosec, receive_time]`` as JSON and exits.
+
+Usage: ``python -m harness.subscriber --out ROWS.json``; started by
+``harness.processes.SubscriberProcess``.
 """
 
 import argparse
@@ -27,7 +30,7 @@ import json
 import sys
 import time
 
-from bench_common import spin_until, stop_on_signal_or_eof
+from harness.processes import spin_until, stop_on_signal_or_eof
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy

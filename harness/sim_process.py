@@ -15,7 +15,7 @@
 """
 The simulated device in a process of its own, with its ground truth saved at the end.
 
-The benchmarks run the simulator apart from the node, as a real device is: the
+Benchmarks run the simulator apart from the node, as a real device is: the
 two then never compete for one interpreter lock, and what is measured is the
 node's own delay. Prints ``port: PATH`` once the pty exists. SIGUSR1 silences
 the radio for good (no more packets: the node can drain what was written, so
@@ -23,26 +23,22 @@ that every written packet can be accounted for). On SIGTERM, SIGINT or end of
 standard input it stops and writes, as JSON, every data packet it produced
 (timer, sample time, write time, valid, source) and its counters.
 
-Usage: ``sim_process.py --config '{"rate_hz": 1000}' --truth OUT.json``. The
-config keys are SimulatorConfig fields, plus ``faults`` (a dict of FaultConfig
-fields) and ``motion`` (a dict of MotionConfig fields).
+Usage: ``python -m harness.sim_process --config '{"rate_hz": 1000}' --truth
+OUT.json``; started by ``harness.processes.SimProcess``. The config keys are
+SimulatorConfig fields, plus ``faults`` (a dict of FaultConfig fields) and
+``motion`` (a dict of MotionConfig fields).
 """
 
 import argparse
 import json
-from pathlib import Path
 import signal
 import sys
 import threading
 from typing import Any
 
-REPO = Path(__file__).resolve().parents[1]
-
 
 def build_config(spec: dict) -> Any:
     """Turn a JSON dict into a SimulatorConfig."""
-    if str(REPO) not in sys.path:
-        sys.path.insert(0, str(REPO))
     from i3dmgx2_driver.simulator import FaultConfig, MotionConfig, SimulatorConfig
 
     spec = dict(spec)
