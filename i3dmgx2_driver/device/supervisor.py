@@ -60,6 +60,7 @@ import time
 from typing import Any
 
 from .dialogue import SensorDialogue
+from .hot_path import HotPathObserver
 from .identity import DeviceInfo
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .observer import Finding, LineObserver
@@ -87,15 +88,19 @@ class DeviceSupervisor:
     thread with every read's raw bytes and read time (a raw capture).
     ``on_fatal`` runs in the supervisor thread, once, when the port can
     never work (``fatal_error`` then holds the error); the supervisor has
-    stopped by then.
+    stopped by then. ``timings``, if given, is told every port open and
+    handed to every link, which tells it the read and the parse of each
+    sample (hot_path.py).
     """
 
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
                  log: Any = None, on_connect: Callable[[], None] | None = None,
                  port_factory: Callable[..., SerialPort] = SerialPort,
                  on_bytes: BytesCallback | None = None,
-                 on_fatal: Callable[[PortError], None] | None = None) -> None:
+                 on_fatal: Callable[[PortError], None] | None = None,
+                 timings: HotPathObserver | None = None) -> None:
         self.config = config
+        self._timings = timings
         self._on_fatal = on_fatal
         self._on_record = on_record
         self._on_bytes = on_bytes
@@ -384,6 +389,8 @@ class DeviceSupervisor:
     def _open(self) -> DeviceLink:
         cfg = self.config
         port = self._port_factory(cfg.port, cfg.baud, low_latency=cfg.low_latency)
+        if self._timings is not None:
+            self._timings.opened()
         if port.low_latency_state != self.low_latency_state:
             self.low_latency_state = port.low_latency_state
             self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
@@ -391,7 +398,7 @@ class DeviceSupervisor:
                                                  cfg.baud, self._on_finding)
         link = DeviceLink(port, cfg.address, self._on_record, wireless=cfg.wireless,
                           on_bytes=self._on_bytes, observer=observer, cancel=self._stop,
-                          thread_policy=cfg.thread_policy)
+                          thread_policy=cfg.thread_policy, timings=self._timings)
         with self._link_lock:
             if self._stop.is_set():
                 # Stopped while opening: the caller has released the link already.

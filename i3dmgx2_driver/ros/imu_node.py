@@ -28,16 +28,23 @@ from rclpy.node import Node
 from .diagnostics import DiagnosticsPublisher
 from .driver_core import DriverCore, load_config
 from .parameters import DriverConfig
+from ..device.hot_path import HotPathObserver
 from ..device.port import PortError
 
 
 class ImuDriverNode(Node):
-    """Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField."""
+    """
+    Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField.
 
-    def __init__(self, node_name: str = 'i3dmgx2_driver', **kwargs) -> None:
+    ``timings``, if given, is told every stage of every sample's path
+    (device/hot_path.py): ``main.py`` passes one when asked to record them.
+    """
+
+    def __init__(self, node_name: str = 'i3dmgx2_driver',
+                 timings: HotPathObserver | None = None, **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         self.config: DriverConfig = load_config(self)
-        self.core = DriverCore(self, self.config)
+        self.core = DriverCore(self, self.config, timings=timings)
         self.diagnostics = DiagnosticsPublisher(self, lambda: self.core)
         self.core.supervisor.start()
 
