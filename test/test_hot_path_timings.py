@@ -169,11 +169,11 @@ def test_the_recorder_keeps_one_row_per_published_message(tmp_path):
         for timer in (7, 8):
             recorder.stamped()
             recorder.packed()
-            recorder.published(type('Record', (), {'timer': timer})(), 0.0)
+            recorder.published(type('Record', (), {'timer': timer})(), timer / 10)
     finally:
         recorder.save(str(tmp_path / 'timings.json'))
     assert recorder.opens == [0.0]
-    assert recorder.rows == [(7, 10.5, 1.0, 2.0, 3.0, 4.0, 0.5, 0.5),
-                             (8, 10.5, 1.0, 5.0, 6.0, 7.0, 0.5, 0.5)]
+    assert recorder.rows == [(7, 0.7, 10.5, 1.0, 2.0, 3.0, 4.0, 0.5, 0.5),
+                             (8, 0.8, 10.5, 1.0, 5.0, 6.0, 7.0, 0.5, 0.5)]
     saved = json.loads((tmp_path / 'timings.json').read_text())
     assert saved['rows'] == [list(row) for row in recorder.rows]

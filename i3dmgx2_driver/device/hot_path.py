@@ -68,7 +68,7 @@ class HotPathObserver(Protocol):
 
 
 #: The fields of :attr:`TimingsRecorder.rows`, in order.
-ROW_FIELDS = ('timer', 'read', 'parsed', 'stamped', 'packed', 'published',
+ROW_FIELDS = ('timer', 'stamp', 'read', 'parsed', 'stamped', 'packed', 'published',
               'cpu_read', 'cpu_published')
 
 
@@ -77,7 +77,7 @@ class TimingsRecorder:
     A :class:`HotPathObserver` that keeps every sample's stage times, for benchmarks.
 
     Each published Imu message adds one row (:data:`ROW_FIELDS`): the record's
-    timer, the system-clock time of its read, of its parse, stamp, pack and
+    timer and its message's stamp, the system-clock time of its read, of its parse, stamp, pack and
     ``publish()`` returned, and the reader thread's CPU time at the read and
     after the publish (their difference against the wall clock's is the time
     the thread did not run). It also notes every garbage collection, every
@@ -132,7 +132,8 @@ class TimingsRecorder:
         """Add the row of this message."""
         now = self._clock()
         m = self._marks
-        self.rows.append((record.timer, m[0], m[1], m[2], m[3], now, m[4], self._cpu_clock()))
+        self.rows.append((record.timer, stamp, m[0], m[1], m[2], m[3], now, m[4],
+                          self._cpu_clock()))
 
     # -- the rest ----------------------------------------------------------------------
 
