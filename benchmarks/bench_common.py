@@ -634,7 +634,7 @@ class NodeProcess:
             pass
 
 
-class TimedNodeProcess:
+class TimedNodeProcess(NodeProcess):
     """
     The driver process with its hot-path timings on (device/hot_path.py).
 
@@ -657,21 +657,18 @@ class TimedNodeProcess:
         handle, self.out_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.json')
         os.close(handle)
         handle, self.log_path = tempfile.mkstemp(prefix='i3dmgx2-bench-node-', suffix='.log')
-        env = child_env()
-        env[TIMINGS_ENV] = self.out_path
         try:
             self.proc = subprocess.Popen(
                 [*command, *ros_harness.param_args(params)], stdout=handle,
-                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env, cwd=str(REPO))
+                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                env={**child_env(), TIMINGS_ENV: self.out_path}, cwd=str(REPO))
         finally:
             os.close(handle)
         self.pid = self.proc.pid
-        if not ros_harness.wait_for_text(self.output, self.proc, 'start-up heap frozen', 30.0):
+        if not self.wait_for_output('start-up heap frozen', 30.0):
             output = self.output()
-            self.proc.kill()
-            self.proc.wait()
-            os.unlink(self.out_path)
-            os.unlink(self.log_path)
+            super().stop()
+            self._remove_files()
             raise RuntimeError(f'{script or "the node"} did not start: {output}')
         self.rows: list[tuple] = []
         self.collections: list[tuple[int, float, float]] = []
@@ -679,28 +676,20 @@ class TimedNodeProcess:
         self.opens: list[float] = []
         self.full_collection = math.nan
 
-    def output(self) -> str:
-        """Return what the process printed so far."""
-        with open(self.log_path, errors='replace') as handle:
-            return handle.read()
+    def _remove_files(self) -> None:
+        self.remove_log()
+        os.unlink(self.out_path)
 
     def stop(self, timeout: float = 15.0) -> dict:
         """Stop the process as Ctrl-C does; keep the timings it saved."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        super().stop(timeout)
         try:
             with open(self.out_path) as handle:
                 document = json.load(handle)
         except (OSError, ValueError) as exc:
             raise RuntimeError(f'no timings saved: {self.output()}') from exc
         finally:
-            os.unlink(self.out_path)
-            os.unlink(self.log_path)
+            self._remove_files()
         self.rows = [tuple(row) for row in document['rows']]
         self.collections = [tuple(event) for event in document['collections']]
         self.reader = document['reader']
