@@ -82,7 +82,7 @@ class _Calls:
         self.calls: list[str] = []
 
     def __getattr__(self, name: str):
-        if name not in (*STAGES, 'opened'):
+        if name not in (*STAGES, 'opened', 'connected'):
             raise AttributeError(name)
         return lambda *args: self.calls.append(name)
 
@@ -141,7 +141,9 @@ def test_the_node_records_ordered_stage_times_for_every_message(tmp_path):
     assert document['fields'] == list(ROW_FIELDS)
     rows = [dict(zip(ROW_FIELDS, row, strict=True)) for row in document['rows']]
     assert len(rows) >= 50, len(rows)
-    assert len(document['opens']) == 1 and document['opens'][0] <= rows[0]['read']
+    # One port open, then the link up, then the first record read.
+    assert len(document['opens']) == len(document['connections']) == 1
+    assert document['opens'][0] <= document['connections'][0] <= rows[0]['read']
     assert document['reader']['cpus']
     for row in rows:
         assert row['timer'] in written
@@ -164,6 +166,7 @@ def test_the_recorder_keeps_one_row_per_published_message(tmp_path):
     recorder = TimingsRecorder(clock=lambda: next(times), cpu_clock=lambda: 0.5)
     try:
         recorder.opened()
+        recorder.connected()
         recorder.read(88, 10.5)
         recorder.parsed()
         for timer in (7, 8):
@@ -172,8 +175,8 @@ def test_the_recorder_keeps_one_row_per_published_message(tmp_path):
             recorder.published(type('Record', (), {'timer': timer})(), timer / 10)
     finally:
         recorder.save(str(tmp_path / 'timings.json'))
-    assert recorder.opens == [0.0]
-    assert recorder.rows == [(7, 0.7, 10.5, 1.0, 2.0, 3.0, 4.0, 0.5, 0.5),
-                             (8, 0.8, 10.5, 1.0, 5.0, 6.0, 7.0, 0.5, 0.5)]
+    assert (recorder.opens, recorder.connections) == ([0.0], [1.0])
+    assert recorder.rows == [(7, 0.7, 10.5, 2.0, 3.0, 4.0, 5.0, 0.5, 0.5),
+                             (8, 0.8, 10.5, 2.0, 6.0, 7.0, 8.0, 0.5, 0.5)]
     saved = json.loads((tmp_path / 'timings.json').read_text())
     assert saved['rows'] == [list(row) for row in recorder.rows]

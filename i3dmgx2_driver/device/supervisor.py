@@ -89,8 +89,9 @@ class DeviceSupervisor:
     ``on_fatal`` runs in the supervisor thread, once, when the port can
     never work (``fatal_error`` then holds the error); the supervisor has
     stopped by then. ``timings``, if given, is told every port open and
-    handed to every link, which tells it the read and the parse of each
-    sample (hot_path.py).
+    every link up (right after ``on_connect``) and handed to every link,
+    which tells it the read and the parse of each sample (hot_path.py).
+    ``port_factory`` opens the port (SerialPort; a subclass to observe it).
     """
 
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
@@ -446,6 +447,8 @@ class DeviceSupervisor:
         """Let the consumer re-anchor before the first record of a new link reaches it."""
         if self._on_connect is not None:
             self._on_connect()
+        if self._timings is not None:
+            self._timings.connected()
 
     def _start_reader(self, link: DeviceLink) -> None:
         """Anchor the consumer, start the reader thread, log what its scheduling became."""

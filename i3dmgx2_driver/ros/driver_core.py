@@ -58,7 +58,7 @@ from ..codec import line_budget
 from ..codec.data_rate import ticks_per_cycle
 from ..codec.framing import DataPacket
 from ..device.hot_path import HotPathObserver
-from ..device.port import check_port_path, PortError
+from ..device.port import check_port_path, PortError, SerialPort
 from ..device.realtime import ThreadPolicy
 from ..device.sample_clock import ClockStatus, Restart, SampleClock
 from ..device.settings import DeviceConfig
@@ -153,12 +153,14 @@ class DriverCore:
     path that exists but is no serial port raises PortUnusable here, before
     anything is made. ``timings``, if given, is told every stage boundary
     of every sample's path (device/hot_path.py); None costs nothing.
+    ``port_factory`` opens the port (SerialPort; a subclass to observe it).
     """
 
     def __init__(self, node: Node, config: DriverConfig,
                  publishers: Publishers | None = None, publishing: bool = True,
                  refusal: Callable[[], str] | None = None,
-                 timings: HotPathObserver | None = None) -> None:
+                 timings: HotPathObserver | None = None,
+                 port_factory: Callable[..., SerialPort] = SerialPort) -> None:
         check_port_path(config.port)
         self.node = node
         self.config = cfg = config
@@ -210,7 +212,7 @@ class DriverCore:
             self.device_config,
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
-            on_fatal=self._on_fatal, timings=timings)
+            on_fatal=self._on_fatal, timings=timings, port_factory=port_factory)
         self.device_services = DeviceServices(
             node, self.supervisor, self._published, self.forget_last_sample,
             capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal)
