@@ -31,11 +31,13 @@ Benchmarks print numbers; they never fail on speed.
 """
 
 from collections.abc import Callable
+import json
 import math
 import os
 from pathlib import Path
 import platform
 import sys
+import tempfile
 import threading
 import time
 from typing import Any, NamedTuple
@@ -47,7 +49,7 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from harness.processes import (  # noqa: E402 - the repository is on the path from here on
-    ADDRESS, ChildProcess, param_args, TruthEntry,
+    ADDRESS, ChildProcess, NodeProcess, ros_env, TruthEntry,
 )
 from i3dmgx2_driver.codec import layouts, line_budget  # noqa: E402
 #: Highest rate of 0xCC packets (88 bytes through the base station) a 115200-baud line
@@ -357,43 +359,57 @@ def standard_args(description: str, default_seconds: float, quick_seconds: float
     return args
 
 
-class TimedNodeProcess(ChildProcess):
+class TimedNodeProcess(NodeProcess):
     """
-    The real driver process, timed from inside (``latency_node.py``).
+    The driver process with its hot-path timings on (device/hot_path.py).
 
-    ``params`` are the node's ROS parameters; ``flags`` go to latency_node.py
-    (``--stages``, ``--no-gc-freeze``, ...), or to another ``script`` that
-    saves the same document (``publish_floor.py``). After :meth:`stop`, ``rows`` holds
-    one tuple per Imu message: (timer, read time, publish() returned, stage
-    marks...), ``gc`` every collection (generation, start, duration), and
-    ``threads`` each thread's scheduling policy, priority and CPUs, ``opens``
-    the time of every open of the port, ``full_collection`` how long a full
-    garbage collection took at the end (s).
+    The node as ``ros2 run`` starts it, or another ``script`` that records
+    the same timings (``floor_node.py``), told by ``I3DMGX2_TIMINGS`` where
+    to write them; ``params`` are its ROS parameters. Returns once it has
+    frozen its start-up heap. After :meth:`stop`, ``rows`` holds one tuple
+    per Imu message (hot_path.ROW_FIELDS), ``collections`` every garbage
+    collection (generation, start, duration), ``reader`` the reader thread's
+    scheduling policy, priority and CPUs, ``opens`` the time of every open of
+    the port, ``full_collection`` how long a full collection took at the end (s).
     """
 
-    def __init__(self, port: str, flags: tuple[str, ...] = (),
-                 script: str = 'latency_node.py', **params: Any) -> None:
+    def __init__(self, port: str, script: str = '', **params: Any) -> None:
+        from i3dmgx2_driver.device.hot_path import TIMINGS_ENV
+
         params = {'port': port, 'address': ADDRESS, **params}
-        argv = [sys.executable, str(BENCH_DIR / script), *flags,
-                *param_args(params)]
-        super().__init__(argv, 'ready', timeout=30.0)
+        command = [sys.executable, str(BENCH_DIR / script)] if script else None
+        handle, self.out_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.json')
+        os.close(handle)
+        super().__init__(params, command=command,
+                         env={**ros_env(), TIMINGS_ENV: self.out_path})
         self.pid = self.proc.pid
+        if not self.wait_for_output('start-up heap frozen', 30.0):
+            output = self.output()
+            self.close()
+            os.unlink(self.out_path)
+            raise RuntimeError(f'{script or "the node"} did not start: {output}')
         self.rows: list[tuple] = []
-        self.gc: list[tuple[int, float, float]] = []
-        self.threads: dict[str, dict] = {}
-        self.gc_frozen = 0
+        self.collections: list[tuple[int, float, float]] = []
+        self.reader: dict[str, Any] = {}
         self.opens: list[float] = []
         self.full_collection = math.nan
 
     def stop(self, timeout: float = 15.0) -> dict:
-        """Stop the node as SIGTERM stops it; keep what it saved."""
-        document = super().stop(timeout)
-        self.opens = document['opens']
-        self.full_collection = document.get('full_collection', math.nan)
+        """Stop the process as Ctrl-C does; keep the timings it saved."""
+        super().stop(timeout=timeout)
+        try:
+            with open(self.out_path) as handle:
+                document = json.load(handle)
+        except (OSError, ValueError) as exc:
+            raise RuntimeError(f'no timings saved: {self.output()}') from exc
+        finally:
+            self.close()
+            os.unlink(self.out_path)
         self.rows = [tuple(row) for row in document['rows']]
-        self.gc = [tuple(event) for event in document['gc']]
-        self.threads = document['threads']
-        self.gc_frozen = document['gc_frozen']
+        self.collections = [tuple(event) for event in document['collections']]
+        self.reader = document['reader']
+        self.opens = document['opens']
+        self.full_collection = document['full_collection']
         return document
 
 

@@ -13,126 +13,306 @@
 # limitations under the License.
 
 """
-Latency: last byte of a packet written to the port, to the message published.
+Latency: where the time from a packet's last byte to a subscriber goes.
 
-The simulated device (its own process) notes ``time.time()`` right after it
-wrote each packet's last byte to the pseudo-terminal. The node runs in this
-process and the time right after ``publish()`` returned is taken for every
-Imu message; a subscriber in a third process notes when its callback starts.
-Matched by the record's timer (and the message stamp), the differences are
-the driver's own delay (read, parse, stamp, fill, publish) and the delay to a
-subscriber in another process (that adds DDS and the subscriber's executor).
+Every run starts three processes: the simulated device (``sim_process.py``),
+a subscriber (``subscriber.py``) and the real driver process with its
+hot-path timings on (``I3DMGX2_TIMINGS``, device/hot_path.py: the package
+reports its own stage times, nothing of it is replaced). The figures:
 
-Runs at 100 Hz (the factory rate) and at the most a 115200-baud line carries
-(~131 Hz of 88-byte packets). Targets (issue #12), about the driver itself:
-its share (read() returned -> publish() returned) p99 <= 0.1 ms and max <=
-0.5 ms at 100 Hz, and write -> publish() p99 <= 1.5 x the kernel's own p99
-(write -> read() returned) in the same run. The original C++ node: 0.99 ms
-mean, 1.16 ms max. ``latency_levers.py`` measures the driver as its own
-process, stage by stage and with each latency lever.
+- end to end: the simulator's ``time.time()`` right after it wrote a
+  packet's last byte, to right after ``publish()`` returned in the node;
+- kernel: that write to the driver's ``read()`` returned (pty wake-up);
+- driver (its share): ``read()`` returned to ``publish()`` returned, and
+  its stages (parsed, stamped, packed, published; the time off the CPU);
+- subscriber: the write to the callback of a subscriber in another process;
+- the node's CPU (% of one core), its garbage collections in the window.
+
+Configurations are arguments, measured interleaved: every round runs each
+once, in an order that changes from round to round, so that the machine's
+other load falls on all of them alike; the figures pool every round and
+the ratios set side by side come from the same run. ``floor`` is
+``floor_node.py``, a process that only reads the port and publishes fixed
+bytes: what no rclpy driver goes below on this machine.
+
+Targets (issue #12), about the driver at 100 Hz: its share p99 <= 0.1 ms and
+max <= 0.5 ms; end to end p99 <= 1.5 x the kernel's own p99 in the same run.
+The original C++ node: 0.99 ms mean, 1.16 ms max.
+
+    python benchmarks/latency.py --configs default,fifo,floor,floor-fifo --rounds 4
+    python benchmarks/latency.py --configs default,floor --rate line-max --rounds 2
 """
 
+import argparse
+import gc
+import os
+import random
+import sys
 import time
+from typing import Any, NamedTuple
 
 from bench_common import (
-    InProcessNode, LINE_MAX_RATE_HZ, report, Result, stage_latencies, standard_args,
-    subscriber_latencies, write_latencies,
+    emit, LINE_MAX_RATE_HZ, machine_table, Result, RunNote, stamp_key, TimedNodeProcess,
+    written_times,
 )
-from harness.percentiles import summarise
-from harness.processes import isolate_ros_domain, SimProcess, SubscriberProcess
+from harness.percentiles import percentile, summarise, Summary
+from harness.processes import (
+    isolate_ros_domain, process_cpu_seconds, SimProcess, SubscriberProcess,
+)
 
-#: The driver's share (read() returned -> publish() returned) at 100 Hz: p99 and max (s).
+from i3dmgx2_driver.device.hot_path import ROW_FIELDS
+from i3dmgx2_driver.ros.conversions import stamp_parts
+
+#: Seconds of streaming left out at the start (start-up, DDS discovery).
+WARM_UP_S = 3.0
+#: The driver's share at 100 Hz: p99 and max (s); end to end p99 over the kernel's p99.
 TARGET_DRIVER_P99_S = 0.1e-3
 TARGET_DRIVER_MAX_S = 0.5e-3
-#: Write -> publish() returned, p99, at most this many times the kernel's own p99.
 TARGET_KERNEL_RATIO = 1.5
-#: Seconds of streaming left out at the start (start-up, DDS discovery).
-WARM_UP_S = 2.0
 
 
-class LatencyRun:
-    """One measured run: the latencies to publish() and to a remote subscriber."""
+class Config(NamedTuple):
+    """One configuration: which process, its parameters, whether anyone subscribes."""
 
-    def __init__(self, rate_hz: float, seconds: float, node_params: dict | None = None,
-                 load: object = None, subscribe: bool = True) -> None:
-        self.rate_hz = rate_hz
-        sim = SimProcess(rate_hz=rate_hz)
-        subscriber = SubscriberProcess() if subscribe else None
-        node = None
-        try:
-            node = InProcessNode(sim.port, **(node_params or {}))
-            if not node.wait_published(1, timeout=20.0):
-                raise RuntimeError('the node published nothing within 20 s')
-            time.sleep(WARM_UP_S)
-            if load is not None:
-                load.start()
-            first = len(node.published)
-            time.sleep(seconds)
-            measured = node.published[first:]
-            if load is not None:
-                load.stop()
-            sim.silence()
-            node.wait_quiet()
-        finally:
-            if node is not None:
-                node.close()
-            rows = subscriber.stop() if subscriber is not None else []
-            sim.stop()
-        self.published = measured
-        self.to_publish = summarise(write_latencies(sim.truth, measured))
-        to_read, in_driver = stage_latencies(sim.truth, measured)
-        self.to_read = summarise(to_read)
-        self.in_driver = summarise(in_driver)
-        self.to_subscriber = summarise(subscriber_latencies(sim.truth, measured, rows))
-        self.sim_stats = sim.stats
+    description: str
+    script: str = ''
+    params: tuple[tuple[str, Any], ...] = ()
+    subscribed: bool = True
 
 
-def run(seconds: float) -> list[Result]:
-    """Measure at 100 Hz and at the line's maximum rate; return the table rows."""
-    isolate_ros_domain()
-    results = []
-    line_max = f'{LINE_MAX_RATE_HZ:.0f} Hz (line max)'
-    for label, rate in (('100 Hz', 100.0), (line_max, LINE_MAX_RATE_HZ)):
-        measured = LatencyRun(rate, seconds)
-        pub = measured.to_publish
-        ratio = pub.p99 / measured.to_read.p99
-        results.append(Result(
-            f'latency write -> publish() returned, {label}: p50 / p99 / max',
-            f'{pub.ms()}; p99 {ratio:.2f} x the kernel p99',
-            f'p99 <= {TARGET_KERNEL_RATIO:g} x kernel p99', ratio <= TARGET_KERNEL_RATIO))
-        results.append(Result(
-            f'latency write -> publish() returned, {label}: mean', f'{pub.mean * 1e3:.3f} ms'))
-        results.append(Result(
-            f'  of which write -> read() returned (kernel pty, wake-up), {label}',
-            measured.to_read.ms()))
-        driver = measured.in_driver
-        results.append(Result(
-            f'  of which read() returned -> publish() returned (driver), {label}',
-            driver.ms(), 'p99 <= 0.100 ms, max <= 0.500 ms' if rate == 100.0 else '',
-            driver.p99 <= TARGET_DRIVER_P99_S and driver.max_ <= TARGET_DRIVER_MAX_S
-            if rate == 100.0 else None))
-        sub = measured.to_subscriber
-        results.append(Result(
-            f'latency write -> subscriber callback (other process), {label}: p50 / p99 / max',
-            sub.ms()))
-    alone = LatencyRun(100.0, seconds, subscribe=False)
-    results.append(Result(
-        'latency write -> publish() returned, 100 Hz, nobody subscribed: p50 / p99 / max',
-        alone.to_publish.ms()))
+CONFIGS = {
+    'default': Config('the driver as shipped'),
+    'fifo': Config('reader thread SCHED_FIFO 50', params=(('realtime_priority', 50),)),
+    'unsubscribed': Config('the driver as shipped, nobody subscribed', subscribed=False),
+    'floor': Config('a process that only reads and publishes fixed bytes',
+                    script='floor_node.py'),
+    'floor-fifo': Config('floor, SCHED_FIFO 50', script='floor_node.py',
+                         params=(('realtime_priority', 50),)),
+}
+_F = {name: i for i, name in enumerate(ROW_FIELDS)}
+#: The driver's stages: name, the row's field it starts at and the field it ends at.
+STAGES = (('read returned -> parsed (capture hook, parser, checksum, record)', 'read', 'parsed'),
+          ('parsed -> stamped (dispatch, lock, timer unwrap, sample clock)', 'parsed', 'stamped'),
+          ('stamped -> packed (orientation, CDR bytes)', 'stamped', 'packed'),
+          ('packed -> publish() returned (rclpy, DDS)', 'packed', 'published'))
+OFF_CPU = ('of read returned -> publish() returned: the reader thread not running '
+           '(preempted, waiting for the interpreter lock or a lock)')
+
+
+class RunResult(NamedTuple):
+    """One configuration's run: latencies (s), stages, CPU and collections."""
+
+    end_to_end: list[float]
+    kernel: list[float]
+    driver: list[float]
+    subscriber: list[float]
+    stages: dict[str, list[float]]
+    cpu_percent: float
+    collections: list[tuple]
+    reader: dict[str, Any]
+    full_collection: float
+
+
+def run_once(config: Config, seconds: float, rate_hz: float) -> RunResult:
+    """Run one configuration for ``seconds`` after the warm-up; return its figures."""
+    floor = bool(config.script)
+    sim = SimProcess(rate_hz=rate_hz, streaming_at_start=floor)
+    subscriber = SubscriberProcess() if config.subscribed else None
+    node = None
+    try:
+        node = TimedNodeProcess(sim.port, config.script, **dict(config.params))
+        time.sleep(WARM_UP_S)
+        t0, cpu0 = time.time(), process_cpu_seconds(node.pid)
+        time.sleep(seconds)
+        t1, cpu1 = time.time(), process_cpu_seconds(node.pid)
+        sim.silence()
+        time.sleep(0.3)
+    finally:
+        if node is not None:
+            node.stop()
+        received = subscriber.stop() if subscriber is not None else []
+        sim.stop()
+    written = written_times(sim.truth)
+    published, timer, read = _F['published'], _F['timer'], _F['read']
+    rows = [r for r in node.rows if t0 <= r[published] <= t1 and r[timer] in written]
+    end_to_end = [r[published] - written[r[timer]] for r in rows]
+    kernel = [r[read] - written[r[timer]] for r in rows]
+    driver = [r[published] - r[read] for r in rows]
+    stages: dict[str, list[float]] = {}
+    if not floor:
+        for label, start, end in STAGES:
+            stages[label] = [r[_F[end]] - r[_F[start]] for r in rows]
+        stages[OFF_CPU] = [(r[published] - r[read])
+                           - (r[_F['cpu_published']] - r[_F['cpu_read']]) for r in rows]
+    # The floor publishes one fixed stamp: only the driver's messages can be matched.
+    to_subscriber = []
+    if not floor:
+        timer_of = {stamp_key(*stamp_parts(r[_F['stamp']])): r[timer] for r in rows}
+        for sec, nanosec, when in received:
+            matched = timer_of.get(stamp_key(sec, nanosec))
+            if matched is not None:
+                to_subscriber.append(when - written[matched])
+    collections = [e for e in node.collections if t0 <= e[1] <= t1]
+    return RunResult(end_to_end, kernel, driver, to_subscriber, stages,
+                     100.0 * (cpu1 - cpu0) / (t1 - t0), collections, node.reader,
+                     node.full_collection)
+
+
+def _ms(summary: Summary) -> str:
+    if not summary.n:
+        return '-'
+    return f'{summary.p50 * 1e3:.3f} / {summary.p99 * 1e3:.3f} / {summary.max_ * 1e3:.3f}'
+
+
+def _reader_policy(reader: dict[str, Any]) -> str:
+    if not reader:
+        return '?'
+    names = {os.SCHED_OTHER: 'OTHER', os.SCHED_FIFO: 'FIFO'}
+    policy = names.get(reader['policy'], str(reader['policy']))
+    return f'{policy} {reader["priority"]}, CPUs {",".join(map(str, reader["cpus"]))}'
+
+
+def _pooled(runs: list[RunResult], field: str) -> Summary:
+    return summarise([v for r in runs for v in getattr(r, field)])
+
+
+def tables(results: dict[str, list[RunResult]], rate_hz: float) -> list[str]:
+    """Return the Markdown lines: configurations, ratios, stages and targets."""
+    floor_p99 = {name: _pooled(runs, 'driver').p99 for name, runs in results.items()
+                 if CONFIGS[name].script}
+    lines = ['| configuration | end to end p50 / p99 / max (ms) | kernel p50 / p99 / max | '
+             'driver p50 / p99 / max | driver p99 per round | to a subscriber p50 / p99 / max | '
+             'e2e p99 / kernel p99 | driver p99 / floor driver p99 | CPU % | '
+             'collections: gen 0/1/2 (longest ms) | a full collection (ms) | reader thread |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|']
+    for name, runs in results.items():
+        e2e, kernel, driver = (_pooled(runs, f) for f in ('end_to_end', 'kernel', 'driver'))
+        per_round = ' '.join(f'{percentile(r.driver, 99) * 1e3:.3f}' for r in runs)
+        floors = ' · '.join(f'{driver.p99 / p99:.2f} ({floor})' for floor, p99 in
+                            floor_p99.items() if floor != name) or '-'
+        collections = [e for r in runs for e in r.collections]
+        longest = max((e[2] for e in collections), default=0.0)
+        by_generation = '/'.join(str(sum(1 for e in collections if e[0] == g)) for g in range(3))
+        full = sorted(r.full_collection for r in runs)[len(runs) // 2]
+        lines.append(
+            f'| {name}: {CONFIGS[name].description} | {_ms(e2e)} | {_ms(kernel)} | '
+            f'{_ms(driver)} | {per_round} | {_ms(_pooled(runs, "subscriber"))} | '
+            f'{e2e.p99 / kernel.p99:.2f} | {floors} | '
+            f'{sum(r.cpu_percent for r in runs) / len(runs):.2f} | '
+            f'{by_generation} ({longest * 1e3:.2f}) | {full * 1e3:.2f} | '
+            f'{_reader_policy(runs[-1].reader)} |')
+    stage_rows = [(name, label, summarise([v for r in runs for v in r.stages[label]]))
+                  for name, runs in results.items() if runs[0].stages
+                  for label in (*(s[0] for s in STAGES), OFF_CPU)]
+    if stage_rows:
+        lines += ['', '| stage of one sample | p50 / p99 / max (ms) | mean (ms) |',
+                  '|---|---|---|']
+        lines += [f'| {name}: {label} | {_ms(s)} | {s.mean * 1e3:.4f} |'
+                  for name, label, s in stage_rows]
+    lines += ['', f'Targets (issue #12, at 100 Hz; this run at {rate_hz:.1f} Hz):']
+    for name, runs in results.items():
+        if CONFIGS[name].script:
+            continue
+        driver, e2e, kernel = (_pooled(runs, f) for f in ('driver', 'end_to_end', 'kernel'))
+        share_met = driver.p99 <= TARGET_DRIVER_P99_S and driver.max_ <= TARGET_DRIVER_MAX_S
+        ratio = e2e.p99 / kernel.p99
+        lines.append(
+            f'- {name}: driver share p99 {driver.p99 * 1e3:.3f} ms, max '
+            f'{driver.max_ * 1e3:.3f} ms (target <= {TARGET_DRIVER_P99_S * 1e3:g} / '
+            f'{TARGET_DRIVER_MAX_S * 1e3:g} ms: {"met" if share_met else "not met"}); '
+            f'end to end p99 {ratio:.2f} x the kernel p99 (target <= {TARGET_KERNEL_RATIO:g}: '
+            f'{"met" if ratio <= TARGET_KERNEL_RATIO else "not met"})')
+    return lines
+
+
+def measure(configs: list[str], rounds: int, seconds: float, rate_hz: float,
+            seed: int = 1) -> dict[str, list[RunResult]]:
+    """Run every configuration once a round, in an order that changes; return the runs."""
+    order_rng = random.Random(seed)
+    results: dict[str, list[RunResult]] = {c: [] for c in configs}
+    for round_ in range(rounds):
+        order = list(configs)
+        order_rng.shuffle(order)
+        for name in order:
+            print(f'-- round {round_ + 1}/{rounds}: {name}', file=sys.stderr, flush=True)
+            result = run_once(CONFIGS[name], seconds, rate_hz)
+            results[name].append(result)
+            print(f'   driver p50/p99/max {_ms(summarise(result.driver))} ms, '
+                  f'end to end {_ms(summarise(result.end_to_end))} ms, '
+                  f'CPU {result.cpu_percent:.2f} %', file=sys.stderr, flush=True)
+            gc.collect()
     return results
 
 
-def main() -> None:
-    """Run from the command line."""
-    args = standard_args(__doc__.splitlines()[1], 30.0, 8.0)
-    results = run(args.seconds)
-    report('Latency', results,
-           [f'{args.seconds:g} s per rate after {WARM_UP_S:g} s of warm-up; simulated device, '
-            f'node and subscriber in three processes.',
-            'Original C++ node (thesis): 0.99 ms mean, 1.16 ms max.'],
-           None if args.no_output else 'latency.md',
-           other_load=args.other_load)
+def run(seconds: float) -> list[Result]:
+    """For run_all.py: the driver and the floor at 100 Hz, the driver at line max; the rows."""
+    isolate_ros_domain()
+    out = []
+    line_max = f'{LINE_MAX_RATE_HZ:.0f} Hz (line max)'
+    for label, rate, configs in (('100 Hz', 100.0, ['default', 'floor']),
+                                 (line_max, LINE_MAX_RATE_HZ, ['default'])):
+        results = measure(configs, 1, seconds, rate)
+        default = results['default']
+        e2e, kernel, driver, sub = (_pooled(default, f) for f in
+                                    ('end_to_end', 'kernel', 'driver', 'subscriber'))
+        ratio = e2e.p99 / kernel.p99
+        out.append(Result(
+            f'latency write -> publish() returned, {label}: p50 / p99 / max', e2e.ms()
+            + f'; mean {e2e.mean * 1e3:.3f} ms; p99 {ratio:.2f} x the kernel p99',
+            f'p99 <= {TARGET_KERNEL_RATIO:g} x kernel p99', ratio <= TARGET_KERNEL_RATIO))
+        out.append(Result(
+            f'  of which write -> read() returned (kernel pty, wake-up), {label}', kernel.ms()))
+        at_100 = rate == 100.0
+        out.append(Result(
+            f'  of which read() returned -> publish() returned (driver), {label}', driver.ms(),
+            'p99 <= 0.100 ms, max <= 0.500 ms' if at_100 else '',
+            driver.p99 <= TARGET_DRIVER_P99_S and driver.max_ <= TARGET_DRIVER_MAX_S
+            if at_100 else None))
+        if 'floor' in results:
+            floor = _pooled(results['floor'], 'driver')
+            out.append(Result(
+                f'  the floor (read and publish fixed bytes): read() -> publish(), {label}',
+                f'{floor.ms()}; driver p99 {driver.p99 / floor.p99:.2f} x the floor p99'))
+        out.append(Result(
+            f'latency write -> subscriber callback (other process), {label}: p50 / p99 / max',
+            sub.ms()))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the rounds; print and save the tables."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--configs', default='default,fifo,floor,floor-fifo',
+                        help=f'comma-separated, of: {", ".join(CONFIGS)}')
+    parser.add_argument('--rounds', type=int, default=4)
+    parser.add_argument('--seconds', type=float, default=20.0, help='measured s per run')
+    parser.add_argument('--rate', default='100',
+                        help='data rate (Hz), or line-max: the most a 115200-baud line carries')
+    parser.add_argument('--quick', action='store_true',
+                        help='a smoke test: default and floor, one round of 8 s')
+    parser.add_argument('--seed', type=int, default=1, help='seed of the run order')
+    parser.add_argument('--output', default='latency.md')
+    parser.add_argument('--no-output', action='store_true',
+                        help='do not write benchmarks/output/')
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.configs, args.rounds, args.seconds = 'default,floor', 1, 8.0
+    configs = [c for c in args.configs.split(',') if c]
+    unknown = [c for c in configs if c not in CONFIGS]
+    if unknown:
+        parser.error(f'unknown configs: {", ".join(unknown)}')
+    rate_hz = LINE_MAX_RATE_HZ if args.rate == 'line-max' else float(args.rate)
+    isolate_ros_domain()
+    note = RunNote('latency.py', argv)
+    results = measure(configs, args.rounds, args.seconds, rate_hz, args.seed)
+    lines = [f'## Latency, {rate_hz:.1f} Hz', '', machine_table(), '',
+             *tables(results, rate_hz), '',
+             note.text(f'{args.rounds} rounds x {len(configs)} configurations, '
+                       f'{args.seconds:g} s measured per run after {WARM_UP_S:g} s; '),
+             '- Original C++ node (thesis): 0.99 ms mean, 1.16 ms max.']
+    emit('\n'.join(lines) + '\n', None if args.no_output else args.output)
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -15,21 +15,22 @@
 """
 The real driver node, with its counters written to a JSON file for the soak campaign.
 
-Runs ``i3dmgx2_driver.ros.main.main()`` unchanged, with two observers added
-from the outside: a ROS timer that writes the node's ``stats``, the parser
-counters summed over every connection (``supervisor.status().parser``) and the
-supervisor's counters to the file named by ``$I3DMGX2_SOAK_STATS`` twice a
-second and once more after shutdown; and a serial port that notes the time
-of every open, input flush and close, and the node's re-anchoring (its
-reader publishes every record from then on), which tell the campaign when
-the node could read the port (records written outside those windows may be
-lost legitimately). Nothing on the path of a sample is changed.
+Runs the driver node as ``ros2 run`` does (``i3dmgx2_driver.ros.main.run``),
+made with the node's own means to be observed, nothing of it replaced: a ROS
+timer that writes the node's ``stats``, the parser counters summed over every
+connection (``supervisor.status().parser``) and the supervisor's counters to the
+file named by ``$I3DMGX2_SOAK_STATS`` twice a second and once more after
+shutdown; a serial port (``port_factory``) that notes the time of every open,
+input flush and close; and a hot-path observer (``timings``) that notes every
+link up, when the node re-anchors (its reader publishes every record from then
+on). They tell the campaign when the node could read the port (records written
+outside those windows may be lost legitimately). Nothing on the path of a
+sample is changed.
 
 Usage: ``I3DMGX2_SOAK_STATS=out.json python -m harness.instrumented_node
 --ros-args -p port:=... -p address:=...``.
 """
 
-import functools
 import json
 import os
 import sys
@@ -37,8 +38,8 @@ import threading
 import time
 
 from i3dmgx2_driver.device.port import SerialPort
-from i3dmgx2_driver.ros import driver_core, imu_node
 from i3dmgx2_driver.ros import main as node_main
+from i3dmgx2_driver.ros.imu_node import ImuDriverNode
 
 #: Environment variable naming the JSON file the counters go to.
 STATS_ENV = 'I3DMGX2_SOAK_STATS'
@@ -75,7 +76,7 @@ class ObservedPort(SerialPort):
         super().close()
 
 
-def _snapshot(node: imu_node.ImuDriverNode, final: bool) -> dict:
+def _snapshot(node: ImuDriverNode, final: bool) -> dict:
     stats = node.core.stats
     device = node.core.supervisor.status()
     with _events_lock:
@@ -102,39 +103,50 @@ def _write(path: str, document: dict) -> None:
     os.replace(temporary, path)
 
 
-class ObservedCore(driver_core.DriverCore):
-    """The driver core, noting when it re-anchors: every record is published from then on."""
+class LinkEvents:
+    """A hot-path observer that notes every link up ('anchor'); it times nothing."""
 
-    def _on_connect(self) -> None:
-        super()._on_connect()
+    def opened(self) -> None:
+        """Leave the open to ObservedPort, which notes it."""
+
+    def connected(self) -> None:
+        """Note the re-anchoring: every record is published from now on."""
         _note('anchor')
 
+    def read(self, nbytes: int, read_time: float) -> None:
+        """Time nothing."""
 
-class ObservedNode(imu_node.ImuDriverNode):
-    """The driver node, writing its counters to a file as it runs."""
+    def parsed(self) -> None:
+        """Time nothing."""
 
-    def __init__(self, *args, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        self._stats_path = os.environ[STATS_ENV]
-        self.create_timer(DUMP_PERIOD, lambda: _write(self._stats_path,
-                                                      _snapshot(self, False)))
+    def stamped(self) -> None:
+        """Time nothing."""
 
-    def shutdown(self) -> None:
-        """Shut down as the node does, then write the final counters."""
-        super().shutdown()
-        _write(self._stats_path, _snapshot(self, True))
+    def packed(self) -> None:
+        """Time nothing."""
+
+    def published(self, record: object, stamp: float) -> None:
+        """Time nothing."""
 
 
 def main() -> int:
-    """Run the driver node with the observers in place."""
-    if not os.environ.get(STATS_ENV):
+    """Run the driver node, observed; write its counters as it runs and once at the end."""
+    path = os.environ.get(STATS_ENV)
+    if not path:
         print(f'{STATS_ENV} must name the file for the counters', file=sys.stderr)
         return 2
-    driver_core.DeviceSupervisor = functools.partial(driver_core.DeviceSupervisor,
-                                                     port_factory=ObservedPort)
-    imu_node.DriverCore = ObservedCore
-    node_main.ImuDriverNode = ObservedNode
-    return node_main.main()
+    made: list[ImuDriverNode] = []
+
+    def make_node() -> ImuDriverNode:
+        node = ImuDriverNode(timings=LinkEvents(), port_factory=ObservedPort)
+        node.create_timer(DUMP_PERIOD, lambda: _write(path, _snapshot(node, False)))
+        made.append(node)
+        return node
+
+    code = node_main.run(make_node)
+    if made:
+        _write(path, _snapshot(made[0], True))
+    return code
 
 
 if __name__ == '__main__':

@@ -31,6 +31,7 @@ from collections.abc import Callable
 import threading
 from typing import Any
 
+from .hot_path import HotPathObserver
 from .link import BytesCallback, DeviceLink, LinkOptions, RecordCallback
 from .observer import Finding, LineObserver
 from .port import PortDisconnected, PortError, SerialPort
@@ -46,12 +47,16 @@ class Connection:
     its reader thread); ``on_finding`` receives what the line observer
     finds; ``cancel`` set means no stream is wanted now (every request on
     the link gives up, and a link opened meanwhile is closed at once).
+    ``timings``, if given, is told every port open and handed to every link
+    (hot_path.py).
     """
 
     def __init__(self, config: DeviceConfig, log: Any, port_factory: Callable[..., SerialPort],
                  on_record: RecordCallback, on_bytes: BytesCallback | None,
-                 on_finding: Callable[[Finding], None], cancel: threading.Event) -> None:
+                 on_finding: Callable[[Finding], None], cancel: threading.Event,
+                 timings: HotPathObserver | None = None) -> None:
         self.config = config
+        self._timings = timings
         self._log = log
         self._port_factory = port_factory
         self._on_record = on_record
@@ -83,6 +88,8 @@ class Connection:
         """Open the port and make it the current link (reader not started); raise PortError."""
         cfg = self.config
         port = self._port_factory(cfg.port, cfg.baud, low_latency=cfg.low_latency)
+        if self._timings is not None:
+            self._timings.opened()
         if port.low_latency_state != self.low_latency_state:
             self.low_latency_state = port.low_latency_state
             self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
@@ -90,7 +97,7 @@ class Connection:
                                                  cfg.baud, self._on_finding)
         link = DeviceLink(port, cfg.address, self._on_record, LinkOptions(
             wireless=cfg.wireless, on_bytes=self._on_bytes, observer=observer,
-            cancel=self._cancel, thread_policy=cfg.thread_policy))
+            cancel=self._cancel, thread_policy=cfg.thread_policy, timings=self._timings))
         with self._lock:
             if self._cancel.is_set():
                 # Stopped while opening: the caller has released the link already.

@@ -30,6 +30,7 @@ import threading
 import time
 from typing import Any, NamedTuple
 
+from .hot_path import HotPathObserver
 from .observer import LineObserver, QUIET_AFTER
 from .port import PortDisconnected, SerialPort
 from .realtime import apply_to_current_thread, NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
@@ -94,7 +95,9 @@ class LinkOptions:
     set, makes requests give up within tens of milliseconds while the reader
     goes on (the stream is being stopped, the port kept: nobody waits for
     the answers any more). ``thread_policy`` is applied by the reader thread
-    to itself before its first read.
+    to itself before its first read. ``timings``, if given, is told when each
+    read returned and when the parser was done with it (hot_path.py); None
+    costs one test per stage.
     """
 
     wireless: bool = True
@@ -103,6 +106,7 @@ class LinkOptions:
     observer: LineObserver | None = None
     cancel: threading.Event | None = None
     thread_policy: ThreadPolicy = NORMAL_SCHEDULING
+    timings: HotPathObserver | None = None
 
 
 class DeviceLink:
@@ -131,6 +135,7 @@ class DeviceLink:
         self._on_record = on_record
         self._on_bytes = options.on_bytes
         self._observer = options.observer
+        self._timings = options.timings
         self._read_timeout = options.read_timeout
         self._pending: _Pending | None = None
         self._lock = threading.Lock()
@@ -178,6 +183,7 @@ class DeviceLink:
         parser = self.parser
         read = self.port.read_some
         observer = self._observer
+        timings = self._timings
         while not self._stop.is_set():
             timeout = 0.02 if parser.pending == 1 else self._read_timeout
             try:
@@ -189,12 +195,16 @@ class DeviceLink:
                 return
             now = time.time()
             mono = time.monotonic()
+            if timings is not None:
+                timings.read(len(data), now)
             if data and self._on_bytes is not None:
                 self._on_bytes(data, now)
             if observer is not None and observer.active \
                     and mono - self.last_data_mono > QUIET_AFTER:
                 observer.feed(data, mono, self.last_data_mono)
             events = parser.feed(data) if data else parser.idle()
+            if timings is not None:
+                timings.parsed()
             for event in events:
                 self._dispatch(event, now, mono)
 

@@ -60,6 +60,7 @@ from .startup import StartUp
 from .connection import Connection
 from .dialogue import SensorDialogue
 from .exclusive import ExclusiveAccess
+from .hot_path import HotPathObserver
 from .identity import DeviceInfo
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .port import PortError, SerialPort
@@ -81,14 +82,19 @@ class DeviceSupervisor:
     thread with every read's raw bytes and read time (a raw capture).
     ``on_fatal`` runs in the supervisor thread, once, when the port can
     never work (``fatal_error`` then holds the error; without it the error
-    is logged); the supervisor has stopped by then.
+    is logged); the supervisor has stopped by then. ``timings``, if given,
+    is told every port open and every link up (right after ``on_connect``)
+    and handed to every link, which tells it the read and the parse of each
+    sample (hot_path.py). ``port_factory`` opens the port (SerialPort; a
+    subclass to observe it).
     """
 
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
                  log: Any = None, on_connect: Callable[[], None] | None = None,
                  port_factory: Callable[..., SerialPort] = SerialPort,
                  on_bytes: BytesCallback | None = None,
-                 on_fatal: Callable[[PortError], None] | None = None) -> None:
+                 on_fatal: Callable[[PortError], None] | None = None,
+                 timings: HotPathObserver | None = None) -> None:
         self.config = config
         log = log or logging.getLogger('i3dmgx2_driver')
         #: Set means "no stream wanted now": the thread ends, and every request on the
@@ -98,11 +104,11 @@ class DeviceSupervisor:
         self._stop = threading.Event()
         self.report = DeviceReport(log)
         self.connection = Connection(config, log, port_factory, on_record, on_bytes,
-                                     self.report.finding, self._stop)
+                                     self.report.finding, self._stop, timings)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
         self.dialogue = SensorDialogue(config, log, self.report.warn, self._stop)
         self._startup = StartUp(self.connection, self.dialogue, self.report, self._stop,
-                                on_connect)
+                                _then(on_connect, timings.connected if timings else None))
         self._exclusive = ExclusiveAccess(self.connection, self.dialogue, self._startup,
                                           self.report, self._stop)
         self.recovery = RecoveryLoop(
@@ -256,3 +262,15 @@ class DeviceSupervisor:
         capture, built-in test). Raises PortError or DeviceTimeout.
         """
         return self._exclusive.run(operation)
+
+
+def _then(first: Callable[[], None] | None,
+          second: Callable[[], None] | None) -> Callable[[], None] | None:
+    """Return a callable that calls ``first`` then ``second`` (either may be None)."""
+    if first is None or second is None:
+        return first or second
+
+    def both() -> None:
+        first()
+        second()
+    return both

@@ -57,7 +57,8 @@ from .unknown_parameters import warn_unknown_parameters
 from ..codec import line_budget
 from ..codec.data_rate import ticks_per_cycle
 from ..codec.framing import DataPacket
-from ..device.port import check_port_path, PortError
+from ..device.hot_path import HotPathObserver
+from ..device.port import check_port_path, PortError, SerialPort
 from ..device.realtime import ThreadPolicy
 from ..device.sample_clock import ClockStatus, Restart, SampleClock
 from ..device.settings import DeviceConfig
@@ -150,12 +151,16 @@ class DriverCore:
     ``refusal`` tells the services why they must refuse now ('' to serve).
     The core starts nothing: its owner drives :attr:`supervisor`. A port
     path that exists but is no serial port raises PortUnusable here, before
-    anything is made.
+    anything is made. ``timings``, if given, is told every stage boundary
+    of every sample's path (device/hot_path.py); None costs nothing.
+    ``port_factory`` opens the port (SerialPort; a subclass to observe it).
     """
 
     def __init__(self, node: Node, config: DriverConfig,
                  publishers: Publishers | None = None, publishing: bool = True,
-                 refusal: Callable[[], str] | None = None) -> None:
+                 refusal: Callable[[], str] | None = None,
+                 timings: HotPathObserver | None = None,
+                 port_factory: Callable[..., SerialPort] = SerialPort) -> None:
         check_port_path(config.port)
         self.node = node
         self.config = cfg = config
@@ -193,6 +198,7 @@ class DriverCore:
         #: Called in the reader thread right after each Imu message is published, with
         #: (record, read time, stamp): for benchmarks and tests. None costs nothing.
         self.on_published = None
+        self._timings = timings
         self.raw_capture = RawCapture(
             cfg.capture_file, node.get_logger(), port=cfg.port, address=cfg.address,
             baud=cfg.baud, wireless=cfg.wireless, node=node.get_fully_qualified_name())
@@ -206,7 +212,7 @@ class DriverCore:
             self.device_config,
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
-            on_fatal=self._on_fatal)
+            on_fatal=self._on_fatal, timings=timings, port_factory=port_factory)
         self.device_services = DeviceServices(
             node, self.supervisor, self._published, self.forget_last_sample,
             capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal)
@@ -273,6 +279,9 @@ class DriverCore:
             stats = self.stats
             clock = self.sample_clock
             stamp = clock.stamp(record.timer, read_mono, self._wire_time)
+            timings = self._timings
+            if timings is not None:
+                timings.stamped()
             ticks = clock.ticks
             if clock.restarted:
                 stats.last_ticks = None
@@ -290,12 +299,17 @@ class DriverCore:
             stats.last_ticks = ticks
             if not self._use_device_time:
                 stamp = read_time
+            message = self._imu_message(record, stamp)
+            if timings is not None:
+                timings.packed()
             try:
-                self.imu_pub.publish(self._imu_message(record, stamp))
+                self.imu_pub.publish(message)
             except RCLError:
                 # ROS is shutting down under the reader: nothing left to publish to.
                 stats.unpublished += 1
                 return
+            if timings is not None:
+                timings.published(record, stamp)
             on_published = self.on_published
             if on_published is not None:
                 on_published(record, read_time, stamp)

@@ -27,7 +27,9 @@ node here, the managed node in ``lifecycle_node.py``): the class is made
 with no arguments and provides ``shutdown()`` and ``finished`` (True once
 it is done by itself, as a managed node after its shutdown transition).
 Once the node is made, the start-up heap is frozen (device/realtime.py says
-why).
+why). With ``I3DMGX2_TIMINGS`` naming a file, the plain node records every
+sample's hot-path stage times and writes them there as it exits
+(device/hot_path.py; for benchmarks/latency.py).
 
 The executor spins in a thread of its own, blocked until it has work; the
 main thread only waits for a signal or for the node to finish. Spinning in
@@ -38,6 +40,7 @@ threads save the reader.
 """
 
 from collections.abc import Callable
+import functools
 import signal
 import sys
 import threading
@@ -51,6 +54,7 @@ from rclpy.signals import SignalHandlerOptions
 from .imu_node import ImuDriverNode
 from .parameters import ParameterError
 from ..device import realtime
+from ..device.hot_path import recorder_from_environment
 from ..device.port import PortUnusable
 
 EXIT_BAD_PARAMETER = 2
@@ -152,8 +156,14 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the driver node until SIGINT or SIGTERM."""
-    return run(ImuDriverNode, args)
+    """Run the driver node until SIGINT or SIGTERM (recording its timings if asked)."""
+    timings, path = recorder_from_environment()
+    if timings is None:
+        return run(ImuDriverNode, args)
+    try:
+        return run(functools.partial(ImuDriverNode, timings=timings), args)
+    finally:
+        timings.save(path)
 
 
 if __name__ == '__main__':

@@ -13,27 +13,29 @@
 # limitations under the License.
 
 """
-The floor under the driver's share: a thread that only reads the port and publishes.
+The floor under the driver's share: a process that only reads the port and publishes.
 
 A process built as the driver's is (an rclpy node, the same publisher and
-QoS, a multi-threaded executor spinning in the main thread, the start-up
-heap frozen as main.py freezes it) whose reader thread does the least any rclpy
-driver must: wait in ``select()``, read, and once a whole packet is in,
-publish a ready-serialized Imu message of the same size, with no parsing,
-stamping or packing. Its read() returned -> publish() returned is what the
-driver's share cannot go below with rclpy on this machine; the rest of the
-driver's share is the driver's own Python.
+QoS, a multi-threaded executor, the start-up heap frozen as main.py freezes
+it) whose reader thread does the least any rclpy driver must: wait in
+``select()``, read, and once a whole packet is in, publish a ready-serialized
+Imu message of the same size, with no parsing, stamping or packing. Its
+read() returned -> publish() returned is what the driver's share cannot go
+below with rclpy on this machine; the rest of the driver's share is the
+driver's own Python.
 
-Output as ``latency_node.py`` (rows: timer, read time, publish() returned),
-so that ``latency_levers.py`` runs it as one more configuration. The
-simulator must stream from power-up (nobody here asks it to).
+It records its timings as the driver does when ``I3DMGX2_TIMINGS`` names a
+file (device/hot_path.py's TimingsRecorder: the read and the publish of each
+packet; it parses, stamps and packs nothing), so that ``latency.py`` runs it
+as one more configuration. The simulator must stream from power-up (nobody
+here asks it to). Prints ``start-up heap frozen`` once it reads the port;
+stops on SIGINT or SIGTERM.
 
-Usage: ``publish_floor.py [--realtime-priority N] [--cpu C] --out OUT.json
---ros-args -p port:=PATH``.
+Usage: ``I3DMGX2_TIMINGS=out.json floor_node.py --ros-args -p port:=PATH
+[-p realtime_priority:=N]``.
 """
 
-import argparse
-import json
+import itertools
 import os
 from pathlib import Path
 import select
@@ -42,6 +44,7 @@ import struct
 import sys
 import threading
 import time
+from typing import NamedTuple
 
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
@@ -56,6 +59,7 @@ from sensor_msgs.msg import Imu  # noqa: E402
 from i3dmgx2_driver.codec import layouts, streams  # noqa: E402, I100
 from i3dmgx2_driver.codec.framing import DATA_FLAGS, DATA_TRAILER_SIZE, HEADER_SIZE  # noqa: E402
 from i3dmgx2_driver.device import realtime  # noqa: E402
+from i3dmgx2_driver.device.hot_path import recorder_from_environment  # noqa: E402
 from i3dmgx2_driver.ros.conversions import MessageFactory, probe_records  # noqa: E402
 
 _LAYOUT = layouts.LAYOUTS[layouts.ACCEL_ANG_RATE_MAG_ORIENTATION]
@@ -65,54 +69,52 @@ _TIMER = struct.Struct('>I')
 _TIMER_AT = HEADER_SIZE + _LAYOUT.record_size - 4
 
 
-def _port_of(ros_args: list[str]) -> str:
-    for i, arg in enumerate(ros_args):
-        if arg == '-p' and ros_args[i + 1].startswith('port:='):
-            return ros_args[i + 1].split(':=', 1)[1]
-    raise SystemExit('publish_floor.py: -p port:=PATH is required')
+class _Packet(NamedTuple):
+    """What the recorder needs of a record: its timer."""
+
+    timer: int
+
+
+def _parameters(ros_args: list[str]) -> dict[str, str]:
+    return {arg.split(':=', 1)[0]: arg.split(':=', 1)[1]
+            for flag, arg in itertools.pairwise(ros_args)
+            if flag == '-p' and ':=' in arg}
 
 
 def main() -> int:
-    """Read and publish until told to stop; save the rows."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1], allow_abbrev=False)
-    parser.add_argument('--out', required=True)
-    parser.add_argument('--realtime-priority', type=int, default=0)
-    parser.add_argument('--cpu', type=int, default=-1)
-    args, ros_args = parser.parse_known_args()
-    port = _port_of(ros_args)
+    """Read and publish until told to stop; save the timings."""
+    params = _parameters(sys.argv[1:])
+    if 'port' not in params:
+        raise SystemExit('floor_node.py: -p port:=PATH is required')
+    timings, path = recorder_from_environment()
+    if timings is None:
+        raise SystemExit('floor_node.py: I3DMGX2_TIMINGS must name the file for the timings')
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
-    rclpy.init(args=[sys.argv[0], *ros_args], signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node('i3dmgx2_publish_floor')
+    rclpy.init(args=sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node('i3dmgx2_floor')
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                      reliability=ReliabilityPolicy.RELIABLE)
     publisher = node.create_publisher(Imu, 'imu/raw_data', qos)
     factory = MessageFactory('imu_link', 'enu', 0.0, 0.0, 0.0, 0.0, streams.DEFAULT)
-    message = factory.imu_cdr(probe_records(streams.DEFAULT)[0], time.time())
+    stamp = time.time()
+    message = factory.imu_cdr(probe_records(streams.DEFAULT)[0], stamp)
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
-    rows: list[tuple[int, float, float]] = []
-    policy = realtime.ThreadPolicy(args.realtime_priority)
-    fd = os.open(port, os.O_RDWR | os.O_NOCTTY)
-
-    threads: dict[str, dict] = {}
+    policy = realtime.ThreadPolicy(int(params.get('realtime_priority', '0')))
+    fd = os.open(params['port'], os.O_RDWR | os.O_NOCTTY)
+    timings.opened()
 
     def reader() -> None:
-        if args.cpu >= 0:
-            os.sched_setaffinity(0, {args.cpu})
         realtime.apply_to_current_thread(policy)
-        threads['gx2-reader'] = {'policy': os.sched_getscheduler(0),
-                                 'priority': os.sched_getparam(0).sched_priority,
-                                 'cpus': sorted(os.sched_getaffinity(0))}
         buf = bytearray()
-        ready = False
         while not stop.is_set():
             readable, _, _ = select.select([fd], [], [], 0.2)
             if not readable:
                 continue
             data = os.read(fd, 4096)
-            now = time.time()
+            timings.read(len(data), time.time())
             buf += data
             while len(buf) >= PACKET_SIZE:
                 if buf[0] != 0xAA or buf[1] != DATA_FLAGS:
@@ -121,29 +123,19 @@ def main() -> int:
                 timer = _TIMER.unpack_from(buf, _TIMER_AT)[0]
                 del buf[:PACKET_SIZE]
                 publisher.publish(message)
-                rows.append((timer, now, time.time()))
-                if not ready:
-                    ready = True
-                    print('ready', flush=True)
+                timings.published(_Packet(timer), stamp)
 
     thread = threading.Thread(target=reader, name='gx2-reader', daemon=True)
     thread.start()
     frozen = realtime.freeze_startup_heap()
-
-    def watch_stdin() -> None:
-        sys.stdin.read()
-        stop.set()
-
-    threading.Thread(target=watch_stdin, daemon=True).start()
+    print(f'floor: start-up heap frozen ({frozen} objects)', flush=True)
     try:
         while not stop.is_set():
             executor.spin_once(timeout_sec=0.1)
     finally:
         stop.set()
         thread.join(1.0)
-        with open(args.out, 'w') as handle:
-            json.dump({'rows': rows, 'gc': [], 'threads': threads, 'gc_frozen': frozen,
-                       'opens': []}, handle)
+        timings.save(path)
         os.close(fd)
         executor.shutdown(timeout_sec=0.5)
         node.destroy_node()

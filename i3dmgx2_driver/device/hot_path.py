@@ -1,0 +1,176 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Where a sample's time goes: the hot path's stages, reported to an observer when asked.
+
+A sample's path runs in the reader thread: the port's bytes are read, the
+parser turns them into records, the sample clock stamps each record, the
+message is packed and published. :class:`HotPathObserver` is told each
+stage boundary as it passes, so a benchmark or a test times the real path
+without replacing any of its functions. The link reports the read and the
+parse (the codec knows bytes only and is timed from around its call), the
+driver core the stamp, the pack and the publish.
+
+Off (the default, None), it costs one ``is not None`` test per stage and
+allocates nothing. The node turns it on only when asked: ``main.py`` reads
+:data:`TIMINGS_ENV` and, if it names a file, records every sample's stage
+times with :class:`TimingsRecorder` and writes them there at shutdown.
+"""
+
+import gc
+import json
+import os
+import time
+from typing import Any, Protocol
+
+#: Environment variable naming the JSON file the node writes its hot-path timings to.
+TIMINGS_ENV = 'I3DMGX2_TIMINGS'
+
+
+class HotPathObserver(Protocol):
+    """
+    Told every stage boundary of a sample's path, in the reader thread, as it passes.
+
+    Each method must return at once and must not raise: it runs on the
+    latency path. Several records parsed from one read share the read and
+    the parse; each then gets its own stamp, pack and publish.
+    """
+
+    def opened(self) -> None:
+        """Note that a port was opened: a connection starts, the next read is its first."""
+
+    def connected(self) -> None:
+        """Note that the link is up: every record of ours is published from now on."""
+
+    def read(self, nbytes: int, read_time: float) -> None:
+        """Note that a read returned ``nbytes`` bytes, at ``read_time`` (system clock)."""
+
+    def parsed(self) -> None:
+        """Note that the parser returned what those bytes completed."""
+
+    def stamped(self) -> None:
+        """Note that the sample clock stamped a record."""
+
+    def packed(self) -> None:
+        """Note that the record's Imu message was packed."""
+
+    def published(self, record: Any, stamp: float) -> None:
+        """Note that ``publish()`` returned for ``record``'s Imu message, stamped ``stamp``."""
+
+
+#: The fields of :attr:`TimingsRecorder.rows`, in order.
+ROW_FIELDS = ('timer', 'stamp', 'read', 'parsed', 'stamped', 'packed', 'published',
+              'cpu_read', 'cpu_published')
+
+
+class TimingsRecorder:
+    """
+    A :class:`HotPathObserver` that keeps every sample's stage times, for benchmarks.
+
+    Each published Imu message adds one row (:data:`ROW_FIELDS`): the record's
+    timer and its message's stamp, the system-clock time of its read, of its parse, stamp, pack and
+    ``publish()`` returned, and the reader thread's CPU time at the read and
+    after the publish (their difference against the wall clock's is the time
+    the thread did not run). It also notes every garbage collection, every
+    port open and link up, and the reader thread's scheduling; :meth:`save` writes it all
+    as JSON.
+    """
+
+    def __init__(self, clock: Any = time.time, cpu_clock: Any = time.thread_time) -> None:
+        self._clock = clock
+        self._cpu_clock = cpu_clock
+        #: One row per published message (:data:`ROW_FIELDS`).
+        self.rows: list[tuple] = []
+        #: Every garbage collection: (generation, start, duration).
+        self.collections: list[tuple[int, float, float]] = []
+        #: The time of every port open, and of every link up after it.
+        self.opens: list[float] = []
+        self.connections: list[float] = []
+        #: The reader thread's scheduling, noted at its first read: policy, priority, CPUs.
+        self.reader: dict[str, Any] = {}
+        self._marks = [0.0] * 5
+        self._gc_start = 0.0
+        gc.callbacks.append(self._on_gc)
+
+    # -- the observer ------------------------------------------------------------------
+
+    def opened(self) -> None:
+        """Note when the port was opened."""
+        self.opens.append(self._clock())
+
+    def connected(self) -> None:
+        """Note when the link was up."""
+        self.connections.append(self._clock())
+
+    def read(self, nbytes: int, read_time: float) -> None:
+        """Note the read's time and the thread's CPU time."""
+        marks = self._marks
+        marks[0] = read_time
+        marks[4] = self._cpu_clock()
+        if not self.reader:
+            self.reader = {'policy': os.sched_getscheduler(0),
+                           'priority': os.sched_getparam(0).sched_priority,
+                           'cpus': sorted(os.sched_getaffinity(0))}
+
+    def parsed(self) -> None:
+        """Note the parse's end."""
+        self._marks[1] = self._clock()
+
+    def stamped(self) -> None:
+        """Note the stamp's end."""
+        self._marks[2] = self._clock()
+
+    def packed(self) -> None:
+        """Note the pack's end."""
+        self._marks[3] = self._clock()
+
+    def published(self, record: Any, stamp: float) -> None:
+        """Add the row of this message."""
+        now = self._clock()
+        m = self._marks
+        self.rows.append((record.timer, stamp, m[0], m[1], m[2], m[3], now, m[4],
+                          self._cpu_clock()))
+
+    # -- the rest ----------------------------------------------------------------------
+
+    def _on_gc(self, phase: str, info: dict) -> None:
+        now = self._clock()
+        if phase == 'start':
+            self._gc_start = now
+        else:
+            self.collections.append((info['generation'], self._gc_start,
+                                     now - self._gc_start))
+
+    def save(self, path: str) -> None:
+        """Stop noting collections; write everything as JSON to ``path``."""
+        if self._on_gc in gc.callbacks:
+            gc.callbacks.remove(self._on_gc)
+        # What a full collection costs now: what one would add to a sample it delays.
+        start = time.perf_counter()
+        gc.collect()
+        full_collection = time.perf_counter() - start
+        document = {'fields': list(ROW_FIELDS), 'rows': self.rows,
+                    'collections': self.collections, 'opens': self.opens,
+                    'connections': self.connections,
+                    'reader': self.reader, 'gc_frozen': gc.get_freeze_count(),
+                    'full_collection': full_collection, 'pid': os.getpid()}
+        with open(path, 'w') as handle:
+            json.dump(document, handle)
+
+
+def recorder_from_environment() -> tuple[TimingsRecorder | None, str]:
+    """Return a recorder and the file it is for if :data:`TIMINGS_ENV` names one; else None."""
+    path = os.environ.get(TIMINGS_ENV, '')
+    return (TimingsRecorder() if path else None), path

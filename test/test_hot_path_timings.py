@@ -1,0 +1,182 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The hot path's timings (device/hot_path.py): ordered and real when on, nothing when off.
+
+Off, the observer costs one ``is not None`` test per stage: the structure of
+the two functions on the path says so (every use of it is one call under
+that test), and the allocation test (test_hot_path_allocation.py) says that
+the path still leaves nothing behind. On, the real node (``I3DMGX2_TIMINGS``)
+against the simulator writes one row per published message whose stage
+times follow the path's order, each after the simulator wrote the packet.
+"""
+
+import ast
+import inspect
+import json
+import textwrap
+import time
+
+from harness.processes import isolate_ros_domain, NodeProcess, ros_env
+from i3dmgx2_driver.device.hot_path import ROW_FIELDS, TIMINGS_ENV, TimingsRecorder
+from i3dmgx2_driver.device.link import DeviceLink, LinkOptions
+from i3dmgx2_driver.device.port import PortDisconnected
+from i3dmgx2_driver.ros.driver_core import DriverCore
+from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+import pytest
+from test_codec_golden import ADDRESS, FIXTURE_DATA_PACKET
+
+#: The stage methods of the observer, in the order a sample passes them.
+STAGES = ('read', 'parsed', 'stamped', 'packed', 'published')
+
+
+def _guarded_uses(function) -> tuple[int, list[str]]:
+    """Count the ``if timings is not None:`` blocks of ``function``; list any other use."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(function)))
+    guarded = 0
+    stray = []
+    inside: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and ast.unparse(node.test) == 'timings is not None':
+            guarded += 1
+            body_ok = (len(node.body) == 1 and not node.orelse
+                       and isinstance(node.body[0], ast.Expr)
+                       and isinstance(node.body[0].value, ast.Call))
+            if not body_ok:
+                stray.append(ast.unparse(node))
+            for inner in ast.walk(node):
+                inside.add(id(inner))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name) and node.id == 'timings' and id(node) not in inside \
+                and not isinstance(node.ctx, ast.Store):
+            stray.append(f'line {node.lineno}: timings used unguarded')
+    return guarded, stray
+
+
+@pytest.mark.parametrize(('function', 'stages'), [
+    (DeviceLink._run, 2),  # read, parsed
+    (DriverCore._on_record, 3),  # stamped, packed, published
+])
+def test_off_costs_one_test_per_stage(function, stages):
+    guarded, stray = _guarded_uses(function)
+    assert stray == []
+    assert guarded == stages
+
+
+class _Calls:
+    """An observer that lists the calls it gets."""
+
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+
+    def __getattr__(self, name: str):
+        if name not in (*STAGES, 'opened', 'connected'):
+            raise AttributeError(name)
+        return lambda *args: self.calls.append(name)
+
+
+class _CannedPort:
+    """A port whose reads return the given chunks, then report it unplugged."""
+
+    def __init__(self, chunks: list[bytes]) -> None:
+        self._chunks = list(chunks)
+
+    def read_some(self, timeout: float) -> bytes:
+        if not self._chunks:
+            raise PortDisconnected('unplugged')
+        return self._chunks.pop(0)
+
+
+def test_the_link_reports_each_read_then_its_parse():
+    packet = FIXTURE_DATA_PACKET
+    timings = _Calls()
+    records = []
+
+    def on_record(packet, now, mono) -> None:
+        timings.calls.append('record')
+        records.append(packet)
+
+    port = _CannedPort([packet[:10], packet[10:] + packet, b''])
+    DeviceLink(port, ADDRESS, on_record, LinkOptions(timings=timings))._run()  # in this thread
+    assert len(records) == 2
+    # The second read completes two records: both are handed over after its parse.
+    assert timings.calls == ['read', 'parsed', 'read', 'parsed', 'record', 'record',
+                             'read', 'parsed']
+
+
+def test_without_an_observer_the_link_runs_as_before():
+    records = []
+    port = _CannedPort([FIXTURE_DATA_PACKET])
+    DeviceLink(port, ADDRESS, lambda p, t, m: records.append(p))._run()
+    assert len(records) == 1
+
+
+@pytest.mark.slow
+def test_the_node_records_ordered_stage_times_for_every_message(tmp_path):
+    isolate_ros_domain()
+    out = tmp_path / 'timings.json'
+    with PtySimulator(SimulatorConfig(address=ADDRESS, seed=83)) as sim:
+        node = NodeProcess({'port': sim.port, 'address': ADDRESS},
+                           env=ros_env({TIMINGS_ENV: str(out)}))
+        with node:
+            assert node.wait_for_output('start-up heap frozen', 30), node.output()
+            # A second of records after start-up (100 Hz), then the node stops.
+            _wait_count(sim, sim.truth_count + 100)
+            assert node.stop()[0] == 0, node.output()
+        written = {t.timer: t.write_time for t in sim.truth
+                   if t.valid and t.write_time is not None and t.timer is not None}
+    document = json.loads(out.read_text())
+    assert document['fields'] == list(ROW_FIELDS)
+    rows = [dict(zip(ROW_FIELDS, row, strict=True)) for row in document['rows']]
+    assert len(rows) >= 50, len(rows)
+    # One port open, then the link up, then the first record read.
+    assert len(document['opens']) == len(document['connections']) == 1
+    assert document['opens'][0] <= document['connections'][0] <= rows[0]['read']
+    assert document['reader']['cpus']
+    for row in rows:
+        assert row['timer'] in written
+        marks = [written[row['timer']], row['read'], row['parsed'], row['stamped'],
+                 row['packed'], row['published']]
+        assert marks == sorted(marks), row
+        assert row['cpu_read'] <= row['cpu_published'], row
+    timers = [row['timer'] for row in rows]
+    assert len(set(timers)) == len(timers)
+
+
+def _wait_count(sim: PtySimulator, count: int, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while sim.truth_count < count and time.monotonic() < deadline:
+        time.sleep(0.05)
+
+
+def test_the_recorder_keeps_one_row_per_published_message(tmp_path):
+    times = iter(float(t) for t in range(100))
+    recorder = TimingsRecorder(clock=lambda: next(times), cpu_clock=lambda: 0.5)
+    try:
+        recorder.opened()
+        recorder.connected()
+        recorder.read(88, 10.5)
+        recorder.parsed()
+        for timer in (7, 8):
+            recorder.stamped()
+            recorder.packed()
+            recorder.published(type('Record', (), {'timer': timer})(), timer / 10)
+    finally:
+        recorder.save(str(tmp_path / 'timings.json'))
+    assert (recorder.opens, recorder.connections) == ([0.0], [1.0])
+    assert recorder.rows == [(7, 0.7, 10.5, 2.0, 3.0, 4.0, 5.0, 0.5, 0.5),
+                             (8, 0.8, 10.5, 2.0, 6.0, 7.0, 8.0, 0.5, 0.5)]
+    saved = json.loads((tmp_path / 'timings.json').read_text())
+    assert saved['rows'] == [list(row) for row in recorder.rows]
