@@ -29,6 +29,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
         (os.path.join('share', package_name, 'launch'), glob('launch/*.launch.py')),
+        (os.path.join('share', package_name, 'udev'), glob('udev/*.rules')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

@@ -82,6 +82,7 @@ def test_layout_is_what_ros2_expects(prefix):
     assert (share / 'i3dmgx2_driver' / 'package.xml').exists()
     assert (share / 'i3dmgx2_driver' / 'config' / 'i3dmgx2.yaml').exists()
     assert (share / 'i3dmgx2_driver' / 'launch' / 'i3dmgx2.launch.py').exists()
+    assert (share / 'i3dmgx2_driver' / 'udev' / '99-i3dmgx2.rules').exists()
     assert not (prefix / 'bin' / 'node').exists(), 'node must not land on PATH'
 
 

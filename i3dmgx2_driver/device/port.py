@@ -75,6 +75,23 @@ class PortNotSerial(PortUnusable):
     """The path exists but is no terminal device (a file, a directory, /dev/null)."""
 
 
+#: The udev rule the package installs under share/i3dmgx2_driver/udev/ (udev/ in the source).
+UDEV_RULE_NAME = '99-i3dmgx2.rules'
+#: The commands that install it, on one line.
+UDEV_RULE_INSTALL = (
+    'sudo cp "$(ros2 pkg prefix i3dmgx2_driver)/share/i3dmgx2_driver/udev/'
+    f'{UDEV_RULE_NAME}" /etc/udev/rules.d/ && sudo udevadm control --reload-rules '
+    '&& sudo udevadm trigger')
+#: What the rule does, and how to install it.
+UDEV_RULE_ADVICE = (
+    "install the udev rule that comes with the driver, which gives the base station's port "
+    'to the dialout group with mode 0660, a stable link /dev/i3dmgx2 and a 1 ms latency '
+    f'timer: {UDEV_RULE_INSTALL} (from a source checkout: udev/{UDEV_RULE_NAME}); then, if '
+    'you are not in dialout yet, sudo usermod -aG dialout $USER and log in again')
+#: Groups that exist to give serial ports to their members (Debian, Arch, Fedora, SUSE...).
+SERIAL_GROUPS = frozenset({'dialout', 'uucp', 'tty', 'serial'})
+#: Words that name a group made for this one device.
+DEVICE_GROUP_WORDS = ('i3dmgx2', 'gx2', 'microstrain', '3dm')
 #: How much one read takes at most; a few packets' worth.
 READ_SIZE = 4096
 #: The kernel's list of terminal drivers: name, node, major, minors, type.
@@ -204,6 +221,44 @@ def _in_group_database(group: str) -> bool:
     except KeyError:
         return False
     return user.pw_gid == entry.gr_gid or user.pw_name in entry.gr_mem
+
+
+def serial_group(group: str, path: str = '') -> bool:
+    """
+    Whether joining ``group`` gives a user serial ports and nothing more.
+
+    True for the groups distributions give serial ports to (``dialout``,
+    ``uucp``, ``tty``, ``serial``...) and for a group named for this device
+    alone (after the sensor, or after the port's own name); False for
+    ``root``, ``wheel``, ``sudo``, ``adm``, ``disk`` and any other group,
+    whose members may do far more than open a serial port.
+    """
+    name = group.lower()
+    if name in SERIAL_GROUPS:
+        return True
+    if any(word in name for word in DEVICE_GROUP_WORDS):
+        return True
+    names = {os.path.basename(p).lower() for p in (path, os.path.realpath(path)) if p}
+    return any(len(n) >= 4 and (n == name or n in name) for n in names)
+
+
+def port_group(path: str) -> tuple[str, bool] | None:
+    """
+    Return the group that owns ``path`` and whether this session is in it.
+
+    None if the path cannot be examined. Root is counted as a member: it
+    opens every port whatever the group.
+    """
+    owner = _owning_group(path)
+    if owner is None:
+        return None
+    group = owner[0]
+    try:
+        gid = grp.getgrnam(group).gr_gid
+    except KeyError:
+        gid = int(group) if group.isdigit() else -1
+    member = os.geteuid() == 0 or gid == os.getegid() or gid in os.getgroups()
+    return group, member
 
 
 def _permission_message(path: str) -> str:
