@@ -50,7 +50,13 @@ class PortMissing(PortError):
 
 
 class PortPermissionDenied(PortError):
-    """The user may not open the device (usually: not in ``dialout``)."""
+    """
+    The user may not open the device (usually: not in ``dialout``).
+
+    The message never advises joining a group that gives more than serial
+    ports (``root``, ``wheel``, ``sudo``...): for such a port it recommends
+    the package's udev rule instead (:func:`serial_group`).
+    """
 
 
 class PortBusy(PortError):
@@ -269,8 +275,11 @@ def _permission_message(path: str) -> str:
                        'then log in again)')
     group, mode = owner
     if not mode & stat.S_IRGRP:
-        return text + (f'only its owner may open it (mode {stat.S_IMODE(mode):04o}); a udev '
-                       f'rule giving it to the dialout group with mode 0660 fixes that')
+        return text + (f'only its owner may open it (mode {stat.S_IMODE(mode):04o}); '
+                       f'{UDEV_RULE_ADVICE}')
+    if not serial_group(group, path):
+        return text + (f'it belongs to the {group} group, and joining {group} would give '
+                       f'your user far more than this port, so do not; {UDEV_RULE_ADVICE}')
     if _in_group_database(group):
         return text + (f'you are in the {group} group that owns it, but this session is '
                        f'not yet: log out and in again (or run newgrp {group})')
