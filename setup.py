@@ -32,6 +32,8 @@ setup(
         (os.path.join('share', package_name, 'udev'), glob('udev/*.rules')),
     ],
     install_requires=['setuptools'],
+    # Only the plot tool draws; on a robot matplotlib would pull in a GUI stack.
+    extras_require={'plot': ['matplotlib']},
     zip_safe=True,
     maintainer='The i3dmgx2_driver Authors',
     maintainer_email='maintainers@i3dmgx2-driver.invalid',
