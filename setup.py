@@ -49,6 +49,7 @@ setup(
             'plot = i3dmgx2_driver.tools.plot:main',
             'monitor = i3dmgx2_driver.ros.monitor:main',
             'discover = i3dmgx2_driver.tools.discover:main',
+            'bringup = i3dmgx2_driver.tools.bringup:main',
         ],
     },
 )

@@ -95,3 +95,14 @@ def test_plot_without_matplotlib_says_how_to_install_it(fixture_path, tmp_path):
     assert 'python3-matplotlib' in result.stderr and 'Traceback' not in result.stderr
     # --help needs nothing to draw.
     assert run('i3dmgx2_driver.tools.plot', '--help').returncode == 0
+
+
+@pytest.mark.slow
+def test_bringup_runs_without_matplotlib(tmp_path):
+    with PtySimulator(SimulatorConfig(seed=63)) as sim:
+        result = run('i3dmgx2_driver.tools.bringup', '--port', sim.port, '--address', '95',
+                     '--output-dir', str(tmp_path), '--pings', '2', '--commands', '2',
+                     '--cycles', '1', '--stream-seconds', '0.5', '--listen', '0.2',
+                     '--streams', 'inertial')
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert 'Left as found: yes' in result.stdout

@@ -28,7 +28,9 @@ as any arrive, so the last byte of a packet reaches the parser without
 waiting for a fixed read size or a polling interval.
 """
 
+import array
 import errno
+import fcntl
 import glob
 import grp
 import os
@@ -98,6 +100,8 @@ UDEV_RULE_ADVICE = (
 SERIAL_GROUPS = frozenset({'dialout', 'uucp', 'tty', 'serial'})
 #: Words that name a group made for this one device.
 DEVICE_GROUP_WORDS = ('i3dmgx2', 'gx2', 'microstrain', '3dm')
+#: The low-latency bit of struct serial_struct's flags (linux/tty_flags.h).
+ASYNC_LOW_LATENCY = 1 << 13
 #: How much one read takes at most; a few packets' worth.
 READ_SIZE = 4096
 #: The kernel's list of terminal drivers: name, node, major, minors, type.
@@ -337,6 +341,27 @@ class SerialPort:
             self._fd: int | None = self._serial.fileno()
         except (AttributeError, OSError, serial.SerialException):
             self._fd = None
+
+    def low_latency_flag(self) -> bool | None:
+        """
+        Whether the port is in low-latency mode now (ASYNC_LOW_LATENCY).
+
+        None when the port cannot tell (a pseudo-terminal, not Linux): what
+        ``bringup`` reports as found, before it asks for the mode itself.
+        """
+        if self._fd is None or not hasattr(termios, 'TIOCGSERIAL'):
+            return None
+        settings = array.array('i', [0] * 32)  # struct serial_struct; flags is the 5th int
+        try:
+            fcntl.ioctl(self._fd, termios.TIOCGSERIAL, settings)
+        except OSError:
+            return None
+        return bool(settings[4] & ASYNC_LOW_LATENCY)
+
+    def enable_low_latency(self) -> str:
+        """Ask for low-latency mode now; return and keep 'on' or why it is not."""
+        self.low_latency_state = self._enable_low_latency()
+        return self.low_latency_state
 
     def _enable_low_latency(self) -> str:
         """Ask for low-latency mode; return 'on' or why it is not."""
