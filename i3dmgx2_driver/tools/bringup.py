@@ -48,6 +48,7 @@ import threading
 import time
 from typing import Any, TextIO
 
+from .arguments import seconds, whole_number
 from ..capture import CaptureWriter, default_header
 from ..codec import commands, layouts, line_budget, streams
 from ..codec.data_rate import (
@@ -77,32 +78,9 @@ QUIET_S = 0.3
 SHORT_COMMAND = layouts.FIRMWARE_VERSION
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r} is not a whole number') from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f'{text!r}: give at least 1')
-    return value
-
-
-def _address(text: str) -> int:
-    value = _positive_int(text)
-    if not MIN_ADDRESS <= value <= MAX_ADDRESS:
-        raise argparse.ArgumentTypeError(f'{text!r}: addresses are {MIN_ADDRESS}..'
-                                         f'{MAX_ADDRESS}')
-    return value
-
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r} is not a number of seconds') from None
-    if not 0.2 <= value <= 600.0:
-        raise argparse.ArgumentTypeError(f'{text!r}: give 0.2..600 seconds')
-    return value
+_count = whole_number(1, 1000, 'count')
+_address = whole_number(MIN_ADDRESS, MAX_ADDRESS, 'node address')
+_seconds = seconds(0.2, 600.0)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -121,11 +99,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--baud', type=int, default=115200, help='baud rate (default 115200)')
     parser.add_argument('--output-dir', default='.', metavar='DIR',
                         help='where the report folder is made (default: here)')
-    parser.add_argument('--pings', type=_positive_int, default=20, metavar='N',
+    parser.add_argument('--pings', type=_count, default=20, metavar='N',
                         help='pings to time (default 20)')
-    parser.add_argument('--commands', type=_positive_int, default=20, metavar='N',
+    parser.add_argument('--commands', type=_count, default=20, metavar='N',
                         help='short commands (0xE9) to time (default 20)')
-    parser.add_argument('--cycles', type=_positive_int, default=5, metavar='N',
+    parser.add_argument('--cycles', type=_count, default=5, metavar='N',
                         help='continuous-mode starts and stops to time (default 5)')
     parser.add_argument('--stream-seconds', type=_seconds, default=5.0, metavar='S',
                         help='how long each stream runs (default 5)')
@@ -484,6 +462,12 @@ def _cell(value: Any) -> str:
     return '-' if value is None else str(value)
 
 
+def _timer(value: int | None) -> str:
+    if value is None:
+        return 'none (not an FTDI USB-serial port)'
+    return f'{value} ms' + (' (the udev rule sets 1 ms)' if value > 1 else '')
+
+
 def _table(rows: list[list[str]]) -> list[str]:
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     return ['  ' + '  '.join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip()
@@ -508,8 +492,8 @@ def format_report(report: dict[str, Any]) -> str:
         ['streaming as found', _cell(found.get('streaming')) if found else '-'],
         ['low-latency mode as found', _cell(port.get('low_latency_as_found'))],
         ['low-latency mode now', _cell(port.get('low_latency'))],
-        ['FTDI latency timer as found', f'{_cell(port.get("latency_timer_ms_as_found"))} ms'],
-        ['FTDI latency timer now', f'{_cell(port.get("latency_timer_ms"))} ms'],
+        ['FTDI latency timer as found', _timer(port.get('latency_timer_ms_as_found'))],
+        ['FTDI latency timer now', _timer(port.get('latency_timer_ms'))],
         ['group', f'{_cell(port.get("group"))}'
                   f'{"" if port.get("in_group", True) else " (you are not in it)"}'],
     ])

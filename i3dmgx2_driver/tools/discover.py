@@ -31,6 +31,7 @@ import sys
 import time
 from typing import Any, TextIO
 
+from .arguments import seconds
 from ..device.port import port_group, serial_group, UDEV_RULE_INSTALL
 from ..device.port_listing import (
     BY_ID_DIR, DEFAULT_LATENCY_TIMER_MS, describe_path, latency_timer_ms, list_ports, PortInfo,
@@ -91,14 +92,7 @@ def _addresses(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r} is not a number of seconds') from None
-    if not 0.0 <= value <= 60.0:
-        raise argparse.ArgumentTypeError(f'{text!r}: give 0..60 seconds')
-    return value
+_seconds = seconds(0.0, 60.0)
 
 
 def build_parser() -> argparse.ArgumentParser:
