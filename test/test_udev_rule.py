@@ -132,7 +132,8 @@ def check_rule(line: str) -> dict[str, str]:
     # sysfs spells the vendor id in four lower-case hex digits.
     assert vendor is not None and re.fullmatch(r'[0-9a-f]{4}', vendor), line
     if kind == 'usb-serial':
-        assert keys[0] == ('ACTION', '==', 'add'), 'the latency timer is set once, when added'
+        # On plug-in, and on 'udevadm trigger' (whose default action is change).
+        assert keys[0] == ('ACTION', '==', 'add|change'), line
         assert matches.get('DRIVER') == 'ftdi_sio', 'only ftdi_sio has latency_timer'
     return {key: value for key, op, value in keys} | {'SUBSYSTEM': kind}
 
