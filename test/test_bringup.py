@@ -185,3 +185,20 @@ def replay_through_node(capture: str, expected: int) -> None:
         node.close()
         listener.close()
         replayer.stop()
+
+
+@pytest.mark.slow
+def test_a_sensor_that_is_not_there_is_reported_soon_and_nothing_is_written(tmp_path):
+    with PtySimulator(SimulatorConfig(seed=20)) as sim:
+        start = time.monotonic()
+        status = bringup.main(['--port', sim.port, '--address', '12', '--output-dir',
+                               str(tmp_path), *SHORT])
+        took = time.monotonic() - start
+        assert sim.eeprom_writes() == []
+    assert status == 1
+    assert took < 15, 'no identity read waits out every retry for a sensor not there'
+    (folder,) = tmp_path.iterdir()
+    report = json.loads((folder / 'report.json').read_text())
+    assert 'the base station answered the pings, the sensor did not' in report['error']
+    assert 'discover' in report['error']
+    assert 'Error: node 12 does not answer' in (folder / 'report.txt').read_text()

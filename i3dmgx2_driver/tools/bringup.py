@@ -189,8 +189,13 @@ class Bringup:
 
     # -- the sensor as found --------------------------------------------------------
 
-    def find_state(self) -> None:
-        """Listen for a stream, quiet it, read identity and divider."""
+    def find_state(self) -> bool:
+        """
+        Listen for a stream, quiet it, read identity and divider.
+
+        Returns False, with the reason in the report, when the sensor is not
+        there: no stream heard and no answer to a ping through the base station.
+        """
         self.say(f'listening {self.args.listen:g} s for a stream already running')
         deadline = time.monotonic() + self.args.listen
         while time.monotonic() < deadline and not self.heard.snapshot()[0]:
@@ -202,6 +207,20 @@ class Bringup:
             self.say(f'the sensor streams 0x{self.found_stream:02X}: stopping it (restarted '
                      f'at the end)')
         self.stop_stream()
+        if not self.found_stream:
+            answer = None
+            for _ in range(3):
+                answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
+                if answer:
+                    break
+            if not answer:
+                self.report['error'] = (
+                    f'node {self.link.address} does not answer on {self.link.port.path}: ' + (
+                        'the base station answered the pings, the sensor did not (is it on? '
+                        'its address?)' if answer is False else
+                        'nothing answered the pings (no base station on this port?)')
+                    + '; ros2 run i3dmgx2_driver discover finds the port and address')
+                return False
         self.say('reading identity and data rate')
         info = read_identity(self.link, timeouts.REQUEST_TIMEOUT, timeouts.REQUEST_RETRIES)
         self.report['identity'] = info._asdict()
@@ -217,6 +236,7 @@ class Bringup:
             'rate_hz': round(RATE_BASE_HZ / self.found_divider, 3)
             if self.found_divider else None,
         }
+        return True
 
     def read_divider(self) -> int:
         return self.link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
@@ -600,8 +620,9 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
     restored = False
     try:
         link.start()
-        session.find_state()
-        if not report['identity']['answered'] and session.found_divider is None:
+        if not session.find_state():
+            pass  # the report says why
+        elif not report['identity']['answered'] and session.found_divider is None:
             report['error'] = (f'node {args.address} on {args.port} answered nothing: '
                                f'discover finds the port and address')
         else:
