@@ -29,8 +29,11 @@ setup(
         ('share/' + package_name, ['package.xml']),
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
         (os.path.join('share', package_name, 'launch'), glob('launch/*.launch.py')),
+        (os.path.join('share', package_name, 'udev'), glob('udev/*.rules')),
     ],
     install_requires=['setuptools'],
+    # Only the plot tool draws; on a robot matplotlib would pull in a GUI stack.
+    extras_require={'plot': ['matplotlib']},
     zip_safe=True,
     maintainer='The i3dmgx2_driver Authors',
     maintainer_email='maintainers@i3dmgx2-driver.invalid',
@@ -46,6 +49,7 @@ setup(
             'plot = i3dmgx2_driver.tools.plot:main',
             'monitor = i3dmgx2_driver.ros.monitor:main',
             'discover = i3dmgx2_driver.tools.discover:main',
+            'bringup = i3dmgx2_driver.tools.bringup:main',
         ],
     },
 )

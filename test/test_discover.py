@@ -40,6 +40,7 @@ from i3dmgx2_driver.device.probe import (
     parse_addresses, probe_port, ProbeConfig, SensorFound,
 )
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from i3dmgx2_driver.tools import discover
 from i3dmgx2_driver.tools.discover import node_command
 import pytest
 
@@ -259,6 +260,46 @@ def test_command_lines():
     assert node_command('/dev/ttyUSB0', wired) == (
         'ros2 run i3dmgx2_driver node --ros-args -p port:=/dev/ttyUSB0 '
         '-p wireless:=false -p address:=1')
+
+
+def fake_sysfs(tmp_path, timer: int | None) -> tuple[str, str]:
+    """Return a port path and a /sys/class/tty whose entry for it has ``timer``."""
+    port = tmp_path / 'dev' / 'ttyUSB7'
+    port.parent.mkdir()
+    port.write_text('')
+    entry = tmp_path / 'sys' / 'ttyUSB7' / 'device'
+    entry.mkdir(parents=True)
+    if timer is not None:
+        (entry / 'latency_timer').write_text(f'{timer}\n')
+    return str(port), str(tmp_path / 'sys')
+
+
+@pytest.mark.parametrize('timer, group, member, words', [
+    (16, 'dialout', True, ['its latency timer is 16 ms']),
+    (1, 'dialout', False, ['belongs to the dialout group, which you are not in']),
+    (16, 'root', False, ['latency timer is 16 ms', 'belongs to the root group',
+                         'joining root would give you far more than this port']),
+    (None, 'uucp', False, ['belongs to the uucp group']),
+])
+def test_discover_mentions_the_udev_rule_where_it_would_help(tmp_path, monkeypatch, timer,
+                                                             group, member, words):
+    path, sys_class_tty = fake_sysfs(tmp_path, timer)
+    monkeypatch.setattr(discover, 'port_group', lambda p: (group, member))
+    note = discover.udev_note(path, '', sys_class_tty)
+    for word in words:
+        assert word in note
+    assert 'sudo udevadm control --reload-rules' in note and '99-i3dmgx2.rules' in note
+
+
+@pytest.mark.parametrize('timer', [1, None])
+def test_discover_says_nothing_of_the_rule_where_all_is_well(tmp_path, monkeypatch, timer):
+    path, sys_class_tty = fake_sysfs(tmp_path, timer)
+    monkeypatch.setattr(discover, 'port_group', lambda p: ('dialout', True))
+    assert discover.udev_note(path, '', sys_class_tty) == ''
+    # A refused open whose message already recommends the rule is not told twice.
+    monkeypatch.setattr(discover, 'port_group', lambda p: ('root', False))
+    assert discover.udev_note(path, 'permission denied ...: install the udev rule ...',
+                              sys_class_tty) == ''
 
 
 # -- the command line ------------------------------------------------------------

@@ -13,12 +13,15 @@
 # limitations under the License.
 
 """
-package.xml names everything the installed package runs with.
+package.xml names everything the installed package runs with, and no more.
 
 ``rosdep install`` on a ROS machine installs what package.xml says and
 nothing else, so every module the installed code imports (the package and
 the launch file, read as code) must map to an ``exec_depend``: a ROS package
-of the same name, or the rosdep key of a Python library.
+of the same name, or the rosdep key of a Python library. The one exception
+is an optional extra (matplotlib, for the plot tool only: on a robot it
+would pull in a GUI stack), which is no ``exec_depend`` and is imported
+only inside the functions that draw, never when a module loads.
 """
 
 import ast
@@ -32,6 +35,8 @@ ROSDEP_KEYS = {'serial': 'python3-serial', 'numpy': 'python3-numpy',
                'matplotlib': 'python3-matplotlib'}
 #: Needed at run time without an import of our own: rclpy.lifecycle loads it.
 RUNTIME_ONLY = {'lifecycle_msgs'}
+#: Optional extras (setup.py's extras_require): imported only where they are used.
+OPTIONAL = {'matplotlib': 'plot'}
 
 
 def installed_sources() -> list[str]:
@@ -56,6 +61,24 @@ def imported_roots(path: str) -> set[str]:
     return roots
 
 
+def load_time_roots(path: str) -> set[str]:
+    """Top-level names imported when ``path`` loads (outside any function)."""
+    with open(path) as handle:
+        tree = ast.parse(handle.read(), path)
+    roots = set()
+    stack = list(tree.body)
+    while stack:
+        node = stack.pop()
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            continue
+        if isinstance(node, ast.Import):
+            roots |= {alias.name.split('.')[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            roots.add(node.module.split('.')[0])
+        stack.extend(ast.iter_child_nodes(node))
+    return roots
+
+
 def exec_depends() -> set[str]:
     root = ElementTree.parse(os.path.join(REPO, 'package.xml')).getroot()
     return {e.text.strip() for e in root.iter() if e.tag in ('exec_depend', 'depend')}
@@ -65,7 +88,7 @@ def test_every_import_of_the_installed_package_is_an_exec_depend():
     needed = {}
     for path in installed_sources():
         for root in imported_roots(path):
-            if root in sys.stdlib_module_names or root == 'i3dmgx2_driver':
+            if root in sys.stdlib_module_names or root in ('i3dmgx2_driver', *OPTIONAL):
                 continue
             needed.setdefault(ROSDEP_KEYS.get(root, root), os.path.relpath(path, REPO))
     for key in RUNTIME_ONLY:
@@ -77,3 +100,27 @@ def test_every_import_of_the_installed_package_is_an_exec_depend():
 def test_the_launch_files_and_the_managed_node_dependencies_are_named():
     depends = exec_depends()
     assert {'launch', 'launch_ros', 'ament_index_python', 'lifecycle_msgs'} <= depends
+
+
+def test_optional_extras_are_no_exec_depend_and_load_with_no_module():
+    depends = exec_depends()
+    for root in OPTIONAL:
+        assert ROSDEP_KEYS.get(root, root) not in depends, \
+            f'{root} is optional: a robot that runs the node must not install it'
+    loaded = {os.path.relpath(path, REPO): load_time_roots(path) & set(OPTIONAL)
+              for path in installed_sources()}
+    assert {path: roots for path, roots in loaded.items() if roots} == {}, \
+        'import an optional extra inside the function that uses it (tools/figures.py)'
+
+
+def test_setup_offers_the_optional_extras(monkeypatch):
+    import runpy
+
+    import setuptools
+    captured = {}
+    monkeypatch.setattr(setuptools, 'setup', lambda **kwargs: captured.update(kwargs))
+    monkeypatch.chdir(REPO)
+    runpy.run_path(os.path.join(REPO, 'setup.py'))
+    extras = captured.get('extras_require', {})
+    for root, extra in OPTIONAL.items():
+        assert root in extras.get(extra, []), f'setup.py: extras_require[{extra!r}]'

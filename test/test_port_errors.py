@@ -24,6 +24,7 @@ import errno
 import os
 import tty
 
+from i3dmgx2_driver.device import port as port_module
 from i3dmgx2_driver.device.port import (
     PortBusy, PortDisconnected, PortError, PortMissing, PortPermissionDenied, SerialPort,
 )
@@ -92,3 +93,35 @@ def test_reads_after_the_other_end_closed_raise_disconnected():
                 port.read_some(1.0)
     finally:
         port.close()
+
+
+@pytest.mark.parametrize('group', ['root', 'wheel', 'sudo', 'adm', 'disk', 'video'])
+def test_permission_denied_never_advises_joining_a_powerful_group(monkeypatch, group):
+    monkeypatch.setattr(port_module, '_owning_group', lambda path: (group, 0o20660))
+    monkeypatch.setattr(port_module, '_in_group_database', lambda name: False)
+    text = str(port_module._classify('/dev/ttyUSB0', PermissionError(errno.EACCES, 'denied')))
+    assert f'usermod -aG {group}' not in text and f'newgrp {group}' not in text
+    assert f'joining {group} would give your user far more than this port' in text
+    assert '/etc/udev/rules.d/' in text and 'udevadm control --reload-rules' in text
+    assert 'udevadm trigger' in text and port_module.UDEV_RULE_NAME in text
+    assert 'usermod -aG dialout $USER' in text, 'the rule gives the port to dialout'
+
+
+@pytest.mark.parametrize('group, path', [
+    ('dialout', '/dev/ttyUSB0'), ('uucp', '/dev/ttyUSB0'), ('tty', '/dev/ttyUSB0'),
+    ('serial', '/dev/ttyUSB0'), ('i3dmgx2', '/dev/i3dmgx2'), ('ttyusb1', '/dev/ttyUSB1')])
+def test_permission_denied_advises_joining_a_group_made_for_serial_ports(monkeypatch, group,
+                                                                         path):
+    monkeypatch.setattr(port_module, '_owning_group', lambda p: (group, 0o20660))
+    monkeypatch.setattr(port_module, '_in_group_database', lambda name: False)
+    text = str(port_module._classify(path, PermissionError(errno.EACCES, 'denied')))
+    assert f'add your user to the {group} group that owns it' in text
+    assert f'sudo usermod -aG {group} $USER' in text
+    assert 'udev' not in text
+
+
+def test_an_owner_only_port_is_pointed_at_the_rule(monkeypatch):
+    monkeypatch.setattr(port_module, '_owning_group', lambda p: ('root', 0o20600))
+    text = str(port_module._classify('/dev/ttyUSB0', PermissionError(errno.EACCES, 'denied')))
+    assert 'only its owner may open it (mode 0600)' in text
+    assert 'udevadm control --reload-rules' in text

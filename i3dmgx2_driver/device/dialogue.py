@@ -35,6 +35,7 @@ import threading
 import time
 from typing import Any
 
+from . import timeouts
 from .identity import DeviceInfo, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR
 from .link import DeviceLink, DeviceTimeout
 from .port import PortDisconnected
@@ -108,7 +109,8 @@ class SensorDialogue:
         """
         cfg = self.config
         if link.wireless:
-            self.ping_ok = link.ping(timeout=0.3, retries=2)
+            self.ping_ok = link.ping(timeout=timeouts.PING_TIMEOUT,
+                                     retries=timeouts.PING_RETRIES)
             if not self.ping_ok:
                 self._warn('ping', f'node {cfg.address} does not answer the base station '
                                    f'ping: check it is powered, its address (ros2 run '

@@ -28,7 +28,9 @@ as any arrive, so the last byte of a packet reaches the parser without
 waiting for a fixed read size or a polling interval.
 """
 
+import array
 import errno
+import fcntl
 import glob
 import grp
 import os
@@ -50,7 +52,13 @@ class PortMissing(PortError):
 
 
 class PortPermissionDenied(PortError):
-    """The user may not open the device (usually: not in ``dialout``)."""
+    """
+    The user may not open the device (usually: not in ``dialout``).
+
+    The message never advises joining a group that gives more than serial
+    ports (``root``, ``wheel``, ``sudo``...): for such a port it recommends
+    the package's udev rule instead (:func:`serial_group`).
+    """
 
 
 class PortBusy(PortError):
@@ -75,6 +83,25 @@ class PortNotSerial(PortUnusable):
     """The path exists but is no terminal device (a file, a directory, /dev/null)."""
 
 
+#: The udev rule the package installs under share/i3dmgx2_driver/udev/ (udev/ in the source).
+UDEV_RULE_NAME = '99-i3dmgx2.rules'
+#: The commands that install it, on one line.
+UDEV_RULE_INSTALL = (
+    'sudo cp "$(ros2 pkg prefix i3dmgx2_driver)/share/i3dmgx2_driver/udev/'
+    f'{UDEV_RULE_NAME}" /etc/udev/rules.d/ && sudo udevadm control --reload-rules '
+    '&& sudo udevadm trigger')
+#: What the rule does, and how to install it.
+UDEV_RULE_ADVICE = (
+    "install the udev rule that comes with the driver, which gives the base station's port "
+    'to the dialout group with mode 0660, a stable link /dev/i3dmgx2 and a 1 ms latency '
+    f'timer: {UDEV_RULE_INSTALL} (from a source checkout: udev/{UDEV_RULE_NAME}); then, if '
+    'you are not in dialout yet, sudo usermod -aG dialout $USER and log in again')
+#: Groups that exist to give serial ports to their members (Debian, Arch, Fedora, SUSE...).
+SERIAL_GROUPS = frozenset({'dialout', 'uucp', 'tty', 'serial'})
+#: Words that name a group made for this one device.
+DEVICE_GROUP_WORDS = ('i3dmgx2', 'gx2', 'microstrain', '3dm')
+#: The low-latency bit of struct serial_struct's flags (linux/tty_flags.h).
+ASYNC_LOW_LATENCY = 1 << 13
 #: How much one read takes at most; a few packets' worth.
 READ_SIZE = 4096
 #: The kernel's list of terminal drivers: name, node, major, minors, type.
@@ -206,6 +233,44 @@ def _in_group_database(group: str) -> bool:
     return user.pw_gid == entry.gr_gid or user.pw_name in entry.gr_mem
 
 
+def serial_group(group: str, path: str = '') -> bool:
+    """
+    Whether joining ``group`` gives a user serial ports and nothing more.
+
+    True for the groups distributions give serial ports to (``dialout``,
+    ``uucp``, ``tty``, ``serial``...) and for a group named for this device
+    alone (after the sensor, or after the port's own name); False for
+    ``root``, ``wheel``, ``sudo``, ``adm``, ``disk`` and any other group,
+    whose members may do far more than open a serial port.
+    """
+    name = group.lower()
+    if name in SERIAL_GROUPS:
+        return True
+    if any(word in name for word in DEVICE_GROUP_WORDS):
+        return True
+    names = {os.path.basename(p).lower() for p in (path, os.path.realpath(path)) if p}
+    return any(len(n) >= 4 and (n == name or n in name) for n in names)
+
+
+def port_group(path: str) -> tuple[str, bool] | None:
+    """
+    Return the group that owns ``path`` and whether this session is in it.
+
+    None if the path cannot be examined. Root is counted as a member: it
+    opens every port whatever the group.
+    """
+    owner = _owning_group(path)
+    if owner is None:
+        return None
+    group = owner[0]
+    try:
+        gid = grp.getgrnam(group).gr_gid
+    except KeyError:
+        gid = int(group) if group.isdigit() else -1
+    member = os.geteuid() == 0 or gid == os.getegid() or gid in os.getgroups()
+    return group, member
+
+
 def _permission_message(path: str) -> str:
     owner = _owning_group(path)
     text = f'permission denied opening {path}: '
@@ -214,8 +279,11 @@ def _permission_message(path: str) -> str:
                        'then log in again)')
     group, mode = owner
     if not mode & stat.S_IRGRP:
-        return text + (f'only its owner may open it (mode {stat.S_IMODE(mode):04o}); a udev '
-                       f'rule giving it to the dialout group with mode 0660 fixes that')
+        return text + (f'only its owner may open it (mode {stat.S_IMODE(mode):04o}); '
+                       f'{UDEV_RULE_ADVICE}')
+    if not serial_group(group, path):
+        return text + (f'it belongs to the {group} group, and joining {group} would give '
+                       f'your user far more than this port, so do not; {UDEV_RULE_ADVICE}')
     if _in_group_database(group):
         return text + (f'you are in the {group} group that owns it, but this session is '
                        f'not yet: log out and in again (or run newgrp {group})')
@@ -273,6 +341,27 @@ class SerialPort:
             self._fd: int | None = self._serial.fileno()
         except (AttributeError, OSError, serial.SerialException):
             self._fd = None
+
+    def low_latency_flag(self) -> bool | None:
+        """
+        Whether the port is in low-latency mode now (ASYNC_LOW_LATENCY).
+
+        None when the port cannot tell (a pseudo-terminal, not Linux): what
+        ``bringup`` reports as found, before it asks for the mode itself.
+        """
+        if self._fd is None or not hasattr(termios, 'TIOCGSERIAL'):
+            return None
+        settings = array.array('i', [0] * 32)  # struct serial_struct; flags is the 5th int
+        try:
+            fcntl.ioctl(self._fd, termios.TIOCGSERIAL, settings)
+        except OSError:
+            return None
+        return bool(settings[4] & ASYNC_LOW_LATENCY)
+
+    def enable_low_latency(self) -> str:
+        """Ask for low-latency mode now; return and keep 'on' or why it is not."""
+        self.low_latency_state = self._enable_low_latency()
+        return self.low_latency_state
 
     def _enable_low_latency(self) -> str:
         """Ask for low-latency mode; return 'on' or why it is not."""

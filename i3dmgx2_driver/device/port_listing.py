@@ -44,6 +44,10 @@ USB_SERIAL_VIDS = {
 #: What a port looks like, in the order of how likely it leads to a sensor.
 KIND_MICROSTRAIN = 'MicroStrain'
 KIND_USB_SERIAL = 'USB-serial'
+#: Where the kernel shows each tty; an FTDI port's device there has latency_timer (ms).
+SYS_CLASS_TTY = '/sys/class/tty'
+#: The FTDI latency timer as the chip comes up (ms): bytes wait up to this long in the chip.
+DEFAULT_LATENCY_TIMER_MS = 16
 
 
 class PortInfo(NamedTuple):
@@ -90,6 +94,22 @@ def port_kind(vid: int | None, description: str = '', manufacturer: str = '') ->
     if vid in USB_SERIAL_VIDS:
         return f'{KIND_USB_SERIAL} ({USB_SERIAL_VIDS[vid]})'
     return None
+
+
+def latency_timer_ms(device: str, sys_class_tty: str = SYS_CLASS_TTY) -> int | None:
+    """
+    Return the USB-serial adapter's latency timer for ``device`` in ms, or None.
+
+    Only FTDI chips (ftdi_sio: MicroStrain's base station among them) have
+    one; for any other port, a link that leads nowhere, or a sysfs that
+    cannot be read, None. ``device`` may be a link (by-id, /dev/i3dmgx2).
+    """
+    name = os.path.basename(os.path.realpath(device))
+    try:
+        with open(os.path.join(sys_class_tty, name, 'device', 'latency_timer')) as handle:
+            return int(handle.read().strip())
+    except (OSError, ValueError):
+        return None
 
 
 def by_id_path(device: str, by_id_dir: str = BY_ID_DIR) -> str | None:

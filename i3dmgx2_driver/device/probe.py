@@ -40,6 +40,7 @@ import threading
 import time
 from typing import Any, NamedTuple
 
+from . import timeouts
 from .identity import DeviceInfo, IDENTIFIER_NAMES, read_firmware, read_identifier
 from .link import DeviceLink, DeviceTimeout, LinkOptions
 from .port import (
@@ -74,13 +75,13 @@ class ProbeConfig:
     #: Seconds to listen for sensors that already stream (one packet is enough).
     listen_s: float = 0.5
     #: Seconds to wait for the answer to a ping, until a base station has answered one.
-    ping_timeout: float = 0.5
+    ping_timeout: float = timeouts.PROBE_PING_TIMEOUT
     #: Seconds to wait for it once a base station is known to be there.
-    answer_timeout: float = 1.0
+    answer_timeout: float = timeouts.PROBE_ANSWER_TIMEOUT
     #: This many unanswered pings first: no base station on the port.
     silent_pings: int = 2
-    request_timeout: float = 0.3
-    request_retries: int = 3
+    request_timeout: float = timeouts.PROBE_REQUEST_TIMEOUT
+    request_retries: int = timeouts.PROBE_REQUEST_RETRIES
     #: Stop a streaming sensor to read it (and restart it), instead of trying
     #: combined mode first.
     stop_streams: bool = False

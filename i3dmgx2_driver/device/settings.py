@@ -23,6 +23,7 @@ timeouts): the node builds it once from its parameters.
 
 from dataclasses import dataclass
 
+from . import timeouts
 from .realtime import NORMAL_SCHEDULING, ThreadPolicy
 from ..codec import streams
 
@@ -36,13 +37,13 @@ class DeviceConfig:
     baud: int = 115200
     wireless: bool = True
     low_latency: bool = True
-    stall_timeout: float = 1.0
+    stall_timeout: float = timeouts.STALL_TIMEOUT
     reconnect_interval: float = 1.0
     data_rate_hz: float | None = None
     #: Command byte of the record to stream (one of codec.streams.STREAMS).
     stream: int = streams.DEFAULT.code
-    request_timeout: float = 0.5
-    request_retries: int = 3
+    request_timeout: float = timeouts.REQUEST_TIMEOUT
+    request_retries: int = timeouts.REQUEST_RETRIES
     continuous_retries: int = 5
     #: Scheduling of the reader thread (its SCHED_FIFO priority).
     thread_policy: ThreadPolicy = NORMAL_SCHEDULING
@@ -53,5 +54,5 @@ class DeviceConfig:
     prompt_reopen: bool = True
     #: Per try and tries of that read: short, so that a reply lost in a stall is asked
     #: again soon after the radio is back.
-    resume_timeout: float = 0.1
-    resume_retries: int = 5
+    resume_timeout: float = timeouts.RESUME_TIMEOUT
+    resume_retries: int = timeouts.RESUME_RETRIES

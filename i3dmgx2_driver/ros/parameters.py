@@ -41,6 +41,7 @@ from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.orientation import CONVENTIONS
 from ..device.realtime import MAX_PRIORITY
+from ..device.timeouts import STALL_TIMEOUT
 
 TIME_SOURCES = ('device', 'host')
 RELIABILITIES = ('reliable', 'best_effort')
@@ -101,7 +102,7 @@ SPECS: list[Spec] = [
          'QoS reliability of the publishers (best_effort does not match reliable '
          'subscribers).', choices=RELIABILITIES),
     Spec('qos_depth', Parameter.Type.INTEGER, 10, 'QoS history depth.', (1, 1000)),
-    Spec('read_timeout', Parameter.Type.DOUBLE, 1.0,
+    Spec('read_timeout', Parameter.Type.DOUBLE, STALL_TIMEOUT,
          'Seconds without data before the stream counts as stalled.', (0.1, 60.0)),
     Spec('reconnect_interval', Parameter.Type.DOUBLE, 1.0,
          'Seconds between attempts to reopen a lost port.', (0.1, 60.0)),

@@ -31,7 +31,12 @@ import sys
 import time
 from typing import Any, TextIO
 
-from ..device.port_listing import BY_ID_DIR, describe_path, list_ports, PortInfo
+from .arguments import seconds
+from ..device.port import port_group, serial_group, UDEV_RULE_INSTALL
+from ..device.port_listing import (
+    BY_ID_DIR, DEFAULT_LATENCY_TIMER_MS, describe_path, latency_timer_ms, list_ports, PortInfo,
+    SYS_CLASS_TTY,
+)
 from ..device.probe import (
     FACTORY_ADDRESSES, parse_addresses, PortProbe, probe_port, ProbeConfig, SensorFound,
 )
@@ -55,6 +60,31 @@ def node_command(path: str, sensor: SensorFound) -> str:
     return f'{head} -p wireless:=false -p address:={WIRED_ADDRESS}'
 
 
+def udev_note(path: str, message: str = '', sys_class_tty: str = SYS_CLASS_TTY) -> str:
+    """
+    Say when the package's udev rule would help this port, or return ''.
+
+    It would when the adapter's latency timer is still the 16 ms it comes up
+    with, or when the port belongs to a group this session is not in (and
+    the error ``message`` of a refused open does not already say so).
+    """
+    reasons = []
+    timer = latency_timer_ms(path, sys_class_tty)
+    if timer is not None and timer >= DEFAULT_LATENCY_TIMER_MS:
+        reasons.append(f'its latency timer is {timer} ms (records arrive in {timer} ms bursts)')
+    owner = port_group(path)
+    if owner is not None and not owner[1] and 'udev rule' not in message:
+        group = owner[0]
+        why = '' if serial_group(group, path) else \
+            f', and joining {group} would give you far more than this port'
+        reasons.append(f'it belongs to the {group} group, which you are not in{why}')
+    if not reasons:
+        return ''
+    return (f'{" and ".join(reasons)}; the udev rule that comes with the driver sets a 1 ms '
+            f'latency timer and gives the port to the dialout group (mode 0660): '
+            f'{UDEV_RULE_INSTALL}')
+
+
 def _addresses(text: str) -> list[int]:
     try:
         return parse_addresses(text)
@@ -62,14 +92,7 @@ def _addresses(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r} is not a number of seconds') from None
-    if not 0.0 <= value <= 60.0:
-        raise argparse.ArgumentTypeError(f'{text!r}: give 0..60 seconds')
-    return value
+_seconds = seconds(0.0, 60.0)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -137,6 +160,8 @@ def _port_dict(port: PortInfo, probe: PortProbe | None) -> dict[str, Any]:
         'device': port.device, 'by_id': port.by_id, 'usb_id': port.usb_id,
         'description': port.description or None, 'looks_like': port.kind,
         'status': probe.status if probe else 'not probed',
+        'latency_timer_ms': latency_timer_ms(port.device),
+        'udev_note': udev_note(port.device, probe.message if probe else '') or None,
     }
     if probe is not None:
         out.update({
@@ -185,11 +210,16 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
              'found by']]
     commands = []
     for port, probe in results:
+        note = udev_note(port.device, probe.message)
         if probe.status != 'probed':
             hint = BUSY_HINT.format(path=shlex.quote(port.device)) \
                 if probe.status == 'busy' else ''
             out.write(f'{port.device}: {probe.message}{hint}\n')
+            if note:
+                out.write(f'  note: {note}\n')
             continue
+        if note:
+            out.write(f'{port.device}: note: {note}\n')
         if not probe.sensors:
             what = {True: 'a base station, but no sensor answered',
                     False: 'no base station and no wired sensor answered',

@@ -49,13 +49,11 @@ import csv
 import math
 import os
 import sys
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.patches import Patch
 import numpy as np
 
+from .figures import agg_figure, have_matplotlib, MATPLOTLIB_HINT, patch
 from .stamp_plot import read_stamp_errors, render_stamp_errors
 from ..capture import (
     FIXTURE_ADDRESS, fixture_chunks, is_capture, load_fixture, read_capture, timeline,
@@ -334,16 +332,15 @@ def _broken(t: np.ndarray, y: np.ndarray, starts: Sequence[int],
     return np.insert(t, idx, np.nan), np.insert(y, idx, np.nan)
 
 
-def render(series: Series, output: str, title: str | None = None) -> Figure:
+def render(series: Series, output: str, title: str | None = None) -> Any:
     """
     Draw the three panels of ``series`` into the PNG ``output``; return the figure.
 
     The figure is made on an Agg canvas directly, not through pyplot: no
     display is ever needed or opened, no global state is kept, and the
-    figure is freed with its last reference.
+    figure is freed with its last reference (``figures.agg_figure``).
     """
-    fig = Figure(figsize=FIGSIZE, layout='constrained')
-    FigureCanvasAgg(fig)
+    fig = agg_figure(figsize=FIGSIZE, layout='constrained')
     axes = fig.subplots(3, 1, sharex=True)
     _draw(fig, axes, series, title)
     fig.savefig(output, dpi=DPI)
@@ -377,9 +374,9 @@ def _draw(fig, axes, series: Series, title: str | None) -> None:
         handles, names = ax.get_legend_handles_labels()
         if ax is axes[0]:
             if series.gaps:
-                handles.append(Patch(color='0.85', label='no data'))
+                handles.append(patch(color='0.85', label='no data'))
             if series.breaks:
-                handles.append(Patch(facecolor='0.92', edgecolor='0.6', hatch='///',
+                handles.append(patch(facecolor='0.92', edgecolor='0.6', hatch='///',
                                      label='timer restarts\n(separate captures)'))
             names = [h.get_label() for h in handles]
         ax.legend(handles, names, loc='upper left', bbox_to_anchor=(1.01, 1.0),
@@ -430,6 +427,9 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the plot command line; return the exit status."""
     args = _parser().parse_args(argv)
+    if not have_matplotlib():
+        print(f'plot: {MATPLOTLIB_HINT}', file=sys.stderr)
+        return 1
     convention = args.convention or ENU
     source_path = args.fixture or args.stamp_errors or args.input
     output = args.output or os.path.splitext(os.path.basename(source_path))[0] + '.png'

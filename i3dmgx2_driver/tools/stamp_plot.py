@@ -25,11 +25,11 @@ slope) or jumps (a step) is plain to see.
 """
 
 import csv
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 import numpy as np
+
+from .figures import agg_figure
 
 
 class StampErrors(NamedTuple):
@@ -81,10 +81,9 @@ def read_stamp_errors(path: str) -> StampErrors:
     return StampErrors(np.array(times), np.array(errors), events)
 
 
-def render_stamp_errors(series: StampErrors, output: str, title: str | None = None) -> Figure:
+def render_stamp_errors(series: StampErrors, output: str, title: str | None = None) -> Any:
     """Draw the error (ms) over time (s from the first record) to ``output`` (PNG)."""
-    fig = Figure(figsize=(10, 4.5), dpi=100)
-    FigureCanvasAgg(fig)
+    fig = agg_figure(figsize=(10, 4.5), dpi=100)
     ax = fig.add_subplot(1, 1, 1)
     start = series.time[0] if series.time.size else 0.0
     ax.plot(series.time - start, series.error * 1e3, '.', markersize=2, color='tab:blue',

@@ -1,0 +1,109 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+How long the driver and ``discover`` wait for the radio: the one place.
+
+Every wait for an answer that crosses the radio (a ping, a command's reply,
+the first record after continuous mode is asked for, the next record of a
+stream) is named here, with the setting that changes it, so that the node
+(``settings.DeviceConfig``, the dialogue), ``discover`` (``probe.ProbeConfig``)
+and ``bringup``, which measures the real round trips and warns when one comes
+within a factor 2 of a timeout, cannot disagree about them.
+"""
+
+from typing import NamedTuple
+
+#: The driver's ping of its sensor at start-up (s per try), and its tries.
+PING_TIMEOUT = 0.3
+PING_RETRIES = 2
+#: A command's reply, per try (s), and the tries, in the driver's dialogue.
+REQUEST_TIMEOUT = 0.5
+REQUEST_RETRIES = 3
+#: The serial-number read that resumes a known sensor after a reconnect (s per try).
+RESUME_TIMEOUT = 0.1
+RESUME_RETRIES = 5
+#: No record for this long (s): the stream has stalled (the node's ``read_timeout``).
+STALL_TIMEOUT = 1.0
+#: discover: the first pings, until a base station has answered one (s per ping).
+PROBE_PING_TIMEOUT = 0.5
+#: discover: a ping once a base station is known to be there (s).
+PROBE_ANSWER_TIMEOUT = 1.0
+#: discover: a command's reply, per try (s), and the tries.
+PROBE_REQUEST_TIMEOUT = 0.3
+PROBE_REQUEST_RETRIES = 3
+
+#: What bringup measures, by the names of its round trips.
+PING = 'ping'
+COMMAND = 'command'
+CONTINUOUS_START = 'continuous start'
+RECORD_GAP = 'record gap'
+
+
+class RadioTimeout(NamedTuple):
+    """One wait on the radio, what it waits for and how to change it."""
+
+    #: The constant's name in this module.
+    name: str
+    seconds: float
+    #: Which measured round trip it bounds: PING, COMMAND, CONTINUOUS_START or RECORD_GAP.
+    measured: str
+    #: Who waits, in words.
+    waits: str
+    #: How a user changes it: a parameter, an option, or this module's constant.
+    setting: str
+
+
+def radio_timeouts() -> tuple[RadioTimeout, ...]:
+    """Return every timeout on the radio, with the round trip it bounds."""
+    here = 'i3dmgx2_driver/device/timeouts.py'
+    return (
+        RadioTimeout('PING_TIMEOUT', PING_TIMEOUT, PING,
+                     "the node's start-up ping", f'PING_TIMEOUT in {here}'),
+        RadioTimeout('PROBE_PING_TIMEOUT', PROBE_PING_TIMEOUT, PING,
+                     "discover's first pings", 'discover --ping-timeout'),
+        RadioTimeout('PROBE_ANSWER_TIMEOUT', PROBE_ANSWER_TIMEOUT, PING,
+                     "discover's pings through a known base station",
+                     f'PROBE_ANSWER_TIMEOUT in {here}'),
+        RadioTimeout('REQUEST_TIMEOUT', REQUEST_TIMEOUT, COMMAND,
+                     "the node's commands (per try)", f'REQUEST_TIMEOUT in {here}'),
+        RadioTimeout('RESUME_TIMEOUT', RESUME_TIMEOUT, COMMAND,
+                     "the node's serial-number read on a reconnect (per try; "
+                     'fast_reconnect false avoids it)', f'RESUME_TIMEOUT in {here}'),
+        RadioTimeout('PROBE_REQUEST_TIMEOUT', PROBE_REQUEST_TIMEOUT, COMMAND,
+                     "discover's commands (per try)", f'PROBE_REQUEST_TIMEOUT in {here}'),
+        RadioTimeout('REQUEST_TIMEOUT', REQUEST_TIMEOUT, CONTINUOUS_START,
+                     "the node's continuous-mode request (per try)",
+                     f'REQUEST_TIMEOUT in {here}'),
+        RadioTimeout('STALL_TIMEOUT', STALL_TIMEOUT, RECORD_GAP,
+                     "the node's stall watch", 'the node parameter read_timeout'),
+    )
+
+
+def close_calls(measured: dict[str, float], factor: float = 2.0) -> list[str]:
+    """
+    Say which timeouts a measured round trip comes within ``factor`` of.
+
+    ``measured`` maps PING, COMMAND, CONTINUOUS_START, RECORD_GAP to the
+    longest time seen (s); one sentence per timeout it comes close to.
+    """
+    said = []
+    for timeout in radio_timeouts():
+        seen = measured.get(timeout.measured)
+        if seen is None or seen * factor < timeout.seconds:
+            continue
+        said.append(f'{timeout.measured} took up to {seen * 1e3:.0f} ms, within a factor '
+                    f'{factor:g} of {timeout.name} = {timeout.seconds:g} s ({timeout.waits}): '
+                    f'raise {timeout.setting}')
+    return said

@@ -1,0 +1,687 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Bring-up: one command a first-time hardware user runs, and sends us.
+
+``ros2 run i3dmgx2_driver bringup --port PATH --address N`` talks to a real
+sensor for about a minute and writes, in one folder it names:
+
+- ``report.txt``, the table it also prints: the sensor's identity, its data
+  rate divider, the port's low-latency mode and FTDI latency timer as found;
+  the round trips of a ping, a short command (0xE9) and continuous mode's
+  start and stop (min / median / max, and how many were lost or NACKed);
+  every stream at the highest rate the line allows, for a few seconds each
+  (rate achieved, records lost by the sensor's timer, LQI and RSSI, the
+  device clock's drift); the timeouts a measured round trip comes within a
+  factor 2 of (``device/timeouts.py``); and the state the sensor was left in;
+- ``report.json``, the same for a program;
+- ``session.gx2cap``, every byte read, with its receive time, in the
+  capture format (``capture.py``): ``replay`` plays it to the driver.
+
+The sensor is left exactly as found: the stream it was streaming (or none),
+its rate divider in EEPROM (written for the streams, written back at the
+end and read back). Exit status: 0 done and left as found, 1 the sensor did
+not answer or could not be restored, 2 bad arguments, 130 interrupted (the
+sensor restored first).
+"""
+
+import argparse
+from collections.abc import Callable, Sequence
+import itertools
+import json
+import os
+import statistics
+import sys
+import threading
+import time
+from typing import Any, TextIO
+
+from .arguments import seconds, whole_number
+from ..capture import CaptureWriter, default_header
+from ..codec import commands, layouts, line_budget, streams
+from ..codec.data_rate import (
+    divider_for_rate, RATE_BASE_HZ, RATE_DIVIDER_ADDRESS, ticks_per_cycle,
+)
+from ..codec.framing import DataPacket, MAX_ADDRESS, MIN_ADDRESS
+from ..codec.records import TICKS_PER_SECOND
+from ..codec.timer import TIMER_MODULUS
+from ..device import timeouts
+from ..device.clock import DeviceClock
+from ..device.identity import read_identity
+from ..device.link import DeviceLink, DeviceNack, DeviceTimeout
+from ..device.port import port_group, PortError, SerialPort
+from ..device.port_listing import latency_timer_ms
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+#: How long a single measured exchange may take (s): far beyond every timeout the
+#: driver uses, so that a slow round trip is measured rather than counted lost.
+MEASURE_TIMEOUT = 2.0
+#: Silence (s) after which a stopped stream counts as stopped (plus a few periods).
+QUIET_S = 0.3
+#: The short command whose round trip is measured: the firmware version (0xE9).
+SHORT_COMMAND = layouts.FIRMWARE_VERSION
+
+
+_count = whole_number(1, 1000, 'count')
+_address = whole_number(MIN_ADDRESS, MAX_ADDRESS, 'node address')
+_seconds = seconds(0.2, 600.0)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command line of ``bringup``."""
+    parser = argparse.ArgumentParser(
+        prog='bringup',
+        description='Talk to a real 3DM-GX2 for about a minute and write a report a person '
+                    'can read and a capture a developer can replay, in one folder: attach '
+                    'that folder to a bug report.',
+        epilog='Exit status: 0 done and the sensor left as found, 1 it did not answer or '
+               'could not be restored, 2 bad arguments.')
+    parser.add_argument('--port', required=True, metavar='PATH',
+                        help='serial port of the base station (discover finds it)')
+    parser.add_argument('--address', required=True, type=_address, metavar='N',
+                        help="the sensor's node address (discover finds it)")
+    parser.add_argument('--baud', type=int, default=115200, help='baud rate (default 115200)')
+    parser.add_argument('--output-dir', default='.', metavar='DIR',
+                        help='where the report folder is made (default: here)')
+    parser.add_argument('--pings', type=_count, default=20, metavar='N',
+                        help='pings to time (default 20)')
+    parser.add_argument('--commands', type=_count, default=20, metavar='N',
+                        help='short commands (0xE9) to time (default 20)')
+    parser.add_argument('--cycles', type=_count, default=5, metavar='N',
+                        help='continuous-mode starts and stops to time (default 5)')
+    parser.add_argument('--stream-seconds', type=_seconds, default=5.0, metavar='S',
+                        help='how long each stream runs (default 5)')
+    parser.add_argument('--listen', type=_seconds, default=1.0, metavar='S',
+                        help='how long to listen first for a stream already running '
+                             '(default 1)')
+    parser.add_argument('--streams', default='all', metavar='LIST',
+                        help='streams to run, e.g. full,inertial or 0xCC,0xC2 '
+                             '(default: all)')
+    return parser
+
+
+def _streams(text: str) -> list[streams.Stream]:
+    if text == 'all':
+        return list(streams.STREAMS)
+    return [streams.parse(item.strip()) for item in text.split(',') if item.strip()]
+
+
+def spread(values: Sequence[float], scale: float = 1.0,
+           digits: int = 1) -> dict[str, float | int | None]:
+    """Return count, min, median and max of ``values`` times ``scale``."""
+    if not values:
+        return {'count': 0, 'min': None, 'median': None, 'max': None}
+
+    def shown(value: float) -> float | int:
+        return round(value * scale, digits) if digits else round(value * scale)
+    return {'count': len(values), 'min': shown(min(values)),
+            'median': shown(statistics.median(values)), 'max': shown(max(values))}
+
+
+class _Heard:
+    """The records of our sensor as the reader thread hands them over."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.count = 0
+        self.last_mono = 0.0
+        #: While collecting: (mono, code, timer, lqi, rssi) of each record.
+        self.log: list[tuple[float, int, int, int | None, int | None]] | None = None
+
+    def __call__(self, packet: DataPacket, now: float, mono: float) -> None:
+        with self.lock:
+            self.count += 1
+            self.last_mono = mono
+            if self.log is not None:
+                record = packet.record
+                code = _CODE_OF_TYPE.get(type(record), 0)
+                self.log.append((mono, code, getattr(record, 'timer', 0), packet.lqi,
+                                 packet.rssi))
+
+    def snapshot(self) -> tuple[int, float]:
+        with self.lock:
+            return self.count, self.last_mono
+
+
+_CODE_OF_TYPE = {layout.record_type: code for code, layout in layouts.LAYOUTS.items()
+                 if layout.record_type is not None}
+
+
+class Bringup:
+    """One bring-up session over an open link; each step fills part of :attr:`report`."""
+
+    def __init__(self, link: DeviceLink, heard: _Heard, args: argparse.Namespace,
+                 say: Callable[[str], None]) -> None:
+        self.link = link
+        self.heard = heard
+        self.args = args
+        self.say = say
+        self.report: dict[str, Any] = {}
+        self.found_stream = 0
+        self.found_divider: int | None = None
+        self.divider: int | None = None
+        #: Longest round trip of each kind (s), for the timeouts' check.
+        self.longest: dict[str, float] = {}
+        #: EEPROM writes made (each written back at the end).
+        self.eeprom_writes = 0
+        #: When the stream was last asked to stop (a record before it is no sign of quiet).
+        self._since = 0.0
+
+    def _note_longest(self, kind: str, values: Sequence[float]) -> None:
+        if values:
+            self.longest[kind] = max(self.longest.get(kind, 0.0), *values)
+
+    # -- the sensor as found --------------------------------------------------------
+
+    def find_state(self) -> bool:
+        """
+        Listen for a stream, quiet it, read identity and divider.
+
+        Returns False, with the reason in the report, when the sensor is not
+        there: no stream heard and no answer to a ping through the base station.
+        """
+        self.say(f'listening {self.args.listen:g} s for a stream already running')
+        deadline = time.monotonic() + self.args.listen
+        while time.monotonic() < deadline and not self.heard.snapshot()[0]:
+            time.sleep(0.02)
+        time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
+        if self.heard.snapshot()[0]:
+            self.found_stream = self.link.last_code or 0
+        if self.found_stream:
+            self.say(f'the sensor streams 0x{self.found_stream:02X}: stopping it (restarted '
+                     f'at the end)')
+        self.stop_stream()
+        if not self.found_stream:
+            answer = None
+            for _ in range(3):
+                answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
+                if answer:
+                    break
+            if not answer:
+                self.report['error'] = (
+                    f'node {self.link.address} does not answer on {self.link.port.path}: ' + (
+                        'the base station answered the pings, the sensor did not (is it on? '
+                        'its address?)' if answer is False else
+                        'nothing answered the pings (no base station on this port?)')
+                    + '; ros2 run i3dmgx2_driver discover finds the port and address')
+                return False
+        self.say('reading identity and data rate')
+        info = read_identity(self.link, timeouts.REQUEST_TIMEOUT, timeouts.REQUEST_RETRIES)
+        self.report['identity'] = info._asdict()
+        self.report['identity']['answered'] = any(info)
+        try:
+            self.found_divider = self.read_divider()
+        except DeviceTimeout:
+            self.found_divider = None
+        self.divider = self.found_divider
+        self.report['as_found'] = {
+            'streaming': f'0x{self.found_stream:02X}' if self.found_stream else None,
+            'rate_divider': self.found_divider,
+            'rate_hz': round(RATE_BASE_HZ / self.found_divider, 3)
+            if self.found_divider else None,
+        }
+        return True
+
+    def read_divider(self) -> int:
+        return self.link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
+                                 layouts.READ_EEPROM, timeouts.REQUEST_TIMEOUT,
+                                 timeouts.REQUEST_RETRIES).value
+
+    def write_divider(self, divider: int) -> bool:
+        """Write the rate divider to EEPROM and read it back; True if it holds."""
+        try:
+            self.link.request(commands.write_eeprom(RATE_DIVIDER_ADDRESS, divider),
+                              layouts.WRITE_EEPROM, timeouts.REQUEST_TIMEOUT,
+                              timeouts.REQUEST_RETRIES)
+            readback = self.read_divider()
+        except DeviceTimeout:
+            return False
+        self.eeprom_writes += 1
+        if readback == divider:
+            self.divider = divider
+        return readback == divider
+
+    # -- streams on and off -----------------------------------------------------------
+
+    def _period(self) -> float:
+        return self.divider / RATE_BASE_HZ if self.divider else 0.01
+
+    def wait_quiet(self, within: float) -> float | None:
+        """Wait until no record came for QUIET_S (and a few periods); return the last's time."""
+        quiet = QUIET_S + 5 * self._period()
+        deadline = time.monotonic() + within
+        while time.monotonic() < deadline:
+            _, last = self.heard.snapshot()
+            if time.monotonic() - max(last, self._since) >= quiet:
+                return last
+            time.sleep(0.01)
+        return None
+
+    def stop_stream(self) -> bool:
+        """Send 0xFA until records stop; True once they have."""
+        for _ in range(5):
+            self._since = time.monotonic()
+            self.link.stop_streaming()
+            if self.wait_quiet(2.0) is not None:
+                return True
+        return False
+
+    def start_stream(self, code: int, tries: int = 5) -> float | None:
+        """Ask for continuous mode until records arrive; return when the first did."""
+        for _ in range(tries):
+            before, _ = self.heard.snapshot()
+            try:
+                self.link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
+                                  timeouts.REQUEST_TIMEOUT, 1)
+            except DeviceTimeout:
+                pass  # the reply may be lost while the stream started: look for records
+            deadline = time.monotonic() + max(1.0, 5 * self._period())
+            while time.monotonic() < deadline:
+                count, last = self.heard.snapshot()
+                if count > before:
+                    return last
+                time.sleep(0.005)
+        return None
+
+    # -- round trips ---------------------------------------------------------------------
+
+    def ping_round_trips(self) -> None:
+        self.say(f'timing {self.args.pings} pings')
+        times, lost, absent = [], 0, 0
+        for _ in range(self.args.pings):
+            start = time.monotonic()
+            answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
+            took = time.monotonic() - start
+            if answer is None:
+                lost += 1
+            elif not answer:
+                absent += 1  # the base station answered, the sensor did not (0x21)
+            else:
+                times.append(took)
+        self._note_longest(timeouts.PING, times)
+        self.report['round_trips']['ping'] = {
+            **spread(times, 1e3), 'lost': lost, 'not_answered_by_sensor': absent}
+
+    def command_round_trips(self) -> None:
+        self.say(f'timing {self.args.commands} short commands (0x{SHORT_COMMAND:02X})')
+        times, lost, nacked = [], 0, 0
+        for _ in range(self.args.commands):
+            start = time.monotonic()
+            try:
+                self.link.request(bytes((SHORT_COMMAND,)), SHORT_COMMAND, MEASURE_TIMEOUT, 1)
+            except DeviceNack:
+                nacked += 1
+                continue
+            except DeviceTimeout:
+                lost += 1
+                continue
+            times.append(time.monotonic() - start)
+        self._note_longest(timeouts.COMMAND, times)
+        self.report['round_trips']['command'] = {
+            **spread(times, 1e3), 'lost': lost, 'nacked': nacked}
+
+    def continuous_round_trips(self, code: int) -> None:
+        self.say(f'timing {self.args.cycles} continuous-mode starts and stops '
+                 f'(0x{code:02X})')
+        starts, stops, replies = [], [], []
+        lost = nacked = failed = 0
+        for _ in range(self.args.cycles):
+            before, _ = self.heard.snapshot()
+            start = time.monotonic()
+            try:
+                self.link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
+                                  MEASURE_TIMEOUT, 1)
+                replies.append(time.monotonic() - start)
+            except DeviceNack:
+                nacked += 1
+            except DeviceTimeout:
+                lost += 1
+            deadline = start + MEASURE_TIMEOUT + 5 * self._period()
+            first = None
+            while time.monotonic() < deadline:
+                count, last = self.heard.snapshot()
+                if count > before:
+                    first = last
+                    break
+                time.sleep(0.002)
+            if first is None:
+                failed += 1
+                continue
+            starts.append(first - start)
+            time.sleep(0.2)
+            self._since = stop_sent = time.monotonic()
+            self.link.send(commands.stop_continuous())
+            last = self.wait_quiet(MEASURE_TIMEOUT)
+            if last is None:
+                lost += 1  # the stop was lost: stop it the sure way
+                self.stop_stream()
+                continue
+            stops.append(max(0.0, last - stop_sent))
+        self._note_longest(timeouts.CONTINUOUS_START, starts)
+        self.report['round_trips']['continuous_start'] = {
+            **spread(starts, 1e3), 'reply': spread(replies, 1e3), 'lost': lost,
+            'nacked': nacked, 'no_records': failed}
+        self.report['round_trips']['continuous_stop'] = spread(stops, 1e3)
+
+    # -- every stream --------------------------------------------------------------------
+
+    def run_stream(self, stream: streams.Stream) -> dict[str, Any]:
+        rate = line_budget.max_rate(stream.code, self.args.baud, True)
+        out: dict[str, Any] = {'stream': stream.label, 'code': f'0x{stream.code:02X}'}
+        if rate is None:
+            out['error'] = 'no rate fits the line'
+            return out
+        divider = divider_for_rate(rate)
+        out['divider'] = divider
+        out['rate_asked_hz'] = round(RATE_BASE_HZ / divider, 2)
+        self.say(f'streaming {stream.label} at {RATE_BASE_HZ / divider:.1f} Hz for '
+                 f'{self.args.stream_seconds:g} s')
+        if divider != self.divider and not self.write_divider(divider):
+            out['error'] = f'could not set the rate divider to {divider}'
+            return out
+        with self.heard.lock:
+            self.heard.log = []
+        if self.start_stream(stream.code) is None:
+            out['error'] = 'no records after 5 continuous-mode requests'
+        else:
+            time.sleep(self.args.stream_seconds)
+        with self.heard.lock:
+            log, self.heard.log = self.heard.log, None
+        self.stop_stream()
+        out.update(stream_figures([e for e in log if e[1] == stream.code], divider,
+                                  line_budget.wire_time(stream.code, self.args.baud, True)))
+        self._note_longest(timeouts.RECORD_GAP, [out['longest_gap_ms'] / 1e3]
+                           if out.get('longest_gap_ms') is not None else [])
+        return out
+
+    # -- as found again -------------------------------------------------------------------
+
+    def restore(self) -> dict[str, Any]:
+        """Put divider and stream back as found; say how it went."""
+        out: dict[str, Any] = {}
+        self.stop_stream()
+        if self.found_divider is not None:
+            ok = self.divider == self.found_divider or self.write_divider(self.found_divider)
+            try:
+                readback = self.read_divider()
+            except DeviceTimeout:
+                readback = None
+            out['rate_divider'] = readback
+            out['rate_divider_restored'] = bool(ok and readback == self.found_divider)
+        else:
+            out['rate_divider'] = None
+            out['rate_divider_restored'] = self.divider is None
+        if self.found_stream:
+            restarted = self.start_stream(self.found_stream) is not None
+            out['streaming'] = f'0x{self.found_stream:02X}' if restarted else None
+            out['stream_restored'] = restarted
+        else:
+            out['streaming'] = None
+            out['stream_restored'] = True
+        out['as_found'] = out['rate_divider_restored'] and out['stream_restored']
+        out['eeprom_writes'] = self.eeprom_writes
+        return out
+
+
+def stream_figures(log: Sequence[tuple[float, int, int, int | None, int | None]],
+                   divider: int, wire_time: float) -> dict[str, Any]:
+    """Rate, records lost by the timer, LQI/RSSI and clock drift of one stream's records."""
+    out: dict[str, Any] = {'records': len(log)}
+    if len(log) < 2:
+        out.update({'rate_hz': None, 'lost': None, 'lqi': spread([]), 'rssi': spread([]),
+                    'drift_ppm': None, 'longest_gap_ms': None})
+        return out
+    expected = ticks_per_cycle(divider)
+    lost = 0
+    ticks = [0]
+    for previous, entry in itertools.pairwise(log):
+        step = (entry[2] - previous[2]) % TIMER_MODULUS
+        ticks.append(ticks[-1] + step)
+        lost += max(0, round(step / expected) - 1)
+    span = ticks[-1] / TICKS_PER_SECOND
+    host_span = log[-1][0] - log[0][0]
+    # The driver's own fit of the device clock, with ten envelope windows in the run.
+    clock = DeviceClock(window=max(span / 10, 0.05), history=20)
+    for tick, entry in zip(ticks, log, strict=True):
+        clock.stamp(tick, entry[0], wire_time)
+    gaps = [b[0] - a[0] for a, b in itertools.pairwise(log)]
+    lqi = [e[3] for e in log if e[3] is not None]
+    rssi = [e[4] for e in log if e[4] is not None]
+    out.update({
+        'rate_hz': round((len(log) - 1) / host_span, 2) if host_span > 0 else None,
+        'device_rate_hz': round((len(log) - 1 + lost) / span, 2) if span > 0 else None,
+        'lost': lost,
+        'lost_share': round(lost / (len(log) + lost), 4),
+        'lqi': spread(lqi, digits=0), 'rssi': spread(rssi, digits=0),
+        'drift_ppm': round(clock.drift_ppm, 1) if host_span >= 1.0 else None,
+        'longest_gap_ms': round(max(gaps) * 1e3, 1),
+    })
+    return out
+
+
+# -- the report ------------------------------------------------------------------------
+
+
+def _cell(value: Any) -> str:
+    return '-' if value is None else str(value)
+
+
+def _timer(value: int | None) -> str:
+    if value is None:
+        return 'none (not an FTDI USB-serial port)'
+    return f'{value} ms' + (' (the udev rule sets 1 ms)' if value > 1 else '')
+
+
+def _table(rows: list[list[str]]) -> list[str]:
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    return ['  ' + '  '.join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip()
+            for row in rows]
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """Return the report as the table a person reads (printed and in report.txt)."""
+    lines = [f'3DM-GX2 bring-up, {report["started"]}', '']
+    port = report['port']
+    ident = report.get('identity', {})
+    found = report.get('as_found', {})
+    lines += _table([
+        ['port', port['path']],
+        ['address', str(report['address'])],
+        ['model', f'{_cell(ident.get("model_name"))} ({_cell(ident.get("model_number"))})'],
+        ['serial', _cell(ident.get('serial_number'))],
+        ['firmware', _cell(ident.get('firmware'))],
+        ['options', _cell(ident.get('options'))],
+        ['rate divider', f'{_cell(found.get("rate_divider"))} '
+                         f'({_cell(found.get("rate_hz"))} Hz)'],
+        ['streaming as found', _cell(found.get('streaming')) if found else '-'],
+        ['low-latency mode as found', _cell(port.get('low_latency_as_found'))],
+        ['low-latency mode now', _cell(port.get('low_latency'))],
+        ['FTDI latency timer as found', _timer(port.get('latency_timer_ms_as_found'))],
+        ['FTDI latency timer now', _timer(port.get('latency_timer_ms'))],
+        ['group', f'{_cell(port.get("group"))}'
+                  f'{"" if port.get("in_group", True) else " (you are not in it)"}'],
+    ])
+    trips = report.get('round_trips', {})
+    if trips:
+        lines += ['', 'Round trips (ms):']
+        rows = [['', 'count', 'min', 'median', 'max', 'lost', 'nacked']]
+        for name, key in (('ping', 'ping'), ('short command (0xE9)', 'command'),
+                          ('continuous start (to 1st record)', 'continuous_start'),
+                          ('continuous stop (to last record)', 'continuous_stop')):
+            t = trips.get(key)
+            if t is not None:
+                rows.append([name, str(t['count']), _cell(t['min']), _cell(t['median']),
+                             _cell(t['max']), _cell(t.get('lost')), _cell(t.get('nacked'))])
+        lines += _table(rows)
+        if trips.get('ping', {}).get('not_answered_by_sensor'):
+            lines.append(f'  pings the base station answered 0x21 (sensor silent): '
+                         f'{trips["ping"]["not_answered_by_sensor"]}')
+    if report.get('streams'):
+        lines += ['', 'Streams, each at the highest rate the line allows:']
+        rows = [['stream', 'asked Hz', 'got Hz', 'records', 'lost', 'LQI min/med',
+                 'RSSI min/med', 'drift ppm', 'longest gap ms']]
+        for s in report['streams']:
+            if 'error' in s and not s.get('records'):
+                rows.append([s['stream'], _cell(s.get('rate_asked_hz')), s['error'], '', '',
+                             '', '', '', ''])
+                continue
+            rows.append([s['stream'], _cell(s.get('rate_asked_hz')), _cell(s.get('rate_hz')),
+                         str(s['records']), _cell(s.get('lost')),
+                         f'{_cell(s["lqi"]["min"])}/{_cell(s["lqi"]["median"])}',
+                         f'{_cell(s["rssi"]["min"])}/{_cell(s["rssi"]["median"])}',
+                         _cell(s.get('drift_ppm')), _cell(s.get('longest_gap_ms'))])
+        lines += _table(rows)
+    if report.get('close_calls'):
+        lines += ['', 'Timeouts a round trip comes close to:']
+        lines += [f'  - {text}' for text in report['close_calls']]
+    left = report.get('left')
+    if left is not None:
+        lines += ['', 'Left as found: ' + ('yes' if left['as_found'] else 'NO') + ': '
+                  f'rate divider {_cell(left["rate_divider"])} in EEPROM (read back after '
+                  f'{left["eeprom_writes"]} writes of the rate divider, the only EEPROM '
+                  'word written), '
+                  + (f'streaming {left["streaming"]}' if left['streaming']
+                     else 'not streaming') + '.']
+    if report.get('error'):
+        lines += ['', f'Error: {report["error"]}']
+    lines += ['', f'Folder: {report["folder"]} (report.txt, report.json, session.gx2cap): '
+                  'please attach it to your bug report.']
+    return '\n'.join(lines) + '\n'
+
+
+def _folder(base: str) -> str:
+    stamp = time.strftime('%Y%m%d-%H%M%S')
+    path = os.path.join(base, f'bringup-{stamp}')
+    suffix = 1
+    while os.path.exists(path):
+        suffix += 1
+        path = os.path.join(base, f'bringup-{stamp}-{suffix}')
+    os.makedirs(path)
+    return path
+
+
+def run(args: argparse.Namespace, out: TextIO) -> int:
+    """Run a bring-up session as ``args`` say; write the folder; return the exit status."""
+    chosen = _streams(args.streams)
+    folder = _folder(args.output_dir)
+
+    def say(text: str) -> None:
+        out.write(f'bringup: {text}\n')
+        out.flush()
+
+    say(f'writing to {folder}')
+    owner = port_group(args.port)
+    report: dict[str, Any] = {
+        'started': time.strftime('%Y-%m-%d %H:%M:%S %z'), 'folder': folder,
+        'address': args.address, 'baud': args.baud,
+        'port': {'path': args.port, 'real_path': os.path.realpath(args.port),
+                 'latency_timer_ms_as_found': latency_timer_ms(args.port),
+                 'group': owner[0] if owner else None,
+                 'in_group': owner[1] if owner else None},
+        'settings': {'pings': args.pings, 'commands': args.commands, 'cycles': args.cycles,
+                     'stream_seconds': args.stream_seconds},
+        'timeouts': [t._asdict() for t in timeouts.radio_timeouts()],
+        'round_trips': {}, 'streams': [],
+    }
+    status = EXIT_FAILED
+    try:
+        port = SerialPort(args.port, args.baud, low_latency=False)
+    except PortError as exc:
+        report['error'] = str(exc)
+        _write(folder, report, out)
+        return EXIT_FAILED
+    report['port']['low_latency_as_found'] = _on_off(port.low_latency_flag())
+    report['port']['low_latency'] = port.enable_low_latency()
+    report['port']['latency_timer_ms'] = latency_timer_ms(args.port)
+    capture = CaptureWriter(os.path.join(folder, 'session.gx2cap'), default_header(
+        port=args.port, address=args.address, baud=args.baud, wireless=True,
+        notes='bringup session'))
+    heard = _Heard()
+    link = DeviceLink(port, args.address, heard, wireless=True, read_timeout=0.05,
+                      on_bytes=capture.write)
+    session = Bringup(link, heard, args, say)
+    session.report = report
+    restored = False
+    try:
+        link.start()
+        if not session.find_state():
+            pass  # the report says why
+        elif not report['identity']['answered'] and session.found_divider is None:
+            report['error'] = (f'node {args.address} on {args.port} answered nothing: '
+                               f'discover finds the port and address')
+        else:
+            session.ping_round_trips()
+            session.command_round_trips()
+            session.continuous_round_trips(session.found_stream or streams.DEFAULT.code)
+            for stream in chosen:
+                report['streams'].append(session.run_stream(stream))
+        say('putting the sensor back as found')
+        report['left'] = session.restore()
+        restored = True
+        report['close_calls'] = timeouts.close_calls(session.longest)
+        if report['left']['as_found'] and 'error' not in report:
+            status = EXIT_OK
+    except KeyboardInterrupt:
+        report['error'] = 'interrupted'
+        status = EXIT_INTERRUPTED
+        if not restored:
+            report['left'] = session.restore()
+    except (PortError, DeviceTimeout) as exc:
+        report['error'] = str(exc)
+    finally:
+        link.stop()
+        port.close()
+        capture.close()
+    report['capture'] = {'path': os.path.join(folder, 'session.gx2cap'),
+                         'chunks': capture.chunks, 'bytes': capture.bytes}
+    _write(folder, report, out)
+    return status
+
+
+def _on_off(flag: bool | None) -> str:
+    return {True: 'on', False: 'off', None: 'unknown (not a USB-serial port)'}[flag]
+
+
+def _write(folder: str, report: dict[str, Any], out: TextIO) -> None:
+    text = format_report(report)
+    with open(os.path.join(folder, 'report.txt'), 'w') as handle:
+        handle.write(text)
+    with open(os.path.join(folder, 'report.json'), 'w') as handle:
+        json.dump(report, handle, indent=2)
+        handle.write('\n')
+    out.write('\n' + text)
+    out.flush()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``bringup``; return the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        _streams(args.streams)
+    except ValueError as exc:
+        parser.error(f'--streams: {exc}')
+    try:
+        return run(args, sys.stdout)
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+
+
+if __name__ == '__main__':
+    sys.exit(main())

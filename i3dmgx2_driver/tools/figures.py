@@ -1,0 +1,73 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+matplotlib, for the plot tool only, imported when a figure is drawn.
+
+matplotlib is an optional extra, not a dependency of the package: on a
+robot it would pull in a GUI stack the driver never uses. The node,
+``discover``, ``bringup`` and every module they import never import it
+(``test/test_package_xml.py`` checks that no module imports it at load
+time, ``test/test_without_matplotlib.py`` runs them without it); the plot
+tool imports it here, when it draws, and says how to install it if it is
+missing.
+"""
+
+from typing import Any
+
+#: What to do when matplotlib is missing.
+MATPLOTLIB_HINT = (
+    'the plot tool needs matplotlib, an optional extra the driver does not install: '
+    'sudo apt install python3-matplotlib (with ROS), or pip install matplotlib '
+    '(pip install "i3dmgx2_driver[plot]" from a source checkout)')
+
+
+class MatplotlibMissing(ImportError):
+    """matplotlib is not installed; the message says how to install it."""
+
+
+def agg_figure(**kwargs: Any) -> Any:
+    """
+    Return a matplotlib Figure on an Agg canvas, made with ``kwargs``.
+
+    No pyplot: no display is ever needed or opened, no global state is kept,
+    and the figure is freed with its last reference. Raises
+    :class:`MatplotlibMissing` when matplotlib is not installed.
+    """
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError as exc:
+        raise MatplotlibMissing(MATPLOTLIB_HINT) from exc
+    fig = Figure(**kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def patch(**kwargs: Any) -> Any:
+    """Return a matplotlib Patch (a legend entry for a shaded span)."""
+    try:
+        from matplotlib.patches import Patch
+    except ImportError as exc:
+        raise MatplotlibMissing(MATPLOTLIB_HINT) from exc
+    return Patch(**kwargs)
+
+
+def have_matplotlib() -> bool:
+    """Whether matplotlib can be imported."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        return False
+    return True
