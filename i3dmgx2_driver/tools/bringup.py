@@ -60,7 +60,7 @@ from ..codec.timer import TIMER_MODULUS
 from ..device import timeouts
 from ..device.clock import DeviceClock
 from ..device.identity import read_identity
-from ..device.link import DeviceLink, DeviceNack, DeviceTimeout
+from ..device.link import DeviceLink, DeviceNack, DeviceTimeout, LinkOptions
 from ..device.port import port_group, PortError, SerialPort
 from ..device.port_listing import latency_timer_ms
 
@@ -613,8 +613,8 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         port=args.port, address=args.address, baud=args.baud, wireless=True,
         notes='bringup session'))
     heard = _Heard()
-    link = DeviceLink(port, args.address, heard, wireless=True, read_timeout=0.05,
-                      on_bytes=capture.write)
+    link = DeviceLink(port, args.address, heard,
+                      LinkOptions(read_timeout=0.05, on_bytes=capture.write))
     session = Bringup(link, heard, args, say)
     session.report = report
     restored = False
