@@ -28,8 +28,8 @@ CSV (``--plot-csv``) for ``plot --stamp-errors``.
 Stream by stream (``--streams``): each stream at the highest rate its line
 budget allows, and 0xCC at 100 Hz, with radio-like delays (2 ms latency,
 the wire time at 115200 baud, a random 0..5 ms more): the standard
-deviation of the stamp error from 5 s to 60 s and after 60 s (the fit's full
-history of 60 one-second windows).
+deviation of the stamp error from 5 s to 60 s and after 60 s (the fit's history
+then holds at least 60 of its 120 one-second windows).
 """
 
 from pathlib import Path
