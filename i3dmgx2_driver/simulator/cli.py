@@ -27,9 +27,10 @@ import signal
 import threading
 import time
 
+from .config import SimulatorConfig
 from .faults import FaultConfig
 from .motion import MotionConfig
-from .pty_link import PtySimulator, SimulatorConfig
+from .pty_link import PtySimulator
 from .sensor import MAX_DIVIDER, MIN_DIVIDER, STREAMABLE
 
 

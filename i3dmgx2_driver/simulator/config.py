@@ -89,7 +89,7 @@ class SimulatorConfig:
     #: When the writer falls this far behind (s), it skips cycles instead of bursting.
     max_lag_s: float = 1.0
     #: Point the port symlink at /proc/<pid>/fd/<slave> rather than /dev/pts/N, so
-    #: that it dangles when the simulator dies, however it dies (see _open_pty).
+    #: that it dangles when the simulator dies, however it dies (see pty_port).
     link_via_proc: bool = True
 
     def __post_init__(self) -> None:
