@@ -128,6 +128,13 @@ class SimulatorConfig:
         return int(self.streaming_at_start)
 
     @property
+    def sensor_spec(self) -> sns.SensorSpec:
+        """Return the sensor this configuration describes."""
+        return sns.SensorSpec(self.address, self.serial_number, self.clock_ppm,
+                              self.timer_start, self.rate_hz, self.firmware_version,
+                              eeprom=self.power_up_eeprom)
+
+    @property
     def power_up_eeprom(self) -> dict[int, int]:
         """EEPROM words the sensor starts with, presets applied (on top of the factory ones)."""
         words = dict(self.eeprom)

@@ -73,7 +73,7 @@ from .motion import Motion, MotionConfig
 from .packet_faults import PacketFaults
 from .power import SensorPower
 from .pty_port import PtyPort
-from .sensor import SimulatedSensor
+from .sensor import SensorSpec, SimulatedSensor
 from .transmitter import Transmitter
 from .truth_queries import TruthQueries
 from .wired_line import WiredLine
@@ -104,15 +104,12 @@ class PtySimulator(TruthQueries):
         self.config = config
         seeds = random.Random(config.seed)
         #: The device model; touch it only while holding ``sim.lock``.
-        self.sensor = SimulatedSensor(
-            config.address, config.serial_number, Motion(_motion_config(config)),
-            clock_ppm=config.clock_ppm, timer_start=config.timer_start, rate_hz=config.rate_hz,
-            firmware_version=config.firmware_version, eeprom=config.power_up_eeprom,
-            seed=seeds.getrandbits(64))
+        self.sensor = SimulatedSensor(config.sensor_spec, Motion(_motion_config(config)),
+                                      seed=seeds.getrandbits(64))
         foreign = SimulatedSensor(
-            config.faults.foreign_of(config.address), '0000',
-            Motion(MotionConfig(static=True)), clock_ppm=-25.0,
-            timer_start=seeds.getrandbits(32), seed=seeds.getrandbits(64))
+            SensorSpec(config.faults.foreign_of(config.address), '0000', clock_ppm=-25.0,
+                       timer_start=seeds.getrandbits(32)),
+            Motion(MotionConfig(static=True)), seed=seeds.getrandbits(64))
         self._fault_rng = random.Random(seeds.getrandbits(64))
         command_rng = random.Random(seeds.getrandbits(64))
         chunk_rng = random.Random(seeds.getrandbits(64))
