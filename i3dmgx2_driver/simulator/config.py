@@ -94,13 +94,11 @@ class SimulatorConfig:
 
     def __post_init__(self) -> None:
         """Reject settings that cannot work, naming the field."""
-        if not 1 <= self.address <= 65534:
-            raise ValueError(f'address must be in 1..65534, got {self.address}')
+        # The sensor's own checks: address, timer_start, rate_hz.
+        sns.SensorSpec(self.address, timer_start=self.timer_start, rate_hz=self.rate_hz)
         low, high = self.chunks
         if not 1 <= low <= high:
             raise ValueError(f'chunks must be (min, max) with 1 <= min <= max, got {self.chunks}')
-        if self.rate_hz is not None and self.rate_hz <= 0:
-            raise ValueError('rate_hz must be positive')
         if self.latency_s < 0 or self.chunk_gap_s < 0:
             raise ValueError('latency_s and chunk_gap_s must not be negative')
         if self.divider is not None and not sns.MIN_DIVIDER <= self.divider <= sns.MAX_DIVIDER:
