@@ -60,6 +60,10 @@ class CycleClock:
         self._grid_origin = t - self.power_up_time
         self._next_index = 1
 
+    def rel(self, t: float) -> float:
+        """Return the seconds from power-up to wall-clock time ``t``."""
+        return t - self.power_up_time
+
     def timer_at(self, t: float) -> int:
         """Return the timer the device shows at wall-clock time ``t``."""
         return self.timer_rel(t - self.power_up_time)

@@ -315,7 +315,7 @@ class PtySimulator(TruthQueries):
     def set_moving(self, moving: bool) -> None:
         """Start or stop the sensor's motion now (a capture while moving goes wrong)."""
         with self.lock:
-            self.sensor.motion.set_static(not moving, time.time() - self.sensor.power_up_time)
+            self.sensor.motion.set_static(not moving, self.sensor.clock.rel(time.time()))
 
     def set_rate(self, rate_hz: float | None) -> None:
         """Override the calculation rate now (None: back to the EEPROM divider)."""

@@ -190,7 +190,7 @@ class SimulatedSensor:
         """
         Start from power-up at wall-clock time ``t``.
 
-        The timer restarts at ``timer_start``, the rate comes from the EEPROM
+        The timer restarts at ``clock.timer_start``, the rate comes from the EEPROM
         divider (unless overridden), the bias corrections from non-volatile
         memory, and streaming from the auto-start word, as on the device.
         """
@@ -211,20 +211,6 @@ class SimulatedSensor:
         """
         self.streaming = 0
         self.biases.forget_capture()
-
-    @property
-    def power_up_time(self) -> float:
-        """Wall-clock time of the last power-up."""
-        return self.clock.power_up_time
-
-    @property
-    def timer_start(self) -> int:
-        """Timer at power-up (a new value takes effect at the next power-up)."""
-        return self.clock.timer_start
-
-    @timer_start.setter
-    def timer_start(self, value: int) -> None:
-        self.clock.timer_start = value
 
     @property
     def rate_hz(self) -> float:
@@ -286,8 +272,8 @@ class SimulatedSensor:
         """Return the data record ``code`` of the calculation cycle at or before ``t``."""
         if code not in STREAMABLE:
             raise ValueError(f'0x{code:02X} is not a data record')
-        rel = self.clock.latest_cycle_rel(t - self.power_up_time)
-        return self._reply(self._record(code, rel), t, self.power_up_time + rel)
+        rel = self.clock.latest_cycle_rel(self.clock.rel(t))
+        return self._reply(self._record(code, rel), t, self.clock.power_up_time + rel)
 
     def handle(self, command: bytes | Command, now: float) -> list[Reply]:
         """
@@ -304,15 +290,15 @@ class SimulatedSensor:
                 self.ignored += 1
                 return []
         code, args = command.code, command.args
-        rel = now - self.power_up_time
+        rel = self.clock.rel(now)
         cycle = self.clock.latest_cycle_rel(rel)
-        cycle_time = self.power_up_time + cycle
+        cycle_time = self.clock.power_up_time + cycle
         timer = self.clock.timer_rel(cycle)
         if code in STREAMABLE:
             # A polled record is the one the next calculation cycle computes,
             # sent when that cycle completes.
             polled = self.clock.next_cycle_rel(rel)
-            polled_time = self.power_up_time + polled
+            polled_time = self.clock.power_up_time + polled
             return [self._reply(self._record(code, polled), polled_time, polled_time)]
         if code == lay.SET_CONTINUOUS:
             target = args[0]
@@ -346,7 +332,7 @@ class SimulatedSensor:
         # The device averages its raw gyros over the sampling time: the true
         # bias if it is still, the bias plus the mean rotation if it is not.
         seconds = args[0] / 1000.0
-        rel = now - self.power_up_time
+        rel = self.clock.rel(now)
         motion = self.motion
         mean = motion.mean_rate(rel, rel + seconds)
         cycles = max(1.0, seconds * self.rate_hz)
@@ -358,7 +344,7 @@ class SimulatedSensor:
                 now + seconds, now + seconds)
 
     def _transfer(self, args, now, timer):
-        quantity = self.biases.store(args[0], now - self.power_up_time)
+        quantity = self.biases.store(args[0], self.clock.rel(now))
         return rec.TransferToNonVolatile(quantity, timer), now, now
 
     def _write_eeprom(self, args, now, timer):
