@@ -23,9 +23,10 @@ faults from ``FaultConfig`` and the ground truth of every packet in
 ``base_station`` (wireless: ACK/NACK, ping) or ``wired_line`` (a wired
 sensor's own line), ``inbox`` (the firmware's quirks), ``transmitter`` (the
 records on their way: timing) with ``packet_faults`` and ``line_writer``,
-``host_reader`` (the reader thread), ``power`` and ``cable`` (power cycles,
-unplugging), ``pty_port`` (the pseudo-terminal, its symlink),
-``ground_truth`` and ``truth_queries`` (the record of it all), and
+``host_reader`` (the reader thread), ``power``, ``cable`` and
+``fault_schedule`` (power cycles, unplugging, timed faults), ``pty_port``
+(the pseudo-terminal, its symlink), ``ground_truth`` and ``truth_queries``
+(the record of it all), and
 ``pty_link`` (``PtySimulator``, which puts them together).
 ``python -m i3dmgx2_driver.simulator`` runs it from a shell. Pure Python on
 top of the codec: the simulator and the driver share one implementation of

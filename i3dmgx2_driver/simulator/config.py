@@ -126,6 +126,16 @@ class SimulatorConfig:
         return int(self.streaming_at_start)
 
     @property
+    def sensor_motion(self) -> MotionConfig:
+        """Return the sensor's motion, with the magnetometer shortcuts applied."""
+        motion = self.motion
+        if self.nan_mag or self.mag_nan_probability:
+            motion = dataclasses.replace(
+                motion, nan_mag=self.nan_mag or motion.nan_mag,
+                mag_nan_probability=self.mag_nan_probability or motion.mag_nan_probability)
+        return motion
+
+    @property
     def sensor_spec(self) -> sns.SensorSpec:
         """Return the sensor this configuration describes."""
         return sns.SensorSpec(self.address, self.serial_number, self.clock_ppm,

@@ -21,7 +21,8 @@ talks to it with pyserial. Behind it sits either a wireless base station
 wired sensor on its own line (``wired_line``). Two threads: the
 ``HostReader`` (``host_reader``) reads the host's bytes and runs the
 scheduled actions (unplug and replug by the ``Cable``, power-up after a
-power cycle by the ``SensorPower``); the ``Transmitter`` writes the
+power cycle by the ``SensorPower``, the timed faults of the
+``FaultSchedule``); the ``Transmitter`` writes the
 sensor's records at their scheduled times, with their ``PacketFaults``,
 through the ``LineWriter`` to the pty (``pty_port``). A command that
 reaches the sensor goes through its ``SensorInbox`` (the firmware's
@@ -64,6 +65,7 @@ from i3dmgx2_driver.codec.commands import Command
 from .base_station import BaseStation
 from .cable import Cable
 from .config import DEFAULT_STREAM, SimulatorConfig
+from .fault_schedule import FaultSchedule
 from .faults import FaultConfig, FaultState
 from .ground_truth import GroundTruth
 from .host_reader import HostReader
@@ -104,7 +106,7 @@ class PtySimulator(TruthQueries):
         self.config = config
         seeds = random.Random(config.seed)
         #: The device model; touch it only while holding ``sim.lock``.
-        self.sensor = SimulatedSensor(config.sensor_spec, Motion(_motion_config(config)),
+        self.sensor = SimulatedSensor(config.sensor_spec, Motion(config.sensor_motion),
                                       seed=seeds.getrandbits(64))
         foreign = SimulatedSensor(
             SensorSpec(config.faults.foreign_of(config.address), '0000', clock_ppm=-25.0,
@@ -141,6 +143,7 @@ class PtySimulator(TruthQueries):
                                   self._reader.post)
         self._cable = Cable(self._pty, self._reader, record, changed,
                             None if config.wireless else self._power, self._stop)
+        self._schedule = FaultSchedule(self._faults, self._reader.post, self._cable, self._power)
         self._threads: list[threading.Thread] = []
         self._started = False
         #: Wall-clock time of start() (the sensor's power-up).
@@ -162,7 +165,7 @@ class PtySimulator(TruthQueries):
             self.sensor.power_up(now)
             self._record.note_streaming(now, self.sensor.streaming)
             self._packet_faults.foreign.power_up(now - 1000.0 * self._fault_rng.random())
-            self._schedule_faults(self._faults.config, now, None)
+            self._schedule.schedule(self._faults.config, now, None)
         self._started = True
         # An interpreter that exits without stop() still removes the port.
         atexit.register(self.stop)
@@ -244,15 +247,11 @@ class PtySimulator(TruthQueries):
         loses its power and starts again from power-up when plugged back in.
         Returns once the port is gone.
         """
-        self._reader.post(0.0, lambda: self._cable.unplug(seconds))
-        deadline = time.monotonic() + timeout
-        while self._pty.plugged.is_set() and time.monotonic() < deadline:
-            time.sleep(0.005)
+        self._cable.pull_out(seconds, timeout)
 
     def replug(self, timeout: float = 5.0) -> bool:
         """Plug the base station back in now; return whether the port is back."""
-        self._reader.post(0.0, self._cable.replug)
-        return self._pty.plugged.wait(timeout)
+        return self._cable.plug_in(timeout)
 
     def wait_for_port(self, timeout: float = 10.0) -> bool:
         """Wait until the port exists (after an unplug); return whether it does."""
@@ -292,25 +291,9 @@ class PtySimulator(TruthQueries):
                 self.sensor.start_streaming(DEFAULT_STREAM, now)
                 self._record.note_streaming(now, self.sensor.streaming)
             if self._started:
-                self._schedule_faults(new, now, None if faults is not None else changes)
+                self._schedule.schedule(new, now, None if faults is not None else changes)
             self._tx_wake.notify_all()
         return new
-
-    def _schedule_faults(self, faults: FaultConfig, now: float,
-                         changes: dict[str, Any] | None) -> None:
-        """Schedule the timed faults (all, or those ``changes`` names) from ``now``."""
-        def asked(*names: str) -> bool:
-            return changes is None or any(name in changes for name in names)
-
-        if faults.stall_at is not None and asked('stall_at', 'stall_seconds'):
-            self._faults.stall(now + faults.stall_at, faults.stall_seconds)
-        if faults.unplug_at is not None and asked('unplug_at', 'unplug_seconds'):
-            seconds = faults.unplug_seconds
-            self._reader.post(faults.unplug_at, lambda: self._cable.unplug(seconds))
-        if faults.power_cycle_at is not None and asked(
-                'power_cycle_at', 'power_off_seconds', 'power_up_timer'):
-            off, timer = faults.power_off_seconds, faults.power_up_timer
-            self._reader.post(faults.power_cycle_at, lambda: self.power_cycle(off, timer))
 
     def set_moving(self, moving: bool) -> None:
         """Start or stop the sensor's motion now (a capture while moving goes wrong)."""
@@ -356,13 +339,3 @@ class PtySimulator(TruthQueries):
     def _deliver(self, command: Command | None, raw: bytes, now: float) -> str:
         """Hand a command to the sensor's inbox (built after the line end that calls this)."""
         return self._inbox.deliver(command, raw, now)
-
-
-def _motion_config(config: SimulatorConfig) -> MotionConfig:
-    """Return the motion with the magnetometer shortcuts of ``config`` applied."""
-    motion = config.motion
-    if config.nan_mag or config.mag_nan_probability:
-        motion = dataclasses.replace(
-            motion, nan_mag=config.nan_mag or motion.nan_mag,
-            mag_nan_probability=config.mag_nan_probability or motion.mag_nan_probability)
-    return motion
