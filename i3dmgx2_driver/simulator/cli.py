@@ -27,6 +27,8 @@ import signal
 import threading
 import time
 
+from i3dmgx2_driver.codec import framing
+
 from .config import SimulatorConfig
 from .faults import FaultConfig
 from .motion import MotionConfig
@@ -57,8 +59,9 @@ def _positive(text: str) -> float:
 
 def _address(text: str) -> int:
     value = int(text, 0)
-    if not 1 <= value <= 65534:
-        raise argparse.ArgumentTypeError(f'a node address is in 1..65534, got {text}')
+    if not framing.MIN_ADDRESS <= value <= framing.MAX_ADDRESS:
+        raise argparse.ArgumentTypeError(
+            f'a node address is in {framing.MIN_ADDRESS}..{framing.MAX_ADDRESS}, got {text}')
     return value
 
 

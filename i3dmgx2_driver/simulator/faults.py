@@ -25,6 +25,7 @@ the quirks of the firmware when it is asked to stream too early.
 
 import dataclasses
 
+from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
 
 #: Bytes that a parser of the host side takes for an answer of the base
@@ -132,7 +133,7 @@ class FaultConfig:
         """Return the address of the other sensor next to the one at ``address``."""
         if self.foreign_address is not None:
             return self.foreign_address
-        return address % 65534 + 1
+        return address % framing.MAX_ADDRESS + framing.MIN_ADDRESS
 
     def check_wired(self) -> None:
         """Reject the faults a wired sensor cannot have, naming the field."""

@@ -34,6 +34,7 @@ import math
 import random
 from typing import Any, ClassVar, NamedTuple
 
+from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec import records as rec
 from i3dmgx2_driver.codec.commands import (
@@ -127,8 +128,9 @@ class SensorSpec:
 
     def __post_init__(self) -> None:
         """Reject what no sensor can be, naming the field."""
-        if not 1 <= self.address <= 65534:
-            raise ValueError(f'address must be in 1..65534, got {self.address}')
+        if not framing.MIN_ADDRESS <= self.address <= framing.MAX_ADDRESS:
+            raise ValueError(f'address must be in {framing.MIN_ADDRESS}..{framing.MAX_ADDRESS}, '
+                             f'got {self.address}')
         if self.timer_start is not None and not 0 <= self.timer_start < TIMER_MODULUS:
             raise ValueError('timer_start must be a uint32')
         if self.rate_hz is not None and self.rate_hz <= 0:
