@@ -68,8 +68,8 @@ def real_records() -> list[bytes]:
 def seed_inputs() -> list[bytes]:
     """Return valid packets of every kind, real records, and some run together."""
     from i3dmgx2_driver.codec import layouts
-    from i3dmgx2_driver.simulator.sensor import SimulatedSensor, STREAMABLE
-    sensor = SimulatedSensor(ADDRESS, seed=1)
+    from i3dmgx2_driver.simulator.sensor import SensorSpec, SimulatedSensor, STREAMABLE
+    sensor = SimulatedSensor(SensorSpec(ADDRESS), seed=1)
     seeds = []
     for code in sorted(STREAMABLE):
         record = sensor.record_at(code, 1.0).data

@@ -546,15 +546,16 @@ def test_symlink_option_and_cleanup(tmp_path):
     assert not os.path.lexists(path)
 
 
-def test_the_public_names_are_importable_from_the_package_and_pty_link():
-    """The split into modules keeps every import that code and tests rely on."""
+def test_the_public_names_are_importable_from_the_package():
+    """Each name lives in one module, and the package exports the public ones."""
     import i3dmgx2_driver.simulator as package
-    from i3dmgx2_driver.simulator import pty_link
-    for name in ('PtySimulator', 'SimulatorConfig', 'SentRecord', 'HostCommand',
-                 'SimulatorStats'):
-        assert getattr(pty_link, name) is getattr(package, name)
-    assert pty_link.LINE_BYTES_PER_SECOND == 11520
-    assert pty_link.PORT_NAME == 'ttyGX2'
-    assert pty_link.DEFAULT_STREAM == lay.ACCEL_ANG_RATE_MAG_ORIENTATION
+    from i3dmgx2_driver.simulator import config, ground_truth, pty_link, pty_port, transmitter
+    assert package.PtySimulator is pty_link.PtySimulator
+    assert package.SimulatorConfig is config.SimulatorConfig
+    for name in ('SentRecord', 'HostCommand', 'SimulatorStats'):
+        assert getattr(package, name) is getattr(ground_truth, name)
+    assert transmitter.LINE_BYTES_PER_SECOND == 11520
+    assert pty_port.PORT_NAME == 'ttyGX2'
+    assert config.DEFAULT_STREAM == lay.ACCEL_ANG_RATE_MAG_ORIENTATION
     assert set(package.__all__) >= {'FaultConfig', 'Motion', 'MotionConfig', 'Reply',
                                     'SimulatedSensor'}

@@ -31,7 +31,7 @@ from i3dmgx2_driver.codec import records as rec
 from i3dmgx2_driver.codec.orientation import euler_from_matrix
 from i3dmgx2_driver.simulator import Motion, MotionConfig, SimulatedSensor
 from i3dmgx2_driver.simulator.motion import mat_vec, matrix_from_euler
-from i3dmgx2_driver.simulator.sensor import DEFAULT_TIMER_START, STREAMABLE
+from i3dmgx2_driver.simulator.sensor import DEFAULT_TIMER_START, SensorSpec, STREAMABLE
 import pytest
 
 TPS = rec.TICKS_PER_SECOND
@@ -52,10 +52,8 @@ def skew(w):
     return (0.0, -z, y, z, 0.0, -x, -y, x, 0.0)
 
 
-def sensor(**kwargs) -> SimulatedSensor:
-    kwargs.setdefault('seed', 1)
-    kwargs.setdefault('power_up_time', T0)
-    return SimulatedSensor(**kwargs)
+def sensor(motion: Motion | None = None, seed: int = 1, **spec) -> SimulatedSensor:
+    return SimulatedSensor(SensorSpec(**spec), motion, seed=seed, power_up_time=T0)
 
 
 @pytest.mark.parametrize('t', [0.0, 1.3, 7.7, 42.0, 123.4])
@@ -230,7 +228,7 @@ def test_gyro_bias_capture_is_due_after_its_sampling_time_and_then_applied():
     [stored] = s.handle(cmd.transfer_to_non_volatile(2), T0 + 13.0)
     assert stored.record.quantity == 2
     s.power_up(T0 + 20.0)
-    assert s.gyro_correction == reply.record.bias
+    assert s.biases.gyro == reply.record.bias
 
 
 def test_a_capture_while_moving_is_off():

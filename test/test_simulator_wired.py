@@ -322,7 +322,7 @@ def test_unplugging_a_wired_sensor_powers_it_off_and_back_up():
             first = host.records(lay.ACCEL_ANG_RATE)[0]
         # Powered up again at the replug: the auto-start streams, the timer starts
         # from timer_start again.
-        power_up = sim.sensor.power_up_time
+        power_up = sim.sensor.clock.power_up_time
         assert power_up >= unplugged
         truth = next(t for t in reversed(sim.truth) if t.timer == first.timer)
         elapsed = truth.sample_time - power_up

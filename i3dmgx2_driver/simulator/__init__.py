@@ -19,10 +19,14 @@ A simulated 3DM-GX2 (wireless with its base station, or wired), for tests and de
 behind a pseudo-terminal that a driver opens like a real serial port, with
 faults from ``FaultConfig`` and the ground truth of every packet in
 ``SentRecord`` entries. One module per part: ``config`` (how it is set up),
-``sensor`` and ``motion`` (the device), ``base_station`` (wireless: ACK/NACK,
-ping) or ``wired_line`` (a wired sensor's own line), ``transmitter`` (the
-records on their way: timing and faults), ``pty_port`` (the pseudo-terminal,
-its symlink, unplugging), ``ground_truth`` (the record of it all), and
+``sensor``, ``cycle_clock``, ``data_records`` and ``motion`` (the device),
+``base_station`` (wireless: ACK/NACK, ping) or ``wired_line`` (a wired
+sensor's own line), ``inbox`` (the firmware's quirks), ``transmitter`` (the
+records on their way: timing) with ``packet_faults`` and ``line_writer``,
+``host_reader`` (the reader thread), ``power``, ``cable`` and
+``fault_schedule`` (power cycles, unplugging, timed faults), ``pty_port``
+(the pseudo-terminal, its symlink), ``ground_truth`` and ``truth_queries``
+(the record of it all), and
 ``pty_link`` (``PtySimulator``, which puts them together).
 ``python -m i3dmgx2_driver.simulator`` runs it from a shell. Pure Python on
 top of the codec: the simulator and the driver share one implementation of

@@ -36,7 +36,7 @@ from i3dmgx2_driver.codec.parser import (
 )
 
 from . import faults as flt
-from .faults import FaultConfig, Stall
+from .faults import FaultState
 from .ground_truth import GroundTruth, HostCommand
 from .pty_port import PtyPort
 from .sensor import Reply, SimulatedSensor
@@ -55,14 +55,11 @@ class BaseStation:
     significant_bytes = flt.SIGNIFICANT_BYTES
 
     def __init__(self, sensor: SimulatedSensor, record: GroundTruth, port: PtyPort,
-                 deliver: Deliver, stall: Stall,
-                 faults: collections.abc.Callable[[], FaultConfig],
-                 rng: random.Random) -> None:
+                 deliver: Deliver, faults: FaultState, rng: random.Random) -> None:
         self._sensor = sensor
         self._record = record
         self._port = port
         self._deliver = deliver
-        self._stall = stall
         self._faults = faults
         self._rng = rng
 
@@ -91,7 +88,7 @@ class BaseStation:
         if command.code != lay.PING:
             return
         answer = self._sensor.ping_reply(command.args[0])
-        if self._stall.covers(now):
+        if self._faults.silent(now):
             answer = _PING_FAILED
         outcome = 'ping ok' if answer != _PING_FAILED else 'ping failed'
         self._record.log(HostCommand(now, 'ping', command.args[0], command, raw, outcome),
@@ -104,7 +101,7 @@ class BaseStation:
         # framing and sends it over the air, whoever it is for. The ACK goes out
         # first; the sensor's answer is queued behind it. A busy base station
         # (fault) NACKs a good packet instead and sends nothing.
-        faults = self._faults()
+        faults = self._faults.config
         if self._rng.random() < faults.nack_probability:
             self._write(bytes((framing.NACK,)))
             self._record.log(HostCommand(now, 'rejected', packet.address, None, packet.command,
@@ -117,7 +114,7 @@ class BaseStation:
             command = None
         if packet.address != self._sensor.address:
             outcome, counter = 'other_address', 'commands_other_address'
-        elif self._stall.covers(now):
+        elif self._faults.silent(now):
             outcome, counter = 'stalled', 'commands_lost'
         elif self._rng.random() < faults.command_loss_probability:
             outcome, counter = 'lost', 'commands_lost'

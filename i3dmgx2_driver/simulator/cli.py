@@ -27,9 +27,12 @@ import signal
 import threading
 import time
 
+from i3dmgx2_driver.codec import framing
+
+from .config import SimulatorConfig
 from .faults import FaultConfig
 from .motion import MotionConfig
-from .pty_link import PtySimulator, SimulatorConfig
+from .pty_link import PtySimulator
 from .sensor import MAX_DIVIDER, MIN_DIVIDER, STREAMABLE
 
 
@@ -56,8 +59,9 @@ def _positive(text: str) -> float:
 
 def _address(text: str) -> int:
     value = int(text, 0)
-    if not 1 <= value <= 65534:
-        raise argparse.ArgumentTypeError(f'a node address is in 1..65534, got {text}')
+    if not framing.MIN_ADDRESS <= value <= framing.MAX_ADDRESS:
+        raise argparse.ArgumentTypeError(
+            f'a node address is in {framing.MIN_ADDRESS}..{framing.MAX_ADDRESS}, got {text}')
     return value
 
 

@@ -89,18 +89,16 @@ class SimulatorConfig:
     #: When the writer falls this far behind (s), it skips cycles instead of bursting.
     max_lag_s: float = 1.0
     #: Point the port symlink at /proc/<pid>/fd/<slave> rather than /dev/pts/N, so
-    #: that it dangles when the simulator dies, however it dies (see _open_pty).
+    #: that it dangles when the simulator dies, however it dies (see pty_port).
     link_via_proc: bool = True
 
     def __post_init__(self) -> None:
         """Reject settings that cannot work, naming the field."""
-        if not 1 <= self.address <= 65534:
-            raise ValueError(f'address must be in 1..65534, got {self.address}')
+        # The sensor's own checks: address, timer_start, rate_hz.
+        sns.SensorSpec(self.address, timer_start=self.timer_start, rate_hz=self.rate_hz)
         low, high = self.chunks
         if not 1 <= low <= high:
             raise ValueError(f'chunks must be (min, max) with 1 <= min <= max, got {self.chunks}')
-        if self.rate_hz is not None and self.rate_hz <= 0:
-            raise ValueError('rate_hz must be positive')
         if self.latency_s < 0 or self.chunk_gap_s < 0:
             raise ValueError('latency_s and chunk_gap_s must not be negative')
         if self.divider is not None and not sns.MIN_DIVIDER <= self.divider <= sns.MAX_DIVIDER:
@@ -126,6 +124,23 @@ class SimulatorConfig:
         if self.streaming_at_start is True:
             return DEFAULT_STREAM
         return int(self.streaming_at_start)
+
+    @property
+    def sensor_motion(self) -> MotionConfig:
+        """Return the sensor's motion, with the magnetometer shortcuts applied."""
+        motion = self.motion
+        if self.nan_mag or self.mag_nan_probability:
+            motion = dataclasses.replace(
+                motion, nan_mag=self.nan_mag or motion.nan_mag,
+                mag_nan_probability=self.mag_nan_probability or motion.mag_nan_probability)
+        return motion
+
+    @property
+    def sensor_spec(self) -> sns.SensorSpec:
+        """Return the sensor this configuration describes."""
+        return sns.SensorSpec(self.address, self.serial_number, self.clock_ppm,
+                              self.timer_start, self.rate_hz, self.firmware_version,
+                              eeprom=self.power_up_eeprom)
 
     @property
     def power_up_eeprom(self) -> dict[int, int]:

@@ -25,6 +25,7 @@ the quirks of the firmware when it is asked to stream too early.
 
 import dataclasses
 
+from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
 
 #: Bytes that a parser of the host side takes for an answer of the base
@@ -128,6 +129,12 @@ class FaultConfig:
             if getattr(self, name) < 0:
                 raise ValueError(f'{name} must not be negative')
 
+    def foreign_of(self, address: int) -> int:
+        """Return the address of the other sensor next to the one at ``address``."""
+        if self.foreign_address is not None:
+            return self.foreign_address
+        return address % framing.MAX_ADDRESS + framing.MIN_ADDRESS
+
     def check_wired(self) -> None:
         """Reject the faults a wired sensor cannot have, naming the field."""
         for name in WIRELESS_ONLY:
@@ -136,23 +143,25 @@ class FaultConfig:
                                  f'a wired sensor has neither (got {getattr(self, name)!r})')
 
 
-class Stall:
+class FaultState:
     """
-    The window of silence in effect: nothing gets through either way.
+    The faults in effect now, and the window of silence.
 
-    Wireless, the radio is silent; wired, the sensor hangs. Not locked
-    itself: the simulator's lock guards it.
+    A stall silences everything: wireless, the radio; wired, the sensor
+    hangs. Not locked itself: the simulator's lock guards it.
     """
 
-    def __init__(self) -> None:
-        self.start = 0.0
-        self.end = 0.0
+    def __init__(self, config: FaultConfig) -> None:
+        #: The fault configuration in effect.
+        self.config = config
+        self._stall_start = 0.0
+        self._stall_end = 0.0
 
-    def begin(self, start: float, seconds: float) -> None:
+    def stall(self, start: float, seconds: float) -> None:
         """Be silent from ``start`` for ``seconds``."""
-        self.start = start
-        self.end = start + seconds
+        self._stall_start = start
+        self._stall_end = start + seconds
 
-    def covers(self, t: float) -> bool:
+    def silent(self, t: float) -> bool:
         """Whether time ``t`` falls in the silence."""
-        return self.start <= t < self.end
+        return self._stall_start <= t < self._stall_end

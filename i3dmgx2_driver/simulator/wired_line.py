@@ -36,7 +36,7 @@ from i3dmgx2_driver.codec.parser import CommandStreamParser, HostEvent, RawComma
 
 from . import faults as flt
 from .base_station import Deliver
-from .faults import Stall
+from .faults import FaultState
 from .ground_truth import GroundTruth, HostCommand
 from .sensor import Reply, SimulatedSensor, WIRED_COMMANDS
 
@@ -51,10 +51,10 @@ class WiredLine:
     #: Bytes that "safe" garbage avoids on this line (any echo byte, ping answers).
     significant_bytes = flt.WIRED_SIGNIFICANT_BYTES
 
-    def __init__(self, record: GroundTruth, deliver: Deliver, stall: Stall) -> None:
+    def __init__(self, record: GroundTruth, deliver: Deliver, faults: FaultState) -> None:
         self._record = record
         self._deliver = deliver
-        self._stall = stall
+        self._faults = faults
 
     @staticmethod
     def new_parser() -> CommandStreamParser:
@@ -70,7 +70,7 @@ class WiredLine:
             command: Command | None = decode_command(raw)
         except CodecError:
             command = None
-        if self._stall.covers(now):
+        if self._faults.silent(now):
             outcome, counter = 'stalled', 'commands_lost'
         else:
             outcome = self._deliver(command, raw, now)
