@@ -29,11 +29,11 @@ from collections.abc import Callable
 import threading
 from typing import Any
 
-from .startup import StartUp
 from .connection import Connection
 from .dialogue import SensorDialogue
 from .link import DeviceLink, DeviceTimeout
 from .report import DeviceReport
+from .startup import StartUp
 from .status import State
 
 

@@ -29,12 +29,12 @@ no command byte and touches no sample (the link's reader thread publishes).
 from collections.abc import Callable
 import threading
 
-from .startup import StartUp
 from .connection import Connection
 from .link import DeviceLink, DeviceTimeout
 from .port import PortDisconnected, PortError, PortUnusable
 from .report import DeviceReport
 from .settings import DeviceConfig
+from .startup import StartUp
 from .status import State
 from .throttle import EVENT_PERIOD
 from .watchdog import ReopenWait, StallWatch

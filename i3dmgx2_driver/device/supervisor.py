@@ -56,7 +56,6 @@ import logging
 import threading
 from typing import Any
 
-from .startup import StartUp
 from .connection import Connection
 from .dialogue import SensorDialogue
 from .exclusive import ExclusiveAccess
@@ -67,6 +66,7 @@ from .port import PortError, SerialPort
 from .recovery import RecoveryLoop
 from .report import DeviceReport
 from .settings import DeviceConfig
+from .startup import StartUp
 from .status import DeviceStatus, State
 
 
