@@ -49,8 +49,12 @@ from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 TOLERANCE = 0.001
 GRACE = 0.5
 EARLY_TOLERANCE = 0.005
-#: The error may trend by at most this (ppm) after the grace: a rate error shows here.
-MAX_TREND_PPM = 100.0
+#: The error may trend by at most this (ppm) after the grace: a rate error shows here. The
+#: defect of issue #23 ran 80,000 ppm slow (8 %); what a fit a few seconds old cannot help
+#: is its drift's uncertainty, the envelope's noise over its baseline: +-100 us over 1-3 s,
+#: i.e. trends of 120-160 ppm seen on a loaded 2-core machine (never a stamp off by more
+#: than 0.3 ms). Over the 3.5 s after the grace, 300 ppm is 1 ms: the tolerance itself.
+MAX_TREND_PPM = 300.0
 
 
 def check_series(series: list[tuple[float, float]], event_time: float | None,
