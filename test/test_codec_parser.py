@@ -237,17 +237,24 @@ def _noisy_stream(items, wireless):
     return bytes(stream)
 
 
+def _twin_parsers(address: int | None, wireless: bool,
+                  ping: bool) -> tuple[SensorStreamParser, SensorStreamParser]:
+    """Return two parsers alike, one to be fed whole and one in chunks."""
+    twins = (SensorStreamParser(address=address, wireless=wireless),
+             SensorStreamParser(address=address, wireless=wireless))
+    if ping:
+        for parser in twins:
+            parser.expect_ping()
+    return twins
+
+
 @CI
 @given(items=st.lists(noisy_item, max_size=12), cuts=cuts_strategy, wireless=st.booleans(),
        address=st.sampled_from([None, ADDRESS]), ping=st.booleans())
 def test_any_chunking_gives_the_same_events(items, cuts, wireless, address, ping):
     """Fed whole or in any chunks, a noisy stream gives the same events and counters."""
     stream = _noisy_stream(items, wireless)
-    whole = SensorStreamParser(address=address, wireless=wireless)
-    chunked = SensorStreamParser(address=address, wireless=wireless)
-    if ping:
-        whole.expect_ping()
-        chunked.expect_ping()
+    whole, chunked = _twin_parsers(address, wireless, ping)
     events_whole = whole.feed(stream)
     assert whole.pending < MAX_FRAME_SIZE
     events_chunked = feed_chunks(chunked, stream, cuts)
@@ -262,11 +269,7 @@ def test_any_chunking_gives_the_same_events(items, cuts, wireless, address, ping
        ping=st.booleans())
 def test_random_bytes_never_raise(data, cuts, wireless, ping):
     """Arbitrary bytes never raise, chunking does not matter, the buffer stays bounded."""
-    whole = SensorStreamParser(address=ADDRESS, wireless=wireless)
-    chunked = SensorStreamParser(address=ADDRESS, wireless=wireless)
-    if ping:
-        whole.expect_ping()
-        chunked.expect_ping()
+    whole, chunked = _twin_parsers(ADDRESS, wireless, ping)
     events = whole.feed(data)
     assert [key(e) for e in feed_chunks(chunked, data, cuts)] == [key(e) for e in events]
     assert whole.stats.bytes_in == len(data)
