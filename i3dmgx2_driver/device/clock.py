@@ -50,6 +50,13 @@ from ..codec.records import TICKS_PER_SECOND
 #: drift changing 1 ppm a minute, both stay near 10 us).
 HISTORY = 120
 
+#: Span (s of device time) the envelope points must cover before the line's slope is
+#: trusted. Over a shorter baseline the slope is the envelope's noise divided by the span
+#: (+-100 us over 1-2 s on a loaded host: hundreds of ppm, extrapolated to a stamp 1 ms off
+#: at 2.8 s in one measured run); until then the drift is taken as 0 (a crystal against an
+#: NTP-disciplined clock: tens of ppm, 0.2 ms over these seconds at most).
+MIN_SPAN_S = 4.0
+
 #: Least step between two stamps: 1 us. A float64 near today's epoch (1.8e9 s) cannot
 #: hold a step below 2.4e-7 s, and a message stamp counts whole nanoseconds.
 MIN_STEP = 1e-6
@@ -78,6 +85,8 @@ class DeviceClock:
         self._origin: float | None = None
         self._offset = 0.0
         self._drift = 0.0
+        #: Whether the line has been fitted (the points span MIN_SPAN_S).
+        self._fitted = False
         self._last_stamp = float('-inf')
         self.samples = 0
         self.anchors += 1
@@ -146,15 +155,16 @@ class DeviceClock:
         elif excess < self._bucket_min[1]:
             self._bucket_min = (t, excess)
         # Until there is a line, the running minimum is the best offset.
-        if len(self._points) < 2 and (
+        if not self._fitted and (
                 self.samples == 0 or excess < self._offset + self._drift * t):
             self._offset = excess - self._drift * t
 
     def _fit(self) -> None:
         """Put the line on the lower-hull edge of the envelope points at their mean time."""
         points = self._points
-        if len(points) < 2:
+        if len(points) < 2 or points[-1][0] - points[0][0] < MIN_SPAN_S:
             return
+        self._fitted = True
         # The points come in time order (one per window), so one pass builds the hull.
         hull: list[tuple[float, float]] = []
         for point in points:
