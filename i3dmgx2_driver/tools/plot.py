@@ -226,17 +226,18 @@ def series_from_chunks(chunks: Iterable[tuple[float, bytes]], address: int | Non
         later = [i for i, h in enumerate(host) if h >= when - 1e-6]
         if later:
             labels.append((float(t[later[0]]), text))
-    return _finish(t, accel, rate, euler, break_idx, labels, source, frame, note, gap)
+    return _with_gaps(Series(t, accel, rate, euler, [], [], labels, source, frame, note),
+                      break_idx, gap)
 
 
-def _finish(t: np.ndarray, accel: np.ndarray, rate: np.ndarray, euler: np.ndarray,
-            break_idx: Sequence[int], labels: list[tuple[float, str]], source: str,
-            frame: str, note: str, gap: float | None) -> Series:
+def _with_gaps(series: Series, break_idx: Sequence[int], gap: float | None) -> Series:
+    """Return ``series`` with its gaps and timer restarts found from its times."""
+    t = series.time
     starts, _ = find_gaps(t, break_idx, gap)
     breaks = set(break_idx)
     gaps = [(float(t[i - 1]), float(t[i])) for i in starts if i not in breaks]
     restarts = [(float(t[i - 1]), float(t[i])) for i in starts if i in breaks]
-    return Series(t, accel, rate, euler, gaps, restarts, labels, source, frame, note)
+    return series._replace(gaps=gaps, breaks=restarts)
 
 
 def series_from_capture(path: str, address: int | None = None, convention: str = ENU,
@@ -316,7 +317,8 @@ def series_from_csv(path: str, gap: float | None = None) -> Series:
     rate = np.column_stack([cols['wx'], cols['wy'], cols['wz']])
     quats = np.column_stack([cols['qx'], cols['qy'], cols['qz'], cols['qw']])
     euler = np.array([euler_deg(q) for q in quats]).reshape(-1, 3)
-    return _finish(t, accel, rate, euler, [], [], os.path.basename(path), frame, note, gap)
+    return _with_gaps(Series(t, accel, rate, euler, [], [], [], os.path.basename(path), frame,
+                             note), [], gap)
 
 
 # Drawing --------------------------------------------------------------------------
