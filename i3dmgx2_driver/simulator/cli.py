@@ -23,6 +23,7 @@ or a test harness.
 """
 
 import argparse
+import math
 import signal
 import threading
 import time
@@ -34,35 +35,14 @@ from .faults import FaultConfig
 from .motion import MotionConfig
 from .pty_link import PtySimulator
 from .sensor import MAX_DIVIDER, MIN_DIVIDER, STREAMABLE
+from ..arguments import in_range
 
 
-def _probability(text: str) -> float:
-    value = float(text)
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f'a probability is in 0..1, got {text}')
-    return value
-
-
-def _non_negative(text: str) -> float:
-    value = float(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f'must not be negative, got {text}')
-    return value
-
-
-def _positive(text: str) -> float:
-    value = float(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f'must be positive, got {text}')
-    return value
-
-
-def _address(text: str) -> int:
-    value = int(text, 0)
-    if not framing.MIN_ADDRESS <= value <= framing.MAX_ADDRESS:
-        raise argparse.ArgumentTypeError(
-            f'a node address is in {framing.MIN_ADDRESS}..{framing.MAX_ADDRESS}, got {text}')
-    return value
+_probability = in_range(float, 0.0, 1.0, 'probability')
+_non_negative = in_range(float, 0.0, math.inf, 'number')
+_positive = in_range(float, 1e-3, math.inf, 'positive number')
+_address = in_range(lambda text: int(text, 0), framing.MIN_ADDRESS, framing.MAX_ADDRESS,
+                    'node address')
 
 
 def _divider(text: str) -> int:

@@ -48,7 +48,7 @@ import threading
 import time
 from typing import Any, TextIO
 
-from .arguments import seconds, whole_number
+from ..arguments import seconds, whole_number
 from ..capture import CaptureWriter, default_header
 from ..codec import commands, layouts, line_budget, streams
 from ..codec.data_rate import (

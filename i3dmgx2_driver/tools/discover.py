@@ -31,7 +31,7 @@ import sys
 import time
 from typing import Any, TextIO
 
-from .arguments import seconds
+from ..arguments import seconds
 from ..device.port import port_group, serial_group, UDEV_RULE_INSTALL
 from ..device.port_listing import (
     BY_ID_DIR, DEFAULT_LATENCY_TIMER_MS, describe_path, latency_timer_ms, list_ports, PortInfo,

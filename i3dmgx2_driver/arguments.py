@@ -12,10 +12,16 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Argument types the command-line tools share: numbers in a range, said plainly when not."""
+"""
+Argument types every command line shares: numbers in a range, said plainly when not.
+
+Here, beside the layers rather than in ``tools/``, so that the simulator's
+command line (below the tools) uses the same types as discover and bringup.
+"""
 
 import argparse
 from collections.abc import Callable
+import math
 from typing import TypeVar
 
 Number = TypeVar('Number', int, float)
@@ -30,7 +36,8 @@ def in_range(convert: Callable[[str], Number], low: Number, high: Number,
         except ValueError:
             raise argparse.ArgumentTypeError(f'{text!r} is not a {what}') from None
         if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f'{text!r}: give {low:g}..{high:g} ({what})')
+            wanted = f'at least {low:g}' if high == math.inf else f'{low:g}..{high:g}'
+            raise argparse.ArgumentTypeError(f'{text!r}: give {wanted} ({what})')
         return value
     return parse
 
