@@ -52,6 +52,7 @@ from harness.processes import (  # noqa: E402 - the repository is on the path fr
     ADDRESS, ChildProcess, NodeProcess, ros_env, TruthEntry,
 )
 from i3dmgx2_driver.codec import layouts, line_budget  # noqa: E402
+from i3dmgx2_driver.device.hot_path import QuietObserver  # noqa: E402
 #: Highest rate of 0xCC packets (88 bytes through the base station) a 115200-baud line
 #: carries (11,520 bytes/s), from the codec's layout table.
 LINE_MAX_RATE_HZ = (line_budget.line_bytes_per_second(115200)
@@ -217,16 +218,32 @@ class Published(NamedTuple):
     time: float
 
 
+class _PublishedObserver(QuietObserver):
+    """Hand (record, read time, stamp) of every published message to ``on_published``."""
+
+    def __init__(self, on_published: Callable[[Any, float, float], None]) -> None:
+        self._on_published = on_published
+        self._read_time = 0.0
+
+    def read(self, nbytes: int, read_time: float) -> None:
+        """Keep the read's time: the records it completes are published next."""
+        self._read_time = read_time
+
+    def published(self, record: Any, stamp: float) -> None:
+        """Hand the message on with the time of the read that completed it."""
+        self._on_published(record, self._read_time, stamp)
+
+
 class InProcessNode:
     """
     The driver node in this process, spinning as ``ros2 run`` would spin it.
 
     The executor runs in a thread of its own, the node's reader thread
-    publishes, and ``published`` gets one entry per Imu message through the
-    core's ``on_published`` hook, called right after ``publish()`` returned:
-    the record's timer (to match the ground truth), the time the reader got
-    its last byte, the stamp, and ``time.time()`` at that moment, the clock
-    the simulator stamps its writes with.
+    publishes, and ``published`` gets one entry per Imu message from the
+    node's hot-path observer (device/hot_path.py), told right after
+    ``publish()`` returned: the record's timer (to match the ground truth),
+    the time the reader got its last byte, the stamp, and ``time.time()`` at
+    that moment, the clock the simulator stamps its writes with.
     """
 
     def __init__(self, port: str, **params: Any) -> None:
@@ -246,9 +263,8 @@ class InProcessNode:
         params = {'port': port, 'address': ADDRESS, **params}
         self.published: list[Published] = []
         self.node = ImuDriverNode(
-            context=self.context,
+            context=self.context, timings=_PublishedObserver(self._on_published),
             parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
-        self.node.core.on_published = self._on_published
         # As main.py spins it: several threads, so that a long service call holds only its own,
         # and the start-up heap frozen as main.py freezes it.
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)

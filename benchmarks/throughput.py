@@ -21,7 +21,7 @@ the device could never reach (``rate_hz`` override), with the node in this
 process and a subscriber (reliable, deep history) in a third. Each rate runs
 for a while, then the radio goes silent, the node drains, and every valid
 packet the simulator wrote is looked for among what the node published (its
-``on_published`` hook and its own counter) and what the subscriber got.
+hot-path observer and its own counter) and what the subscriber got.
 Target: >= 1,000 records/s with none lost.
 """
 

@@ -37,6 +37,7 @@ import sys
 import threading
 import time
 
+from i3dmgx2_driver.device.hot_path import QuietObserver
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.ros import main as node_main
 from i3dmgx2_driver.ros.imu_node import ImuDriverNode
@@ -103,30 +104,12 @@ def _write(path: str, document: dict) -> None:
     os.replace(temporary, path)
 
 
-class LinkEvents:
+class LinkEvents(QuietObserver):
     """A hot-path observer that notes every link up ('anchor'); it times nothing."""
-
-    def opened(self) -> None:
-        """Leave the open to ObservedPort, which notes it."""
 
     def connected(self) -> None:
         """Note the re-anchoring: every record is published from now on."""
         _note('anchor')
-
-    def read(self, nbytes: int, read_time: float) -> None:
-        """Time nothing."""
-
-    def parsed(self) -> None:
-        """Time nothing."""
-
-    def stamped(self) -> None:
-        """Time nothing."""
-
-    def packed(self) -> None:
-        """Time nothing."""
-
-    def published(self, record: object, stamp: float) -> None:
-        """Time nothing."""
 
 
 def main() -> int:

@@ -195,9 +195,6 @@ class DriverCore:
         else:
             self._imu_message, self._mag_message = (self.messages.fill_imu,
                                                     self.messages.fill_mag)
-        #: Called in the reader thread right after each Imu message is published, with
-        #: (record, read time, stamp): for benchmarks and tests. None costs nothing.
-        self.on_published = None
         self._timings = timings
         self.raw_capture = RawCapture(
             cfg.capture_file, node.get_logger(), port=cfg.port, address=cfg.address,
@@ -310,9 +307,6 @@ class DriverCore:
                 return
             if timings is not None:
                 timings.published(record, stamp)
-            on_published = self.on_published
-            if on_published is not None:
-                on_published(record, read_time, stamp)
             stats.published += 1
             if not stats.first_time:
                 stats.first_time = read_time
