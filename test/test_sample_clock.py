@@ -287,3 +287,17 @@ def test_first_half_second_after_a_start_is_within_5_ms():
     _, errors = stamp_all(packets([Life(0.0, 3.0, 5_000_000)]))
     assert all(abs(e - LATENCY) <= EARLY_TOLERANCE for t, e in errors)
     assert all(abs(e - LATENCY) <= TOLERANCE for t, e in errors if t >= GRACE)
+
+
+def test_system_clock_offset_ignores_a_read_interrupted_by_preemption(monkeypatch):
+    """A thread preempted between the clock reads would put every such stamp ms off."""
+    from i3dmgx2_driver.device import sample_clock
+    wall_minus_mono = 1.7e9
+    # Monotonic reads: the first pair 4 ms apart (the thread was away between them), the
+    # second 0.2 us apart. The wall clock is read between each pair, as the code does.
+    mono = iter([100.000, 100.004, 100.0100000, 100.0100002])
+    wall = iter([100.001 + wall_minus_mono, 100.0100001 + wall_minus_mono])
+    monkeypatch.setattr(sample_clock.time, 'monotonic', lambda: next(mono))
+    monkeypatch.setattr(sample_clock.time, 'time', lambda: next(wall))
+    offset = sample_clock.system_clock_offset()
+    assert offset == pytest.approx(wall_minus_mono, abs=1e-6)
