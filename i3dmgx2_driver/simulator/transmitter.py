@@ -25,9 +25,19 @@ with its faults (``packet_faults``: silence, loss, garbage before it, a
 packet of another sensor, a flipped bit, a wrong length byte) and the
 line's rate limit. Each is written in random chunks (``line_writer``) and
 recorded in the ground truth, written or lost, and why.
+
+A record is written at its due time to within a few microseconds: the
+thread takes it ``WRITE_LEAD_S`` early, makes its frame, sleeps until
+``WRITE_SPIN_S`` before the due time and yields the processor in a loop
+for the rest. A radio's delay does not depend on the host's scheduler; a
+thread that merely slept until the due time wrote 0.2-0.7 ms late, by an
+amount that wandered with the machine's load, and that lateness, not the
+driver, was most of the noise the stamp benchmarks measured
+(docs/timestamps.md).
 """
 
 import heapq
+import os
 import threading
 import time
 from typing import NamedTuple
@@ -45,6 +55,11 @@ from .wired_line import WiredLine
 LINE_BYTES_PER_SECOND = 11520
 #: Longest sleep of the thread, so that stop() never waits long.
 POLL_S = 0.25
+#: How long (s) before its due time a record is taken from the queue and framed.
+WRITE_LEAD_S = 0.001
+#: The last part (s) of the wait for the due time, spent yielding instead of sleeping
+#: (a sleep wakes 50-100 us late: the kernel's timer slack and the wake-up).
+WRITE_SPIN_S = 0.0003
 
 
 class Outgoing(NamedTuple):
@@ -113,14 +128,14 @@ class Transmitter:
                     continue
                 # The radio is a FIFO: the packet sent first is written first,
                 # even when its delay (jitter) makes a later one ready sooner.
-                if self._outbox and self._outbox[0].write_at <= now:
+                if self._outbox and self._outbox[0].write_at <= now + WRITE_LEAD_S:
                     item = heapq.heappop(self._outbox)
                 else:
                     wake = now + POLL_S
                     if next_sample is not None:
                         wake = min(wake, next_sample)
                     if self._outbox:
-                        wake = min(wake, self._outbox[0].write_at)
+                        wake = min(wake, self._outbox[0].write_at - WRITE_LEAD_S)
                     self._wake.wait(max(wake - now, 0.0))
                     continue
             self._transmit(item)
@@ -143,6 +158,7 @@ class Transmitter:
                 self._stream_line_free_at = (max(item.send, self._stream_line_free_at)
                                              + len(packet) / LINE_BYTES_PER_SECOND)
             packet, fault = self._faults.spoil(packet, reply.code, item.send)
+            _wait_until(item.write_at)
             error, first_write, write_time = self._writer.write(packet)
             valid = fault is None and error is None
             self._record.add(reply, write_time, packet, item.address, valid, fault or error,
@@ -163,3 +179,12 @@ class Transmitter:
                 and item.send < self._stream_line_free_at - 1e-9:
             return flt.FAULT_LINE_RATE
         return None
+
+
+def _wait_until(due: float) -> None:
+    """Return at ``due`` (time.time()) to within microseconds, not the tens a sleep gives."""
+    left = due - time.time()
+    if left > WRITE_SPIN_S:
+        time.sleep(left - WRITE_SPIN_S)
+    while time.time() < due:
+        os.sched_yield()  # releases the GIL: the host's reader may run meanwhile
