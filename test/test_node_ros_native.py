@@ -162,7 +162,7 @@ def test_is_calibrated_is_false_until_a_capture_then_true_and_latched(rig):
 
 
 def test_self_test_is_served_as_diagnostic_msgs_self_test(rig):
-    sim, listener, _, _ = rig
+    listener = rig[1]
     response = call(listener, SelfTest, 'diagnostic_self_test')
     assert response.id == SimulatorConfig().serial_number == '3095'
     assert response.passed == b'\x01'
@@ -187,10 +187,10 @@ def test_deprecated_qos_names_still_work_and_name_the_standard_parameter():
     isolate_ros_domain()
     with PtySimulator(SimulatorConfig(seed=72)) as sim:
         listener = Listener({'imu/raw_data': Imu}, reliable=False)
+        # A name of its own: the graph may still list the last test's node.
         node = NodeProcess({'port': sim.port, 'address': 95,
                             'qos_reliability': 'best_effort', 'qos_depth': 5},
-            # A name of its own: the graph may still list the last test's node.
-                            extra_args=['-r', '__node:=deprecated_gx2'])
+                           extra_args=['-r', '__node:=deprecated_gx2'])
         with listener, node:
             assert len(listener.wait_for('imu/raw_data', 10, timeout=30)) >= 10, node.output()
             assert publisher_qos(listener, '/imu/raw_data', '/deprecated_gx2').reliability == \

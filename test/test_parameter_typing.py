@@ -114,7 +114,7 @@ def test_rclpy_still_keeps_the_overrides_where_the_unknown_parameter_warning_rea
     node = make_node('-p', 'data_rat:=200.0')
     overrides = getattr(node, '_parameter_overrides', None)
     assert isinstance(overrides, dict), (
-        "rclpy no longer has Node._parameter_overrides: unknown_parameters.py must find "
+        'rclpy no longer has Node._parameter_overrides: unknown_parameters.py must find '
         'the overrides another way')
     assert overrides['data_rat'].value == 200.0
     lines = warn_unknown_parameters(node, ['data_rate'])

@@ -103,10 +103,10 @@ SPECS: list[Spec] = [
          'microstrain_3dmgx2_imu driver.', (0.0, 10.0)),
     Spec('angular_velocity_stddev', Parameter.Type.DOUBLE, ANGULAR_VELOCITY_STDDEV,
          'Angular velocity standard deviation (rad/s); 0: unknown. Default: the ROS 1 '
-         'microstrain_3dmgx2_imu driver\'s figure for this sensor.', (0.0, 10.0)),
+         "microstrain_3dmgx2_imu driver's figure for this sensor.", (0.0, 10.0)),
     Spec('linear_acceleration_stddev', Parameter.Type.DOUBLE, LINEAR_ACCELERATION_STDDEV,
          'Linear acceleration standard deviation (m/s^2); 0: unknown. Default: the ROS 1 '
-         'microstrain_3dmgx2_imu driver\'s figure for this sensor (10 mg).', (0.0, 100.0)),
+         "microstrain_3dmgx2_imu driver's figure for this sensor (10 mg).", (0.0, 100.0)),
     Spec('magnetic_field_stddev', Parameter.Type.DOUBLE, 0.0,
          'Magnetic field standard deviation (T); 0: unknown (no published figure).',
          (0.0, 1.0)),
