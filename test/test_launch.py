@@ -215,7 +215,7 @@ def test_topic_arguments_remap_the_drivers_topics_only_when_given():
 
 
 def _made_by(arguments: dict) -> dict:
-    """What one include of the launch file makes, by kind: node, topics, frame, port."""
+    """Return what one include of the launch file makes: node, topics, frame, port."""
     functions = _launch_functions(arguments)
     renamed = dict(functions['topic_remappings'](None))
     topics = {renamed.get(topic, topic) for topic in functions['TOPIC_ARGUMENTS'].values()}
