@@ -156,8 +156,9 @@ def _launch_functions(arguments: dict) -> dict:
     """
     _, tree = parse()
     wanted = {'optional_overrides', 'topic_remappings'}
-    body = [n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name in wanted
-            or isinstance(n, ast.Assign) and n.targets[0].id.isupper()]
+    body = [n for n in tree.body
+            if (isinstance(n, ast.FunctionDef) and n.name in wanted)
+            or (isinstance(n, ast.Assign) and n.targets[0].id.isupper())]
 
     class LaunchConfiguration:
         """Stands in for launch's: ``launch`` is not on PyPI."""
