@@ -21,6 +21,14 @@ documents the driver and rclpy rejects out-of-range values. Whatever rclpy
 cannot check (choices, "0 or at least 1 Hz") is checked here; every failure
 becomes one ``ParameterError`` whose message names the parameter and its
 valid range, and the node stops. Nothing falls back to a default silently.
+
+Values are taken as people type them (``-p data_rate:=300`` for a double,
+``-p stream:=0xC2`` for a string) through rclpy's public API only: what was
+given is read through a dynamically typed declaration, converted, and the
+parameter then declared with its own type and descriptor (:func:`_given`).
+The QoS of the publishers is not here: rclpy declares its standard
+``qos_overrides`` parameters itself (``qos.py``); ``qos_reliability`` and
+``qos_depth`` remain for one release, warned about when given.
 """
 
 from collections.abc import Callable
