@@ -47,6 +47,8 @@ def measure(rate_hz: float, seconds: float, warm_up: float = WARM_UP_S,
     """Return the node's CPU (% of one core) and how many messages the subscriber got."""
     sim = SimProcess(rate_hz=rate_hz)
     subscriber = SubscriberProcess()
+    # qos_depth (deprecated, warned about) rather than qos_overrides: the A/B run's other
+    # tree may predate the standard parameters, and both trees take this name.
     node = NodeProcess({'port': sim.port, 'address': ADDRESS, 'qos_depth': 1000}, tree=tree)
     try:
         if not node.wait_for_output('streaming 0xCC', timeout=30.0):

@@ -54,7 +54,7 @@ class StreamRun:
         node = None
         try:
             node = InProcessNode(sim.port, stream=stream.name, data_rate=self.fits,
-                                 qos_depth=1000)
+                                 **{'qos_overrides./imu/raw_data.publisher.depth': 1000})
             if not node.wait_published(1, timeout=20.0):
                 raise RuntimeError(f'{stream.name}: the node published nothing within 20 s')
             time.sleep(WARM_UP_S)

@@ -43,7 +43,8 @@ class RateRun:
         subscriber = SubscriberProcess()
         node = None
         try:
-            node = InProcessNode(sim.port, qos_depth=1000)
+            node = InProcessNode(
+                sim.port, **{'qos_overrides./imu/raw_data.publisher.depth': 1000})
             if not node.wait_published(1, timeout=20.0):
                 raise RuntimeError('the node published nothing within 20 s')
             time.sleep(seconds)

@@ -441,8 +441,10 @@ def run_campaign(cfg: CampaignConfig) -> 'CampaignResult':
     collector.start()
     subscriber = Subscriber()
     params = {'port': sim.port, 'address': cfg.address, 'read_timeout': cfg.read_timeout,
-              'reconnect_interval': cfg.reconnect_interval, 'qos_depth': 1000,
-              'qos_reliability': 'reliable', 'temperature_period': cfg.temperature_period}
+              'reconnect_interval': cfg.reconnect_interval,
+              'qos_overrides./imu/raw_data.publisher.depth': 1000,
+              'qos_overrides./imu/raw_data.publisher.reliability': 'reliable',
+              'temperature_period': cfg.temperature_period}
     node = NodeProcess(params, command=NODE_COMMAND, env=ros_env({STATS_ENV: stats_path}))
     rss: list[tuple[float, int]] = []
     driver = FaultDriver(sim, cfg, random.Random(cfg.seed * 7919 + 1))

@@ -20,9 +20,19 @@ Launch the 3DM-GX2 driver with the installed parameter file.
     ros2 launch i3dmgx2_driver i3dmgx2.launch.py address:=95 managed:=true autostart:=true
     ros2 launch i3dmgx2_driver i3dmgx2.launch.py address:=95 stream:=0xC2 data_rate:=250
 
-Topics land under the ``imu`` namespace as REP-145 asks (``imu/raw_data``,
-``imu/mag``, ``imu/temperature``); ``namespace:=robot1`` moves them all to
-``/robot1/imu/...``. Values given here override the parameter file.
+The driver publishes ``imu/raw_data``, ``imu/mag`` and ``imu/temperature``
+(REP-145 would call ``imu/raw_data`` ``imu/data`` for the ``full`` stream, which
+carries orientation, and ``imu/data_raw`` for streams without it: the
+README's "Wiring it to a fusion stack" says which is which). ``imu_topic:=``,
+``mag_topic:=`` and ``temperature_topic:=`` rename them (a remapping, e.g.
+``imu_topic:=imu/data_raw`` for imu_filter_madgwick); ``namespace:=robot1``
+moves them all to ``/robot1/...``. Values given here override the parameter
+file.
+
+``node_name``, ``frame_id`` and the topic arguments let two sensors (two base
+stations, two ports) run side by side from one launch file: include this one
+twice, each in a ``GroupAction`` of its own, with its own ``node_name``,
+``port``, ``address``, ``frame_id`` and topics (README, Running it).
 
 ``managed:=true`` starts the managed (lifecycle) node instead of the plain
 one, with the same name, parameters and topics. It starts unconfigured, for
@@ -56,6 +66,11 @@ from lifecycle_msgs.msg import Transition
 
 #: Launch arguments that override the parameter file only when given.
 OPTIONAL_PARAMETERS = ('stream', 'data_rate')
+#: The same, always passed as text (a frame named ``1`` is no number).
+OPTIONAL_TEXT_PARAMETERS = ('frame_id',)
+#: Launch argument -> the driver's topic it renames (remaps) when given.
+TOPIC_ARGUMENTS = {'imu_topic': 'imu/raw_data', 'mag_topic': 'imu/mag',
+                   'temperature_topic': 'imu/temperature'}
 
 
 def optional_overrides(context: LaunchContext) -> dict:
@@ -70,7 +85,18 @@ def optional_overrides(context: LaunchContext) -> dict:
     """
     given = (name for name in OPTIONAL_PARAMETERS
              if LaunchConfiguration(name).perform(context))
-    return {name: LaunchConfiguration(name) for name in given}
+    overrides = {name: LaunchConfiguration(name) for name in given}
+    for name in OPTIONAL_TEXT_PARAMETERS:
+        if LaunchConfiguration(name).perform(context):
+            overrides[name] = ParameterValue(LaunchConfiguration(name), value_type=str)
+    return overrides
+
+
+def topic_remappings(context: LaunchContext) -> list:
+    """Return (driver's topic, new name) for each topic argument that was given."""
+    return [(topic, LaunchConfiguration(argument).perform(context))
+            for argument, topic in TOPIC_ARGUMENTS.items()
+            if LaunchConfiguration(argument).perform(context)]
 
 
 def driver_actions(context: LaunchContext) -> list:
@@ -79,8 +105,9 @@ def driver_actions(context: LaunchContext) -> list:
     # What both executables are started with.
     common = {
         'package': 'i3dmgx2_driver',
-        'name': 'i3dmgx2_driver',
+        'name': LaunchConfiguration('node_name'),
         'namespace': LaunchConfiguration('namespace'),
+        'remappings': topic_remappings(context),
         'output': 'screen',
         'emulate_tty': True,
         'parameters': [
@@ -123,6 +150,21 @@ def generate_launch_description() -> LaunchDescription:
                               description='Node address of the sensor (1..65534), required'),
         DeclareLaunchArgument('namespace', default_value='',
                               description='Namespace of the node and its topics'),
+        DeclareLaunchArgument('node_name', default_value='i3dmgx2_driver',
+                              description='Name of the node (one per sensor when several '
+                                          'run side by side)'),
+        DeclareLaunchArgument('frame_id', default_value='',
+                              description='Frame of the published messages; empty: as the '
+                                          'parameter file says'),
+        DeclareLaunchArgument('imu_topic', default_value='',
+                              description='Publish imu/raw_data under this name instead '
+                                          '(e.g. imu/data_raw, imu/data); empty: imu/raw_data'),
+        DeclareLaunchArgument('mag_topic', default_value='',
+                              description='Publish imu/mag under this name instead; '
+                                          'empty: imu/mag'),
+        DeclareLaunchArgument('temperature_topic', default_value='',
+                              description='Publish imu/temperature under this name instead; '
+                                          'empty: imu/temperature'),
         DeclareLaunchArgument('params_file', default_value=params_file,
                               description='Parameter file'),
         DeclareLaunchArgument('managed', default_value='false',

@@ -22,7 +22,11 @@ arguments the README documents (``address`` without a default), starts the
 ``namespace`` argument, and with ``autostart:=true`` configures the managed
 node and activates it once configured. ``stream`` and ``data_rate`` reach
 the node only when given (the parameter file decides otherwise), and as
-substitutions, which launch_ros reads as YAML the way ``-p`` is read.
+substitutions, which launch_ros reads as YAML the way ``-p`` is read;
+``frame_id`` likewise, as text. ``node_name`` names the node and the topic
+arguments remap its topics, so that two sensors run side by side: the
+launch file's own functions are run with two command lines and nothing the
+two nodes make may collide.
 """
 
 import ast
@@ -61,7 +65,8 @@ def test_launch_file_declares_the_documented_arguments():
     compile(tree, LAUNCH, 'exec')
     declared = {c.args[0].value: keywords(c) for c in calls(tree, 'DeclareLaunchArgument')}
     assert set(declared) == {'port', 'address', 'namespace', 'params_file', 'managed',
-                             'autostart', 'stream', 'data_rate'}
+                             'autostart', 'stream', 'data_rate', 'node_name', 'frame_id',
+                             'imu_topic', 'mag_topic', 'temperature_topic'}
     assert 'default_value' not in declared['address'], 'address must have no default'
     assert declared['port']['default_value'] == '/dev/ttyUSB0'
     # The plain node unless asked; a managed node waits for its manager unless asked.
@@ -69,8 +74,13 @@ def test_launch_file_declares_the_documented_arguments():
     assert declared['autostart']['default_value'] == 'false'
     # Empty: as the parameter file says.
     assert declared['stream']['default_value'] == declared['data_rate']['default_value'] == ''
+    # The name everything documents, unless asked; empty: the parameter file, no remapping.
+    assert declared['node_name']['default_value'] == 'i3dmgx2_driver'
+    for name in ('frame_id', 'imu_topic', 'mag_topic', 'temperature_topic'):
+        assert declared[name]['default_value'] == '', name
     functions = [f.name for f in ast.walk(tree) if isinstance(f, ast.FunctionDef)]
-    assert functions == ['optional_overrides', 'driver_actions', 'generate_launch_description']
+    assert functions == ['optional_overrides', 'topic_remappings', 'driver_actions',
+                         'generate_launch_description']
     (opaque,) = calls(tree, 'OpaqueFunction')
     assert ast.get_source_segment(source, opaque) == 'OpaqueFunction(function=driver_actions)'
 
@@ -80,10 +90,11 @@ def test_launch_file_starts_this_packages_node_with_the_params_file():
     common = assigned(tree, 'common')
     assert {k.value: v.value for k, v in zip(common.keys, common.values, strict=True)
             if isinstance(v, ast.Constant)} == {
-        'package': 'i3dmgx2_driver', 'name': 'i3dmgx2_driver', 'output': 'screen',
-        'emulate_tty': True}
+        'package': 'i3dmgx2_driver', 'output': 'screen', 'emulate_tty': True}
     common_text = ast.get_source_segment(source, common)
+    assert "'name': LaunchConfiguration('node_name')" in common_text
     assert "'namespace': LaunchConfiguration('namespace')" in common_text
+    assert "'remappings': topic_remappings(context)" in common_text
     assert "LaunchConfiguration('params_file')" in common_text
     # After the params file, so that what is given wins.
     assert common_text.index("LaunchConfiguration('params_file')") < \
@@ -129,13 +140,25 @@ def test_autostart_configures_then_activates_only_after_a_successful_configure()
         assert 'condition=autostart' in ast.get_source_segment(source, assigned(tree, name))
 
 
-def _optional_overrides(arguments: dict) -> dict:
-    """Run the launch file's optional_overrides with ``arguments`` as the command line."""
+class ParameterValue:
+    """Stands in for launch_ros's: the substitution and the type it is read as."""
+
+    def __init__(self, value: object, value_type: type) -> None:
+        self.value, self.value_type = value, value_type
+
+
+def _launch_functions(arguments: dict) -> dict:
+    """
+    Run the launch file's constants and functions with ``arguments`` as the command line.
+
+    Returns its namespace: ``optional_overrides`` and ``topic_remappings``
+    among them, called with any context.
+    """
     _, tree = parse()
-    (function,) = [f for f in ast.walk(tree) if isinstance(f, ast.FunctionDef)
-                   and f.name == 'optional_overrides']
-    optional = ast.Assign([ast.Name('OPTIONAL_PARAMETERS', ast.Store())],
-                          assigned(tree, 'OPTIONAL_PARAMETERS'), lineno=0)
+    wanted = {'optional_overrides', 'topic_remappings'}
+    body = [n for n in tree.body
+            if (isinstance(n, ast.FunctionDef) and n.name in wanted)
+            or (isinstance(n, ast.Assign) and n.targets[0].id.isupper())]
 
     class LaunchConfiguration:
         """Stands in for launch's: ``launch`` is not on PyPI."""
@@ -144,11 +167,18 @@ def _optional_overrides(arguments: dict) -> dict:
             self.name = name
 
         def perform(self, context: object) -> str:
-            return arguments[self.name]
+            return arguments.get(self.name, '')
 
-    namespace = {'LaunchConfiguration': LaunchConfiguration, 'LaunchContext': object}
-    module = ast.fix_missing_locations(ast.Module([optional, function], []))
+    namespace = {'LaunchConfiguration': LaunchConfiguration, 'LaunchContext': object,
+                 'ParameterValue': ParameterValue}
+    module = ast.fix_missing_locations(ast.Module(body, []))
     exec(compile(module, LAUNCH, 'exec'), namespace)
+    return namespace
+
+
+def _optional_overrides(arguments: dict) -> dict:
+    """Run the launch file's optional_overrides with ``arguments`` as the command line."""
+    namespace = _launch_functions(arguments)
     assert namespace['OPTIONAL_PARAMETERS'] == ('stream', 'data_rate')
     return namespace['optional_overrides'](None)
 
@@ -164,3 +194,51 @@ def test_stream_and_rate_reach_the_node_only_when_given_and_as_substitutions():
     overrides = _optional_overrides({'stream': 'inertial', 'data_rate': '250'})
     assert sorted(overrides) == ['data_rate', 'stream']
     assert overrides['data_rate'].name == 'data_rate'
+
+
+def test_frame_id_reaches_the_node_only_when_given_and_as_text():
+    assert 'frame_id' not in _optional_overrides({})
+    frame = _optional_overrides({'frame_id': 'imu_front'})['frame_id']
+    # As text whatever it looks like: a frame named 1 is no integer.
+    assert isinstance(frame, ParameterValue) and frame.value_type is str
+    assert frame.value.name == 'frame_id'
+
+
+def test_topic_arguments_remap_the_drivers_topics_only_when_given():
+    remappings = _launch_functions({})['topic_remappings']
+    assert remappings(None) == []
+    remappings = _launch_functions({'imu_topic': 'imu/data_raw'})['topic_remappings']
+    assert remappings(None) == [('imu/raw_data', 'imu/data_raw')]
+    remappings = _launch_functions({'imu_topic': 'front/imu', 'mag_topic': 'front/mag',
+                                    'temperature_topic': 'front/temp'})['topic_remappings']
+    assert remappings(None) == [('imu/raw_data', 'front/imu'), ('imu/mag', 'front/mag'),
+                                ('imu/temperature', 'front/temp')]
+
+
+def _made_by(arguments: dict) -> dict:
+    """Return what one include of the launch file makes: node, topics, frame, port."""
+    functions = _launch_functions(arguments)
+    renamed = dict(functions['topic_remappings'](None))
+    topics = {renamed.get(topic, topic) for topic in functions['TOPIC_ARGUMENTS'].values()}
+    name = arguments.get('node_name', 'i3dmgx2_driver')
+    overrides = functions['optional_overrides'](None)
+    frame = (arguments['frame_id'] if 'frame_id' in overrides else 'imu_link')
+    return {'node': name, 'topics': topics | {f'{name}/is_calibrated'}, 'frame': frame,
+            'port': arguments['port'], 'diagnostics': f'{name}: '}
+
+
+def test_two_sensors_on_two_base_stations_run_side_by_side_from_one_launch_file():
+    # README: the launch file included twice, each with its own arguments.
+    front = _made_by({'node_name': 'imu_front', 'port': '/dev/ttyUSB0', 'address': '95',
+                      'frame_id': 'imu_front_link', 'imu_topic': 'imu_front/data',
+                      'mag_topic': 'imu_front/mag', 'temperature_topic': 'imu_front/temp'})
+    rear = _made_by({'node_name': 'imu_rear', 'port': '/dev/ttyUSB1', 'address': '12',
+                     'frame_id': 'imu_rear_link', 'imu_topic': 'imu_rear/data',
+                     'mag_topic': 'imu_rear/mag', 'temperature_topic': 'imu_rear/temp'})
+    for kind in ('node', 'frame', 'port', 'diagnostics'):
+        assert front[kind] != rear[kind], kind
+    assert not front['topics'] & rear['topics']
+    # Left at their defaults the two would collide: what the arguments are for.
+    plain = _made_by({'port': '/dev/ttyUSB0'})
+    assert plain['topics'] == {'imu/raw_data', 'imu/mag', 'imu/temperature',
+                               'i3dmgx2_driver/is_calibrated'}

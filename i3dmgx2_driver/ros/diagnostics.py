@@ -40,6 +40,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from .calibration import Calibration, RATE_TOLERANCE
+from .qos import overriding_options
 from ..device.link import RadioStats
 from ..device.sample_clock import ClockStatus, Restart
 from ..device.settings import DeviceConfig
@@ -311,7 +312,7 @@ def device_status(device: DeviceStatus, address: int, temperature_c: float | Non
 
 
 def time_status(time_source: str, clock: ClockStatus, now: float,
-                max_drift_ppm: float = MAX_DRIFT_PPM) -> Status:
+                max_drift_ppm: float = MAX_DRIFT_PPM, time_offset: float = 0.0) -> Status:
     """
     Show how stamps are made and what the device clock went through.
 
@@ -319,6 +320,7 @@ def time_status(time_source: str, clock: ClockStatus, now: float,
     WARN for ``RESET_WARNING_S`` after the sensor's timer was found to have
     restarted (a power cycle the driver may not otherwise notice), and when
     the fit is implausible; STALE before the first sample (device time).
+    ``time_offset`` is the ``time_offset`` parameter, added to every stamp.
     """
     samples = clock.samples
     drift_ppm = clock.drift_ppm
@@ -326,6 +328,7 @@ def time_status(time_source: str, clock: ClockStatus, now: float,
                          for reason in Restart)
     values = (
         ('time source', time_source),
+        ('time offset (s)', f'{time_offset:+.6f}'),
         ('clock drift (ppm)', f'{drift_ppm:.1f}' if samples else 'n/a'),
         ('samples in this fit', str(samples)),
         ('fit started afresh', restarts),
@@ -393,13 +396,19 @@ def lifecycle_status(label: str, state: State | None) -> Status:
     return Status(OK, 'lifecycle', text, values)
 
 
-def to_message(statuses: Iterable[Status], hardware_id: str) -> list[DiagnosticStatus]:
-    """Turn statuses into ``DiagnosticStatus`` messages, names prefixed."""
+def to_message(statuses: Iterable[Status], hardware_id: str,
+               prefix: str = PREFIX) -> list[DiagnosticStatus]:
+    """
+    Turn statuses into ``DiagnosticStatus`` messages, names prefixed.
+
+    The node passes its own name as the prefix, so that two drivers side by
+    side (two sensors) publish statuses an aggregator tells apart.
+    """
     out = []
     for status in statuses:
         msg = DiagnosticStatus()
         msg.level = bytes((status.level,))
-        msg.name = PREFIX + status.name
+        msg.name = prefix + status.name
         msg.message = status.message
         msg.hardware_id = hardware_id
         msg.values = [KeyValue(key=key, value=value) for key, value in status.values]
@@ -453,7 +462,8 @@ class DiagnosticsPublisher:
         self._core: Callable[[], Any] = lambda: None
         self._last_tick = time.monotonic()
         self._forget()
-        self.publisher = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.publisher = node.create_publisher(
+            DiagnosticArray, '/diagnostics', 10, qos_overriding_options=overriding_options())
         self.timer = node.create_timer(period, self.tick,
                                        callback_group=MutuallyExclusiveCallbackGroup())
 
@@ -512,7 +522,8 @@ class DiagnosticsPublisher:
             radio_status(cfg.wireless, radio, fresh),
             parser_status(parser, self._last_parser),
             device_status(device, cfg.address, core.temperature.latest),
-            time_status(cfg.time_source, core.clock_status(), now),
+            time_status(cfg.time_source, core.clock_status(), now,
+                        time_offset=cfg.time_offset),
             calibration_status(last, good, time.time()),
         ]
         self._last_parser = parser
@@ -528,7 +539,8 @@ class DiagnosticsPublisher:
         """Build and publish one DiagnosticArray (the timer callback)."""
         array = DiagnosticArray()
         array.header.stamp = self.node.get_clock().now().to_msg()
-        array.status = to_message(self.collect(), self.hardware_id())
+        array.status = to_message(self.collect(), self.hardware_id(),
+                                  f'{self.node.get_name()}: ')
         try:
             self.publisher.publish(array)
         except RCLError:

@@ -45,11 +45,13 @@ from typing import NamedTuple
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.node import Node
 from rclpy.publisher import Publisher
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, MagneticField, Temperature
+from std_msgs.msg import Bool
 
 from .conversions import mag_is_valid, MessageFactory
 from .parameters import declare_parameters, driver_config, DriverConfig, SPECS
+from .qos import override_names, overriding_options
 from .raw_capture import RawCapture
 from .services import DeviceServices
 from .temperature import TemperaturePoller
@@ -82,7 +84,8 @@ def load_config(node: Node) -> DriverConfig:
     try:
         values = declare_parameters(node)
     finally:
-        warn_unknown_parameters(node, [spec.name for spec in SPECS])
+        warn_unknown_parameters(node, [*(spec.name for spec in SPECS),
+                                       *override_names(node)])
     return driver_config(values)
 
 
@@ -102,15 +105,30 @@ class StreamStats:
 
 
 class Publishers(NamedTuple):
-    """The data publishers; None where the parameters turn a topic off."""
+    """The publishers; None where the parameters turn a topic off."""
 
     imu: Publisher
     mag: Publisher | None
     temperature: Publisher | None
+    #: ``~/is_calibrated``: a plain publisher even on a managed node, so that
+    #: its latched value holds in every state.
+    is_calibrated: Publisher
+
+
+def calibrated_qos() -> QoSProfile:
+    """Return the QoS of ``~/is_calibrated``: the last value kept for late subscribers."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def publisher_qos(config: DriverConfig) -> QoSProfile:
-    """Return the QoS the parameters ask for, for every data publisher."""
+    """
+    Return the data publishers' QoS before rclpy's ``qos_overrides`` parameters.
+
+    The deprecated ``qos_reliability`` and ``qos_depth`` still set it (for
+    one release); a ``qos_overrides`` parameter wins over them.
+    """
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST, depth=config.qos_depth,
         reliability=(ReliabilityPolicy.RELIABLE if config.qos_reliability == 'reliable'
@@ -128,15 +146,22 @@ def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False)
     does not skip (ros2/rclpy#1284). Its parameters are read-only, so the
     publishers it made first are the ones every later configure needs.
     """
-    qos = publisher_qos(config)
-    create = node.create_lifecycle_publisher if lifecycle else node.create_publisher
+    make = node.create_lifecycle_publisher if lifecycle else node.create_publisher
+
+    def create(kind: type, topic: str) -> Publisher:
+        # A profile each: rclpy writes the overrides into the one it is given.
+        return make(kind, topic, publisher_qos(config),
+                    qos_overriding_options=overriding_options())
+
     return Publishers(
-        create(Imu, 'imu/raw_data', qos),
+        create(Imu, 'imu/raw_data'),
         # Only streams with a field (named 'mag' in each layout) have a magnetometer topic.
-        create(MagneticField, 'imu/mag', qos)
+        create(MagneticField, 'imu/mag')
         if config.publish_mag and config.stream_choice.mag else None,
-        create(Temperature, 'imu/temperature', qos) if config.temperature_period > 0
-        else None)
+        create(Temperature, 'imu/temperature') if config.temperature_period > 0
+        else None,
+        node.create_publisher(Bool, '~/is_calibrated', calibrated_qos(),
+                              qos_overriding_options=overriding_options()))
 
 
 class DriverCore:
@@ -183,6 +208,7 @@ class DriverCore:
         #: deactivate are counted as unpublished, not as published).
         self.publishing = publishing
         self._use_device_time = cfg.time_source == 'device'
+        self._time_offset = cfg.time_offset
         self._wire_time = line_budget.wire_time(self.stream.code, cfg.baud, cfg.wireless)
         self._publish_lock = threading.Lock()
         # Publish the messages ready-serialized (conversions.py says why) when they read
@@ -210,17 +236,34 @@ class DriverCore:
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
             on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
             on_fatal=self._on_fatal, timings=timings, port_factory=port_factory)
+        self.announce_calibrated(False)
         self.device_services = DeviceServices(
             node, self.supervisor, self._published, self.forget_last_sample,
-            capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal)
+            capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal,
+            calibrated=self.announce_calibrated)
         self.temperature = TemperaturePoller(
             node, self.supervisor.streaming_link, self.messages.frame_id,
-            cfg.temperature_period, self.publishers.temperature)
+            cfg.temperature_period, self.publishers.temperature, cfg.time_offset)
         node.get_logger().info(
             f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
             f'stream {self.stream.label}, frame {self.messages.frame_id} '
             f'({cfg.frame_convention}), '
-            f'time source {cfg.time_source}')
+            f'time source {cfg.time_source}'
+            + (f', time offset {cfg.time_offset:+g} s' if cfg.time_offset else ''))
+
+    def announce_calibrated(self, calibrated: bool) -> None:
+        """
+        Publish on ``~/is_calibrated`` whether the device uses a gyro bias captured still.
+
+        False from the start (a bias captured by an earlier process may be
+        gone with a power cycle), True after a capture the driver accepted,
+        False again after one refused (the device uses the moved bias) and
+        when the sensor's timer shows a power cycle (the bias lives in RAM).
+        """
+        try:
+            self.publishers.is_calibrated.publish(Bool(data=calibrated))
+        except RCLError:
+            pass  # ROS is shutting down: nobody is left to tell
 
     def _on_fatal(self, error: PortError) -> None:
         """
@@ -284,6 +327,7 @@ class DriverCore:
                 stats.last_ticks = None
                 if clock.last_restart == Restart.RESET.value:
                     stats.device_resets += 1
+                    self.announce_calibrated(False)
                     self.node.get_logger().warning(
                         "the sensor's timer restarted (a power cycle or brown-out): "
                         'timestamps start afresh from its new clock')
@@ -296,6 +340,7 @@ class DriverCore:
             stats.last_ticks = ticks
             if not self._use_device_time:
                 stamp = read_time
+            stamp += self._time_offset
             message = self._imu_message(record, stamp)
             if timings is not None:
                 timings.packed()

@@ -21,6 +21,14 @@ documents the driver and rclpy rejects out-of-range values. Whatever rclpy
 cannot check (choices, "0 or at least 1 Hz") is checked here; every failure
 becomes one ``ParameterError`` whose message names the parameter and its
 valid range, and the node stops. Nothing falls back to a default silently.
+
+Values are taken as people type them (``-p data_rate:=300`` for a double,
+``-p stream:=0xC2`` for a string) through rclpy's public API only: what was
+given is read through a dynamically typed declaration, converted, and the
+parameter then declared with its own type and descriptor (:func:`_given`).
+The QoS of the publishers is not here: rclpy declares its standard
+``qos_overrides`` parameters itself (``qos.py``); ``qos_reliability`` and
+``qos_depth`` remain for one release, warned about when given.
 """
 
 from collections.abc import Callable
@@ -29,10 +37,7 @@ import math
 from typing import Any, NamedTuple
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.exceptions import (
-    InvalidParameterTypeException, InvalidParameterValueException,
-    ParameterUninitializedException,
-)
+from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -44,6 +49,17 @@ from ..device.realtime import MAX_PRIORITY
 from ..device.timeouts import STALL_TIMEOUT
 
 TIME_SOURCES = ('device', 'host')
+#: Default standard deviations, per axis. No noise density of the 3DM-GX2 was
+#: found in a source we can cite, so these are the per-sample figures the ROS 1
+#: driver for this very sensor uses (ros-drivers/microstrain_3dmgx2_imu,
+#: src/imu_node.cc: orientation_stdev 0.035, angular_velocity_stdev 0.012,
+#: linear_acceleration_stdev 0.098); 0.035 rad is the datasheet's 2.0 degrees of
+#: dynamic orientation accuracy. They do not depend on the data rate.
+ORIENTATION_STDDEV = 0.035
+ANGULAR_VELOCITY_STDDEV = 0.012
+LINEAR_ACCELERATION_STDDEV = 0.098
+#: Largest ``time_offset`` (s) either way: far beyond any radio's latency.
+TIME_OFFSET_LIMIT = 10.0
 RELIABILITIES = ('reliable', 'best_effort')
 _REQUIRED = object()
 
@@ -66,6 +82,8 @@ class Spec(NamedTuple):
     empty_ok: bool = False
     #: For a string: the text an integer override stands for (rcl reads 0xC2 as 194).
     from_integer: Callable[[int], str] | None = None
+    #: Deprecated: the QoS policy of rclpy's standard parameter that replaces it.
+    replaced_by: str = ''
 
 
 SPECS: list[Spec] = [
@@ -87,21 +105,35 @@ SPECS: list[Spec] = [
     Spec('frame_convention', Parameter.Type.STRING, 'enu',
          'enu: REP-103 (ENU world, x-forward/y-left/z-up body); ned: device axes '
          '(NED world, x-forward/y-right/z-down body).', choices=CONVENTIONS),
-    Spec('orientation_stddev', Parameter.Type.DOUBLE, 0.0,
-         'Orientation standard deviation (rad); 0: unknown.', (0.0, 10.0)),
-    Spec('angular_velocity_stddev', Parameter.Type.DOUBLE, 0.0,
-         'Angular velocity standard deviation (rad/s); 0: unknown.', (0.0, 10.0)),
-    Spec('linear_acceleration_stddev', Parameter.Type.DOUBLE, 0.0,
-         'Linear acceleration standard deviation (m/s^2); 0: unknown.', (0.0, 100.0)),
+    Spec('orientation_stddev', Parameter.Type.DOUBLE, ORIENTATION_STDDEV,
+         'Orientation standard deviation (rad); 0: unknown. Default: 2.0 degrees, the '
+         "3DM-GX2 datasheet's dynamic orientation accuracy (0.5 degrees static), as the ROS 1 "
+         'microstrain_3dmgx2_imu driver.', (0.0, 10.0)),
+    Spec('angular_velocity_stddev', Parameter.Type.DOUBLE, ANGULAR_VELOCITY_STDDEV,
+         'Angular velocity standard deviation (rad/s); 0: unknown. Default: the ROS 1 '
+         "microstrain_3dmgx2_imu driver's figure for this sensor.", (0.0, 10.0)),
+    Spec('linear_acceleration_stddev', Parameter.Type.DOUBLE, LINEAR_ACCELERATION_STDDEV,
+         'Linear acceleration standard deviation (m/s^2); 0: unknown. Default: the ROS 1 '
+         "microstrain_3dmgx2_imu driver's figure for this sensor (10 mg).", (0.0, 100.0)),
     Spec('magnetic_field_stddev', Parameter.Type.DOUBLE, 0.0,
-         'Magnetic field standard deviation (T); 0: unknown.', (0.0, 1.0)),
+         'Magnetic field standard deviation (T); 0: unknown (no published figure).',
+         (0.0, 1.0)),
     Spec('time_source', Parameter.Type.STRING, 'device',
          'device: sample time from the sensor timer aligned to the host clock; '
          'host: time the packet was read.', choices=TIME_SOURCES),
+    Spec('time_offset', Parameter.Type.DOUBLE, 0.0,
+         'Seconds added to every stamp (imu/raw_data, imu/mag, imu/temperature), for the '
+         "radio's latency the host cannot see; shown on /diagnostics (status time).",
+         (-TIME_OFFSET_LIMIT, TIME_OFFSET_LIMIT)),
     Spec('qos_reliability', Parameter.Type.STRING, 'reliable',
-         'QoS reliability of the publishers (best_effort does not match reliable '
-         'subscribers).', choices=RELIABILITIES),
-    Spec('qos_depth', Parameter.Type.INTEGER, 10, 'QoS history depth.', (1, 1000)),
+         'Deprecated (removed in the next release): use '
+         'qos_overrides./imu/raw_data.publisher.reliability. QoS reliability of the data '
+         'publishers (best_effort does not match reliable subscribers).',
+         choices=RELIABILITIES, replaced_by='reliability'),
+    Spec('qos_depth', Parameter.Type.INTEGER, 10,
+         'Deprecated (removed in the next release): use '
+         'qos_overrides./imu/raw_data.publisher.depth. QoS history depth of the data '
+         'publishers.', (1, 1000), replaced_by='depth'),
     Spec('read_timeout', Parameter.Type.DOUBLE, STALL_TIMEOUT,
          'Seconds without data before the stream counts as stalled.', (0.1, 60.0)),
     Spec('reconnect_interval', Parameter.Type.DOUBLE, 1.0,
@@ -154,6 +186,7 @@ class DriverConfig:
     linear_acceleration_stddev: float
     magnetic_field_stddev: float
     time_source: str
+    time_offset: float
     qos_reliability: str
     qos_depth: int
     read_timeout: float
@@ -207,48 +240,76 @@ def _descriptor(spec: Spec) -> ParameterDescriptor:
     return descriptor
 
 
-def _accept_integer(node: Node, spec: Spec) -> None:
+def _given(node: Node, name: str) -> Any:
     """
-    Let ``300`` stand for ``300.0`` where a floating-point number is wanted.
+    Return the override given for ``name`` (-p, a params file, a launch file), or None.
+
+    Through public API only: a parameter declared with dynamic typing takes
+    an override of any type, so declaring one and undeclaring it again shows
+    what was given, typed as rcl read it (``-p data_rate:=300`` is an
+    integer, ``-p stream:=0xC2`` the integer 194), without the type error a
+    statically typed declaration would raise.
+    """
+    value = node.declare_parameter(
+        name, None, ParameterDescriptor(dynamic_typing=True)).value
+    node.undeclare_parameter(name)
+    return value
+
+
+def _as_typed(spec: Spec, value: Any) -> Any:
+    """
+    Return ``value`` as the parameter's type, the way a person means it, or raise.
 
     rcl types ``-p data_rate:=300`` (and ``300`` in a YAML file or a launch
-    file) as an integer, and rclpy refuses an integer for a parameter whose
-    default is a double. Users type rates and deviations as integers, so the
-    override is made a double before the parameter is declared; an integer
-    parameter given a double stays an error. Likewise rcl reads
-    ``stream:=0xC2`` as the integer 194: a string parameter that takes
-    command bytes gets its text back.
+    file) as an integer; users type rates and deviations as integers, so an
+    integer stands for a double. Likewise rcl reads ``stream:=0xC2`` as the
+    integer 194: a string parameter that takes command bytes gets its text
+    back. An integer parameter given a double stays an error.
     """
-    overrides = node._parameter_overrides
-    given = overrides.get(spec.name)
-    if given is None or given.type_ != Parameter.Type.INTEGER:
-        return
-    if spec.kind == Parameter.Type.DOUBLE:
-        overrides[spec.name] = Parameter(spec.name, Parameter.Type.DOUBLE, float(given.value))
-    elif spec.kind == Parameter.Type.STRING and spec.from_integer is not None:
-        overrides[spec.name] = Parameter(spec.name, Parameter.Type.STRING,
-                                         spec.from_integer(given.value))
+    given = Parameter.Type.from_parameter_value(value)
+    if given == spec.kind:
+        return value
+    if given == Parameter.Type.INTEGER and spec.kind == Parameter.Type.DOUBLE:
+        return float(value)
+    if given == Parameter.Type.INTEGER and spec.from_integer is not None:
+        return spec.from_integer(value)
+    kind = {Parameter.Type.DOUBLE: 'a floating-point number, e.g. 1.0',
+            Parameter.Type.INTEGER: 'an integer', Parameter.Type.BOOL: 'true or false',
+            Parameter.Type.STRING: 'a string'}[spec.kind]
+    raise ParameterError(f'parameter {spec.name!r} must be {_valid_range(spec)}, written as '
+                         f'{kind}: got {value!r} ({given.name.lower()})')
+
+
+def _warn_deprecated(node: Node, spec: Spec) -> None:
+    """Name the standard parameter that replaces a deprecated one the user gave."""
+    topic = node.resolve_topic_name('imu/raw_data')
+    node.get_logger().warning(
+        f"parameter '{spec.name}' is deprecated and will be removed in the next release: "
+        f"use 'qos_overrides.{topic}.publisher.{spec.replaced_by}' instead (rclpy's "
+        f'standard QoS parameters; likewise for imu/mag, imu/temperature and the other '
+        f'topics). It still applies to every publisher until then.')
 
 
 def _declare(node: Node, spec: Spec) -> Any:
     problem = f'parameter {spec.name!r} must be {_valid_range(spec)}'
-    _accept_integer(node, spec)
     try:
         if node.has_parameter(spec.name):
             pass  # a managed node configured again: read what is there
-        elif spec.default is _REQUIRED:
-            node.declare_parameter(spec.name, spec.kind, _descriptor(spec))
         else:
-            node.declare_parameter(spec.name, spec.default, _descriptor(spec))
+            given = _given(node, spec.name)
+            if given is not None and spec.replaced_by:
+                _warn_deprecated(node, spec)
+            value = spec.default if given is None else _as_typed(spec, given)
+            if value is _REQUIRED:
+                node.declare_parameter(spec.name, spec.kind, _descriptor(spec))
+            else:
+                # The override was read above and is given here, converted.
+                node.declare_parameter(spec.name, value, _descriptor(spec),
+                                       ignore_override=True)
         value = node.get_parameter(spec.name).value
     except ParameterUninitializedException:
         raise ParameterError(f'parameter {spec.name!r} is required: set it with '
                              f'-p {spec.name}:=<value> ({_valid_range(spec)})') from None
-    except InvalidParameterTypeException as exc:
-        kind = {Parameter.Type.DOUBLE: 'a floating-point number, e.g. 1.0',
-                Parameter.Type.INTEGER: 'an integer', Parameter.Type.BOOL: 'true or false',
-                Parameter.Type.STRING: 'a string'}[spec.kind]
-        raise ParameterError(f'{problem}, written as {kind}: {exc}') from None
     except InvalidParameterValueException:
         raise ParameterError(f'{problem}') from None
     return value

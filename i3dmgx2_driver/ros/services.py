@@ -13,7 +13,12 @@
 # limitations under the License.
 
 """
-The node's services: ``~/capture_gyro_bias`` and ``~/self_test`` (std_srvs/Trigger).
+The node's services: ``~/capture_gyro_bias``, ``~/self_test`` and ``~/diagnostic_self_test``.
+
+The first two are std_srvs/Trigger (a yes or no and a text); the self test
+is also served as diagnostic_msgs/SelfTest, the ROS message for exactly
+this (the sensor's serial number, passed, one DiagnosticStatus per step),
+from the same steps.
 
 Both need the device to themselves, so they run through the supervisor's
 ``run_paused``: the stream stops, the exchange runs, the stream restarts.
@@ -33,6 +38,8 @@ import threading
 import time
 from typing import Any, NamedTuple, Protocol
 
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.srv import SelfTest
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from std_srvs.srv import Trigger
@@ -132,6 +139,16 @@ def format_report(steps: Sequence[Step]) -> str:
     return '\n'.join(lines)
 
 
+def to_statuses(steps: Sequence[Step], prefix: str,
+                hardware_id: str) -> list[DiagnosticStatus]:
+    """One DiagnosticStatus per step: OK or ERROR, the step's numbers as its message."""
+    return [DiagnosticStatus(
+        level=DiagnosticStatus.OK if step.passed else DiagnosticStatus.ERROR,
+        name=f'{prefix}{step.name}', message=step.detail, hardware_id=hardware_id,
+        values=[KeyValue(key='result', value='PASS' if step.passed else 'FAIL')])
+        for step in steps]
+
+
 def gravity_step(accel: Vector3, tolerance: float = GRAVITY_TOLERANCE) -> Step:
     """Judge the mean acceleration of a sensor at rest: |a| = 1 g ± ``tolerance``."""
     size = _norm(accel)
@@ -183,13 +200,17 @@ class DeviceServices:
     keeps a pause from counting as lost records; ``capture_on_start`` asks
     for one capture once streaming. ``refusal``, if given, returns why a
     call must be refused now ('' to serve it): a managed node that is not
-    active answers so at once.
+    active answers so at once. ``calibrated(flag)``, if given, is told
+    whether the device uses a good gyro bias after every capture that
+    reached the device (``~/is_calibrated``).
     """
 
     def __init__(self, node: Node, device: Device, published: Callable[[], tuple[int, float]],
                  forget_last_sample: Callable[[], None], capture_on_start: bool = False,
-                 refusal: Callable[[], str] | None = None) -> None:
+                 refusal: Callable[[], str] | None = None,
+                 calibrated: Callable[[bool], None] | None = None) -> None:
         self.node = node
+        self._calibrated = calibrated or (lambda flag: None)
         self._device = device
         self._published = published
         self._forget = forget_last_sample
@@ -207,6 +228,9 @@ class DeviceServices:
             Trigger, '~/capture_gyro_bias', self._on_capture, callback_group=group)
         self.self_test_service = node.create_service(
             Trigger, '~/self_test', self._on_self_test, callback_group=group)
+        self.diagnostic_self_test_service = node.create_service(
+            SelfTest, '~/diagnostic_self_test', self._on_diagnostic_self_test,
+            callback_group=group)
         self._start_thread: threading.Thread | None = None
         if capture_on_start:
             self._start_thread = threading.Thread(
@@ -222,6 +246,7 @@ class DeviceServices:
         self.stop()
         self.node.destroy_service(self.capture_service)
         self.node.destroy_service(self.self_test_service)
+        self.node.destroy_service(self.diagnostic_self_test_service)
 
     def wait_idle(self, timeout: float) -> bool:
         """
@@ -249,6 +274,15 @@ class DeviceServices:
     def _on_self_test(self, request: Trigger.Request, response: Trigger.Response
                       ) -> Trigger.Response:
         response.success, response.message = self.self_test()
+        return response
+
+    def _on_diagnostic_self_test(self, request: SelfTest.Request,
+                                 response: SelfTest.Response) -> SelfTest.Response:
+        steps = self.self_test_steps()
+        info = self._device.status().info
+        response.id = info.serial_number if info is not None and info.serial_number else ''
+        response.passed = bytes((all(step.passed for step in steps),))
+        response.status = to_statuses(steps, f'{self.node.get_name()}: ', response.id)
         return response
 
     # -- operations -----------------------------------------------------------
@@ -308,6 +342,7 @@ class DeviceServices:
         if reasons:
             summary = 'the sensor moved: ' + '; '.join(reasons)
             self.last_capture = Calibration(started, False, bias, sampling_ms, summary)
+            self._calibrated(False)
             message = (f'refused: the sensor moved during the capture ({"; ".join(reasons)}). '
                        f'The device now uses the captured bias {text} rad/s until the next '
                        f'capture or a power cycle: capture again with the sensor still.')
@@ -315,6 +350,7 @@ class DeviceServices:
             return False, message
         calibration = Calibration(started, True, bias, sampling_ms, f'bias {text} rad/s')
         self.last_capture = self.good_capture = calibration
+        self._calibrated(True)
         message = (f'gyro bias captured over {sampling_ms} ms: {text} rad/s; the device uses '
                    f'it until power-off (not stored in non-volatile memory)')
         self._log.info(message)
@@ -333,20 +369,35 @@ class DeviceServices:
         """Run the self test; return (all steps passed, one line per step)."""
         return self._exclusive('self test', self._self_test)
 
+    def self_test_steps(self) -> list[Step]:
+        """Run the self test; return its steps (one failed step when it is refused)."""
+        steps: list[Step] = []
+
+        def run() -> tuple[bool, str]:
+            steps.extend(self._steps())
+            return True, ''
+
+        _, refusal = self._exclusive('self test', run)
+        return steps or [Step('self test', False, refusal)]
+
     def _self_test(self) -> tuple[bool, str]:
+        steps = self._steps()
+        return all(step.passed for step in steps), format_report(steps)
+
+    def _steps(self) -> list[Step]:
+        """Run every step of the self test and log the report; return the steps."""
         try:
             steps = self._device.run_paused(self._device_steps)
         except OPERATION_ERRORS as exc:
             steps = [Step('device operation', False, f'could not complete: {exc}')]
         steps.append(self._measure_rate())
-        ok = all(step.passed for step in steps)
         report = format_report(steps)
         # One call site per severity: rclpy refuses to change a call site's severity.
-        if ok:
+        if all(step.passed for step in steps):
             self._log.info(f'self test:\n{report}')
         else:
             self._log.warning(f'self test:\n{report}')
-        return ok, report
+        return steps
 
     def _device_steps(self, link: DeviceLink) -> list[Step]:
         """Run the steps that need the device alone (with the stream stopped)."""

@@ -55,12 +55,15 @@ class TemperaturePoller:
     lifecycle publisher on a managed node); ``streaming_link()`` returns the
     device link while the device streams (None otherwise: no poll then);
     ``frame_id`` is the IMU frame. ``period`` 0 disables it: no thread (and
-    no publisher is needed).
+    no publisher is needed). ``time_offset`` (s) is added to every stamp, as
+    to the IMU's.
     """
 
     def __init__(self, node: Node, streaming_link: Callable[[], DeviceLink | None],
-                 frame_id: str, period: float, publisher: Publisher | None) -> None:
+                 frame_id: str, period: float, publisher: Publisher | None,
+                 time_offset: float = 0.0) -> None:
         self.node = node
+        self._time_offset = time_offset
         self._streaming_link = streaming_link
         self.period = period
         self.published = 0
@@ -111,7 +114,7 @@ class TemperaturePoller:
         self.latest = reply.accel_celsius
         msg = self._msg
         msg.temperature = self.latest
-        set_stamp(msg.header, read_time)
+        set_stamp(msg.header, read_time + self._time_offset)
         try:
             self.publisher.publish(msg)
         except RCLError:

@@ -65,7 +65,10 @@ def warn_unknown_parameters(node: Node, expected: Iterable[str]) -> list[str]:
     the rest of the known names are those ``node`` has declared so far,
     rclpy's own among them.
     """
-    # rclpy offers no public view of the overrides it was given.
+    # rclpy offers no public view of the overrides it was given (-p, params files):
+    # this one read of its private field is the only one in the driver (the
+    # parameters themselves go through public API, parameters.py), and
+    # test/test_parameter_typing.py fails loudly if rclpy renames or reshapes it.
     given = getattr(node, '_parameter_overrides', None) or {}
     declared = node.list_parameters([], 0).names
     lines = [message(name, closest)

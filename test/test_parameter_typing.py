@@ -1,0 +1,134 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Parameters typed as a person types them, through rclpy's public API only.
+
+Each test makes a real rclpy node in this process with a command line of
+its own (``cli_args``), so rcl parses ``-p`` exactly as for the executable;
+the node processes of test_node_params.py and test_node_every_stream.py
+check the same end to end.
+"""
+
+import os
+
+from i3dmgx2_driver.ros.parameters import (
+    ANGULAR_VELOCITY_STDDEV, declare_parameters, LINEAR_ACCELERATION_STDDEV,
+    ORIENTATION_STDDEV, ParameterError,
+)
+from i3dmgx2_driver.ros.qos import override_names
+from i3dmgx2_driver.ros.unknown_parameters import warn_unknown_parameters
+import pytest
+import rclpy
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.fixture
+def make_node():
+    """Make rclpy nodes with a command line each; destroy them and their context after."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    nodes = []
+
+    def make(*arguments: str) -> Node:
+        node = Node('i3dmgx2_driver', context=context, cli_args=['--ros-args', *arguments])
+        nodes.append(node)
+        return node
+
+    yield make
+    for node in nodes:
+        node.destroy_node()
+    rclpy.shutdown(context=context)
+
+
+def test_integers_stand_for_doubles_and_command_bytes_for_their_text(make_node):
+    node = make_node('-p', 'address:=95', '-p', 'data_rate:=300', '-p', 'stream:=0xC2',
+                     '-p', 'read_timeout:=2')
+    values = declare_parameters(node)
+    assert values['address'] == 95
+    assert values['data_rate'] == 300.0 and isinstance(values['data_rate'], float)
+    assert values['stream'] == '0xC2'
+    assert values['read_timeout'] == 2.0
+    # Declared with their own types: ros2 param get shows a double, a string.
+    assert node.get_parameter('data_rate').type_ == Parameter.Type.DOUBLE
+    assert node.get_parameter('stream').type_ == Parameter.Type.STRING
+    assert node.describe_parameter('data_rate').read_only
+    # rclpy still checks the range at run time (and read-only refuses every change).
+    assert not node.set_parameters([Parameter('data_rate', value=1000.0)])[0].successful
+
+
+def test_a_double_where_an_integer_is_wanted_is_refused(make_node):
+    node = make_node('-p', 'address:=95.0')
+    with pytest.raises(ParameterError, match=r"parameter 'address' must be 1\.\.65534, "
+                                             r'written as an integer: got 95\.0 \(double\)'):
+        declare_parameters(node)
+
+
+def test_a_run_time_parameter_keeps_its_range(make_node):
+    node = make_node('-p', 'address:=95', '-p', 'gyro_bias_sampling_ms:=400')
+    declare_parameters(node)
+    assert node.get_parameter('gyro_bias_sampling_ms').value == 400
+    assert not node.set_parameters([Parameter('gyro_bias_sampling_ms', value=50)])[0].successful
+    assert node.set_parameters([Parameter('gyro_bias_sampling_ms', value=500)])[0].successful
+
+
+def test_covariance_defaults_come_from_the_sensor_and_zero_still_means_unknown(make_node):
+    values = declare_parameters(make_node('-p', 'address:=95'))
+    assert (values['orientation_stddev'], values['angular_velocity_stddev'],
+            values['linear_acceleration_stddev'], values['magnetic_field_stddev']) == \
+        (ORIENTATION_STDDEV, ANGULAR_VELOCITY_STDDEV, LINEAR_ACCELERATION_STDDEV, 0.0)
+    # The ROS 1 microstrain_3dmgx2_imu driver's figures; 0.035 rad is 2.0 degrees.
+    assert (ORIENTATION_STDDEV, ANGULAR_VELOCITY_STDDEV, LINEAR_ACCELERATION_STDDEV) == \
+        (0.035, 0.012, 0.098)
+    values = declare_parameters(make_node(
+        '-p', 'address:=95', '-p', 'orientation_stddev:=0', '-p', 'angular_velocity_stddev:=0',
+        '-p', 'linear_acceleration_stddev:=0'))
+    assert (values['orientation_stddev'], values['angular_velocity_stddev'],
+            values['linear_acceleration_stddev']) == (0.0, 0.0, 0.0)
+
+
+def test_the_parameters_never_write_rclpys_private_overrides():
+    with open(os.path.join(REPO, 'i3dmgx2_driver', 'ros', 'parameters.py')) as handle:
+        assert '_parameter_overrides' not in handle.read()
+
+
+def test_rclpy_still_keeps_the_overrides_where_the_unknown_parameter_warning_reads_them(
+        make_node):
+    # rclpy has no public view of the overrides; unknown_parameters.py reads this
+    # private field. If rclpy renames or reshapes it, this fails rather than the
+    # warning going silent.
+    node = make_node('-p', 'data_rat:=200.0')
+    overrides = getattr(node, '_parameter_overrides', None)
+    assert isinstance(overrides, dict), (
+        'rclpy no longer has Node._parameter_overrides: unknown_parameters.py must find '
+        'the overrides another way')
+    assert overrides['data_rat'].value == 200.0
+    lines = warn_unknown_parameters(node, ['data_rate'])
+    assert lines == ["unknown parameter 'data_rat' (did you mean 'data_rate'?): ignored, the "
+                     'driver has no such parameter (ros2 param list shows those it has)']
+
+
+def test_qos_overrides_of_the_drivers_topics_are_known_names_and_a_misspelt_one_is_not(
+        make_node):
+    node = make_node('-r', '__ns:=/robot1')
+    known = override_names(node)
+    # Resolved names, as rclpy declares them: the namespace and the node's name in.
+    assert 'qos_overrides./robot1/imu/raw_data.publisher.reliability' in known
+    assert 'qos_overrides./robot1/i3dmgx2_driver/is_calibrated.publisher.durability' in known
+    assert 'qos_overrides./diagnostics.publisher.depth' in known
+    assert 'qos_overrides./robot1/imu/raw_dat.publisher.depth' not in known
+    assert 'qos_overrides./robot1/imu/raw_data.publisher.lifespan' not in known
