@@ -239,12 +239,16 @@ def test_configure_fails_on_a_silent_sensor_and_releases_the_port():
 
 @pytest.mark.parametrize('params, expected', [
     ({'address': None}, "parameter 'address' is required: set it with -p address:=<value>"),
-    ({'address': 0}, "parameter 'address' must be 1..65534"),
+    ({'address': 0}, "parameter 'address' must be 1..65534, got 0"),
     ({'frame_convention': 'xyz'},
      "parameter 'frame_convention' must be one of 'enu', 'ned', got 'xyz'"),
     ({'data_rate': 0.5}, "parameter 'data_rate' must be 0 (leave the device as it is) or "
                          '1..301.2 Hz, got 0.5'),
-], ids=['missing-address', 'address-0', 'frame-convention', 'data-rate'])
+    # rclpy's QoS parameter of a data topic, checked when configure makes its publisher.
+    ({'qos_overrides./imu/raw_data.publisher.reliability': 'sometimes'},
+     "parameter 'qos_overrides./imu/raw_data.publisher.reliability' must be one of "
+     "'system_default', 'reliable', 'best_effort', 'best_available', got 'sometimes'"),
+], ids=['missing-address', 'address-0', 'frame-convention', 'data-rate', 'qos-override'])
 def test_bad_parameter_fails_configure_with_the_plain_nodes_message(params, expected):
     with PtySimulator(SimulatorConfig(seed=55)) as sim, Listener(TOPICS) as listener:
         given = {k: v for k, v in {'port': sim.port, 'address': 95, **params}.items()

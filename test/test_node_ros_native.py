@@ -206,11 +206,18 @@ def test_deprecated_qos_names_still_work_and_name_the_standard_parameter():
             assert len(listener.wait_for('imu/raw_data', 10, timeout=30)) >= 10, node.output()
             assert publisher_qos(listener, '/imu/raw_data', '/deprecated_gx2').reliability == \
                 ReliabilityPolicy.BEST_EFFORT
+            assert publisher_qos(listener, '/imu/mag', '/deprecated_gx2').reliability == \
+                ReliabilityPolicy.BEST_EFFORT
+            # The data topics only, as the warning says: /diagnostics keeps its own QoS.
+            assert publisher_qos(listener, '/diagnostics', '/deprecated_gx2').reliability == \
+                ReliabilityPolicy.RELIABLE
             output = node.output()
             for old, new in (('qos_reliability', 'reliability'), ('qos_depth', 'depth')):
                 assert (f"parameter '{old}' is deprecated and will be removed in the next "
                         f"release: use 'qos_overrides./imu/raw_data.publisher.{new}' "
                         f'instead') in output, output
+            assert ('Until then it still sets the data topics (imu/raw_data, imu/mag, '
+                    'imu/temperature).') in output, output
             assert 'unknown parameter' not in output
             assert node.stop()[0] == 0
 

@@ -27,12 +27,14 @@ from i3dmgx2_driver.ros.parameters import (
     ANGULAR_VELOCITY_STDDEV, declare_parameters, LINEAR_ACCELERATION_STDDEV,
     ORIENTATION_STDDEV, ParameterError,
 )
-from i3dmgx2_driver.ros.qos import override_names
+from i3dmgx2_driver.ros.qos import create_publisher, override_names
 from i3dmgx2_driver.ros.unknown_parameters import warn_unknown_parameters
 import pytest
 import rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import ReliabilityPolicy
+from std_msgs.msg import Bool
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -76,6 +78,55 @@ def test_a_double_where_an_integer_is_wanted_is_refused(make_node):
     with pytest.raises(ParameterError, match=r"parameter 'address' must be 1\.\.65534, "
                                              r'written as an integer: got 95\.0 \(double\)'):
         declare_parameters(node)
+
+
+@pytest.mark.parametrize('argument, expected', [
+    ('address:=0', "parameter 'address' must be 1..65534, got 0"),
+    ('data_rate:=400', "parameter 'data_rate' must be 0 (leave the device as it is) or "
+                       '1..301.2 Hz, got 400'),
+    ('time_offset:=11.5', "parameter 'time_offset' must be -10..10, got 11.5"),
+    ('orientation_stddev:=-1', "parameter 'orientation_stddev' must be 0..10, got -1"),
+])
+def test_a_value_out_of_range_is_refused_with_what_was_given(make_node, argument, expected):
+    # rclpy checks the descriptor's range; the message still says what was given, as typed.
+    node = make_node('-p', 'address:=95', '-p', argument)
+    with pytest.raises(ParameterError) as raised:
+        declare_parameters(node)
+    assert str(raised.value) == expected
+
+
+@pytest.mark.parametrize('argument, expected', [
+    ('reliability:=sometimes', "reliability' must be one of 'system_default', 'reliable', "
+                               "'best_effort', 'best_available', got 'sometimes'"),
+    ('reliability:=5', "reliability' must be one of 'system_default', 'reliable', "
+                       "'best_effort', 'best_available', got 5"),
+    ('durability:=latched', "durability' must be one of 'system_default', "
+                            "'transient_local', 'volatile', 'best_available', got 'latched'"),
+    ('history:=all', "history' must be one of 'system_default', 'keep_last', 'keep_all', "
+                     "got 'all'"),
+    # rclpy would raise a type error, and rcl fail after rmw printed its own.
+    ('depth:=abc', "depth' must be 0..2147483647 (0: the system default), got 'abc'"),
+    ('depth:=-3', "depth' must be 0..2147483647 (0: the system default), got -3"),
+])
+def test_a_bad_qos_override_is_refused_naming_parameter_value_and_choices(
+        make_node, argument, expected):
+    node = make_node('-r', '__ns:=/robot1', '-p', f'qos_overrides./robot1/imu/raw_data.'
+                                                  f'publisher.{argument}')
+    with pytest.raises(ParameterError) as raised:
+        create_publisher(node, Bool, 'imu/raw_data', 10)
+    assert str(raised.value) == \
+        "parameter 'qos_overrides./robot1/imu/raw_data.publisher." + expected
+    # Another topic's publisher is not concerned.
+    create_publisher(node, Bool, 'imu/mag', 10)
+
+
+def test_good_qos_overrides_are_applied_as_rclpy_takes_them(make_node):
+    node = make_node('-p', 'qos_overrides./imu/raw_data.publisher.reliability:=Best_Effort',
+                     '-p', 'qos_overrides./imu/raw_data.publisher.depth:=0')
+    with pytest.warns(UserWarning, match='zero depth'):  # rclpy: the system default
+        publisher = create_publisher(node, Bool, 'imu/raw_data', 10)
+    assert publisher.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+    assert node.get_parameter('qos_overrides./imu/raw_data.publisher.depth').value == 0
 
 
 def test_a_run_time_parameter_keeps_its_range(make_node):

@@ -40,7 +40,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from .calibration import Calibration, RATE_TOLERANCE
-from .qos import overriding_options
+from .qos import create_publisher
 from ..device.link import RadioStats
 from ..device.sample_clock import ClockStatus, Restart
 from ..device.settings import DeviceConfig
@@ -462,8 +462,7 @@ class DiagnosticsPublisher:
         self._core: Callable[[], Any] = lambda: None
         self._last_tick = time.monotonic()
         self._forget()
-        self.publisher = node.create_publisher(
-            DiagnosticArray, '/diagnostics', 10, qos_overriding_options=overriding_options())
+        self.publisher = create_publisher(node, DiagnosticArray, '/diagnostics', 10)
         self.timer = node.create_timer(period, self.tick,
                                        callback_group=MutuallyExclusiveCallbackGroup())
 

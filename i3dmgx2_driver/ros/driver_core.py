@@ -51,7 +51,7 @@ from std_msgs.msg import Bool
 
 from .conversions import mag_is_valid, MessageFactory
 from .parameters import declare_parameters, driver_config, DriverConfig, SPECS
-from .qos import override_names, overriding_options
+from .qos import create_publisher, override_names
 from .raw_capture import RawCapture
 from .services import DeviceServices
 from .temperature import TemperaturePoller
@@ -150,8 +150,7 @@ def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False)
 
     def create(kind: type, topic: str) -> Publisher:
         # A profile each: rclpy writes the overrides into the one it is given.
-        return make(kind, topic, publisher_qos(config),
-                    qos_overriding_options=overriding_options())
+        return create_publisher(node, kind, topic, publisher_qos(config), make)
 
     return Publishers(
         create(Imu, 'imu/raw_data'),
@@ -160,8 +159,7 @@ def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False)
         if config.publish_mag and config.stream_choice.mag else None,
         create(Temperature, 'imu/temperature') if config.temperature_period > 0
         else None,
-        node.create_publisher(Bool, '~/is_calibrated', calibrated_qos(),
-                              qos_overriding_options=overriding_options()))
+        create_publisher(node, Bool, '~/is_calibrated', calibrated_qos()))
 
 
 class DriverCore:

@@ -156,7 +156,11 @@ class LifecycleDriverNode(LifecycleNode):
             log.error(f'configure failed: {exc}')
             return FAILURE
         if self._data_publishers is None:
-            self._data_publishers = create_publishers(self, config, lifecycle=True)
+            try:
+                self._data_publishers = create_publishers(self, config, lifecycle=True)
+            except ParameterError as exc:  # a bad qos_overrides parameter
+                log.error(f'configure failed: {exc}')
+                return FAILURE
         core = DriverCore(self, config, publishers=self._data_publishers, publishing=False,
                           refusal=self._refusal)
         self.core = core

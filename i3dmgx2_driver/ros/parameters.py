@@ -25,7 +25,7 @@ valid range, and the node stops. Nothing falls back to a default silently.
 Values are taken as people type them (``-p data_rate:=300`` for a double,
 ``-p stream:=0xC2`` for a string) through rclpy's public API only: what was
 given is read through a dynamically typed declaration, converted, and the
-parameter then declared with its own type and descriptor (:func:`_given`).
+parameter then declared with its own type and descriptor (:func:`given_value`).
 The QoS of the publishers is not here: rclpy declares its standard
 ``qos_overrides`` parameters itself (``qos.py``); ``qos_reliability`` and
 ``qos_depth`` remain for one release, warned about when given.
@@ -240,7 +240,7 @@ def _descriptor(spec: Spec) -> ParameterDescriptor:
     return descriptor
 
 
-def _given(node: Node, name: str) -> Any:
+def given_value(node: Node, name: str) -> Any:
     """
     Return the override given for ``name`` (-p, a params file, a launch file), or None.
 
@@ -287,16 +287,18 @@ def _warn_deprecated(node: Node, spec: Spec) -> None:
         f"parameter '{spec.name}' is deprecated and will be removed in the next release: "
         f"use 'qos_overrides.{topic}.publisher.{spec.replaced_by}' instead (rclpy's "
         f'standard QoS parameters; likewise for imu/mag, imu/temperature and the other '
-        f'topics). It still applies to every publisher until then.')
+        f'topics). Until then it still sets the data topics (imu/raw_data, imu/mag, '
+        f'imu/temperature).')
 
 
 def _declare(node: Node, spec: Spec) -> Any:
     problem = f'parameter {spec.name!r} must be {_valid_range(spec)}'
+    given = None
     try:
         if node.has_parameter(spec.name):
             pass  # a managed node configured again: read what is there
         else:
-            given = _given(node, spec.name)
+            given = given_value(node, spec.name)
             if given is not None and spec.replaced_by:
                 _warn_deprecated(node, spec)
             value = spec.default if given is None else _as_typed(spec, given)
@@ -311,7 +313,8 @@ def _declare(node: Node, spec: Spec) -> Any:
         raise ParameterError(f'parameter {spec.name!r} is required: set it with '
                              f'-p {spec.name}:=<value> ({_valid_range(spec)})') from None
     except InvalidParameterValueException:
-        raise ParameterError(f'{problem}') from None
+        # Out of the descriptor's range: rclpy refused what was given.
+        raise ParameterError(f'{problem}, got {given!r}') from None
     return value
 
 

@@ -24,20 +24,35 @@ The topic in the name is the resolved one: under a namespace or a remapping
 it is the name the topic really has (``/robot1/imu/raw_data``).
 
 The policies offered are those a subscriber's match depends on and that a
-person tunes: history, depth, reliability, durability.
+person tunes: history, depth, reliability, durability. rclpy refuses a bad
+one with a traceback; :func:`create_publisher` turns that into the
+``ParameterError`` every other bad parameter gives.
 """
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from typing import Any
 
 from rclpy.node import Node
-from rclpy.qos import QoSPolicyKind
+from rclpy.publisher import Publisher
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSPolicyKind, QoSProfile,
+                       ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
+
+from .parameters import given_value, ParameterError
 
 #: The policies that get a ``qos_overrides`` parameter on every publisher.
 POLICIES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, QoSPolicyKind.RELIABILITY,
             QoSPolicyKind.DURABILITY)
 #: Every topic the driver may publish, as it names them (before resolution).
 TOPICS = ('imu/raw_data', 'imu/mag', 'imu/temperature', '~/is_calibrated', '/diagnostics')
+#: The words rclpy takes for each named policy (in any case): its enum's
+#: members but UNKNOWN, which rmw reports and nobody can ask for.
+CHOICES = {kind: tuple(member.name.lower() for member in enum if member.name != 'UNKNOWN')
+           for kind, enum in ((QoSPolicyKind.HISTORY, HistoryPolicy),
+                              (QoSPolicyKind.RELIABILITY, ReliabilityPolicy),
+                              (QoSPolicyKind.DURABILITY, DurabilityPolicy))}
+#: Largest history depth rmw takes (DDS holds it in a signed 32-bit integer).
+MAX_DEPTH = 2 ** 31 - 1
 
 
 def overriding_options() -> QoSOverridingOptions:
@@ -60,3 +75,50 @@ def override_names(node: Node, topics: Iterable[str] = TOPICS) -> list[str]:
     """
     return [override_name(node.resolve_topic_name(topic), policy)
             for topic in topics for policy in POLICIES]
+
+
+def create_publisher(node: Node, msg_type: type, topic: str, qos: QoSProfile | int,
+                     make: Callable[..., Publisher] | None = None) -> Publisher:
+    """
+    Make a publisher on ``topic`` (with ``make``, default ``node.create_publisher``).
+
+    rclpy declares and applies the ``qos_overrides`` parameters there, and
+    would refuse a bad value with a traceback (a RuntimeError that names the
+    policy but not the parameter, a type error, or rcl's failure to set the
+    depth, after rmw has printed its own error). So they are checked first:
+    a bad one raises ParameterError naming the parameter, what was given and
+    what is valid, and the node stops as for any bad parameter.
+    """
+    problem = bad_override(node, node.resolve_topic_name(topic))
+    if problem is not None:
+        raise ParameterError(problem)
+    make = make or node.create_publisher
+    return make(msg_type, topic, qos, qos_overriding_options=overriding_options())
+
+
+def _valid(policy: QoSPolicyKind) -> str:
+    if policy == QoSPolicyKind.DEPTH:
+        return f'0..{MAX_DEPTH} (0: the system default)'
+    return 'one of ' + ', '.join(repr(choice) for choice in CHOICES[policy])
+
+
+def _is_valid(policy: QoSPolicyKind, value: Any) -> bool:
+    if policy == QoSPolicyKind.DEPTH:
+        return type(value) is int and 0 <= value <= MAX_DEPTH
+    return isinstance(value, str) and value.lower() in CHOICES[policy]
+
+
+def bad_override(node: Node, topic: str) -> str | None:
+    """
+    Say what is wrong with the first bad ``qos_overrides`` parameter of ``topic``; None if none.
+
+    ``topic`` is resolved. A parameter rclpy declared already (a managed
+    node configured again) is read; any other is read as it was given.
+    """
+    for policy in POLICIES:
+        name = override_name(topic, policy)
+        value = (node.get_parameter(name).value if node.has_parameter(name)
+                 else given_value(node, name))
+        if value is not None and not _is_valid(policy, value):
+            return f'parameter {name!r} must be {_valid(policy)}, got {value!r}'
+    return None
