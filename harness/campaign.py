@@ -686,13 +686,15 @@ def stamp_verdict(matched: list[tuple[Sent, tuple]], cfg: CampaignConfig) -> tup
         return True, 'no stamps to judge'
     series = [(sent.sample_time, row[1] * 1e-9 - sent.sample_time, sent.timer)
               for sent, row in matched]
+    # How late each record left the simulator after its sample time (the line's queue).
+    delays = [(sent.write_time or sent.sample_time) - sent.sample_time for sent, _ in matched]
     steady = statistics.median(e for _, e, _ in series)
     grace_from = series[0][0]
     returns = 0
     worst = worst_early = 0.0
     bad = []
     previous = None
-    for t, e, timer in series:
+    for (t, e, timer), delay in zip(series, delays, strict=True):
         if previous is not None:
             dt = t - previous[0]
             steps = ((timer - previous[2]) % TIMER_MODULUS / TICKS_PER_SECOND
@@ -709,7 +711,8 @@ def stamp_verdict(matched: list[tuple[Sent, tuple]], cfg: CampaignConfig) -> tup
             worst = max(worst, off)
         if off > (cfg.stamp_early_tolerance if early else cfg.stamp_tolerance):
             bad.append(f'{off * 1e3:.2f} ms at {t - series[0][0]:.2f} s'
-                       + (' (in a grace)' if early else ''))
+                       + (' (in a grace)' if early else '')
+                       + f' written {delay * 1e3:.1f} ms after its sample time')
     detail = (f'stamp - true sample time: steady {steady * 1e3:+.3f} ms; worst off it '
               f'{worst * 1e3:.3f} ms after the {cfg.stamp_grace:g}-s graces (limit '
               f'{cfg.stamp_tolerance * 1e3:g}), {worst_early * 1e3:.2f} ms in them (limit '
