@@ -54,6 +54,9 @@ PHASES = ('quiet', 'identity', 'data_rate', 'continuous', 'streaming', 'shutdown
 #: What it can do, once hostile.
 MODES = ('bitflip', 'truncate', 'lying_length', 'chance_checksum', 'burst', 'answer_bytes',
          'foreign', 'wrong_echo', 'unsolicited', 'stop_mid_packet', 'noise')
+#: The modes that send the real packet whole (held back, or with bytes around it): the
+#: node may publish it.
+KEEPS_PACKET = frozenset(('stop_mid_packet', 'unsolicited', 'burst'))
 #: The bytes a dialogue waits for alone: ACK/start of packet, NACK, ping answer, data flags.
 ANSWER_BYTES = bytes((0xAA, 0x21, 0x02, 0x07))
 #: Phase of each command byte the host sends (others leave the phase as it is).
@@ -305,7 +308,10 @@ class HostileStation(threading.Thread):
             self._give(piece, now)
             return
         if key is not None and ours:
-            self.attacked_keys[key] = self.attack.mode
+            if self.attack.mode in KEEPS_PACKET:
+                self.intact_keys.add(key)  # delayed or surrounded, but sent whole
+            else:
+                self.attacked_keys[key] = self.attack.mode
         self._give(self._mutate(piece, is_packet), now)
 
     def _mutate(self, piece: bytes, is_packet: bool) -> bytes:

@@ -68,6 +68,8 @@ class SensorDialogue:
         self.divider: int | None = None
         #: EEPROM write commands sent (the divider's cell; each may wear it).
         self.eeprom_writes = 0
+        #: Dividers written (or tried): never written again by this dialogue.
+        self._divider_written: set[int] = set()
         self.ping_ok: bool | None = None
         #: The stream's use of the line at the device's rate (once the rate is known),
         #: and, when it does not fit, what to do about it ('' when it fits).
@@ -175,6 +177,20 @@ class SensorDialogue:
         wanted = divider_for_rate(cfg.data_rate_hz)
         if wanted == current:
             return
+        if wanted in self._divider_written:
+            # Written before: a retry, a reconnect or a restart of the stream must not
+            # write the cell again. The sensor (or a reply that only looks valid, or
+            # another sensor put in its place) says otherwise; go on with what it says,
+            # and say so. (Not even the serial number can be trusted for this: a reply
+            # that only looks valid can carry any.)
+            self._warn('rate', f'the device reports divider {current} though {wanted} was '
+                               f'written before: not writing its EEPROM again (restart the '
+                               f'driver to write it)', None)
+            return
+        # Noted before the first write goes out: from then on the cell may be written,
+        # whatever the replies say (found by the stateful dialogue test: a forged
+        # read-back made the next initialise write again).
+        self._divider_written.add(wanted)
         self.divider = self._write_divider(link, current, wanted)
         self._log.warning(
             f'data rate set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM 0xFCA2: {current} -> '
