@@ -25,6 +25,15 @@ and nothing else was, and that its counters reconcile with the simulator's
 ground truth. Prints the report with its rules; exits 1 if any check fails.
 
     python benchmarks/soak.py --minutes 10 --rate 500 --seed 1
+
+``--every-stream`` runs the long soak instead (``harness/long_soak.py``):
+every stream in turn at its line-budget maximum rate, in legs of
+``--leg-minutes``, managed node processes that live the whole run
+(configure / activate / deactivate / cleanup at every leg) and a plain
+node every third leg, the slopes of RSS, descriptors and threads; for an
+hour:
+
+    python benchmarks/soak.py --every-stream --minutes 60 --seed 1
 """
 
 import argparse
@@ -36,6 +45,7 @@ import sys
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from harness.campaign import CampaignConfig, run_campaign  # noqa: E402, RUF100 - after the path
+from harness.long_soak import LongSoakConfig, run_long_soak  # noqa: E402, RUF100
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,12 +58,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seed', type=int, default=1, help='seed of the faults and the data')
     parser.add_argument('--no-long-stalls', action='store_true',
                         help='leave out the stalls long enough to make the node reopen')
+    parser.add_argument('--every-stream', action='store_true',
+                        help='the long soak: every stream, both node kinds, slopes')
+    parser.add_argument('--leg-minutes', type=float, default=2.5,
+                        help='with --every-stream: minutes of faults per leg (default 2.5)')
     args = parser.parse_args(argv)
-    if args.minutes <= 0 or args.rate <= 0:
-        parser.error('--minutes and --rate must be positive')
+    if args.minutes <= 0 or args.rate <= 0 or args.leg_minutes <= 0:
+        parser.error('--minutes, --rate and --leg-minutes must be positive')
     # A domain of its own, outside the 1..100 that the test harness draws from, so that
     # a soak never hears (or is heard by) tests running on the same machine.
     os.environ.setdefault('I3DMGX2_TEST_DOMAIN', str(random.SystemRandom().randint(101, 232)))
+    if args.every_stream:
+        long_result = run_long_soak(LongSoakConfig(minutes=args.minutes, seed=args.seed,
+                                                   leg_minutes=args.leg_minutes))
+        print(long_result.report, flush=True)
+        return 0 if long_result.ok else 1
     cfg = CampaignConfig(minutes=args.minutes, rate_hz=args.rate, seed=args.seed,
                          long_stalls=not args.no_long_stalls)
     result = run_campaign(cfg)

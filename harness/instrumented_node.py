@@ -27,8 +27,14 @@ on). They tell the campaign when the node could read the port (records written
 outside those windows may be lost legitimately). Nothing on the path of a
 sample is changed.
 
+With ``--lifecycle`` (before ``--ros-args``) it runs the managed node the
+same way: each configure makes a new core, and the file holds the counters
+of the last one (``configures`` says which); an activate is noted as an
+anchor once it returns (records are published from then on), a deactivate
+as ``deactivate`` when it begins (they are not published from then on).
+
 Usage: ``I3DMGX2_SOAK_STATS=out.json python -m harness.instrumented_node
---ros-args -p port:=... -p address:=...``.
+[--lifecycle] --ros-args -p port:=... -p address:=...``.
 """
 
 import json
@@ -41,6 +47,7 @@ from i3dmgx2_driver.device.hot_path import QuietObserver
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.ros import main as node_main
 from i3dmgx2_driver.ros.imu_node import ImuDriverNode
+from i3dmgx2_driver.ros.lifecycle_node import LifecycleDriverNode
 
 #: Environment variable naming the JSON file the counters go to.
 STATS_ENV = 'I3DMGX2_SOAK_STATS'
@@ -77,15 +84,48 @@ class ObservedPort(SerialPort):
         super().close()
 
 
-def _snapshot(node: ImuDriverNode, final: bool) -> dict:
-    stats = node.core.stats
-    device = node.core.supervisor.status()
+class ObservedLifecycleNode(LifecycleDriverNode):
+    """The managed node, its activations and deactivations noted, its last core kept."""
+
+    def __init__(self, **kwargs) -> None:
+        #: The core of the last configure (kept after cleanup, for the counters).
+        self.last_core = None
+        self.configures = 0
+        super().__init__(**kwargs)
+
+    def on_configure(self, state):  # noqa: ANN001, ANN201 - rclpy's signature
+        """Configure; keep the core made."""
+        result = super().on_configure(state)
+        if self.core is not None:
+            self.last_core = self.core
+            self.configures += 1
+        return result
+
+    def on_activate(self, state):  # noqa: ANN001, ANN201
+        """Activate; note the anchor once records are published."""
+        result = super().on_activate(state)
+        _note('anchor')
+        return result
+
+    def on_deactivate(self, state):  # noqa: ANN001, ANN201
+        """Note that publishing ends, then deactivate."""
+        _note('deactivate')
+        return super().on_deactivate(state)
+
+
+def _snapshot(node, final: bool) -> dict:
+    core = node.core if node.core is not None else getattr(node, 'last_core', None)
+    if core is None:
+        return {'time': time.time(), 'final': final, 'pid': os.getpid(), 'configures': 0}
+    stats = core.stats
+    device = core.supervisor.status()
     with _events_lock:
         events = list(_events)
     return {
         'time': time.time(),
         'final': final,
         'pid': os.getpid(),
+        'configures': getattr(node, 'configures', 1),
         'stats': {name: getattr(stats, name) for name in (
             'published', 'unpublished', 'mag_published', 'lost', 'other_records',
             'device_resets')},
@@ -119,9 +159,12 @@ def main() -> int:
         print(f'{STATS_ENV} must name the file for the counters', file=sys.stderr)
         return 2
     made: list[ImuDriverNode] = []
+    arguments = sys.argv[1:sys.argv.index('--ros-args')] if '--ros-args' in sys.argv \
+        else sys.argv[1:]
+    kind = ObservedLifecycleNode if '--lifecycle' in arguments else ImuDriverNode
 
     def make_node() -> ImuDriverNode:
-        node = ImuDriverNode(timings=LinkEvents(), port_factory=ObservedPort)
+        node = kind(timings=LinkEvents(), port_factory=ObservedPort)
         node.create_timer(DUMP_PERIOD, lambda: _write(path, _snapshot(node, False)))
         made.append(node)
         return node

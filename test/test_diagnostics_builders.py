@@ -157,8 +157,9 @@ def test_parser_warns_only_while_failures_grow():
 
 def test_device_status():
     status = d.device_status(DeviceStatus(info=INFO, connections=1, divider=512,
-                                          expected_rate_hz=100.0), 95, 25.3)
+                                          expected_rate_hz=100.0, eeprom_writes=1), 95, 25.3)
     assert status.level == d.OK
+    assert status.value('EEPROM writes') == '1'
     assert status.value('serial number') == '3095'
     assert status.value('firmware') == '2.1.03'
     assert status.value('options') == '5g 300deg/s'

@@ -22,8 +22,9 @@ sensor, and the refusal of a silent address with the reason.
 """
 
 import threading
+import time
 
-from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec import commands, layouts as lay
 from i3dmgx2_driver.device.dialogue import SensorDialogue
 from i3dmgx2_driver.device.identity import read_firmware
 from i3dmgx2_driver.device.link import DeviceLink, DeviceTimeout, LinkOptions
@@ -133,5 +134,71 @@ def test_a_silent_address_is_refused_with_the_reason():
                 talk.dialogue.initialise(talk.link, require_answer=True,
                                          observed=lambda: 'seen: node 95')
             assert talk.warnings and talk.warnings[0][0] == 'ping'
+        finally:
+            talk.close()
+
+
+def test_another_stream_does_not_pass_for_the_one_asked():
+    # A sensor power-cycled into its EEPROM auto-start streams 0xCC while the driver
+    # asked for 0xC2: neither the stall watch (last_data_mono) nor the wait for the
+    # stream (link.records) may take those records for the stream (found by the long
+    # soak: the node stayed on the wrong stream for good).
+    config = SimulatorConfig(seed=8, streaming_at_start=lay.ACCEL_ANG_RATE_MAG_ORIENTATION,
+                             rate_hz=200.0)
+    with PtySimulator(config) as sim:
+        talk = Talk(sim, stream=lay.ACCEL_ANG_RATE, request_timeout=0.2, continuous_retries=2)
+        try:
+            talk.dialogue.initialise(talk.link)
+            assert talk.dialogue.start_continuous(talk.link)
+            assert sim.streaming == lay.ACCEL_ANG_RATE
+            sim.set_faults(ignore_first_continuous=True)
+            sim.power_cycle()  # back up streaming 0xCC, as its EEPROM says
+            assert sim.wait_until(lambda: sim.streaming == lay.ACCEL_ANG_RATE_MAG_ORIENTATION)
+            time.sleep(0.3)
+            records, last = talk.link.records, talk.link.last_data_mono
+            time.sleep(0.3)
+            assert talk.records > 0  # 0xCC records reach the consumer (counted, not ours)
+            assert (talk.link.records, talk.link.last_data_mono) == (records, last)
+            # The first request is ignored: only 0xC2 records end the wait, not the 0xCC.
+            assert talk.dialogue.start_continuous(talk.link)
+            assert sim.streaming == lay.ACCEL_ANG_RATE
+        finally:
+            talk.close()
+
+
+def test_the_divider_is_written_once_through_lost_replies_and_restarts():
+    # Replies dropped and commands lost on the radio, dialogues restarted with the same
+    # setting: the sensor receives the write of its divider once, never again.
+    faults = FaultConfig(drop_probability=0.4, command_loss_probability=0.3)
+    with PtySimulator(SimulatorConfig(seed=9, faults=faults)) as sim:
+        done = 0
+        for _ in range(6):
+            talk = Talk(sim, data_rate_hz=200.0, request_timeout=0.15)
+            try:
+                talk.dialogue.initialise(talk.link)
+                done += 1
+            except DeviceTimeout:
+                pass  # a dialogue may give up on so rough a radio; the next one goes on
+            finally:
+                talk.close()
+        assert done > 0
+        assert len(sim.eeprom_writes()) == 1
+        assert sim.eeprom[0xFCA2] == 256
+
+
+def test_a_dialogue_never_writes_the_same_divider_twice():
+    # Once written, a divider is not written again by the same dialogue, even when the
+    # sensor (another one put in its place, or a reply that only looks valid) says
+    # otherwise later: it goes on with what the sensor says and says why.
+    with PtySimulator(SimulatorConfig(seed=10)) as sim:
+        talk = Talk(sim, data_rate_hz=200.0)
+        try:
+            talk.dialogue.initialise(talk.link)
+            assert talk.dialogue.eeprom_writes == 1
+            # Someone else sets 512 again.
+            talk.link.request(commands.write_eeprom(0xFCA2, 512), lay.WRITE_EEPROM, 0.5, 3)
+            talk.dialogue.initialise(talk.link)
+            assert talk.dialogue.eeprom_writes == 1 and talk.dialogue.divider == 512
+            assert any('not writing its EEPROM again' in m for _, m in talk.warnings)
         finally:
             talk.close()

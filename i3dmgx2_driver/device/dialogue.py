@@ -66,6 +66,10 @@ class SensorDialogue:
         self._throttle = Throttle()
         self.info: DeviceInfo | None = None
         self.divider: int | None = None
+        #: EEPROM write commands sent (the divider's cell; each may wear it).
+        self.eeprom_writes = 0
+        #: Dividers written (or tried): never written again by this dialogue.
+        self._divider_written: set[int] = set()
         self.ping_ok: bool | None = None
         #: The stream's use of the line at the device's rate (once the rate is known),
         #: and, when it does not fit, what to do about it ('' when it fits).
@@ -173,17 +177,53 @@ class SensorDialogue:
         wanted = divider_for_rate(cfg.data_rate_hz)
         if wanted == current:
             return
-        link.request(commands.write_eeprom(RATE_DIVIDER_ADDRESS, wanted), layouts.WRITE_EEPROM,
-                     cfg.request_timeout, cfg.request_retries)
-        readback = link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
-                                layouts.READ_EEPROM, cfg.request_timeout,
-                                cfg.request_retries).value
-        if readback != wanted:
-            raise DeviceTimeout(f'data rate: wrote divider {wanted}, read back {readback}')
-        self.divider = readback
+        if wanted in self._divider_written:
+            # Written before: a retry, a reconnect or a restart of the stream must not
+            # write the cell again. The sensor (or a reply that only looks valid, or
+            # another sensor put in its place) says otherwise; go on with what it says,
+            # and say so. (Not even the serial number can be trusted for this: a reply
+            # that only looks valid can carry any.)
+            self._warn('rate', f'the device reports divider {current} though {wanted} was '
+                               f'written before: not writing its EEPROM again (restart the '
+                               f'driver to write it)', None)
+            return
+        # Noted before the first write goes out: from then on the cell may be written,
+        # whatever the replies say (found by the stateful dialogue test: a forged
+        # read-back made the next initialise write again).
+        self._divider_written.add(wanted)
+        self.divider = self._write_divider(link, current, wanted)
         self._log.warning(
             f'data rate set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM 0xFCA2: {current} -> '
             f'{wanted}); this persists across power cycles')
+
+    def _write_divider(self, link: DeviceLink, current: int, wanted: int) -> int:
+        """
+        Write the divider once; return it as read back.
+
+        An EEPROM cell wears with every write, so a write is never resent
+        blindly: when its reply does not come, the write may have reached
+        the sensor and only the reply been lost. The divider is read back
+        instead, and written again only if the sensor still has the old one
+        (the command itself was lost). So one change of setting writes the
+        cell once, however rough the radio.
+        """
+        cfg = self.config
+        readback = current
+        for _ in range(cfg.request_retries):
+            self.eeprom_writes += 1
+            try:
+                link.request(commands.write_eeprom(RATE_DIVIDER_ADDRESS, wanted),
+                             layouts.WRITE_EEPROM, cfg.request_timeout, 1)
+            except DeviceTimeout:
+                pass  # written or not: the read below tells
+            readback = link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
+                                    layouts.READ_EEPROM, cfg.request_timeout,
+                                    cfg.request_retries).value
+            if readback != current:
+                break
+        if readback != wanted:
+            raise DeviceTimeout(f'data rate: wrote divider {wanted}, read back {readback}')
+        return readback
 
     def _check_line(self) -> None:
         """

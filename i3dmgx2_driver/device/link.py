@@ -148,6 +148,7 @@ class DeviceLink:
         self.last_data_time = 0.0
         #: The same instant on the monotonic clock, for stall detection.
         self.last_data_mono = 0.0
+        #: Records of the stream (of any code while none is streamed) received so far.
         self.records = 0
         #: Command byte of the last record handed to ``on_record`` (None before one).
         self.last_code: int | None = None
@@ -210,18 +211,25 @@ class DeviceLink:
 
     def _dispatch(self, event: Any, now: float, mono: float) -> None:
         if isinstance(event, DataPacket):
-            self.last_data_time = now
-            self.last_data_mono = mono
+            code = _CODE_OF_TYPE.get(type(event.record))
+            # While a stream runs, only its records keep it alive: a sensor power-cycled
+            # into its EEPROM auto-start streams another record, and the stall watch
+            # and the wait for the stream must not take that one for it (found by the
+            # long soak).
+            ours = self.streamed is None or code == self.streamed
+            if ours:
+                self.last_data_time = now
+                self.last_data_mono = mono
             if event.lqi is not None:
                 self._note_radio(event.lqi, event.rssi)
             pending = self._pending
-            code = _CODE_OF_TYPE.get(type(event.record))
             if pending is not None and pending.code == code:
                 pending.reply = event.record
                 pending.done.set()
                 if code != self.streamed:
                     return
-            self.records += 1
+            if ours:
+                self.records += 1
             self.last_code = code
             self._on_record(event, now, mono)
         elif isinstance(event, Ack):

@@ -68,6 +68,8 @@ class DeviceStatus:
     #: The data-rate divider found or set, and the rate it gives (Hz), once known.
     divider: int | None = None
     expected_rate_hz: float | None = None
+    #: EEPROM write commands sent to the sensor so far (the divider; 0 when it was right).
+    eeprom_writes: int = 0
     #: The stream's use of the line at that rate, and what to do when it does not fit.
     line_use: str = ''
     line_warning: str = ''

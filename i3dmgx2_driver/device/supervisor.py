@@ -127,7 +127,8 @@ class DeviceSupervisor:
             parser=connection.parser_stats(), radio=link.radio if link is not None else None,
             connected=link is not None, ping_ok=dialogue.ping_ok, info=dialogue.info,
             divider=dialogue.divider, expected_rate_hz=dialogue.expected_rate_hz,
-            line_use=dialogue.line_use, line_warning=dialogue.line_warning)
+            eeprom_writes=dialogue.eeprom_writes, line_use=dialogue.line_use,
+            line_warning=dialogue.line_warning)
 
     @property
     def state(self) -> State:

@@ -294,6 +294,7 @@ def device_status(device: DeviceStatus, address: int, temperature_c: float | Non
     info, divider, connected_once = device.info, device.divider, device.connections > 0
     values = [('node address', str(address)),
               ('rate divider (EEPROM 0xFCA2)', str(divider) if divider else 'unknown'),
+              ('EEPROM writes', str(device.eeprom_writes)),
               ('configured rate (Hz)', _fmt(device.expected_rate_hz, 2))]
     if temperature_c is not None:
         values.append(('accel temperature (C)', _fmt(temperature_c, 1)))

@@ -58,8 +58,9 @@ from .diagnostics import DiagnosticsPublisher
 from .driver_core import create_publishers, DriverCore, load_config, Publishers
 from .main import run
 from .parameters import declare_parameters, driver_config, ParameterError
+from ..device.hot_path import HotPathObserver
 from ..device.link import DeviceTimeout
-from ..device.port import check_port_path, PortError, PortUnusable
+from ..device.port import check_port_path, PortError, PortUnusable, SerialPort
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
@@ -101,10 +102,18 @@ def transition(name: str) -> Callable[[Transition], Transition]:
 
 
 class LifecycleDriverNode(LifecycleNode):
-    """The 3DM-GX2 driver as a managed node; the core exists from configure to cleanup."""
+    """
+    The 3DM-GX2 driver as a managed node; the core exists from configure to cleanup.
 
-    def __init__(self, node_name: str = 'i3dmgx2_driver', **kwargs) -> None:
+    ``timings`` and ``port_factory`` go to every core a configure makes, as
+    the plain node's (imu_node.py): a run that observes the node uses them.
+    """
+
+    def __init__(self, node_name: str = 'i3dmgx2_driver',
+                 timings: HotPathObserver | None = None,
+                 port_factory: Callable[..., SerialPort] = SerialPort, **kwargs) -> None:
         super().__init__(node_name, **kwargs)
+        self._core_options = {'timings': timings, 'port_factory': port_factory}
         #: The driver, from a successful configure to cleanup or shutdown; else None.
         self.core: DriverCore | None = None
         #: Made at the first configure and kept (create_publishers says why).
@@ -162,7 +171,7 @@ class LifecycleDriverNode(LifecycleNode):
                 log.error(f'configure failed: {exc}')
                 return FAILURE
         core = DriverCore(self, config, publishers=self._data_publishers, publishing=False,
-                          refusal=self._refusal)
+                          refusal=self._refusal, **self._core_options)
         self.core = core
         try:
             core.supervisor.connect()
@@ -201,9 +210,12 @@ class LifecycleDriverNode(LifecycleNode):
         """Stop publishing and the stream (0xFA); keep the port."""
         start = time.monotonic()
         core = self.core
+        if core is not None:
+            # Before the publishers go inactive: a record read in between would
+            # otherwise fail to publish (found by the long soak).
+            core.publishing = False
         super().on_deactivate(state)
         if core is not None:
-            core.publishing = False
             core.supervisor.stop_streaming()
             core.device_services.wait_idle(1.0)
         self.get_logger().info(f'deactivate: stream stopped (0xFA), port kept open '

@@ -1,0 +1,60 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The long soak of ``benchmarks/soak.py --every-stream``, for about a minute in CI.
+
+Same code (harness/long_soak.py), same checks but the slopes (a minute is too
+short to fit a leak): three legs (the full stream and one without the
+magnetometer on managed nodes that live the whole run, one with it on a plain
+node), each at its line-budget maximum rate through every fault, then the
+managed nodes shut down from a random state. The pieces the verdict rests on
+(the legs, the slope fit) are checked first, fast.
+"""
+
+from harness.long_soak import LongSoakConfig, plan_legs, run_long_soak, slope_per_hour
+from i3dmgx2_driver.codec import line_budget, streams
+import pytest
+
+
+def test_legs_go_round_every_stream_at_its_line_budget_maximum():
+    legs = plan_legs(LongSoakConfig(legs=12, plain_every=3))
+    assert [leg.stream for leg in legs] == [s.name for s in streams.STREAMS] * 2
+    assert [leg.kind for leg in legs] == ['managed', 'managed', 'plain'] * 4
+    for leg in legs:
+        code = streams.BY_NAME[leg.stream].code
+        fits = line_budget.max_rate(code, 115200, wireless=True)
+        assert fits - 0.1 <= leg.rate_hz <= fits
+        assert streams.line_budget(streams.BY_NAME[leg.stream], leg.rate_hz, 115200, True).fits
+
+
+def test_an_hour_goes_round_every_stream_three_times():
+    assert len(plan_legs(LongSoakConfig(minutes=60.0))) >= 3 * len(streams.STREAMS)
+    assert len(plan_legs(LongSoakConfig(minutes=0.1))) == 1
+
+
+def test_slope_is_per_hour_and_ignores_a_constant():
+    # 1 MiB every 3600 s -> 1 MiB/h; exact on a line, whatever the offset.
+    assert slope_per_hour([(t, 50.0 + t / 3600.0) for t in range(0, 600, 5)]) \
+        == pytest.approx(1.0)
+    assert slope_per_hour([(t, 7.0) for t in range(10)]) == 0.0
+    assert slope_per_hour([(0.0, 1.0), (1.0, 2.0)]) is None
+
+
+@pytest.mark.slow
+def test_soak_every_stream_short():
+    cfg = LongSoakConfig(minutes=1.0, legs=3, leg_minutes=0.2, quiet=3.0,
+                         event_gap=(0.3, 1.0), seed=7, log=None)
+    result = run_long_soak(cfg)
+    assert result.ok, result.report
