@@ -55,7 +55,8 @@ from ..codec.timer import TIMER_MODULUS
 #: Device time (s) between two records past which the second is checked against the line.
 GAP_S = 0.1
 #: How far (s) a record after a gap may come before the line and still continue it: the
-#: line is the lower envelope of the delays, so only its own error puts a record below it.
+#: line lies on the low edge of the delays (the 5 % quantile of the one-second minima), so
+#: only its own error, tens of microseconds, puts a record below it.
 CONTINUE_EARLY_S = 0.003
 #: How far (s) after the line it may come: no further than the stamps may be off in the
 #: first half second after any start, so that a restart whose timer happens to fit
