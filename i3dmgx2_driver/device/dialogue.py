@@ -88,11 +88,11 @@ class SensorDialogue:
     def quiet(self, link: DeviceLink) -> None:
         """Stop the device's stream and drop what is in flight (raises PortError)."""
         if not link.running.is_set():
-            link.port.flush_input()
+            link.flush_input()
         link.stop_streaming()
         link.streamed = None  # a polled record is a reply only now
         time.sleep(0.05)
-        link.port.flush_input()
+        link.flush_input()
 
     # -- bring-up -----------------------------------------------------------------------
 
@@ -124,7 +124,7 @@ class SensorDialogue:
                              timeout=cfg.request_timeout, retries=2)
             except DeviceTimeout:
                 pass
-        if require_answer and not self.ping_ok and not link.parser.stats.good_frames:
+        if require_answer and not self.ping_ok and not link.heard:
             silent = (f'node {cfg.address} is silent: no answer to the base station '
                       f'ping or to polled requests (check it is powered, its address and the '
                       f'radio channel)' if link.wireless else
@@ -287,7 +287,7 @@ class SensorDialogue:
 
     def expect_stream(self, link: DeviceLink) -> None:
         """Drop what is in flight; count records of the stream as samples from the first."""
-        link.port.flush_input()
+        link.flush_input()
         link.streamed = self.config.stream
 
     def can_resume(self) -> bool:

@@ -66,6 +66,7 @@ from .port import PortError, SerialPort
 from .recovery import RecoveryLoop
 from .report import DeviceReport
 from .settings import DeviceConfig
+from .shared_port import SharedPort
 from .startup import StartUp
 from .status import DeviceStatus, State
 
@@ -86,7 +87,10 @@ class DeviceSupervisor:
     is told every port open and every link up (right after ``on_connect``)
     and handed to every link, which tells it the read and the parse of each
     sample (hot_path.py). ``port_factory`` opens the port (SerialPort; a
-    subclass to observe it).
+    subclass to observe it). ``shared``, if given, is the port this sensor
+    shares with others behind the same base station (shared_port.py): it
+    opens and closes the port, and this supervisor keeps only its sensor
+    streaming (a supervisor per sensor, each with its own thread).
     """
 
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
@@ -94,7 +98,8 @@ class DeviceSupervisor:
                  port_factory: Callable[..., SerialPort] = SerialPort,
                  on_bytes: BytesCallback | None = None,
                  on_fatal: Callable[[PortError], None] | None = None,
-                 timings: HotPathObserver | None = None) -> None:
+                 timings: HotPathObserver | None = None,
+                 shared: SharedPort | None = None) -> None:
         self.config = config
         log = log or logging.getLogger('i3dmgx2_driver')
         #: Set means "no stream wanted now": the thread ends, and every request on the
@@ -104,7 +109,7 @@ class DeviceSupervisor:
         self._stop = threading.Event()
         self.report = DeviceReport(log)
         self.connection = Connection(config, log, port_factory, on_record, on_bytes,
-                                     self.report.finding, self._stop, timings)
+                                     self.report.finding, self._stop, timings, shared)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
         self.dialogue = SensorDialogue(config, log, self.report.warn, self._stop)
         self._startup = StartUp(self.connection, self.dialogue, self.report, self._stop,
