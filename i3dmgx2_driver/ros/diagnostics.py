@@ -393,13 +393,14 @@ def lifecycle_status(label: str, state: State | None) -> Status:
     return Status(OK, 'lifecycle', text, values)
 
 
-def to_message(statuses: Iterable[Status], hardware_id: str) -> list[DiagnosticStatus]:
+def to_message(statuses: Iterable[Status], hardware_id: str,
+               prefix: str = PREFIX) -> list[DiagnosticStatus]:
     """Turn statuses into ``DiagnosticStatus`` messages, names prefixed."""
     out = []
     for status in statuses:
         msg = DiagnosticStatus()
         msg.level = bytes((status.level,))
-        msg.name = PREFIX + status.name
+        msg.name = prefix + status.name
         msg.message = status.message
         msg.hardware_id = hardware_id
         msg.values = [KeyValue(key=key, value=value) for key, value in status.values]
@@ -441,11 +442,15 @@ class DiagnosticsPublisher:
     ``lifecycle``, for a managed node, returns its lifecycle state's label,
     reported first. The timer runs in its own callback group, so a
     multi-threaded executor keeps it ticking during a long service call.
+    ``sensor``, one of several sensors' names, goes into every status name
+    (``i3dmgx2_driver: left_arm: stream``): one publisher per sensor.
     """
 
     def __init__(self, node: Node, driver: Callable[[], Any],
-                 lifecycle: Callable[[], str] | None = None, period: float = PERIOD) -> None:
+                 lifecycle: Callable[[], str] | None = None, period: float = PERIOD,
+                 sensor: str = '') -> None:
         self.node = node
+        self.prefix = PREFIX + (f'{sensor}: ' if sensor else '')
         self.period = period
         self._driver = driver
         self._lifecycle = lifecycle
@@ -511,7 +516,7 @@ class DiagnosticsPublisher:
             stream_status(device, seen),
             radio_status(cfg.wireless, radio, fresh),
             parser_status(parser, self._last_parser),
-            device_status(device, cfg.address, core.temperature.latest),
+            device_status(device, core.sensor.address, core.temperature.latest),
             time_status(cfg.time_source, core.clock_status(), now),
             calibration_status(last, good, time.time()),
         ]
@@ -528,7 +533,7 @@ class DiagnosticsPublisher:
         """Build and publish one DiagnosticArray (the timer callback)."""
         array = DiagnosticArray()
         array.header.stamp = self.node.get_clock().now().to_msg()
-        array.status = to_message(self.collect(), self.hardware_id())
+        array.status = to_message(self.collect(), self.hardware_id(), self.prefix)
         try:
             self.publisher.publish(array)
         except RCLError:

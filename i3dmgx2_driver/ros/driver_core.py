@@ -51,6 +51,7 @@ from sensor_msgs.msg import Imu, MagneticField, Temperature
 from .conversions import mag_is_valid, MessageFactory
 from .parameters import declare_parameters, driver_config, DriverConfig, SPECS
 from .raw_capture import RawCapture
+from .sensor_set import SensorSetting
 from .services import DeviceServices
 from .temperature import TemperaturePoller
 from .unknown_parameters import warn_unknown_parameters
@@ -62,6 +63,7 @@ from ..device.port import check_port_path, PortError, SerialPort
 from ..device.realtime import ThreadPolicy
 from ..device.sample_clock import ClockStatus, Restart, SampleClock
 from ..device.settings import DeviceConfig
+from ..device.shared_port import SharedPort
 from ..device.supervisor import DeviceSupervisor
 
 #: Whether ready-serialized messages read back right, by the message factory's
@@ -117,9 +119,14 @@ def publisher_qos(config: DriverConfig) -> QoSProfile:
                      else ReliabilityPolicy.BEST_EFFORT))
 
 
-def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False) -> Publishers:
+def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False,
+                      sensor: SensorSetting | None = None) -> Publishers:
     """
-    Make the data publishers on ``node``: lifecycle publishers if ``lifecycle``.
+    Make the data publishers of ``sensor`` (default: the one sensor) on ``node``.
+
+    Lifecycle publishers if ``lifecycle``. The topics are under the sensor's
+    name: ``imu/raw_data`` for the one sensor, ``<name>/raw_data`` for each
+    of several (sensor_set.py).
 
     A managed node makes them once and keeps them across configure/cleanup
     cycles: destroying a publisher while a multi-threaded executor builds
@@ -129,14 +136,25 @@ def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False)
     publishers it made first are the ones every later configure needs.
     """
     qos = publisher_qos(config)
+    sensor = sensor if sensor is not None else config.sensors[0]
+    name = sensor.name
     create = node.create_lifecycle_publisher if lifecycle else node.create_publisher
     return Publishers(
-        create(Imu, 'imu/raw_data', qos),
+        create(Imu, f'{name}/raw_data', qos),
         # Only streams with a field (named 'mag' in each layout) have a magnetometer topic.
-        create(MagneticField, 'imu/mag', qos)
-        if config.publish_mag and config.stream_choice.mag else None,
-        create(Temperature, 'imu/temperature', qos) if config.temperature_period > 0
+        create(MagneticField, f'{name}/mag', qos)
+        if config.publish_mag and sensor.stream_choice.mag else None,
+        create(Temperature, f'{name}/temperature', qos) if config.temperature_period > 0
         else None)
+
+
+def device_config(config: DriverConfig, sensor: SensorSetting) -> DeviceConfig:
+    """Return how the device side reaches and treats ``sensor``, from the parameters."""
+    return DeviceConfig(
+        port=config.port, address=sensor.address, baud=config.baud, wireless=config.wireless,
+        low_latency=config.low_latency, stall_timeout=config.read_timeout,
+        reconnect_interval=config.reconnect_interval, data_rate_hz=sensor.data_rate_hz,
+        stream=sensor.stream_choice.code, thread_policy=ThreadPolicy(config.realtime_priority))
 
 
 class DriverCore:
@@ -154,24 +172,34 @@ class DriverCore:
     anything is made. ``timings``, if given, is told every stage boundary
     of every sample's path (device/hot_path.py); None costs nothing.
     ``port_factory`` opens the port (SerialPort; a subclass to observe it).
+
+    One core serves one sensor: ``sensor`` (default: the one the parameters
+    name). With several behind one base station (driver_set.py) each has a
+    core, ``shared`` is the port they share and ``raw_capture`` the port's
+    one capture, which the set closes; the core's services are then under
+    its sensor's name (``~/<name>/self_test``).
     """
 
     def __init__(self, node: Node, config: DriverConfig,
                  publishers: Publishers | None = None, publishing: bool = True,
                  refusal: Callable[[], str] | None = None,
                  timings: HotPathObserver | None = None,
-                 port_factory: Callable[..., SerialPort] = SerialPort) -> None:
+                 port_factory: Callable[..., SerialPort] = SerialPort,
+                 sensor: SensorSetting | None = None, shared: SharedPort | None = None,
+                 raw_capture: RawCapture | None = None) -> None:
         check_port_path(config.port)
         self.node = node
         self.config = cfg = config
+        #: The sensor this core serves: address, name (topic prefix), frame, stream.
+        self.sensor = sensor = sensor if sensor is not None else cfg.sensors[0]
         #: Why the port can never work, once the supervisor found out.
         self.fatal_error: PortError | None = None
-        self.stream = cfg.stream_choice
+        self.stream = sensor.stream_choice
         self._record_type = self.stream.record_type
-        self.publishers = publishers or create_publishers(node, cfg)
+        self.publishers = publishers or create_publishers(node, cfg, sensor=sensor)
         self.imu_pub = self.publishers.imu
         self.mag_pub = self.publishers.mag
-        settings = (cfg.frame_id, cfg.frame_convention, cfg.orientation_stddev,
+        settings = (sensor.frame_id, cfg.frame_convention, cfg.orientation_stddev,
                     cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
                     cfg.magnetic_field_stddev, self.stream)
         self.messages = MessageFactory(*settings)
@@ -196,29 +224,31 @@ class DriverCore:
             self._imu_message, self._mag_message = (self.messages.fill_imu,
                                                     self.messages.fill_mag)
         self._timings = timings
-        self.raw_capture = RawCapture(
-            cfg.capture_file, node.get_logger(), port=cfg.port, address=cfg.address,
+        #: The port's raw capture: this core's own, or the one the sensors share.
+        self._owns_capture = raw_capture is None
+        self.raw_capture = raw_capture if raw_capture is not None else RawCapture(
+            cfg.capture_file, node.get_logger(), port=cfg.port, address=sensor.address,
             baud=cfg.baud, wireless=cfg.wireless, node=node.get_fully_qualified_name())
         #: How the device side reaches and treats the sensor.
-        self.device_config = DeviceConfig(
-            port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
-            low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
-            reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
-            stream=self.stream.code, thread_policy=ThreadPolicy(cfg.realtime_priority))
+        self.device_config = device_config(cfg, sensor)
+        capture = self.raw_capture.on_bytes if self.raw_capture.active else None
         self.supervisor = DeviceSupervisor(
             self.device_config,
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
-            on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
-            on_fatal=self._on_fatal, timings=timings, port_factory=port_factory)
+            on_bytes=capture if shared is None else None,
+            on_fatal=self._on_fatal, timings=timings, port_factory=port_factory,
+            shared=shared)
         self.device_services = DeviceServices(
             node, self.supervisor, self._published, self.forget_last_sample,
-            capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal)
+            capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal,
+            prefix='~/' if shared is None else f'~/{sensor.name}/')
         self.temperature = TemperaturePoller(
             node, self.supervisor.streaming_link, self.messages.frame_id,
             cfg.temperature_period, self.publishers.temperature)
         node.get_logger().info(
-            f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
-            f'stream {self.stream.label}, frame {self.messages.frame_id} '
+            f'i3dmgx2_driver: port {cfg.port}, node address {sensor.address}, '
+            + (f'topics {sensor.name}/..., ' if shared is not None else '')
+            + f'stream {self.stream.label}, frame {self.messages.frame_id} '
             f'({cfg.frame_convention}), '
             f'time source {cfg.time_source}')
 
@@ -323,7 +353,8 @@ class DriverCore:
         self.temperature.stop()
         self.supervisor.stop()
         self.device_services.wait_idle(1.0)
-        self.raw_capture.close()
+        if self._owns_capture:
+            self.raw_capture.close()
         if not report:
             return
         message = (f'stopped: {self.stats.published} records published, port closed '

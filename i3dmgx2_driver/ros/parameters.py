@@ -42,6 +42,7 @@ from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.orientation import CONVENTIONS
 from ..device.realtime import MAX_PRIORITY
 from ..device.timeouts import STALL_TIMEOUT
+from .sensor_set import check_shared_budget, SensorSetting, sensor_settings
 
 TIME_SOURCES = ('device', 'host')
 RELIABILITIES = ('reliable', 'best_effort')
@@ -66,14 +67,39 @@ class Spec(NamedTuple):
     empty_ok: bool = False
     #: For a string: the text an integer override stands for (rcl reads 0xC2 as 194).
     from_integer: Callable[[int], str] | None = None
+    #: For a required one: not required when this other parameter is given.
+    unless: str = ''
 
+
+#: Several sensors behind one base station, served by one driver (ros/sensor_set.py).
+SENSOR_SET_SPECS = (
+    Spec('addresses', Parameter.Type.INTEGER_ARRAY, [],
+         'Node addresses of several sensors behind the one base station, served by this '
+         "driver (instead of 'address'); each gets its topics under its name (see Several "
+         'sensors).'),
+    Spec('sensor_names', Parameter.Type.STRING_ARRAY, [],
+         "With addresses: each sensor's name, the prefix of its topics (<name>/raw_data); "
+         "default imu_<address>. For one sensor: 'imu'."),
+    Spec('frame_ids', Parameter.Type.STRING_ARRAY, [],
+         "With addresses: each sensor's frame; default <name>_link (frame_id is one "
+         "sensor's)."),
+    Spec('streams', Parameter.Type.STRING_ARRAY, [],
+         "With addresses: each sensor's stream (or one for all); default: stream for all.",
+         from_integer=lambda code: f'0x{code:02X}'),
+    Spec('data_rates', Parameter.Type.DOUBLE_ARRAY, [],
+         "With addresses: each sensor's data rate (Hz; or one for all; 0: as the device "
+         'is); default: data_rate for all. Together they must fit the serial line.'),
+)
 
 SPECS: list[Spec] = [
     Spec('port', Parameter.Type.STRING, '/dev/ttyUSB0',
          'Serial port of the base station (or wired sensor).'),
     Spec('address', Parameter.Type.INTEGER, _REQUIRED,
          'Node address of the sensor (factory: last two digits of its serial number).',
-         (MIN_ADDRESS, MAX_ADDRESS)),
+         (MIN_ADDRESS, MAX_ADDRESS), unless='addresses'),
+    # Several sensors behind one base station (ros/sensor_set.py): the defaults,
+    # empty, leave the one sensor of 'address' as it always was.
+    *SENSOR_SET_SPECS,
     Spec('baud', Parameter.Type.INTEGER, 115200, 'Serial baud rate.', (9600, 921600)),
     Spec('wireless', Parameter.Type.BOOL, True,
          'True: through a wireless base station (packets, ACK/NACK); false: wired sensor.'),
@@ -143,7 +169,13 @@ class DriverConfig:
     """The validated parameters, as plain values."""
 
     port: str
+    #: 0 when ``addresses`` lists the sensors instead.
     address: int
+    addresses: tuple[int, ...]
+    sensor_names: tuple[str, ...]
+    frame_ids: tuple[str, ...]
+    streams: tuple[str, ...]
+    data_rates: tuple[float, ...]
     baud: int
     wireless: bool
     stream: str
@@ -177,6 +209,13 @@ class DriverConfig:
         """Return the stream the ``stream`` parameter names."""
         return streams.parse(self.stream)
 
+    @property
+    def sensors(self) -> list[SensorSetting]:
+        """Return every sensor to serve, with its name, frame and stream (sensor_set.py)."""
+        return sensor_settings(self.address, self.addresses, self.sensor_names, self.frame_ids,
+                               self.streams, self.data_rates, self.frame_id, self.stream,
+                               self.data_rate, self.wireless)
+
 
 def _valid_range(spec: Spec) -> str:
     if spec.choices:
@@ -187,6 +226,12 @@ def _valid_range(spec: Spec) -> str:
         return streams.valid_text()
     if spec.name == 'data_rate':
         return f'0 (leave the device as it is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz'
+    if spec.name == 'addresses':
+        return f"[] (then 'address'), or distinct addresses {MIN_ADDRESS}..{MAX_ADDRESS}"
+    if spec.name in ('streams', 'data_rates'):
+        return f"[] (then '{spec.name[:-1]}' for all), one for all, or one per address"
+    if isinstance(spec.default, list):
+        return '[] (the default), or one distinct name per address'
     if spec.limits is not None:
         low, high = spec.limits
         return f'{low:g}..{high:g}'
@@ -221,6 +266,9 @@ def _accept_integer(node: Node, spec: Spec) -> None:
     """
     overrides = node._parameter_overrides
     given = overrides.get(spec.name)
+    if given is not None and given.type_ == Parameter.Type.INTEGER_ARRAY:
+        _accept_integer_array(overrides, spec, given)
+        return
     if given is None or given.type_ != Parameter.Type.INTEGER:
         return
     if spec.kind == Parameter.Type.DOUBLE:
@@ -230,18 +278,33 @@ def _accept_integer(node: Node, spec: Spec) -> None:
                                          spec.from_integer(given.value))
 
 
+def _accept_integer_array(overrides: dict, spec: Spec, given: Parameter) -> None:
+    """Integers where an array of doubles or of stream texts is wanted, as for one value."""
+    if spec.kind == Parameter.Type.DOUBLE_ARRAY:
+        overrides[spec.name] = Parameter(spec.name, Parameter.Type.DOUBLE_ARRAY,
+                                         [float(v) for v in given.value])
+    elif spec.kind == Parameter.Type.STRING_ARRAY and spec.from_integer is not None:
+        overrides[spec.name] = Parameter(spec.name, Parameter.Type.STRING_ARRAY,
+                                         [spec.from_integer(v) for v in given.value])
+
+
 def _declare(node: Node, spec: Spec) -> Any:
     problem = f'parameter {spec.name!r} must be {_valid_range(spec)}'
     _accept_integer(node, spec)
     try:
         if node.has_parameter(spec.name):
             pass  # a managed node configured again: read what is there
-        elif spec.default is _REQUIRED:
+        elif spec.default is _REQUIRED or spec.default == []:
+            # An empty array has no type of its own: declared by its type, unset.
             node.declare_parameter(spec.name, spec.kind, _descriptor(spec))
         else:
             node.declare_parameter(spec.name, spec.default, _descriptor(spec))
         value = node.get_parameter(spec.name).value
     except ParameterUninitializedException:
+        if spec.default is not _REQUIRED:
+            return list(spec.default)
+        if spec.unless and spec.unless in node._parameter_overrides:
+            return 0
         raise ParameterError(f'parameter {spec.name!r} is required: set it with '
                              f'-p {spec.name}:=<value> ({_valid_range(spec)})') from None
     except InvalidParameterTypeException as exc:
@@ -255,6 +318,10 @@ def _declare(node: Node, spec: Spec) -> Any:
 
 
 def _check(spec: Spec, value: Any) -> Any:
+    if isinstance(spec.default, list):
+        return tuple(value)  # each entry is checked with the others (sensor_set.py)
+    if spec.unless and value == 0:
+        return value  # left to the parameter it gives way to
     problem = f'parameter {spec.name!r} must be {_valid_range(spec)}, got {value!r}'
     if spec.choices and value not in spec.choices:
         raise ParameterError(problem)
@@ -296,6 +363,12 @@ def driver_config(values: dict) -> DriverConfig:
     """Build the driver's configuration from validated values; check the line budget."""
     fields = DriverConfig.__dataclass_fields__
     config = DriverConfig(**{name: values[name] for name in fields})
+    try:
+        sensors = config.sensors
+        if len(sensors) > 1:
+            check_shared_budget(sensors, config.baud, config.wireless)
+    except ValueError as exc:
+        raise ParameterError(str(exc)) from None
     check_line_budget(config)
     return config
 
@@ -309,11 +382,12 @@ def check_line_budget(config: DriverConfig) -> None:
     rate is the device's and is known only once connected: the supervisor
     warns then.
     """
-    if config.data_rate_hz is None:
-        return
-    stream = config.stream_choice
-    budget = streams.line_budget(stream, config.data_rate_hz, config.baud, config.wireless)
+    sensors = config.sensors
+    if len(sensors) > 1 or sensors[0].data_rate_hz is None:
+        return  # several sensors: the budget of them all (sensor_set.py)
+    stream, rate = sensors[0].stream_choice, sensors[0].data_rate
+    budget = streams.line_budget(stream, rate, config.baud, config.wireless)
     if not budget.fits:
-        raise ParameterError(f"parameter 'data_rate' ({config.data_rate:g} Hz) does not fit "
+        raise ParameterError(f"parameter 'data_rate' ({rate:g} Hz) does not fit "
                              f'the line with stream {stream.name!r}: '
                              + streams.advice(stream, budget))

@@ -183,12 +183,13 @@ class DeviceServices:
     keeps a pause from counting as lost records; ``capture_on_start`` asks
     for one capture once streaming. ``refusal``, if given, returns why a
     call must be refused now ('' to serve it): a managed node that is not
-    active answers so at once.
+    active answers so at once. ``prefix`` goes before the services' names
+    (``~/<name>/`` for each of several sensors).
     """
 
     def __init__(self, node: Node, device: Device, published: Callable[[], tuple[int, float]],
                  forget_last_sample: Callable[[], None], capture_on_start: bool = False,
-                 refusal: Callable[[], str] | None = None) -> None:
+                 refusal: Callable[[], str] | None = None, prefix: str = '~/') -> None:
         self.node = node
         self._device = device
         self._published = published
@@ -204,9 +205,9 @@ class DeviceServices:
         self.good_capture: Calibration | None = None
         group = MutuallyExclusiveCallbackGroup()
         self.capture_service = node.create_service(
-            Trigger, '~/capture_gyro_bias', self._on_capture, callback_group=group)
+            Trigger, f'{prefix}capture_gyro_bias', self._on_capture, callback_group=group)
         self.self_test_service = node.create_service(
-            Trigger, '~/self_test', self._on_self_test, callback_group=group)
+            Trigger, f'{prefix}self_test', self._on_self_test, callback_group=group)
         self._start_thread: threading.Thread | None = None
         if capture_on_start:
             self._start_thread = threading.Thread(
