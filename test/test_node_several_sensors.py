@@ -26,8 +26,8 @@ practice) and never one of another sensor.
 
 from harness.processes import isolate_ros_domain, Listener, NodeProcess, SubscriberProcess
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
-import pytest
 import numpy as np
+import pytest
 from test_node_messages import FRD_TO_FLU
 
 pytestmark = pytest.mark.slow
@@ -39,7 +39,7 @@ def _domain():
 
 
 def rates_by_address(sim: PtySimulator) -> dict[int, set]:
-    """The angular velocity (ENU, rad/s) of every record each sensor wrote, by address."""
+    """Return the angular velocity (ENU, rad/s) of every record each sensor wrote, by address."""
     out: dict[int, set] = {}
     for entry in sim.truth:
         if entry.source == 'stream' and entry.valid and entry.write_time is not None:
@@ -82,7 +82,7 @@ def check_nothing_crossed(truth: dict, rows: list, names: dict[int, str],
         for row in mine:
             rate = tuple(row[5:8])
             assert rate in truth[address], f'{name} published a record its sensor never sent'
-            assert rate not in others, f'{name} published another sensor\'s record'
+            assert rate not in others, f"{name} published another sensor's record"
 
 
 def test_two_sensors_each_on_its_own_topics_nothing_crossed():

@@ -36,13 +36,13 @@ from rclpy.exceptions import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from .sensor_set import check_shared_budget, sensor_settings, SensorSetting
 from ..codec import streams
 from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.orientation import CONVENTIONS
 from ..device.realtime import MAX_PRIORITY
 from ..device.timeouts import STALL_TIMEOUT
-from .sensor_set import check_shared_budget, SensorSetting, sensor_settings
 
 TIME_SOURCES = ('device', 'host')
 RELIABILITIES = ('reliable', 'best_effort')

@@ -76,7 +76,7 @@ def _per_sensor(name: str, given: Sequence, count: int, what: str,
         return
     one = ' (or one for all)' if one_for_all else ''
     raise ValueError(f'parameter {name!r} must give one {what} per sensor{one}: '
-                         f'{count} addresses, got {len(given)} ({list(given)})')
+                     f'{count} addresses, got {len(given)} ({list(given)})')
 
 
 def _names(name: str, given: Sequence[str]) -> None:
