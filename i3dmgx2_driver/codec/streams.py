@@ -185,8 +185,8 @@ def shared_advice(chosen: Sequence[tuple[int, Stream, float]], baud: int,
     n = len(chosen)
     parts = []
     total = 0.0
-    for address, stream, rate in chosen:
-        rate = rate_of_divider(divider_for_rate(rate))
+    for address, stream, asked in chosen:
+        rate = rate_of_divider(divider_for_rate(asked))
         needed = bytes_per_second(stream.code, rate, wireless)
         total += needed
         parts.append(f'{address}: {stream.label} at {_hz(rate)} Hz, {needed:,.0f}')
