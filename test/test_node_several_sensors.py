@@ -151,3 +151,29 @@ def test_one_sensor_off_is_reported_and_retried_while_the_other_streams():
     # 95 streamed throughout 17's absence: far more messages than 17.
     assert sum(1 for r in rows if r[3] == 'imu_95/raw_data') > \
         sum(1 for r in rows if r[3] == 'imu_17/raw_data') + 150
+
+
+def test_managed_node_configures_with_one_sensor_off_and_fails_only_with_none():
+    from harness.processes import LIFECYCLE_COMMAND, LifecycleClient
+    from sensor_msgs.msg import Imu
+    config = SimulatorConfig(addresses=(17, 95), seed=33)
+    topics = {'imu_17/raw_data': Imu, 'imu_95/raw_data': Imu}
+    with PtySimulator(config) as sim, Listener(topics) as listener:
+        sim.power_cycle(off_seconds=1e6, address=17)  # off for good
+        params = {'port': sim.port, 'addresses': [17, 95], 'data_rate': 50.0,
+                  'reconnect_interval': 0.3}
+        with NodeProcess(params, command=LIFECYCLE_COMMAND) as node:
+            client = LifecycleClient(listener)
+            assert client.wait_ready(), node.output()
+            assert client.change('configure'), node.output()
+            assert 'configure: node 17 does not answer' in node.output()
+            assert client.change('activate'), node.output()
+            assert len(listener.wait_for('imu_95/raw_data', 50, timeout=20)) >= 50
+            assert listener.received('imu_17/raw_data') == []
+            assert client.change('deactivate') and client.change('cleanup'), node.output()
+            sim.stall(1e6, address=95)  # now neither answers
+            assert not client.change('configure'), node.output()
+            output = node.output()
+            assert 'configure failed: no listed sensor answers: node 17:' in output
+            assert 'node 95:' in output.split('no listed sensor answers')[-1]
+            assert node.stop()[0] == 0

@@ -177,6 +177,10 @@ class Connection:
                 totals[key] = totals.get(key, 0) + value
         return totals
 
+    def strays(self) -> dict[int, int]:
+        """Packets of addresses no sensor on a shared port has, by address (else empty)."""
+        return self._shared.strays() if self._shared is not None else {}
+
     def observe(self, on: bool) -> None:
         """Resume or pause the line observer: silence is a symptom only while we ask."""
         observer = self._observer

@@ -132,7 +132,8 @@ class DeviceSupervisor:
             parser=connection.parser_stats(), radio=link.radio if link is not None else None,
             connected=link is not None, ping_ok=dialogue.ping_ok, info=dialogue.info,
             divider=dialogue.divider, expected_rate_hz=dialogue.expected_rate_hz,
-            line_use=dialogue.line_use, line_warning=dialogue.line_warning)
+            line_use=dialogue.line_use, line_warning=dialogue.line_warning,
+            strays=connection.strays())
 
     @property
     def state(self) -> State:
@@ -243,6 +244,18 @@ class DeviceSupervisor:
             # stop() came while the stream was starting: it has the port; no thread.
             raise DeviceTimeout('the driver stopped while the stream was starting')
         self.recovery.start(link)
+
+    def start_retrying(self) -> None:
+        """
+        Let go of any link and keep trying in the supervisor thread, as :meth:`start` does.
+
+        For a managed node with several sensors: one that did not answer at
+        configure or activate is retried in the background (it may be
+        switched on later) while the others stream.
+        """
+        self.connection.release()
+        self.report.enter(State.DISCONNECTED)
+        self.start()
 
     def stop_streaming(self, timeout: float = 1.5) -> None:
         """
