@@ -75,18 +75,24 @@ def _options(parser) -> None:
     parser.add_argument('--stream', default='full', help='the stream every sensor sends')
 
 
-def main() -> None:
-    """Run from the command line."""
-    args = standard_args(__doc__.splitlines()[1], 20.0, 6.0, more=_options)
-    stream = streams.parse(args.stream)
+def run(seconds: float, stream: streams.Stream = streams.DEFAULT) -> list[Result]:
+    """Measure 1, 2 and 4 sensors at the line budget; return the table rows."""
     isolate_ros_domain()
     results = []
     for count in (1, 2, 4):
-        rate, cpu, rates = measure(count, stream, args.seconds)
+        rate, cpu, rates = measure(count, stream, seconds)
         each = ', '.join(f'{topic.split("/")[0]} {hz:.1f}' for topic, hz in rates.items())
         results.append(Result(
             f'{count} x {stream.name} at {rate:g} Hz (the line budget for {count})',
             f'node CPU {cpu:.2f} % of one core; received per sensor (Hz): {each}'))
+    return results
+
+
+def main() -> None:
+    """Run from the command line."""
+    args = standard_args(__doc__.splitlines()[1], 20.0, 6.0, more=_options)
+    stream = streams.parse(args.stream)
+    results = run(args.seconds, stream)
     report(f'Several sensors on one base station ({stream.name})', results,
            [f'{args.seconds:g} s window after {WARM_UP_S:g} s of warm-up; one node serving '
             'every sensor; a subscriber in another process on every topic; rates are what '
