@@ -74,6 +74,7 @@ from .motion import Motion, MotionConfig
 from .pty_port import PtyPort
 from .sensor import SensorSpec, SimulatedSensor
 from .sensor_unit import AllInboxes, SensorUnit, unit_specs
+from .transmitter import SharedLine
 from .truth_queries import TruthQueries
 from .wired_line import WiredLine
 
@@ -134,12 +135,13 @@ class PtySimulator(TruthQueries):
         self._reader = HostReader(self._pty, self._end, record, AllInboxes(self.units),
                                   changed)
         specs = unit_specs(config, seeds)
+        line = SharedLine() if len(specs) > 1 else None
         for i, (spec, motion) in enumerate(specs):
             self.units[spec.address] = SensorUnit(
                 config, spec, motion, sensor_seed if i == 0 else seeds.getrandbits(64),
                 self._fault_rng if i == 0 else random.Random(seeds.getrandbits(64)),
                 self._end, writer, record, self._tx_wake, self._reader.post, foreign,
-                station_faults if i == 0 else None)
+                station_faults if i == 0 else None, line)
         first = next(iter(self.units.values()))
         #: The device model of the first sensor; touch it only while holding ``sim.lock``.
         self.sensor = first.sensor

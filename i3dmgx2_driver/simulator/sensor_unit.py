@@ -40,7 +40,7 @@ from .motion import Motion, MotionConfig
 from .packet_faults import PacketFaults
 from .power import Post, SensorPower
 from .sensor import SensorSpec, SimulatedSensor
-from .transmitter import Transmitter
+from .transmitter import SharedLine, Transmitter
 from .wired_line import WiredLine
 
 #: How far apart the clocks of neighbouring sensors run (ppm), so that a
@@ -84,18 +84,21 @@ class SensorUnit:
     line writer every unit shares, ``wake`` the condition on the
     simulator's lock, ``post`` schedules actions on its reader thread,
     ``foreign`` the stranger whose packets the radio may pick up; ``faults``
-    the faults in effect for it, if the line end shares them (the first sensor's).
+    the faults in effect for it, if the line end shares them (the first sensor's);
+    ``line`` the serial line its packets share with the other sensors' (several).
     """
 
     def __init__(self, config: SimulatorConfig, spec: SensorSpec, motion: MotionConfig,
                  seed: int, fault_rng: random.Random, end: BaseStation | WiredLine,
                  writer: LineWriter, record: GroundTruth, wake: threading.Condition,
-                 post: Post, foreign: SimulatedSensor, faults: FaultState | None = None) -> None:
+                 post: Post, foreign: SimulatedSensor, faults: FaultState | None = None,
+                 line: SharedLine | None = None) -> None:
         self.sensor = SimulatedSensor(spec, Motion(motion), seed=seed)
         self.address = spec.address
         self.faults = faults if faults is not None else FaultState(config.faults)
         self.packet_faults = PacketFaults(self.faults, fault_rng, end, foreign, writer, record)
-        self.tx = Transmitter(config, self.sensor, end, record, wake, self.packet_faults, writer)
+        self.tx = Transmitter(config, self.sensor, end, record, wake, self.packet_faults, writer,
+                              line)
         self.inbox = SensorInbox(self.sensor, record, self.tx, wake, self.faults)
         self.power = SensorPower(self.sensor, self.tx, record, wake, self.faults, post)
 
