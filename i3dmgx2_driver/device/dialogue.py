@@ -151,7 +151,8 @@ class SensorDialogue:
             self._info_logged = info
             self._log.info(f'device: model {info.model_name or "?"} '
                            f'({info.model_number or "?"}), serial {info.serial_number or "?"}, '
-                           f'firmware {info.firmware or "?"}, options {info.options or "-"}')
+                           f'firmware {info.firmware or "?"}, options {info.options or "-"}, '
+                           f'node {cfg.address}')
 
     def _configure_rate(self, link: DeviceLink) -> None:
         cfg = self.config

@@ -200,6 +200,9 @@ def status_line(sim: PtySimulator, elapsed: float) -> str:
     """One line on what the simulator has done so far."""
     stats = sim.stats
     streaming = f'0x{sim.streaming:02X}' if sim.streaming else 'no'
+    if len(sim.addresses) > 1:
+        streaming = ','.join(f'{a}:' + (f'0x{sim.streaming_of(a):02X}' if sim.streaming_of(a)
+                                        else 'no') for a in sim.addresses)
     link = (f'acks={stats.acks} nacks={stats.nacks}' if sim.wireless
             else 'wired')
     line = (f'[{elapsed:8.1f} s] records={stats.records_sent} replies={stats.replies_sent} '
