@@ -24,6 +24,8 @@ the message has it, is the key: noisy float32 values are unique in
 practice) and never one of another sensor.
 """
 
+import time
+
 from harness.processes import isolate_ros_domain, Listener, NodeProcess, SubscriberProcess
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import numpy as np
@@ -177,3 +179,27 @@ def test_managed_node_configures_with_one_sensor_off_and_fails_only_with_none():
             assert 'configure failed: no listed sensor answers: node 17:' in output
             assert 'node 95:' in output.split('no listed sensor answers')[-1]
             assert node.stop()[0] == 0
+
+
+def test_each_sensors_packet_loss_is_counted_from_its_own_timer():
+    from diagnostic_msgs.msg import DiagnosticArray
+    config = SimulatorConfig(addresses=(17, 95), seed=34)
+    with PtySimulator(config) as sim, Listener({'/diagnostics': DiagnosticArray}) as listener:
+        with NodeProcess({'port': sim.port, 'addresses': [17, 95], 'data_rate': 50.0}) as node:
+            for address in (17, 95):
+                assert node.wait_for_output(f'from node {address} on'), node.output()
+            time.sleep(1.0)
+            sim.stall(0.4, address=17)  # 20 records of 17 lost on the radio; 95 untouched
+            time.sleep(2.5)
+            listener.clear()
+            listener.wait_for('/diagnostics', 4, timeout=20)
+            assert node.stop()[0] == 0
+        lost = {}
+        for array in listener.received('/diagnostics'):
+            for status in array.status:
+                if status.name.endswith(': stream'):
+                    lost[status.name] = {k.key: k.value for k in status.values}
+    lost_17 = int(lost['i3dmgx2_driver: imu_17: stream']['lost (timer gaps)'])
+    truth_17 = sum(1 for t in sim.truth if t.address == 17 and t.fault == 'stall')
+    assert truth_17 >= 15 and lost_17 == truth_17
+    assert lost['i3dmgx2_driver: imu_95: stream']['lost (timer gaps)'] == '0'
