@@ -68,7 +68,7 @@ def wait(predicate, timeout: float = 10.0) -> bool:
 def supervisors(sim: PtySimulator, addresses, **config):
     base = DeviceConfig(port=sim.port, address=addresses[0], low_latency=False,
                         reconnect_interval=0.3, **config)
-    shared = SharedPort(base, tuple(addresses), log=_Log())
+    shared = SharedPort(base, log=_Log())
     out = {}
     for address in addresses:
         sink = Sink()

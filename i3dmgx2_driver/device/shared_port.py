@@ -44,18 +44,17 @@ from .settings import DeviceConfig
 
 class SharedPort:
     """
-    The port at ``config.port``, shared by the sensors at ``addresses``.
+    The port at ``config.port``, shared by the sensors behind its base station.
 
     ``on_bytes`` (a raw capture) and ``timings`` belong to the port's one
     reader; ``port_factory`` opens it (SerialPort; a subclass to observe it).
     """
 
-    def __init__(self, config: DeviceConfig, addresses: tuple[int, ...], log: Any,
+    def __init__(self, config: DeviceConfig, log: Any,
                  port_factory: Callable[..., SerialPort] = SerialPort,
                  on_bytes: BytesCallback | None = None,
                  timings: HotPathObserver | None = None) -> None:
         self.config = config
-        self.addresses = tuple(addresses)
         self._log = log
         self._port_factory = port_factory
         self._on_bytes = on_bytes

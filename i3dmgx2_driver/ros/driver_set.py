@@ -63,8 +63,7 @@ class DriverSet:
                 address=sensors[0].address, baud=config.baud, wireless=config.wireless,
                 node=node.get_fully_qualified_name())
             self.shared = SharedPort(
-                device_config(config, sensors[0]), tuple(s.address for s in sensors),
-                node.get_logger(), port_factory,
+                device_config(config, sensors[0]), node.get_logger(), port_factory,
                 capture.on_bytes if capture.active else None, timings)
         self._capture = capture
         self.cores = [
