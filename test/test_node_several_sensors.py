@@ -203,3 +203,18 @@ def test_each_sensors_packet_loss_is_counted_from_its_own_timer():
     truth_17 = sum(1 for t in sim.truth if t.address == 17 and t.fault == 'stall')
     assert truth_17 >= 15 and lost_17 == truth_17
     assert lost['i3dmgx2_driver: imu_95: stream']['lost (timer gaps)'] == '0'
+
+
+def test_devices_left_at_rates_that_overflow_the_line_together_are_warned_about():
+    from diagnostic_msgs.msg import DiagnosticArray
+    # Both sensors' EEPROM says 100 Hz of 0xCC: 17,600 bytes/s for a line of 11,520.
+    config = SimulatorConfig(addresses=(17, 95), seed=35)
+    with PtySimulator(config) as sim, Listener({'/diagnostics': DiagnosticArray}) as listener:
+        with NodeProcess({'port': sim.port, 'addresses': [17, 95]}) as node:
+            assert node.wait_for_output('cannot carry together'), node.output()
+            listener.wait_for('/diagnostics', 6, timeout=20)
+            assert node.stop()[0] == 0
+        stream = [s for array in listener.received('/diagnostics') for s in array.status
+                  if s.name == 'i3dmgx2_driver: imu_95: stream']
+    assert stream and stream[-1].level == b'\x01'
+    assert "2 x 'full' at \u2264 62 Hz" in stream[-1].message

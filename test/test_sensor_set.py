@@ -105,3 +105,27 @@ def test_packets_of_unlisted_addresses_are_named_on_diagnostics():
     assert status.message == '10 frames from other sensors ignored (node 3: 2, node 40: 10)'
     assert status.value('packets of unlisted addresses') == 'node 3: 2, node 40: 10'
     assert parser_status({}, None).value('packets of unlisted addresses') is None
+
+
+def test_rates_found_on_the_devices_are_checked_together_on_the_shared_port():
+    from i3dmgx2_driver.codec import layouts
+    from i3dmgx2_driver.device.settings import DeviceConfig
+    from i3dmgx2_driver.device.shared_port import SharedPort
+
+    class Log:
+        def __init__(self) -> None:
+            self.warnings: list[str] = []
+
+        def warning(self, text: str) -> None:
+            self.warnings.append(text)
+
+    log = Log()
+    shared = SharedPort(DeviceConfig(port='/dev/null', address=17), log)
+    full = layouts.ACCEL_ANG_RATE_MAG_ORIENTATION
+    assert shared.line_warning(17, full, 100.0) == ''  # one sensor: its own check
+    text = shared.line_warning(95, full, 100.0)
+    assert text.startswith('the sensors on this port are set to rates the line cannot carry')
+    assert "2 x 'full' at \u2264 62 Hz" in text
+    assert shared.line_warning(17, full, 100.0) == text and len(log.warnings) == 1
+    shared.line_warning(95, full, 50.0)
+    assert shared.line_warning(17, full, 50.0) == ''

@@ -40,6 +40,7 @@ from .hot_path import HotPathObserver
 from .link import BytesCallback, DeviceLink, LinkOptions, PortReader, RecordCallback
 from .port import SerialPort
 from .settings import DeviceConfig
+from ..codec import streams
 
 
 class SharedPort:
@@ -62,6 +63,9 @@ class SharedPort:
         self._lock = threading.Lock()
         self._reader: PortReader | None = None
         self._links: set[DeviceLink] = set()
+        #: Each sensor's stream and the rate its device runs at, once known.
+        self._streams: dict[int, tuple[int, float]] = {}
+        self._warned = ''
         #: Times the port was opened, and what it granted of low-latency mode.
         self.opens = 0
         self.low_latency_state = ''
@@ -111,6 +115,31 @@ class SharedPort:
             self._close(reader)
             if reader is self._reader:
                 self._reader = None
+
+    def line_warning(self, address: int, code: int, rate_hz: float) -> str:
+        """
+        Note a sensor's stream and rate; say if the sensors' streams together overflow the line.
+
+        The parameters were checked against the line before the start, but a
+        sensor left at its device's rate (``data_rate`` 0) is known only once
+        connected: the base station would then drop the packets the line
+        cannot carry. Returns '' while they fit (or one sensor is known); the
+        first time they do not, it is also logged.
+        """
+        self._streams[address] = (code, rate_hz)
+        if len(self._streams) < 2:
+            return ''
+        chosen = [(a, streams.BY_CODE[c], r) for a, (c, r) in sorted(self._streams.items())]
+        if streams.shared_line_fits([(st, r) for _, st, r in chosen], self.config.baud,
+                                    self.config.wireless):
+            return ''
+        text = ('the sensors on this port are set to rates the line cannot carry together, '
+                'records will be skipped: '
+                + streams.shared_advice(chosen, self.config.baud, self.config.wireless))
+        if text != self._warned:
+            self._warned = text
+            self._log.warning(text)
+        return text
 
     def parser_stats(self) -> dict[str, int]:
         """Return the counters of the open port's parser (empty while closed)."""

@@ -101,6 +101,7 @@ class DeviceSupervisor:
                  timings: HotPathObserver | None = None,
                  shared: SharedPort | None = None) -> None:
         self.config = config
+        self._shared = shared
         log = log or logging.getLogger('i3dmgx2_driver')
         #: Set means "no stream wanted now": the thread ends, and every request on the
         #: link gives up within a few tens of milliseconds (the link's ``cancel`` event).
@@ -126,13 +127,17 @@ class DeviceSupervisor:
         """Return the device side as one snapshot (from any thread)."""
         dialogue, connection = self.dialogue, self.connection
         link = connection.link
+        line_warning = dialogue.line_warning
+        if self._shared is not None and dialogue.divider and not line_warning:
+            line_warning = self._shared.line_warning(self.config.address, self.config.stream,
+                                                     dialogue.expected_rate_hz)
         return DeviceStatus(
             **self.report.fields(), connections=connection.connections,
             reconnects=connection.reconnects, low_latency_state=connection.low_latency_state,
             parser=connection.parser_stats(), radio=link.radio if link is not None else None,
             connected=link is not None, ping_ok=dialogue.ping_ok, info=dialogue.info,
             divider=dialogue.divider, expected_rate_hz=dialogue.expected_rate_hz,
-            line_use=dialogue.line_use, line_warning=dialogue.line_warning,
+            line_use=dialogue.line_use, line_warning=line_warning,
             strays=connection.strays())
 
     @property

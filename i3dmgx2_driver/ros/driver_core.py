@@ -224,6 +224,8 @@ class DriverCore:
             self._imu_message, self._mag_message = (self.messages.fill_imu,
                                                     self.messages.fill_mag)
         self._timings = timings
+        #: Whether this core's sensor shares its port with others (driver_set.py).
+        self._shared = shared is not None
         #: The port's raw capture: this core's own, or the one the sensors share.
         self._owns_capture = raw_capture is None
         self.raw_capture = raw_capture if raw_capture is not None else RawCapture(
@@ -357,7 +359,8 @@ class DriverCore:
             self.raw_capture.close()
         if not report:
             return
-        message = (f'stopped: {self.stats.published} records published, port closed '
+        of = f' of node {self.sensor.address}' if self._shared else ''
+        message = (f'stopped: {self.stats.published} records{of} published, port closed '
                    f'({time.monotonic() - start:.2f} s)')
         if self.node.context.ok():
             self.node.get_logger().info(message)
