@@ -183,8 +183,8 @@ class SensorDialogue:
             raise DeviceTimeout(f'data rate: wrote divider {wanted}, read back {readback}')
         self.divider = readback
         self._log.warning(
-            f'data rate set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM 0xFCA2: {current} -> '
-            f'{wanted}); this persists across power cycles')
+            f'data rate of node {cfg.address} set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM '
+            f'0xFCA2: {current} -> {wanted}); this persists across power cycles')
 
     def _check_line(self) -> None:
         """
