@@ -39,6 +39,7 @@ import cpu
 import executor_load
 from harness.processes import ros_env
 import latency
+import several_sensors
 import streams
 import throughput
 import timestamps
@@ -81,6 +82,7 @@ def main() -> int:
         ('timestamps', lambda: timestamps.run(15.0 if quick else 60.0)),
         ('executor load', lambda: executor_load.run(8.0 if quick else 30.0)),
         ('streams', lambda: streams.run(6.0 if quick else 20.0)[0]),
+        ('several sensors', lambda: several_sensors.run(6.0 if quick else 20.0)),
     ]
     results: list[Result] = []
     for name, step in steps:

@@ -331,11 +331,18 @@ class SimProcess(ChildProcess):
 
 
 class SubscriberProcess(ChildProcess):
-    """A subscriber to ``imu/raw_data`` in its own process."""
+    """
+    A subscriber to ``imu/raw_data`` (or ``topics``) in its own process.
 
-    def __init__(self, topic: str = 'imu/raw_data') -> None:
-        super().__init__([sys.executable, '-m', 'harness.subscriber',
-                          '--topic', topic], 'ready')
+    ``values``: each row also holds the topic, frame_id and angular velocity.
+    """
+
+    def __init__(self, topic: str = 'imu/raw_data', values: bool = False,
+                 topics: Sequence[str] = ()) -> None:
+        argv = [sys.executable, '-m', 'harness.subscriber']
+        for name in topics or (topic,):
+            argv += ['--topic', name]
+        super().__init__(argv + (['--values'] if values else []), 'ready')
         self.rows: list[tuple[int, int, float]] = []
 
     def stop(self, timeout: float = 15.0) -> list:

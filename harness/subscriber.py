@@ -42,8 +42,11 @@ def main(argv: list[str] | None = None) -> int:
     """Subscribe until told to stop; then save the receive times."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--out', required=True, help='where to write the rows (JSON)')
-    parser.add_argument('--topic', default='imu/raw_data')
+    parser.add_argument('--topic', action='append',
+                        help='a topic to subscribe to (again: several; default imu/raw_data)')
     parser.add_argument('--depth', type=int, default=5000)
+    parser.add_argument('--values', action='store_true',
+                        help="also save each message's topic, frame_id and angular velocity")
     args = parser.parse_args(argv)
     stop = stop_on_signal_or_eof()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
@@ -51,14 +54,20 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[tuple[int, int, float]] = []
     clock = time.time
 
-    def on_message(msg: Imu) -> None:
+    def on_message(msg: Imu, topic: str) -> None:
         now = clock()
         stamp = msg.header.stamp
-        rows.append((stamp.sec, stamp.nanosec, now))
+        if args.values:
+            w = msg.angular_velocity
+            rows.append((stamp.sec, stamp.nanosec, now, topic, msg.header.frame_id,
+                         w.x, w.y, w.z))
+        else:
+            rows.append((stamp.sec, stamp.nanosec, now))
 
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=args.depth,
                      reliability=ReliabilityPolicy.RELIABLE)
-    node.create_subscription(Imu, args.topic, on_message, qos)
+    for topic in args.topic or ['imu/raw_data']:
+        node.create_subscription(Imu, topic, lambda msg, t=topic: on_message(msg, t), qos)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     print('ready', flush=True)

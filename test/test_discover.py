@@ -39,9 +39,9 @@ from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.device.probe import (
     parse_addresses, probe_port, ProbeConfig, SensorFound,
 )
-from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 from i3dmgx2_driver.tools import discover
-from i3dmgx2_driver.tools.discover import node_command
+from i3dmgx2_driver.tools.discover import node_command, port_command
 import pytest
 
 #: Commands that only read: what discovery may send a sensor it does not stop.
@@ -260,6 +260,30 @@ def test_command_lines():
     assert node_command('/dev/ttyUSB0', wired) == (
         'ros2 run i3dmgx2_driver node --ros-args -p port:=/dev/ttyUSB0 '
         '-p wireless:=false -p address:=1')
+
+
+def test_one_command_for_a_base_station_with_several_sensors():
+    found = [SensorFound(a, 'ping', None, None, 0, False, None, None) for a in (17, 95)]
+    assert port_command('/dev/i3dmgx2', found) == (
+        'ros2 run i3dmgx2_driver node --ros-args -p port:=/dev/i3dmgx2 '
+        "-p 'addresses:=[17,95]'")
+    assert port_command('/dev/i3dmgx2', found[1:]) == node_command('/dev/i3dmgx2', found[1])
+
+
+@pytest.mark.slow
+def test_discover_prints_one_command_that_serves_every_sensor_behind_the_base_station():
+    config = SimulatorConfig(addresses=(17, 95, 40), seed=87,
+                             faults=FaultConfig(already_streaming=True))
+    with PtySimulator(config) as sim:
+        result = run_discover('--port', sim.port)
+        assert result.returncode == 0, result.stderr
+        lines = result.stdout.splitlines()
+        commands = [line.strip() for line in lines if 'ros2 run' in line]
+        assert commands == [f'ros2 run i3dmgx2_driver node --ros-args -p port:={sim.port} '
+                            f"-p 'addresses:=[17,40,95]'"], result.stdout
+        assert '3 sensors' in result.stdout
+        for address in (17, 95, 40):
+            assert sim.streaming_of(address) == lay.ACCEL_ANG_RATE_MAG_ORIENTATION
 
 
 def fake_sysfs(tmp_path, timer: int | None) -> tuple[str, str]:

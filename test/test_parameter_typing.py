@@ -23,6 +23,7 @@ check the same end to end.
 
 import os
 
+from i3dmgx2_driver.ros.driver_core import ALONE_TOPICS, SensorTopics
 from i3dmgx2_driver.ros.parameters import (
     ANGULAR_VELOCITY_STDDEV, declare_parameters, LINEAR_ACCELERATION_STDDEV,
     ORIENTATION_STDDEV, ParameterError,
@@ -176,10 +177,20 @@ def test_rclpy_still_keeps_the_overrides_where_the_unknown_parameter_warning_rea
 def test_qos_overrides_of_the_drivers_topics_are_known_names_and_a_misspelt_one_is_not(
         make_node):
     node = make_node('-r', '__ns:=/robot1')
-    known = override_names(node)
+    known = override_names(node, ALONE_TOPICS)
     # Resolved names, as rclpy declares them: the namespace and the node's name in.
     assert 'qos_overrides./robot1/imu/raw_data.publisher.reliability' in known
     assert 'qos_overrides./robot1/i3dmgx2_driver/is_calibrated.publisher.durability' in known
     assert 'qos_overrides./diagnostics.publisher.depth' in known
     assert 'qos_overrides./robot1/imu/raw_dat.publisher.depth' not in known
     assert 'qos_overrides./robot1/imu/raw_data.publisher.lifespan' not in known
+
+
+def test_qos_overrides_of_each_of_several_sensors_are_known_names(make_node):
+    """With several sensors the topics are under each one's name (sensor_set.py)."""
+    node = make_node()
+    known = override_names(node, [*SensorTopics.of('left_arm', several=True), '/diagnostics'])
+    assert 'qos_overrides./left_arm/raw_data.publisher.depth' in known
+    assert 'qos_overrides./left_arm/mag.publisher.reliability' in known
+    assert 'qos_overrides./i3dmgx2_driver/left_arm/is_calibrated.publisher.durability' in known
+    assert 'qos_overrides./imu/raw_data.publisher.depth' not in known

@@ -28,6 +28,7 @@ records in practice. The highest rate that fits is a rate the device can
 actually run at: 51200 / x for a whole divider x (``data_rate``).
 """
 
+from collections.abc import Sequence
 import math
 from typing import NamedTuple
 
@@ -88,11 +89,30 @@ def max_rate(code: int, baud: int, wireless: bool, margin: float = MARGIN) -> fl
 
     None only when not even the slowest rate (1 Hz) fits.
     """
-    limit = usable_bytes_per_second(baud, margin) / packet_size(code, wireless)
+    return max_shared_rate((code,), baud, wireless, margin)
+
+
+def shared_fits(streams: Sequence[tuple[int, float]], baud: int, wireless: bool,
+                margin: float = MARGIN) -> bool:
+    """Tell whether several sensors' streams, (code, rate) each, fit one line together."""
+    return (sum(bytes_per_second(code, rate, wireless) for code, rate in streams)
+            <= usable_bytes_per_second(baud, margin))
+
+
+def max_shared_rate(codes: Sequence[int], baud: int, wireless: bool,
+                    margin: float = MARGIN) -> float | None:
+    """
+    Return the highest rate (51200 / x) at which every sensor can stream its ``codes`` entry.
+
+    Sensors behind one base station share its serial line: their packets
+    together must fit it. None when not even 1 Hz each fits.
+    """
+    limit = usable_bytes_per_second(baud, margin) / sum(packet_size(c, wireless) for c in codes)
     divider = max(MIN_DIVIDER, math.ceil(rate_of_divider(1) / limit - 1e-9))
     if divider > MAX_DIVIDER:
         return None
-    while not fits(code, rate_of_divider(divider), baud, wireless, margin):
+    while not shared_fits([(c, rate_of_divider(divider)) for c in codes], baud, wireless,
+                          margin):
         divider += 1  # float rounding at the boundary: at most one step
     return rate_of_divider(divider)
 

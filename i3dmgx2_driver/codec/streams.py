@@ -25,13 +25,17 @@ Users choose a stream by its name or by its command byte written as text
 (``0xC2``), which is what readers of the protocol manual type.
 """
 
+from collections.abc import Sequence
 import math
 import re
 from typing import NamedTuple
 
 from . import layouts as lay
 from .data_rate import divider_for_rate, rate_of_divider
-from .line_budget import Budget, budget
+from .line_budget import (
+    Budget, budget, bytes_per_second, line_bytes_per_second, max_shared_rate, shared_fits,
+    usable_bytes_per_second,
+)
 
 MATRIX = 'matrix'
 EULER = 'euler'
@@ -161,3 +165,41 @@ def advice(stream: Stream, b: Budget, knob: str = 'data_rate') -> str:
         text += ', or stream ' + ', '.join(f"'{o.name}' (\u2264 {_limit(ob)})"
                                            for o, ob in fitting)
     return text
+
+
+def shared_line_fits(chosen: Sequence[tuple[Stream, float]], baud: int, wireless: bool) -> bool:
+    """Tell whether several sensors' (stream, rate) fit one line together, margin kept."""
+    return shared_fits([(stream.code, rate_of_divider(divider_for_rate(rate)))
+                        for stream, rate in chosen], baud, wireless)
+
+
+def shared_advice(chosen: Sequence[tuple[int, Stream, float]], baud: int,
+                  wireless: bool) -> str:
+    """
+    Say why several sensors' streams do not fit one line together, and what fits per sensor.
+
+    ``chosen``: (address, stream, rate) of each sensor. What fits: the same
+    streams at a lower common rate, or every sensor on one stream at the
+    highest rate that fits for that many (fastest first).
+    """
+    n = len(chosen)
+    parts = []
+    total = 0.0
+    for address, stream, asked in chosen:
+        rate = rate_of_divider(divider_for_rate(asked))
+        needed = bytes_per_second(stream.code, rate, wireless)
+        total += needed
+        parts.append(f'{address}: {stream.label} at {_hz(rate)} Hz, {needed:,.0f}')
+    capacity, usable = line_bytes_per_second(baud), usable_bytes_per_second(baud)
+    text = (f'{n} sensors need {total:,.0f} bytes/s together ({"; ".join(parts)}); {baud} baud '
+            f'carries {capacity:,.0f} ({usable:,.0f} with the {1 - usable / capacity:.0%} '
+            f'margin kept free): what fits per sensor: ')
+    options = []
+    same = max_shared_rate([stream.code for _, stream, _ in chosen], baud, wireless)
+    if same and len({stream.code for _, stream, _ in chosen}) > 1:
+        options.append(f'these streams at \u2264 {math.floor(same)} Hz each')
+    each = sorted(((max_shared_rate([stream.code] * n, baud, wireless) or 0.0, stream)
+                   for stream in STREAMS), key=lambda pair: -pair[0])
+    options += [f"{n} x '{stream.name}' at \u2264 {math.floor(rate)} Hz"
+                for rate, stream in each if rate]
+    return text + (', or '.join(options) if options else 'nothing, even at 1 Hz')

@@ -37,6 +37,7 @@ from .observer import Finding, LineObserver
 from .port import PortDisconnected, PortError, SerialPort
 from .realtime import PolicyOutcome
 from .settings import DeviceConfig
+from .shared_port import SharedPort
 
 
 class Connection:
@@ -48,14 +49,18 @@ class Connection:
     finds; ``cancel`` set means no stream is wanted now (every request on
     the link gives up, and a link opened meanwhile is closed at once).
     ``timings``, if given, is told every port open and handed to every link
-    (hot_path.py).
+    (hot_path.py). ``shared``, if given, is the port several sensors share
+    (shared_port.py): the links come from it and go back to it, the port is
+    its to open and close, and no line observer watches it.
     """
 
     def __init__(self, config: DeviceConfig, log: Any, port_factory: Callable[..., SerialPort],
                  on_record: RecordCallback, on_bytes: BytesCallback | None,
                  on_finding: Callable[[Finding], None], cancel: threading.Event,
-                 timings: HotPathObserver | None = None) -> None:
+                 timings: HotPathObserver | None = None,
+                 shared: SharedPort | None = None) -> None:
         self.config = config
+        self._shared = shared
         self._timings = timings
         self._log = log
         self._port_factory = port_factory
@@ -87,6 +92,10 @@ class Connection:
     def open_link(self) -> DeviceLink:
         """Open the port and make it the current link (reader not started); raise PortError."""
         cfg = self.config
+        if self._shared is not None:
+            link = self._shared.attach(cfg.address, self._on_record, self._cancel)
+            self.low_latency_state = self._shared.low_latency_state
+            return self._own(link)
         port = self._port_factory(cfg.port, cfg.baud, low_latency=cfg.low_latency)
         if self._timings is not None:
             self._timings.opened()
@@ -98,10 +107,15 @@ class Connection:
         link = DeviceLink(port, cfg.address, self._on_record, LinkOptions(
             wireless=cfg.wireless, on_bytes=self._on_bytes, observer=observer,
             cancel=self._cancel, thread_policy=cfg.thread_policy, timings=self._timings))
+        return self._own(link)
+
+    def _own(self, link: DeviceLink) -> DeviceLink:
+        """Make ``link`` the current one, unless the driver was told to stop meanwhile."""
+        cfg = self.config
         with self._lock:
             if self._cancel.is_set():
                 # Stopped while opening: the caller has released the link already.
-                port.close()
+                self._close(link)
                 raise PortDisconnected(f'{cfg.port}: closed, the driver is stopping')
             self._link = link
         self.connections += 1
@@ -134,9 +148,17 @@ class Connection:
                 link.stop_streaming(repeats=2, gap=0.01)
             except PortError:
                 pass
-        link.port.close()
-        for key, value in link.parser.stats.as_dict().items():
-            self._parser_totals[key] = self._parser_totals.get(key, 0) + value
+        self._close(link)
+        if self._shared is None:
+            for key, value in link.parser.stats.as_dict().items():
+                self._parser_totals[key] = self._parser_totals.get(key, 0) + value
+
+    def _close(self, link: DeviceLink) -> None:
+        """Close the link's port, or hand the link back to the shared one."""
+        if self._shared is not None:
+            self._shared.detach(link)
+        else:
+            link.port.close()
 
     def abort(self) -> None:
         """Make the current link's reader and any waiting request give up (shutdown)."""
@@ -145,13 +167,19 @@ class Connection:
             link.abort()
 
     def parser_stats(self) -> dict[str, int]:
-        """Parser counters summed over every connection so far."""
+        """Parser counters summed over every connection so far (shared: the open port's)."""
+        if self._shared is not None:
+            return self._shared.parser_stats()
         totals = dict(self._parser_totals)
         link = self._link
         if link is not None:
             for key, value in link.parser.stats.as_dict().items():
                 totals[key] = totals.get(key, 0) + value
         return totals
+
+    def strays(self) -> dict[int, int]:
+        """Packets of addresses no sensor on a shared port has, by address (else empty)."""
+        return self._shared.strays() if self._shared is not None else {}
 
     def observe(self, on: bool) -> None:
         """Resume or pause the line observer: silence is a symptom only while we ask."""

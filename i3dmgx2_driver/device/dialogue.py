@@ -92,11 +92,11 @@ class SensorDialogue:
     def quiet(self, link: DeviceLink) -> None:
         """Stop the device's stream and drop what is in flight (raises PortError)."""
         if not link.running.is_set():
-            link.port.flush_input()
+            link.flush_input()
         link.stop_streaming()
         link.streamed = None  # a polled record is a reply only now
         time.sleep(0.05)
-        link.port.flush_input()
+        link.flush_input()
 
     # -- bring-up -----------------------------------------------------------------------
 
@@ -128,7 +128,7 @@ class SensorDialogue:
                              timeout=cfg.request_timeout, retries=2)
             except DeviceTimeout:
                 pass
-        if require_answer and not self.ping_ok and not link.parser.stats.good_frames:
+        if require_answer and not self.ping_ok and not link.heard:
             silent = (f'node {cfg.address} is silent: no answer to the base station '
                       f'ping or to polled requests (check it is powered, its address and the '
                       f'radio channel)' if link.wireless else
@@ -155,7 +155,8 @@ class SensorDialogue:
             self._info_logged = info
             self._log.info(f'device: model {info.model_name or "?"} '
                            f'({info.model_number or "?"}), serial {info.serial_number or "?"}, '
-                           f'firmware {info.firmware or "?"}, options {info.options or "-"}')
+                           f'firmware {info.firmware or "?"}, options {info.options or "-"}, '
+                           f'node {cfg.address}')
 
     def _configure_rate(self, link: DeviceLink) -> None:
         cfg = self.config
@@ -193,8 +194,8 @@ class SensorDialogue:
         self._divider_written.add(wanted)
         self.divider = self._write_divider(link, current, wanted)
         self._log.warning(
-            f'data rate set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM 0xFCA2: {current} -> '
-            f'{wanted}); this persists across power cycles')
+            f'data rate of node {cfg.address} set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM '
+            f'0xFCA2: {current} -> {wanted}); this persists across power cycles')
 
     def _write_divider(self, link: DeviceLink, current: int, wanted: int) -> int:
         """
@@ -327,7 +328,7 @@ class SensorDialogue:
 
     def expect_stream(self, link: DeviceLink) -> None:
         """Drop what is in flight; count records of the stream as samples from the first."""
-        link.port.flush_input()
+        link.flush_input()
         link.streamed = self.config.stream
 
     def can_resume(self) -> bool:

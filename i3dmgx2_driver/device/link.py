@@ -25,11 +25,13 @@ commands both ways.
 """
 
 from collections.abc import Callable
+import contextlib
 from dataclasses import dataclass
 import threading
 import time
 from typing import Any, NamedTuple
 
+from . import timeouts
 from .hot_path import HotPathObserver
 from .observer import LineObserver, QUIET_AFTER
 from .port import PortDisconnected, SerialPort
@@ -109,62 +111,58 @@ class LinkOptions:
     timings: HotPathObserver | None = None
 
 
-class DeviceLink:
+class PortReader:
     """
-    The reader thread and the exchanges of one open port.
+    The one thread that reads a port, and whom it hands each event.
 
-    ``address`` selects the sensor behind a base station; ``on_record``
-    receives every data packet not claimed by a pending request; ``options``
-    say how to read and whom else to tell (:class:`LinkOptions`).
-    ``streamed`` is the command byte of the record being streamed, None
-    while the device is not streaming (the dialogue sets it): a polled
-    reply of that code is then both the reply and a record of the stream.
-    ``policy_outcome`` says what the scheduler granted the reader thread.
+    Data packets go to the link of their address (``route``); a port with
+    one sensor has its link as ``fallback`` and an empty table (its parser
+    keeps the other addresses out), so the hot path is one dict lookup. The
+    base station's answers (ACK, NACK, a ping's byte) carry no address:
+    they go to the link whose request holds the port now (``requester``),
+    and since ``request_lock`` lets one exchange at a time onto the port,
+    that is the only one who can be waiting for them. ``address`` None (a
+    port shared by several sensors) reads every node's packets; those of an
+    address no link routes are counted by address in ``strays``.
     """
 
-    def __init__(self, port: SerialPort, address: int | None, on_record: RecordCallback,
+    def __init__(self, port: SerialPort, address: int | None,
                  options: LinkOptions | None = None) -> None:
         options = options if options is not None else LinkOptions()
-        wireless = options.wireless
         self.port = port
-        self.address = address
-        self.wireless = wireless
-        self.streamed: int | None = None
-        self.parser = SensorStreamParser(address=address if wireless else None,
-                                         wireless=wireless)
-        self._on_record = on_record
+        self.wireless = options.wireless
+        self.parser = SensorStreamParser(address=address if self.wireless else None,
+                                         wireless=self.wireless)
+        self.routes: dict[int | None, DeviceLink] = {}
+        self.fallback: DeviceLink | None = None
+        #: The link whose exchange holds the port now (set under ``request_lock``).
+        self.requester: DeviceLink | None = None
+        #: Packets of addresses no link routes, by address (a port shared by several).
+        self.strays: dict[int, int] = {}
+        self.request_lock = threading.Lock()
+        self.write_lock = threading.Lock()
         self._on_bytes = options.on_bytes
         self._observer = options.observer
         self._timings = options.timings
         self._read_timeout = options.read_timeout
-        self._pending: _Pending | None = None
-        self._lock = threading.Lock()
-        self._write_lock = threading.Lock()
+        self._thread_policy = options.thread_policy
         self._stop = threading.Event()
-        self._cancel = options.cancel if options.cancel is not None else threading.Event()
         self._thread: threading.Thread | None = None
+        self._start_lock = threading.Lock()
         self.disconnected = threading.Event()
         self.error: str | None = None
-        self.last_data_time = 0.0
-        #: The same instant on the monotonic clock, for stall detection.
-        self.last_data_mono = 0.0
-        #: Records of the stream (of any code while none is streamed) received so far.
-        self.records = 0
-        #: Command byte of the last record handed to ``on_record`` (None before one).
-        self.last_code: int | None = None
-        self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
-        self._thread_policy = options.thread_policy
-        #: What the scheduler granted the reader thread (set once it runs).
+        #: What the scheduler granted the thread (set once it runs).
         self.policy_outcome = PolicyOutcome()
-        #: Set by the reader thread once its policy is applied, before its first read.
+        #: Set by the thread once its policy is applied, before its first read.
         self.running = threading.Event()
 
-    # -- reader thread -------------------------------------------------
-
     def start(self) -> None:
-        """Start the reader thread."""
-        self._thread = threading.Thread(target=self._run, name='gx2-reader', daemon=True)
-        self._thread.start()
+        """Start the reader thread (once; later calls do nothing)."""
+        with self._start_lock:
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name='gx2-reader',
+                                                daemon=True)
+                self._thread.start()
 
     def stop(self) -> None:
         """Stop the reader thread and wait for it (a read times out quickly)."""
@@ -173,9 +171,14 @@ class DeviceLink:
             self._thread.join(timeout=2.0)
 
     def abort(self) -> None:
-        """Make the reader and any waiting request give up (driver shutdown)."""
+        """Make the reader give up (driver shutdown)."""
         self._stop.set()
-        self._wake_pending()
+
+    def _links(self) -> list['DeviceLink']:
+        links = list(self.routes.values())
+        if self.fallback is not None:
+            links.append(self.fallback)
+        return links
 
     def _run(self) -> None:
         if self._thread_policy.requested:
@@ -185,6 +188,7 @@ class DeviceLink:
         read = self.port.read_some
         observer = self._observer
         timings = self._timings
+        routes = self.routes
         while not self._stop.is_set():
             timeout = 0.02 if parser.pending == 1 else self._read_timeout
             try:
@@ -192,7 +196,8 @@ class DeviceLink:
             except PortDisconnected as exc:
                 self.error = str(exc)
                 self.disconnected.set()
-                self._wake_pending()
+                for link in self._links():
+                    link._wake_pending()
                 return
             now = time.time()
             mono = time.monotonic()
@@ -200,49 +205,179 @@ class DeviceLink:
                 timings.read(len(data), now)
             if data and self._on_bytes is not None:
                 self._on_bytes(data, now)
-            if observer is not None and observer.active \
-                    and mono - self.last_data_mono > QUIET_AFTER:
-                observer.feed(data, mono, self.last_data_mono)
+            if observer is not None and observer.active and self.fallback is not None \
+                    and mono - self.fallback.last_data_mono > QUIET_AFTER:
+                observer.feed(data, mono, self.fallback.last_data_mono)
             events = parser.feed(data) if data else parser.idle()
             if timings is not None:
                 timings.parsed()
+            fallback = self.fallback
             for event in events:
-                self._dispatch(event, now, mono)
+                if type(event) is DataPacket:
+                    link = routes.get(event.address, fallback)
+                    if link is not None:
+                        link._on_data(event, now, mono)
+                    else:
+                        self._stray(event.address)
+                else:
+                    requester = self.requester
+                    if requester is not None:
+                        requester._on_answer(event)
 
-    def _dispatch(self, event: Any, now: float, mono: float) -> None:
-        if isinstance(event, DataPacket):
-            code = _CODE_OF_TYPE.get(type(event.record))
-            # While a stream runs, only its records keep it alive: a sensor power-cycled
-            # into its EEPROM auto-start streams another record, and the stall watch
-            # and the wait for the stream must not take that one for it (found by the
-            # long soak).
-            ours = self.streamed is None or code == self.streamed
-            if ours:
-                self.last_data_time = now
-                self.last_data_mono = mono
-            if event.lqi is not None:
-                self._note_radio(event.lqi, event.rssi)
-            pending = self._pending
-            if pending is not None and pending.code == code:
-                pending.reply = event.record
-                pending.done.set()
-                if code != self.streamed:
-                    return
-            if ours:
-                self.records += 1
-            self.last_code = code
-            self._on_record(event, now, mono)
-        elif isinstance(event, Ack):
-            if self._pending is not None:
-                self._pending.acked.set()
+    def _stray(self, address: int) -> None:
+        """Count a packet of an address no link routes (a foreign frame, as the parser would)."""
+        self.strays[address] = self.strays.get(address, 0) + 1
+        stats = self.parser.stats
+        stats.good_frames -= 1
+        stats.foreign_frames += 1
+
+
+class DeviceLink:
+    """
+    The exchanges with one sensor over an open port, and its records.
+
+    ``address`` selects the sensor behind a base station; ``on_record``
+    receives every data packet not claimed by a pending request; ``options``
+    say how to read and whom else to tell (:class:`LinkOptions`).
+    ``streamed`` is the command byte of the record being streamed, None
+    while the device is not streaming (the dialogue sets it): a polled
+    reply of that code is then both the reply and a record of the stream.
+    ``policy_outcome`` says what the scheduler granted the reader thread.
+
+    Alone on its port (``reader`` None) the link makes its own
+    :class:`PortReader` and starts and stops it. Given a ``reader`` that
+    several sensors share, it only joins it: :meth:`start` routes its
+    address to it, :meth:`stop` takes that route away, and the port, its
+    reader and flushes belong to whoever shares it (shared_port.py).
+    """
+
+    def __init__(self, port: SerialPort, address: int | None, on_record: RecordCallback,
+                 options: LinkOptions | None = None, reader: PortReader | None = None) -> None:
+        options = options if options is not None else LinkOptions()
+        self.port = port
+        self.address = address
+        self.wireless = options.wireless
+        self.streamed: int | None = None
+        self.shared = reader is not None
+        if reader is None:
+            reader = PortReader(port, address, options)
+            reader.fallback = self
+        self.reader = reader
+        self.parser = reader.parser
+        self._on_record = on_record
+        self._pending: _Pending | None = None
+        #: One exchange at a time with this sensor; on a shared port, the port's
+        #: lock is held only while the base station's answer (no address) is due.
+        self._lock = reader.request_lock if not self.shared else threading.Lock()
+        self._port_lock = reader.request_lock if self.shared else None
+        self._write_lock = reader.write_lock
+        self._stop = threading.Event()
+        self._cancel = options.cancel if options.cancel is not None else threading.Event()
+        self.disconnected = reader.disconnected
+        self.last_data_time = 0.0
+        #: The same instant on the monotonic clock, for stall detection.
+        self.last_data_mono = 0.0
+        #: Records of the stream (of any code while none is streamed) received so far.
+        self.records = 0
+        #: Replies to this link's requests (data packets it asked for).
+        self.replies = 0
+        #: Command byte of the last record handed to ``on_record`` (None before one).
+        self.last_code: int | None = None
+        self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
+        #: Set once the link receives its packets (its own reader runs, or its
+        #: address is routed on the shared one).
+        self.running = reader.running if not self.shared else threading.Event()
+
+    @property
+    def error(self) -> str | None:
+        """Return why the port was lost (None while it works)."""
+        return self.reader.error
+
+    @property
+    def policy_outcome(self) -> PolicyOutcome:
+        """Return what the scheduler granted the reader thread."""
+        return self.reader.policy_outcome
+
+    @property
+    def heard(self) -> bool:
+        """Whether any packet of this sensor arrived on this link (a record or a reply)."""
+        return bool(self.records or self.replies)
+
+    # -- reader thread -------------------------------------------------
+
+    def start(self) -> None:
+        """Start receiving: the reader thread, or this address's route on the shared one."""
+        reader = self.reader
+        if self.shared:
+            reader.routes[self.address] = self
+            reader.start()
+            if reader.running.wait(1.0):
+                self.running.set()
+        else:
+            reader.start()
+
+    def stop(self) -> None:
+        """Stop receiving: the reader thread (waited for), or this address's route."""
+        self._stop.set()
+        if self.shared:
+            if self.reader.routes.get(self.address) is self:
+                del self.reader.routes[self.address]
+            self._wake_pending()
+        else:
+            self.reader.stop()
+
+    def abort(self) -> None:
+        """Make the reader (if the link's own) and any waiting request give up."""
+        self._stop.set()
+        if not self.shared:
+            self.reader.abort()
+        self._wake_pending()
+
+    def _run(self) -> None:
+        """Read in the calling thread (tests); the link's own reader only."""
+        self.reader._run()
+
+    def flush_input(self) -> None:
+        """Drop what the port holds unread; not on a shared port (the others' packets)."""
+        if not self.shared:
+            self.port.flush_input()
+
+    def _on_data(self, event: DataPacket, now: float, mono: float) -> None:
+        code = _CODE_OF_TYPE.get(type(event.record))
+        # While a stream runs, only its records keep it alive: a sensor power-cycled
+        # into its EEPROM auto-start streams another record, and the stall watch
+        # and the wait for the stream must not take that one for it (found by the
+        # long soak).
+        ours = self.streamed is None or code == self.streamed
+        if ours:
+            self.last_data_time = now
+            self.last_data_mono = mono
+        if event.lqi is not None:
+            self._note_radio(event.lqi, event.rssi)
+        pending = self._pending
+        if pending is not None and pending.code == code:
+            pending.reply = event.record
+            pending.done.set()
+            self.replies += 1
+            if code != self.streamed:
+                return
+        if ours:
+            self.records += 1
+        self.last_code = code
+        self._on_record(event, now, mono)
+
+    def _on_answer(self, event: Any) -> None:
+        """Take the base station's answer to this link's exchange (ACK, NACK, ping)."""
+        pending = self._pending
+        if pending is None:
+            return
+        if isinstance(event, Ack):
+            pending.acked.set()
         elif isinstance(event, Nack):
-            if self._pending is not None:
-                self._pending.nacked.set()
-        elif isinstance(event, PingReply):
-            pending = self._pending
-            if pending is not None and pending.code == layouts.PING:
-                pending.reply = event
-                pending.done.set()
+            pending.nacked.set()
+        elif isinstance(event, PingReply) and pending.code == layouts.PING:
+            pending.reply = event
+            pending.done.set()
 
     def _wake_pending(self) -> None:
         pending = self._pending
@@ -290,10 +425,16 @@ class DeviceLink:
                 pending = _Pending(reply_code)
                 self._pending = pending
                 try:
-                    self.send(command)
-                    self._wait(pending, timeout)
+                    if self._port_lock is None:
+                        self.reader.requester = self
+                        self.send(command)
+                        self._wait(pending, timeout)
+                    else:
+                        self._exchange_shared(command, pending, timeout)
                 finally:
                     self._pending = None
+                    if self.reader.requester is self:
+                        self.reader.requester = None
                 if self.disconnected.is_set():
                     raise PortDisconnected(self.error or 'device disconnected')
                 self._check_cancelled()
@@ -306,6 +447,31 @@ class DeviceLink:
                 raise DeviceNack(f'{name}: the base station rejected it {retries} times')
             raise DeviceTimeout(f'{name}: no reply after {retries} tries')
 
+    def _exchange_shared(self, command: bytes, pending: _Pending, timeout: float) -> None:
+        """
+        Send on a shared port: hold it until the ACK or NACK, then wait for the reply alone.
+
+        The reply is a data packet with this sensor's address, routed to this
+        link whoever else streams or asks meanwhile; only the base station's
+        one-byte answer must not be mistaken for another sensor's.
+        """
+        deadline = time.monotonic() + timeout
+        with self._port_lock:
+            self.reader.requester = self
+            try:
+                self.send(command)
+                ack_deadline = time.monotonic() + min(timeouts.ACK_TIMEOUT, timeout)
+                while not (pending.acked.is_set() or pending.nacked.is_set()
+                           or pending.done.is_set() or self._cancel.is_set()):
+                    left = ack_deadline - time.monotonic()
+                    if left <= 0:
+                        break
+                    pending.acked.wait(min(left, 0.01))
+            finally:
+                self.reader.requester = None
+        if not pending.nacked.is_set():
+            self._wait(pending, deadline - time.monotonic())
+
     def _wait(self, pending: _Pending, timeout: float, nack_ends: bool = True) -> None:
         """Wait for a reply, a NACK (if ``nack_ends``), a cancel or the timeout."""
         deadline = time.monotonic() + timeout
@@ -315,7 +481,7 @@ class DeviceLink:
                 break
 
     def _check_cancelled(self) -> None:
-        if self._stop.is_set():
+        if self._stop.is_set() or self.reader._stop.is_set():
             raise DeviceTimeout('the link is shutting down')
         if self._cancel.is_set():
             raise DeviceTimeout('cancelled: the stream is being stopped')
@@ -336,11 +502,12 @@ class DeviceLink:
         wired sensor, or nothing, is on the port (what discovery needs to
         tell apart from a node that is not there).
         """
-        with self._lock:
+        with self._lock, self._port_lock or contextlib.nullcontext():
             for _ in range(2):
                 skipped = self.parser.stats.bytes_skipped
                 pending = _Pending(layouts.PING)
                 self._pending = pending
+                self.reader.requester = self
                 try:
                     self.parser.expect_ping()
                     with self._write_lock:
@@ -348,6 +515,7 @@ class DeviceLink:
                     self._wait(pending, timeout, nack_ends=False)
                 finally:
                     self._pending = None
+                    self.reader.requester = None
                 if self.disconnected.is_set():
                     raise PortDisconnected(self.error or 'device disconnected')
                 self._check_cancelled()

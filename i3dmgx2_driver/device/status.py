@@ -82,3 +82,5 @@ class DeviceStatus:
     radio: RadioStats | None = None
     #: Whether a link is open now.
     connected: bool = False
+    #: On a port several sensors share: packets of addresses none of them has, by address.
+    strays: dict[int, int] = dataclasses.field(default_factory=dict)

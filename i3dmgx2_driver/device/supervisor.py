@@ -66,6 +66,7 @@ from .port import PortError, SerialPort
 from .recovery import RecoveryLoop
 from .report import DeviceReport
 from .settings import DeviceConfig
+from .shared_port import SharedPort
 from .startup import StartUp
 from .status import DeviceStatus, State
 
@@ -86,7 +87,10 @@ class DeviceSupervisor:
     is told every port open and every link up (right after ``on_connect``)
     and handed to every link, which tells it the read and the parse of each
     sample (hot_path.py). ``port_factory`` opens the port (SerialPort; a
-    subclass to observe it).
+    subclass to observe it). ``shared``, if given, is the port this sensor
+    shares with others behind the same base station (shared_port.py): it
+    opens and closes the port, and this supervisor keeps only its sensor
+    streaming (a supervisor per sensor, each with its own thread).
     """
 
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
@@ -94,8 +98,10 @@ class DeviceSupervisor:
                  port_factory: Callable[..., SerialPort] = SerialPort,
                  on_bytes: BytesCallback | None = None,
                  on_fatal: Callable[[PortError], None] | None = None,
-                 timings: HotPathObserver | None = None) -> None:
+                 timings: HotPathObserver | None = None,
+                 shared: SharedPort | None = None) -> None:
         self.config = config
+        self._shared = shared
         log = log or logging.getLogger('i3dmgx2_driver')
         #: Set means "no stream wanted now": the thread ends, and every request on the
         #: link gives up within a few tens of milliseconds (the link's ``cancel`` event).
@@ -104,7 +110,7 @@ class DeviceSupervisor:
         self._stop = threading.Event()
         self.report = DeviceReport(log)
         self.connection = Connection(config, log, port_factory, on_record, on_bytes,
-                                     self.report.finding, self._stop, timings)
+                                     self.report.finding, self._stop, timings, shared)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
         self.dialogue = SensorDialogue(config, log, self.report.warn, self._stop)
         self._startup = StartUp(self.connection, self.dialogue, self.report, self._stop,
@@ -121,6 +127,10 @@ class DeviceSupervisor:
         """Return the device side as one snapshot (from any thread)."""
         dialogue, connection = self.dialogue, self.connection
         link = connection.link
+        line_warning = dialogue.line_warning
+        if self._shared is not None and dialogue.divider and not line_warning:
+            line_warning = self._shared.line_warning(self.config.address, self.config.stream,
+                                                     dialogue.expected_rate_hz)
         return DeviceStatus(
             **self.report.fields(), connections=connection.connections,
             reconnects=connection.reconnects, low_latency_state=connection.low_latency_state,
@@ -128,7 +138,7 @@ class DeviceSupervisor:
             connected=link is not None, ping_ok=dialogue.ping_ok, info=dialogue.info,
             divider=dialogue.divider, expected_rate_hz=dialogue.expected_rate_hz,
             eeprom_writes=dialogue.eeprom_writes, line_use=dialogue.line_use,
-            line_warning=dialogue.line_warning)
+            line_warning=line_warning, strays=connection.strays())
 
     @property
     def state(self) -> State:
@@ -239,6 +249,18 @@ class DeviceSupervisor:
             # stop() came while the stream was starting: it has the port; no thread.
             raise DeviceTimeout('the driver stopped while the stream was starting')
         self.recovery.start(link)
+
+    def start_retrying(self) -> None:
+        """
+        Let go of any link and keep trying in the supervisor thread, as :meth:`start` does.
+
+        For a managed node with several sensors: one that did not answer at
+        configure or activate is retried in the background (it may be
+        switched on later) while the others stream.
+        """
+        self.connection.release()
+        self.report.enter(State.DISCONNECTED)
+        self.start()
 
     def stop_streaming(self, timeout: float = 1.5) -> None:
         """

@@ -31,6 +31,9 @@ PING_RETRIES = 2
 #: A command's reply, per try (s), and the tries, in the driver's dialogue.
 REQUEST_TIMEOUT = 0.5
 REQUEST_RETRIES = 3
+#: On a port several sensors share: how long (s) a command holds the port for the
+#: base station's ACK (which names no sensor), before the others may send theirs.
+ACK_TIMEOUT = 0.1
 #: The serial-number read that resumes a known sensor after a reconnect (s per try).
 RESUME_TIMEOUT = 0.1
 RESUME_RETRIES = 5

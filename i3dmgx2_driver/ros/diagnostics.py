@@ -263,15 +263,24 @@ def radio_status(wireless: bool, radio: RadioStats | None, fresh: bool,
     return Status(OK, 'radio link', f'LQI {radio.lqi}, RSSI {radio.rssi}', values)
 
 
-def parser_status(totals: Mapping[str, int], previous: Mapping[str, int] | None) -> Status:
+def parser_status(totals: Mapping[str, int], previous: Mapping[str, int] | None,
+                  strays: Mapping[int, int] | None = None) -> Status:
     """
     Show the parser's counters; WARN while damaged frames keep arriving.
+
+    ``strays``, on a port several sensors share: the packets of addresses
+    none of them has, by address, named so that a sensor left out of
+    ``addresses`` is found.
 
     Checksum and length failures that grew since the previous period mean a
     noisy line or radio (or another protocol on the port); skipped bytes
     alone are normal at start-up and after a reconnect.
     """
     values = tuple((label, str(totals.get(key, 0))) for key, label in PARSER_KEYS)
+    named = ''
+    if strays:
+        named = ', '.join(f'node {address}: {count}' for address, count in sorted(strays.items()))
+        values += (('packets of unlisted addresses', named),)
     if previous is None:
         return Status(OK, 'parser', 'counting', values)
     grown = {key: totals.get(key, 0) - previous.get(key, 0) for key in PARSER_FAILURES}
@@ -281,7 +290,8 @@ def parser_status(totals: Mapping[str, int], previous: Mapping[str, int] | None)
                          for key, count in grown.items() if count > 0)
         return Status(WARN, 'parser', f'damaged frames in the last period: {text}', values)
     if foreign > 0:
-        return Status(OK, 'parser', f'{foreign} frames from other sensors ignored', values)
+        seen = f' ({named})' if named else ''
+        return Status(OK, 'parser', f'{foreign} frames from other sensors ignored{seen}', values)
     return Status(OK, 'parser', 'no damaged frames in the last period', values)
 
 
@@ -451,11 +461,17 @@ class DiagnosticsPublisher:
     ``lifecycle``, for a managed node, returns its lifecycle state's label,
     reported first. The timer runs in its own callback group, so a
     multi-threaded executor keeps it ticking during a long service call.
+    ``sensor``, one of several sensors' names, goes into every status name
+    (``i3dmgx2_driver: left_arm: stream``, the node's name first): one
+    publisher per sensor.
     """
 
     def __init__(self, node: Node, driver: Callable[[], Any],
-                 lifecycle: Callable[[], str] | None = None, period: float = PERIOD) -> None:
+                 lifecycle: Callable[[], str] | None = None, period: float = PERIOD,
+                 sensor: str = '') -> None:
         self.node = node
+        # The node's own name first, so that two drivers side by side are told apart.
+        self.prefix = f'{node.get_name()}: ' + (f'{sensor}: ' if sensor else '')
         self.period = period
         self._driver = driver
         self._lifecycle = lifecycle
@@ -520,8 +536,8 @@ class DiagnosticsPublisher:
             connection_status(core.device_config, device, core.raw_capture.describe()),
             stream_status(device, seen),
             radio_status(cfg.wireless, radio, fresh),
-            parser_status(parser, self._last_parser),
-            device_status(device, cfg.address, core.temperature.latest),
+            parser_status(parser, self._last_parser, device.strays),
+            device_status(device, core.sensor.address, core.temperature.latest),
             time_status(cfg.time_source, core.clock_status(), now,
                         time_offset=cfg.time_offset),
             calibration_status(last, good, time.time()),
@@ -539,8 +555,7 @@ class DiagnosticsPublisher:
         """Build and publish one DiagnosticArray (the timer callback)."""
         array = DiagnosticArray()
         array.header.stamp = self.node.get_clock().now().to_msg()
-        array.status = to_message(self.collect(), self.hardware_id(),
-                                  f'{self.node.get_name()}: ')
+        array.status = to_message(self.collect(), self.hardware_id(), self.prefix)
         try:
             self.publisher.publish(array)
         except RCLError:

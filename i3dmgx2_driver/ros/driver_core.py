@@ -53,6 +53,7 @@ from .conversions import mag_is_valid, MessageFactory
 from .parameters import declare_parameters, driver_config, DriverConfig, SPECS
 from .qos import create_publisher, override_names
 from .raw_capture import RawCapture
+from .sensor_set import SensorSetting, SINGLE_NAME
 from .services import DeviceServices
 from .temperature import TemperaturePoller
 from .unknown_parameters import warn_unknown_parameters
@@ -64,6 +65,7 @@ from ..device.port import check_port_path, PortError, SerialPort
 from ..device.realtime import ThreadPolicy
 from ..device.sample_clock import ClockStatus, Restart, SampleClock
 from ..device.settings import DeviceConfig
+from ..device.shared_port import SharedPort
 from ..device.supervisor import DeviceSupervisor
 
 #: Whether ready-serialized messages read back right, by the message factory's
@@ -81,12 +83,41 @@ def load_config(node: Node) -> DriverConfig:
     closest real name, also when a required one is missing ('adress'
     explains why 'address' is).
     """
+    config = None
     try:
-        values = declare_parameters(node)
+        config = driver_config(declare_parameters(node))
     finally:
+        topics = (SensorTopics.of_every_sensor(config) if config is not None
+                  else ALONE_TOPICS)
         warn_unknown_parameters(node, [*(spec.name for spec in SPECS),
-                                       *override_names(node)])
-    return driver_config(values)
+                                       *override_names(node, topics)])
+    return config
+
+
+class SensorTopics(NamedTuple):
+    """The topics one sensor's publishers use, named once for the node and its QoS names."""
+
+    imu: str
+    mag: str
+    temperature: str
+    is_calibrated: str
+
+    @classmethod
+    def of(cls, name: str, several: bool) -> 'SensorTopics':
+        """Return the topics of the sensor called ``name`` (sensor_set.py: ``imu`` alone)."""
+        return cls(f'{name}/raw_data', f'{name}/mag', f'{name}/temperature',
+                   f'~/{name}/is_calibrated' if several else '~/is_calibrated')
+
+    @staticmethod
+    def of_every_sensor(config: DriverConfig) -> list[str]:
+        """Return every topic the node may publish with ``config``, /diagnostics too."""
+        several = len(config.sensors) > 1
+        return [*(topic for sensor in config.sensors
+                  for topic in SensorTopics.of(sensor.name, several)), '/diagnostics']
+
+
+#: The topics of a node with one sensor: what is checked when the parameters fail.
+ALONE_TOPICS = [*SensorTopics.of(SINGLE_NAME, several=False), '/diagnostics']
 
 
 class StreamStats:
@@ -135,9 +166,14 @@ def publisher_qos(config: DriverConfig) -> QoSProfile:
                      else ReliabilityPolicy.BEST_EFFORT))
 
 
-def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False) -> Publishers:
+def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False,
+                      sensor: SensorSetting | None = None) -> Publishers:
     """
-    Make the data publishers on ``node``: lifecycle publishers if ``lifecycle``.
+    Make the data publishers of ``sensor`` (default: the one sensor) on ``node``.
+
+    Lifecycle publishers if ``lifecycle``. The topics are under the sensor's
+    name: ``imu/raw_data`` for the one sensor, ``<name>/raw_data`` for each
+    of several (sensor_set.py).
 
     A managed node makes them once and keeps them across configure/cleanup
     cycles: destroying a publisher while a multi-threaded executor builds
@@ -146,6 +182,8 @@ def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False)
     does not skip (ros2/rclpy#1284). Its parameters are read-only, so the
     publishers it made first are the ones every later configure needs.
     """
+    sensor = sensor if sensor is not None else config.sensors[0]
+    topics = SensorTopics.of(sensor.name, several=len(config.sensors) > 1)
     make = node.create_lifecycle_publisher if lifecycle else node.create_publisher
 
     def create(kind: type, topic: str) -> Publisher:
@@ -153,13 +191,22 @@ def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False)
         return create_publisher(node, kind, topic, publisher_qos(config), make)
 
     return Publishers(
-        create(Imu, 'imu/raw_data'),
+        create(Imu, topics.imu),
         # Only streams with a field (named 'mag' in each layout) have a magnetometer topic.
-        create(MagneticField, 'imu/mag')
-        if config.publish_mag and config.stream_choice.mag else None,
-        create(Temperature, 'imu/temperature') if config.temperature_period > 0
+        create(MagneticField, topics.mag)
+        if config.publish_mag and sensor.stream_choice.mag else None,
+        create(Temperature, topics.temperature) if config.temperature_period > 0
         else None,
-        create_publisher(node, Bool, '~/is_calibrated', calibrated_qos()))
+        create_publisher(node, Bool, topics.is_calibrated, calibrated_qos()))
+
+
+def device_config(config: DriverConfig, sensor: SensorSetting) -> DeviceConfig:
+    """Return how the device side reaches and treats ``sensor``, from the parameters."""
+    return DeviceConfig(
+        port=config.port, address=sensor.address, baud=config.baud, wireless=config.wireless,
+        low_latency=config.low_latency, stall_timeout=config.read_timeout,
+        reconnect_interval=config.reconnect_interval, data_rate_hz=sensor.data_rate_hz,
+        stream=sensor.stream_choice.code, thread_policy=ThreadPolicy(config.realtime_priority))
 
 
 class DriverCore:
@@ -177,24 +224,34 @@ class DriverCore:
     anything is made. ``timings``, if given, is told every stage boundary
     of every sample's path (device/hot_path.py); None costs nothing.
     ``port_factory`` opens the port (SerialPort; a subclass to observe it).
+
+    One core serves one sensor: ``sensor`` (default: the one the parameters
+    name). With several behind one base station (driver_set.py) each has a
+    core, ``shared`` is the port they share and ``raw_capture`` the port's
+    one capture, which the set closes; the core's services are then under
+    its sensor's name (``~/<name>/self_test``).
     """
 
     def __init__(self, node: Node, config: DriverConfig,
                  publishers: Publishers | None = None, publishing: bool = True,
                  refusal: Callable[[], str] | None = None,
                  timings: HotPathObserver | None = None,
-                 port_factory: Callable[..., SerialPort] = SerialPort) -> None:
+                 port_factory: Callable[..., SerialPort] = SerialPort,
+                 sensor: SensorSetting | None = None, shared: SharedPort | None = None,
+                 raw_capture: RawCapture | None = None) -> None:
         check_port_path(config.port)
         self.node = node
         self.config = cfg = config
+        #: The sensor this core serves: address, name (topic prefix), frame, stream.
+        self.sensor = sensor = sensor if sensor is not None else cfg.sensors[0]
         #: Why the port can never work, once the supervisor found out.
         self.fatal_error: PortError | None = None
-        self.stream = cfg.stream_choice
+        self.stream = sensor.stream_choice
         self._record_type = self.stream.record_type
-        self.publishers = publishers or create_publishers(node, cfg)
+        self.publishers = publishers or create_publishers(node, cfg, sensor=sensor)
         self.imu_pub = self.publishers.imu
         self.mag_pub = self.publishers.mag
-        settings = (cfg.frame_id, cfg.frame_convention, cfg.orientation_stddev,
+        settings = (sensor.frame_id, cfg.frame_convention, cfg.orientation_stddev,
                     cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
                     cfg.magnetic_field_stddev, self.stream)
         self.messages = MessageFactory(*settings)
@@ -220,31 +277,35 @@ class DriverCore:
             self._imu_message, self._mag_message = (self.messages.fill_imu,
                                                     self.messages.fill_mag)
         self._timings = timings
-        self.raw_capture = RawCapture(
-            cfg.capture_file, node.get_logger(), port=cfg.port, address=cfg.address,
+        #: Whether this core's sensor shares its port with others (driver_set.py).
+        self._shared = shared is not None
+        #: The port's raw capture: this core's own, or the one the sensors share.
+        self._owns_capture = raw_capture is None
+        self.raw_capture = raw_capture if raw_capture is not None else RawCapture(
+            cfg.capture_file, node.get_logger(), port=cfg.port, address=sensor.address,
             baud=cfg.baud, wireless=cfg.wireless, node=node.get_fully_qualified_name())
         #: How the device side reaches and treats the sensor.
-        self.device_config = DeviceConfig(
-            port=cfg.port, address=cfg.address, baud=cfg.baud, wireless=cfg.wireless,
-            low_latency=cfg.low_latency, stall_timeout=cfg.read_timeout,
-            reconnect_interval=cfg.reconnect_interval, data_rate_hz=cfg.data_rate_hz,
-            stream=self.stream.code, thread_policy=ThreadPolicy(cfg.realtime_priority))
+        self.device_config = device_config(cfg, sensor)
+        capture = self.raw_capture.on_bytes if self.raw_capture.active else None
         self.supervisor = DeviceSupervisor(
             self.device_config,
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
-            on_bytes=self.raw_capture.on_bytes if self.raw_capture.active else None,
-            on_fatal=self._on_fatal, timings=timings, port_factory=port_factory)
+            on_bytes=capture if shared is None else None,
+            on_fatal=self._on_fatal, timings=timings, port_factory=port_factory,
+            shared=shared)
         self.announce_calibrated(False)
         self.device_services = DeviceServices(
             node, self.supervisor, self._published, self.forget_last_sample,
             capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal,
-            calibrated=self.announce_calibrated)
+            calibrated=self.announce_calibrated,
+            prefix='~/' if shared is None else f'~/{sensor.name}/')
         self.temperature = TemperaturePoller(
             node, self.supervisor.streaming_link, self.messages.frame_id,
             cfg.temperature_period, self.publishers.temperature, cfg.time_offset)
         node.get_logger().info(
-            f'i3dmgx2_driver: port {cfg.port}, node address {cfg.address}, '
-            f'stream {self.stream.label}, frame {self.messages.frame_id} '
+            f'i3dmgx2_driver: port {cfg.port}, node address {sensor.address}, '
+            + (f'topics {sensor.name}/..., ' if shared is not None else '')
+            + f'stream {self.stream.label}, frame {self.messages.frame_id} '
             f'({cfg.frame_convention}), '
             f'time source {cfg.time_source}'
             + (f', time offset {cfg.time_offset:+g} s' if cfg.time_offset else ''))
@@ -366,10 +427,12 @@ class DriverCore:
         self.temperature.stop()
         self.supervisor.stop()
         self.device_services.wait_idle(1.0)
-        self.raw_capture.close()
+        if self._owns_capture:
+            self.raw_capture.close()
         if not report:
             return
-        message = (f'stopped: {self.stats.published} records published, port closed '
+        of = f' of node {self.sensor.address}' if self._shared else ''
+        message = (f'stopped: {self.stats.published} records{of} published, port closed '
                    f'({time.monotonic() - start:.2f} s)')
         if self.node.context.ok():
             self.node.get_logger().info(message)

@@ -29,6 +29,7 @@ from rclpy.node import Node
 
 from .diagnostics import DiagnosticsPublisher
 from .driver_core import DriverCore, load_config
+from .driver_set import DriverSet
 from .parameters import DriverConfig
 from ..device.hot_path import HotPathObserver
 from ..device.port import PortError, SerialPort
@@ -48,10 +49,14 @@ class ImuDriverNode(Node):
                  port_factory: Callable[..., SerialPort] = SerialPort, **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         self.config: DriverConfig = load_config(self)
-        self.core = DriverCore(self, self.config, timings=timings,
-                               port_factory=port_factory)
-        self.diagnostics = DiagnosticsPublisher(self, lambda: self.core)
-        self.core.supervisor.start()
+        #: Every sensor's core (one, unless ``addresses`` lists several: driver_set.py).
+        self.drivers = DriverSet(self, self.config, timings=timings, port_factory=port_factory)
+        self.core: DriverCore = self.drivers.cores[0]
+        self.diagnostics = [
+            DiagnosticsPublisher(self, lambda core=core: core,
+                                 sensor=core.sensor.name if self.drivers.several else '')
+            for core in self.drivers.cores]
+        self.drivers.start()
 
     @property
     def finished(self) -> bool:
@@ -61,8 +66,8 @@ class ImuDriverNode(Node):
     @property
     def fatal_error(self) -> PortError | None:
         """Why the port can never work, once the supervisor found out (main exits 2)."""
-        return self.core.fatal_error
+        return self.drivers.fatal_error
 
     def shutdown(self) -> None:
-        """Stop the device stream and close the port (bounded in time)."""
-        self.core.shutdown()
+        """Stop the device streams and close the port (bounded in time)."""
+        self.drivers.shutdown()

@@ -41,6 +41,12 @@ logged in one line:
   transition, within 2 s, even in the middle of a configure.
 
 ``/diagnostics`` runs in every state and reports the lifecycle state first.
+
+With several sensors (``addresses``) every step is taken for each sensor at
+once (driver_set.py): configure fails only if no listed sensor answers, and
+says which did not; a sensor that did not answer, or whose stream does not
+start at activate, is retried in the background while the others stream
+(as the plain node retries it); activate fails only if no sensor streams.
 """
 
 from collections.abc import Callable
@@ -56,8 +62,9 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 
 from .diagnostics import DiagnosticsPublisher
 from .driver_core import create_publishers, DriverCore, load_config, Publishers
+from .driver_set import DriverSet
 from .main import run
-from .parameters import declare_parameters, driver_config, ParameterError
+from .parameters import declare_parameters, driver_config, DriverConfig, ParameterError
 from ..device.hot_path import HotPathObserver
 from ..device.link import DeviceTimeout
 from ..device.port import check_port_path, PortError, PortUnusable, SerialPort
@@ -103,7 +110,7 @@ def transition(name: str) -> Callable[[Transition], Transition]:
 
 class LifecycleDriverNode(LifecycleNode):
     """
-    The 3DM-GX2 driver as a managed node; the core exists from configure to cleanup.
+    The 3DM-GX2 driver as a managed node; the cores exist from configure to cleanup.
 
     ``timings`` and ``port_factory`` go to every core a configure makes, as
     the plain node's (imu_node.py): a run that observes the node uses them.
@@ -114,21 +121,39 @@ class LifecycleDriverNode(LifecycleNode):
                  port_factory: Callable[..., SerialPort] = SerialPort, **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         self._core_options = {'timings': timings, 'port_factory': port_factory}
-        #: The driver, from a successful configure to cleanup or shutdown; else None.
-        self.core: DriverCore | None = None
-        #: Made at the first configure and kept (create_publishers says why).
-        self._data_publishers: Publishers | None = None
+        #: Every sensor's core, from a successful configure to cleanup or shutdown.
+        self.drivers: DriverSet | None = None
+        #: Made at the first configure and kept (create_publishers says why), per sensor.
+        self._data_publishers: list[Publishers] | None = None
         self._transition_lock = threading.RLock()
         self._finished = threading.Event()
+        config: DriverConfig | None = None
         try:
             # Declared now so that ``ros2 param`` shows them before configure, and
             # names the node does not know are said once; configure checks them
             # again and reports what is wrong.
-            load_config(self)
+            config = load_config(self)
         except ParameterError:
             pass
-        self.diagnostics = DiagnosticsPublisher(self, lambda: self.core,
-                                                lifecycle=self.state_label)
+        names = [s.name for s in config.sensors] if config is not None else []
+        if len(names) > 1:
+            self.diagnostics = [
+                DiagnosticsPublisher(self, lambda i=i: self._core(i),
+                                     lifecycle=self.state_label if i == 0 else None,
+                                     sensor=name)
+                for i, name in enumerate(names)]
+        else:
+            self.diagnostics = [DiagnosticsPublisher(self, lambda: self.core,
+                                                     lifecycle=self.state_label)]
+
+    @property
+    def core(self) -> DriverCore | None:
+        """Return the (first) sensor's core while configured, else None."""
+        return self._core(0)
+
+    def _core(self, index: int) -> DriverCore | None:
+        drivers = self.drivers
+        return drivers.cores[index] if drivers is not None else None
 
     # -- state ---------------------------------------------------------------
 
@@ -166,42 +191,61 @@ class LifecycleDriverNode(LifecycleNode):
             return FAILURE
         if self._data_publishers is None:
             try:
-                self._data_publishers = create_publishers(self, config, lifecycle=True)
+                self._data_publishers = [
+                    create_publishers(self, config, lifecycle=True, sensor=s)
+                    for s in config.sensors]
             except ParameterError as exc:  # a bad qos_overrides parameter
                 log.error(f'configure failed: {exc}')
                 return FAILURE
-        core = DriverCore(self, config, publishers=self._data_publishers, publishing=False,
-                          refusal=self._refusal, **self._core_options)
-        self.core = core
-        try:
-            core.supervisor.connect()
-        except DEVICE_ERRORS as exc:
+        drivers = DriverSet(self, config, publishers=self._data_publishers, publishing=False,
+                            refusal=self._refusal, **self._core_options)
+        self.drivers = drivers
+        failed = _each(drivers.cores, lambda core: core.supervisor.connect())
+        if len(failed) == len(drivers.cores):
             self._release()
-            log.error(f'configure failed: {exc}')
+            if not drivers.several:
+                log.error(f'configure failed: {failed[0][1]}')
+            else:
+                log.error('configure failed: no listed sensor answers: ' + '; '.join(
+                    f'node {core.sensor.address}: {exc}' for core, exc in failed))
             return FAILURE
-        sup = core.supervisor
+        for core, exc in failed:
+            log.warning(f'configure: node {core.sensor.address} does not answer ({exc}); '
+                        f'the others go on, and it is retried once active')
+        ready = [core for core in drivers.cores if core not in {c for c, _ in failed}]
+        sup = ready[0].supervisor
         rate = f', {sup.expected_rate_hz:.1f} Hz' if sup.expected_rate_hz else ''
-        log.info(f'configure: {config.port} open, node {config.address} ready{rate} '
-                 f'({time.monotonic() - start:.2f} s)')
+        nodes = ', '.join(str(core.sensor.address) for core in ready)
+        log.info(f'configure: {config.port} open, node{"s" if len(ready) > 1 else ""} '
+                 f'{nodes} ready{rate} ({time.monotonic() - start:.2f} s)')
         return SUCCESS
 
     @transition('activate')
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Enable the publishers, start the stream; fail if no record comes."""
         start = time.monotonic()
-        core = self.core
+        drivers = self.drivers
         result = super().on_activate(state)
-        if result != SUCCESS or core is None:
+        if result != SUCCESS or drivers is None:
             return FAILURE
-        core.forget_last_sample()  # the pause since the last activation is no loss
-        core.publishing = True
-        try:
-            core.supervisor.start_streaming()
-        except DEVICE_ERRORS as exc:
-            core.publishing = False
+        for core in drivers.cores:
+            core.forget_last_sample()  # the pause since the last activation is no loss
+        drivers.set_publishing(True)
+        failed = _each(drivers.cores, lambda core: core.supervisor.start_streaming())
+        if len(failed) == len(drivers.cores):
+            drivers.set_publishing(False)
+            if drivers.several:
+                _each(drivers.cores, lambda core: core.supervisor.stop_streaming())
             super().on_deactivate(state)
-            self.get_logger().error(f'activate failed: {exc}')
+            self.get_logger().error('activate failed: ' + '; '.join(
+                (f'node {core.sensor.address}: ' if drivers.several else '') + str(exc)
+                for core, exc in failed))
             return FAILURE
+        for core, exc in failed:
+            self.get_logger().warning(
+                f'activate: node {core.sensor.address} does not stream ({exc}): retried '
+                f'in the background while the others stream')
+            core.supervisor.start_retrying()
         self.get_logger().info(f'activate: streaming ({time.monotonic() - start:.2f} s)')
         return SUCCESS
 
@@ -209,15 +253,16 @@ class LifecycleDriverNode(LifecycleNode):
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Stop publishing and the stream (0xFA); keep the port."""
         start = time.monotonic()
-        core = self.core
-        if core is not None:
+        drivers = self.drivers
+        if drivers is not None:
             # Before the publishers go inactive: a record read in between would
             # otherwise fail to publish (found by the long soak).
-            core.publishing = False
+            drivers.set_publishing(False)
         super().on_deactivate(state)
-        if core is not None:
-            core.supervisor.stop_streaming()
-            core.device_services.wait_idle(1.0)
+        if drivers is not None:
+            _each(drivers.cores, lambda core: core.supervisor.stop_streaming())
+            for core in drivers.cores:
+                core.device_services.wait_idle(1.0)
         self.get_logger().info(f'deactivate: stream stopped (0xFA), port kept open '
                                f'({time.monotonic() - start:.2f} s)')
         return SUCCESS
@@ -243,16 +288,16 @@ class LifecycleDriverNode(LifecycleNode):
 
     def _release(self, what: str | None = None) -> None:
         """Stop the core and remove it; log one line saying so when ``what`` is given."""
-        core, self.core = self.core, None
+        drivers, self.drivers = self.drivers, None
         start = time.monotonic()
-        if core is None:
+        if drivers is None:
             if what:
                 self.get_logger().info(f'{what}: nothing open')
             return
-        core.publishing = False
-        published = core.stats.published
-        core.shutdown(report=False)
-        core.destroy()
+        drivers.set_publishing(False)
+        published = sum(core.stats.published for core in drivers.cores)
+        drivers.shutdown(report=False)
+        drivers.destroy()
         if what:
             self.get_logger().info(
                 f'{what}: stream stopped, port closed, {published} records published '
@@ -272,10 +317,10 @@ class LifecycleDriverNode(LifecycleNode):
         """
         if self._finished.is_set():
             return
-        core = self.core
-        if core is not None:
-            core.publishing = False
-            core.supervisor.stop()
+        drivers = self.drivers
+        if drivers is not None:
+            drivers.set_publishing(False)
+            _each(drivers.cores, lambda core: core.supervisor.stop())
         locked = self._transition_lock.acquire(timeout=TRANSITION_WAIT)
         try:
             if locked and not self._finished.is_set():
@@ -290,6 +335,35 @@ class LifecycleDriverNode(LifecycleNode):
         if not self._finished.is_set():
             self._release('shutdown')
             self._finished.set()
+
+
+def _each(cores: list[DriverCore],
+          step: Callable[[DriverCore], None]) -> list[tuple[DriverCore, Exception]]:
+    """
+    Take ``step`` for every core at once (one thread each if several); return who failed.
+
+    With several sensors a silent one would otherwise hold up the others by
+    its timeouts; one core takes its step in the calling thread, as always.
+    Only the device's or the port's errors count as failures; others raise.
+    """
+    failed: list[tuple[DriverCore, Exception]] = []
+
+    def take(core: DriverCore) -> None:
+        try:
+            step(core)
+        except DEVICE_ERRORS as exc:
+            failed.append((core, exc))
+
+    if len(cores) == 1:
+        take(cores[0])
+        return failed
+    threads = [threading.Thread(target=take, args=(core,), name='gx2-transition')
+               for core in cores]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    return sorted(failed, key=lambda pair: cores.index(pair[0]))
 
 
 def main(args: list[str] | None = None) -> int:

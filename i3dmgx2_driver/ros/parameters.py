@@ -41,6 +41,7 @@ from rclpy.exceptions import InvalidParameterValueException, ParameterUninitiali
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from .sensor_set import check_shared_budget, sensor_settings, SensorSetting
 from ..codec import streams
 from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
@@ -84,6 +85,29 @@ class Spec(NamedTuple):
     from_integer: Callable[[int], str] | None = None
     #: Deprecated: the QoS policy of rclpy's standard parameter that replaces it.
     replaced_by: str = ''
+    #: For a required one: not required when this other parameter is given.
+    unless: str = ''
+
+
+#: Several sensors behind one base station, served by one driver (ros/sensor_set.py).
+SENSOR_SET_SPECS = (
+    Spec('addresses', Parameter.Type.INTEGER_ARRAY, [],
+         'Node addresses of several sensors behind the one base station, served by this '
+         "driver (instead of 'address'); each gets its topics under its name (see Several "
+         'sensors).'),
+    Spec('sensor_names', Parameter.Type.STRING_ARRAY, [],
+         "With addresses: each sensor's name, the prefix of its topics (<name>/raw_data); "
+         "default imu_<address>. For one sensor: 'imu'."),
+    Spec('frame_ids', Parameter.Type.STRING_ARRAY, [],
+         "With addresses: each sensor's frame; default <name>_link (frame_id is one "
+         "sensor's)."),
+    Spec('streams', Parameter.Type.STRING_ARRAY, [],
+         "With addresses: each sensor's stream (or one for all); default: stream for all.",
+         from_integer=lambda code: f'0x{code:02X}'),
+    Spec('data_rates', Parameter.Type.DOUBLE_ARRAY, [],
+         "With addresses: each sensor's data rate (Hz; or one for all; 0: as the device "
+         'is); default: data_rate for all. Together they must fit the serial line.'),
+)
 
 
 SPECS: list[Spec] = [
@@ -91,7 +115,10 @@ SPECS: list[Spec] = [
          'Serial port of the base station (or wired sensor).'),
     Spec('address', Parameter.Type.INTEGER, _REQUIRED,
          'Node address of the sensor (factory: last two digits of its serial number).',
-         (MIN_ADDRESS, MAX_ADDRESS)),
+         (MIN_ADDRESS, MAX_ADDRESS), unless='addresses'),
+    # Several sensors behind one base station (ros/sensor_set.py): the defaults,
+    # empty, leave the one sensor of 'address' as it always was.
+    *SENSOR_SET_SPECS,
     Spec('baud', Parameter.Type.INTEGER, 115200, 'Serial baud rate.', (9600, 921600)),
     Spec('wireless', Parameter.Type.BOOL, True,
          'True: through a wireless base station (packets, ACK/NACK); false: wired sensor.'),
@@ -175,7 +202,13 @@ class DriverConfig:
     """The validated parameters, as plain values."""
 
     port: str
+    #: 0 when ``addresses`` lists the sensors instead.
     address: int
+    addresses: tuple[int, ...]
+    sensor_names: tuple[str, ...]
+    frame_ids: tuple[str, ...]
+    streams: tuple[str, ...]
+    data_rates: tuple[float, ...]
     baud: int
     wireless: bool
     stream: str
@@ -210,6 +243,13 @@ class DriverConfig:
         """Return the stream the ``stream`` parameter names."""
         return streams.parse(self.stream)
 
+    @property
+    def sensors(self) -> list[SensorSetting]:
+        """Return every sensor to serve, with its name, frame and stream (sensor_set.py)."""
+        return sensor_settings(self.address, self.addresses, self.sensor_names, self.frame_ids,
+                               self.streams, self.data_rates, self.frame_id, self.stream,
+                               self.data_rate, self.wireless)
+
 
 def _valid_range(spec: Spec) -> str:
     if spec.choices:
@@ -220,6 +260,12 @@ def _valid_range(spec: Spec) -> str:
         return streams.valid_text()
     if spec.name == 'data_rate':
         return f'0 (leave the device as it is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz'
+    if spec.name == 'addresses':
+        return f"[] (then 'address'), or distinct addresses {MIN_ADDRESS}..{MAX_ADDRESS}"
+    if spec.name in ('streams', 'data_rates'):
+        return f"[] (then '{spec.name[:-1]}' for all), one for all, or one per address"
+    if isinstance(spec.default, list):
+        return '[] (the default), or one distinct name per address'
     if spec.limits is not None:
         low, high = spec.limits
         return f'{low:g}..{high:g}'
@@ -273,9 +319,18 @@ def _as_typed(spec: Spec, value: Any) -> Any:
         return float(value)
     if given == Parameter.Type.INTEGER and spec.from_integer is not None:
         return spec.from_integer(value)
+    # The same for arrays: -p data_rates:=[100, 50] is an array of integers.
+    if given == Parameter.Type.INTEGER_ARRAY and spec.kind == Parameter.Type.DOUBLE_ARRAY:
+        return [float(v) for v in value]
+    if given == Parameter.Type.INTEGER_ARRAY and spec.kind == Parameter.Type.STRING_ARRAY \
+            and spec.from_integer is not None:
+        return [spec.from_integer(v) for v in value]
     kind = {Parameter.Type.DOUBLE: 'a floating-point number, e.g. 1.0',
             Parameter.Type.INTEGER: 'an integer', Parameter.Type.BOOL: 'true or false',
-            Parameter.Type.STRING: 'a string'}[spec.kind]
+            Parameter.Type.STRING: 'a string',
+            Parameter.Type.INTEGER_ARRAY: 'a list of integers, e.g. [17, 95]',
+            Parameter.Type.DOUBLE_ARRAY: 'a list of numbers, e.g. [100.0, 50.0]',
+            Parameter.Type.STRING_ARRAY: 'a list of names, e.g. [left, right]'}[spec.kind]
     raise ParameterError(f'parameter {spec.name!r} must be {_valid_range(spec)}, written as '
                          f'{kind}: got {value!r} ({given.name.lower()})')
 
@@ -302,7 +357,8 @@ def _declare(node: Node, spec: Spec) -> Any:
             if given is not None and spec.replaced_by:
                 _warn_deprecated(node, spec)
             value = spec.default if given is None else _as_typed(spec, given)
-            if value is _REQUIRED:
+            if value is _REQUIRED or value == []:
+                # An empty array has no type of its own: declared by its type, unset.
                 node.declare_parameter(spec.name, spec.kind, _descriptor(spec))
             else:
                 # The override was read above and is given here, converted.
@@ -310,6 +366,10 @@ def _declare(node: Node, spec: Spec) -> Any:
                                        ignore_override=True)
         value = node.get_parameter(spec.name).value
     except ParameterUninitializedException:
+        if spec.default is not _REQUIRED:
+            return list(spec.default)
+        if spec.unless and _is_set(node, spec.unless):
+            return 0
         raise ParameterError(f'parameter {spec.name!r} is required: set it with '
                              f'-p {spec.name}:=<value> ({_valid_range(spec)})') from None
     except InvalidParameterValueException:
@@ -318,7 +378,21 @@ def _declare(node: Node, spec: Spec) -> Any:
     return value
 
 
+def _is_set(node: Node, name: str) -> bool:
+    """Whether parameter ``name`` was given something (declared already, or not yet)."""
+    if node.has_parameter(name):
+        try:
+            return bool(node.get_parameter(name).value)
+        except ParameterUninitializedException:
+            return False
+    return bool(given_value(node, name))
+
+
 def _check(spec: Spec, value: Any) -> Any:
+    if isinstance(spec.default, list):
+        return tuple(value)  # each entry is checked with the others (sensor_set.py)
+    if spec.unless and value == 0:
+        return value  # left to the parameter it gives way to
     problem = f'parameter {spec.name!r} must be {_valid_range(spec)}, got {value!r}'
     if spec.choices and value not in spec.choices:
         raise ParameterError(problem)
@@ -360,6 +434,12 @@ def driver_config(values: dict) -> DriverConfig:
     """Build the driver's configuration from validated values; check the line budget."""
     fields = DriverConfig.__dataclass_fields__
     config = DriverConfig(**{name: values[name] for name in fields})
+    try:
+        sensors = config.sensors
+        if len(sensors) > 1:
+            check_shared_budget(sensors, config.baud, config.wireless)
+    except ValueError as exc:
+        raise ParameterError(str(exc)) from None
     check_line_budget(config)
     return config
 
@@ -373,11 +453,12 @@ def check_line_budget(config: DriverConfig) -> None:
     rate is the device's and is known only once connected: the supervisor
     warns then.
     """
-    if config.data_rate_hz is None:
-        return
-    stream = config.stream_choice
-    budget = streams.line_budget(stream, config.data_rate_hz, config.baud, config.wireless)
+    sensors = config.sensors
+    if len(sensors) > 1 or sensors[0].data_rate_hz is None:
+        return  # several sensors: the budget of them all (sensor_set.py)
+    stream, rate = sensors[0].stream_choice, sensors[0].data_rate
+    budget = streams.line_budget(stream, rate, config.baud, config.wireless)
     if not budget.fits:
-        raise ParameterError(f"parameter 'data_rate' ({config.data_rate:g} Hz) does not fit "
+        raise ParameterError(f"parameter 'data_rate' ({rate:g} Hz) does not fit "
                              f'the line with stream {stream.name!r}: '
                              + streams.advice(stream, budget))

@@ -43,8 +43,6 @@ from .parameters import given_value, ParameterError
 #: The policies that get a ``qos_overrides`` parameter on every publisher.
 POLICIES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, QoSPolicyKind.RELIABILITY,
             QoSPolicyKind.DURABILITY)
-#: Every topic the driver may publish, as it names them (before resolution).
-TOPICS = ('imu/raw_data', 'imu/mag', 'imu/temperature', '~/is_calibrated', '/diagnostics')
 #: The words rclpy takes for each named policy (in any case): its enum's
 #: members but UNKNOWN, which rmw reports and nobody can ask for.
 CHOICES = {kind: tuple(member.name.lower() for member in enum if member.name != 'UNKNOWN')
@@ -65,9 +63,9 @@ def override_name(topic: str, policy: QoSPolicyKind) -> str:
     return f'qos_overrides.{topic}.publisher.{policy.name.lower()}'
 
 
-def override_names(node: Node, topics: Iterable[str] = TOPICS) -> list[str]:
+def override_names(node: Node, topics: Iterable[str]) -> list[str]:
     """
-    Return every QoS parameter name the driver's publishers on ``node`` may declare.
+    Return every QoS parameter name the publishers of ``topics`` on ``node`` may declare.
 
     For the unknown-parameter warning, which runs before the publishers
     exist (and a topic switched off never declares its own): a misspelt

@@ -202,13 +202,15 @@ class DeviceServices:
     call must be refused now ('' to serve it): a managed node that is not
     active answers so at once. ``calibrated(flag)``, if given, is told
     whether the device uses a good gyro bias after every capture that
-    reached the device (``~/is_calibrated``).
+    reached the device (``~/is_calibrated``). ``prefix`` goes before the
+    services' names (``~/<name>/`` for each of several sensors).
     """
 
     def __init__(self, node: Node, device: Device, published: Callable[[], tuple[int, float]],
                  forget_last_sample: Callable[[], None], capture_on_start: bool = False,
                  refusal: Callable[[], str] | None = None,
-                 calibrated: Callable[[bool], None] | None = None) -> None:
+                 calibrated: Callable[[bool], None] | None = None,
+                 prefix: str = '~/') -> None:
         self.node = node
         self._calibrated = calibrated or (lambda flag: None)
         self._device = device
@@ -225,11 +227,11 @@ class DeviceServices:
         self.good_capture: Calibration | None = None
         group = MutuallyExclusiveCallbackGroup()
         self.capture_service = node.create_service(
-            Trigger, '~/capture_gyro_bias', self._on_capture, callback_group=group)
+            Trigger, f'{prefix}capture_gyro_bias', self._on_capture, callback_group=group)
         self.self_test_service = node.create_service(
-            Trigger, '~/self_test', self._on_self_test, callback_group=group)
+            Trigger, f'{prefix}self_test', self._on_self_test, callback_group=group)
         self.diagnostic_self_test_service = node.create_service(
-            SelfTest, '~/diagnostic_self_test', self._on_diagnostic_self_test,
+            SelfTest, f'{prefix}diagnostic_self_test', self._on_diagnostic_self_test,
             callback_group=group)
         self._start_thread: threading.Thread | None = None
         if capture_on_start:

@@ -26,6 +26,7 @@ packet with the link's LQI and RSSI.
 
 import collections.abc
 import random
+from typing import Any
 
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
@@ -48,18 +49,24 @@ Deliver = collections.abc.Callable[[Command | None, bytes, float], str]
 
 
 class BaseStation:
-    """A base station between the host and one wireless sensor; call with the lock held."""
+    """
+    A base station between the host and the wireless sensors; call with the lock held.
+
+    ``units`` maps each sensor's address to its parts (``sensor``, ``faults``
+    in effect for it, ``deliver``): a command packet or ping goes to the
+    sensor it names, if that one is on the channel. ``faults`` is the base
+    station's own (busy NACKs).
+    """
 
     wireless = True
     #: Bytes that "safe" garbage avoids on this line (see faults.SIGNIFICANT_BYTES).
     significant_bytes = flt.SIGNIFICANT_BYTES
 
-    def __init__(self, sensor: SimulatedSensor, record: GroundTruth, port: PtyPort,
-                 deliver: Deliver, faults: FaultState, rng: random.Random) -> None:
-        self._sensor = sensor
+    def __init__(self, units: collections.abc.Mapping[int, Any], record: GroundTruth,
+                 port: PtyPort, faults: FaultState, rng: random.Random) -> None:
+        self._units = units
         self._record = record
         self._port = port
-        self._deliver = deliver
         self._faults = faults
         self._rng = rng
 
@@ -87,9 +94,11 @@ class BaseStation:
             return
         if command.code != lay.PING:
             return
-        answer = self._sensor.ping_reply(command.args[0])
-        if self._faults.silent(now):
+        unit = self._units.get(command.args[0])
+        if unit is None or unit.faults.silent(now):
             answer = _PING_FAILED
+        else:
+            answer = unit.sensor.ping_reply(command.args[0])
         outcome = 'ping ok' if answer != _PING_FAILED else 'ping failed'
         self._record.log(HostCommand(now, 'ping', command.args[0], command, raw, outcome),
                          pings=1)
@@ -112,14 +121,15 @@ class BaseStation:
             command: Command | None = decode_command(packet.command)
         except CodecError:
             command = None
-        if packet.address != self._sensor.address:
+        unit = self._units.get(packet.address)
+        if unit is None:
             outcome, counter = 'other_address', 'commands_other_address'
-        elif self._faults.silent(now):
+        elif unit.faults.silent(now):
             outcome, counter = 'stalled', 'commands_lost'
         elif self._rng.random() < faults.command_loss_probability:
             outcome, counter = 'lost', 'commands_lost'
         else:
-            outcome = self._deliver(command, packet.command, now)
+            outcome = unit.deliver(command, packet.command, now)
             counter = 'commands_received' if outcome == 'delivered' else 'commands_ignored'
         self._record.log(
             HostCommand(now, 'packet', packet.address, command, packet.command, outcome),

@@ -78,8 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
                     'with --wired, a wired 3DM-GX2) on a pseudo-terminal. Prints '
                     '"port: PATH" first; open PATH like a serial port at 115200 baud.')
     device = parser.add_argument_group('device')
-    device.add_argument('--address', type=_address, default=95,
-                        help='node address of the sensor (default: 95)')
+    device.add_argument('--address', type=_address, action='append', metavar='N',
+                        help='node address of the sensor (default: 95); given again, '
+                             'several sensors behind the one base station, each with its '
+                             'own motion, clock and serial number (e.g. --address 17 '
+                             '--address 95)')
     device.add_argument('--wired', action='store_true',
                         help='a wired sensor on the port, no base station: raw commands in, '
                              'wired records (echo, data, checksum) out, no ACK/NACK, no ping')
@@ -140,6 +143,14 @@ def build_parser() -> argparse.ArgumentParser:
                         help='radio silence starting T seconds after start')
     faults.add_argument('--stall-for', type=_non_negative, default=2.0, metavar='S',
                         help='length of that silence (default: 2 s)')
+    faults.add_argument('--power-cycle-at', type=_non_negative, metavar='T',
+                        help='switch the sensor off T seconds after start')
+    faults.add_argument('--power-off-for', type=_non_negative, default=1.0, metavar='S',
+                        help='how long it stays off (default: 1 s)')
+    faults.add_argument('--fault-address', type=_address, metavar='N',
+                        help='with several sensors: the one --stall-at and --power-cycle-at '
+                             'hit, the others streaming on (default: a stall silences the '
+                             'base station, a power cycle hits the first sensor)')
     faults.add_argument('--unplug-at', type=_non_negative, metavar='T',
                         help='unplug the base station T seconds after start')
     faults.add_argument('--unplug-for', type=_non_negative, default=2.0, metavar='S',
@@ -168,9 +179,12 @@ def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
         ignore_first_continuous=args.ignore_first_continuous,
         needs_polled_first=args.needs_polled_first, jitter_ms=args.jitter_ms,
         stall_at=args.stall_at, stall_seconds=args.stall_for,
+        power_cycle_at=args.power_cycle_at, power_off_seconds=args.power_off_for,
         unplug_at=args.unplug_at, unplug_seconds=args.unplug_for)
+    addresses = tuple(args.address or (95,))
     return SimulatorConfig(
-        address=args.address, wireless=not args.wired, divider=args.divider,
+        address=addresses[0], addresses=addresses if len(addresses) > 1 else (),
+        fault_address=args.fault_address, wireless=not args.wired, divider=args.divider,
         streaming_at_start=args.stream or False,
         serial_number=args.serial, rate_hz=args.rate, seed=args.seed,
         motion=MotionConfig(static=args.static), faults=faults, nan_mag=args.nan_mag,
@@ -186,6 +200,9 @@ def status_line(sim: PtySimulator, elapsed: float) -> str:
     """One line on what the simulator has done so far."""
     stats = sim.stats
     streaming = f'0x{sim.streaming:02X}' if sim.streaming else 'no'
+    if len(sim.addresses) > 1:
+        streaming = ','.join(f'{a}:' + (f'0x{sim.streaming_of(a):02X}' if sim.streaming_of(a)
+                                        else 'no') for a in sim.addresses)
     link = (f'acks={stats.acks} nacks={stats.nacks}' if sim.wireless
             else 'wired')
     line = (f'[{elapsed:8.1f} s] records={stats.records_sent} replies={stats.replies_sent} '

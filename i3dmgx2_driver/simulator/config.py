@@ -39,6 +39,13 @@ class SimulatorConfig:
 
     #: Node address of the sensor (factory: last two digits of its serial number).
     address: int = 95
+    #: Several sensors behind the one base station: their addresses, the first
+    #: being ``address`` (set from it); () or one address: one sensor. The first
+    #: is set up as the fields below say, the others differ from it (sensor_unit.py).
+    addresses: tuple[int, ...] = ()
+    #: The sensor the timed faults (``stall_at``, ``power_cycle_at``) hit; None:
+    #: a stall silences the base station (every sensor), a power cycle hits the first.
+    fault_address: int | None = None
     #: True: a wireless sensor behind its base station (packets, ACK/NACK, ping).
     #: False: a wired sensor on the port itself: raw command bytes in, wired
     #: records (echo, data, checksum) out, no ACK/NACK, no ping (see PtySimulator).
@@ -95,7 +102,18 @@ class SimulatorConfig:
     def __post_init__(self) -> None:
         """Reject settings that cannot work, naming the field."""
         # The sensor's own checks: address, timer_start, rate_hz.
-        sns.SensorSpec(self.address, timer_start=self.timer_start, rate_hz=self.rate_hz)
+        self.addresses = tuple(self.addresses)
+        if self.addresses:
+            self.address = self.addresses[0]
+        for address in self.all_addresses:
+            sns.SensorSpec(address, timer_start=self.timer_start, rate_hz=self.rate_hz)
+        if len(set(self.all_addresses)) != len(self.all_addresses):
+            raise ValueError(f'addresses must differ, got {self.addresses}')
+        if len(self.all_addresses) > 1 and not self.wireless:
+            raise ValueError('several sensors need a base station (wireless), not a wired line')
+        if self.fault_address is not None and self.fault_address not in self.all_addresses:
+            raise ValueError(f'fault_address {self.fault_address} is none of the sensors '
+                             f'{self.all_addresses}')
         low, high = self.chunks
         if not 1 <= low <= high:
             raise ValueError(f'chunks must be (min, max) with 1 <= min <= max, got {self.chunks}')
@@ -115,6 +133,11 @@ class SimulatorConfig:
                              f'streamable records: {valid}')
         if not self.wireless:
             self.faults.check_wired()
+
+    @property
+    def all_addresses(self) -> tuple[int, ...]:
+        """Return the address of every sensor, the first one's first."""
+        return self.addresses or (self.address,)
 
     @property
     def start_stream(self) -> int:

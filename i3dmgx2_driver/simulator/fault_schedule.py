@@ -21,18 +21,20 @@ ones it names.
 """
 
 import collections.abc
+from collections.abc import Callable
 
 from .cable import Cable
-from .faults import FaultConfig, FaultState
+from .faults import FaultConfig
 from .power import Post, SensorPower
 
 
 class FaultSchedule:
     """Starts the timed faults on time; call with the simulator's lock held."""
 
-    def __init__(self, faults: FaultState, post: Post, cable: Cable,
+    def __init__(self, stall: Callable[[float, float], None], post: Post, cable: Cable,
                  power: SensorPower) -> None:
-        self._faults = faults
+        #: ``stall(start, seconds)`` silences what the stall hits (a sensor, or all of them).
+        self._stall = stall
         self._post = post
         self._cable = cable
         self._power = power
@@ -44,7 +46,7 @@ class FaultSchedule:
             return changes is None or any(name in changes for name in names)
 
         if faults.stall_at is not None and asked('stall_at', 'stall_seconds'):
-            self._faults.stall(now + faults.stall_at, faults.stall_seconds)
+            self._stall(now + faults.stall_at, faults.stall_seconds)
         if faults.unplug_at is not None and asked('unplug_at', 'unplug_seconds'):
             seconds = faults.unplug_seconds
             self._post(faults.unplug_at, lambda: self._cable.unplug(seconds))

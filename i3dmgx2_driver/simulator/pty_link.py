@@ -69,14 +69,12 @@ from .fault_schedule import FaultSchedule
 from .faults import FaultConfig, FaultState
 from .ground_truth import GroundTruth
 from .host_reader import HostReader
-from .inbox import SensorInbox
 from .line_writer import LineWriter
 from .motion import Motion, MotionConfig
-from .packet_faults import PacketFaults
-from .power import SensorPower
 from .pty_port import PtyPort
 from .sensor import SensorSpec, SimulatedSensor
-from .transmitter import Transmitter
+from .sensor_unit import AllInboxes, SensorUnit, unit_specs
+from .transmitter import SharedLine
 from .truth_queries import TruthQueries
 from .wired_line import WiredLine
 
@@ -105,11 +103,11 @@ class PtySimulator(TruthQueries):
             config = dataclasses.replace(config, **overrides)
         self.config = config
         seeds = random.Random(config.seed)
-        #: The device model; touch it only while holding ``sim.lock``.
-        self.sensor = SimulatedSensor(config.sensor_spec, Motion(config.sensor_motion),
-                                      seed=seeds.getrandbits(64))
+        # The first sensor's seeds are drawn as they always were: a seeded run of
+        # one sensor is the same run it was before there could be several.
+        sensor_seed = seeds.getrandbits(64)
         foreign = SimulatedSensor(
-            SensorSpec(config.faults.foreign_of(config.address), '0000', clock_ppm=-25.0,
+            SensorSpec(self._foreign_address(config.faults), '0000', clock_ppm=-25.0,
                        timer_start=seeds.getrandbits(32)),
             Motion(MotionConfig(static=True)), seed=seeds.getrandbits(64))
         self._fault_rng = random.Random(seeds.getrandbits(64))
@@ -124,26 +122,37 @@ class PtySimulator(TruthQueries):
         record = GroundTruth(config.truth_limit, changed)
         super().__init__(record, changed)
         self._stop = threading.Event()
-        self._faults = FaultState(config.faults)
         self._pty = PtyPort(config.symlink, config.link_via_proc)
+        #: Every sensor's parts, by address, in the order given (sensor_unit.py).
+        self.units: dict[int, SensorUnit] = {}
         self._end: BaseStation | WiredLine
-        if config.wireless:
-            self._end = BaseStation(self.sensor, record, self._pty, self._deliver,
-                                    self._faults, command_rng)
-        else:
-            self._end = WiredLine(record, self._deliver, self._faults)
         writer = LineWriter(self._pty, record, config.chunks, config.chunk_gap_s, chunk_rng)
-        self._packet_faults = PacketFaults(self._faults, self._fault_rng, self._end, foreign,
-                                           writer, record)
-        self._tx = Transmitter(config, self.sensor, self._end, record, self._tx_wake,
-                               self._packet_faults, writer)
-        self._inbox = SensorInbox(self.sensor, record, self._tx, self._tx_wake, self._faults)
-        self._reader = HostReader(self._pty, self._end, record, self._inbox, changed)
-        self._power = SensorPower(self.sensor, self._tx, record, self._tx_wake, self._faults,
-                                  self._reader.post)
+        station_faults = FaultState(config.faults)
+        if config.wireless:
+            self._end = BaseStation(self.units, record, self._pty, station_faults, command_rng)
+        else:
+            self._end = WiredLine(record, self._deliver, station_faults)
+        self._reader = HostReader(self._pty, self._end, record, AllInboxes(self.units),
+                                  changed)
+        specs = unit_specs(config, seeds)
+        line = SharedLine() if len(specs) > 1 else None
+        for i, (spec, motion) in enumerate(specs):
+            self.units[spec.address] = SensorUnit(
+                config, spec, motion, sensor_seed if i == 0 else seeds.getrandbits(64),
+                self._fault_rng if i == 0 else random.Random(seeds.getrandbits(64)),
+                self._end, writer, record, self._tx_wake, self._reader.post, foreign,
+                station_faults if i == 0 else None, line)
+        first = next(iter(self.units.values()))
+        #: The device model of the first sensor; touch it only while holding ``sim.lock``.
+        self.sensor = first.sensor
+        self._faults, self._packet_faults = first.faults, first.packet_faults
+        self._tx, self._inbox, self._power = first.tx, first.inbox, first.power
         self._cable = Cable(self._pty, self._reader, record, changed,
                             None if config.wireless else self._power, self._stop)
-        self._schedule = FaultSchedule(self._faults, self._reader.post, self._cable, self._power)
+        target = self.units.get(config.fault_address) if config.fault_address else None
+        self._schedule = FaultSchedule(
+            target.faults.stall if target is not None else self._stall_all, self._reader.post,
+            self._cable, (target or first).power)
         self._threads: list[threading.Thread] = []
         self._started = False
         #: Wall-clock time of start() (the sensor's power-up).
@@ -162,8 +171,9 @@ class PtySimulator(TruthQueries):
         now = time.time()
         with self.lock:
             self.start_time = now
-            self.sensor.power_up(now)
-            self._record.note_streaming(now, self.sensor.streaming)
+            for unit in self.units.values():
+                unit.sensor.power_up(now)
+                self._record.note_streaming(now, unit.sensor.streaming)
             self._packet_faults.foreign.power_up(now - 1000.0 * self._fault_rng.random())
             self._schedule.schedule(self._faults.config, now, None)
         self._started = True
@@ -172,8 +182,10 @@ class PtySimulator(TruthQueries):
         self._threads = [
             threading.Thread(target=self._reader.run, args=(self._stop,), name='gx2sim-rx',
                              daemon=True),
-            threading.Thread(target=self._tx.run, args=(self._stop,), name='gx2sim-tx',
-                             daemon=True),
+            *(threading.Thread(target=unit.tx.run, args=(self._stop,),
+                               name='gx2sim-tx' if i == 0 else f'gx2sim-tx-{unit.address}',
+                               daemon=True)
+              for i, unit in enumerate(self.units.values())),
         ]
         for thread in self._threads:
             thread.start()
@@ -259,10 +271,38 @@ class PtySimulator(TruthQueries):
 
     # -- run-time control -------------------------------------------------------------------
 
-    def stall(self, seconds: float) -> None:
-        """Silence from now for ``seconds`` (radio; wired: a hung sensor): nothing gets through."""
+    def stall(self, seconds: float, address: int | None = None) -> None:
+        """
+        Silence from now for ``seconds`` (radio; wired: a hung sensor): nothing gets through.
+
+        ``address`` stalls that sensor alone (its radio link), the others
+        streaming on; None the base station (every sensor).
+        """
         with self.lock:
-            self._faults.stall(time.time(), seconds)
+            if address is None:
+                self._stall_all(time.time(), seconds)
+            else:
+                self._unit(address).faults.stall(time.time(), seconds)
+
+    def _stall_all(self, start: float, seconds: float) -> None:
+        for unit in self.units.values():
+            unit.faults.stall(start, seconds)
+
+    def _unit(self, address: int | None) -> SensorUnit:
+        """Return the sensor at ``address`` (None: the first); ValueError if there is none."""
+        if address is None:
+            return next(iter(self.units.values()))
+        if address not in self.units:
+            raise ValueError(f'no sensor at address {address}: the sensors are '
+                             f'{list(self.units)}')
+        return self.units[address]
+
+    def _foreign_address(self, faults: FaultConfig) -> int:
+        """Return the stranger's address: next to the first sensor's, and none of ours."""
+        address = faults.foreign_of(self.config.address)
+        while faults.foreign_address is None and address in self.config.all_addresses:
+            address = faults.foreign_of(address)
+        return address
 
     @property
     def faults(self) -> FaultConfig:
@@ -282,14 +322,16 @@ class PtySimulator(TruthQueries):
             new = faults if faults is not None else dataclasses.replace(old, **changes)
             if not self.config.wireless:
                 new.check_wired()
-            self._faults.config = new
-            self._packet_faults.foreign.address = new.foreign_of(self.config.address)
+            for unit in self.units.values():
+                unit.faults.config = new
+            self._packet_faults.foreign.address = self._foreign_address(new)
             if new.ignore_first_continuous and not old.ignore_first_continuous:
                 self._inbox.ignore_next_continuous = True
             now = time.time()
             if new.already_streaming and not old.already_streaming and self._started:
-                self.sensor.start_streaming(DEFAULT_STREAM, now)
-                self._record.note_streaming(now, self.sensor.streaming)
+                for unit in self.units.values():
+                    unit.sensor.start_streaming(DEFAULT_STREAM, now)
+                    self._record.note_streaming(now, unit.sensor.streaming)
             if self._started:
                 self._schedule.schedule(new, now, None if faults is not None else changes)
             self._tx_wake.notify_all()
@@ -306,7 +348,8 @@ class PtySimulator(TruthQueries):
             self.sensor.set_rate_override(rate_hz, time.time())
             self._tx_wake.notify_all()
 
-    def power_cycle(self, off_seconds: float = 0.0, timer_start: int | None = None) -> None:
+    def power_cycle(self, off_seconds: float = 0.0, timer_start: int | None = None,
+                    address: int | None = None) -> None:
         """
         Restart the sensor: dark for ``off_seconds``, then up again as from power-up.
 
@@ -314,16 +357,27 @@ class PtySimulator(TruthQueries):
         radio silence). At power-up the timer starts at ``timer_start`` (None:
         the sensor's configured ``timer_start``; a value given here stays the
         sensor's from then on), the stream as the EEPROM auto-start says.
+        ``address``: that sensor, the others going on; None: the first.
         """
-        self._power.cycle(off_seconds, timer_start)
+        self._unit(address).power.cycle(off_seconds, timer_start)
 
     # -- the device now ---------------------------------------------------------------------
 
     @property
     def streaming(self) -> int:
-        """Command byte the sensor streams now, 0 when polled."""
+        """Command byte the (first) sensor streams now, 0 when polled."""
         with self.lock:
             return self.sensor.streaming
+
+    def streaming_of(self, address: int) -> int:
+        """Command byte the sensor at ``address`` streams now, 0 when polled."""
+        with self.lock:
+            return self._unit(address).sensor.streaming
+
+    @property
+    def addresses(self) -> tuple[int, ...]:
+        """Return the address of every sensor behind the base station, the first first."""
+        return tuple(self.units)
 
     @property
     def wireless(self) -> bool:

@@ -34,6 +34,10 @@ thread that merely slept until the due time wrote 0.2-0.7 ms late, by an
 amount that wandered with the machine's load, and that lateness, not the
 driver, was most of the noise the stamp benchmarks measured
 (docs/timestamps.md).
+recorded in the ground truth, written or lost, and why. Several sensors
+behind one base station each have a transmitter, and their packets take the
+one serial line in turn (``SharedLine``): interleaved, never overlapping,
+at the line's rate.
 """
 
 import heapq
@@ -60,6 +64,25 @@ WRITE_LEAD_S = 0.001
 #: The last part (s) of the wait for the due time, spent yielding instead of sleeping
 #: (a sleep wakes 50-100 us late: the kernel's timer slack and the wake-up).
 WRITE_SPIN_S = 0.0003
+#: How far behind (s) the base station's shared line may fall before it drops a
+#: packet rather than queue it: several sensors sending more than the line
+#: carries lose packets there, as a buffer of a few packets would.
+LINE_BUFFER_S = 0.05
+
+
+class SharedLine:
+    """
+    The base station's one serial line, which several sensors' packets take in turn.
+
+    A packet starts on the line when it has arrived over the radio and the
+    packet before it, of whichever sensor, has left; its last byte is at the
+    host its wire time later. Only a base station with several sensors has
+    one (a single sensor's packets keep the timing they always had).
+    """
+
+    def __init__(self) -> None:
+        #: When the last packet queued for the line has left it (wall clock).
+        self.free_at = 0.0
 
 
 class Outgoing(NamedTuple):
@@ -71,6 +94,8 @@ class Outgoing(NamedTuple):
     reply: Reply
     source: str
     address: int
+    #: Dropped by the base station: its line was too far behind (SharedLine).
+    overflow: bool = False
 
 
 class Transmitter:
@@ -84,8 +109,10 @@ class Transmitter:
 
     def __init__(self, config: SimulatorConfig, sensor: SimulatedSensor,
                  end: BaseStation | WiredLine, record: GroundTruth, wake: threading.Condition,
-                 faults: PacketFaults, writer: LineWriter) -> None:
+                 faults: PacketFaults, writer: LineWriter,
+                 line: SharedLine | None = None) -> None:
         self._config = config
+        self._line = line
         self._sensor = sensor
         self._end = end
         self._record = record
@@ -101,12 +128,24 @@ class Transmitter:
         """Queue a record the sensor sends at ``reply.due``."""
         config = self._config
         delay = config.latency_s
-        if config.wire_baud:
-            delay += self._end.frame_size(len(reply.data)) * 10.0 / config.wire_baud
-        delay += self._faults.jitter()
+        wire = (self._end.frame_size(len(reply.data)) * 10.0 / config.wire_baud
+                if config.wire_baud else 0.0)
+        line = self._line
+        overflow = False
+        if line is None:
+            write_at = reply.due + (delay + wire + self._faults.jitter())
+        else:
+            # Several sensors: each packet waits for the line behind the others'.
+            ready = reply.due + delay + self._faults.jitter()
+            overflow = line.free_at - ready > LINE_BUFFER_S
+            if overflow:
+                write_at = ready
+            else:
+                write_at = max(ready, line.free_at) + wire
+                line.free_at = write_at
         self._seq += 1
-        heapq.heappush(self._outbox, Outgoing(reply.due, self._seq, reply.due + delay,
-                                              reply, source, address))
+        heapq.heappush(self._outbox, Outgoing(reply.due, self._seq, write_at,
+                                              reply, source, address, overflow))
 
     def clear(self) -> None:
         """Forget what is queued (the sensor lost its power)."""
@@ -150,7 +189,8 @@ class Transmitter:
         reply = item.reply
         with self._wake:
             packet = self._end.frame(reply, item.address, self._sensor)
-            fault = self._faults.lost(item.send) or self._line_busy(item)
+            fault = self._faults.lost(item.send) or self._line_busy(item) \
+                or (flt.FAULT_LINE_RATE if item.overflow else None)
             if fault is not None:
                 self._record.add(reply, None, packet, item.address, False, fault, item.source)
                 return

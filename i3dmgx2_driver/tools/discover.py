@@ -60,6 +60,21 @@ def node_command(path: str, sensor: SensorFound) -> str:
     return f'{head} -p wireless:=false -p address:={WIRED_ADDRESS}'
 
 
+def port_command(path: str, sensors: Sequence[SensorFound]) -> str:
+    """
+    Return the one ``ros2 run`` line that starts the driver for every sensor on a port.
+
+    The node opens its port exclusively, so several sensors behind one base
+    station are served by one node (``addresses``), never one node each.
+    """
+    wireless = [sensor for sensor in sensors if sensor.wireless]
+    if len(wireless) < 2:
+        return node_command(path, sensors[0])
+    listed = ','.join(str(address) for address in sorted(s.address for s in wireless))
+    return (f'ros2 run i3dmgx2_driver node --ros-args -p port:={shlex.quote(path)} '
+            f'-p {shlex.quote(f"addresses:=[{listed}]")}')
+
+
 def udev_note(path: str, message: str = '', sys_class_tty: str = SYS_CLASS_TTY) -> str:
     """
     Say when the package's udev rule would help this port, or return ''.
@@ -133,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 # -- output --------------------------------------------------------------------
 
-def _sensor_dict(path: str, sensor: SensorFound) -> dict[str, Any]:
+def _sensor_dict(sensor: SensorFound, command: str | None) -> dict[str, Any]:
     info = sensor.info
     return {
         'address': sensor.address,
@@ -151,7 +166,7 @@ def _sensor_dict(path: str, sensor: SensorFound) -> dict[str, Any]:
         'lqi': sensor.lqi,
         'rssi': sensor.rssi,
         'note': sensor.note or None,
-        'command': node_command(path, sensor),
+        'command': command,
     }
 
 
@@ -164,13 +179,15 @@ def _port_dict(port: PortInfo, probe: PortProbe | None) -> dict[str, Any]:
         'udev_note': udev_note(port.device, probe.message if probe else '') or None,
     }
     if probe is not None:
+        command = port_command(port.stable_path, probe.sensors) if probe.sensors else None
         out.update({
             'message': probe.message or None,
             'base_station': probe.base_station,
             'pinged': probe.pinged,
             'ping_seconds': round(probe.ping_seconds, 3),
             'seconds': round(probe.seconds, 3),
-            'sensors': [_sensor_dict(port.stable_path, s) for s in probe.sensors],
+            'sensors': [_sensor_dict(s, command) for s in probe.sensors],
+            'command': command,
         })
     return out
 
@@ -230,6 +247,7 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
         count = len(probe.sensors)
         out.write(f'{port.device}: {count} sensor{"s" if count > 1 else ""}, '
                   f'{probe.seconds:.1f} s\n')
+        commands.append((probe.sensors, port_command(port.stable_path, probe.sensors)))
         for sensor in probe.sensors:
             info = sensor.info
             rows.append([
@@ -240,16 +258,16 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
                 (info.firmware or '?') if info else '?',
                 f'{sensor.rate_hz:.1f} Hz' if sensor.rate_hz else '?',
                 _state(sensor), sensor.found_by])
-            commands.append((sensor, node_command(port.stable_path, sensor)))
     if not commands:
         return
     out.write('\n')
     _table(rows, out)
     out.write('\nStart the driver with:\n')
-    for sensor, command in commands:
+    for sensors, command in commands:
         out.write(f'  {command}\n')
-        if sensor.note:
-            out.write(f'    note: {sensor.note}\n')
+        for sensor in sensors:
+            if sensor.note:
+                out.write(f'    note: {sensor.note}\n')
 
 
 def print_hints(results: Sequence[tuple[PortInfo, PortProbe]], config: ProbeConfig,

@@ -1,0 +1,157 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+One port, one reader thread, several sensors: a base station shared by all of them.
+
+The node opens the port exclusively, as it must: two readers would split the
+byte stream. With several sensors behind one base station, each sensor still
+has its own supervisor (dialogue, recovery loop, reconnects, counters); what
+they share is this: :class:`SharedPort` opens the port when the first
+sensor's connection asks for a link, gives every sensor a
+:class:`~.link.DeviceLink` of its own on the one
+:class:`~.link.PortReader` (which routes each data packet to the link of its
+address), and closes the port when the last link is handed back.
+
+An unplug is seen by every link at once (they share the reader's
+``disconnected``): each sensor's recovery loop hands its link back and asks
+for a new one, and the first to ask opens the port again, the others join
+it; the dead reader is closed then, whoever still held it. So the port-level
+recovery stops all sensors and brings all back, and a sensor switched off
+costs the others nothing but the time its requests hold the port.
+"""
+
+from collections.abc import Callable
+import threading
+from typing import Any
+
+from .hot_path import HotPathObserver
+from .link import BytesCallback, DeviceLink, LinkOptions, PortReader, RecordCallback
+from .port import SerialPort
+from .settings import DeviceConfig
+from ..codec import streams
+
+
+class SharedPort:
+    """
+    The port at ``config.port``, shared by the sensors behind its base station.
+
+    ``on_bytes`` (a raw capture) and ``timings`` belong to the port's one
+    reader; ``port_factory`` opens it (SerialPort; a subclass to observe it).
+    """
+
+    def __init__(self, config: DeviceConfig, log: Any,
+                 port_factory: Callable[..., SerialPort] = SerialPort,
+                 on_bytes: BytesCallback | None = None,
+                 timings: HotPathObserver | None = None) -> None:
+        self.config = config
+        self._log = log
+        self._port_factory = port_factory
+        self._on_bytes = on_bytes
+        self._timings = timings
+        self._lock = threading.Lock()
+        self._reader: PortReader | None = None
+        self._links: set[DeviceLink] = set()
+        #: Each sensor's stream and the rate its device runs at, once known.
+        self._streams: dict[int, tuple[int, float]] = {}
+        self._warned = ''
+        #: Times the port was opened, and what it granted of low-latency mode.
+        self.opens = 0
+        self.low_latency_state = ''
+
+    @property
+    def reader(self) -> PortReader | None:
+        """Return the reader of the open port (None while closed)."""
+        return self._reader
+
+    def attach(self, address: int, on_record: RecordCallback,
+               cancel: threading.Event) -> DeviceLink:
+        """
+        Return a new link to the sensor at ``address``, opening the port if need be.
+
+        The link receives nothing until it is started (its address routed).
+        Raises PortError when the port cannot be opened.
+        """
+        cfg = self.config
+        with self._lock:
+            reader = self._reader
+            if reader is None or reader.disconnected.is_set():
+                if reader is not None:
+                    self._close(reader)
+                port = self._port_factory(cfg.port, cfg.baud, low_latency=cfg.low_latency)
+                if self._timings is not None:
+                    self._timings.opened()
+                if port.low_latency_state != self.low_latency_state:
+                    self.low_latency_state = port.low_latency_state
+                    self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
+                reader = self._reader = PortReader(port, None, LinkOptions(
+                    wireless=cfg.wireless, on_bytes=self._on_bytes,
+                    thread_policy=cfg.thread_policy, timings=self._timings))
+                self.opens += 1
+            link = DeviceLink(reader.port, address, on_record,
+                              LinkOptions(wireless=cfg.wireless, cancel=cancel), reader=reader)
+            self._links.add(link)
+            return link
+
+    def detach(self, link: DeviceLink) -> None:
+        """Take ``link`` off its reader; close the port once no link is left on it."""
+        link.stop()
+        with self._lock:
+            self._links.discard(link)
+            reader = link.reader
+            if any(other.reader is reader for other in self._links):
+                return
+            self._close(reader)
+            if reader is self._reader:
+                self._reader = None
+
+    def line_warning(self, address: int, code: int, rate_hz: float) -> str:
+        """
+        Note a sensor's stream and rate; say if the sensors' streams together overflow the line.
+
+        The parameters were checked against the line before the start, but a
+        sensor left at its device's rate (``data_rate`` 0) is known only once
+        connected: the base station would then drop the packets the line
+        cannot carry. Returns '' while they fit (or one sensor is known); the
+        first time they do not, it is also logged.
+        """
+        self._streams[address] = (code, rate_hz)
+        if len(self._streams) < 2:
+            return ''
+        chosen = [(a, streams.BY_CODE[c], r) for a, (c, r) in sorted(self._streams.items())]
+        if streams.shared_line_fits([(st, r) for _, st, r in chosen], self.config.baud,
+                                    self.config.wireless):
+            return ''
+        text = ('the sensors on this port are set to rates the line cannot carry together, '
+                'records will be skipped: '
+                + streams.shared_advice(chosen, self.config.baud, self.config.wireless))
+        if text != self._warned:
+            self._warned = text
+            self._log.warning(text)
+        return text
+
+    def parser_stats(self) -> dict[str, int]:
+        """Return the counters of the open port's parser (empty while closed)."""
+        reader = self._reader
+        return reader.parser.stats.as_dict() if reader is not None else {}
+
+    def strays(self) -> dict[int, int]:
+        """Return the packets of unlisted addresses on the open port, by address."""
+        reader = self._reader
+        return dict(reader.strays) if reader is not None else {}
+
+    @staticmethod
+    def _close(reader: PortReader) -> None:
+        reader.stop()
+        reader.port.close()
