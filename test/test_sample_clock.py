@@ -210,6 +210,53 @@ def test_a_busy_host_reading_late_keeps_the_fit(late):
     assert clock.status().gaps == 0
 
 
+def _steps(stream: list[Packet]) -> tuple[SampleClock, list[int | None]]:
+    """Stamp the stream; return the clock and each record's ticks_since_last."""
+    system = Stepped()
+    clock = SampleClock(offset=system.offset)
+    steps = []
+    for p in stream:
+        clock.stamp(p.timer, p.read_time, WIRE)
+        steps.append(clock.ticks_since_last)
+    return clock, steps
+
+
+def test_a_late_read_after_a_stall_resyncs_and_still_counts_the_loss():
+    """
+    The first record after a 2-s stall is read 20 ms late (a loaded host).
+
+    The fit starts afresh (a resync, not a reset: the device is fine), and
+    the timer's step across the stall still says how many records were lost
+    (the long soak's loss counts fell short by the records of such gaps).
+    """
+    stream = packets([Life(0.0, 20.0, 5_000_000)], outages=((8.0, 10.0),))
+    first_after = next(i for i, p in enumerate(stream) if p.true_time >= 10.0)
+    stream[first_after] = stream[first_after]._replace(
+        read_time=stream[first_after].read_time + 0.020)
+    clock, steps = _steps(stream)
+    assert clock.status().restarts == {'start': 1, 'resync': 1}
+    cycle = TICKS_PER_SECOND * (1 + PPM * 1e-6) / RATE
+    assert round(steps[first_after] / cycle) == 201  # 200 cycles lost, then this one
+    assert steps[0] is None
+    assert all(round(step / cycle) == 1 for step in steps[1:first_after])
+
+
+def test_a_young_fit_of_late_reads_resyncs_and_is_no_reset():
+    """
+    After a start on a loaded host every record so far came 30 ms late; then a stall.
+
+    The record after it, read on time, comes 30 ms before the line: the line
+    was what was off, not the device (the long soak counted such a resync as
+    a power cycle, and warned of one).
+    """
+    stream = packets([Life(0.0, 10.0, 5_000_000)], outages=((2.0, 4.0),))
+    stream = [p._replace(read_time=p.read_time + 0.030) if p.true_time < 2.0 else p
+              for p in stream]
+    clock, steps = _steps(stream)
+    assert clock.status().restarts == {'start': 1, 'resync': 1}
+    assert clock.resets == 0
+
+
 @pytest.mark.parametrize('seconds', [0.3, 3.0, 30.0, 300.0])
 def test_stall_keeps_the_fit(seconds):
     """Radio out of range: the sensor's timer ran on, and the fit goes on."""

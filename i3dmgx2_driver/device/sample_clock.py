@@ -66,6 +66,11 @@ CONTINUE_LATE_S = 0.005
 #: A record further than this (s) from the line, or before it, says the timer restarted:
 #: no read comes that late. Nearer, a late read and a restart cannot be told apart.
 RESET_S = 0.5
+#: A record further than this (s) *before* the line says the timer restarted. Nearer, the
+#: line may be what is off: after a start on a loaded host, every record so far may have
+#: been read late (tens of ms were measured), and a record read on time after a gap then
+#: comes that much early. A restarted timer lands this close before the line by chance only.
+EARLY_RESET_S = 0.05
 #: Added to both per second of gap: what a drift error of 100 ppm makes of it.
 GAP_DRIFT = 100e-6
 #: How long (s) a continued gap is watched, and how close (s) to the line some record
@@ -145,7 +150,11 @@ class SampleClock:
 
     ``offset`` returns the system clock minus the monotonic clock now
     (:func:`system_clock_offset` by default). After each :meth:`stamp`,
-    :attr:`ticks` is the record's device time in ticks since the current
+    :attr:`ticks_since_last` the device ticks since the record before, as
+    the timer counted them (rollovers included), or None where the timer
+    did not run on from it (the first record, a reset, another sensor):
+    what packet loss is counted from, across a resync too. :attr:`ticks` is
+    the record's device time in ticks since the current
     fit started (for loss counting) and :attr:`restarted` says whether that
     record started a fit afresh (its reason in :attr:`last_restart`).
     """
@@ -170,6 +179,7 @@ class SampleClock:
         self._probation_end: float | None = None
         self._probation_best = 0.0
         self.ticks = 0
+        self.ticks_since_last: int | None = None
         self.restarted = False
 
     def link_changed(self, same_device: bool = True) -> None:
@@ -216,8 +226,15 @@ class SampleClock:
             off = self.fit.residual(ticks, read_time, wire_time)
             slack = GAP_DRIFT * max(elapsed, 0.0)
             if not -CONTINUE_EARLY_S - slack <= off <= CONTINUE_LATE_S + slack:
-                sure = off < -CONTINUE_EARLY_S - slack or off > RESET_S
-                self._restart(Restart.RESET if sure else Restart.RESYNC, raw, host)
+                # Far off either way, the timer restarted. Nearer, it may have run on and
+                # the line be what is off: a late read, or a young fit whose first
+                # records all came late (a loaded host), so that a record on time now
+                # comes early. Starting afresh is right for both; only the first is a
+                # reset of the device, and only the second keeps counting the loss.
+                if off > RESET_S or off < -EARLY_RESET_S:
+                    self._restart(Restart.RESET, raw, host)
+                else:
+                    self._restart(Restart.RESYNC, raw, host, since=ticks - self.ticks)
                 return
             if gap or self._check_next:
                 self.gaps += 1
@@ -233,13 +250,16 @@ class SampleClock:
                 self._probation_end = None
                 if self._probation_best > CONFIRM_S:
                     # No record since the gap came near the line: the device lost time.
-                    self._restart(Restart.RESYNC, raw, host)
+                    self._restart(Restart.RESYNC, raw, host, since=ticks - self.ticks)
                     return
+        self.ticks_since_last = ticks - self.ticks
         self.ticks = ticks
 
-    def _restart(self, reason: Restart, raw: int, host: float = 0.0) -> None:
+    def _restart(self, reason: Restart, raw: int, host: float = 0.0,
+                 since: int | None = None) -> None:
         self.fit.reset()
         self.ticks = raw
+        self.ticks_since_last = since
         self.restarted = True
         self.last_restart = reason.value
         self._restarts[reason.value] = self._restarts.get(reason.value, 0) + 1

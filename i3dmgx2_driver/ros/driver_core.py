@@ -132,7 +132,9 @@ class StreamStats:
         self.device_resets = 0
         self.first_time = 0.0
         self.last_time = 0.0
-        self.last_ticks: int | None = None
+        #: Whether the next record's timer step counts packet loss: not across a
+        #: reconnect or a deliberate pause (deactivate, a capture).
+        self.counting = False
 
 
 class Publishers(NamedTuple):
@@ -345,7 +347,7 @@ class DriverCore:
         """
         with self._publish_lock:
             self.sample_clock.link_changed()
-            self.stats.last_ticks = None
+            self.stats.counting = False
 
     def clock_status(self) -> ClockStatus:
         """Return a snapshot of the stamping clock (from any thread)."""
@@ -359,7 +361,7 @@ class DriverCore:
     def forget_last_sample(self) -> None:
         """Let the next record start afresh: a deliberate pause is no packet loss."""
         with self._publish_lock:
-            self.stats.last_ticks = None
+            self.stats.counting = False
 
     def _expected_ticks(self) -> int | None:
         divider = self.supervisor.divider
@@ -381,22 +383,22 @@ class DriverCore:
             timings = self._timings
             if timings is not None:
                 timings.stamped()
-            ticks = clock.ticks
-            if clock.restarted:
-                stats.last_ticks = None
-                if clock.last_restart == Restart.RESET.value:
-                    stats.device_resets += 1
-                    self.announce_calibrated(False)
-                    self.node.get_logger().warning(
-                        "the sensor's timer restarted (a power cycle or brown-out): "
-                        'timestamps start afresh from its new clock')
-            elif stats.last_ticks is not None:
+            if clock.restarted and clock.last_restart == Restart.RESET.value:
+                stats.device_resets += 1
+                self.announce_calibrated(False)
+                self.node.get_logger().warning(
+                    "the sensor's timer restarted (a power cycle or brown-out): "
+                    'timestamps start afresh from its new clock')
+            # The timer's step since the record before, when it ran on (across a resync
+            # of the fit too): the records in between were lost.
+            since = clock.ticks_since_last
+            if since is not None and stats.counting:
                 expected = self._expected_ticks()
                 if expected:
-                    gap = round((ticks - stats.last_ticks) / expected) - 1
+                    gap = round(since / expected) - 1
                     if gap > 0:
                         stats.lost += gap
-            stats.last_ticks = ticks
+            stats.counting = True
             if not self._use_device_time:
                 stamp = read_time
             stamp += self._time_offset
