@@ -208,7 +208,7 @@ class LifecycleDriverNode(LifecycleNode):
         core = self.core
         if core is not None:
             # Before the publishers go inactive: a record read in between would
-            # otherwise fail to publish (found by the long soak).
+            # otherwise be counted as published while the inactive publisher drops it.
             core.publishing = False
         super().on_deactivate(state)
         if core is not None:
