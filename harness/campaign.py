@@ -812,9 +812,22 @@ def analyse(data: RunData) -> CampaignResult:
         return s.key is not None and s.valid and s.address == address \
             and s.code in (None, code)
 
-    must = [s for s in data.truth if ours(s) and windows.read(s.write_time)]
-    may = [s for s in data.truth if ours(s)
-           and s.write_time is not None and not windows.read(s.write_time)]
+    # A polled request of the stream's own record (the start-up's two polled requests)
+    # takes the first such record after it as its reply, whether the sensor answered it
+    # or was streaming already (a stall ate the stop): that record is claimed, not lost.
+    polled = sorted(h.time for h in data.host_log
+                    if h.command is not None and h.command.code == code)
+    ours_sorted = sorted((s.write_time, s.index) for s in data.truth
+                         if ours(s) and s.write_time is not None)
+    claimed = set()
+    for p in polled:
+        i = bisect.bisect_right(ours_sorted, (p, float('inf')))
+        if i < len(ours_sorted):
+            claimed.add(ours_sorted[i][1])
+    must = [s for s in data.truth if ours(s) and windows.read(s.write_time)
+            and s.index not in claimed]
+    may = [s for s in data.truth if ours(s) and s.write_time is not None
+           and (not windows.read(s.write_time) or s.index in claimed)]
     missing = [s for s in must if s.index not in seen]
     may_published = sum(1 for s in may if s.index in seen)
     published = nstats.get('published')

@@ -30,7 +30,8 @@ through configure / activate (the leg) / deactivate / cleanup each time its
 stream's turn comes, so that every managed process lives the whole run and
 its RSS, descriptors and threads can be fitted against time (a leak is a
 slope, not a final value). Every ``plain_every``-th leg runs the plain node
-instead, a fresh process stopped with SIGINT at the leg's end. At the end
+instead, a fresh process stopped with SIGINT at the leg's end (shifted by
+one each round, so that every stream runs on both kinds). At the end
 every managed process is taken to a random state and shut down with SIGINT.
 
 Per leg and per stream: records sent, published, received by a subscriber
@@ -96,7 +97,8 @@ class LongSoakConfig:
     streams: tuple[str, ...] = ()
     seed: int = 1
     address: int = 95
-    #: Every this many legs, the plain node runs the leg instead of a managed one (0: never).
+    #: Every this many legs, the plain node runs the leg instead of a managed one (0: never);
+    #: shifted by one leg each round of the streams.
     plain_every: int = 3
     #: Seconds between fault events (the campaign's FaultDriver).
     event_gap: tuple[float, float] = (1.0, 4.0)
@@ -150,7 +152,9 @@ def plan_legs(cfg: LongSoakConfig) -> list[Leg]:
     for number in range(count):
         stream = chosen[number % len(chosen)]
         rate = line_budget.max_rate(stream.code, BAUD, wireless=True)
-        plain = cfg.plain_every and (number + 1) % cfg.plain_every == 0
+        # Shifted by one each round of the streams, so that every stream meets both kinds.
+        turn = number + number // len(chosen)
+        plain = cfg.plain_every and (turn + 1) % cfg.plain_every == 0
         # Rounded down to 0.1 Hz: the parameter's text must map to the same divider.
         legs.append(Leg(number, stream.name, int(rate * 10) / 10.0,
                         'plain' if plain else 'managed'))

@@ -252,7 +252,7 @@ def test_a_young_fit_of_late_reads_resyncs_and_is_no_reset():
     stream = packets([Life(0.0, 10.0, 5_000_000)], outages=((2.0, 4.0),))
     stream = [p._replace(read_time=p.read_time + 0.030) if p.true_time < 2.0 else p
               for p in stream]
-    clock, steps = _steps(stream)
+    clock, _ = _steps(stream)
     assert clock.status().restarts == {'start': 1, 'resync': 1}
     assert clock.resets == 0
 

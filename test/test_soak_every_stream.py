@@ -29,9 +29,13 @@ import pytest
 
 
 def test_legs_go_round_every_stream_at_its_line_budget_maximum():
-    legs = plan_legs(LongSoakConfig(legs=12, plain_every=3))
-    assert [leg.stream for leg in legs] == [s.name for s in streams.STREAMS] * 2
-    assert [leg.kind for leg in legs] == ['managed', 'managed', 'plain'] * 4
+    legs = plan_legs(LongSoakConfig(legs=18, plain_every=3))
+    assert [leg.stream for leg in legs] == [s.name for s in streams.STREAMS] * 3
+    assert [leg.kind for leg in legs[:3]] == ['managed', 'managed', 'plain']
+    assert sum(leg.kind == 'plain' for leg in legs) == 6
+    # Within three rounds every stream runs on both kinds of node.
+    for stream in streams.STREAMS:
+        assert {leg.kind for leg in legs if leg.stream == stream.name} == {'managed', 'plain'}
     for leg in legs:
         code = streams.BY_NAME[leg.stream].code
         fits = line_budget.max_rate(code, 115200, wireless=True)

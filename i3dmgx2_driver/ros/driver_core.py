@@ -358,6 +358,17 @@ class DriverCore:
         """Return (records published, read time of the last), for the self test's rate."""
         return self.stats.published, self.stats.last_time
 
+    def set_publishing(self, on: bool) -> None:
+        """
+        Publish the records (a managed node while active), or only count them.
+
+        Under the publish lock: once this returns False no record is between
+        the check and its publish, so none goes to a publisher about to be
+        deactivated (which would drop it while it counted as published).
+        """
+        with self._publish_lock:
+            self.publishing = on
+
     def forget_last_sample(self) -> None:
         """Let the next record start afresh: a deliberate pause is no packet loss."""
         with self._publish_lock:
@@ -373,11 +384,11 @@ class DriverCore:
         if type(record) is not self._record_type:
             self.stats.other_records += 1
             return
-        if not self.publishing:
-            self.stats.unpublished += 1
-            return
         with self._publish_lock:
             stats = self.stats
+            if not self.publishing:
+                stats.unpublished += 1
+                return
             clock = self.sample_clock
             stamp = clock.stamp(record.timer, read_mono, self._wire_time)
             timings = self._timings

@@ -90,7 +90,7 @@ class DriverSet:
     def set_publishing(self, on: bool) -> None:
         """Publish the records (a managed node while active), or only count them."""
         for core in self.cores:
-            core.publishing = on
+            core.set_publishing(on)
 
     def shutdown(self, report: bool = True) -> None:
         """Stop every stream and close the port, the sensors at once (bounded in time)."""

@@ -256,7 +256,7 @@ class LifecycleDriverNode(LifecycleNode):
         drivers = self.drivers
         if drivers is not None:
             # Before the publishers go inactive: a record read in between would
-            # otherwise fail to publish (found by the long soak).
+            # otherwise be counted as published while the inactive publisher drops it.
             drivers.set_publishing(False)
         super().on_deactivate(state)
         if drivers is not None:
