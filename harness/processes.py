@@ -401,6 +401,20 @@ class Listener:
             time.sleep(0.02)
         return self.received(topic)
 
+    def call(self, kind: type, name: str, timeout: float = 30.0) -> object:
+        """Call service ``name`` (of type ``kind``, an empty request); return the response."""
+        client = self.node.create_client(kind, name)
+        try:
+            assert client.wait_for_service(timeout_sec=timeout), f'no service {name}'
+            future = client.call_async(kind.Request())
+            deadline = time.monotonic() + timeout
+            while not future.done() and time.monotonic() < deadline:
+                time.sleep(0.02)
+            assert future.done(), f'{name} did not answer in {timeout} s'
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
     def clear(self) -> None:
         """Forget what was received."""
         with self._lock:

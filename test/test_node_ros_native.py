@@ -69,17 +69,7 @@ class Latched:
 
 def call(listener: Listener, kind: type, name: str, timeout: float = 30.0) -> object:
     """Call a service of the node from the listener's node; return the response."""
-    client = listener.node.create_client(kind, f'{NODE}/{name}')
-    try:
-        assert client.wait_for_service(timeout_sec=timeout), f'no service {name}'
-        future = client.call_async(kind.Request())
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert future.done(), f'{name} did not answer in {timeout} s'
-        return future.result()
-    finally:
-        listener.node.destroy_client(client)
+    return listener.call(kind, f'{NODE}/{name}', timeout)
 
 
 def publisher_qos(listener: Listener, topic: str, node: str = NODE,

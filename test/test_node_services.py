@@ -58,17 +58,7 @@ def rig():
 
 def call(listener, name, timeout=30.0):
     """Call a Trigger service of the node; return the response."""
-    client = listener.node.create_client(Trigger, SERVICE + name)
-    try:
-        assert client.wait_for_service(timeout_sec=timeout), f'no service {name}'
-        future = client.call_async(Trigger.Request())
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert future.done(), f'{name} did not answer in {timeout} s'
-        return future.result()
-    finally:
-        listener.node.destroy_client(client)
+    return listener.call(Trigger, SERVICE + name, timeout)
 
 
 def bias_in(message):
