@@ -193,13 +193,26 @@ def process_sample(pid: int) -> tuple[int, int, int] | None:
 
 
 class Sampler(threading.Thread):
-    """Sample RSS, descriptors and threads of the processes it is given, all run long."""
+    """
+    Sample RSS, descriptors and threads of the processes it is given, all run long.
+
+    A managed node has more descriptors and threads while configured (the
+    port, the reader and supervisor threads) than while unconfigured, so
+    its samples are taken only while it is unconfigured: a leak is then a
+    slope, not a change of state.
+    """
 
     def __init__(self, period: float) -> None:
         super().__init__(name='soak-sampler', daemon=True)
         self.period = period
         self.samples: dict[str, list[tuple[float, int, int, int]]] = {}
         self.born: dict[str, float] = {}
+        #: Processes configured now (not sampled: compared in one state, unconfigured),
+        #: and when each was first released (its warm-up ends then).
+        self.busy: set[str] = set()
+        #: Every sample, whatever the state (a leg's own RSS check).
+        self.all_samples: dict[str, list[tuple[float, int, int, int]]] = {}
+        self.first_release: dict[str, float] = {}
         self._pids: dict[str, int] = {}
         self._lock = threading.Lock()
         self._halt = threading.Event()
@@ -223,7 +236,10 @@ class Sampler(threading.Thread):
                 pids = dict(self._pids)
             for name, pid in pids.items():
                 got = process_sample(pid)
-                if got is not None:
+                if got is None:
+                    continue
+                self.all_samples.setdefault(name, []).append((time.time(), *got))
+                if name not in self.busy:  # configured: more descriptors and threads
                     self.samples[name].append((time.time(), *got))
 
     def stop(self) -> None:
@@ -398,6 +414,7 @@ class LongSoak:
         if leg.kind == 'managed':
             node = self.managed[leg.stream]
             client = self.clients[leg.stream]
+            self.sampler.busy.add(name)
             if not client.change('configure'):
                 raise RuntimeError(f'leg {leg.number}: configure failed:\n'
                                    f'{node.output()[-3000:]}')
@@ -437,6 +454,9 @@ class LongSoak:
                 self._wait_messages(published, 15.0)
             stats = self._final_stats(path, done, published)
             client.change('cleanup')
+            time.sleep(0.5)  # the port closed, the threads joined
+            self.sampler.first_release.setdefault(name, time.time())
+            self.sampler.busy.discard(name)
         else:
             exit_code, exit_seconds = plain.stop(timeout=15.0)
             self.sampler.forget(name)
@@ -454,7 +474,8 @@ class LongSoak:
         stats = dict(stats, port_events=events)
         with self.sim.lock:
             divider = self.sim.sensor.eeprom.get(RATE_DIVIDER_ADDRESS, 512)
-        rss = [(t, kib) for t, kib, _, _ in self.sampler.samples.get(name, []) if t >= started]
+        rss = [(t, kib) for t, kib, _, _ in self.sampler.all_samples.get(name, [])
+               if t >= started]
         data = RunData(
             cfg=CampaignConfig(minutes=cfg.leg_minutes, rate_hz=None, stream=leg.stream,
                                data_rate=leg.rate_hz, seed=cfg.seed, address=cfg.address,
@@ -578,14 +599,17 @@ class LongSoak:
         cfg = self.cfg
         checks, lines = [], []
         asserted = minutes >= cfg.slope_min_minutes
-        lines.append(f'slopes per hour after the first {cfg.slope_after:g} s of each managed '
-                     f'process ({"asserted" if asserted else "not asserted"}: run of '
+        lines.append(f'slopes per hour, while unconfigured, after the first {cfg.slope_after:g} s '
+                     f'and the first leg of each managed process '
+                     f'({"asserted" if asserted else "not asserted"}: run of '
                      f'{minutes:.1f} min, asserted from {cfg.slope_min_minutes:g} min):')
         for name in sorted(self.managed):
             key = f'soak_{name}'
             born = self.sampler.born.get(key, 0.0)
-            samples = [s for s in self.sampler.samples.get(key, [])
-                       if s[0] >= born + cfg.slope_after]
+            # After the first 5 minutes and after the process's first leg (its first
+            # activation loads what it keeps: a warm-up, not a leak).
+            since = max(born + cfg.slope_after, self.sampler.first_release.get(key, born))
+            samples = [s for s in self.sampler.samples.get(key, []) if s[0] >= since]
             rss = slope_per_hour([(t, kib / 1024.0) for t, kib, _, _ in samples])
             fds = slope_per_hour([(t, n) for t, _, n, _ in samples])
             threads = slope_per_hour([(t, n) for t, _, _, n in samples])
