@@ -28,9 +28,14 @@ stop is *quiet*, 0xEA/0xE9 *identity*, 0xE5/0xE4 *data rate*, 0xC4
 
 What may be published is decided by the bytes the node was given: every
 data packet a fresh codec parser finds in them (reset whenever the node
-opens the port) is allowed; every real packet forwarded intact while the
-station behaved is a packet that must be published. Used by
-``benchmarks/fuzz_node.py`` and the stateful dialogue test.
+opens the port) is allowed; every real packet of the node's stream forwarded
+whole while the station behaved is a packet that must be published. Not
+other records from its address: those are the replies to its own polled
+requests (the dialogue's 0xC2 polls, its identity), which the node takes as
+replies and never publishes. Not a packet the pty took only in part either
+(its buffer full after a held-back stretch is let go at once): the station
+lost that one itself. Used by ``benchmarks/fuzz_node.py`` and the stateful
+dialogue test.
 """
 
 import os
@@ -42,6 +47,7 @@ import tty
 from typing import NamedTuple
 
 from harness.campaign import imu_values
+from i3dmgx2_driver.codec import streams
 from i3dmgx2_driver.codec.checksum import checksum16
 from i3dmgx2_driver.codec.framing import (
     CommandPacket, DATA_FLAGS, DATA_TRAILER_SIZE, DataPacket, decode_data_packet, HEADER_SIZE,
@@ -117,11 +123,18 @@ def reseal(packet: bytearray) -> bytes:
 
 
 class HostileStation(threading.Thread):
-    """The station: forwards, watches the phase, attacks when armed; keeps the oracle."""
+    """
+    The station: forwards, watches the phase, attacks when armed; keeps the oracle.
 
-    def __init__(self, upstream: str, address: int, seed: int) -> None:
+    ``stream`` is the command byte of the record the node streams and
+    publishes (its ``stream`` parameter): only those records must be published.
+    """
+
+    def __init__(self, upstream: str, address: int, seed: int,
+                 stream: int = streams.DEFAULT.code) -> None:
         super().__init__(name='hostile-station', daemon=True)
         self.address = address
+        self.stream = stream
         self.rng = random.Random(seed)
         self.port = PtyPort()
         self.path = self.port.create()
@@ -140,7 +153,8 @@ class HostileStation(threading.Thread):
         self.attacks: list[tuple[float, Attack]] = []
         #: Keys a fresh parser found in the bytes the node was given: allowed to be published.
         self.allowed: set[bytes] = set()
-        #: (time, key) of real packets from our address forwarded intact while behaving.
+        #: (time, key) of real records of the node's stream from our address, forwarded
+        #: whole while behaving: each must be published.
         self.intact: list[tuple[float, bytes]] = []
         self.intact_keys: set[bytes] = set()
         #: Keys of real packets from our address that were attacked (never sent intact).
@@ -303,9 +317,13 @@ class HostileStation(threading.Thread):
                         self._start(self.armed)
         if not self.hostile:
             if key is not None and ours:
-                self.intact.append((now, key))
                 self.intact_keys.add(key)
-            self._give(piece, now)
+            written = self._give(piece, now)
+            # Only a record of the stream is a sample to the node (a polled reply is
+            # not), and only one the pty took whole reached it.
+            if key is not None and ours and piece[HEADER_SIZE] == self.stream \
+                    and written == len(piece):
+                self.intact.append((now, key))
             return
         if key is not None and ours:
             if self.attack.mode in KEEPS_PACKET:
@@ -373,13 +391,17 @@ class HostileStation(threading.Thread):
             return bytes(packet) + extra
         return bytes(packet)
 
-    def _give(self, data: bytes, now: float) -> None:
-        """Hand bytes to the node; let the reference parser say what they allow."""
+    def _give(self, data: bytes, now: float) -> int:
+        """
+        Hand bytes to the node; let the reference parser say what they allow.
+
+        Return how many the pty took (fewer when its buffer is full: the rest is lost).
+        """
         if not data:
-            return
+            return 0
         written = self.port.write(data)
         if not written:
-            return
+            return 0
         data = data[:written]
         self.bytes_out += written
         for event in self._reference.feed(data):
@@ -390,6 +412,7 @@ class HostileStation(threading.Thread):
         self.recent.append((now, data))
         if len(self.recent) > 4000:
             del self.recent[:2000]
+        return written
 
     def evidence(self, t: float, before: float = 0.5) -> bytes:
         """Return the bytes given to the node in the ``before`` s up to ``t``."""

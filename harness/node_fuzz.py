@@ -23,10 +23,10 @@ restarted (a full dialogue) or its port pulled out (a reconnect). All the
 time, checked: the node process lives and answers a parameter request
 within its period, ``/diagnostics`` keeps coming, nothing is published that
 the bytes it was given did not hold as a valid packet from its address,
-every real packet forwarded intact while the station behaved is published,
-the stream comes back once the station behaves, and a SIGINT during an
-attack ends the process cleanly. Each finding keeps the bytes the node was
-given just before it, for a regression test.
+every real record of its stream forwarded whole while the station behaved
+is published, the stream comes back once the station behaves, and a SIGINT
+during an attack ends the process cleanly. Each finding keeps the bytes
+the node was given just before it, for a regression test.
 """
 
 import dataclasses
