@@ -148,7 +148,12 @@ class HostileDialogue(RuleBasedStateMachine):
         self.sim.stop()
 
 
+# Derandomised, with no example database: CI runs the same 12 sequences every time. The
+# outcome of a step still depends on thread timing (a real pseudo-terminal), and a replay
+# of a stored or random sequence then differs from the run that found it (hypothesis's
+# FlakyFailure), which would say nothing about the dialogue. Explore more by hand with
+# other settings (max_examples=200, derandomize=False).
 HostileDialogue.TestCase.settings = settings(
-    max_examples=12, stateful_step_count=8, deadline=None,
+    max_examples=12, stateful_step_count=8, deadline=None, derandomize=True, database=None,
     suppress_health_check=[HealthCheck.too_slow])
 test_dialogue_against_a_hostile_base_station = HostileDialogue.TestCase
