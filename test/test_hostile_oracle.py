@@ -27,8 +27,6 @@ must publish. The bytes are the last the node was given before it. The
 parser finds every complete packet in them: no driver defect.
 """
 
-import os
-
 from harness.hostile import HostileStation
 from i3dmgx2_driver.codec import SensorStreamParser
 from i3dmgx2_driver.codec.framing import DataPacket, HEADER_SIZE
@@ -83,13 +81,13 @@ def test_a_polled_reply_is_allowed_but_not_owed(station):
 
 
 @pytest.mark.slow
-def test_a_packet_the_full_pty_cut_is_not_owed(station):
-    master = station.port.master
-    while True:  # fill the pty as a burst of held-back bytes does
-        try:
-            if not os.write(master, bytes(4096)):
-                break
-        except BlockingIOError:
-            break
+def test_a_packet_the_full_pty_cut_is_not_owed(station, monkeypatch):
+    # The pty takes 43 bytes of it, as in the finding. Filling the real pty does not
+    # pin that down: the kernel frees room in its buffers on its own schedule, and on
+    # a CI machine the whole packet went in after the fill (a test that failed there
+    # on timing, not on the oracle).
+    write = station.port.write
+    monkeypatch.setattr(station.port, 'write', lambda data: write(data[:43]))
     station._piece(WHOLE_CC, 1.0)
     assert station.intact == []
+    assert station.bytes_out == 43  # what it took is still given, and checked

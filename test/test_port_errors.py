@@ -22,6 +22,8 @@ uses a real pseudo-terminal opened twice.
 
 import errno
 import os
+import threading
+import time
 import tty
 
 from i3dmgx2_driver.device import port as port_module
@@ -76,6 +78,60 @@ def test_exclusive_open_refuses_a_second_user():
         first.close()
         os.close(slave)
         os.close(master)
+
+
+@pytest.mark.slow
+def test_a_queue_flushed_between_select_and_read_is_no_unplug(monkeypatch):
+    """The race a CI machine found: readable by select, emptied by a flush, read empty."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    port = SerialPort(os.ttyname(slave))
+    os.close(slave)
+    real_select = port_module.select.select
+    try:
+        os.write(master, b'\xaa\x07')
+
+        def select_then_flush(*args):
+            ready = real_select(*args)
+            port.flush_input()  # what the other thread did in between
+            return ready
+
+        monkeypatch.setattr(port_module.select, 'select', select_then_flush)
+        assert port.read_some(1.0) == b''
+        monkeypatch.setattr(port_module.select, 'select', real_select)
+        os.write(master, b'\xaa\x07')
+        assert port.read_some(1.0) == b'\xaa\x07'
+        os.close(master)
+        with pytest.raises(PortDisconnected):
+            port.read_some(1.0)
+    finally:
+        port.close()
+
+
+@pytest.mark.slow
+def test_flushes_from_another_thread_never_read_as_an_unplug():
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    port = SerialPort(os.ttyname(slave))
+    os.close(slave)
+    stop = threading.Event()
+
+    def write_and_flush():
+        while not stop.is_set():
+            os.write(master, bytes(50))
+            port.flush_input()
+            time.sleep(0.0003)
+
+    helper = threading.Thread(target=write_and_flush)
+    helper.start()
+    try:
+        got = sum(len(port.read_some(0.002)) for _ in range(1000))  # raised before the fix
+    finally:
+        stop.set()
+        helper.join()
+        os.close(master)
+        port.close()
+    assert got > 0
 
 
 @pytest.mark.slow

@@ -43,6 +43,10 @@ from typing import Any
 import serial
 
 
+#: Readable-but-empty reads in a row (with no flag saying hang-up) taken as one.
+EMPTY_READS_OF_A_HANGUP = 3
+
+
 class PortError(Exception):
     """The port could not be opened or used; the message says what to do."""
 
@@ -378,7 +382,15 @@ class SerialPort:
         Wait up to ``timeout`` s for bytes; return all that are there.
 
         Returns b'' on a timeout. Raises PortDisconnected when the device is
-        gone: a descriptor that is readable but gives no data, or an I/O error.
+        gone: an I/O error, or a descriptor that is readable, gives no data
+        and says it was hung up.
+
+        A readable descriptor that gives nothing is not enough: a flush from
+        another thread (the dialogue's ``quiet`` while the reader runs) can
+        empty the queue between select and read, and reading that as an
+        unplug made a reconnect out of nothing (found by the stateful
+        dialogue test on a CI machine). A hung-up terminal says so in poll's
+        flags; an empty read that repeats at once is taken as one too.
         """
         if self._fd is None:
             return self._read_portable(timeout)
@@ -387,11 +399,27 @@ class SerialPort:
             if not ready:
                 return b''
             data = os.read(self._fd, READ_SIZE)
+            if not data:
+                data = self._after_empty_read()
         except (OSError, ValueError) as exc:
             raise PortDisconnected(f'{self.path}: {exc}') from exc
-        if not data:
-            raise PortDisconnected(f'{self.path}: device disconnected')
         return data
+
+    def _after_empty_read(self) -> bytes:
+        """Tell a hang-up from a queue another thread flushed: raise, or return bytes."""
+        for _ in range(EMPTY_READS_OF_A_HANGUP):
+            poller = select.poll()
+            poller.register(self._fd, select.POLLIN)
+            events = poller.poll(0)
+            flags = events[0][1] if events else 0
+            if flags & (select.POLLHUP | select.POLLERR | select.POLLNVAL):
+                break
+            if not flags & select.POLLIN:
+                return b''  # flushed: nothing there, nothing wrong
+            data = os.read(self._fd, READ_SIZE)
+            if data:
+                return data
+        raise PortDisconnected(f'{self.path}: device disconnected')
 
     def _read_portable(self, timeout: float) -> bytes:
         try:
