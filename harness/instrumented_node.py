@@ -37,6 +37,7 @@ Usage: ``I3DMGX2_SOAK_STATS=out.json python -m harness.instrumented_node
 [--lifecycle] --ros-args -p port:=... -p address:=...``.
 """
 
+import ctypes
 import json
 import os
 import sys
@@ -113,10 +114,48 @@ class ObservedLifecycleNode(LifecycleDriverNode):
         return super().on_deactivate(state)
 
 
+class _MallInfo2(ctypes.Structure):
+    """glibc's ``struct mallinfo2`` (every field a size_t)."""
+
+    _fields_ = [(name, ctypes.c_size_t) for name in (
+        'arena', 'ordblks', 'smblks', 'hblks', 'hblkhd', 'usmblks', 'fsmblks', 'uordblks',
+        'fordblks', 'keepcost')]
+
+
+def _mallinfo2():  # noqa: ANN202 - a ctypes function, or None
+    try:
+        function = ctypes.CDLL(None).mallinfo2
+    except (AttributeError, OSError):
+        return None  # not glibc, or older than 2.33
+    function.restype = _MallInfo2
+    return function
+
+
+_MALLINFO2 = _mallinfo2()
+
+
+def heap_figures() -> dict:
+    """
+    Return what the process's heaps hold in use, beside its RSS.
+
+    RSS also counts memory an allocator keeps after it was freed (glibc's
+    arenas, CPython's 1-MiB object arenas partly used), so a slope of RSS alone
+    cannot tell a leak from an allocator settling: a leak shows in these too.
+    ``python_blocks``: CPython's allocated memory blocks (objects alive);
+    ``malloc_in_use_kib``: the C heap in use over all arenas (None off glibc).
+    """
+    native = None
+    if _MALLINFO2 is not None:
+        info = _MALLINFO2()
+        native = (info.uordblks + info.hblkhd) // 1024
+    return {'python_blocks': sys.getallocatedblocks(), 'malloc_in_use_kib': native}
+
+
 def _snapshot(node, final: bool) -> dict:
     core = node.core if node.core is not None else getattr(node, 'last_core', None)
     if core is None:
-        return {'time': time.time(), 'final': final, 'pid': os.getpid(), 'configures': 0}
+        return {'time': time.time(), 'final': final, 'pid': os.getpid(), 'configures': 0,
+                'heap': heap_figures()}
     stats = core.stats
     device = core.supervisor.status()
     with _events_lock:
@@ -134,6 +173,7 @@ def _snapshot(node, final: bool) -> dict:
                        'stalls': device.stalls, 'state': device.state.value,
                        'last_error': device.last_error},
         'port_events': events,
+        'heap': heap_figures(),
     }
 
 

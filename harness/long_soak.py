@@ -214,13 +214,19 @@ class Sampler(threading.Thread):
         self.all_samples: dict[str, list[tuple[float, int, int, int]]] = {}
         self.first_release: dict[str, float] = {}
         self._pids: dict[str, int] = {}
+        #: Heap figures the node wrote (instrumented_node.heap_figures), sampled as
+        #: ``samples`` are: (time, Python blocks, C heap in use KiB).
+        self.heaps: dict[str, list[tuple[float, int, int | None]]] = {}
+        self._stats: dict[str, str] = {}
         self._lock = threading.Lock()
         self._halt = threading.Event()
 
-    def watch(self, name: str, pid: int) -> None:
-        """Start sampling process ``pid`` as ``name``."""
+    def watch(self, name: str, pid: int, stats_path: str | None = None) -> None:
+        """Start sampling process ``pid`` as ``name`` (its heap from ``stats_path``)."""
         with self._lock:
             self._pids[name] = pid
+            if stats_path is not None:
+                self._stats[name] = stats_path
             self.born.setdefault(name, time.time())
             self.samples.setdefault(name, [])
 
@@ -241,6 +247,14 @@ class Sampler(threading.Thread):
                 self.all_samples.setdefault(name, []).append((time.time(), *got))
                 if name not in self.busy:  # configured: more descriptors and threads
                     self.samples[name].append((time.time(), *got))
+                    self._sample_heap(name)
+
+    def _sample_heap(self, name: str) -> None:
+        path = self._stats.get(name)
+        heap = (_read_json(path) or {}).get('heap') if path is not None else None
+        if heap:
+            self.heaps.setdefault(name, []).append(
+                (time.time(), heap['python_blocks'], heap['malloc_in_use_kib']))
 
     def stop(self) -> None:
         """Stop sampling."""
@@ -299,7 +313,7 @@ class LongSoak:
         node = NodeProcess(self._params(name, stream, rate), extra_args=['-r', f'__ns:=/{name}'],
                            command=command,
                            env=ros_env({STATS_ENV: self._stats_path(name)}))
-        self.sampler.watch(name, node.proc.pid)
+        self.sampler.watch(name, node.proc.pid, self._stats_path(name))
         return node
 
     def _wait_publisher(self, topic: str, node: NodeProcess, timeout: float = 60.0) -> None:
@@ -615,6 +629,9 @@ class LongSoak:
             threads = slope_per_hour([(t, n) for t, _, _, n in samples])
             first = samples[0][1:] if samples else None
             last = samples[-1][1:] if samples else None
+            heaps = [h for h in self.sampler.heaps.get(key, []) if h[0] >= since]
+            blocks = slope_per_hour([(t, n) for t, n, _ in heaps])
+            native = slope_per_hour([(t, kib / 1024.0) for t, _, kib in heaps if kib is not None])
 
             def text(value: float | None, unit: str) -> str:
                 return 'n/a' if value is None else f'{value:+.3f} {unit}/h'
@@ -622,6 +639,12 @@ class LongSoak:
             lines.append(f'  {name:22s} RSS {text(rss, "MiB")}, descriptors {text(fds, "")}, '
                          f'threads {text(threads, "")}; {len(samples)} samples; first '
                          f'{first}, last {last} (RSS KiB, fds, threads)')
+            if heaps:
+                # Not asserted: what tells a leak (these grow too) from an allocator
+                # that keeps freed memory (RSS alone grows).
+                lines.append(f'  {"":22s} heap in use: Python objects '
+                             f'{text(blocks, "blocks")}, C heap {text(native, "MiB")}; first '
+                             f'{heaps[0][1:]}, last {heaps[-1][1:]} (blocks, KiB)')
             if asserted:
                 ok = (rss is not None and rss < cfg.rss_slope_limit
                       and fds is not None and abs(fds) <= cfg.count_slope_limit
