@@ -70,6 +70,27 @@ def _streamable(text: str) -> int:
     return value
 
 
+#: The faults drawn by chance, in the order of ``--help``: flag, the ``FaultConfig``
+#: field it sets, and its help.
+_CHANCES = (
+    ('--garbage', 'garbage_probability', 'chance of random garbage bytes before a packet'),
+    ('--corrupt-checksum', 'corrupt_checksum_probability',
+     'chance of a packet with a bad checksum'),
+    ('--corrupt-length', 'corrupt_length_probability',
+     'chance of a packet with a bad length byte'),
+    ('--foreign', 'foreign_probability', 'chance of a packet from another sensor address'),
+    ('--drop', 'drop_probability', 'chance that a data packet is lost on the radio'),
+    ('--command-loss', 'command_loss_probability',
+     'chance that an ACKed command never reaches the sensor'),
+    ('--nack', 'nack_probability', 'chance that the base station NACKs a good command packet'),
+)
+
+
+def _dest(flag: str) -> str:
+    """Return the attribute argparse stores ``flag`` under."""
+    return flag.lstrip('-').replace('-', '_')
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser (separate so that docs and tests can use it)."""
     parser = argparse.ArgumentParser(
@@ -114,22 +135,11 @@ def build_parser() -> argparse.ArgumentParser:
     device.add_argument('--seed', type=int, help='seed for reproducible noise and faults')
 
     faults = parser.add_argument_group('faults')
-    faults.add_argument('--garbage', type=_probability, default=0.0, metavar='P',
-                        help='chance of random garbage bytes before a packet')
-    faults.add_argument('--garbage-any', action='store_true',
-                        help='garbage may contain 0xAA/0x21/0x02 (spurious ACK/NACK)')
-    faults.add_argument('--corrupt-checksum', type=_probability, default=0.0, metavar='P',
-                        help='chance of a packet with a bad checksum')
-    faults.add_argument('--corrupt-length', type=_probability, default=0.0, metavar='P',
-                        help='chance of a packet with a bad length byte')
-    faults.add_argument('--foreign', type=_probability, default=0.0, metavar='P',
-                        help='chance of a packet from another sensor address')
-    faults.add_argument('--drop', type=_probability, default=0.0, metavar='P',
-                        help='chance that a data packet is lost on the radio')
-    faults.add_argument('--command-loss', type=_probability, default=0.0, metavar='P',
-                        help='chance that an ACKed command never reaches the sensor')
-    faults.add_argument('--nack', type=_probability, default=0.0, metavar='P',
-                        help='chance that the base station NACKs a good command packet')
+    for flag, _, text in _CHANCES:
+        faults.add_argument(flag, type=_probability, default=0.0, metavar='P', help=text)
+        if flag == '--garbage':
+            faults.add_argument('--garbage-any', action='store_true',
+                                help='garbage may contain 0xAA/0x21/0x02 (spurious ACK/NACK)')
     faults.add_argument('--already-streaming', action='store_true',
                         help='the sensor streams 0xCC from power-up')
     faults.add_argument('--ignore-first-continuous', action='store_true',
@@ -170,11 +180,8 @@ def build_parser() -> argparse.ArgumentParser:
 def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
     """Turn parsed arguments into a simulator configuration."""
     faults = FaultConfig(
-        garbage_probability=args.garbage, garbage_safe=not args.garbage_any,
-        corrupt_checksum_probability=args.corrupt_checksum,
-        corrupt_length_probability=args.corrupt_length,
-        foreign_probability=args.foreign, drop_probability=args.drop,
-        command_loss_probability=args.command_loss, nack_probability=args.nack,
+        **{field: getattr(args, _dest(flag)) for flag, field, _ in _CHANCES},
+        garbage_safe=not args.garbage_any,
         already_streaming=args.already_streaming,
         ignore_first_continuous=args.ignore_first_continuous,
         needs_polled_first=args.needs_polled_first, jitter_ms=args.jitter_ms,

@@ -34,7 +34,7 @@ import time
 from .base_station import BaseStation
 from .ground_truth import GroundTruth
 from .inbox import SensorInbox
-from .pty_port import PtyPort, TIOCPKT_DATA, TIOCPKT_FLUSHREAD
+from .pty_port import close_quietly, PtyPort, TIOCPKT_DATA, TIOCPKT_FLUSHREAD
 from .transmitter import POLL_S
 from .wired_line import WiredLine
 
@@ -72,11 +72,7 @@ class HostReader:
 
     def close_pipe(self) -> None:
         """Close the wake-up pipe (after the thread ended)."""
-        for fd in (self._wake_r, self._wake_w):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        close_quietly(self._wake_r, self._wake_w)
 
     def plug_in(self) -> None:
         """Plug the port in, and start reading the host afresh."""

@@ -52,31 +52,18 @@ The radio faults (command loss, NACK, foreign packets, corrupted length
 bytes) do not exist wired and are refused.
 """
 
-import atexit
 import dataclasses
-import random
-import threading
 import time
 import typing
 from typing import Any
 
-from i3dmgx2_driver.codec.commands import Command
-
-from .base_station import BaseStation
-from .cable import Cable
-from .config import DEFAULT_STREAM, SimulatorConfig
-from .fault_schedule import FaultSchedule
-from .faults import FaultConfig, FaultState
-from .ground_truth import GroundTruth
-from .host_reader import HostReader
-from .line_writer import LineWriter
-from .motion import Motion, MotionConfig
-from .pty_port import PtyPort
-from .sensor import SensorSpec, SimulatedSensor
-from .sensor_unit import AllInboxes, SensorUnit, unit_specs
-from .transmitter import SharedLine
+from .config import SimulatorConfig
+from .fault_control import FaultControl
+from .faults import FaultConfig
+from .lifecycle import Lifecycle
+from .sensor_unit import SensorUnit, unit_at
 from .truth_queries import TruthQueries
-from .wired_line import WiredLine
+from .wiring import SimulatorParts
 
 if typing.TYPE_CHECKING:  # typing.Self is new in Python 3.11; Jazzy allows 3.10
     from typing import Self
@@ -93,7 +80,10 @@ class PtySimulator(TruthQueries):
     truth (``truth``, ``commands``, ``host_log``, ``stats``, ``stream_changes``:
     see :class:`TruthQueries`) is thread-safe to read at any time; the
     properties return copies. The module's docstring tells how a wired
-    sensor differs.
+    sensor differs. The parts are built by ``SimulatorParts`` (``wiring``),
+    started and stopped by ``Lifecycle`` (``lifecycle``), and their faults
+    changed by ``FaultControl`` (``fault_control``): this class is the face
+    that tests, the harness and the benchmarks use.
     """
 
     def __init__(self, config: SimulatorConfig | None = None, **overrides: Any) -> None:
@@ -102,114 +92,37 @@ class PtySimulator(TruthQueries):
         elif overrides:
             config = dataclasses.replace(config, **overrides)
         self.config = config
-        seeds = random.Random(config.seed)
-        # The first sensor's seeds are drawn as they always were: a seeded run of
-        # one sensor is the same run it was before there could be several.
-        sensor_seed = seeds.getrandbits(64)
-        foreign = SimulatedSensor(
-            SensorSpec(self._foreign_address(config.faults), '0000', clock_ppm=-25.0,
-                       timer_start=seeds.getrandbits(32)),
-            Motion(MotionConfig(static=True)), seed=seeds.getrandbits(64))
-        self._fault_rng = random.Random(seeds.getrandbits(64))
-        command_rng = random.Random(seeds.getrandbits(64))
-        chunk_rng = random.Random(seeds.getrandbits(64))
-
+        parts = SimulatorParts(config)
+        super().__init__(parts.record, parts.changed)
         #: Guards the sensor, the queues and the ground truth. Lock order: ``lock``
         #: may be held while taking the port's ``io_lock``, never the reverse.
-        self.lock = threading.RLock()
-        self._tx_wake = threading.Condition(self.lock)
-        changed = threading.Condition(self.lock)
-        record = GroundTruth(config.truth_limit, changed)
-        super().__init__(record, changed)
-        self._stop = threading.Event()
-        self._pty = PtyPort(config.symlink, config.link_via_proc)
+        self.lock = parts.lock
+        self._wake = parts.wake
         #: Every sensor's parts, by address, in the order given (sensor_unit.py).
-        self.units: dict[int, SensorUnit] = {}
-        self._end: BaseStation | WiredLine
-        writer = LineWriter(self._pty, record, config.chunks, config.chunk_gap_s, chunk_rng)
-        station_faults = FaultState(config.faults)
-        if config.wireless:
-            self._end = BaseStation(self.units, record, self._pty, station_faults, command_rng)
-        else:
-            self._end = WiredLine(record, self._deliver, station_faults)
-        self._reader = HostReader(self._pty, self._end, record, AllInboxes(self.units),
-                                  changed)
-        specs = unit_specs(config, seeds)
-        line = SharedLine() if len(specs) > 1 else None
-        for i, (spec, motion) in enumerate(specs):
-            self.units[spec.address] = SensorUnit(
-                config, spec, motion, sensor_seed if i == 0 else seeds.getrandbits(64),
-                self._fault_rng if i == 0 else random.Random(seeds.getrandbits(64)),
-                self._end, writer, record, self._tx_wake, self._reader.post, foreign,
-                station_faults if i == 0 else None, line)
-        first = next(iter(self.units.values()))
+        self.units: dict[int, SensorUnit] = parts.units
         #: The device model of the first sensor; touch it only while holding ``sim.lock``.
-        self.sensor = first.sensor
-        self._faults, self._packet_faults = first.faults, first.packet_faults
-        self._tx, self._inbox, self._power = first.tx, first.inbox, first.power
-        self._cable = Cable(self._pty, self._reader, record, changed,
-                            None if config.wireless else self._power, self._stop)
-        target = self.units.get(config.fault_address) if config.fault_address else None
-        self._schedule = FaultSchedule(
-            target.faults.stall if target is not None else self._stall_all, self._reader.post,
-            self._cable, (target or first).power)
-        self._threads: list[threading.Thread] = []
-        self._started = False
-        #: Wall-clock time of start() (the sensor's power-up).
-        self.start_time: float | None = None
+        self.sensor = unit_at(self.units, None).sensor
+        self._pty, self._reader, self._cable = parts.pty, parts.reader, parts.cable
+        self._life = Lifecycle(parts.pty, parts.reader, parts.wake, parts.stop,
+                               parts.transmitters(), self._power_up)
+        self._control = FaultControl(config, self.units, parts.wake, parts.record,
+                                     parts.foreign, parts.fault_rng, parts.schedule,
+                                     lambda: self._life.started)
 
     # -- lifecycle --------------------------------------------------------------------------
 
     def start(self) -> 'PtySimulator':
         """Create the port, power the sensor up and start the threads."""
-        if self._started:
-            raise RuntimeError('the simulator is already started')
-        self._stop.clear()
-        self._pty.create()
-        self._reader.open_pipe()
-        self._reader.plug_in()
-        now = time.time()
-        with self.lock:
-            self.start_time = now
-            for unit in self.units.values():
-                unit.sensor.power_up(now)
-                self._record.note_streaming(now, unit.sensor.streaming)
-            self._packet_faults.foreign.power_up(now - 1000.0 * self._fault_rng.random())
-            self._schedule.schedule(self._faults.config, now, None)
-        self._started = True
-        # An interpreter that exits without stop() still removes the port.
-        atexit.register(self.stop)
-        self._threads = [
-            threading.Thread(target=self._reader.run, args=(self._stop,), name='gx2sim-rx',
-                             daemon=True),
-            *(threading.Thread(target=unit.tx.run, args=(self._stop,),
-                               name='gx2sim-tx' if i == 0 else f'gx2sim-tx-{unit.address}',
-                               daemon=True)
-              for i, unit in enumerate(self.units.values())),
-        ]
-        for thread in self._threads:
-            thread.start()
+        self._life.start()
         return self
 
     def stop(self) -> None:
         """Stop the threads, close the pty and remove the port symlink."""
-        if not self._started:
-            return
-        self._stop.set()
-        self._reader.wake()
-        with self.lock:
-            self._tx_wake.notify_all()
-        for thread in self._threads:
-            thread.join(timeout=5.0)
-        self._pty.pull_out()
-        self._reader.close_pipe()
-        self._pty.remove()
-        self._started = False
-        atexit.unregister(self.stop)
+        self._life.stop()
 
     def __enter__(self) -> 'Self':
         """Start (if not yet started) for a ``with`` block."""
-        if not self._started:
+        if not self._life.started:
             self.start()
         return self
 
@@ -220,7 +133,19 @@ class PtySimulator(TruthQueries):
     @property
     def started(self) -> bool:
         """Whether the threads run."""
-        return self._started
+        return self._life.started
+
+    @property
+    def start_time(self) -> float | None:
+        """Wall-clock time of start() (the sensor's power-up)."""
+        return self._life.start_time
+
+    def _power_up(self, now: float) -> None:
+        """Power every sensor up at start (lock held), then the stranger and the timed faults."""
+        for unit in self.units.values():
+            unit.sensor.power_up(now)
+            self._record.note_streaming(now, unit.sensor.streaming)
+        self._control.start(now)
 
     # -- the port ---------------------------------------------------------------------------
 
@@ -278,36 +203,12 @@ class PtySimulator(TruthQueries):
         ``address`` stalls that sensor alone (its radio link), the others
         streaming on; None the base station (every sensor).
         """
-        with self.lock:
-            if address is None:
-                self._stall_all(time.time(), seconds)
-            else:
-                self._unit(address).faults.stall(time.time(), seconds)
-
-    def _stall_all(self, start: float, seconds: float) -> None:
-        for unit in self.units.values():
-            unit.faults.stall(start, seconds)
-
-    def _unit(self, address: int | None) -> SensorUnit:
-        """Return the sensor at ``address`` (None: the first); ValueError if there is none."""
-        if address is None:
-            return next(iter(self.units.values()))
-        if address not in self.units:
-            raise ValueError(f'no sensor at address {address}: the sensors are '
-                             f'{list(self.units)}')
-        return self.units[address]
-
-    def _foreign_address(self, faults: FaultConfig) -> int:
-        """Return the stranger's address: next to the first sensor's, and none of ours."""
-        address = faults.foreign_of(self.config.address)
-        while faults.foreign_address is None and address in self.config.all_addresses:
-            address = faults.foreign_of(address)
-        return address
+        self._control.stall(seconds, address)
 
     @property
     def faults(self) -> FaultConfig:
         """Return the faults in effect."""
-        return self._faults.config
+        return self._control.faults
 
     def set_faults(self, faults: FaultConfig | None = None, **changes: Any) -> FaultConfig:
         """
@@ -317,25 +218,7 @@ class PtySimulator(TruthQueries):
         now. Turning ``already_streaming`` on makes the sensor stream 0xCC now.
         A wired simulator refuses the radio's faults (ValueError).
         """
-        with self.lock:
-            old = self._faults.config
-            new = faults if faults is not None else dataclasses.replace(old, **changes)
-            if not self.config.wireless:
-                new.check_wired()
-            for unit in self.units.values():
-                unit.faults.config = new
-            self._packet_faults.foreign.address = self._foreign_address(new)
-            if new.ignore_first_continuous and not old.ignore_first_continuous:
-                self._inbox.ignore_next_continuous = True
-            now = time.time()
-            if new.already_streaming and not old.already_streaming and self._started:
-                for unit in self.units.values():
-                    unit.sensor.start_streaming(DEFAULT_STREAM, now)
-                    self._record.note_streaming(now, unit.sensor.streaming)
-            if self._started:
-                self._schedule.schedule(new, now, None if faults is not None else changes)
-            self._tx_wake.notify_all()
-        return new
+        return self._control.set_faults(faults, changes)
 
     def set_moving(self, moving: bool) -> None:
         """Start or stop the sensor's motion now (a capture while moving goes wrong)."""
@@ -346,7 +229,7 @@ class PtySimulator(TruthQueries):
         """Override the calculation rate now (None: back to the EEPROM divider)."""
         with self.lock:
             self.sensor.set_rate_override(rate_hz, time.time())
-            self._tx_wake.notify_all()
+            self._wake.notify_all()
 
     def power_cycle(self, off_seconds: float = 0.0, timer_start: int | None = None,
                     address: int | None = None) -> None:
@@ -359,7 +242,7 @@ class PtySimulator(TruthQueries):
         sensor's from then on), the stream as the EEPROM auto-start says.
         ``address``: that sensor, the others going on; None: the first.
         """
-        self._unit(address).power.cycle(off_seconds, timer_start)
+        self._control.power_cycle(off_seconds, timer_start, address)
 
     # -- the device now ---------------------------------------------------------------------
 
@@ -372,7 +255,7 @@ class PtySimulator(TruthQueries):
     def streaming_of(self, address: int) -> int:
         """Command byte the sensor at ``address`` streams now, 0 when polled."""
         with self.lock:
-            return self._unit(address).sensor.streaming
+            return unit_at(self.units, address).sensor.streaming
 
     @property
     def addresses(self) -> tuple[int, ...]:
@@ -389,7 +272,3 @@ class PtySimulator(TruthQueries):
         """Return the sensor's EEPROM words now (a copy): presets and what the host wrote."""
         with self.lock:
             return dict(self.sensor.eeprom)
-
-    def _deliver(self, command: Command | None, raw: bytes, now: float) -> str:
-        """Hand a command to the sensor's inbox (built after the line end that calls this)."""
-        return self._inbox.deliver(command, raw, now)

@@ -55,6 +55,16 @@ TIOCPKT_FLUSHREAD = getattr(termios, 'TIOCPKT_FLUSHREAD', 0x01)
 _TIOCPKT = getattr(termios, 'TIOCPKT', 0x5420)
 
 
+def close_quietly(*fds: int | None) -> None:
+    """Close each descriptor given (None: none); one already closed is no error at the end."""
+    for fd in fds:
+        if fd is not None:
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
 class PtyPort:
     """
     One pseudo-terminal at a time behind the symlink ``path``; unplugging closes it.
@@ -122,12 +132,7 @@ class PtyPort:
     def pull_out(self) -> None:
         """Close the pty (the host's reads and writes fail) and remove our symlink."""
         with self.io_lock:
-            for fd in (self.master, self.slave):
-                if fd is not None:
-                    try:
-                        os.close(fd)
-                    except OSError:
-                        pass
+            close_quietly(self.master, self.slave)
             target = self.link_target
             self.master = self.slave = self.device = self.link_target = None
         self.plugged.clear()

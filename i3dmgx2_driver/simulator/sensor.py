@@ -27,6 +27,8 @@ an exact grid from power-up. The timer starts close to its 32-bit rollover
 by default, so every run crosses it, and runs ``clock_ppm`` fast, so a host
 has a drift to estimate. Its data records are made by a ``RecordMaker``
 (``data_records``) from the motion, less the host's bias corrections.
+Its EEPROM, with the rate divider and the auto-start it holds, is a
+``SensorEeprom`` (``eeprom``).
 """
 
 import dataclasses
@@ -48,24 +50,18 @@ from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 
 from .cycle_clock import CycleClock
 from .data_records import BiasCorrections, float32, RecordMaker
+# The EEPROM's words and limits are read here by the configuration, the command line
+# and the harness, as they always were.
+from .eeprom import (  # noqa: F401
+    AUTOSTART_ADDRESS, FACTORY_DIVIDER, MAX_DIVIDER, MIN_DIVIDER, RATE_DIVIDER_ADDRESS,
+    SensorEeprom,
+)
 from .motion import Motion
 
 #: Ticks per second of the device timer.
 TICKS_PER_SECOND = rec.TICKS_PER_SECOND
 #: Default timer at power-up: five seconds before the rollover.
 DEFAULT_TIMER_START = TIMER_MODULUS - 5 * TICKS_PER_SECOND
-#: The calculation rate is this divided by the EEPROM divider.
-BASE_RATE_HZ = 51200
-#: EEPROM word holding the rate divider, its factory value and valid range.
-RATE_DIVIDER_ADDRESS = 0xFCA2
-FACTORY_DIVIDER = 512
-MIN_DIVIDER = 170
-MAX_DIVIDER = 51200
-#: EEPROM word of the power-up auto-start (LSB: command; MSB 0x80: wireless).
-AUTOSTART_ADDRESS = 0xFCA6
-#: What the EEPROM answers for a word nobody wrote (erased flash).
-ERASED_WORD = 0xFFFF
-
 #: Data records: no request arguments, a timer in the reply. These can be
 #: polled and streamed; derived from the codec's table, not listed by hand.
 STREAMABLE = frozenset(
@@ -161,13 +157,11 @@ class SimulatedSensor:
         self.serial_number = spec.serial_number
         self.firmware_version = spec.firmware_version
         self.identifiers = spec.identifiers
-        #: The EEPROM words; it persists across power cycles, like the real one.
-        self.eeprom: dict[int, int] = {RATE_DIVIDER_ADDRESS: FACTORY_DIVIDER,
-                                       AUTOSTART_ADDRESS: 0x0000}
-        if spec.eeprom:
-            self.eeprom.update(spec.eeprom)
+        #: The EEPROM and the settings it holds; it persists across power cycles.
+        self.settings = SensorEeprom(spec.eeprom, spec.rate_hz)
+        #: The EEPROM words (the settings' own dict).
+        self.eeprom: dict[int, int] = self.settings.words
         self.rng = random.Random(seed)
-        self._rate_override = spec.rate_hz
         #: The calculation cycles and the timer.
         self.clock = CycleClock(spec.clock_ppm, DEFAULT_TIMER_START if spec.timer_start is None
                                 else spec.timer_start)
@@ -198,7 +192,7 @@ class SimulatedSensor:
         """
         self.biases.restore()
         self.clock.restart(t, self.rate_hz)
-        autostart = self.eeprom.get(AUTOSTART_ADDRESS, 0) & 0xFF
+        autostart = self.settings.autostart
         #: Command byte being streamed, 0 when polled.
         self.streaming = 0
         if autostart in STREAMABLE:
@@ -217,15 +211,13 @@ class SimulatedSensor:
     @property
     def rate_hz(self) -> float:
         """Return the calculation rate (Hz): the override, or 51200 / EEPROM divider."""
-        if self._rate_override is not None:
-            return self._rate_override
-        return BASE_RATE_HZ / self.eeprom.get(RATE_DIVIDER_ADDRESS, FACTORY_DIVIDER)
+        return self.settings.rate_hz
 
     def set_rate_override(self, rate_hz: float | None, t: float) -> None:
         """Force a rate beyond the device's range (benchmarks), or None to drop it."""
         if rate_hz is not None and rate_hz <= 0:
             raise ValueError('rate_hz must be positive')
-        self._rate_override = rate_hz
+        self.settings.rate_override = rate_hz
         self.clock.regrid(t, self.rate_hz)
 
     def timer_at(self, t: float) -> int:
@@ -351,17 +343,12 @@ class SimulatedSensor:
 
     def _write_eeprom(self, args, now, timer):
         address, value = args
-        if address == RATE_DIVIDER_ADDRESS:
-            # An invalid divider is not stored; the reply shows the word kept.
-            if MIN_DIVIDER <= value <= MAX_DIVIDER:
-                self.eeprom[address] = value
-                self.clock.regrid(now, self.rate_hz)
-        else:
-            self.eeprom[address] = value
-        return rec.EepromWritten(self.eeprom.get(address, ERASED_WORD)), now, now
+        if self.settings.write(address, value):
+            self.clock.regrid(now, self.rate_hz)
+        return rec.EepromWritten(self.settings.read(address)), now, now
 
     def _read_eeprom(self, args, now, timer):
-        return rec.EepromWord(self.eeprom.get(args[0], ERASED_WORD)), now, now
+        return rec.EepromWord(self.settings.read(args[0])), now, now
 
     def _firmware(self, args, now, timer):
         return rec.FirmwareVersion(self.firmware_version), now, now

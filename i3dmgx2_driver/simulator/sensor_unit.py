@@ -21,8 +21,10 @@ quirks), its own power, its own faults in effect (a stall of one sensor
 leaves the others streaming) and its own transmitter thread, whose packets
 go through the one line writer under the simulator's lock, so that the
 sensors' packets interleave on the line whole, as the base station forwards
-them. :class:`SensorUnit` holds these parts for one address;
-:func:`unit_specs` says how the sensors after the first differ from it.
+them. :class:`SensorUnit` holds these parts for one address, built from what the
+sensor is (:class:`UnitSensor`), the line it shares (:class:`UnitLine`) and
+what can go wrong for it (:class:`UnitFaults`); :func:`unit_specs` says how
+the sensors after the first differ from it.
 """
 
 import collections.abc
@@ -75,36 +77,78 @@ def unit_specs(config: SimulatorConfig,
     return out
 
 
+@dataclasses.dataclass(frozen=True)
+class UnitSensor:
+    """What the sensor is: its spec, its motion and the seed of its noise."""
+
+    spec: SensorSpec
+    motion: MotionConfig
+    seed: int
+
+
+@dataclasses.dataclass(frozen=True)
+class UnitLine:
+    """
+    Where a sensor's packets go, shared with the other sensors.
+
+    ``end`` is the line end (base station or wired line), ``writer`` the
+    line writer every unit shares, ``shared`` the serial line its packets
+    share with the other sensors' (several; None: one sensor).
+    """
+
+    end: BaseStation | WiredLine
+    writer: LineWriter
+    shared: SharedLine | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class UnitFaults:
+    """
+    What can go wrong for one sensor: its random choices and the stranger's packets.
+
+    ``rng`` draws its faults, ``foreign`` is the stranger whose packets the
+    radio may pick up, ``state`` the faults in effect for it if the line end
+    shares them (the first sensor's; None: its own, from the configuration).
+    """
+
+    rng: random.Random
+    foreign: SimulatedSensor
+    state: FaultState | None = None
+
+
 class SensorUnit:
     """
     The parts of one sensor: model, faults, packet faults, transmitter, inbox, power.
 
-    ``seed`` and ``fault_rng`` are its random choices (noise; faults),
-    ``end`` is the line end (base station or wired line), ``writer`` the
-    line writer every unit shares, ``wake`` the condition on the
-    simulator's lock, ``post`` schedules actions on its reader thread,
-    ``foreign`` the stranger whose packets the radio may pick up; ``faults``
-    the faults in effect for it, if the line end shares them (the first sensor's);
-    ``line`` the serial line its packets share with the other sensors' (several).
+    ``record`` is the ground truth, ``wake`` the condition on the
+    simulator's lock, ``post`` schedules actions on its reader thread.
     """
 
-    def __init__(self, config: SimulatorConfig, spec: SensorSpec, motion: MotionConfig,
-                 seed: int, fault_rng: random.Random, end: BaseStation | WiredLine,
-                 writer: LineWriter, record: GroundTruth, wake: threading.Condition,
-                 post: Post, foreign: SimulatedSensor, faults: FaultState | None = None,
-                 line: SharedLine | None = None) -> None:
-        self.sensor = SimulatedSensor(spec, Motion(motion), seed=seed)
-        self.address = spec.address
-        self.faults = faults if faults is not None else FaultState(config.faults)
-        self.packet_faults = PacketFaults(self.faults, fault_rng, end, foreign, writer, record)
-        self.tx = Transmitter(config, self.sensor, end, record, wake, self.packet_faults, writer,
-                              line)
+    def __init__(self, config: SimulatorConfig, sensor: UnitSensor, line: UnitLine,
+                 faults: UnitFaults, record: GroundTruth, wake: threading.Condition,
+                 post: Post) -> None:
+        self.sensor = SimulatedSensor(sensor.spec, Motion(sensor.motion), seed=sensor.seed)
+        self.address = sensor.spec.address
+        self.faults = faults.state if faults.state is not None else FaultState(config.faults)
+        self.packet_faults = PacketFaults(self.faults, faults.rng, line.end, faults.foreign,
+                                          line.writer, record)
+        self.tx = Transmitter(config, self.sensor, line.end, record, wake, self.packet_faults,
+                              line.writer, line.shared)
         self.inbox = SensorInbox(self.sensor, record, self.tx, wake, self.faults)
         self.power = SensorPower(self.sensor, self.tx, record, wake, self.faults, post)
 
     def deliver(self, command, raw: bytes, now: float) -> str:
         """Hand a command that reached this sensor to its inbox."""
         return self.inbox.deliver(command, raw, now)
+
+
+def unit_at(units: collections.abc.Mapping[int, SensorUnit], address: int | None) -> SensorUnit:
+    """Return the sensor at ``address`` (None: the first); ValueError if there is none."""
+    if address is None:
+        return next(iter(units.values()))
+    if address not in units:
+        raise ValueError(f'no sensor at address {address}: the sensors are {list(units)}')
+    return units[address]
 
 
 class AllInboxes:
