@@ -23,16 +23,14 @@ dialogue. What a sensor is and what rate it runs at are learned elsewhere
 (identification.py, rate_setting.py); this uses them.
 """
 
-import threading
 import time
-from typing import Any
 
+from .dialogue_parts import DialogueParts
 from .identification import Identification
 from .identity import read_identifier, SERIAL_NUMBER_SELECTOR
 from .link import DeviceLink, DeviceTimeout
 from .port import PortDisconnected
 from .rate_setting import RateSetting
-from .settings import DeviceConfig
 from .throttle import EVENT_PERIOD, Throttle
 from ..codec import commands, layouts, streams
 
@@ -46,11 +44,9 @@ class ContinuousMode:
     the waits give up.
     """
 
-    def __init__(self, config: DeviceConfig, log: Any, cancel: threading.Event,
-                 identity: Identification, rate: RateSetting) -> None:
-        self.config = config
-        self._log = log
-        self._cancel = cancel
+    def __init__(self, parts: DialogueParts, identity: Identification,
+                 rate: RateSetting) -> None:
+        self.config, self._log, _, self._cancel = parts
         self._identity = identity
         self._rate = rate
         self._throttle = Throttle()

@@ -40,12 +40,12 @@ import time
 from typing import Any
 
 from .continuous import ContinuousMode
+from .dialogue_parts import DialogueParts, Warn
 from .identification import Identification
 from .identity import DeviceInfo
 from .link import DeviceLink
 from .rate_setting import RateSetting
 from .settings import DeviceConfig
-from .throttle import Warn
 
 
 class SensorDialogue:
@@ -60,12 +60,13 @@ class SensorDialogue:
     def __init__(self, config: DeviceConfig, log: Any, warn: Warn,
                  cancel: threading.Event) -> None:
         self.config = config
+        parts = DialogueParts(config, log, warn, cancel)
         #: Who answers and what it is (ping, polled requests, identity).
-        self.identification = Identification(config, log, warn, cancel)
+        self.identification = Identification(parts)
         #: The data-rate divider, its EEPROM write, the line's use.
-        self.rate = RateSetting(config, log, warn, cancel)
+        self.rate = RateSetting(parts)
         #: Starting and resuming the stream.
-        self.continuous = ContinuousMode(config, log, cancel, self.identification, self.rate)
+        self.continuous = ContinuousMode(parts, self.identification, self.rate)
 
     # -- what it learned (the supervisor's status snapshot) ------------------------------
 

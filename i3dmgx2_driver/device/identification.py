@@ -23,14 +23,11 @@ fails soon with the reason.
 """
 
 from collections.abc import Callable
-import threading
-from typing import Any
 
 from . import timeouts
+from .dialogue_parts import DialogueParts
 from .identity import DeviceInfo, read_identity
 from .link import DeviceLink, DeviceTimeout
-from .settings import DeviceConfig
-from .throttle import Warn
 from ..codec import layouts
 
 
@@ -38,17 +35,12 @@ class Identification:
     """
     What the sensor at ``config.address`` answered and said it is.
 
-    ``log`` has ``info``; ``warn`` says a problem once per key and period;
     ``cancel`` set means the driver is stopping (an identity not read is
     then no reason to warn).
     """
 
-    def __init__(self, config: DeviceConfig, log: Any, warn: Warn,
-                 cancel: threading.Event) -> None:
-        self.config = config
-        self._log = log
-        self._warn = warn
-        self._cancel = cancel
+    def __init__(self, parts: DialogueParts) -> None:
+        self.config, self._log, self._warn, self._cancel = parts
         self.info: DeviceInfo | None = None
         self.ping_ok: bool | None = None
         self._info_logged: DeviceInfo | None = None

@@ -21,12 +21,9 @@ writes the cell once, however rough the radio, and never again from this
 driver's run. The rate then says whether the line carries the stream.
 """
 
-import threading
-from typing import Any
-
+from .dialogue_parts import DialogueParts
 from .link import DeviceLink, DeviceTimeout
-from .settings import DeviceConfig
-from .throttle import Throttle, Warn
+from .throttle import Throttle
 from ..codec import commands, layouts, streams
 from ..codec.data_rate import divider_for_rate, RATE_BASE_HZ, RATE_DIVIDER_ADDRESS
 
@@ -35,17 +32,12 @@ class RateSetting:
     """
     The data-rate divider of the sensor at ``config.address``, as read and as written.
 
-    ``log`` has ``info/warning``; ``warn`` says a problem once per key and
-    period; ``cancel`` set means the driver is stopping (a failed read is
-    then no reason to warn).
+    ``cancel`` set means the driver is stopping (a failed read is then no
+    reason to warn).
     """
 
-    def __init__(self, config: DeviceConfig, log: Any, warn: Warn,
-                 cancel: threading.Event) -> None:
-        self.config = config
-        self._log = log
-        self._warn = warn
-        self._cancel = cancel
+    def __init__(self, parts: DialogueParts) -> None:
+        self.config, self._log, self._warn, self._cancel = parts
         self._throttle = Throttle()
         self.divider: int | None = None
         #: EEPROM write commands sent (the divider's cell; each may wear it).

@@ -21,7 +21,6 @@ rate; what may come back is said once and reminded (``REMINDER_PERIOD``),
 events that each mean something new (a stall) at most every ``EVENT_PERIOD``.
 """
 
-from collections.abc import Callable
 import time
 
 #: A condition that persists (a missing port, a silent sensor) is said once,
@@ -29,9 +28,6 @@ import time
 REMINDER_PERIOD = 60.0
 #: Events that each mean something new (a stall) are logged at most this often (s).
 EVENT_PERIOD = 10.0
-
-#: ``warn(key, message, period)``: say a problem (throttled per key), keep it as the last error.
-Warn = Callable[[str, str, float | None], None]
 
 
 class Throttle:
