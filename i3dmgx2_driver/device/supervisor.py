@@ -21,7 +21,8 @@ the device side and offers them as the node needs them. The pieces, each in
 a module of its own:
 
 - ``dialogue.py``: :class:`~.dialogue.SensorDialogue`, what to say to the
-  sensor (quiet, identity, rate, continuous mode, resume); no thread.
+  sensor (quiet, identity, rate, continuous mode, resume; each phase in a
+  module of its own); no thread.
 - ``connection.py``: :class:`~.connection.Connection`, the one open link,
   opened and closed safely from any thread, counted across reconnects.
 - ``startup.py``: :class:`~.startup.StartUp`, the steps from an open port
