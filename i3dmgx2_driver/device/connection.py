@@ -92,7 +92,7 @@ class Connection:
             link = self._shared.attach(cfg.address, self._on_record, self._cancel)
             self.low_latency_state = self._shared.low_latency_state
             return self._own(link)
-        port = self._opener.open()
+        port = self._opener.open_port()
         self.low_latency_state = self._opener.low_latency_state
         observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
                                                  cfg.baud, self._on_finding)

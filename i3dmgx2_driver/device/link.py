@@ -87,7 +87,7 @@ class DeviceLink:
 
     @property
     def streamed(self) -> int | None:
-        """Return the command byte of the record being streamed (None: not streaming)."""
+        """Return the command byte of the record being streamed, or None while none is."""
         return self.watch.streamed
 
     @streamed.setter

@@ -61,7 +61,7 @@ class PortOpener:
         #: What the last port opened granted of low-latency mode ('' before one).
         self.low_latency_state = ''
 
-    def open(self) -> SerialPort:
+    def open_port(self) -> SerialPort:
         """Open the port (raises PortError); tell the observer; log a new low-latency mode."""
         cfg = self.config
         port = self.parts.port_factory(cfg.port, cfg.baud, low_latency=cfg.low_latency)

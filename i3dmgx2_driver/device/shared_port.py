@@ -88,7 +88,7 @@ class SharedPort:
             if reader is None or reader.disconnected.is_set():
                 if reader is not None:
                     self._close(reader)
-                port = self._opener.open()
+                port = self._opener.open_port()
                 self.low_latency_state = self._opener.low_latency_state
                 reader = self._reader = PortReader(port, None, self._opener.reader_options())
                 self.opens += 1
