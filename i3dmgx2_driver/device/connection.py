@@ -31,10 +31,10 @@ from collections.abc import Callable
 import threading
 from typing import Any
 
-from .hot_path import HotPathObserver
-from .link import BytesCallback, DeviceLink, LinkOptions, RecordCallback
+from .link import DeviceLink, RecordCallback
 from .observer import Finding, LineObserver
-from .port import PortDisconnected, PortError, SerialPort
+from .port import PortDisconnected, PortError
+from .port_opener import PortOpener, PortParts
 from .realtime import PolicyOutcome
 from .settings import DeviceConfig
 from .shared_port import SharedPort
@@ -44,28 +44,24 @@ class Connection:
     """
     Open, hold and close the link to the device at ``config.port``.
 
-    ``on_record`` and ``on_bytes`` are handed to every link (they run in
-    its reader thread); ``on_finding`` receives what the line observer
-    finds; ``cancel`` set means no stream is wanted now (every request on
-    the link gives up, and a link opened meanwhile is closed at once).
-    ``timings``, if given, is told every port open and handed to every link
-    (hot_path.py). ``shared``, if given, is the port several sensors share
-    (shared_port.py): the links come from it and go back to it, the port is
-    its to open and close, and no line observer watches it.
+    ``parts`` open the port and are handed to every link's reader (the raw
+    capture and the hot-path observer run in its thread, port_opener.py);
+    ``on_record`` is handed to every link too; ``on_finding`` receives what
+    the line observer finds; ``cancel`` set means no stream is wanted now
+    (every request on the link gives up, and a link opened meanwhile is
+    closed at once). ``shared``, if given, is the port several sensors
+    share (shared_port.py): the links come from it and go back to it, the
+    port is its to open and close, and no line observer watches it.
     """
 
-    def __init__(self, config: DeviceConfig, log: Any, port_factory: Callable[..., SerialPort],
-                 on_record: RecordCallback, on_bytes: BytesCallback | None,
-                 on_finding: Callable[[Finding], None], cancel: threading.Event,
-                 timings: HotPathObserver | None = None,
-                 shared: SharedPort | None = None) -> None:
+    def __init__(self, config: DeviceConfig, log: Any, parts: PortParts,
+                 on_record: RecordCallback, on_finding: Callable[[Finding], None],
+                 cancel: threading.Event, shared: SharedPort | None = None) -> None:
         self.config = config
         self._shared = shared
-        self._timings = timings
+        self._opener = PortOpener(config, log, parts)
         self._log = log
-        self._port_factory = port_factory
         self._on_record = on_record
-        self._on_bytes = on_bytes
         self._on_finding = on_finding
         self._cancel = cancel
         self._link: DeviceLink | None = None
@@ -96,17 +92,12 @@ class Connection:
             link = self._shared.attach(cfg.address, self._on_record, self._cancel)
             self.low_latency_state = self._shared.low_latency_state
             return self._own(link)
-        port = self._port_factory(cfg.port, cfg.baud, low_latency=cfg.low_latency)
-        if self._timings is not None:
-            self._timings.opened()
-        if port.low_latency_state != self.low_latency_state:
-            self.low_latency_state = port.low_latency_state
-            self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
+        port = self._opener.open_port()
+        self.low_latency_state = self._opener.low_latency_state
         observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
                                                  cfg.baud, self._on_finding)
-        link = DeviceLink(port, cfg.address, self._on_record, LinkOptions(
-            wireless=cfg.wireless, on_bytes=self._on_bytes, observer=observer,
-            cancel=self._cancel, thread_policy=cfg.thread_policy, timings=self._timings))
+        link = DeviceLink(port, cfg.address, self._on_record,
+                          self._opener.reader_options(observer, self._cancel))
         return self._own(link)
 
     def _own(self, link: DeviceLink) -> DeviceLink:

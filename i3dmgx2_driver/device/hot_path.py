@@ -70,34 +70,14 @@ class HotPathObserver(Protocol):
         """Note that ``publish()`` returned for ``record``'s Imu message, stamped ``stamp``."""
 
 
-class QuietObserver:
+class QuietObserver(HotPathObserver):
     """
     A :class:`HotPathObserver` that notes nothing: subclass it and override what you watch.
 
     For observers that want one or two stages (a benchmark's published
-    messages, a campaign's link-ups) without writing out every method.
+    messages, a campaign's link-ups) without writing out every method: it
+    inherits the protocol's methods, each of which does nothing.
     """
-
-    def opened(self) -> None:
-        """Note nothing."""
-
-    def connected(self) -> None:
-        """Note nothing."""
-
-    def read(self, nbytes: int, read_time: float) -> None:
-        """Note nothing."""
-
-    def parsed(self) -> None:
-        """Note nothing."""
-
-    def stamped(self) -> None:
-        """Note nothing."""
-
-    def packed(self) -> None:
-        """Note nothing."""
-
-    def published(self, record: Any, stamp: float) -> None:
-        """Note nothing."""
 
 
 #: The fields of :attr:`TimingsRecorder.rows`, in order.

@@ -13,223 +13,29 @@
 # limitations under the License.
 
 """
-One connection to the device: the reader thread and request/reply exchanges.
+One connection to one sensor: what the other layers hold and call.
 
-A single thread reads the port, feeds the parser and hands every record to
-the consumer the moment it is complete: no queue, no executor in between, so
-nothing else can delay a sample. Requests (polled records, EEPROM, identity,
-continuous mode) are made from another thread: they write a command packet
-and wait for the reader to see the reply, the base station's ACK or NACK, or
-nothing, with a timeout and bounded retries, because the radio loses
-commands both ways.
+:class:`DeviceLink` puts together the pieces of a sensor's connection,
+each in a module of its own: the reader thread (``port_reader.py``,
+:class:`~.port_reader.PortReader`, its own or a port's that several sensors
+share), the request/reply exchange (``exchange.py``), the stream's
+bookkeeping the reader hands each data packet to (``stream_watch.py``) and
+the radio's link quality (``radio.py``). It owns no behaviour of its own but
+starting and stopping: a change to one of those belongs in its module.
 """
 
-from collections.abc import Callable
-import contextlib
-from dataclasses import dataclass
 import threading
-import time
-from typing import Any, NamedTuple
+from typing import Any
 
-from . import timeouts
-from .hot_path import HotPathObserver
-from .observer import LineObserver, QUIET_AFTER
-from .port import PortDisconnected, SerialPort
-from .realtime import apply_to_current_thread, NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
-from ..codec import commands, layouts
-from ..codec.framing import DataPacket, encode_command_packet
-from ..codec.parser import Ack, Nack, SensorStreamParser
-from ..codec.records import PingReply
+from .exchange import DeviceNack, DeviceTimeout, Exchange
+from .port import SerialPort
+from .port_reader import BytesCallback, LinkOptions, PortReader, RecordCallback
+from .radio import RadioQuality, RadioStats
+from .realtime import PolicyOutcome
+from .stream_watch import StreamWatch
 
-#: Called from the reader thread with each data packet and its read time.
-#: Called with a record, the system-clock time its last byte was read and the same
-#: instant on the monotonic clock (what intervals and the device-clock fit use: the
-#: system clock can be stepped).
-RecordCallback = Callable[[DataPacket, float, float], None]
-#: Called from the reader thread with each read's bytes and their read time.
-BytesCallback = Callable[[bytes, float], None]
-
-_CODE_OF_TYPE = {layout.record_type: code for code, layout in layouts.LAYOUTS.items()
-                 if layout.record_type is not None}
-
-
-class DeviceTimeout(Exception):
-    """A request got no reply after every retry."""
-
-
-class DeviceNack(DeviceTimeout):
-    """The base station rejected a request on every try."""
-
-
-class RadioStats(NamedTuple):
-    """Latest, lowest and mean LQI and RSSI of the packets received."""
-
-    lqi: int
-    rssi: int
-    lqi_min: int
-    rssi_min: int
-    lqi_mean: float
-    rssi_mean: float
-
-
-class _Pending:
-    """A request waiting for its reply, filled in by the reader thread."""
-
-    def __init__(self, code: int | None) -> None:
-        self.code = code
-        self.done = threading.Event()
-        self.reply: Any = None
-        self.acked = threading.Event()
-        self.nacked = threading.Event()
-
-
-@dataclass(frozen=True)
-class LinkOptions:
-    """
-    How a link reads and whom it tells, besides the consumer of records.
-
-    ``wireless=False`` speaks to a wired sensor (no packets, no ACKs).
-    ``read_timeout`` bounds each read (s). ``on_bytes``, if given, receives
-    every read's bytes as read, before they are parsed (a raw capture); it
-    runs in the reader thread and must not raise or block. ``observer``, if
-    given, is fed every read while no packet of ours has arrived for
-    ``QUIET_AFTER`` s (never while records flow). ``cancel``, if given and
-    set, makes requests give up within tens of milliseconds while the reader
-    goes on (the stream is being stopped, the port kept: nobody waits for
-    the answers any more). ``thread_policy`` is applied by the reader thread
-    to itself before its first read. ``timings``, if given, is told when each
-    read returned and when the parser was done with it (hot_path.py); None
-    costs one test per stage.
-    """
-
-    wireless: bool = True
-    read_timeout: float = 0.2
-    on_bytes: BytesCallback | None = None
-    observer: LineObserver | None = None
-    cancel: threading.Event | None = None
-    thread_policy: ThreadPolicy = NORMAL_SCHEDULING
-    timings: HotPathObserver | None = None
-
-
-class PortReader:
-    """
-    The one thread that reads a port, and whom it hands each event.
-
-    Data packets go to the link of their address (``route``); a port with
-    one sensor has its link as ``fallback`` and an empty table (its parser
-    keeps the other addresses out), so the hot path is one dict lookup. The
-    base station's answers (ACK, NACK, a ping's byte) carry no address:
-    they go to the link whose request holds the port now (``requester``),
-    and since ``request_lock`` lets one exchange at a time onto the port,
-    that is the only one who can be waiting for them. ``address`` None (a
-    port shared by several sensors) reads every node's packets; those of an
-    address no link routes are counted by address in ``strays``.
-    """
-
-    def __init__(self, port: SerialPort, address: int | None,
-                 options: LinkOptions | None = None) -> None:
-        options = options if options is not None else LinkOptions()
-        self.port = port
-        self.wireless = options.wireless
-        self.parser = SensorStreamParser(address=address if self.wireless else None,
-                                         wireless=self.wireless)
-        self.routes: dict[int | None, DeviceLink] = {}
-        self.fallback: DeviceLink | None = None
-        #: The link whose exchange holds the port now (set under ``request_lock``).
-        self.requester: DeviceLink | None = None
-        #: Packets of addresses no link routes, by address (a port shared by several).
-        self.strays: dict[int, int] = {}
-        self.request_lock = threading.Lock()
-        self.write_lock = threading.Lock()
-        self._on_bytes = options.on_bytes
-        self._observer = options.observer
-        self._timings = options.timings
-        self._read_timeout = options.read_timeout
-        self._thread_policy = options.thread_policy
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._start_lock = threading.Lock()
-        self.disconnected = threading.Event()
-        self.error: str | None = None
-        #: What the scheduler granted the thread (set once it runs).
-        self.policy_outcome = PolicyOutcome()
-        #: Set by the thread once its policy is applied, before its first read.
-        self.running = threading.Event()
-
-    def start(self) -> None:
-        """Start the reader thread (once; later calls do nothing)."""
-        with self._start_lock:
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._run, name='gx2-reader',
-                                                daemon=True)
-                self._thread.start()
-
-    def stop(self) -> None:
-        """Stop the reader thread and wait for it (a read times out quickly)."""
-        self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout=2.0)
-
-    def abort(self) -> None:
-        """Make the reader give up (driver shutdown)."""
-        self._stop.set()
-
-    def _links(self) -> list['DeviceLink']:
-        links = list(self.routes.values())
-        if self.fallback is not None:
-            links.append(self.fallback)
-        return links
-
-    def _run(self) -> None:
-        if self._thread_policy.requested:
-            self.policy_outcome = apply_to_current_thread(self._thread_policy)
-        self.running.set()
-        parser = self.parser
-        read = self.port.read_some
-        observer = self._observer
-        timings = self._timings
-        routes = self.routes
-        while not self._stop.is_set():
-            timeout = 0.02 if parser.pending == 1 else self._read_timeout
-            try:
-                data = read(timeout)
-            except PortDisconnected as exc:
-                self.error = str(exc)
-                self.disconnected.set()
-                for link in self._links():
-                    link._wake_pending()
-                return
-            now = time.time()
-            mono = time.monotonic()
-            if timings is not None:
-                timings.read(len(data), now)
-            if data and self._on_bytes is not None:
-                self._on_bytes(data, now)
-            if observer is not None and observer.active and self.fallback is not None \
-                    and mono - self.fallback.last_data_mono > QUIET_AFTER:
-                observer.feed(data, mono, self.fallback.last_data_mono)
-            events = parser.feed(data) if data else parser.idle()
-            if timings is not None:
-                timings.parsed()
-            fallback = self.fallback
-            for event in events:
-                if type(event) is DataPacket:
-                    link = routes.get(event.address, fallback)
-                    if link is not None:
-                        link._on_data(event, now, mono)
-                    else:
-                        self._stray(event.address)
-                else:
-                    requester = self.requester
-                    if requester is not None:
-                        requester._on_answer(event)
-
-    def _stray(self, address: int) -> None:
-        """Count a packet of an address no link routes (a foreign frame, as the parser would)."""
-        self.strays[address] = self.strays.get(address, 0) + 1
-        stats = self.parser.stats
-        stats.good_frames -= 1
-        stats.foreign_frames += 1
+__all__ = ['BytesCallback', 'DeviceLink', 'DeviceNack', 'DeviceTimeout', 'LinkOptions',
+           'PortReader', 'RadioStats', 'RecordCallback']
 
 
 class DeviceLink:
@@ -255,38 +61,73 @@ class DeviceLink:
                  options: LinkOptions | None = None, reader: PortReader | None = None) -> None:
         options = options if options is not None else LinkOptions()
         self.port = port
-        self.address = address
         self.wireless = options.wireless
-        self.streamed: int | None = None
         self.shared = reader is not None
         if reader is None:
             reader = PortReader(port, address, options)
-            reader.fallback = self
         self.reader = reader
         self.parser = reader.parser
-        self._on_record = on_record
-        self._pending: _Pending | None = None
-        #: One exchange at a time with this sensor; on a shared port, the port's
-        #: lock is held only while the base station's answer (no address) is due.
-        self._lock = reader.request_lock if not self.shared else threading.Lock()
-        self._port_lock = reader.request_lock if self.shared else None
-        self._write_lock = reader.write_lock
-        self._stop = threading.Event()
-        self._cancel = options.cancel if options.cancel is not None else threading.Event()
+        cancel = options.cancel if options.cancel is not None else threading.Event()
+        self.exchange = Exchange(port, address, reader, cancel, self.shared)
+        self._radio = RadioQuality()
+        self.watch = StreamWatch(on_record, self.exchange, self._radio)
+        if not self.shared:
+            reader.fallback = self.watch
         self.disconnected = reader.disconnected
-        self.last_data_time = 0.0
-        #: The same instant on the monotonic clock, for stall detection.
-        self.last_data_mono = 0.0
-        #: Records of the stream (of any code while none is streamed) received so far.
-        self.records = 0
-        #: Replies to this link's requests (data packets it asked for).
-        self.replies = 0
-        #: Command byte of the last record handed to ``on_record`` (None before one).
-        self.last_code: int | None = None
-        self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
         #: Set once the link receives its packets (its own reader runs, or its
         #: address is routed on the shared one).
         self.running = reader.running if not self.shared else threading.Event()
+
+    # -- what the pieces know ------------------------------------------------
+
+    @property
+    def address(self) -> int | None:
+        """Return the node address requests go to (:meth:`retarget` changes it)."""
+        return self.exchange.address
+
+    @property
+    def streamed(self) -> int | None:
+        """Return the command byte of the record being streamed, or None while none is."""
+        return self.watch.streamed
+
+    @streamed.setter
+    def streamed(self, code: int | None) -> None:
+        self.watch.streamed = code
+
+    @property
+    def records(self) -> int:
+        """Return the records of the stream received so far."""
+        return self.watch.records
+
+    @property
+    def replies(self) -> int:
+        """Return the replies to this link's requests received so far."""
+        return self.watch.replies
+
+    @property
+    def last_code(self) -> int | None:
+        """Return the command byte of the last record handed on (None before one)."""
+        return self.watch.last_code
+
+    @property
+    def last_data_time(self) -> float:
+        """Return the system-clock time the stream was last heard."""
+        return self.watch.last_data_time
+
+    @property
+    def last_data_mono(self) -> float:
+        """Return the same instant on the monotonic clock, for stall detection."""
+        return self.watch.last_data_mono
+
+    @property
+    def heard(self) -> bool:
+        """Whether any packet of this sensor arrived on this link (a record or a reply)."""
+        return bool(self.watch.records or self.watch.replies)
+
+    @property
+    def radio(self) -> RadioStats | None:
+        """Radio link quality so far, or None before the first packet."""
+        return self._radio.stats
 
     @property
     def error(self) -> str | None:
@@ -298,18 +139,13 @@ class DeviceLink:
         """Return what the scheduler granted the reader thread."""
         return self.reader.policy_outcome
 
-    @property
-    def heard(self) -> bool:
-        """Whether any packet of this sensor arrived on this link (a record or a reply)."""
-        return bool(self.records or self.replies)
-
-    # -- reader thread -------------------------------------------------
+    # -- reader thread -------------------------------------------------------
 
     def start(self) -> None:
         """Start receiving: the reader thread, or this address's route on the shared one."""
         reader = self.reader
         if self.shared:
-            reader.routes[self.address] = self
+            reader.routes[self.address] = self.watch
             reader.start()
             if reader.running.wait(1.0):
                 self.running.set()
@@ -318,20 +154,20 @@ class DeviceLink:
 
     def stop(self) -> None:
         """Stop receiving: the reader thread (waited for), or this address's route."""
-        self._stop.set()
+        self.exchange.stopped.set()
         if self.shared:
-            if self.reader.routes.get(self.address) is self:
+            if self.reader.routes.get(self.address) is self.watch:
                 del self.reader.routes[self.address]
-            self._wake_pending()
+            self.exchange.wake()
         else:
             self.reader.stop()
 
     def abort(self) -> None:
         """Make the reader (if the link's own) and any waiting request give up."""
-        self._stop.set()
+        self.exchange.stopped.set()
         if not self.shared:
             self.reader.abort()
-        self._wake_pending()
+        self.exchange.wake()
 
     def _run(self) -> None:
         """Read in the calling thread (tests); the link's own reader only."""
@@ -342,196 +178,28 @@ class DeviceLink:
         if not self.shared:
             self.port.flush_input()
 
-    def _on_data(self, event: DataPacket, now: float, mono: float) -> None:
-        code = _CODE_OF_TYPE.get(type(event.record))
-        # While a stream runs, only its records keep it alive: a sensor power-cycled
-        # into its EEPROM auto-start streams another record, and the stall watch
-        # and the wait for the stream must not take that one for it (found by the
-        # long soak).
-        ours = self.streamed is None or code == self.streamed
-        if ours:
-            self.last_data_time = now
-            self.last_data_mono = mono
-        if event.lqi is not None:
-            self._note_radio(event.lqi, event.rssi)
-        pending = self._pending
-        if pending is not None and pending.code == code:
-            pending.reply = event.record
-            pending.done.set()
-            self.replies += 1
-            if code != self.streamed:
-                return
-        if ours:
-            self.records += 1
-        self.last_code = code
-        self._on_record(event, now, mono)
-
-    def _on_answer(self, event: Any) -> None:
-        """Take the base station's answer to this link's exchange (ACK, NACK, ping)."""
-        pending = self._pending
-        if pending is None:
-            return
-        if isinstance(event, Ack):
-            pending.acked.set()
-        elif isinstance(event, Nack):
-            pending.nacked.set()
-        elif isinstance(event, PingReply) and pending.code == layouts.PING:
-            pending.reply = event
-            pending.done.set()
-
-    def _wake_pending(self) -> None:
-        pending = self._pending
-        if pending is not None:
-            pending.done.set()
-
-    def _note_radio(self, lqi: int, rssi: int) -> None:
-        radio = self._radio
-        radio[0], radio[1] = lqi, rssi
-        radio[2] = min(radio[2], lqi)
-        radio[3] = min(radio[3], rssi)
-        radio[4] += lqi
-        radio[5] += rssi
-        radio[6] += 1
-
-    @property
-    def radio(self) -> RadioStats | None:
-        """Radio link quality so far, or None before the first packet."""
-        r = self._radio
-        if not r[6]:
-            return None
-        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
-
-    # -- requests ------------------------------------------------------
+    # -- requests (exchange.py) ------------------------------------------------
 
     def send(self, command: bytes) -> None:
         """Write one command, framed for the link; no waiting."""
-        data = encode_command_packet(self.address, command) if self.wireless else command
-        with self._write_lock:
-            self.port.write(data)
+        self.exchange.send(command)
 
     def request(self, command: bytes, reply_code: int | None, timeout: float = 0.5,
                 retries: int = 3) -> Any:
-        """
-        Send ``command`` until its reply (a record of ``reply_code``) arrives.
-
-        Returns the reply record. A NACK resends at once; silence resends
-        after ``timeout``. Raises DeviceTimeout (DeviceNack if every try was
-        rejected) after ``retries`` tries, PortDisconnected if the port died.
-        """
-        with self._lock:
-            nacks = 0
-            for _ in range(retries):
-                self._check_cancelled()
-                pending = _Pending(reply_code)
-                self._pending = pending
-                try:
-                    if self._port_lock is None:
-                        self.reader.requester = self
-                        self.send(command)
-                        self._wait(pending, timeout)
-                    else:
-                        self._exchange_shared(command, pending, timeout)
-                finally:
-                    self._pending = None
-                    if self.reader.requester is self:
-                        self.reader.requester = None
-                if self.disconnected.is_set():
-                    raise PortDisconnected(self.error or 'device disconnected')
-                self._check_cancelled()
-                if pending.done.is_set():
-                    return pending.reply
-                if pending.nacked.is_set():
-                    nacks += 1
-            name = layouts.LAYOUTS[command[0]].name
-            if nacks == retries:
-                raise DeviceNack(f'{name}: the base station rejected it {retries} times')
-            raise DeviceTimeout(f'{name}: no reply after {retries} tries')
-
-    def _exchange_shared(self, command: bytes, pending: _Pending, timeout: float) -> None:
-        """
-        Send on a shared port: hold it until the ACK or NACK, then wait for the reply alone.
-
-        The reply is a data packet with this sensor's address, routed to this
-        link whoever else streams or asks meanwhile; only the base station's
-        one-byte answer must not be mistaken for another sensor's.
-        """
-        deadline = time.monotonic() + timeout
-        with self._port_lock:
-            self.reader.requester = self
-            try:
-                self.send(command)
-                ack_deadline = time.monotonic() + min(timeouts.ACK_TIMEOUT, timeout)
-                while not (pending.acked.is_set() or pending.nacked.is_set()
-                           or pending.done.is_set() or self._cancel.is_set()):
-                    left = ack_deadline - time.monotonic()
-                    if left <= 0:
-                        break
-                    pending.acked.wait(min(left, 0.01))
-            finally:
-                self.reader.requester = None
-        if not pending.nacked.is_set():
-            self._wait(pending, deadline - time.monotonic())
-
-    def _wait(self, pending: _Pending, timeout: float, nack_ends: bool = True) -> None:
-        """Wait for a reply, a NACK (if ``nack_ends``), a cancel or the timeout."""
-        deadline = time.monotonic() + timeout
-        while not (nack_ends and pending.nacked.is_set()) and not self._cancel.is_set():
-            left = deadline - time.monotonic()
-            if left <= 0 or pending.done.wait(min(left, 0.02)):
-                break
-
-    def _check_cancelled(self) -> None:
-        if self._stop.is_set() or self.reader._stop.is_set():
-            raise DeviceTimeout('the link is shutting down')
-        if self._cancel.is_set():
-            raise DeviceTimeout('cancelled: the stream is being stopped')
+        """Send ``command`` until its reply arrives (:meth:`.Exchange.request`)."""
+        return self.exchange.request(command, reply_code, timeout, retries)
 
     def ping(self, timeout: float = 0.5, retries: int = 3) -> bool:
         """Ask the base station whether the sensor answers over the radio."""
-        for _ in range(retries):
-            answer = self.ping_once(self.address, timeout)
-            if answer is not None:
-                return answer
-        return False
+        return self.exchange.ping(timeout, retries)
 
     def ping_once(self, address: int, timeout: float) -> bool | None:
-        """
-        Ping ``address`` once: True (link OK), False (0x21: no such node).
-
-        None means no answer at all, which a base station never gives: a
-        wired sensor, or nothing, is on the port (what discovery needs to
-        tell apart from a node that is not there).
-        """
-        with self._lock, self._port_lock or contextlib.nullcontext():
-            for _ in range(2):
-                skipped = self.parser.stats.bytes_skipped
-                pending = _Pending(layouts.PING)
-                self._pending = pending
-                self.reader.requester = self
-                try:
-                    self.parser.expect_ping()
-                    with self._write_lock:
-                        self.port.write(commands.ping(address))
-                    self._wait(pending, timeout, nack_ends=False)
-                finally:
-                    self._pending = None
-                    self.reader.requester = None
-                if self.disconnected.is_set():
-                    raise PortDisconnected(self.error or 'device disconnected')
-                self._check_cancelled()
-                # The answer is one byte, 0x02 or 0x21, found between frames. While
-                # the parser skips garbage (the tail of another node's packet cut by
-                # a flush) a byte of that garbage can pass for it; the parser is in
-                # step with the stream after it, so a second ping is trustworthy.
-                if pending.reply is None or self.parser.stats.bytes_skipped == skipped:
-                    break
-            return None if pending.reply is None else bool(pending.reply.ok)
+        """Ping ``address`` once (:meth:`.Exchange.ping_once`): True, False or None."""
+        return self.exchange.ping_once(address, timeout)
 
     def stop_streaming(self, repeats: int = 3, gap: float = 0.02) -> None:
         """Send 0xFA several times: it has no reply and the radio may drop it."""
-        for _ in range(repeats):
-            self.send(commands.stop_continuous())
-            time.sleep(gap)
+        self.exchange.stop_streaming(repeats, gap)
 
     def retarget(self, address: int | None) -> None:
         """
@@ -541,6 +209,6 @@ class DeviceLink:
         accepts data packets from every node (listening for sensors that
         already stream); requests need an address again before they are sent.
         """
-        self.address = address
+        self.exchange.address = address
         if self.wireless:
             self.parser.address = address

@@ -39,6 +39,7 @@ from typing import Any
 from .hot_path import HotPathObserver
 from .link import BytesCallback, DeviceLink, LinkOptions, PortReader, RecordCallback
 from .port import SerialPort
+from .port_opener import PortOpener, PortParts
 from .settings import DeviceConfig
 from ..codec import streams
 
@@ -57,9 +58,7 @@ class SharedPort:
                  timings: HotPathObserver | None = None) -> None:
         self.config = config
         self._log = log
-        self._port_factory = port_factory
-        self._on_bytes = on_bytes
-        self._timings = timings
+        self._opener = PortOpener(config, log, PortParts(port_factory, on_bytes, timings))
         self._lock = threading.Lock()
         self._reader: PortReader | None = None
         self._links: set[DeviceLink] = set()
@@ -89,15 +88,9 @@ class SharedPort:
             if reader is None or reader.disconnected.is_set():
                 if reader is not None:
                     self._close(reader)
-                port = self._port_factory(cfg.port, cfg.baud, low_latency=cfg.low_latency)
-                if self._timings is not None:
-                    self._timings.opened()
-                if port.low_latency_state != self.low_latency_state:
-                    self.low_latency_state = port.low_latency_state
-                    self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
-                reader = self._reader = PortReader(port, None, LinkOptions(
-                    wireless=cfg.wireless, on_bytes=self._on_bytes,
-                    thread_policy=cfg.thread_policy, timings=self._timings))
+                port = self._opener.open_port()
+                self.low_latency_state = self._opener.low_latency_state
+                reader = self._reader = PortReader(port, None, self._opener.reader_options())
                 self.opens += 1
             link = DeviceLink(reader.port, address, on_record,
                               LinkOptions(wireless=cfg.wireless, cancel=cancel), reader=reader)

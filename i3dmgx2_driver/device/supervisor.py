@@ -21,7 +21,8 @@ the device side and offers them as the node needs them. The pieces, each in
 a module of its own:
 
 - ``dialogue.py``: :class:`~.dialogue.SensorDialogue`, what to say to the
-  sensor (quiet, identity, rate, continuous mode, resume); no thread.
+  sensor (quiet, identity, rate, continuous mode, resume; each phase in a
+  module of its own); no thread.
 - ``connection.py``: :class:`~.connection.Connection`, the one open link,
   opened and closed safely from any thread, counted across reconnects.
 - ``startup.py``: :class:`~.startup.StartUp`, the steps from an open port
@@ -59,10 +60,10 @@ from typing import Any
 from .connection import Connection
 from .dialogue import SensorDialogue
 from .exclusive import ExclusiveAccess
-from .hot_path import HotPathObserver
 from .identity import DeviceInfo
-from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
-from .port import PortError, SerialPort
+from .link import DeviceLink, DeviceTimeout, RecordCallback
+from .port import PortError
+from .port_opener import PortParts
 from .recovery import RecoveryLoop
 from .report import DeviceReport
 from .settings import DeviceConfig
@@ -79,29 +80,30 @@ class DeviceSupervisor:
     ``on_connect`` runs in the supervisor thread each time a link is made
     (the node checks its clock there). ``log`` is any object with
     ``debug/info/warning/error`` methods (a ``logging.Logger`` by default;
-    the node passes its rclpy logger). ``on_bytes`` runs in the reader
-    thread with every read's raw bytes and read time (a raw capture).
-    ``on_fatal`` runs in the supervisor thread, once, when the port can
-    never work (``fatal_error`` then holds the error; without it the error
-    is logged); the supervisor has stopped by then. ``timings``, if given,
-    is told every port open and every link up (right after ``on_connect``)
-    and handed to every link, which tells it the read and the parse of each
-    sample (hot_path.py). ``port_factory`` opens the port (SerialPort; a
-    subclass to observe it). ``shared``, if given, is the port this sensor
-    shares with others behind the same base station (shared_port.py): it
-    opens and closes the port, and this supervisor keeps only its sensor
-    streaming (a supervisor per sensor, each with its own thread).
+    the node passes its rclpy logger). ``on_fatal`` runs in the supervisor
+    thread, once, when the port can never work (``fatal_error`` then holds
+    the error; without it the error is logged); the supervisor has stopped
+    by then. ``port`` says how the port is opened and whom its reader tells
+    (port_opener.py): its
+    ``port_factory`` opens the port (SerialPort; a subclass to observe it);
+    its ``on_bytes`` runs in the reader thread with every read's raw bytes
+    and read time (a raw capture); its ``timings``, if given, is told every
+    port open and every link up (right after ``on_connect``) and handed to
+    every link, which tells it the read and the parse of each sample
+    (hot_path.py). ``shared``, if given, is the port this sensor shares
+    with others behind the same base station (shared_port.py): it opens and
+    closes the port, and this supervisor keeps only its sensor streaming (a
+    supervisor per sensor, each with its own thread).
     """
 
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
                  log: Any = None, on_connect: Callable[[], None] | None = None,
-                 port_factory: Callable[..., SerialPort] = SerialPort,
-                 on_bytes: BytesCallback | None = None,
                  on_fatal: Callable[[PortError], None] | None = None,
-                 timings: HotPathObserver | None = None,
+                 port: PortParts | None = None,
                  shared: SharedPort | None = None) -> None:
         self.config = config
         self._shared = shared
+        port = port if port is not None else PortParts()
         log = log or logging.getLogger('i3dmgx2_driver')
         #: Set means "no stream wanted now": the thread ends, and every request on the
         #: link gives up within a few tens of milliseconds (the link's ``cancel`` event).
@@ -109,10 +111,11 @@ class DeviceSupervisor:
         #: stop_streaming() keeps it.
         self._stop = threading.Event()
         self.report = DeviceReport(log)
-        self.connection = Connection(config, log, port_factory, on_record, on_bytes,
-                                     self.report.finding, self._stop, timings, shared)
+        self.connection = Connection(config, log, port, on_record, self.report.finding,
+                                     self._stop, shared)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
         self.dialogue = SensorDialogue(config, log, self.report.warn, self._stop)
+        timings = port.timings
         self._startup = StartUp(self.connection, self.dialogue, self.report, self._stop,
                                 _then(on_connect, timings.connected if timings else None))
         self._exclusive = ExclusiveAccess(self.connection, self.dialogue, self._startup,

@@ -62,6 +62,7 @@ from ..codec.data_rate import ticks_per_cycle
 from ..codec.framing import DataPacket
 from ..device.hot_path import HotPathObserver
 from ..device.port import check_port_path, PortError, SerialPort
+from ..device.port_opener import PortParts
 from ..device.realtime import ThreadPolicy
 from ..device.sample_clock import ClockStatus, Restart, SampleClock
 from ..device.settings import DeviceConfig
@@ -292,8 +293,8 @@ class DriverCore:
         self.supervisor = DeviceSupervisor(
             self.device_config,
             on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
-            on_bytes=capture if shared is None else None,
-            on_fatal=self._on_fatal, timings=timings, port_factory=port_factory,
+            on_fatal=self._on_fatal, port=PortParts(
+                port_factory, capture if shared is None else None, timings),
             shared=shared)
         self.announce_calibrated(False)
         self.device_services = DeviceServices(
