@@ -121,7 +121,7 @@ class Replayer:
 
     @property
     def pty_name(self) -> str | None:
-        """The pty itself, behind the link (None before start)."""
+        """Return the pty itself, behind the link (None before start)."""
         return self._pty.pty_name
 
     @property
