@@ -38,7 +38,7 @@ keeps in :attr:`DriverCore.fatal_error` the one the supervisor finds later.
 """
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import sys
 import time
 
@@ -120,7 +120,7 @@ class Probes:
     """
 
     timings: HotPathObserver | None = None
-    port_factory: Callable[..., SerialPort] = field(default=SerialPort)
+    port_factory: Callable[..., SerialPort] = SerialPort
 
 
 @dataclass(frozen=True)
