@@ -33,7 +33,7 @@ from harness.processes import isolate_ros_domain, NodeProcess, ros_env
 from i3dmgx2_driver.device.hot_path import ROW_FIELDS, TIMINGS_ENV, TimingsRecorder
 from i3dmgx2_driver.device.link import DeviceLink, LinkOptions, PortReader
 from i3dmgx2_driver.device.port import PortDisconnected
-from i3dmgx2_driver.ros.driver_core import DriverCore
+from i3dmgx2_driver.ros.record_publisher import RecordPublisher
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
 from test_codec_golden import ADDRESS, FIXTURE_DATA_PACKET
@@ -67,7 +67,7 @@ def _guarded_uses(function) -> tuple[int, list[str]]:
 
 @pytest.mark.parametrize(('function', 'stages'), [
     (PortReader._run, 2),  # read, parsed
-    (DriverCore._on_record, 3),  # stamped, packed, published
+    (RecordPublisher.on_record, 3),  # stamped, packed, published
 ])
 def test_off_costs_one_test_per_stage(function, stages):
     guarded, stray = _guarded_uses(function)

@@ -23,11 +23,11 @@ check the same end to end.
 
 import os
 
-from i3dmgx2_driver.ros.driver_core import ALONE_TOPICS, SensorTopics
 from i3dmgx2_driver.ros.parameters import (
     ANGULAR_VELOCITY_STDDEV, declare_parameters, LINEAR_ACCELERATION_STDDEV,
     ORIENTATION_STDDEV, ParameterError,
 )
+from i3dmgx2_driver.ros.publishers import ALONE_TOPICS, SensorTopics
 from i3dmgx2_driver.ros.qos import create_publisher, override_names
 from i3dmgx2_driver.ros.unknown_parameters import warn_unknown_parameters
 import pytest

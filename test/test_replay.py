@@ -33,7 +33,8 @@ from i3dmgx2_driver.codec import (
     encode_record, Nack, SensorStreamParser,
 )
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
-from i3dmgx2_driver.tools.replay import Replayer, schedule, unread_bytes
+from i3dmgx2_driver.tools.replay import Replayer, schedule
+from i3dmgx2_driver.tools.replay_pty import unread_bytes
 import pytest
 import serial
 

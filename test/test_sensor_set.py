@@ -22,6 +22,7 @@ and the README's table of what N sensors fit on the line, against the code.
 import math
 import os
 import re
+from types import SimpleNamespace
 
 from harness.processes import REPO
 from i3dmgx2_driver.codec import line_budget, streams
@@ -31,8 +32,10 @@ import pytest
 
 def settings(address=0, addresses=(), names=(), frame_ids=(), stream_texts=(), rates=(),
              frame_id='imu_link', stream='full', data_rate=0.0, wireless=True):
-    return sensor_settings(address, addresses, names, frame_ids, stream_texts, rates,
-                           frame_id, stream, data_rate, wireless)
+    return sensor_settings(SimpleNamespace(
+        address=address, addresses=addresses, sensor_names=names, frame_ids=frame_ids,
+        streams=stream_texts, data_rates=rates, frame_id=frame_id, stream=stream,
+        data_rate=data_rate, wireless=wireless))
 
 
 def test_one_sensor_is_named_imu_as_always():

@@ -30,8 +30,9 @@ import threading
 
 from rclpy.node import Node
 
-from .driver_core import device_config, DriverCore, Publishers
+from .driver_core import CoreRole, device_config, DriverCore, Probes, SensorSlot
 from .parameters import DriverConfig
+from .publishers import Publishers
 from .raw_capture import RawCapture
 from ..device.hot_path import HotPathObserver
 from ..device.port import check_port_path, PortError, SerialPort
@@ -66,10 +67,11 @@ class DriverSet:
                 device_config(config, sensors[0]), node.get_logger(), port_factory,
                 capture.on_bytes if capture.active else None, timings)
         self._capture = capture
+        probes = Probes(timings, port_factory)
         self.cores = [
-            DriverCore(node, config, publishers[i] if publishers else None, publishing,
-                       refusal, timings, port_factory, sensor=sensor, shared=self.shared,
-                       raw_capture=capture)
+            DriverCore(node, config,
+                       CoreRole(publishers[i] if publishers else None, publishing, refusal),
+                       probes, SensorSlot(sensor, self.shared, capture))
             for i, sensor in enumerate(sensors)]
 
     @property

@@ -35,7 +35,7 @@ logged in one line:
   the services answer that the node is inactive.
 - cleanup: close the port (another process may open it at once) and remove
   the core's services; the publishers stay for the next configure
-  (:func:`~.driver_core.create_publishers` says why).
+  (:func:`~.publishers.create_publishers` says why).
 - shutdown, from any state: stop the stream, close the port; the process
   then exits 0. SIGINT and SIGTERM do the same through the shutdown
   transition, within 2 s, even in the middle of a configure.
@@ -61,10 +61,11 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from .diagnostics import DiagnosticsPublisher
-from .driver_core import create_publishers, DriverCore, load_config, Publishers
+from .driver_core import DriverCore, load_config
 from .driver_set import DriverSet
 from .main import run
 from .parameters import declare_parameters, driver_config, DriverConfig, ParameterError
+from .publishers import create_publishers, Publishers
 from ..device.hot_path import HotPathObserver
 from ..device.link import DeviceTimeout
 from ..device.port import check_port_path, PortError, PortUnusable, SerialPort

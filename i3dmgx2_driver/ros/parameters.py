@@ -246,9 +246,7 @@ class DriverConfig:
     @property
     def sensors(self) -> list[SensorSetting]:
         """Return every sensor to serve, with its name, frame and stream (sensor_set.py)."""
-        return sensor_settings(self.address, self.addresses, self.sensor_names, self.frame_ids,
-                               self.streams, self.data_rates, self.frame_id, self.stream,
-                               self.data_rate, self.wireless)
+        return sensor_settings(self)
 
 
 def _valid_range(spec: Spec) -> str:

@@ -42,25 +42,25 @@ from collections.abc import Callable, Sequence
 import itertools
 import json
 import os
-import statistics
 import sys
-import threading
 import time
 from typing import Any, TextIO
 
+from .bringup_round_trips import MEASURE_TIMEOUT, note_longest, RoundTrips, spread
+from .bringup_sensor import HeardRecords, SensorControl
 from ..arguments import seconds, whole_number
 from ..capture import CaptureWriter, default_header
-from ..codec import commands, layouts, line_budget, streams
+from ..codec import line_budget, streams
 from ..codec.data_rate import (
-    divider_for_rate, RATE_BASE_HZ, RATE_DIVIDER_ADDRESS, ticks_per_cycle,
+    divider_for_rate, RATE_BASE_HZ, ticks_per_cycle,
 )
-from ..codec.framing import DataPacket, MAX_ADDRESS, MIN_ADDRESS
+from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.records import TICKS_PER_SECOND
 from ..codec.timer import TIMER_MODULUS
 from ..device import timeouts
 from ..device.clock import DeviceClock
 from ..device.identity import read_identity
-from ..device.link import DeviceLink, DeviceNack, DeviceTimeout, LinkOptions
+from ..device.link import DeviceLink, DeviceTimeout, LinkOptions
 from ..device.port import port_group, PortError, SerialPort
 from ..device.port_listing import latency_timer_ms
 
@@ -68,15 +68,6 @@ EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
-
-#: How long a single measured exchange may take (s): far beyond every timeout the
-#: driver uses, so that a slow round trip is measured rather than counted lost.
-MEASURE_TIMEOUT = 2.0
-#: Silence (s) after which a stopped stream counts as stopped (plus a few periods).
-QUIET_S = 0.3
-#: The short command whose round trip is measured: the firmware version (0xE9).
-SHORT_COMMAND = layouts.FIRMWARE_VERSION
-
 
 _count = whole_number(1, 1000, 'count')
 _address = whole_number(MIN_ADDRESS, MAX_ADDRESS, 'node address')
@@ -122,51 +113,17 @@ def _streams(text: str) -> list[streams.Stream]:
     return [streams.parse(item.strip()) for item in text.split(',') if item.strip()]
 
 
-def spread(values: Sequence[float], scale: float = 1.0,
-           digits: int = 1) -> dict[str, float | int | None]:
-    """Return count, min, median and max of ``values`` times ``scale``."""
-    if not values:
-        return {'count': 0, 'min': None, 'median': None, 'max': None}
-
-    def shown(value: float) -> float | int:
-        return round(value * scale, digits) if digits else round(value * scale)
-    return {'count': len(values), 'min': shown(min(values)),
-            'median': shown(statistics.median(values)), 'max': shown(max(values))}
-
-
-class _Heard:
-    """The records of our sensor as the reader thread hands them over."""
-
-    def __init__(self) -> None:
-        self.lock = threading.Lock()
-        self.count = 0
-        self.last_mono = 0.0
-        #: While collecting: (mono, code, timer, lqi, rssi) of each record.
-        self.log: list[tuple[float, int, int, int | None, int | None]] | None = None
-
-    def __call__(self, packet: DataPacket, now: float, mono: float) -> None:
-        with self.lock:
-            self.count += 1
-            self.last_mono = mono
-            if self.log is not None:
-                record = packet.record
-                code = _CODE_OF_TYPE.get(type(record), 0)
-                self.log.append((mono, code, getattr(record, 'timer', 0), packet.lqi,
-                                 packet.rssi))
-
-    def snapshot(self) -> tuple[int, float]:
-        with self.lock:
-            return self.count, self.last_mono
-
-
-_CODE_OF_TYPE = {layout.record_type: code for code, layout in layouts.LAYOUTS.items()
-                 if layout.record_type is not None}
-
-
 class Bringup:
-    """One bring-up session over an open link; each step fills part of :attr:`report`."""
+    """
+    One bring-up session over an open link; each step fills part of :attr:`report`.
 
-    def __init__(self, link: DeviceLink, heard: _Heard, args: argparse.Namespace,
+    The sensor's stream and divider are :attr:`control`'s
+    (bringup_sensor.py), the round trips :attr:`round_trips`'
+    (bringup_round_trips.py); here: the sensor as found, every stream, and
+    the sensor as found again.
+    """
+
+    def __init__(self, link: DeviceLink, heard: HeardRecords, args: argparse.Namespace,
                  say: Callable[[str], None]) -> None:
         self.link = link
         self.heard = heard
@@ -175,17 +132,10 @@ class Bringup:
         self.report: dict[str, Any] = {}
         self.found_stream = 0
         self.found_divider: int | None = None
-        self.divider: int | None = None
         #: Longest round trip of each kind (s), for the timeouts' check.
         self.longest: dict[str, float] = {}
-        #: EEPROM writes made (each written back at the end).
-        self.eeprom_writes = 0
-        #: When the stream was last asked to stop (a record before it is no sign of quiet).
-        self._since = 0.0
-
-    def _note_longest(self, kind: str, values: Sequence[float]) -> None:
-        if values:
-            self.longest[kind] = max(self.longest.get(kind, 0.0), *values)
+        self.control = SensorControl(link, heard)
+        self.round_trips = RoundTrips(self.control, args, say, self.longest)
 
     # -- the sensor as found --------------------------------------------------------
 
@@ -206,7 +156,7 @@ class Bringup:
         if self.found_stream:
             self.say(f'the sensor streams 0x{self.found_stream:02X}: stopping it (restarted '
                      f'at the end)')
-        self.stop_stream()
+        self.control.stop_stream()
         if not self.found_stream:
             answer = None
             for _ in range(3):
@@ -226,10 +176,10 @@ class Bringup:
         self.report['identity'] = info._asdict()
         self.report['identity']['answered'] = any(info)
         try:
-            self.found_divider = self.read_divider()
+            self.found_divider = self.control.read_divider()
         except DeviceTimeout:
             self.found_divider = None
-        self.divider = self.found_divider
+        self.control.divider = self.found_divider
         self.report['as_found'] = {
             'streaming': f'0x{self.found_stream:02X}' if self.found_stream else None,
             'rate_divider': self.found_divider,
@@ -237,147 +187,6 @@ class Bringup:
             if self.found_divider else None,
         }
         return True
-
-    def read_divider(self) -> int:
-        return self.link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
-                                 layouts.READ_EEPROM, timeouts.REQUEST_TIMEOUT,
-                                 timeouts.REQUEST_RETRIES).value
-
-    def write_divider(self, divider: int) -> bool:
-        """Write the rate divider to EEPROM and read it back; True if it holds."""
-        try:
-            self.link.request(commands.write_eeprom(RATE_DIVIDER_ADDRESS, divider),
-                              layouts.WRITE_EEPROM, timeouts.REQUEST_TIMEOUT,
-                              timeouts.REQUEST_RETRIES)
-            readback = self.read_divider()
-        except DeviceTimeout:
-            return False
-        self.eeprom_writes += 1
-        if readback == divider:
-            self.divider = divider
-        return readback == divider
-
-    # -- streams on and off -----------------------------------------------------------
-
-    def _period(self) -> float:
-        return self.divider / RATE_BASE_HZ if self.divider else 0.01
-
-    def wait_quiet(self, within: float) -> float | None:
-        """Wait until no record came for QUIET_S (and a few periods); return the last's time."""
-        quiet = QUIET_S + 5 * self._period()
-        deadline = time.monotonic() + within
-        while time.monotonic() < deadline:
-            _, last = self.heard.snapshot()
-            if time.monotonic() - max(last, self._since) >= quiet:
-                return last
-            time.sleep(0.01)
-        return None
-
-    def stop_stream(self) -> bool:
-        """Send 0xFA until records stop; True once they have."""
-        for _ in range(5):
-            self._since = time.monotonic()
-            self.link.stop_streaming()
-            if self.wait_quiet(2.0) is not None:
-                return True
-        return False
-
-    def start_stream(self, code: int, tries: int = 5) -> float | None:
-        """Ask for continuous mode until records arrive; return when the first did."""
-        for _ in range(tries):
-            before, _ = self.heard.snapshot()
-            try:
-                self.link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
-                                  timeouts.REQUEST_TIMEOUT, 1)
-            except DeviceTimeout:
-                pass  # the reply may be lost while the stream started: look for records
-            deadline = time.monotonic() + max(1.0, 5 * self._period())
-            while time.monotonic() < deadline:
-                count, last = self.heard.snapshot()
-                if count > before:
-                    return last
-                time.sleep(0.005)
-        return None
-
-    # -- round trips ---------------------------------------------------------------------
-
-    def ping_round_trips(self) -> None:
-        self.say(f'timing {self.args.pings} pings')
-        times, lost, absent = [], 0, 0
-        for _ in range(self.args.pings):
-            start = time.monotonic()
-            answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
-            took = time.monotonic() - start
-            if answer is None:
-                lost += 1
-            elif not answer:
-                absent += 1  # the base station answered, the sensor did not (0x21)
-            else:
-                times.append(took)
-        self._note_longest(timeouts.PING, times)
-        self.report['round_trips']['ping'] = {
-            **spread(times, 1e3), 'lost': lost, 'not_answered_by_sensor': absent}
-
-    def command_round_trips(self) -> None:
-        self.say(f'timing {self.args.commands} short commands (0x{SHORT_COMMAND:02X})')
-        times, lost, nacked = [], 0, 0
-        for _ in range(self.args.commands):
-            start = time.monotonic()
-            try:
-                self.link.request(bytes((SHORT_COMMAND,)), SHORT_COMMAND, MEASURE_TIMEOUT, 1)
-            except DeviceNack:
-                nacked += 1
-                continue
-            except DeviceTimeout:
-                lost += 1
-                continue
-            times.append(time.monotonic() - start)
-        self._note_longest(timeouts.COMMAND, times)
-        self.report['round_trips']['command'] = {
-            **spread(times, 1e3), 'lost': lost, 'nacked': nacked}
-
-    def continuous_round_trips(self, code: int) -> None:
-        self.say(f'timing {self.args.cycles} continuous-mode starts and stops '
-                 f'(0x{code:02X})')
-        starts, stops, replies = [], [], []
-        lost = nacked = failed = 0
-        for _ in range(self.args.cycles):
-            before, _ = self.heard.snapshot()
-            start = time.monotonic()
-            try:
-                self.link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
-                                  MEASURE_TIMEOUT, 1)
-                replies.append(time.monotonic() - start)
-            except DeviceNack:
-                nacked += 1
-            except DeviceTimeout:
-                lost += 1
-            deadline = start + MEASURE_TIMEOUT + 5 * self._period()
-            first = None
-            while time.monotonic() < deadline:
-                count, last = self.heard.snapshot()
-                if count > before:
-                    first = last
-                    break
-                time.sleep(0.002)
-            if first is None:
-                failed += 1
-                continue
-            starts.append(first - start)
-            time.sleep(0.2)
-            self._since = stop_sent = time.monotonic()
-            self.link.send(commands.stop_continuous())
-            last = self.wait_quiet(MEASURE_TIMEOUT)
-            if last is None:
-                lost += 1  # the stop was lost: stop it the sure way
-                self.stop_stream()
-                continue
-            stops.append(max(0.0, last - stop_sent))
-        self._note_longest(timeouts.CONTINUOUS_START, starts)
-        self.report['round_trips']['continuous_start'] = {
-            **spread(starts, 1e3), 'reply': spread(replies, 1e3), 'lost': lost,
-            'nacked': nacked, 'no_records': failed}
-        self.report['round_trips']['continuous_stop'] = spread(stops, 1e3)
 
     # -- every stream --------------------------------------------------------------------
 
@@ -392,22 +201,22 @@ class Bringup:
         out['rate_asked_hz'] = round(RATE_BASE_HZ / divider, 2)
         self.say(f'streaming {stream.label} at {RATE_BASE_HZ / divider:.1f} Hz for '
                  f'{self.args.stream_seconds:g} s')
-        if divider != self.divider and not self.write_divider(divider):
+        if divider != self.control.divider and not self.control.write_divider(divider):
             out['error'] = f'could not set the rate divider to {divider}'
             return out
         with self.heard.lock:
             self.heard.log = []
-        if self.start_stream(stream.code) is None:
+        if self.control.start_stream(stream.code) is None:
             out['error'] = 'no records after 5 continuous-mode requests'
         else:
             time.sleep(self.args.stream_seconds)
         with self.heard.lock:
             log, self.heard.log = self.heard.log, None
-        self.stop_stream()
+        self.control.stop_stream()
         out.update(stream_figures([e for e in log if e[1] == stream.code], divider,
                                   line_budget.wire_time(stream.code, self.args.baud, True)))
-        self._note_longest(timeouts.RECORD_GAP, [out['longest_gap_ms'] / 1e3]
-                           if out.get('longest_gap_ms') is not None else [])
+        note_longest(self.longest, timeouts.RECORD_GAP, [out['longest_gap_ms'] / 1e3]
+                     if out.get('longest_gap_ms') is not None else [])
         return out
 
     # -- as found again -------------------------------------------------------------------
@@ -415,27 +224,28 @@ class Bringup:
     def restore(self) -> dict[str, Any]:
         """Put divider and stream back as found; say how it went."""
         out: dict[str, Any] = {}
-        self.stop_stream()
+        self.control.stop_stream()
         if self.found_divider is not None:
-            ok = self.divider == self.found_divider or self.write_divider(self.found_divider)
+            ok = (self.control.divider == self.found_divider
+                  or self.control.write_divider(self.found_divider))
             try:
-                readback = self.read_divider()
+                readback = self.control.read_divider()
             except DeviceTimeout:
                 readback = None
             out['rate_divider'] = readback
             out['rate_divider_restored'] = bool(ok and readback == self.found_divider)
         else:
             out['rate_divider'] = None
-            out['rate_divider_restored'] = self.divider is None
+            out['rate_divider_restored'] = self.control.divider is None
         if self.found_stream:
-            restarted = self.start_stream(self.found_stream) is not None
+            restarted = self.control.start_stream(self.found_stream) is not None
             out['streaming'] = f'0x{self.found_stream:02X}' if restarted else None
             out['stream_restored'] = restarted
         else:
             out['streaming'] = None
             out['stream_restored'] = True
         out['as_found'] = out['rate_divider_restored'] and out['stream_restored']
-        out['eeprom_writes'] = self.eeprom_writes
+        out['eeprom_writes'] = self.control.eeprom_writes
         return out
 
 
@@ -612,11 +422,12 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
     capture = CaptureWriter(os.path.join(folder, 'session.gx2cap'), default_header(
         port=args.port, address=args.address, baud=args.baud, wireless=True,
         notes='bringup session'))
-    heard = _Heard()
+    heard = HeardRecords()
     link = DeviceLink(port, args.address, heard,
                       LinkOptions(read_timeout=0.05, on_bytes=capture.write))
     session = Bringup(link, heard, args, say)
     session.report = report
+    trips = session.round_trips
     restored = False
     try:
         link.start()
@@ -626,9 +437,10 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
             report['error'] = (f'node {args.address} on {args.port} answered nothing: '
                                f'discover finds the port and address')
         else:
-            session.ping_round_trips()
-            session.command_round_trips()
-            session.continuous_round_trips(session.found_stream or streams.DEFAULT.code)
+            report['round_trips'].update(trips.ping())
+            report['round_trips'].update(trips.command())
+            report['round_trips'].update(
+                trips.continuous(session.found_stream or streams.DEFAULT.code))
             for stream in chosen:
                 report['streams'].append(session.run_stream(stream))
         say('putting the sensor back as found')

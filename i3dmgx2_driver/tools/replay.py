@@ -30,91 +30,29 @@ must carry on reading the stream regardless. A capture of a real session
 also holds the ACKs and replies of that session, which arrive at their
 recorded times. In a loop the device timer jumps back at each pass.
 
-The pty slave is put in raw mode at once (no echo, no line editing: the
-bytes are binary) and kept open here, so that the driver may close and
-reopen the port without the pty hanging up.
+Here: the pacing of the chunks and the command line. The pty and its link
+are replay_pty.py's, the ACK/NACK answers replay_answers.py's.
 """
 
 import argparse
 from collections.abc import Iterable, Sequence
-import fcntl
 import itertools
 import logging
-import os
-import select
-import shutil
 import signal
 import statistics
-import struct
 import sys
-import tempfile
-import termios
 import threading
 import time
-import tty
 from typing import Any
 
+from .replay_answers import ACK_HOLD, BaseStationAnswers
+from .replay_pty import POLL, ReplayPty
+from .replay_stats import ReplayStats
 from ..capture import FIXTURE_ADDRESS, fixture_chunks, read_capture
-from ..codec.framing import ACK, CommandPacket, NACK
-from ..codec.parser import CommandStreamParser, RejectedPacket, SensorStreamParser
 
 Chunk = tuple[float, bytes]
 
 _LOG = logging.getLogger('i3dmgx2_driver.replay')
-#: How long a paced write waits for the reader to make room before dropping
-#: the rest of the chunk, as a serial line does when the host stops reading.
-WRITE_STALL = 0.25
-#: An ACK waits for the end of the packet being sent, but never longer than this.
-ACK_HOLD = 0.5
-#: Granularity of the threads' checks for a stop request.
-POLL = 0.05
-
-
-def _hex(data: bytes) -> str:
-    return data.hex(' ')
-
-
-def unread_bytes(fd: int) -> int:
-    """
-    Return how many bytes wait to be read on the terminal ``fd`` (a pty slave): 0 only if none.
-
-    FIONREAD alone counts only what the line discipline holds: bytes just
-    written to the master sit in the tty's flip buffer until a kernel worker
-    moves them, and meanwhile count as 0 (most of the time, right after a
-    write), so a replay that waited for its reader by FIONREAD could close
-    the pty under it. Polling ``fd`` first makes the kernel finish that move
-    whenever the line discipline is empty: 0 then means that nothing written
-    is left unread. A nonzero count may leave out bytes still on their way.
-    """
-    select.select([fd], [], [], 0)
-    raw = fcntl.ioctl(fd, termios.FIONREAD, b'\0\0\0\0')
-    return struct.unpack('i', raw)[0]
-
-
-class ReplayStats:
-    """What a replay did, for the log and for tests."""
-
-    __slots__ = (
-        'acks_sent',
-        'bytes_dropped',
-        'bytes_sent',
-        'chunks_sent',
-        'commands',
-        'host_bytes',
-        'nacks_sent',
-        'passes',
-    )
-
-    def __init__(self) -> None:
-        for name in self.__slots__:
-            setattr(self, name, 0)
-
-    def as_dict(self) -> dict:
-        """Return the counters by name."""
-        return {name: getattr(self, name) for name in self.__slots__}
-
-    def __repr__(self) -> str:
-        return 'ReplayStats(' + ', '.join(f'{k}={v}' for k, v in self.as_dict().items()) + ')'
 
 
 def schedule(times: Sequence[float], max_gap: float | None = None) -> list[float]:
@@ -165,21 +103,13 @@ class Replayer:
         self.wait_for_host = wait_for_host
         self.stats = ReplayStats()
         self._offsets = schedule([t for t, _ in self.chunks], max_gap)
-        self._link_request = link
-        self._link: str | None = None
-        self._tmpdir: str | None = None
-        self._master = -1
-        self._slave = -1
-        self.pty_name: str | None = None
         self._stop = threading.Event()
         self._wake = threading.Event()
         self._finished = threading.Event()
-        self._host_seen = threading.Event()
-        self._answers: list[bytes] = []
-        self._answers_lock = threading.Lock()
-        self._answer_due = 0.0
         self._threads: list[threading.Thread] = []
-        self._tracker = SensorStreamParser(wireless=True)
+        self._pty = ReplayPty(link, self._stop)
+        self._answers = BaseStationAnswers(self._pty, self.stats, wireless, self._wake,
+                                           self._stop)
         self._dropping = False
 
     # Public interface --------------------------------------------------------
@@ -187,7 +117,12 @@ class Replayer:
     @property
     def port(self) -> str | None:
         """Path for the driver's ``port`` parameter (None before start)."""
-        return self._link or self.pty_name
+        return self._pty.path
+
+    @property
+    def pty_name(self) -> str | None:
+        """Return the pty itself, behind the link (None before start)."""
+        return self._pty.pty_name
 
     @property
     def finished(self) -> bool:
@@ -198,20 +133,10 @@ class Replayer:
         """Open the pty, start playing and answering; return :attr:`port`."""
         if self._threads:
             raise RuntimeError('replayer already started')
-        self._master, self._slave = os.openpty()
-        try:
-            # Raw at once: no echo of the driver's commands back into the stream, no
-            # CR/LF translation, no signal characters in binary data.
-            tty.setraw(self._slave)
-            os.set_blocking(self._master, False)
-            self.pty_name = os.ttyname(self._slave)
-            self._make_link()
-        except BaseException:
-            self._close_fds()
-            raise
+        self._pty.create()
         self._threads = [
             threading.Thread(target=self._play, name='replay-play', daemon=True),
-            threading.Thread(target=self._listen, name='replay-listen', daemon=True),
+            threading.Thread(target=self._answers.listen, name='replay-listen', daemon=True),
         ]
         for thread in self._threads:
             thread.start()
@@ -225,12 +150,7 @@ class Replayer:
 
     def pending_output(self) -> int:
         """Bytes played but not yet read by the driver (0 only if none; 0 after stop)."""
-        if self._slave < 0:
-            return 0
-        try:
-            return unread_bytes(self._slave)
-        except (OSError, ValueError):
-            return 0
+        return self._pty.pending_output()
 
     def drain(self, timeout: float, abort: threading.Event | None = None) -> bool:
         """Wait up to ``timeout`` s for the driver to read what was played."""
@@ -248,8 +168,7 @@ class Replayer:
         for thread in self._threads:
             if thread is not threading.current_thread():
                 thread.join()
-        self._close_fds()
-        self._remove_link()
+        self._pty.close()
 
     def __enter__(self) -> 'Replayer':
         self.start()
@@ -257,38 +176,6 @@ class Replayer:
 
     def __exit__(self, *exc_info: Any) -> None:
         self.stop()
-
-    # The link ----------------------------------------------------------------
-
-    def _make_link(self) -> None:
-        link = self._link_request
-        if link is None:
-            self._tmpdir = tempfile.mkdtemp(prefix='gx2-replay-')
-            link = os.path.join(self._tmpdir, 'ttyGX2')
-        elif os.path.islink(link):
-            os.unlink(link)  # a stale link of an earlier replay
-        elif os.path.exists(link):
-            raise FileExistsError(f'{link} exists and is not a symlink; not replacing it')
-        os.symlink(self.pty_name, link)
-        self._link = link
-
-    def _remove_link(self) -> None:
-        link, self._link = self._link, None
-        if link and os.path.islink(link) and os.readlink(link) == self.pty_name:
-            os.unlink(link)
-        if self._tmpdir:
-            shutil.rmtree(self._tmpdir, ignore_errors=True)
-            self._tmpdir = None
-
-    def _close_fds(self) -> None:
-        for name in ('_master', '_slave'):
-            fd = getattr(self, name)
-            if fd >= 0:
-                setattr(self, name, -1)
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
 
     # Playing -----------------------------------------------------------------
 
@@ -307,7 +194,7 @@ class Replayer:
 
     def _play_passes(self) -> None:
         if self.wait_for_host:
-            while not self._host_seen.wait(POLL):
+            while not self._answers.host_seen.wait(POLL):
                 if self._stop.is_set():
                     return
                 self._send_answers(force=True)
@@ -347,7 +234,7 @@ class Replayer:
             self._wake.clear()
 
     def _send_chunk(self, data: bytes) -> None:
-        sent = self._write(data, paced=self.speed > 0)
+        sent = self._pty.write(data, paced=self.speed > 0)
         self.stats.chunks_sent += 1
         self.stats.bytes_sent += sent
         if sent < len(data):
@@ -358,92 +245,10 @@ class Replayer:
             self._dropping = True
         else:
             self._dropping = False
-        if self.wireless:
-            self._tracker.feed(data[:sent])
-
-    def _write(self, data: bytes, paced: bool) -> int:
-        """
-        Write all of ``data`` unless stopped; return the bytes written.
-
-        Paced, a full pty (nobody reading) drops the rest after WRITE_STALL, as
-        a serial port nobody reads overruns; unpaced, the reader sets the pace.
-        """
-        view = memoryview(data)
-        written = 0
-        stall_end = time.monotonic() + WRITE_STALL
-        while written < len(data):
-            try:
-                written += os.write(self._master, view[written:])
-                continue
-            except BlockingIOError:
-                pass
-            if self._stop.is_set() or (paced and time.monotonic() >= stall_end):
-                break
-            select.select([], [self._master], [], POLL)
-        return written
-
-    # Answering the host --------------------------------------------------------
-
-    def _at_boundary(self) -> bool:
-        # At most a lone 0xAA held back: an ACK after it reads the same either way.
-        return self._tracker.pending <= 1
+        self._answers.played(data[:sent])
 
     def _send_answers(self, force: bool = False) -> None:
-        """Send queued ACK/NACKs between packets, never inside one."""
-        with self._answers_lock:
-            if not self._answers:
-                return
-        if not force and not self._at_boundary() and time.monotonic() < self._answer_due:
-            return
-        with self._answers_lock:
-            answers, self._answers = self._answers, []
-        for answer in answers:
-            if self._write(answer, paced=False) == len(answer):
-                if answer[0] == ACK:
-                    self.stats.acks_sent += 1
-                else:
-                    self.stats.nacks_sent += 1
-
-    def _queue_answer(self, byte: int) -> None:
-        with self._answers_lock:
-            if not self._answers:
-                self._answer_due = time.monotonic() + ACK_HOLD
-            self._answers.append(bytes((byte,)))
-        self._wake.set()
-
-    def _listen(self) -> None:
-        parser = CommandStreamParser(wireless=True)
-        while not self._stop.is_set():
-            try:
-                ready, _, _ = select.select([self._master], [], [], POLL)
-                if not ready:
-                    continue
-                data = os.read(self._master, 4096)
-            except BlockingIOError:
-                continue
-            except OSError as exc:
-                if not self._stop.is_set():
-                    _LOG.error('reading the host stopped: %s', exc)
-                return
-            if not data:
-                continue
-            self.stats.host_bytes += len(data)
-            self._host_seen.set()
-            _LOG.debug('host wrote %d bytes: %s', len(data), _hex(data))
-            if not self.wireless:
-                continue
-            for event in parser.feed(data):
-                if isinstance(event, CommandPacket):
-                    self.stats.commands += 1
-                    _LOG.info('host command to node %d: %s (ACK; replay does not answer it)',
-                              event.address, _hex(event.command))
-                    self._queue_answer(ACK)
-                elif isinstance(event, RejectedPacket):
-                    _LOG.info('host sent a malformed packet (%s): NACK', event.reason)
-                    self._queue_answer(NACK)
-                else:
-                    _LOG.info('host sent %s: not answered (no sensor behind a replay)',
-                              _hex(event.command))
+        self._answers.send(force)
 
 
 # Command line -----------------------------------------------------------------

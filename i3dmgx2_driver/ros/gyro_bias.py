@@ -1,0 +1,139 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The gyro bias capture (0xCD) and whether to trust what it captured.
+
+The device captures the bias over ``gyro_bias_sampling_ms`` and uses it at
+once, whatever happened meanwhile; so the driver polls the accelerometer
+and gyros before and after, judges them, and says whether the sensor was
+still. The judgement is a pure function of the numbers, tested without a
+device; :class:`GyroBiasCapture` runs the exchange and keeps what the
+captures came to, for diagnostics and ``~/is_calibrated``.
+"""
+
+from collections.abc import Callable
+import math
+import time
+from typing import Any
+
+from rclpy.impl.rcutils_logger import RcutilsLogger
+
+from .calibration import Calibration
+from .operations import Device, format_vector, norm, OPERATION_ERRORS, poll_inertial, Vector3
+from ..codec import commands, layouts
+from ..device.link import DeviceLink
+
+#: Seconds the capture reply may come after the sampling time (radio, scheduling).
+CAPTURE_MARGIN = 2.0
+#: A captured bias larger than this (rad/s, about 5.7 deg/s) is no bias: the
+#: sensor turned. Real 3DM-GX2 biases are a few hundredths of a rad/s at most.
+MAX_GYRO_BIAS = 0.1
+#: After a capture the device subtracts the new bias, so a still sensor reads
+#: about zero; more than this (rad/s, about 1.1 deg/s) means it is turning.
+MAX_RESIDUAL_RATE = 0.02
+#: The gravity vector may change this much (g, about 1.1 degrees of tilt)
+#: between before and after the capture; more means the sensor was moved.
+MAX_ACCEL_CHANGE = 0.02
+
+
+def judge_capture(bias: Vector3, accel_before: Vector3, accel_after: Vector3,
+                  rate_after: Vector3, max_bias: float = MAX_GYRO_BIAS,
+                  max_residual: float = MAX_RESIDUAL_RATE,
+                  max_accel_change: float = MAX_ACCEL_CHANGE) -> list[str]:
+    """
+    Return why a captured gyro bias cannot be trusted; empty if it can.
+
+    Three independent signs of motion, so that no single unlucky moment (a
+    sway reversing direction just as the capture ends) hides it: a bias too
+    large to be one, a gravity vector that changed between before and after,
+    and an angular rate that is not about zero once the new bias is applied.
+    """
+    reasons = []
+    size = norm(bias)
+    if not math.isfinite(size) or size > max_bias:
+        reasons.append(f'captured bias |{size:.4f}| rad/s exceeds {max_bias:g}')
+    change = norm([a - b for a, b in zip(accel_after, accel_before, strict=True)])
+    if not math.isfinite(change) or change > max_accel_change:
+        reasons.append(f'gravity vector changed by {change:.4f} g (over {max_accel_change:g})')
+    residual = norm(rate_after)
+    if not math.isfinite(residual) or residual > max_residual:
+        reasons.append(f'angular rate after the capture |{residual:.4f}| rad/s '
+                       f'(over {max_residual:g})')
+    return reasons
+
+
+class GyroBiasCapture:
+    """
+    Capture the gyro bias with the stream paused, judge it, and keep what it came to.
+
+    ``device`` runs the exchange with the stream paused;
+    ``forget_last_sample()`` keeps the pause from counting as lost records;
+    ``calibrated(flag)`` is told whether the device uses a good gyro bias
+    after every capture that reached the device (``~/is_calibrated``).
+    """
+
+    def __init__(self, device: Device, forget_last_sample: Callable[[], None],
+                 calibrated: Callable[[bool], None], log: RcutilsLogger) -> None:
+        self._device = device
+        self._forget = forget_last_sample
+        self._calibrated = calibrated
+        self._log = log
+        #: The last capture attempt and the last accepted one.
+        self.last_capture: Calibration | None = None
+        self.good_capture: Calibration | None = None
+
+    def run(self, sampling_ms: int) -> tuple[bool, str]:
+        """Capture over ``sampling_ms``; return (success, message)."""
+        timeout = sampling_ms / 1000.0 + CAPTURE_MARGIN
+
+        def operation(link: DeviceLink) -> tuple[Vector3, Any, Vector3, Vector3]:
+            accel_before, _ = poll_inertial(link)
+            reply = link.request(commands.capture_gyro_bias(sampling_ms),
+                                 layouts.CAPTURE_GYRO_BIAS, timeout=timeout, retries=1)
+            accel_after, rate_after = poll_inertial(link)
+            # While the stream is still stopped: the timer gap across the pause is
+            # the operation's doing, not the radio's.
+            self._forget()
+            return accel_before, reply, accel_after, rate_after
+
+        self._log.info(f'capturing the gyro bias over {sampling_ms} ms: keep the sensor still')
+        started = time.time()
+        try:
+            accel_before, reply, accel_after, rate_after = \
+                self._device.run_paused(operation)
+        except OPERATION_ERRORS as exc:
+            summary = f'no capture: {exc}'
+            self.last_capture = Calibration(started, False, None, sampling_ms, summary)
+            self._log.warning(f'gyro bias capture failed: {exc}')
+            return False, f'gyro bias capture failed: {exc}'
+        bias: Vector3 = tuple(reply.bias)
+        reasons = judge_capture(bias, accel_before, accel_after, rate_after)
+        text = format_vector(bias)
+        if reasons:
+            summary = 'the sensor moved: ' + '; '.join(reasons)
+            self.last_capture = Calibration(started, False, bias, sampling_ms, summary)
+            self._calibrated(False)
+            message = (f'refused: the sensor moved during the capture ({"; ".join(reasons)}). '
+                       f'The device now uses the captured bias {text} rad/s until the next '
+                       f'capture or a power cycle: capture again with the sensor still.')
+            self._log.warning(message)
+            return False, message
+        calibration = Calibration(started, True, bias, sampling_ms, f'bias {text} rad/s')
+        self.last_capture = self.good_capture = calibration
+        self._calibrated(True)
+        message = (f'gyro bias captured over {sampling_ms} ms: {text} rad/s; the device uses '
+                   f'it until power-off (not stored in non-volatile memory)')
+        self._log.info(message)
+        return True, message

@@ -1,0 +1,156 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The round trips a bring-up measures: ping, a short command, continuous mode's start and stop.
+
+Each is timed with :data:`MEASURE_TIMEOUT`, far beyond the driver's own
+timeouts, so that a slow round trip is measured rather than counted lost;
+the longest of each kind is noted for the check of the driver's timeouts
+(``device/timeouts.py``: ``close_calls``).
+"""
+
+import argparse
+from collections.abc import Callable, Sequence
+import statistics
+import time
+from typing import Any
+
+from .bringup_sensor import SensorControl
+from ..codec import commands, layouts
+from ..device import timeouts
+from ..device.link import DeviceNack, DeviceTimeout
+
+#: How long a single measured exchange may take (s): far beyond every timeout the
+#: driver uses, so that a slow round trip is measured rather than counted lost.
+MEASURE_TIMEOUT = 2.0
+#: The short command whose round trip is measured: the firmware version (0xE9).
+SHORT_COMMAND = layouts.FIRMWARE_VERSION
+
+
+def spread(values: Sequence[float], scale: float = 1.0,
+           digits: int = 1) -> dict[str, float | int | None]:
+    """Return count, min, median and max of ``values`` times ``scale``."""
+    if not values:
+        return {'count': 0, 'min': None, 'median': None, 'max': None}
+
+    def shown(value: float) -> float | int:
+        return round(value * scale, digits) if digits else round(value * scale)
+    return {'count': len(values), 'min': shown(min(values)),
+            'median': shown(statistics.median(values)), 'max': shown(max(values))}
+
+
+def note_longest(longest: dict[str, float], kind: str, values: Sequence[float]) -> None:
+    """Keep in ``longest`` the longest of ``values`` (s) for ``kind``, if longer."""
+    if values:
+        longest[kind] = max(longest.get(kind, 0.0), *values)
+
+
+class RoundTrips:
+    """
+    Time the round trips over ``control``'s link as many times as ``args`` say.
+
+    Each method returns its entries of the report's ``round_trips`` and
+    notes the longest round trip of its kind in ``longest``.
+    """
+
+    def __init__(self, control: SensorControl, args: argparse.Namespace,
+                 say: Callable[[str], None], longest: dict[str, float]) -> None:
+        self.control = control
+        self.link = control.link
+        self.heard = control.heard
+        self.args = args
+        self.say = say
+        self.longest = longest
+
+    def ping(self) -> dict[str, Any]:
+        """Time pings through the base station (no answer: lost; 0x21: not the sensor's)."""
+        self.say(f'timing {self.args.pings} pings')
+        times, lost, absent = [], 0, 0
+        for _ in range(self.args.pings):
+            start = time.monotonic()
+            answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
+            took = time.monotonic() - start
+            if answer is None:
+                lost += 1
+            elif not answer:
+                absent += 1  # the base station answered, the sensor did not (0x21)
+            else:
+                times.append(took)
+        note_longest(self.longest, timeouts.PING, times)
+        return {'ping': {
+            **spread(times, 1e3), 'lost': lost, 'not_answered_by_sensor': absent}}
+
+    def command(self) -> dict[str, Any]:
+        """Time the short command's request and reply."""
+        self.say(f'timing {self.args.commands} short commands (0x{SHORT_COMMAND:02X})')
+        times, lost, nacked = [], 0, 0
+        for _ in range(self.args.commands):
+            start = time.monotonic()
+            try:
+                self.link.request(bytes((SHORT_COMMAND,)), SHORT_COMMAND, MEASURE_TIMEOUT, 1)
+            except DeviceNack:
+                nacked += 1
+                continue
+            except DeviceTimeout:
+                lost += 1
+                continue
+            times.append(time.monotonic() - start)
+        note_longest(self.longest, timeouts.COMMAND, times)
+        return {'command': {
+            **spread(times, 1e3), 'lost': lost, 'nacked': nacked}}
+
+    def continuous(self, code: int) -> dict[str, Any]:
+        """Time continuous mode ``code``: reply and first record, then the stop's last record."""
+        self.say(f'timing {self.args.cycles} continuous-mode starts and stops '
+                 f'(0x{code:02X})')
+        starts, stops, replies = [], [], []
+        lost = nacked = failed = 0
+        for _ in range(self.args.cycles):
+            before, _ = self.heard.snapshot()
+            start = time.monotonic()
+            try:
+                self.link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
+                                  MEASURE_TIMEOUT, 1)
+                replies.append(time.monotonic() - start)
+            except DeviceNack:
+                nacked += 1
+            except DeviceTimeout:
+                lost += 1
+            deadline = start + MEASURE_TIMEOUT + 5 * self.control.period()
+            first = None
+            while time.monotonic() < deadline:
+                count, last = self.heard.snapshot()
+                if count > before:
+                    first = last
+                    break
+                time.sleep(0.002)
+            if first is None:
+                failed += 1
+                continue
+            starts.append(first - start)
+            time.sleep(0.2)
+            stop_sent = self.control.send_stop()
+            last = self.control.wait_quiet(MEASURE_TIMEOUT)
+            if last is None:
+                lost += 1  # the stop was lost: stop it the sure way
+                self.control.stop_stream()
+                continue
+            stops.append(max(0.0, last - stop_sent))
+        note_longest(self.longest, timeouts.CONTINUOUS_START, starts)
+        return {
+            'continuous_start': {
+                **spread(starts, 1e3), 'reply': spread(replies, 1e3), 'lost': lost,
+                'nacked': nacked, 'no_records': failed},
+            'continuous_stop': spread(stops, 1e3)}

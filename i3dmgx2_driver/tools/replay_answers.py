@@ -1,0 +1,128 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The one answer a replay gives: the base station's ACK or NACK to each command packet.
+
+There is no sensor behind a replay, but a driver waiting for the base
+station's ACK would stall without one: :class:`BaseStationAnswers` reads
+what the host writes, answers a well-formed wireless command packet with
+an ACK (0xAA) and a malformed one with a NACK (0x21), and leaves everything
+else unanswered. An answer waits for the end of the packet being played
+(never inside one, where it would corrupt it), but never longer than
+:data:`ACK_HOLD`. The playing (replay.py) hands it every chunk it played,
+to know where the packets end, and asks it to send what is due.
+"""
+
+import logging
+import threading
+import time
+
+from .replay_pty import ReplayPty
+from .replay_stats import ReplayStats
+from ..codec.framing import ACK, CommandPacket, NACK
+from ..codec.parser import CommandStreamParser, RejectedPacket, SensorStreamParser
+
+_LOG = logging.getLogger('i3dmgx2_driver.replay')
+#: An ACK waits for the end of the packet being sent, but never longer than this.
+ACK_HOLD = 0.5
+
+
+def _hex(data: bytes) -> str:
+    return data.hex(' ')
+
+
+class BaseStationAnswers:
+    """
+    Answer the host's command packets on ``pty`` as a base station would (``wireless``).
+
+    ``wake`` is set when an answer is queued, so that the playing thread
+    sends it; ``stop`` ends :meth:`listen`. Counts go into ``stats``.
+    :attr:`host_seen` is set once the host first wrote.
+    """
+
+    def __init__(self, pty: ReplayPty, stats: ReplayStats, wireless: bool,
+                 wake: threading.Event, stop: threading.Event) -> None:
+        self._pty = pty
+        self._stats = stats
+        self._wireless = wireless
+        self._wake = wake
+        self._stop = stop
+        self.host_seen = threading.Event()
+        self._answers: list[bytes] = []
+        self._answers_lock = threading.Lock()
+        self._answer_due = 0.0
+        self._tracker = SensorStreamParser(wireless=True)
+
+    def played(self, data: bytes) -> None:
+        """Note bytes played, to know where the packets end."""
+        if self._wireless:
+            self._tracker.feed(data)
+
+    def _at_boundary(self) -> bool:
+        # At most a lone 0xAA held back: an ACK after it reads the same either way.
+        return self._tracker.pending <= 1
+
+    def send(self, force: bool = False) -> None:
+        """Send queued ACK/NACKs between packets, never inside one."""
+        with self._answers_lock:
+            if not self._answers:
+                return
+        if not force and not self._at_boundary() and time.monotonic() < self._answer_due:
+            return
+        with self._answers_lock:
+            answers, self._answers = self._answers, []
+        for answer in answers:
+            if self._pty.write(answer, paced=False) == len(answer):
+                if answer[0] == ACK:
+                    self._stats.acks_sent += 1
+                else:
+                    self._stats.nacks_sent += 1
+
+    def _queue(self, byte: int) -> None:
+        with self._answers_lock:
+            if not self._answers:
+                self._answer_due = time.monotonic() + ACK_HOLD
+            self._answers.append(bytes((byte,)))
+        self._wake.set()
+
+    def listen(self) -> None:
+        """Read what the host writes until stopped, queueing the answers (own thread)."""
+        parser = CommandStreamParser(wireless=True)
+        while not self._stop.is_set():
+            try:
+                data = self._pty.read()
+            except OSError as exc:
+                if not self._stop.is_set():
+                    _LOG.error('reading the host stopped: %s', exc)
+                return
+            if not data:
+                continue
+            self._stats.host_bytes += len(data)
+            self.host_seen.set()
+            _LOG.debug('host wrote %d bytes: %s', len(data), _hex(data))
+            if not self._wireless:
+                continue
+            for event in parser.feed(data):
+                if isinstance(event, CommandPacket):
+                    self._stats.commands += 1
+                    _LOG.info('host command to node %d: %s (ACK; replay does not answer it)',
+                              event.address, _hex(event.command))
+                    self._queue(ACK)
+                elif isinstance(event, RejectedPacket):
+                    _LOG.info('host sent a malformed packet (%s): NACK', event.reason)
+                    self._queue(NACK)
+                else:
+                    _LOG.info('host sent %s: not answered (no sensor behind a replay)',
+                              _hex(event.command))
