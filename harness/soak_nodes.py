@@ -21,7 +21,6 @@ folder (``instrumented_node.py``). Kept apart from the legs so that how a
 node is started and stopped has one home.
 """
 
-import json
 import os
 import random
 import shutil
@@ -29,7 +28,7 @@ import sys
 import tempfile
 import time
 
-from harness.campaign import Check
+from harness.campaign import Check, read_json
 from harness.instrumented_node import STATS_ENV
 from harness.process_sampler import Sampler
 from harness.processes import LifecycleClient, Listener, NodeProcess, ros_env
@@ -54,21 +53,13 @@ def leg_node_name(leg: Leg) -> str:
     return managed_name(leg.stream) if leg.kind == 'managed' else f'soak_plain_{leg.number}'
 
 
-def _read_json(path: str) -> dict | None:
-    try:
-        with open(path) as handle:
-            return json.load(handle)
-    except (OSError, ValueError):
-        return None
-
-
 def final_stats(path: str, after: float, published: int | None = None,
                 timeout: float = 10.0) -> dict:
     """Return the node's counters written after ``after`` (with ``published``, if given)."""
     deadline = time.monotonic() + timeout
     got: dict = {}
     while time.monotonic() < deadline:
-        got = _read_json(path) or {}
+        got = read_json(path) or {}
         if got.get('time', 0.0) > after and (
                 published is None or got.get('stats', {}).get('published') == published):
             break

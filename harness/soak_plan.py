@@ -20,8 +20,9 @@ fast, without a simulator or a node (``test/test_soak_every_stream.py``).
 """
 
 import dataclasses
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
+from harness.run_config import FaultedNodeConfig
 from i3dmgx2_driver.codec import line_budget
 from i3dmgx2_driver.codec.streams import STREAMS
 
@@ -31,8 +32,13 @@ LEG_OVERHEAD = 15.0
 
 
 @dataclasses.dataclass
-class LongSoakConfig:
-    """How long, how rough, and what counts as a pass."""
+class LongSoakConfig(FaultedNodeConfig):
+    """
+    How long, how rough, and what counts as a pass.
+
+    The seed, address, node timeouts, fault pacing (the quiet phase: at the
+    end of each leg) and log: ``FaultedNodeConfig``.
+    """
 
     #: Length of the whole run (min): legs follow one another until it is over.
     minutes: float = 60.0
@@ -42,18 +48,9 @@ class LongSoakConfig:
     legs: int | None = None
     #: The streams the legs go round (names; empty: every stream).
     streams: tuple[str, ...] = ()
-    seed: int = 1
-    address: int = 95
     #: Every this many legs, the plain node runs the leg instead of a managed one (0: never);
     #: shifted by one leg each round of the streams.
     plain_every: int = 3
-    #: Seconds between fault events (the campaign's FaultDriver).
-    event_gap: tuple[float, float] = (1.0, 4.0)
-    #: Quiet seconds at the end of each leg, in which the stream must come back.
-    quiet: float = 4.0
-    read_timeout: float = 0.3
-    reconnect_interval: float = 0.2
-    temperature_period: float = 1.0
     #: Seconds from the end of a fault to the next message received, at most.
     recovery_limit: float = 1.0
     #: Slopes are fitted from this many seconds after the start of each process.
@@ -65,7 +62,6 @@ class LongSoakConfig:
     count_slope_limit: float = 1.0
     #: Seconds between samples of RSS, descriptors and threads.
     sample_period: float = 5.0
-    log: Any = print
 
 
 class Leg(NamedTuple):
