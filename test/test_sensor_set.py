@@ -29,10 +29,16 @@ from i3dmgx2_driver.ros.sensor_set import check_shared_budget, sensor_settings
 import pytest
 
 
-def settings(address=0, addresses=(), names=(), frame_ids=(), stream_texts=(), rates=(),
-             frame_id='imu_link', stream='full', data_rate=0.0, wireless=True):
-    return sensor_settings(address, addresses, names, frame_ids, stream_texts, rates,
-                           frame_id, stream, data_rate, wireless)
+#: The parameters as a node without a parameters file gives them, in sensor_settings' order.
+DEFAULTS = {'address': 0, 'addresses': (), 'names': (), 'frame_ids': (), 'stream_texts': (),
+            'rates': (), 'frame_id': 'imu_link', 'stream': 'full', 'data_rate': 0.0,
+            'wireless': True}
+
+
+def settings(**given):
+    unknown = given.keys() - DEFAULTS.keys()
+    assert not unknown, f'no such parameter: {sorted(unknown)}'
+    return sensor_settings(*{**DEFAULTS, **given}.values())
 
 
 def test_one_sensor_is_named_imu_as_always():
