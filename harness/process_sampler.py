@@ -26,7 +26,7 @@ import statistics
 import threading
 import time
 
-from harness.campaign import Check
+from harness.campaign import Check, read_json
 from harness.soak_plan import LongSoakConfig
 
 
@@ -83,13 +83,19 @@ class Sampler(threading.Thread):
         self.all_samples: dict[str, list[tuple[float, int, int, int]]] = {}
         self.first_release: dict[str, float] = {}
         self._pids: dict[str, int] = {}
+        #: Heap figures the node wrote (instrumented_node.heap_figures), sampled as
+        #: ``samples`` are: (time, Python blocks, C heap in use KiB).
+        self.heaps: dict[str, list[tuple[float, int, int | None]]] = {}
+        self._stats: dict[str, str] = {}
         self._lock = threading.Lock()
         self._halt = threading.Event()
 
-    def watch(self, name: str, pid: int) -> None:
-        """Start sampling process ``pid`` as ``name``."""
+    def watch(self, name: str, pid: int, stats_path: str | None = None) -> None:
+        """Start sampling process ``pid`` as ``name`` (its heap from ``stats_path``)."""
         with self._lock:
             self._pids[name] = pid
+            if stats_path is not None:
+                self._stats[name] = stats_path
             self.born.setdefault(name, time.time())
             self.samples.setdefault(name, [])
 
@@ -110,6 +116,14 @@ class Sampler(threading.Thread):
                 self.all_samples.setdefault(name, []).append((time.time(), *got))
                 if name not in self.busy:  # configured: more descriptors and threads
                     self.samples[name].append((time.time(), *got))
+                    self._sample_heap(name)
+
+    def _sample_heap(self, name: str) -> None:
+        path = self._stats.get(name)
+        heap = (read_json(path) or {}).get('heap') if path is not None else None
+        if heap:
+            self.heaps.setdefault(name, []).append(
+                (time.time(), heap['python_blocks'], heap['malloc_in_use_kib']))
 
     def stop(self) -> None:
         """Stop sampling."""
@@ -141,10 +155,19 @@ def fit_slopes(cfg: LongSoakConfig, sampler: Sampler, processes: list[tuple[str,
         threads = slope_per_hour([(t, n) for t, _, _, n in samples])
         first = samples[0][1:] if samples else None
         last = samples[-1][1:] if samples else None
+        heaps = [h for h in sampler.heaps.get(key, []) if h[0] >= since]
+        blocks = slope_per_hour([(t, n) for t, n, _ in heaps])
+        native = slope_per_hour([(t, kib / 1024.0) for t, _, kib in heaps if kib is not None])
         lines.append(f'  {name:22s} RSS {_per_hour(rss, "MiB")}, descriptors '
                      f'{_per_hour(fds, "")}, threads {_per_hour(threads, "")}; '
                      f'{len(samples)} samples; first {first}, last {last} '
                      f'(RSS KiB, fds, threads)')
+        if heaps:
+            # Not asserted: what tells a leak (these grow too) from an allocator
+            # that keeps freed memory (RSS alone grows).
+            lines.append(f'  {"":22s} heap in use: Python objects '
+                         f'{_per_hour(blocks, "blocks")}, C heap {_per_hour(native, "MiB")}; '
+                         f'first {heaps[0][1:]}, last {heaps[-1][1:]} (blocks, KiB)')
         if asserted:
             ok = (rss is not None and rss < cfg.rss_slope_limit
                   and fds is not None and abs(fds) <= cfg.count_slope_limit

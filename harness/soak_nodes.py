@@ -98,7 +98,7 @@ class SoakNodes:
         node = NodeProcess(self._params(name, stream, rate), extra_args=['-r', f'__ns:=/{name}'],
                            command=command,
                            env=ros_env({STATS_ENV: self.stats_path(name)}))
-        self.sampler.watch(name, node.proc.pid)
+        self.sampler.watch(name, node.proc.pid, self.stats_path(name))
         return node
 
     def start_managed(self, legs: list[Leg], listener: Listener) -> None:
