@@ -375,6 +375,20 @@ def standard_args(description: str, default_seconds: float, quick_seconds: float
     return args
 
 
+def run_benchmark(doc: str, seconds: tuple[float, float], run: Callable[[float], list[Result]],
+                  title: str, output: str, notes: Callable[[float], list[str]]) -> None:
+    """
+    Be a benchmark's ``main``: the shared options, one run, its report.
+
+    ``seconds``: the default measuring time per run and the one with
+    ``--quick``; ``notes`` are made from the time measured, after the run.
+    """
+    args = standard_args(doc.splitlines()[1], *seconds)
+    results = run(args.seconds)
+    report(title, results, notes(args.seconds), None if args.no_output else output,
+           other_load=args.other_load)
+
+
 class TimedNodeProcess(NodeProcess):
     """
     The driver process with its hot-path timings on (device/hot_path.py).

@@ -29,7 +29,7 @@ processes cost (the CPU is shared), and nothing more.
 import subprocess
 import sys
 
-from bench_common import LoadProcess, report, Result, standard_args
+from bench_common import LoadProcess, Result, run_benchmark
 from harness.processes import isolate_ros_domain
 from latency import LatencyRun, TARGET_DRIVER_P99_S
 
@@ -85,14 +85,11 @@ def run(seconds: float) -> list[Result]:
 
 def main() -> None:
     """Run from the command line."""
-    args = standard_args(__doc__.splitlines()[1], 30.0, 8.0)
-    results = run(args.seconds)
-    report('Publishing under executor load (issue #6)', results,
-           [f'{args.seconds:g} s per run; 4 parameter requests kept in flight; '
-            f'~/{SLOW_SERVICE} pauses the stream while it talks to the device, so fewer '
-            f'records are published in that run.'],
-           None if args.no_output else 'executor_load.md',
-           other_load=args.other_load)
+    run_benchmark(__doc__, (30.0, 8.0), run, 'Publishing under executor load (issue #6)',
+                  'executor_load.md', lambda seconds: [
+                      f'{seconds:g} s per run; 4 parameter requests kept in flight; '
+                      f'~/{SLOW_SERVICE} pauses the stream while it talks to the device, so '
+                      f'fewer records are published in that run.'])
 
 
 if __name__ == '__main__':

@@ -33,16 +33,14 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import (
     DescribeParameters, GetParameters, ListParameters, SetParameters,
 )
-import rclpy
 from rclpy.executors import MultiThreadedExecutor
-from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import Trigger
 
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from harness.processes import spin_until, stop_on_signal_or_eof  # noqa: E402, I100
+from harness.processes import spin_until, start_helper_node  # noqa: E402, I100
 
 #: Parameters asked about; ``qos_depth`` is read-only, so a set is refused (and still served).
 NAMES = ['port', 'address', 'frame_id', 'time_source', 'qos_depth', 'low_latency']
@@ -71,9 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--slow-service', default='',
                         help='also call this Trigger service of the node in a loop')
     args = parser.parse_args(argv)
-    stop = stop_on_signal_or_eof()
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node('i3dmgx2_benchmark_load')
+    stop, node = start_helper_node('i3dmgx2_benchmark_load')
     executor = MultiThreadedExecutor(num_threads=2)
     executor.add_node(node)
     counts: dict[str, int] = {}

@@ -45,7 +45,8 @@ import sys
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from harness.campaign import CampaignConfig, run_campaign  # noqa: E402, RUF100 - after the path
-from harness.long_soak import LongSoakConfig, run_long_soak  # noqa: E402, RUF100
+from harness.long_soak import run_long_soak  # noqa: E402, RUF100
+from harness.soak_plan import LongSoakConfig  # noqa: E402, RUF100
 
 
 def main(argv: list[str] | None = None) -> int:

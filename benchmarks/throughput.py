@@ -27,7 +27,7 @@ Target: >= 1,000 records/s with none lost.
 
 import time
 
-from bench_common import InProcessNode, report, Result, stamp_key, standard_args
+from bench_common import InProcessNode, Result, run_benchmark, stamp_key
 from harness.processes import isolate_ros_domain, SimProcess, SubscriberProcess
 
 TARGET_RATE = 1000.0
@@ -108,13 +108,9 @@ def run(seconds: float, rates: tuple[float, ...] = RATES) -> list[Result]:
 
 def main() -> None:
     """Run from the command line."""
-    args = standard_args(__doc__.splitlines()[1], 60.0, 10.0)
-    results = run(args.seconds)
-    report('Sustained rate', results,
-           [f'Rates swept: {", ".join(f"{r:.0f}" for r in RATES)} Hz, {args.seconds:g} s each; '
-            f'node QoS reliable, depth 1000; subscriber reliable, depth 5000.'],
-           None if args.no_output else 'throughput.md',
-           other_load=args.other_load)
+    run_benchmark(__doc__, (60.0, 10.0), run, 'Sustained rate', 'throughput.md', lambda seconds: [
+        f'Rates swept: {", ".join(f"{r:.0f}" for r in RATES)} Hz, {seconds:g} s each; '
+        f'node QoS reliable, depth 1000; subscriber reliable, depth 5000.'])
 
 
 if __name__ == '__main__':

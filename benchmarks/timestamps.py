@@ -30,7 +30,7 @@ over a whole run depends on its length. The mean is reported too: in device
 mode it is the simulated radio latency, which no host-side estimate can see.
 """
 
-from bench_common import InProcessNode, report, Result, standard_args
+from bench_common import InProcessNode, Result, run_benchmark
 from harness.percentiles import percentile, std_dev
 from harness.processes import isolate_ros_domain, SimProcess
 
@@ -105,16 +105,12 @@ def run(seconds: float) -> list[Result]:
 
 def main() -> None:
     """Run from the command line."""
-    args = standard_args(__doc__.splitlines()[1], 60.0, 15.0)
-    results = run(args.seconds)
-    report('Timestamps', results,
-           [f'{args.seconds:g} s per time source at 100 Hz; simulated delay: '
-            f'{RADIO_LATENCY_S * 1e3:g} ms radio + {WIRE_TIME_S * 1e3:.2f} ms on the wire + '
-            f'0..{JITTER_MS:g} ms random; device clock 40 ppm fast.',
-            f'Device-time mean offset: the {RADIO_LATENCY_S * 1e3:g} ms radio latency, '
-            f'which the host cannot observe.'],
-           None if args.no_output else 'timestamps.md',
-           other_load=args.other_load)
+    run_benchmark(__doc__, (60.0, 15.0), run, 'Timestamps', 'timestamps.md', lambda seconds: [
+        f'{seconds:g} s per time source at 100 Hz; simulated delay: '
+        f'{RADIO_LATENCY_S * 1e3:g} ms radio + {WIRE_TIME_S * 1e3:.2f} ms on the wire + '
+        f'0..{JITTER_MS:g} ms random; device clock 40 ppm fast.',
+        f'Device-time mean offset: the {RADIO_LATENCY_S * 1e3:g} ms radio latency, '
+        f'which the host cannot observe.'])
 
 
 if __name__ == '__main__':

@@ -29,6 +29,14 @@ imports it.
 * ``percentiles``: a sample's percentile and summary.
 * ``campaign``: the soak and fault campaign (``benchmarks/soak.py`` runs it
   for minutes, ``test/test_soak_short.py`` for half a minute).
+* ``run_config``: the settings the campaign, the long soak and the node fuzz share.
+* ``long_soak``: the campaign's legs over every stream for an hour, from
+  ``soak_plan`` (settings, legs), ``soak_nodes`` (the node processes),
+  ``soak_leg`` (one leg), ``soak_recovery`` (data back after a fault),
+  ``process_sampler`` (RSS, descriptors, threads, slopes) and ``soak_report``.
+* ``hostile``: a hostile base station (its attacks' bytes in
+  ``packet_mutation``, its oracle in ``hostile_oracle``); ``node_fuzz``
+  fuzzes the running node through it.
 * ``fuzz_checks``: the codec's properties on one input (the fuzzer in
   ``benchmarks/fuzz_parser.py`` and ``test/test_fuzz_regressions.py``).
 * ``stamp_runs``: stamps against the simulator's truth, and their check.

@@ -46,10 +46,11 @@ import sys
 import tempfile
 import threading
 import time
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from harness.instrumented_node import STATS_ENV
 from harness.processes import isolate_ros_domain, Listener, NodeProcess, ros_env
+from harness.run_config import FaultedNodeConfig
 from i3dmgx2_driver.codec.commands import decode_record
 from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.framing import HEADER_SIZE
@@ -69,8 +70,12 @@ _MARKS = (0xAA, 0x21)
 
 
 @dataclasses.dataclass
-class CampaignConfig:
-    """How long, how fast and how rough the campaign is."""
+class CampaignConfig(FaultedNodeConfig):
+    """
+    How long, how fast and how rough the campaign is.
+
+    The seed, address, node timeouts, fault pacing and log: ``FaultedNodeConfig``.
+    """
 
     #: Length of the fault phase (min); a quiet phase follows.
     minutes: float = 10.0
@@ -81,22 +86,11 @@ class CampaignConfig:
     #: The stream the node asks for, and its data_rate parameter (0: leave the device's).
     stream: str = 'full'
     data_rate: float = 0.0
-    #: Seed of the simulator and of the fault schedule.
-    seed: int = 1
-    #: Node address of the sensor.
-    address: int = 95
-    #: The node's read_timeout (stall detection) and reconnect_interval (s).
-    read_timeout: float = 0.3
-    reconnect_interval: float = 0.2
-    #: Seconds between fault events, drawn uniformly from this range.
-    event_gap: tuple[float, float] = (1.0, 4.0)
     #: Warm-up (s) before the RSS baseline: this share of the run, at least ``warmup_min``.
     warmup_fraction: float = 0.15
     warmup_min: float = 10.0
     #: Most RSS growth allowed from the end of warm-up to the end of the run.
     rss_limit: float = 0.10
-    #: Seconds without faults at the end, in which the stream must come back.
-    quiet: float = 4.0
     #: How long before a close or an unplug a record may still be legitimately unread (s).
     unread_margin: float = 0.5
     #: How far (s) a stamp may be from the steady offset (the median of stamp - true
@@ -108,10 +102,6 @@ class CampaignConfig:
     stamp_grace: float = 0.5
     #: Include long stalls (longer than the node's stall recovery: it reopens the port).
     long_stalls: bool = True
-    #: The node's temperature_period: 0xD1 polls interleaved with the stream (0: none).
-    temperature_period: float = 1.0
-    #: Where progress lines go (None: nowhere).
-    log: Any = print
 
 
 def rate_text(cfg: CampaignConfig) -> str:
@@ -417,7 +407,8 @@ def read_rss_kib(pid: int) -> int | None:
     return None
 
 
-def _read_json(path: str) -> dict | None:
+def read_json(path: str) -> dict | None:
+    """Return a node's counters file, None while it is missing or half written."""
     try:
         with open(path) as handle:
             return json.load(handle)
@@ -526,7 +517,7 @@ def run_campaign(cfg: CampaignConfig) -> 'CampaignResult':
         final = None
         deadline = time.monotonic() + 5.0
         while time.monotonic() < deadline:
-            final = _read_json(stats_path)
+            final = read_json(stats_path)
             if final and final.get('final'):
                 break
             time.sleep(0.1)

@@ -34,7 +34,8 @@ other records from its address: those are the replies to its own polled
 requests (the dialogue's 0xC2 polls, its identity), which the node takes as
 replies and never publishes. Not a packet the pty took only in part either
 (its buffer full after a held-back stretch is let go at once): the station
-lost that one itself. Used by ``benchmarks/fuzz_node.py`` and the stateful
+lost that one itself (``hostile_oracle.py``; the attacks' bytes:
+``packet_mutation.py``). Used by ``benchmarks/fuzz_node.py`` and the stateful
 dialogue test.
 """
 
@@ -47,12 +48,12 @@ import tty
 from typing import NamedTuple
 
 from harness.campaign import imu_values
+from harness.hostile_oracle import PublishOracle
+from harness.packet_mutation import PacketMutator
 from i3dmgx2_driver.codec import streams
-from i3dmgx2_driver.codec.checksum import checksum16
 from i3dmgx2_driver.codec.framing import (
-    CommandPacket, DATA_FLAGS, DATA_TRAILER_SIZE, DataPacket, decode_data_packet, HEADER_SIZE,
-    SOP)
-from i3dmgx2_driver.codec.parser import CommandStreamParser, RawCommand, SensorStreamParser
+    CommandPacket, DATA_FLAGS, DATA_TRAILER_SIZE, decode_data_packet, HEADER_SIZE, SOP)
+from i3dmgx2_driver.codec.parser import CommandStreamParser, RawCommand
 from i3dmgx2_driver.simulator.pty_port import PtyPort, TIOCPKT_DATA, TIOCPKT_FLUSHREAD
 
 #: The phases of the dialogue the station can attack in.
@@ -63,8 +64,6 @@ MODES = ('bitflip', 'truncate', 'lying_length', 'chance_checksum', 'burst', 'ans
 #: The modes that send the real packet whole (held back, or with bytes around it): the
 #: node may publish it.
 KEEPS_PACKET = frozenset(('stop_mid_packet', 'unsolicited', 'burst'))
-#: The bytes a dialogue waits for alone: ACK/start of packet, NACK, ping answer, data flags.
-ANSWER_BYTES = bytes((0xAA, 0x21, 0x02, 0x07))
 #: Phase of each command byte the host sends (others leave the phase as it is).
 _PHASE_OF = {0xFA: 'quiet', 0x02: 'quiet', 0xEA: 'identity', 0xE9: 'identity',
              0xE5: 'data_rate', 0xE4: 'data_rate', 0xC4: 'continuous'}
@@ -115,13 +114,6 @@ class Split:
         return rest
 
 
-def reseal(packet: bytearray) -> bytes:
-    """Recompute a data packet's checksum (over flags .. record), as a base station does."""
-    end = len(packet) - DATA_TRAILER_SIZE
-    packet[-2:] = checksum16(packet[1:end]).to_bytes(2, 'big')
-    return bytes(packet)
-
-
 class HostileStation(threading.Thread):
     """
     The station: forwards, watches the phase, attacks when armed; keeps the oracle.
@@ -143,7 +135,10 @@ class HostileStation(threading.Thread):
         self._up = self._open_upstream()
         self._host = CommandStreamParser(wireless=True)
         self._split = Split()
-        self._reference = SensorStreamParser(address=address)
+        #: What may and what must be published (see ``hostile_oracle.py``).
+        self.oracle = PublishOracle(address, stream)
+        #: The attacks' bytes; the same generator as the noise, so that a seed replays a run.
+        self._mutator = PacketMutator(self.rng)
         self._lock = threading.Lock()
         self._halt = threading.Event()
         self.phase = 'quiet'
@@ -151,24 +146,35 @@ class HostileStation(threading.Thread):
         self.hostile_until = 0.0
         self.attack: Attack | None = None
         self.attacks: list[tuple[float, Attack]] = []
-        #: Keys a fresh parser found in the bytes the node was given: allowed to be published.
-        self.allowed: set[bytes] = set()
-        #: (time, key) of real records of the node's stream from our address, forwarded
-        #: whole while behaving: each must be published.
-        self.intact: list[tuple[float, bytes]] = []
-        self.intact_keys: set[bytes] = set()
-        #: Keys of real packets from our address that were attacked (never sent intact).
-        self.attacked_keys: dict[bytes, str] = {}
-        #: The last replies seen (by echo byte), to replay unasked.
-        self._replies: dict[int, bytes] = {}
         self.packets_in = 0
         self.packets_mutated = 0
         self.bytes_out = 0
         self.opens = 0
         #: Recent bytes given to the node (time, bytes), for a finding's evidence.
         self.recent: list[tuple[float, bytes]] = []
-        self._held: list[bytes] = []
         self._resume_at = 0.0
+
+    # -- the oracle, as the fuzz and the tests read it -----------------------------------------
+
+    @property
+    def allowed(self) -> set[bytes]:
+        """Keys allowed to be published (found by a fresh parser in what the node was given)."""
+        return self.oracle.allowed
+
+    @property
+    def intact(self) -> list[tuple[float, bytes]]:
+        """(time, key) of the records that must be published."""
+        return self.oracle.intact
+
+    @property
+    def intact_keys(self) -> set[bytes]:
+        """Keys of real packets of ours sent whole: they may be published."""
+        return self.oracle.intact_keys
+
+    @property
+    def attacked_keys(self) -> dict[bytes, str]:
+        """Keys of real packets of ours that were attacked, with the attack's mode."""
+        return self.oracle.attacked_keys
 
     def _open_upstream(self) -> int | None:
         try:
@@ -251,7 +257,7 @@ class HostileStation(threading.Thread):
         if data[0] != TIOCPKT_DATA:
             if data[0] & TIOCPKT_FLUSHREAD:
                 # The node (re)opened the port: its parser starts afresh, so does ours.
-                self._reference = SensorStreamParser(address=self.address)
+                self.oracle.port_opened()
                 self.opens += 1
             return
         payload = data[1:]
@@ -260,7 +266,7 @@ class HostileStation(threading.Thread):
             if isinstance(event, (CommandPacket, RawCommand)) and event.command:
                 code = event.command[0]
             if code == 0x02:
-                self._reference.expect_ping()
+                self.oracle.expect_ping()
             phase = _PHASE_OF.get(code)
             if phase is not None:
                 self._enter(phase)
@@ -287,8 +293,7 @@ class HostileStation(threading.Thread):
             return
         if now >= self.hostile_until:
             self.attack = None
-            held, self._held = self._held, []
-            for piece in held:
+            for piece in self._mutator.release():
                 self._give(piece, now)
             return
         if attack.mode == 'noise':
@@ -307,7 +312,7 @@ class HostileStation(threading.Thread):
                 values = imu_values(record)
                 key = values[0] if values is not None else None
                 if ours and record is not None:
-                    self._replies[piece[HEADER_SIZE]] = piece
+                    self._mutator.remember_reply(piece)
             except Exception:  # noqa: B902 - the simulator's own faults: a damaged packet
                 record = None
             if ours and self.phase == 'continuous' and key is not None:
@@ -317,79 +322,18 @@ class HostileStation(threading.Thread):
                         self._start(self.armed)
         if not self.hostile:
             if key is not None and ours:
-                self.intact_keys.add(key)
+                self.oracle.sent_whole(key)
             written = self._give(piece, now)
-            # Only a record of the stream is a sample to the node (a polled reply is
-            # not), and only one the pty took whole reached it.
-            if key is not None and ours and piece[HEADER_SIZE] == self.stream \
-                    and written == len(piece):
-                self.intact.append((now, key))
+            if key is not None and ours:
+                self.oracle.owed(piece, key, written, now)
             return
         if key is not None and ours:
             if self.attack.mode in KEEPS_PACKET:
-                self.intact_keys.add(key)  # delayed or surrounded, but sent whole
+                self.oracle.sent_whole(key)  # delayed or surrounded, but sent whole
             else:
-                self.attacked_keys[key] = self.attack.mode
-        self._give(self._mutate(piece, is_packet), now)
-
-    def _mutate(self, piece: bytes, is_packet: bool) -> bytes:
-        """Return what the hostile station sends instead of ``piece``."""
-        rng = self.rng
-        mode = self.attack.mode
+                self.oracle.attacked(key, self.attack.mode)
         self.packets_mutated += is_packet
-        packet = bytearray(piece)
-        if mode == 'noise':
-            return b''  # nothing real gets through, only the noise of _tick
-        if mode == 'stop_mid_packet':
-            if self._held or not is_packet:
-                self._held.append(piece)
-                return b''
-            cut = rng.randint(1, len(piece) - 1)
-            self._held.append(piece[cut:])
-            return piece[:cut]
-        if mode == 'answer_bytes':
-            out = bytearray()
-            for byte in packet:
-                if rng.random() < 0.1:
-                    out += rng.choice(ANSWER_BYTES).to_bytes(1, 'big')
-                out.append(byte)
-            return bytes(out) + bytes(rng.choices(ANSWER_BYTES, k=rng.randint(0, 3)))
-        if not is_packet:
-            return piece if rng.random() < 0.5 else bytes((rng.choice(ANSWER_BYTES),))
-        if mode == 'bitflip':
-            for _ in range(rng.randint(1, 3)):
-                i = rng.randrange(len(packet))
-                packet[i] ^= 1 << rng.randrange(8)
-            return bytes(packet)
-        if mode == 'truncate':
-            return bytes(packet[:rng.randint(1, len(packet) - 1)])
-        if mode == 'lying_length':
-            packet[5] = rng.choice([0, 1, 2, 255, rng.randrange(256)])
-            return reseal(packet) if rng.random() < 0.5 else bytes(packet)
-        if mode == 'chance_checksum':
-            for _ in range(rng.randint(1, 4)):
-                i = rng.randrange(HEADER_SIZE + 1, len(packet) - DATA_TRAILER_SIZE)
-                packet[i] = rng.randrange(256)
-            return reseal(packet)
-        if mode == 'burst':
-            extra = bytearray()
-            for _ in range(rng.randint(2, 10)):
-                other = bytearray(packet)
-                other[3:5] = rng.randrange(1, 65535).to_bytes(2, 'big')
-                extra += reseal(other)
-            return bytes(packet) + bytes(extra) + rng.randbytes(rng.randint(0, 32))
-        if mode == 'foreign':
-            packet[3:5] = rng.randrange(1, 65535).to_bytes(2, 'big')
-            return reseal(packet)
-        if mode == 'wrong_echo':
-            echoes = (0xC2, 0xC8, 0xCC, 0xCB, 0xD1, 0xEA, 0xE5, 0xC4, rng.randrange(256))
-            packet[HEADER_SIZE] = rng.choice(echoes)
-            return reseal(packet)
-        if mode == 'unsolicited':
-            replies = list(self._replies.values())
-            extra = rng.choice(replies) if replies else b''
-            return bytes(packet) + extra
-        return bytes(packet)
+        self._give(self._mutator.mutate(piece, is_packet, self.attack.mode), now)
 
     def _give(self, data: bytes, now: float) -> int:
         """
@@ -404,11 +348,7 @@ class HostileStation(threading.Thread):
             return 0
         data = data[:written]
         self.bytes_out += written
-        for event in self._reference.feed(data):
-            if isinstance(event, DataPacket) and event.address == self.address:
-                values = imu_values(event.record)
-                if values is not None:
-                    self.allowed.add(values[0])
+        self.oracle.given(data)
         self.recent.append((now, data))
         if len(self.recent) > 4000:
             del self.recent[:2000]

@@ -41,22 +41,21 @@ from diagnostic_msgs.msg import DiagnosticArray
 from harness.campaign import _KEY
 from harness.hostile import Attack, HostileStation, MODES, PHASES
 from harness.processes import isolate_ros_domain, Listener, NodeProcess
+from harness.run_config import RunConfig
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 from rcl_interfaces.srv import GetParameters
 from sensor_msgs.msg import Imu
 
 
 @dataclasses.dataclass
-class FuzzConfig:
-    """How long, how fast, how rough."""
+class FuzzConfig(RunConfig):
+    """How long, how fast, how rough (the seed, address and log: ``RunConfig``)."""
 
     minutes: float = 30.0
     #: Stop once this many packets went through the station (0: only the minutes count).
     packets: int = 0
     #: The simulator's rate (its override, the line not limited: packets per second).
     rate_hz: float = 600.0
-    seed: int = 1
-    address: int = 95
     #: Longest attack (s); each lasts between a tenth of it and it.
     attack_max: float = 3.0
     #: The stream must be back within this long after the station behaves again (s).
@@ -67,7 +66,6 @@ class FuzzConfig:
     diagnostics_gap: float = 3.0
     #: Share of rounds that restart the node (a full start-up dialogue).
     restart_share: float = 0.3
-    log: Any = print
 
 
 @dataclasses.dataclass

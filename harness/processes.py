@@ -47,6 +47,7 @@ from lifecycle_msgs.srv import ChangeState, GetState
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: How ``NodeProcess`` starts the node from the source tree, as ``ros2 run`` does.
@@ -205,6 +206,19 @@ def stop_on_signal_or_eof() -> threading.Event:
 
     threading.Thread(target=watch_stdin, daemon=True).start()
     return stop
+
+
+def start_helper_node(name: str) -> tuple[threading.Event, Any]:
+    """
+    Start ROS in a helper process and make its node; return (stop event, node).
+
+    rclpy's own signal handlers stay off: SIGINT, SIGTERM or the end of
+    standard input set the event instead (:func:`stop_on_signal_or_eof`), so
+    that the helper saves what it gathered before it exits (:func:`spin_until`).
+    """
+    stop = stop_on_signal_or_eof()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    return stop, rclpy.create_node(name)
 
 
 def spin_until(stop: threading.Event, executor: Any, node: Any, save: Any) -> None:

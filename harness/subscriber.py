@@ -30,11 +30,9 @@ import json
 import sys
 import time
 
-from harness.processes import spin_until, stop_on_signal_or_eof
-import rclpy
+from harness.processes import spin_until, start_helper_node
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
 
 
@@ -48,9 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--values', action='store_true',
                         help="also save each message's topic, frame_id and angular velocity")
     args = parser.parse_args(argv)
-    stop = stop_on_signal_or_eof()
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node('i3dmgx2_benchmark_subscriber')
+    stop, node = start_helper_node('i3dmgx2_benchmark_subscriber')
     rows: list[tuple[int, int, float]] = []
     clock = time.time
 

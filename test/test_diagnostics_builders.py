@@ -155,16 +155,18 @@ def test_parser_warns_only_while_failures_grow():
     assert status.value('foreign-address frames') == '7'
 
 
+def assert_values(status, expected: dict[str, str]) -> None:
+    """Check the status's values by key, every one (a mismatch shows them all)."""
+    assert {key: status.value(key) for key in expected} == expected
+
+
 def test_device_status():
     status = d.device_status(DeviceStatus(info=INFO, connections=1, divider=512,
                                           expected_rate_hz=100.0, eeprom_writes=1), 95, 25.3)
     assert status.level == d.OK
-    assert status.value('EEPROM writes') == '1'
-    assert status.value('serial number') == '3095'
-    assert status.value('firmware') == '2.1.03'
-    assert status.value('options') == '5g 300deg/s'
-    assert status.value('model') == '3DM-GX2 Wireless'
-    assert status.value('accel temperature (C)') == '25.3'
+    assert_values(status, {'EEPROM writes': '1', 'serial number': '3095', 'firmware': '2.1.03',
+                           'options': '5g 300deg/s', 'model': '3DM-GX2 Wireless',
+                           'accel temperature (C)': '25.3'})
     assert d.device_status(DeviceStatus(connections=1, divider=512), 95, None).level == d.WARN
     assert d.device_status(DeviceStatus(), 95, None).level == d.STALE
 
@@ -174,11 +176,9 @@ def test_time_status():
                         rollovers=3, gaps=4, last_restart='reset', last_reset_at=100.0)
     ok = d.time_status('device', clock, 100.0 + d.RESET_WARNING_S + 1)
     assert ok.level == d.OK
-    assert ok.value('clock drift (ppm)') == '-38.2'
-    assert ok.value('fit started afresh') == 'start 1, reset 2, resync 0, reconnect 0'
-    assert ok.value('last fresh start') == 'reset'
-    assert ok.value('timer rollovers') == '3'
-    assert ok.value('gaps bridged') == '4'
+    assert_values(ok, {'clock drift (ppm)': '-38.2',
+                       'fit started afresh': 'start 1, reset 2, resync 0, reconnect 0',
+                       'last fresh start': 'reset', 'timer rollovers': '3', 'gaps bridged': '4'})
     # A restart of the sensor's timer is a warning for a while, then history.
     recent = d.time_status('device', clock, 130.0)
     assert recent.level == d.WARN

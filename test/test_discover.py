@@ -68,6 +68,19 @@ def info(serial: str) -> DeviceInfo:
     return DeviceInfo('3DM-GX2', serial, '3DM-GX2 Wireless', '5g 300deg/s', '2.1.03')
 
 
+def sensor_2017(seed: int, streaming: int) -> PtySimulator:
+    """Return sensor 17 (serial 2017), streaming ``streaming`` from the start."""
+    return PtySimulator(SimulatorConfig(address=17, serial_number='2017', seed=seed,
+                                        streaming_at_start=streaming))
+
+
+def restarted_as_found(sim: PtySimulator, streaming: int) -> None:
+    """Check that discovery's last command started ``streaming`` again, as it found it."""
+    assert sim.commands[-1][1].code == lay.SET_CONTINUOUS
+    assert sim.commands[-1][1].args == (streaming,)
+    left_as_found(sim, restarted=True)
+
+
 def codes(sim: PtySimulator) -> list[int]:
     """Command bytes the sensor received, in order."""
     return [command.code for _, command in sim.commands]
@@ -176,8 +189,7 @@ def test_a_port_with_nothing_behind_it():
 
 @pytest.mark.slow
 def test_stop_streams_restarts_the_same_record():
-    with PtySimulator(SimulatorConfig(address=17, serial_number='2017', seed=75,
-                                      streaming_at_start=lay.EULER_ANGLES)) as sim:
+    with sensor_2017(75, lay.EULER_ANGLES) as sim:
         found = probe_port(sim.port, ProbeConfig(stop_streams=True, **PATIENT))
         [sensor] = found.sensors
         assert (sensor.info, sensor.streaming, sensor.restarted, sensor.note) == \
@@ -186,9 +198,7 @@ def test_stop_streams_restarts_the_same_record():
         stop = received.index(lay.STOP_CONTINUOUS)
         assert set(received[:stop]) == set(), 'not a request while it streamed'
         assert set(received[stop + 1:-1]) <= READS | {lay.STOP_CONTINUOUS}
-        assert sim.commands[-1][1].code == lay.SET_CONTINUOUS
-        assert sim.commands[-1][1].args == (lay.EULER_ANGLES,)
-        left_as_found(sim, restarted=True)
+        restarted_as_found(sim, lay.EULER_ANGLES)
 
 
 @pytest.mark.slow
@@ -196,8 +206,7 @@ def test_a_sensor_that_cannot_answer_while_streaming_is_stopped_read_and_restart
     # Every command is lost until the first 0xFA reaches the base station: the
     # radio of a busy stream. Combined mode fails; the stream is stopped, the
     # sensor read, and its stream restarted with the same record.
-    with PtySimulator(SimulatorConfig(address=17, serial_number='2017', seed=76,
-                                      streaming_at_start=lay.ACCEL_ANG_RATE_MAG)) as sim:
+    with sensor_2017(76, lay.ACCEL_ANG_RATE_MAG) as sim:
         sim.set_faults(command_loss_probability=1.0)
 
         def clear_on_stop():
@@ -212,9 +221,7 @@ def test_a_sensor_that_cannot_answer_while_streaming_is_stopped_read_and_restart
         [sensor] = found.sensors
         assert (sensor.found_by, sensor.info, sensor.streaming, sensor.restarted) == \
             ('stream', info('2017'), lay.ACCEL_ANG_RATE_MAG, True)
-        assert sim.commands[-1][1].code == lay.SET_CONTINUOUS
-        assert sim.commands[-1][1].args == (lay.ACCEL_ANG_RATE_MAG,)
-        left_as_found(sim, restarted=True)
+        restarted_as_found(sim, lay.ACCEL_ANG_RATE_MAG)
 
 
 @pytest.mark.slow

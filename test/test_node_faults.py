@@ -22,6 +22,7 @@ rclpy in this process. Assertions are on content and counts, never on how
 fast something happened, apart from generous timeouts.
 """
 
+import contextlib
 import os
 import signal
 import tempfile
@@ -48,6 +49,16 @@ def run_node(sim: PtySimulator, **params):
     base = {'port': sim.port, 'address': 95, 'read_timeout': 0.5, 'reconnect_interval': 0.3}
     base.update(params)
     return listener, NodeProcess(base)
+
+
+@contextlib.contextmanager
+def streaming(seed: int, count: int):
+    """Yield (sim, listener, node) once the node on a fresh simulator published ``count``."""
+    with PtySimulator(SimulatorConfig(seed=seed)) as sim:
+        listener, node = run_node(sim)
+        with listener, node:
+            assert len(listener.wait_for('imu/raw_data', count, timeout=30)) >= count
+            yield sim, listener, node
 
 
 def published_records(listener, sim):
@@ -106,23 +117,19 @@ def test_start_up_quirks(faults):
 
 
 def test_stall_is_recovered_by_rerequesting_continuous():
-    with PtySimulator(SimulatorConfig(seed=23)) as sim:
-        listener, node = run_node(sim)
-        with listener, node:
-            assert len(listener.wait_for('imu/raw_data', 50, timeout=30)) >= 50
-            requests_before = len(sim.wait_for_commands(lambda c: c.code == 0xC4,
-                                                        timeout=0.1))
-            # The sensor stops streaming without a word (a brown-out, a lost
-            # radio link that came back with the sensor in polled mode).
-            with sim.lock:
-                sim.sensor.streaming = 0
-            listener.clear()
-            got = listener.wait_for('imu/raw_data', 50, timeout=30)
-            assert len(got) >= 50, node.output()
-            assert len(sim.wait_for_commands(lambda c: c.code == 0xC4, timeout=0.1)) \
-                > requests_before
-            assert 'no data for' in node.output()
-            assert node.stop()[0] == 0
+    with streaming(seed=23, count=50) as (sim, listener, node):
+        requests_before = len(sim.wait_for_commands(lambda c: c.code == 0xC4, timeout=0.1))
+        # The sensor stops streaming without a word (a brown-out, a lost
+        # radio link that came back with the sensor in polled mode).
+        with sim.lock:
+            sim.sensor.streaming = 0
+        listener.clear()
+        got = listener.wait_for('imu/raw_data', 50, timeout=30)
+        assert len(got) >= 50, node.output()
+        assert len(sim.wait_for_commands(lambda c: c.code == 0xC4, timeout=0.1)) \
+            > requests_before
+        assert 'no data for' in node.output()
+        assert node.stop()[0] == 0
 
 
 def test_radio_stall_then_resume():
@@ -138,25 +145,22 @@ def test_radio_stall_then_resume():
 
 
 def test_unplug_and_replug_reconnects_every_time():
-    with PtySimulator(SimulatorConfig(seed=25)) as sim:
-        listener, node = run_node(sim)
-        with listener, node:
-            assert len(listener.wait_for('imu/raw_data', 30, timeout=30)) >= 30
-            for _ in range(2):
-                sim.unplug(seconds=1.0)
-                assert sim.wait_for_port(10)
-                listener.clear()
-                got = listener.wait_for('imu/raw_data', 30, timeout=30)
-                assert len(got) >= 30, node.output()
-            output = node.output()
-            assert 'disconnected' in output or 'Input/output error' in output
-            # The identity is read at every connection but logged only once.
-            assert output.count('device: model') == 1, output
-            assert sim.stats.port_opens >= 3
-            assert node.proc.poll() is None
-            pairs = published_records(listener, sim)
-            assert all(entry is not None and entry.valid for _, entry in pairs)
-            assert node.stop()[0] == 0
+    with streaming(seed=25, count=30) as (sim, listener, node):
+        for _ in range(2):
+            sim.unplug(seconds=1.0)
+            assert sim.wait_for_port(10)
+            listener.clear()
+            got = listener.wait_for('imu/raw_data', 30, timeout=30)
+            assert len(got) >= 30, node.output()
+        output = node.output()
+        assert 'disconnected' in output or 'Input/output error' in output
+        # The identity is read at every connection but logged only once.
+        assert output.count('device: model') == 1, output
+        assert sim.stats.port_opens >= 3
+        assert node.proc.poll() is None
+        pairs = published_records(listener, sim)
+        assert all(entry is not None and entry.valid for _, entry in pairs)
+        assert node.stop()[0] == 0
 
 
 def test_port_missing_at_start_then_appears():

@@ -23,6 +23,7 @@ i3dmgx2_driver node`` does: find ``lib/i3dmgx2_driver/node`` under the
 package's prefix and execute it, with nothing of the source tree on the path.
 """
 
+import contextlib
 import glob
 import os
 from pathlib import Path
@@ -99,35 +100,36 @@ def test_share_directory_found_through_ament_index(prefix):
     assert out.stdout.strip() == str(prefix / 'share' / 'i3dmgx2_driver')
 
 
-def test_installed_node_publishes(prefix):
+@contextlib.contextmanager
+def installed_on_simulator(prefix: Path, executable: str, seed: int):
+    """Yield a listener and the installed ``executable`` running on a simulated sensor."""
     isolate_ros_domain()
-    with PtySimulator(SimulatorConfig(seed=41)) as sim:
+    with PtySimulator(SimulatorConfig(seed=seed)) as sim:
         listener = Listener({'imu/raw_data': Imu})
         node = NodeProcess({'port': sim.port, 'address': 95},
-                           command=[str(prefix / 'lib' / 'i3dmgx2_driver' / 'node')],
+                           command=[str(prefix / 'lib' / 'i3dmgx2_driver' / executable)],
                            env=installed_env(prefix))
         with listener, node:
-            got = listener.wait_for('imu/raw_data', 20, timeout=30)
-            assert len(got) >= 20, node.output()
-            assert str(prefix) in node.proc.args[0]
-            assert node.stop()[0] == 0
+            yield listener, node
+
+
+def test_installed_node_publishes(prefix):
+    with installed_on_simulator(prefix, 'node', seed=41) as (listener, node):
+        got = listener.wait_for('imu/raw_data', 20, timeout=30)
+        assert len(got) >= 20, node.output()
+        assert str(prefix) in node.proc.args[0]
+        assert node.stop()[0] == 0
 
 
 def test_installed_lifecycle_node_is_driven_through_its_services(prefix):
-    isolate_ros_domain()
-    with PtySimulator(SimulatorConfig(seed=42)) as sim:
-        listener = Listener({'imu/raw_data': Imu})
-        node = NodeProcess({'port': sim.port, 'address': 95},
-                           command=[str(prefix / 'lib' / 'i3dmgx2_driver' / 'lifecycle_node')],
-                           env=installed_env(prefix))
-        with listener, node:
-            client = LifecycleClient(listener)
-            assert client.wait_ready(), node.output()
-            assert client.change('configure') and client.change('activate'), node.output()
-            got = listener.wait_for('imu/raw_data', 20, timeout=30)
-            assert len(got) >= 20, node.output()
-            assert client.change('deactivate') and client.change('shutdown'), node.output()
-            assert node.wait(timeout=10) == 0, node.output()
+    with installed_on_simulator(prefix, 'lifecycle_node', seed=42) as (listener, node):
+        client = LifecycleClient(listener)
+        assert client.wait_ready(), node.output()
+        assert client.change('configure') and client.change('activate'), node.output()
+        got = listener.wait_for('imu/raw_data', 20, timeout=30)
+        assert len(got) >= 20, node.output()
+        assert client.change('deactivate') and client.change('shutdown'), node.output()
+        assert node.wait(timeout=10) == 0, node.output()
 
 
 def test_installed_simulator_prints_its_port(prefix):

@@ -30,12 +30,19 @@ from i3dmgx2_driver.ros.sensor_set import check_shared_budget, sensor_settings
 import pytest
 
 
-def settings(address=0, addresses=(), names=(), frame_ids=(), stream_texts=(), rates=(),
-             frame_id='imu_link', stream='full', data_rate=0.0, wireless=True):
-    return sensor_settings(SimpleNamespace(
-        address=address, addresses=addresses, sensor_names=names, frame_ids=frame_ids,
-        streams=stream_texts, data_rates=rates, frame_id=frame_id, stream=stream,
-        data_rate=data_rate, wireless=wireless))
+#: The parameters as a node without a parameters file gives them.
+DEFAULTS = {'address': 0, 'addresses': (), 'names': (), 'frame_ids': (), 'stream_texts': (),
+            'rates': (), 'frame_id': 'imu_link', 'stream': 'full', 'data_rate': 0.0,
+            'wireless': True}
+#: The node's own names of the three above that are shorter here.
+NODE_NAMES = {'names': 'sensor_names', 'stream_texts': 'streams', 'rates': 'data_rates'}
+
+
+def settings(**given):
+    unknown = given.keys() - DEFAULTS.keys()
+    assert not unknown, f'no such parameter: {sorted(unknown)}'
+    values = {NODE_NAMES.get(name, name): value for name, value in {**DEFAULTS, **given}.items()}
+    return sensor_settings(SimpleNamespace(**values))
 
 
 def test_one_sensor_is_named_imu_as_always():

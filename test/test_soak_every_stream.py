@@ -23,7 +23,9 @@ managed nodes shut down from a random state. The pieces the verdict rests on
 (the legs, the slope fit) are checked first, fast.
 """
 
-from harness.long_soak import LongSoakConfig, plan_legs, run_long_soak, slope_per_hour
+from harness.long_soak import run_long_soak
+from harness.process_sampler import slope_per_hour
+from harness.soak_plan import LongSoakConfig, plan_legs
 from i3dmgx2_driver.codec import line_budget, streams
 import pytest
 

@@ -21,6 +21,7 @@ stop_streaming() sends 0xFA and keeps the port; stop() lets it go. Each
 failure of connect() says why and leaves the port free.
 """
 
+import contextlib
 import os
 import threading
 import time
@@ -64,6 +65,31 @@ def held(path: str) -> bool:
 def supervisor(port: str, records: Records, **config) -> DeviceSupervisor:
     return DeviceSupervisor(DeviceConfig(port=port, address=95, low_latency=False,
                                          **config), on_record=records)
+
+
+@contextlib.contextmanager
+def connected_then_stalled(seed: int):
+    """Yield (sim, supervisor), connected to a sensor that then falls silent for 5 s."""
+    with PtySimulator(SimulatorConfig(seed=seed)) as sim:
+        sup = supervisor(sim.port, Records())
+        sup.connect()
+        sim.stall(5.0)
+        yield sim, sup
+
+
+def in_thread(call) -> tuple[threading.Thread, list[str]]:
+    """Start ``call`` in a thread; return it and the DeviceTimeout messages it raised."""
+    errors: list[str] = []
+
+    def run():
+        try:
+            call()
+        except DeviceTimeout as exc:
+            errors.append(str(exc))
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    return thread, errors
 
 
 @pytest.mark.slow
@@ -159,20 +185,9 @@ def test_start_streaming_reopens_a_port_lost_while_inactive():
 def test_stop_streaming_cuts_a_pending_request_short():
     # A request to a sensor that does not answer waits out its retries (1.5 s);
     # stopping the stream makes it give up at once, the port still open.
-    with PtySimulator(SimulatorConfig(seed=75)) as sim:
-        sup = supervisor(sim.port, Records())
-        sup.connect()
-        sim.stall(5.0)
-        failures = []
-
-        def poll():
-            try:
-                sup.link.request(bytes((0xC2,)), 0xC2, timeout=0.5, retries=3)
-            except DeviceTimeout as exc:
-                failures.append(str(exc))
-
-        thread = threading.Thread(target=poll)
-        thread.start()
+    with connected_then_stalled(seed=75) as (sim, sup):
+        thread, failures = in_thread(
+            lambda: sup.link.request(bytes((0xC2,)), 0xC2, timeout=0.5, retries=3))
         time.sleep(0.2)
         sup.stop_streaming()
         thread.join(timeout=1.0)
@@ -185,20 +200,8 @@ def test_stop_streaming_cuts_a_pending_request_short():
 @pytest.mark.slow
 def test_stop_while_the_stream_starts_leaves_the_port_closed():
     # A signal during activate: stop() comes while start_streaming() waits for records.
-    with PtySimulator(SimulatorConfig(seed=76)) as sim:
-        sup = supervisor(sim.port, Records())
-        sup.connect()
-        sim.stall(5.0)
-        errors = []
-
-        def activate():
-            try:
-                sup.start_streaming()
-            except DeviceTimeout as exc:
-                errors.append(str(exc))
-
-        thread = threading.Thread(target=activate)
-        thread.start()
+    with connected_then_stalled(seed=76) as (sim, sup):
+        thread, errors = in_thread(sup.start_streaming)
         time.sleep(0.3)
         sup.stop()
         thread.join(timeout=2.0)

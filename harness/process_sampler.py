@@ -1,0 +1,184 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+RSS, descriptors and threads of long-lived processes, sampled, and their slopes.
+
+A leak shows as a slope against time, not as a final value: the long soak
+(``long_soak.py``) keeps its managed node processes for the whole run and
+hands them to the :class:`Sampler`; :func:`fit_slopes` turns the samples into
+lines of the report and, for a run long enough, checks.
+"""
+
+import os
+import statistics
+import threading
+import time
+
+from harness.campaign import Check, read_json
+from harness.soak_plan import LongSoakConfig
+
+
+def slope_per_hour(samples: list[tuple[float, float]]) -> float | None:
+    """Least-squares slope of (time s, value) samples, in value per hour; None if too few."""
+    if len(samples) < 3:
+        return None
+    ts = [t for t, _ in samples]
+    vs = [v for _, v in samples]
+    mt, mv = statistics.fmean(ts), statistics.fmean(vs)
+    den = sum((t - mt) ** 2 for t in ts)
+    if den == 0:
+        return None
+    return sum((t - mt) * (v - mv) for t, v in zip(ts, vs, strict=True)) / den * 3600.0
+
+
+def process_sample(pid: int) -> tuple[int, int, int] | None:
+    """Return (RSS KiB, open descriptors, threads) of a process, None if it is gone."""
+    try:
+        rss = threads = None
+        with open(f'/proc/{pid}/status') as handle:
+            for line in handle:
+                if line.startswith('VmRSS:'):
+                    rss = int(line.split()[1])
+                elif line.startswith('Threads:'):
+                    threads = int(line.split()[1])
+        fds = len(os.listdir(f'/proc/{pid}/fd'))
+    except OSError:
+        return None
+    if rss is None or threads is None:
+        return None
+    return rss, fds, threads
+
+
+class Sampler(threading.Thread):
+    """
+    Sample RSS, descriptors and threads of the processes it is given, all run long.
+
+    A managed node has more descriptors and threads while configured (the
+    port, the reader and supervisor threads) than while unconfigured, so
+    its samples are taken only while it is unconfigured: a leak is then a
+    slope, not a change of state.
+    """
+
+    def __init__(self, period: float) -> None:
+        super().__init__(name='soak-sampler', daemon=True)
+        self.period = period
+        self.samples: dict[str, list[tuple[float, int, int, int]]] = {}
+        self.born: dict[str, float] = {}
+        #: Processes configured now (not sampled: compared in one state, unconfigured),
+        #: and when each was first released (its warm-up ends then).
+        self.busy: set[str] = set()
+        #: Every sample, whatever the state (a leg's own RSS check).
+        self.all_samples: dict[str, list[tuple[float, int, int, int]]] = {}
+        self.first_release: dict[str, float] = {}
+        self._pids: dict[str, int] = {}
+        #: Heap figures the node wrote (instrumented_node.heap_figures), sampled as
+        #: ``samples`` are: (time, Python blocks, C heap in use KiB).
+        self.heaps: dict[str, list[tuple[float, int, int | None]]] = {}
+        self._stats: dict[str, str] = {}
+        self._lock = threading.Lock()
+        self._halt = threading.Event()
+
+    def watch(self, name: str, pid: int, stats_path: str | None = None) -> None:
+        """Start sampling process ``pid`` as ``name`` (its heap from ``stats_path``)."""
+        with self._lock:
+            self._pids[name] = pid
+            if stats_path is not None:
+                self._stats[name] = stats_path
+            self.born.setdefault(name, time.time())
+            self.samples.setdefault(name, [])
+
+    def forget(self, name: str) -> None:
+        """Stop sampling ``name`` (its process ended)."""
+        with self._lock:
+            self._pids.pop(name, None)
+
+    def run(self) -> None:
+        """Sample until stopped."""
+        while not self._halt.wait(self.period):
+            with self._lock:
+                pids = dict(self._pids)
+            for name, pid in pids.items():
+                got = process_sample(pid)
+                if got is None:
+                    continue
+                self.all_samples.setdefault(name, []).append((time.time(), *got))
+                if name not in self.busy:  # configured: more descriptors and threads
+                    self.samples[name].append((time.time(), *got))
+                    self._sample_heap(name)
+
+    def _sample_heap(self, name: str) -> None:
+        path = self._stats.get(name)
+        heap = (read_json(path) or {}).get('heap') if path is not None else None
+        if heap:
+            self.heaps.setdefault(name, []).append(
+                (time.time(), heap['python_blocks'], heap['malloc_in_use_kib']))
+
+    def stop(self) -> None:
+        """Stop sampling."""
+        self._halt.set()
+        self.join(5.0)
+
+
+def fit_slopes(cfg: LongSoakConfig, sampler: Sampler, processes: list[tuple[str, str]],
+               minutes: float) -> tuple[list[Check], list[str]]:
+    """
+    Fit RSS, descriptors and threads against time for each long-lived process.
+
+    ``processes`` are (name in the report, name in the sampler) pairs.
+    """
+    checks, lines = [], []
+    asserted = minutes >= cfg.slope_min_minutes
+    lines.append(f'slopes per hour, while unconfigured, after the first {cfg.slope_after:g} s '
+                 f'and the first leg of each managed process '
+                 f'({"asserted" if asserted else "not asserted"}: run of '
+                 f'{minutes:.1f} min, asserted from {cfg.slope_min_minutes:g} min):')
+    for name, key in processes:
+        born = sampler.born.get(key, 0.0)
+        # After the first 5 minutes and after the process's first leg (its first
+        # activation loads what it keeps: a warm-up, not a leak).
+        since = max(born + cfg.slope_after, sampler.first_release.get(key, born))
+        samples = [s for s in sampler.samples.get(key, []) if s[0] >= since]
+        rss = slope_per_hour([(t, kib / 1024.0) for t, kib, _, _ in samples])
+        fds = slope_per_hour([(t, n) for t, _, n, _ in samples])
+        threads = slope_per_hour([(t, n) for t, _, _, n in samples])
+        first = samples[0][1:] if samples else None
+        last = samples[-1][1:] if samples else None
+        heaps = [h for h in sampler.heaps.get(key, []) if h[0] >= since]
+        blocks = slope_per_hour([(t, n) for t, n, _ in heaps])
+        native = slope_per_hour([(t, kib / 1024.0) for t, _, kib in heaps if kib is not None])
+        lines.append(f'  {name:22s} RSS {_per_hour(rss, "MiB")}, descriptors '
+                     f'{_per_hour(fds, "")}, threads {_per_hour(threads, "")}; '
+                     f'{len(samples)} samples; first {first}, last {last} '
+                     f'(RSS KiB, fds, threads)')
+        if heaps:
+            # Not asserted: what tells a leak (these grow too) from an allocator
+            # that keeps freed memory (RSS alone grows).
+            lines.append(f'  {"":22s} heap in use: Python objects '
+                         f'{_per_hour(blocks, "blocks")}, C heap {_per_hour(native, "MiB")}; '
+                         f'first {heaps[0][1:]}, last {heaps[-1][1:]} (blocks, KiB)')
+        if asserted:
+            ok = (rss is not None and rss < cfg.rss_slope_limit
+                  and fds is not None and abs(fds) <= cfg.count_slope_limit
+                  and threads is not None and abs(threads) <= cfg.count_slope_limit)
+            checks.append(Check(
+                f'managed {name}: no leak', ok,
+                f'RSS {_per_hour(rss, "MiB")} (limit {cfg.rss_slope_limit:g}), descriptors '
+                f'{_per_hour(fds, "")}, threads {_per_hour(threads, "")} (limit '
+                f'\u00b1{cfg.count_slope_limit:g})'))
+    return checks, lines
+
+
+def _per_hour(value: float | None, unit: str) -> str:
+    return 'n/a' if value is None else f'{value:+.3f} {unit}/h'
