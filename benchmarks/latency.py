@@ -113,21 +113,32 @@ class RunResult(NamedTuple):
     full_collection: float
 
 
-def run_once(config: Config, seconds: float, rate_hz: float) -> RunResult:
-    """Run one configuration for ``seconds`` after the warm-up; return its figures."""
+def run_once(config: Config, seconds: float, rate_hz: float, load: Any = None) -> RunResult:
+    """
+    Run one configuration for ``seconds`` after the warm-up; return its figures.
+
+    ``load``, if given, is started after the warm-up and stopped after the
+    measured seconds (anything with ``start()`` and ``stop()``: executor_load.py's).
+    """
     floor = bool(config.script)
     sim = SimProcess(rate_hz=rate_hz, streaming_at_start=floor)
     subscriber = SubscriberProcess() if config.subscribed else None
     node = None
+    loaded = False
     try:
         node = TimedNodeProcess(sim.port, config.script, **dict(config.params))
         time.sleep(WARM_UP_S)
+        if load is not None:
+            load.start()
+            loaded = True
         t0, cpu0 = time.time(), process_cpu_seconds(node.pid)
         time.sleep(seconds)
         t1, cpu1 = time.time(), process_cpu_seconds(node.pid)
         sim.silence()
         time.sleep(0.3)
     finally:
+        if loaded:
+            load.stop()
         if node is not None:
             node.stop()
         received = subscriber.stop() if subscriber is not None else []
