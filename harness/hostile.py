@@ -47,7 +47,7 @@ import time
 import tty
 from typing import NamedTuple
 
-from harness.campaign import imu_values
+from harness.campaign_truth import imu_values
 from harness.hostile_oracle import PublishOracle
 from harness.packet_mutation import PacketMutator
 from i3dmgx2_driver.codec import streams

@@ -25,7 +25,7 @@ apart from the forwarding (``hostile.py``) so that what counts as a finding
 is read in one place.
 """
 
-from harness.campaign import imu_values
+from harness.campaign_truth import imu_values
 from i3dmgx2_driver.codec.framing import DataPacket, HEADER_SIZE
 from i3dmgx2_driver.codec.parser import SensorStreamParser
 

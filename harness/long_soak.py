@@ -57,7 +57,9 @@ import sys
 import time
 import traceback
 
-from harness.campaign import Check, Subscriber, TruthCollector
+from harness.campaign_listener import Subscriber
+from harness.campaign_result import Check
+from harness.campaign_truth import TruthCollector
 from harness.process_sampler import fit_slopes, Sampler
 from harness.processes import isolate_ros_domain
 from harness.soak_leg import LegRunner, SoakRig

@@ -38,7 +38,7 @@ import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
-from harness.campaign import _KEY
+from harness.campaign_truth import _KEY
 from harness.hostile import Attack, HostileStation, MODES, PHASES
 from harness.processes import isolate_ros_domain, Listener, NodeProcess
 from harness.run_config import RunConfig

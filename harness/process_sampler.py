@@ -26,7 +26,8 @@ import statistics
 import threading
 import time
 
-from harness.campaign import Check, read_json
+from harness.campaign import read_json
+from harness.campaign_result import Check
 from harness.soak_plan import LongSoakConfig
 
 

@@ -18,7 +18,7 @@ One leg of the long soak: bring the leg's node up, fault it, bring it down, judg
 A managed leg takes its stream's long-lived node through configure /
 activate / deactivate / cleanup; a plain leg starts a fresh node and stops
 it with SIGINT. What was published is then judged by the campaign's checks
-(``campaign.analyse``) and by the recoveries (``soak_recovery.py``).
+(``campaign_analysis.analyse``) and by the recoveries (``soak_recovery.py``).
 """
 
 from collections.abc import Callable
@@ -26,8 +26,13 @@ import random
 import time
 from typing import NamedTuple
 
-from harness.campaign import (
-    analyse, CampaignConfig, Check, FaultDriver, RunData, Subscriber, TruthCollector)
+from harness.campaign_analysis import analyse
+from harness.campaign_config import CampaignConfig
+from harness.campaign_data import RunData
+from harness.campaign_listener import Subscriber
+from harness.campaign_result import Check
+from harness.campaign_truth import TruthCollector
+from harness.fault_driver import FaultDriver
 from harness.process_sampler import Sampler
 from harness.processes import LifecycleClient, NodeProcess, process_cpu_seconds
 from harness.soak_nodes import final_stats, leg_node_name, SoakNodes, topic

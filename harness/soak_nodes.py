@@ -28,7 +28,8 @@ import sys
 import tempfile
 import time
 
-from harness.campaign import Check, read_json
+from harness.campaign import read_json
+from harness.campaign_result import Check
 from harness.instrumented_node import STATS_ENV
 from harness.process_sampler import Sampler
 from harness.processes import LifecycleClient, Listener, NodeProcess, ros_env

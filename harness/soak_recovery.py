@@ -23,7 +23,7 @@ the reasoning lives here, apart from the running of the leg.
 import bisect
 from collections.abc import Callable
 
-from harness.campaign import FaultEvent
+from harness.fault_driver import FaultEvent
 from i3dmgx2_driver.device.timeouts import REQUEST_TIMEOUT
 
 #: What one more try costs the dialogue when a command or its answer is lost: the

@@ -22,7 +22,7 @@ changes here and nowhere else.
 import collections
 import dataclasses
 
-from harness.campaign import Check
+from harness.campaign_result import Check
 from harness.soak_leg import LegResult
 from harness.soak_plan import LongSoakConfig
 from i3dmgx2_driver.codec.data_rate import divider_for_rate

@@ -24,7 +24,7 @@ records of the node's stream.
 
 import random
 
-from harness.campaign import imu_values
+from harness.campaign_truth import imu_values
 from harness.hostile_oracle import PublishOracle
 from harness.packet_mutation import PacketMutator, reseal
 from i3dmgx2_driver.codec import SensorStreamParser
