@@ -28,7 +28,12 @@ imports it.
   those processes run.
 * ``percentiles``: a sample's percentile and summary.
 * ``campaign``: the soak and fault campaign (``benchmarks/soak.py`` runs it
-  for minutes, ``test/test_soak_short.py`` for half a minute).
+  for minutes, ``test/test_soak_short.py`` for half a minute): its settings
+  in ``campaign_config``, its faults in ``fault_driver``, the truth in
+  ``campaign_truth``, its subscriber in ``campaign_listener``, a run's data in
+  ``campaign_data``; ``campaign_analysis`` judges it from ``read_windows``,
+  ``campaign_match``, ``campaign_stamps``, ``campaign_counters`` and
+  ``campaign_health`` into ``campaign_result`` and ``campaign_report``.
 * ``run_config``: the settings the campaign, the long soak and the node fuzz share.
 * ``long_soak``: the campaign's legs over every stream for an hour, from
   ``soak_plan`` (settings, legs), ``soak_nodes`` (the node processes),
