@@ -30,8 +30,8 @@ import subprocess
 import sys
 
 from bench_common import LoadProcess, Result, run_benchmark
-from harness.processes import isolate_ros_domain
 from harness.percentiles import summarise
+from harness.processes import isolate_ros_domain
 from latency import CONFIGS, run_once, TARGET_DRIVER_P99_S
 
 SLOW_SERVICE = 'self_test'

@@ -65,6 +65,23 @@ def test_a_missing_path_is_reported_as_missing(tmp_path):
         SerialPort(str(tmp_path / 'ttyUSB9'))
 
 
+@pytest.fixture
+def open_pty():
+    """Return (master, port): a SerialPort on a pty's slave end, closed after the test."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    port = SerialPort(os.ttyname(slave))
+    os.close(slave)
+    ends = [master]
+    yield ends, port
+    port.close()
+    for fd in ends:
+        try:
+            os.close(fd)
+        except OSError:
+            pass  # the test closed the master itself (an unplug)
+
+
 @pytest.mark.slow
 def test_exclusive_open_refuses_a_second_user():
     master, slave = os.openpty()
@@ -81,39 +98,30 @@ def test_exclusive_open_refuses_a_second_user():
 
 
 @pytest.mark.slow
-def test_a_queue_flushed_between_select_and_read_is_no_unplug(monkeypatch):
+def test_a_queue_flushed_between_select_and_read_is_no_unplug(monkeypatch, open_pty):
     """The race a CI machine found: readable by select, emptied by a flush, read empty."""
-    master, slave = os.openpty()
-    tty.setraw(slave)
-    port = SerialPort(os.ttyname(slave))
-    os.close(slave)
+    (master,), port = open_pty
     real_select = port_module.select.select
-    try:
-        os.write(master, b'\xaa\x07')
+    os.write(master, b'\xaa\x07')
 
-        def select_then_flush(*args):
-            ready = real_select(*args)
-            port.flush_input()  # what the other thread did in between
-            return ready
+    def select_then_flush(*args):
+        ready = real_select(*args)
+        port.flush_input()  # what the other thread did in between
+        return ready
 
-        monkeypatch.setattr(port_module.select, 'select', select_then_flush)
-        assert port.read_some(1.0) == b''
-        monkeypatch.setattr(port_module.select, 'select', real_select)
-        os.write(master, b'\xaa\x07')
-        assert port.read_some(1.0) == b'\xaa\x07'
-        os.close(master)
-        with pytest.raises(PortDisconnected):
-            port.read_some(1.0)
-    finally:
-        port.close()
+    monkeypatch.setattr(port_module.select, 'select', select_then_flush)
+    assert port.read_some(1.0) == b''
+    monkeypatch.setattr(port_module.select, 'select', real_select)
+    os.write(master, b'\xaa\x07')
+    assert port.read_some(1.0) == b'\xaa\x07'
+    os.close(master)
+    with pytest.raises(PortDisconnected):
+        port.read_some(1.0)
 
 
 @pytest.mark.slow
-def test_flushes_from_another_thread_never_read_as_an_unplug():
-    master, slave = os.openpty()
-    tty.setraw(slave)
-    port = SerialPort(os.ttyname(slave))
-    os.close(slave)
+def test_flushes_from_another_thread_never_read_as_an_unplug(open_pty):
+    (master,), port = open_pty
     stop = threading.Event()
 
     def write_and_flush():
@@ -129,26 +137,18 @@ def test_flushes_from_another_thread_never_read_as_an_unplug():
     finally:
         stop.set()
         helper.join()
-        os.close(master)
-        port.close()
     assert got > 0
 
 
 @pytest.mark.slow
-def test_reads_after_the_other_end_closed_raise_disconnected():
-    master, slave = os.openpty()
-    tty.setraw(slave)
-    port = SerialPort(os.ttyname(slave))
-    os.close(slave)
-    try:
-        os.write(master, b'\xaa\x07')
-        assert port.read_some(1.0) == b'\xaa\x07'
-        os.close(master)
-        with pytest.raises(PortDisconnected):
-            for _ in range(3):
-                port.read_some(1.0)
-    finally:
-        port.close()
+def test_reads_after_the_other_end_closed_raise_disconnected(open_pty):
+    (master,), port = open_pty
+    os.write(master, b'\xaa\x07')
+    assert port.read_some(1.0) == b'\xaa\x07'
+    os.close(master)
+    with pytest.raises(PortDisconnected):
+        for _ in range(3):
+            port.read_some(1.0)
 
 
 @pytest.mark.parametrize('group', ['root', 'wheel', 'sudo', 'adm', 'disk', 'video'])

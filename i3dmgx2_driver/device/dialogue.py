@@ -46,6 +46,7 @@ from .identity import DeviceInfo
 from .link import DeviceLink
 from .rate_setting import RateSetting
 from .settings import DeviceConfig
+from ..forwarding import Forwarded
 
 
 class SensorDialogue:
@@ -70,45 +71,27 @@ class SensorDialogue:
 
     # -- what it learned (the supervisor's status snapshot) ------------------------------
 
-    @property
-    def info(self) -> DeviceInfo | None:
-        """Return the device's identity, once read."""
-        return self.identification.info
+    info: 'DeviceInfo | None' = Forwarded('identification', "The device's identity, once read.")
 
-    @property
-    def ping_ok(self) -> bool | None:
-        """Return whether the base station's ping was answered (None: wired, or not asked)."""
-        return self.identification.ping_ok
+    ping_ok: 'bool | None' = Forwarded(
+        'identification',
+        "Whether the base station's ping was answered (None: wired, or not asked).")
 
-    @property
-    def divider(self) -> int | None:
-        """Return the data-rate divider, once known."""
-        return self.rate.divider
+    divider: 'int | None' = Forwarded('rate', 'The data-rate divider, once known.')
 
-    @property
-    def eeprom_writes(self) -> int:
-        """Return the EEPROM write commands sent (the divider's cell; each may wear it)."""
-        return self.rate.eeprom_writes
+    eeprom_writes: 'int' = Forwarded(
+        'rate', "The EEPROM write commands sent (the divider's cell; each may wear it).")
 
-    @property
-    def line_use(self) -> str:
-        """Return the stream's use of the line at the device's rate ('' while unknown)."""
-        return self.rate.line_use
+    line_use: 'str' = Forwarded(
+        'rate', "The stream's use of the line at the device's rate ('' while unknown).")
 
-    @property
-    def line_warning(self) -> str:
-        """Return what to do when the stream does not fit the line ('' when it fits)."""
-        return self.rate.line_warning
+    line_warning: 'str' = Forwarded(
+        'rate', "What to do when the stream does not fit the line ('' when it fits).")
 
-    @property
-    def expected_rate_hz(self) -> float | None:
-        """Return the rate the divider gives, once known."""
-        return self.rate.expected_rate_hz
+    expected_rate_hz: 'float | None' = Forwarded('rate', 'The rate the divider gives, once known.')
 
-    @property
-    def period(self) -> float:
-        """Return the time between samples (s), or 10 ms while the rate is unknown."""
-        return self.rate.period
+    period: 'float' = Forwarded(
+        'rate', 'The time between samples (s), or 10 ms while the rate is unknown.')
 
     # -- quiet --------------------------------------------------------------------------
 

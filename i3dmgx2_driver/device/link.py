@@ -33,6 +33,7 @@ from .port_reader import BytesCallback, LinkOptions, PortReader, RecordCallback
 from .radio import RadioQuality, RadioStats
 from .realtime import PolicyOutcome
 from .stream_watch import StreamWatch
+from ..forwarding import Forwarded
 
 __all__ = ['BytesCallback', 'DeviceLink', 'DeviceNack', 'DeviceTimeout', 'LinkOptions',
            'PortReader', 'RadioStats', 'RecordCallback']
@@ -80,64 +81,38 @@ class DeviceLink:
 
     # -- what the pieces know ------------------------------------------------
 
-    @property
-    def address(self) -> int | None:
-        """Return the node address requests go to (:meth:`retarget` changes it)."""
-        return self.exchange.address
+    address: 'int | None' = Forwarded(
+        'exchange', 'The node address requests go to (:meth:`retarget` changes it).')
 
-    @property
-    def streamed(self) -> int | None:
-        """Return the command byte of the record being streamed, or None while none is."""
-        return self.watch.streamed
+    streamed: 'int | None' = Forwarded(
+        'watch', 'The command byte of the record being streamed, or None while none is.',
+        writable=True)
 
-    @streamed.setter
-    def streamed(self, code: int | None) -> None:
-        self.watch.streamed = code
+    records: 'int' = Forwarded('watch', 'The records of the stream received so far.')
 
-    @property
-    def records(self) -> int:
-        """Return the records of the stream received so far."""
-        return self.watch.records
+    replies: 'int' = Forwarded('watch', "The replies to this link's requests received so far.")
 
-    @property
-    def replies(self) -> int:
-        """Return the replies to this link's requests received so far."""
-        return self.watch.replies
+    last_code: 'int | None' = Forwarded(
+        'watch', 'The command byte of the last record handed on (None before one).')
 
-    @property
-    def last_code(self) -> int | None:
-        """Return the command byte of the last record handed on (None before one)."""
-        return self.watch.last_code
+    last_data_time: 'float' = Forwarded(
+        'watch', 'The system-clock time the stream was last heard.')
 
-    @property
-    def last_data_time(self) -> float:
-        """Return the system-clock time the stream was last heard."""
-        return self.watch.last_data_time
-
-    @property
-    def last_data_mono(self) -> float:
-        """Return the same instant on the monotonic clock, for stall detection."""
-        return self.watch.last_data_mono
+    last_data_mono: 'float' = Forwarded(
+        'watch', 'The same instant on the monotonic clock, for stall detection.')
 
     @property
     def heard(self) -> bool:
         """Whether any packet of this sensor arrived on this link (a record or a reply)."""
         return bool(self.watch.records or self.watch.replies)
 
-    @property
-    def radio(self) -> RadioStats | None:
-        """Radio link quality so far, or None before the first packet."""
-        return self._radio.stats
+    radio: 'RadioStats | None' = Forwarded(
+        '_radio', 'Radio link quality so far, or None before the first packet.', 'stats')
 
-    @property
-    def error(self) -> str | None:
-        """Return why the port was lost (None while it works)."""
-        return self.reader.error
+    error: 'str | None' = Forwarded('reader', 'Why the port was lost (None while it works).')
 
-    @property
-    def policy_outcome(self) -> PolicyOutcome:
-        """Return what the scheduler granted the reader thread."""
-        return self.reader.policy_outcome
+    policy_outcome: 'PolicyOutcome' = Forwarded(
+        'reader', 'What the scheduler granted the reader thread.')
 
     # -- reader thread -------------------------------------------------------
 

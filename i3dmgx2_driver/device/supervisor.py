@@ -70,6 +70,7 @@ from .settings import DeviceConfig
 from .shared_port import SharedPort
 from .startup import StartUp
 from .status import DeviceStatus, State
+from ..forwarding import Forwarded
 
 
 class DeviceSupervisor:
@@ -143,40 +144,25 @@ class DeviceSupervisor:
             eeprom_writes=dialogue.eeprom_writes, line_use=dialogue.line_use,
             line_warning=line_warning, strays=connection.strays())
 
-    @property
-    def state(self) -> State:
-        """Return what the supervisor is doing now."""
-        return self.report.state
+    state: 'State' = Forwarded('report', 'What the supervisor is doing now.')
 
-    @property
-    def fatal_error(self) -> PortError | None:
-        """Return why the port can never work, once found (None otherwise)."""
-        return self.report.fatal_error
+    fatal_error: 'PortError | None' = Forwarded(
+        'report', 'Why the port can never work, once found (None otherwise).')
 
-    @property
-    def link(self) -> DeviceLink | None:
-        """Return the current link, or None while disconnected."""
-        return self.connection.link
+    link: 'DeviceLink | None' = Forwarded(
+        'connection', 'The current link, or None while disconnected.')
 
     def streaming_link(self) -> DeviceLink | None:
         """Return the link while the device streams (a poll may share it), else None."""
         link = self.connection.link
         return link if link is not None and self.report.state is State.STREAMING else None
 
-    @property
-    def info(self) -> DeviceInfo | None:
-        """Return the device's identity, once read."""
-        return self.dialogue.info
+    info: 'DeviceInfo | None' = Forwarded('dialogue', "The device's identity, once read.")
 
-    @property
-    def divider(self) -> int | None:
-        """Return the data-rate divider, once known."""
-        return self.dialogue.divider
+    divider: 'int | None' = Forwarded('dialogue', 'The data-rate divider, once known.')
 
-    @property
-    def expected_rate_hz(self) -> float | None:
-        """Return the rate the divider gives, once known."""
-        return self.dialogue.expected_rate_hz
+    expected_rate_hz: 'float | None' = Forwarded(
+        'dialogue', 'The rate the divider gives, once known.')
 
     # -- the plain node: one thread for everything ----------------------------------------
 

@@ -64,6 +64,7 @@ from .lifecycle import Lifecycle
 from .sensor_unit import SensorUnit, unit_at
 from .truth_queries import TruthQueries
 from .wiring import SimulatorParts
+from ..forwarding import Forwarded
 
 if typing.TYPE_CHECKING:  # typing.Self is new in Python 3.11; Jazzy allows 3.10
     from typing import Self
@@ -130,15 +131,10 @@ class PtySimulator(TruthQueries):
         """Stop at the end of the ``with`` block."""
         self.stop()
 
-    @property
-    def started(self) -> bool:
-        """Whether the threads run."""
-        return self._life.started
+    started: 'bool' = Forwarded('_life', 'Whether the threads run.')
 
-    @property
-    def start_time(self) -> float | None:
-        """Wall-clock time of start() (the sensor's power-up)."""
-        return self._life.start_time
+    start_time: 'float | None' = Forwarded(
+        '_life', "Wall-clock time of start() (the sensor's power-up).")
 
     def _power_up(self, now: float) -> None:
         """Power every sensor up at start (lock held), then the stranger and the timed faults."""
@@ -149,30 +145,23 @@ class PtySimulator(TruthQueries):
 
     # -- the port ---------------------------------------------------------------------------
 
-    @property
-    def port(self) -> str | None:
-        """Path to open: a symlink that survives unplug and replug (None before start)."""
-        return self._pty.path
+    port: 'str | None' = Forwarded(
+        '_pty', 'Path to open: a symlink that survives unplug and replug (None before start).',
+        'path')
 
-    @property
-    def device(self) -> str | None:
-        """Return the pseudo-terminal the symlink points to now (None while unplugged)."""
-        return self._pty.device
+    device: 'str | None' = Forwarded(
+        '_pty', 'The pseudo-terminal the symlink points to now (None while unplugged).')
 
-    @property
-    def link_target(self) -> str | None:
-        """Return what the port symlink points to now: ``/proc/<pid>/fd/<n>`` or the device."""
-        return self._pty.link_target
+    link_target: 'str | None' = Forwarded(
+        '_pty', 'What the port symlink points to now: ``/proc/<pid>/fd/<n>`` or the device.')
 
     @property
     def plugged(self) -> bool:
         """Whether the port exists now (False between unplug and replug)."""
         return self._pty.plugged.is_set()
 
-    @property
-    def last_port_open(self) -> float | None:
-        """Wall-clock time the host last opened the port (or flushed its input)."""
-        return self._reader.last_port_open
+    last_port_open: 'float | None' = Forwarded(
+        '_reader', 'Wall-clock time the host last opened the port (or flushed its input).')
 
     def unplug(self, seconds: float | None = None, timeout: float = 5.0) -> None:
         """
@@ -205,10 +194,7 @@ class PtySimulator(TruthQueries):
         """
         self._control.stall(seconds, address)
 
-    @property
-    def faults(self) -> FaultConfig:
-        """Return the faults in effect."""
-        return self._control.faults
+    faults: 'FaultConfig' = Forwarded('_control', 'The faults in effect.')
 
     def set_faults(self, faults: FaultConfig | None = None, **changes: Any) -> FaultConfig:
         """
@@ -262,10 +248,8 @@ class PtySimulator(TruthQueries):
         """Return the address of every sensor behind the base station, the first first."""
         return tuple(self.units)
 
-    @property
-    def wireless(self) -> bool:
-        """Whether this is a base station with a wireless sensor (False: a wired sensor)."""
-        return self.config.wireless
+    wireless: 'bool' = Forwarded(
+        'config', 'Whether this is a base station with a wireless sensor (False: a wired sensor).')
 
     @property
     def eeprom(self) -> dict[int, int]:

@@ -49,6 +49,7 @@ from .replay_answers import ACK_HOLD, BaseStationAnswers
 from .replay_pty import POLL, ReplayPty
 from .replay_stats import ReplayStats
 from ..capture import FIXTURE_ADDRESS, fixture_chunks, read_capture
+from ..forwarding import Forwarded
 
 Chunk = tuple[float, bytes]
 
@@ -114,15 +115,11 @@ class Replayer:
 
     # Public interface --------------------------------------------------------
 
-    @property
-    def port(self) -> str | None:
-        """Path for the driver's ``port`` parameter (None before start)."""
-        return self._pty.path
+    port: 'str | None' = Forwarded(
+        '_pty', "Path for the driver's ``port`` parameter (None before start).", 'path')
 
-    @property
-    def pty_name(self) -> str | None:
-        """Return the pty itself, behind the link (None before start)."""
-        return self._pty.pty_name
+    pty_name: 'str | None' = Forwarded(
+        '_pty', 'The pty itself, behind the link (None before start).')
 
     @property
     def finished(self) -> bool:
