@@ -42,6 +42,7 @@ class Talk:
 
     def __init__(self, sim: PtySimulator, **config) -> None:
         self.records = 0
+        self.timers: list[int] = []
         self.log = Log()
         self.warnings: list[tuple[str, str]] = []
         self.cancel = threading.Event()
@@ -55,6 +56,7 @@ class Talk:
 
     def _on_record(self, packet, read_time, read_mono) -> None:
         self.records += 1
+        self.timers.append(packet.record.timer)
 
     def close(self) -> None:
         self.link.stop()
@@ -202,3 +204,31 @@ def test_a_dialogue_never_writes_the_same_divider_twice():
             assert any('not writing its EEPROM again' in m for _, m in talk.warnings)
         finally:
             talk.close()
+
+
+@pytest.mark.parametrize('stream', [lay.ACCEL_ANG_RATE, lay.ACCEL_ANG_RATE_MAG_ORIENTATION])
+def test_a_sensor_still_streaming_loses_no_record_to_the_first_polls(stream):
+    """
+    Found by the hour-long soak: its stop lost, the sensor streams 0xC2 while started in full.
+
+    A record of the stream that came while a 0xC2 poll waited was taken for
+    the poll's reply: neither published nor the answer. Every record the
+    sensor streamed in that time must reach the consumer.
+    """
+    with PtySimulator(SimulatorConfig(seed=8, divider=171)) as sim:  # 300 Hz
+        talk = Talk(sim, stream=stream)
+        try:
+            talk.link.send(commands.set_continuous(stream))  # streaming, as if the stop was lost
+            while talk.records < 40:
+                time.sleep(0.01)
+            begin = time.time()
+            for _ in range(20):  # the first polls, many times over: each a chance to collide
+                talk.dialogue.identification.introduce(talk.link)
+            end = time.time()
+            time.sleep(0.1)
+        finally:
+            talk.close()
+        streamed = [e.timer for e in sim.truth if e.source == 'stream' and e.valid
+                    and e.write_time is not None and begin <= e.write_time <= end]
+        assert len(streamed) > 100
+        assert set(streamed) <= set(talk.timers), 'records of the stream taken for replies'

@@ -31,6 +31,21 @@ from .link import DeviceLink, DeviceTimeout
 from ..codec import layouts
 
 
+def first_poll_code(stream: int) -> int:
+    """
+    Return what the first polled requests ask for: never the record being streamed.
+
+    A sensor may still stream while the dialogue starts it in full (its stop
+    lost on the radio, or streaming from power-up); a record of the stream
+    that arrives while a poll of the same code waits is taken for its reply,
+    so it is neither published nor the answer, and the real reply, coming
+    next, is published in its place (found by the hour-long soak, stream
+    ``inertial``). 0xC2, or the magnetometer alone (0xC7, no stream's
+    record) when 0xC2 is the stream.
+    """
+    return layouts.MAGNETOMETER if stream == layouts.ACCEL_ANG_RATE else layouts.ACCEL_ANG_RATE
+
+
 class Identification:
     """
     What the sensor at ``config.address`` answered and said it is.
@@ -59,10 +74,10 @@ class Identification:
                                    f'the radio channel', None)
         # The thesis author found continuous mode unreliable as the very first
         # command: a couple of polled requests first make it dependable.
+        code = first_poll_code(cfg.stream)
         for _ in range(2):
             try:
-                link.request(bytes((layouts.ACCEL_ANG_RATE,)), layouts.ACCEL_ANG_RATE,
-                             timeout=cfg.request_timeout, retries=2)
+                link.request(bytes((code,)), code, timeout=cfg.request_timeout, retries=2)
             except DeviceTimeout:
                 pass
         if require_answer and not self.ping_ok and not link.heard:
