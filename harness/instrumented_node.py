@@ -37,6 +37,7 @@ Usage: ``I3DMGX2_SOAK_STATS=out.json python -m harness.instrumented_node
 [--lifecycle] --ros-args -p port:=... -p address:=...``.
 """
 
+import collections
 import ctypes
 import json
 import os
@@ -55,7 +56,11 @@ STATS_ENV = 'I3DMGX2_SOAK_STATS'
 #: How often the counters are written while the node runs (s).
 DUMP_PERIOD = 0.5
 
-_events: list[tuple[str, float, int]] = []
+#: Port events kept (the newest): far more than a leg makes, so that an hour's run in
+#: one process holds a bounded list rather than one that grows with every fault.
+EVENTS_KEPT = 4096
+
+_events: collections.deque[tuple[str, float, int]] = collections.deque(maxlen=EVENTS_KEPT)
 _events_lock = threading.Lock()
 _connection = [0]
 

@@ -44,6 +44,18 @@ def slope_per_hour(samples: list[tuple[float, float]]) -> float | None:
     return sum((t - mt) * (v - mv) for t, v in zip(ts, vs, strict=True)) / den * 3600.0
 
 
+def halves_per_hour(samples: list[tuple[float, float]]) -> tuple[float, float] | None:
+    """Slopes per hour of the first and the second half of the samples (by time); None if few."""
+    if len(samples) < 6:
+        return None
+    middle = (samples[0][0] + samples[-1][0]) / 2.0
+    first = slope_per_hour([s for s in samples if s[0] <= middle])
+    second = slope_per_hour([s for s in samples if s[0] >= middle])
+    if first is None or second is None:
+        return None
+    return first, second
+
+
 def process_sample(pid: int) -> tuple[int, int, int] | None:
     """Return (RSS KiB, open descriptors, threads) of a process, None if it is gone."""
     try:
@@ -163,6 +175,12 @@ def fit_slopes(cfg: LongSoakConfig, sampler: Sampler, processes: list[tuple[str,
                      f'{_per_hour(fds, "")}, threads {_per_hour(threads, "")}; '
                      f'{len(samples)} samples; first {first}, last {last} '
                      f'(RSS KiB, fds, threads)')
+        halves = halves_per_hour([(t, kib / 1024.0) for t, kib, _, _ in samples])
+        if halves is not None:
+            # Not asserted: a warm-up slows down (the second half's slope is smaller),
+            # a leak keeps its pace.
+            lines.append(f'  {"":22s} RSS by halves of the fit: first '
+                         f'{_per_hour(halves[0], "MiB")}, second {_per_hour(halves[1], "MiB")}')
         if heaps:
             # Not asserted: what tells a leak (these grow too) from an allocator
             # that keeps freed memory (RSS alone grows).

@@ -54,6 +54,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 NODE_COMMAND = (sys.executable, '-m', 'i3dmgx2_driver.ros.main')
 #: How ``NodeProcess`` starts the managed node from the source tree.
 LIFECYCLE_COMMAND = (sys.executable, '-m', 'i3dmgx2_driver.ros.lifecycle_node')
+#: How long a hung child has to write its stacks after SIGABRT before it is killed (s).
+ABORT_GRACE = 3.0
 #: Node address the simulator and the node agree on.
 ADDRESS = 95
 
@@ -64,6 +66,8 @@ def ros_env(extra: dict[str, str] | None = None) -> dict[str, str]:
     env['PYTHONPATH'] = REPO + (os.pathsep + env['PYTHONPATH'] if env.get('PYTHONPATH') else '')
     env['PYTHONUNBUFFERED'] = '1'
     env['RCUTILS_COLORIZED_OUTPUT'] = '0'
+    # A child that hangs is sent SIGABRT before it is killed: its threads' stacks go to its log.
+    env['PYTHONFAULTHANDLER'] = '1'
     if extra:
         env.update(extra)
     return env
@@ -161,9 +165,17 @@ class NodeProcess:
             try:
                 self.proc.wait(timeout)
             except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+                self._abort_with_stacks()
         return self.proc.returncode, time.monotonic() - start
+
+    def _abort_with_stacks(self) -> None:
+        """End a hung process so that its log says where each thread waited (faulthandler)."""
+        self.proc.send_signal(signal.SIGABRT)
+        try:
+            self.proc.wait(ABORT_GRACE)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
 
     def wait(self, timeout: float = 20.0) -> int:
         """Wait for the process to end by itself; return its exit code."""

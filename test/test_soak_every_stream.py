@@ -24,7 +24,7 @@ managed nodes shut down from a random state. The pieces the verdict rests on
 """
 
 from harness.long_soak import run_long_soak
-from harness.process_sampler import slope_per_hour
+from harness.process_sampler import halves_per_hour, slope_per_hour
 from harness.soak_plan import LongSoakConfig, plan_legs
 from i3dmgx2_driver.codec import line_budget, streams
 import pytest
@@ -56,6 +56,16 @@ def test_slope_is_per_hour_and_ignores_a_constant():
         == pytest.approx(1.0)
     assert slope_per_hour([(t, 7.0) for t in range(10)]) == 0.0
     assert slope_per_hour([(0.0, 1.0), (1.0, 2.0)]) is None
+
+
+def test_a_warm_up_slows_by_halves_and_a_leak_keeps_its_pace():
+    leak = [(t, 50.0 + t / 3600.0) for t in range(0, 3600, 30)]
+    assert halves_per_hour(leak) == pytest.approx((1.0, 1.0))
+    # Grows 2 MiB/h for half an hour, then holds: by halves, 2 then 0.
+    warm = [(t, 50.0 + 2.0 * min(t, 1800) / 3600.0) for t in range(0, 3601, 30)]
+    first, second = halves_per_hour(warm)
+    assert first == pytest.approx(2.0) and second == pytest.approx(0.0, abs=1e-9)
+    assert halves_per_hour(leak[:5]) is None
 
 
 @pytest.mark.slow
