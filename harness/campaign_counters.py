@@ -150,11 +150,17 @@ def node_rows(data: RunData, windows: Windows, matching: Matching) -> list[Count
     published_sorted = sorted((s for s, _ in matching.matched
                                if s.index not in matching.duplicates),
                               key=lambda s: s.index)
-    lost, resets = expected_gaps(published_sorted, windows, data.divider, data.power_ups)
+    lost, resets, gaps = expected_gaps(published_sorted, windows, data.divider, data.power_ups)
+    rule = (f'timer steps between published records of one connection and one power-up, '
+            f'as cycles of the divider ({data.divider}) less one: exact')
+    if nstats.get('lost') != lost:
+        # Where to look: the largest steps counted here, by the write time of the record after.
+        largest = sorted(gaps, key=lambda gap: -gap[1])[:5]
+        rule += '; largest steps counted here: ' + ', '.join(
+            f'{count} before the record written at {t - data.started:.2f} s'
+            for t, count in largest)
     return [
-        bounds('lost', nstats.get('lost'), lost, lost,
-               f'timer steps between published records of one connection and one power-up, '
-               f'as cycles of the divider ({data.divider}) less one: exact'),
+        bounds('lost', nstats.get('lost'), lost, lost, rule),
         bounds('device_resets', nstats.get('device_resets'), resets, resets,
                'published records of one connection on either side of a sensor power-up: exact')]
 
@@ -168,9 +174,11 @@ def counter_checks(rows: list[CounterRow], nstats: dict) -> list[Check]:
 
 
 def expected_gaps(published: list[Sent], windows: Windows, divider: int,
-                  power_ups: list[float]) -> tuple[int, int]:
+                  power_ups: list[float]) -> tuple[int, int, list[tuple[float, int]]]:
     """
-    Return the (lost, device resets) the node should count over the published records.
+    Return the (lost, device resets, steps) the node should count over the published records.
+
+    ``steps`` are the (write time, records lost) of each record after a loss.
 
     Two consecutive published records straddle a power-up of the sensor or
     do not. If they do, the node counts a device reset, whether or not it
@@ -185,6 +193,7 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
     expected = 384 * divider
     ups = sorted(power_ups)
     lost = resets = 0
+    steps: list[tuple[float, int]] = []
     last = None
     span = None
     for sent in published:
@@ -195,6 +204,8 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
                 resets += 1
             elif i == span:
                 gap = round(((sent.timer - last.timer) % TIMER_MODULUS) / expected) - 1
-                lost += max(gap, 0)
+                if gap > 0:
+                    lost += gap
+                    steps.append((sent.write_time, gap))
         span, last = i, sent
-    return lost, resets
+    return lost, resets, steps

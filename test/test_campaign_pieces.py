@@ -16,7 +16,7 @@
 
 from types import SimpleNamespace
 
-from harness.campaign_counters import bounds
+from harness.campaign_counters import bounds, expected_gaps
 from harness.campaign_health import rss_check
 from harness.campaign_match import claimed_by_polls
 from harness.campaign_truth import Sent
@@ -58,6 +58,23 @@ def test_windows_near_flush_counts_opens_and_flushes():
 
 def _sent(index: int, write_time: float | None) -> Sent:
     return Sent(index, write_time, True, None, 95, 'stream', b'k', None, None, 0, 0.0, 0, 10)
+
+
+def _record(index: int, write_time: float, timer: int) -> Sent:
+    return _sent(index, write_time)._replace(timer=timer, sample_time=write_time)
+
+
+def test_losses_are_counted_within_one_anchor_span_and_say_where():
+    step = 384 * 10  # one record's ticks at divider 10
+    published = [_record(0, 3.0, 0), _record(1, 3.1, step), _record(2, 3.5, 5 * step),
+                 _record(3, 12.0, 100 * step), _record(4, 12.1, 103 * step)]
+    lost, resets, steps = expected_gaps(published, _windows(), 10, power_ups=[])
+    # 3 lost before the record at 3.5 s and 2 before the one at 12.1 s; none across the
+    # anchor at 11.2 s (a new connection: the node forgets its last record there).
+    assert (lost, resets, steps) == (5, 0, [(3.5, 3), (12.1, 2)])
+    # A power-up between two records is a reset, not a loss.
+    lost, resets, steps = expected_gaps(published, _windows(), 10, power_ups=[3.3])
+    assert (lost, resets, steps) == (2, 1, [(12.1, 2)])
 
 
 def test_a_polled_request_claims_the_first_record_written_after_it():
