@@ -31,6 +31,7 @@ from harness.campaign_match import Matching
 from harness.campaign_result import Check, verdict
 from harness.campaign_truth import Sent
 from harness.read_windows import Windows
+from i3dmgx2_driver.codec.data_rate import ticks_per_cycle
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 
 
@@ -186,11 +187,11 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
     link against the fit (device/sample_clock.py). If they do not, and both
     lie between the same two anchors of the node (it forgets the last record
     at each: every connection, and again when a reconnect to a known sensor
-    fell back to the full dialogue), it counts ``round(step / (384 *
+    fell back to the full dialogue), it counts ``round(step / ticks_per_cycle(
     divider)) - 1`` lost records when that is positive, ``step`` being the
     timer step in ticks (its own formula, for the rate the divider gives).
     """
-    expected = 384 * divider
+    expected = ticks_per_cycle(divider)
     ups = sorted(power_ups)
     lost = resets = 0
     steps: list[tuple[float, int]] = []

@@ -21,6 +21,7 @@ from harness.campaign_health import rss_check
 from harness.campaign_match import claimed_by_polls
 from harness.campaign_truth import Sent
 from harness.read_windows import Windows
+from i3dmgx2_driver.codec.data_rate import ticks_per_cycle
 
 
 def _windows() -> Windows:
@@ -65,7 +66,7 @@ def _record(index: int, write_time: float, timer: int) -> Sent:
 
 
 def test_losses_are_counted_within_one_anchor_span_and_say_where():
-    step = 384 * 10  # one record's ticks at divider 10
+    step = ticks_per_cycle(10)  # one record's ticks at divider 10
     published = [_record(0, 3.0, 0), _record(1, 3.1, step), _record(2, 3.5, 5 * step),
                  _record(3, 12.0, 100 * step), _record(4, 12.1, 103 * step)]
     lost, resets, steps = expected_gaps(published, _windows(), 10, power_ups=[])
