@@ -56,22 +56,47 @@ def halves_per_hour(samples: list[tuple[float, float]]) -> tuple[float, float] |
     return first, second
 
 
-def process_sample(pid: int) -> tuple[int, int, int] | None:
-    """Return (RSS KiB, open descriptors, threads) of a process, None if it is gone."""
+#: The parts of RSS /proc tells apart, as named in its status file.
+RSS_KINDS = ('RssAnon', 'RssFile', 'RssShmem')
+
+
+def _status_fields(pid: int, keys: tuple[str, ...]) -> dict[str, int] | None:
+    """Return the ``keys`` of /proc/<pid>/status (their first number), None if it is gone."""
+    found: dict[str, int] = {}
     try:
-        rss = threads = None
         with open(f'/proc/{pid}/status') as handle:
             for line in handle:
-                if line.startswith('VmRSS:'):
-                    rss = int(line.split()[1])
-                elif line.startswith('Threads:'):
-                    threads = int(line.split()[1])
+                key, _, value = line.partition(':')
+                if key in keys:
+                    found[key] = int(value.split()[0])
+    except OSError:
+        return None
+    return found if len(found) == len(keys) else None
+
+
+def process_sample(pid: int) -> tuple[int, int, int] | None:
+    """Return (RSS KiB, open descriptors, threads) of a process, None if it is gone."""
+    status = _status_fields(pid, ('VmRSS', 'Threads'))
+    try:
         fds = len(os.listdir(f'/proc/{pid}/fd'))
     except OSError:
         return None
-    if rss is None or threads is None:
+    if status is None:
         return None
-    return rss, fds, threads
+    return status['VmRSS'], fds, status['Threads']
+
+
+def rss_kinds(pid: int) -> tuple[int, int, int] | None:
+    """
+    Return a process's RSS as (anonymous, file-backed, shared memory) KiB, None if gone.
+
+    A heap that grows is anonymous memory; library code paged in on the
+    first use of a path (a fault handler run for the first time) is
+    file-backed and bounded by the libraries' size: the kinds tell a leak
+    from a warm-up that RSS alone mixes.
+    """
+    status = _status_fields(pid, RSS_KINDS)
+    return None if status is None else tuple(status[k] for k in RSS_KINDS)
 
 
 class Sampler(threading.Thread):
@@ -99,6 +124,8 @@ class Sampler(threading.Thread):
         #: Heap figures the node wrote (instrumented_node.heap_figures), sampled as
         #: ``samples`` are: (time, Python blocks, C heap in use KiB).
         self.heaps: dict[str, list[tuple[float, int, int | None]]] = {}
+        #: RSS by kind (:func:`rss_kinds`), sampled as ``samples`` are: (time, anon, file, shmem).
+        self.kinds: dict[str, list[tuple[float, int, int, int]]] = {}
         self._stats: dict[str, str] = {}
         self._lock = threading.Lock()
         self._halt = threading.Event()
@@ -129,6 +156,9 @@ class Sampler(threading.Thread):
                 self.all_samples.setdefault(name, []).append((time.time(), *got))
                 if name not in self.busy:  # configured: more descriptors and threads
                     self.samples[name].append((time.time(), *got))
+                    kinds = rss_kinds(pid)
+                    if kinds is not None:
+                        self.kinds.setdefault(name, []).append((time.time(), *kinds))
                     self._sample_heap(name)
 
     def _sample_heap(self, name: str) -> None:
@@ -181,6 +211,15 @@ def fit_slopes(cfg: LongSoakConfig, sampler: Sampler, processes: list[tuple[str,
             # a leak keeps its pace.
             lines.append(f'  {"":22s} RSS by halves of the fit: first '
                          f'{_per_hour(halves[0], "MiB")}, second {_per_hour(halves[1], "MiB")}')
+        kinds = [k for k in sampler.kinds.get(key, []) if k[0] >= since]
+        if kinds:
+            # Not asserted: which memory the slope is (a leak is anonymous).
+            per_kind = [slope_per_hour([(k[0], k[i] / 1024.0) for k in kinds])
+                        for i in (1, 2, 3)]
+            lines.append(f'  {"":22s} RSS by kind: anonymous {_per_hour(per_kind[0], "MiB")}, '
+                         f'file-backed {_per_hour(per_kind[1], "MiB")}, shared memory '
+                         f'{_per_hour(per_kind[2], "MiB")}; first {kinds[0][1:]}, last '
+                         f'{kinds[-1][1:]} (KiB)')
         if heaps:
             # Not asserted: what tells a leak (these grow too) from an allocator
             # that keeps freed memory (RSS alone grows).

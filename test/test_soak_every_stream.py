@@ -23,8 +23,11 @@ managed nodes shut down from a random state. The pieces the verdict rests on
 (the legs, the slope fit) are checked first, fast.
 """
 
+import os
+
 from harness.long_soak import run_long_soak
-from harness.process_sampler import halves_per_hour, slope_per_hour
+from harness.process_sampler import halves_per_hour, process_sample, rss_kinds, \
+    slope_per_hour
 from harness.soak_plan import LongSoakConfig, plan_legs
 from i3dmgx2_driver.codec import line_budget, streams
 import pytest
@@ -66,6 +69,17 @@ def test_a_warm_up_slows_by_halves_and_a_leak_keeps_its_pace():
     first, second = halves_per_hour(warm)
     assert first == pytest.approx(2.0) and second == pytest.approx(0.0, abs=1e-9)
     assert halves_per_hour(leak[:5]) is None
+
+
+def test_rss_kinds_add_up_to_rss_and_a_gone_process_gives_none():
+    rss, fds, threads = process_sample(os.getpid())
+    anon, file, shmem = rss_kinds(os.getpid())
+    assert anon > 0 and file > 0 and shmem >= 0 and fds > 0 and threads >= 1
+    # Read a moment apart: the sum is RSS to within what this test allocates meanwhile.
+    assert abs(anon + file + shmem - rss) < 4096
+    with open('/proc/sys/kernel/pid_max') as handle:
+        never = int(handle.read())  # pids stay below it
+    assert process_sample(never) is None and rss_kinds(never) is None
 
 
 @pytest.mark.slow
