@@ -187,7 +187,8 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
     link against the fit (device/sample_clock.py). If they do not, and both
     lie between the same two anchors of the node (it forgets the last record
     at each: every connection, and again when a reconnect to a known sensor
-    fell back to the full dialogue), it counts ``round(step / ticks_per_cycle(
+    fell back to the full dialogue; a record written after the flush just
+    before an anchor is read after it: ``Windows.fresh_starts``), it counts ``round(step / ticks_per_cycle(
     divider)) - 1`` lost records when that is positive, ``step`` being the
     timer step in ticks (its own formula, for the rate the divider gives).
     """
@@ -198,7 +199,7 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
     last = None
     span = None
     for sent in published:
-        i = bisect.bisect_right(windows.anchors, sent.write_time) - 1
+        i = bisect.bisect_right(windows.fresh_starts, sent.write_time) - 1
         if last is not None:
             j = bisect.bisect_right(ups, last.sample_time)
             if j < len(ups) and ups[j] <= sent.sample_time:

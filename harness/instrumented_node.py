@@ -65,9 +65,9 @@ _events_lock = threading.Lock()
 _connection = [0]
 
 
-def _note(kind: str) -> None:
+def _note(kind: str, at: float | None = None) -> None:
     with _events_lock:
-        _events.append((kind, time.time(), _connection[0]))
+        _events.append((kind, time.time() if at is None else at, _connection[0]))
 
 
 class ObservedPort(SerialPort):
@@ -80,9 +80,15 @@ class ObservedPort(SerialPort):
         _note('open')
 
     def flush_input(self) -> None:
-        """Flush, then note the time: what was written before is gone."""
+        """
+        Flush, and note when the flush began.
+
+        What was written before is gone; what was written from then on may
+        wait in the queue and be read after the next anchor (read_windows.py).
+        """
+        began = time.time()
         super().flush_input()
-        _note('flush')
+        _note('flush', began)
 
     def close(self) -> None:
         """Note the time, then close: the reader has stopped by now."""

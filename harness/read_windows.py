@@ -39,8 +39,9 @@ class Windows:
                 entry[kind] = t
         self.flushes = sorted(t for e in by_conn.values() for t in e['flush'])
         self.opens = sorted(e['open'] for e in by_conn.values() if e['open'] is not None)
-        #: Every time the node started afresh (re-anchored: its reader publishes from then on).
-        self.anchors = sorted(t for e in by_conn.values() for t in e['anchor'])
+        #: Where the node's loss counting starts afresh (it re-anchored: its reader publishes
+        #: from then on), by the write time of the records (see :func:`_fresh_from`).
+        self.fresh_starts = sorted(t for e in by_conn.values() for t in _fresh_from(e))
         self.spans: list[tuple[float, float]] = []
         for entry in by_conn.values():
             if entry['anchor']:
@@ -74,3 +75,26 @@ class Windows:
             if i < len(times) and times[i] <= t + width:
                 return True
         return False
+
+
+def _fresh_from(entry: dict) -> list[float]:
+    """
+    Return, for each anchor of one connection, the write time from which records follow it.
+
+    The node forgets its last record at an anchor, and its reader starts
+    there; the bytes of a record written after the flush just before the
+    anchor (a reconnect's ``expect_stream``, a start-up's quiet) wait in the
+    port's queue and are read, and counted, after it, though written
+    before. So a record belongs to the anchor's span from that flush on, or
+    from the anchor itself when no flush came between it and the one before.
+    (When a resume falls back to the full dialogue, its reader still runs
+    through the quiet's flush; the stream was stopped 50 ms before it, so no
+    record should come between that flush and the anchor.)
+    """
+    starts = []
+    previous = entry['open'] if entry['open'] is not None else float('-inf')
+    for anchor in sorted(entry['anchor']):
+        flushes = [t for t in entry['flush'] if previous < t <= anchor]
+        starts.append(max(flushes) if flushes else anchor)
+        previous = anchor
+    return starts

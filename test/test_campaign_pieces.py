@@ -78,6 +78,24 @@ def test_losses_are_counted_within_one_anchor_span_and_say_where():
     assert (lost, resets, steps) == (2, 1, [(12.1, 2)])
 
 
+def test_a_record_written_between_a_reconnects_flush_and_its_anchor_starts_the_new_span():
+    # Reconnect 2 flushes at 11.1 s and anchors at 11.2 s: the record written at 11.15 s
+    # waited in the port's queue and was read after the anchor, where the node forgets the
+    # record before. The gap across the outage is no loss (leg 20 of the hour run of
+    # 2026-11-26 counted 387 such records of a reconnect against the node).
+    events = [('open', 1.0, 1), ('flush', 1.5, 1), ('anchor', 2.0, 1), ('close', 10.0, 1),
+              ('open', 11.0, 2), ('flush', 11.1, 2), ('anchor', 11.2, 2)]
+    windows = Windows(events, unplugs=[6.0], end=20.0, margin=0.5)
+    assert windows.fresh_starts == [1.5, 11.1]
+    step = ticks_per_cycle(10)
+    published = [_record(0, 3.0, 0), _record(1, 3.1, step), _record(2, 11.15, 300 * step),
+                 _record(3, 11.3, 302 * step)]
+    assert expected_gaps(published, windows, 10, power_ups=[]) == (1, 0, [(11.3, 1)])
+    # An anchor with no flush since the one before starts the span at the anchor itself.
+    events += [('anchor', 15.0, 2)]
+    assert Windows(events, unplugs=[], end=20.0, margin=0.5).fresh_starts == [1.5, 11.1, 15.0]
+
+
 def test_a_polled_request_claims_the_first_record_written_after_it():
     ours = [_sent(0, 0.9), _sent(1, 1.1), _sent(2, 1.2), _sent(3, None), _sent(4, 5.0)]
     log = [SimpleNamespace(time=1.0, command=SimpleNamespace(code=0xCC)),
