@@ -188,9 +188,10 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
     lie between the same two anchors of the node (it forgets the last record
     at each: every connection, and again when a reconnect to a known sensor
     fell back to the full dialogue; a record written after the flush just
-    before an anchor is read after it: ``Windows.fresh_starts``), it counts ``round(step / ticks_per_cycle(
-    divider)) - 1`` lost records when that is positive, ``step`` being the
-    timer step in ticks (its own formula, for the rate the divider gives).
+    before an anchor is read after it: ``Windows.fresh_starts``), it counts
+    ``round(step / ticks_per_cycle(divider)) - 1`` lost records when that is
+    positive, ``step`` being the timer step in ticks (its own formula, for
+    the rate the divider gives).
     """
     expected = ticks_per_cycle(divider)
     ups = sorted(power_ups)
