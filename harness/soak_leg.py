@@ -227,11 +227,11 @@ class LegRunner:
                  seconds: float) -> LegResult:
         """Judge the leg: the campaign's checks, and the data back after every fault."""
         cfg = self.cfg
-        result = analyse(data)
         # A managed node does not exit at a leg's end (its exit is checked at the run's),
         # and counts as unpublished what it reads while inactive, by design.
-        checks = [c for c in result.checks if not (leg.kind == 'managed' and c.name in (
-            'clean exit on SIGINT', 'nothing left unpublished'))]
+        result = analyse(data, exempt=('clean exit on SIGINT', 'nothing left unpublished')
+                         if leg.kind == 'managed' else ())
+        checks = list(result.checks)
         found = recoveries(driver.events, data.messages, data.truth, self.rig.sim.host_log,
                            cfg.recovery_limit, self.log)
         slow = [(k, g, lim) for k, g, lim in found if g is None or g > lim]

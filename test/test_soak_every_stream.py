@@ -88,3 +88,8 @@ def test_soak_every_stream_short():
                          event_gap=(0.3, 1.0), seed=7, log=None)
     result = run_long_soak(cfg)
     assert result.ok, result.report
+    # A managed node lives on after its leg and counts what it reads while inactive: those
+    # two checks are the plain node's only, in the verdict and in the report.
+    for name in ('clean exit on SIGINT', 'nothing left unpublished'):
+        legs = {c.name.split(')')[0] for c in result.checks if c.name.endswith(f': {name}')}
+        assert legs and all('(plain ' in leg for leg in legs), legs
