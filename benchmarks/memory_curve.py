@@ -44,6 +44,7 @@ from harness.process_sampler import rss_kinds, slope_per_hour
 from harness.processes import ADDRESS, isolate_ros_domain, NodeProcess, ros_env
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 
+
 def _fault(sim: PtySimulator, kind: str) -> None:
     """Inflict one fault and return once it has ended."""
     if kind == 'unplug':
