@@ -126,7 +126,7 @@ def _slopes(rows: list[tuple[float, int, int, int, int]]) -> None:
             part = [r for r in rows if k * third <= r[0] <= (k + 1) * third]
             hourly = slope_per_hour([(r[0], r[column] * scale) for r in part])
             per_fault = slope_per_hour([(r[1], r[column] * scale) for r in part])
-            unit = 'MiB' if scale != 1.0 else ''
+            unit = ' MiB' if scale != 1.0 else ''
             parts.append('n/a' if hourly is None or per_fault is None else
                          f'{hourly:+.3f}{unit} | {per_fault / 36:+.3f}{unit}')
         print(f'  {name:15s} ' + ';  '.join(parts))
