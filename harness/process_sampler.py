@@ -77,11 +77,11 @@ def _status_fields(pid: int, keys: tuple[str, ...]) -> dict[str, int] | None:
 def process_sample(pid: int) -> tuple[int, int, int] | None:
     """Return (RSS KiB, open descriptors, threads) of a process, None if it is gone."""
     status = _status_fields(pid, ('VmRSS', 'Threads'))
+    if status is None:
+        return None
     try:
         fds = len(os.listdir(f'/proc/{pid}/fd'))
     except OSError:
-        return None
-    if status is None:
         return None
     return status['VmRSS'], fds, status['Threads']
 
