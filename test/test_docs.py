@@ -18,7 +18,9 @@ The documentation cannot drift from the code, nor point where nothing is.
 The README's parameter table is what ``scripts/parameter_table.py`` prints
 from the parameter table, and the shipped params file names every
 parameter, with values that are valid defaults. The README opens with the
-two commands a newcomer runs and says how to run the tests. In README.md
+two commands a newcomer runs, says how to run the tests, and each row of its
+headline table ("How fast, how true") links to the docs/ page that holds the
+measurement, since the figures themselves live there. In README.md
 and docs/*.md every relative link leads to a file that exists, every
 ``#anchor`` to a heading (GitHub's slugs), every repository path named in
 code (``benchmarks/latency.py``, ``device/link.py``) to a file, and every
@@ -214,6 +216,18 @@ def test_readme_says_how_to_run_the_tests_and_the_quick_loop():
         text = handle.read()
     assert 'bash scripts/test.sh' in text
     assert "-m 'not slow'" in text
+
+
+def test_each_headline_figure_links_to_where_it_was_measured():
+    with open(README) as handle:
+        text = handle.read()
+    section = text[text.index('\n## How fast, how true\n'):]
+    section = section[:section.index('\n## ', 1)]
+    rows = [line for line in section.splitlines()
+            if line.startswith('| ') and not line.startswith('| what |')]
+    assert len(rows) >= 5, 'the headline table is gone'
+    for row in rows:
+        assert any(target.startswith('docs/') for target in links(row)), row
 
 
 def test_slugs_are_githubs():
