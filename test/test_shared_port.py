@@ -119,7 +119,7 @@ def test_one_sensor_off_is_retried_while_the_others_stream():
         try:
             off, on = sups[17], sups[95]
             assert wait(lambda: on[1].count > 50, 10.0)
-            assert off[1].count == 0 and off[0].state is not State.STREAMING
+            assert off[1].count == 0 and off[0].status().state is not State.STREAMING
             start = on[1].count
             time.sleep(1.0)
             assert on[1].count - start > 60  # 95 never paused for 17's retries

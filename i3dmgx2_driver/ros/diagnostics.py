@@ -453,9 +453,10 @@ class DiagnosticsPublisher:
     """
     Publish the driver's diagnostics on ``/diagnostics`` every :data:`PERIOD` s.
 
-    ``driver`` returns the DriverCore to report on (its supervisor, stream
-    stats, clock model, services, temperature and capture are read, never
-    changed), or None while there is none (a managed node before configure).
+    ``driver`` returns the DriverCore to report on (of the device side only
+    its supervisor's one ``DeviceStatus`` snapshot is read; its stream stats,
+    clock status, services, temperature and capture too, never changed), or
+    None while there is none (a managed node before configure).
     ``lifecycle``, for a managed node, returns its lifecycle state's label,
     reported first. The timer runs in its own callback group, so a
     multi-threaded executor keeps it ticking during a long service call.
