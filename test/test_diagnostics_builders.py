@@ -24,7 +24,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from i3dmgx2_driver.device.identity import DeviceInfo
 from i3dmgx2_driver.device.link import RadioStats
 from i3dmgx2_driver.device.sample_clock import ClockStatus
-from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.device.status import DeviceStatus, State
 from i3dmgx2_driver.ros import diagnostics as d
 from i3dmgx2_driver.ros.calibration import Calibration
@@ -35,12 +34,12 @@ GOOD_RADIO = RadioStats(230, 170, 200, 150, 228.5, 168.0)
 
 
 def connection(state, wireless=True, capture='off', **changes):
-    """Build the connection status from a settings and a device snapshot."""
-    device = {'state': state, 'connections': 1, 'reconnects': 0, 'stalls': 0,
+    """Build the connection status from a device snapshot."""
+    device = {'state': state, 'port': '/dev/ttyUSB0', 'address': 95, 'wireless': wireless,
+              'connections': 1, 'reconnects': 0, 'stalls': 0,
               'last_error': '', 'low_latency_state': 'on', 'ping_ok': True}
     device.update(changes)
-    settings = DeviceConfig(port='/dev/ttyUSB0', address=95, wireless=wireless)
-    return d.connection_status(settings, DeviceStatus(**device), capture)
+    return d.connection_status(DeviceStatus(**device), capture)
 
 
 @pytest.mark.parametrize('state, changes, level', [

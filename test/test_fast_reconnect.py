@@ -104,7 +104,7 @@ def streaming_supervisor(port: str, recorder: Recorder, **config) -> DeviceSuper
     supervisor = DeviceSupervisor(DeviceConfig(**config), on_record=recorder.on_record,
                                   log=recorder)
     supervisor.start()
-    assert wait_until(lambda: supervisor.state == State.STREAMING
+    assert wait_until(lambda: supervisor.status().state == State.STREAMING
                       and recorder.records_since(0.0) >= 20), recorder.lines
     assert supervisor.status().last_start == 'full'
     return supervisor
@@ -123,7 +123,7 @@ def test_the_same_sensor_is_asked_its_serial_number_and_nothing_else():
                               recorder.records_since(back) >= 50), recorder.lines
             assert supervisor.status().last_start == 'resumed'
             assert asked(sim, back) == [(layouts.DEVICE_IDENTIFIER, 1)]
-            assert supervisor.info.serial_number == '3095'
+            assert supervisor.status().info.serial_number == '3095'
             assert len(recorder.logged('same sensor (serial 3095)')) == 1
             assert len(recorder.logged('device: model')) == 1  # identity logged once only
         finally:
@@ -160,9 +160,9 @@ def test_another_sensor_on_the_port_gets_the_full_dialogue(tmp_path, streaming):
         first.stop()  # unplugged; another base station and sensor, same address, appear
         with PtySimulator(SimulatorConfig(seed=54, symlink=port, serial_number='4711',
                                           streaming_at_start=streaming)) as second:
-            assert wait_until(lambda: supervisor.info is not None
-                              and supervisor.info.serial_number == '4711'
-                              and supervisor.state == State.STREAMING), recorder.lines
+            assert wait_until(lambda: supervisor.status().info is not None
+                              and supervisor.status().info.serial_number == '4711'
+                              and supervisor.status().state == State.STREAMING), recorder.lines
             assert wait_until(lambda: len(second.truth) > 0 and recorder.records_since(
                 second.truth[0].sample_time) >= 30)
             sent = asked(second, 0.0)
@@ -205,7 +205,7 @@ def test_a_port_that_comes_back_is_reopened_before_the_reconnect_interval():
         supervisor = streaming_supervisor(sim.port, recorder, reconnect_interval=60.0)
         try:
             sim.unplug()
-            assert wait_until(lambda: supervisor.state == State.DISCONNECTED)
+            assert wait_until(lambda: supervisor.status().state == State.DISCONNECTED)
             time.sleep(0.5)
             back = time.time()
             assert sim.replug()

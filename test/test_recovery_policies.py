@@ -13,25 +13,24 @@
 # limitations under the License.
 
 """
-The supervisor's pieces that need no port: policies on a fake clock, the report, the loop.
+The supervisor's decisions that need no port: policies on a fake clock, the report, the loop.
 
-StallWatch and ReopenWait decide on a clock passed in; DeviceReport is the
-one place that changes what diagnostics show; RecoveryLoop and
-ExclusiveAccess are driven here with stand-ins for the connection, the
-bring-up and the dialogue, so that what they decide is seen without a
-simulator.
+StallWatch and ReopenWait (the reconnect back-off) decide on a clock passed
+in; DeviceReport is the one place that changes what diagnostics show; the
+supervisor's thread is driven here with a port factory that never opens, so
+that what it decides about a failed port is seen without a simulator (the
+exclusive access, which needs a streaming sensor, is driven in
+test_supervisor_phases.py).
 """
 
-import threading
+import time
 
-from i3dmgx2_driver.device.exclusive import ExclusiveAccess
-from i3dmgx2_driver.device.link import DeviceTimeout
 from i3dmgx2_driver.device.observer import Finding
 from i3dmgx2_driver.device.port import PortMissing, PortNotSerial
-from i3dmgx2_driver.device.recovery import RecoveryLoop
-from i3dmgx2_driver.device.report import DeviceReport
+from i3dmgx2_driver.device.port_opener import PortParts
 from i3dmgx2_driver.device.settings import DeviceConfig
-from i3dmgx2_driver.device.status import State
+from i3dmgx2_driver.device.status import DeviceReport, State
+from i3dmgx2_driver.device.supervisor import DeviceSupervisor
 from i3dmgx2_driver.device.watchdog import PORT_SETTLE_S, PORT_WATCH_S, ReopenWait, StallWatch
 from log_lines import Log
 import pytest
@@ -105,6 +104,20 @@ def test_a_port_seen_missing_is_reopened_once_it_is_back():
     assert clock.now - start == pytest.approx(6 * PORT_WATCH_S + PORT_SETTLE_S)
 
 
+def test_a_port_closed_for_a_stall_is_reopened_at_once():
+    clock = FakeClock()
+    ReopenWait('/dev/x', 1.0, True, clock.wait, exists=lambda path: True,
+               clock=clock)(after_stall=True)
+    assert clock.waits == []
+
+
+def test_without_prompt_reopen_a_stall_waits_the_whole_interval_too():
+    clock = FakeClock()
+    ReopenWait('/dev/x', 1.0, False, clock.wait, exists=lambda path: True,
+               clock=clock)(after_stall=True)
+    assert clock.waits == [1.0]
+
+
 def test_a_stop_ends_the_wait_at_once():
     clock = FakeClock()
     clock.cancelled = True
@@ -140,93 +153,57 @@ def test_a_problem_is_said_once_and_kept_as_the_last_error():
     assert report.fields()['last_error'] == 'port missing (2)'
 
 
-# -- RecoveryLoop, with stand-ins ---------------------------------------------------------
+# -- the supervisor thread, on a port that never opens ----------------------------------
 
 
-class FailingConnection:
-    """A connection whose port never opens: it raises ``error`` each time."""
+class FailingPort:
+    """A port factory whose port never opens: it raises ``error`` each time."""
 
     def __init__(self, error: Exception) -> None:
         self.error = error
         self.opened = 0
-        self.released = 0
 
-    def open_link(self):
+    def __call__(self, *args, **kwargs):
         self.opened += 1
         raise self.error
 
-    def release(self, send_stop: bool = False) -> None:
-        self.released += 1
+
+def supervisor_on(port: FailingPort, **config):
+    log, fatal = Log(), []
+    sup = DeviceSupervisor(DeviceConfig(port='/dev/x', address=95, **config),
+                           on_record=lambda packet, now, mono: None, log=log,
+                           on_fatal=fatal.append, port=PortParts(port_factory=port))
+    return sup, fatal, log
 
 
-def loop_with(connection, **config):
-    log, fatal, cancel = Log(), [], threading.Event()
-    report = DeviceReport(log)
-    loop = RecoveryLoop(DeviceConfig(port='/dev/x', address=95, **config), connection,
-                        None, report, cancel, threading.Event(), fatal.append)
-    return loop, report, fatal, cancel, log
+def wait_until(condition, timeout: float = 5.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.005)
+    return condition()
 
 
 def test_a_port_that_can_never_work_ends_the_loop_once():
     error = PortNotSerial('/tmp: a directory, not a serial port')
-    connection = FailingConnection(error)
-    loop, report, fatal, cancel, log = loop_with(connection)
-    loop.start(None)
-    assert loop.join(5.0)
-    assert connection.opened == 1 and fatal == [error] and cancel.is_set()
-    assert report.state is State.STOPPED and report.fatal_error is error
+    port = FailingPort(error)
+    sup, fatal, log = supervisor_on(port)
+    sup.start()
+    assert wait_until(lambda: fatal) and sup.join(5.0)
+    assert port.opened == 1 and fatal == [error]
+    status = sup.status()
+    assert status.state is State.STOPPED and status.fatal_error == str(error)
     assert log.lines == [], 'the entry point says it, once, as it exits'
 
 
 def test_a_missing_port_is_retried_and_said_once():
-    connection = FailingConnection(PortMissing('/dev/x: no such port'))
-    loop, report, fatal, cancel, log = loop_with(connection, reconnect_interval=0.01,
-                                                 prompt_reopen=False)
-    loop.start(None)
+    port = FailingPort(PortMissing('/dev/x: no such port'))
+    sup, fatal, log = supervisor_on(port, reconnect_interval=0.01, prompt_reopen=False)
+    sup.start()
     try:
-        deadline = threading.Event()
-        while connection.opened < 5 and not deadline.wait(0.01):
-            pass
+        assert wait_until(lambda: port.opened >= 5
+                          and sup.status().state is State.DISCONNECTED)
     finally:
-        cancel.set()
-        assert loop.join(5.0)
-    assert connection.opened >= 5 and not fatal
+        sup.stop()
+        assert sup.join(5.0)
+    assert port.opened >= 5 and not fatal
     assert log.lines == [('warning', '/dev/x: no such port (retrying every 0.01 s)')]
-    assert report.state is State.DISCONNECTED
-
-
-# -- ExclusiveAccess, with stand-ins ------------------------------------------------------
-
-
-class Stand:
-    """Stand-ins for the connection, the dialogue and the bring-up around one link."""
-
-    def __init__(self, report: DeviceReport) -> None:
-        self.link = object()
-        self.report = report
-        self.observing: list[bool] = []
-
-    def observe(self, on: bool) -> None:
-        self.observing.append(on)
-
-    def run_exclusive(self, link, operation):
-        return operation(link)
-
-    def restart_stream(self, link) -> bool:
-        self.report.streaming()
-        return True
-
-
-def test_an_operation_has_the_sensor_paused_then_the_stream_back():
-    report = DeviceReport(Log())
-    stand = Stand(report)
-    access = ExclusiveAccess(stand, stand, stand, report, threading.Event())
-    with pytest.raises(DeviceTimeout, match='not streaming'):
-        access.run(lambda link: None)
-    report.streaming('full')
-    seen = []
-    result = access.run(lambda link: seen.append((link, report.state,
-                                                  access.paused.is_set())) or 42)
-    assert result == 42 and seen == [(stand.link, State.PAUSED, True)]
-    assert report.state is State.STREAMING and not access.paused.is_set()
-    assert stand.observing == [False, True]

@@ -95,13 +95,13 @@ def test_each_sensor_gets_its_own_records_from_one_port():
         for sup, _ in sups.values():
             sup.start()
         try:
-            assert wait(lambda: all(s.state is State.STREAMING for s, _ in sups.values()))
+            assert wait(lambda: all(s.status().state is State.STREAMING for s, _ in sups.values()))
             assert wait(lambda: all(sink.count > 100 for _, sink in sups.values()))
             for address, (_, sink) in sups.items():
                 assert set(sink.addresses) == {address}
                 truth = {t.timer for t in sim.truth if t.address == address}
                 assert set(sink.timers) <= truth
-            serials = {sup.info.serial_number for sup, _ in sups.values()}
+            serials = {sup.status().info.serial_number for sup, _ in sups.values()}
             assert len(serials) == 3  # each dialogue read its own sensor's identity
             assert shared.opens == 1
         finally:
@@ -119,7 +119,7 @@ def test_one_sensor_off_is_retried_while_the_others_stream():
         try:
             off, on = sups[17], sups[95]
             assert wait(lambda: on[1].count > 50, 10.0)
-            assert off[1].count == 0 and off[0].state is not State.STREAMING
+            assert off[1].count == 0 and off[0].status().state is not State.STREAMING
             start = on[1].count
             time.sleep(1.0)
             assert on[1].count - start > 60  # 95 never paused for 17's retries

@@ -63,10 +63,10 @@ def test_the_supervisor_thread_gives_up_on_a_directory_once(tmp_path):
                            on_fatal=lambda exc: (fatal.append(exc), done.set()))
     sup.start()
     assert done.wait(10)
-    assert sup.recovery.join(5), 'no retry: it can never work'
-    assert len(fatal) == 1 and fatal[0] is sup.fatal_error
+    assert sup.join(5), 'no retry: it can never work'
+    assert len(fatal) == 1 and str(fatal[0]) == sup.status().fatal_error
     assert f'{tmp_path} is a directory, not a serial port' in str(fatal[0])
-    assert sup.state is State.STOPPED
+    assert sup.status().state is State.STOPPED
     sup.stop()
 
 
@@ -97,12 +97,12 @@ def test_a_long_operation_with_the_stream_paused_is_no_silence():
         try:
             deadline = threading.Event()
             for _ in range(100):
-                if sup.state is State.STREAMING:
+                if sup.status().state is State.STREAMING:
                     break
                 deadline.wait(0.1)
-            assert sup.state is State.STREAMING, log.lines
+            assert sup.status().state is State.STREAMING, log.lines
             sup.run_paused(lambda link: deadline.wait(4.0))
-            assert sup.state is State.STREAMING
+            assert sup.status().state is State.STREAMING
         finally:
             sup.stop()
     assert not [m for level, m in log.lines if 'not one byte' in m], log.lines

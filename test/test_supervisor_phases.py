@@ -98,9 +98,9 @@ def test_phases_open_stream_quiet_and_close():
         records = Records()
         sup = supervisor(sim.port, records)
         sup.connect()
-        assert sup.state is State.READY
-        assert sup.info is not None and sup.info.serial_number
-        assert sup.divider is not None
+        assert sup.status().state is State.READY
+        assert sup.status().info is not None and sup.status().info.serial_number
+        assert sup.status().divider is not None
         assert sim.wait_until(lambda: sim.streaming == 0, timeout=2), 'not quieted'
         assert held(sim.port)
         before = records.count
@@ -108,12 +108,12 @@ def test_phases_open_stream_quiet_and_close():
         assert records.count == before, 'records flow before start_streaming'
 
         sup.start_streaming()
-        assert sup.state is State.STREAMING
+        assert sup.status().state is State.STREAMING
         assert records.wait_for(before + 20) >= before + 20
 
         sent = time.time()
         sup.stop_streaming()
-        assert sup.state is State.READY
+        assert sup.status().state is State.READY
         assert [t for t, c in sim.commands if c.code == 0xFA and t >= sent]
         assert sim.streaming == 0
         assert held(sim.port), 'deactivating let the port go'
@@ -127,9 +127,29 @@ def test_phases_open_stream_quiet_and_close():
         assert sup.status().connections == 1, 'the port was reopened'
 
         sup.stop()
-        assert sup.state is State.STOPPED
+        assert sup.status().state is State.STOPPED
         assert sim.wait_until(lambda: sim.streaming == 0, timeout=2)
         assert not held(sim.port)
+
+
+@pytest.mark.slow
+def test_an_operation_has_the_sensor_paused_then_the_stream_back():
+    with PtySimulator(SimulatorConfig(seed=77)) as sim:
+        records = Records()
+        sup = supervisor(sim.port, records)
+        try:
+            sup.connect()
+            with pytest.raises(DeviceTimeout, match='not streaming'):
+                sup.run_paused(lambda link: None)
+            sup.start_streaming()
+            seen = []
+            result = sup.run_paused(lambda link: seen.append((link, sup.status().state)) or 42)
+            assert result == 42 and seen == [(sup.link, State.PAUSED)]
+            assert sup.status().state is State.STREAMING
+            before = records.count
+            assert records.wait_for(before + 20) >= before + 20, 'the stream did not restart'
+        finally:
+            sup.stop()
 
 
 def test_connect_fails_on_a_missing_port(tmp_path):
@@ -150,7 +170,7 @@ def test_connect_fails_on_a_busy_port_then_succeeds():
         finally:
             holder.close()
         sup.connect()
-        assert sup.state is State.READY
+        assert sup.status().state is State.READY
         sup.stop()
 
 

@@ -19,10 +19,10 @@ The device layer: the serial port and the protocol dialogue, no ROS.
 there; ``link`` is one sensor's connection (its pieces: ``port_reader``,
 the reader thread; ``exchange``, the request/reply exchanges;
 ``stream_watch`` and ``radio``, what its packets say); ``port_opener``
-opens a port the same way for ``connection`` and ``shared_port``;
+opens a port the same way for ``supervisor`` and ``shared_port``;
 ``dialogue`` says what the sensor needs to hear (its phases:
 ``identification``, ``rate_setting``, ``continuous``); ``supervisor`` keeps a
-link alive through stalls and unplugs (its pieces: ``connection``,
-``startup``, ``recovery``, ``watchdog``, ``exclusive``, ``report``);
+link alive through stalls and unplugs (its policies in ``watchdog``, its
+state and counters in ``status``);
 ``clock`` and ``sample_clock`` turn device timer ticks into host timestamps.
 """

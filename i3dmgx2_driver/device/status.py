@@ -14,20 +14,38 @@
 
 
 """
-What the device side is doing, as one immutable snapshot.
+What the device side is doing: the state and counters, and their one snapshot.
+
+The supervisor thread, the lifecycle phases, the reader thread (through the
+line observer) and a service's exclusive operation all change what
+diagnostics show: the state, the counters, the last problem said. Each such
+change is one method of :class:`DeviceReport`, so that every rule about it
+lives here: the device is declared streaming in one place only
+(:meth:`~DeviceReport.streaming`), a problem is logged once per key and
+period and kept as the last error (:meth:`~DeviceReport.warn`), and what
+the observer found is forgotten once records flow.
 
 Diagnostics and services run in executor threads while the supervisor and
 the reader change the device's state in theirs. Rather than reading a dozen
 attributes across threads (and catching them half-way through a change),
 they ask the supervisor for a :class:`DeviceStatus`, made in one place
-(:meth:`~.supervisor.DeviceSupervisor.status`), and read that.
+(:meth:`~.supervisor.DeviceSupervisor.status`) from the report's fields
+(taken under its lock), and read that. Its field types (``State``,
+``RadioStats``, ``DeviceInfo``) are named from here for its readers.
 """
 
 import dataclasses
 import enum
+import threading
+from typing import Any
 
 from .identity import DeviceInfo
 from .link import RadioStats
+from .observer import Finding
+from .port import PortError
+from .throttle import Throttle
+
+__all__ = ['DeviceInfo', 'DeviceReport', 'DeviceStatus', 'RadioStats', 'State']
 
 
 class State(str, enum.Enum):
@@ -49,6 +67,10 @@ class DeviceStatus:
     """The device side at one moment: connection, identity, rate, line and radio."""
 
     state: State = State.CONNECTING
+    #: The port, the sensor's address and whether it is wireless, as configured.
+    port: str = ''
+    address: int = 0
+    wireless: bool = True
     #: Links opened so far, and how many of them were reconnections.
     connections: int = 0
     reconnects: int = 0
@@ -84,3 +106,88 @@ class DeviceStatus:
     connected: bool = False
     #: On a port several sensors share: packets of addresses none of them has, by address.
     strays: dict[int, int] = dataclasses.field(default_factory=dict)
+
+
+class DeviceReport:
+    """
+    The device side's state and counters, and the one way to change each.
+
+    ``log`` has ``debug/info/warning/error``. Any thread may call any
+    method; :meth:`fields` returns them all at one moment.
+    """
+
+    def __init__(self, log: Any) -> None:
+        self.log = log
+        self._throttle = Throttle()
+        self._lock = threading.Lock()
+        self.state = State.CONNECTING
+        self.stalls = 0
+        #: The last problem said (a warning's text), '' if none yet.
+        self.last_error = ''
+        #: What the line observer last found while nothing of ours arrived ('' once
+        #: records flow), for diagnostics.
+        self.advice = ''
+        #: The port can never work (a path that is no serial port): why.
+        self.fatal_error: PortError | None = None
+        #: How the last connection got streaming: 'full' (the whole dialogue) or 'resumed'.
+        self.last_start = ''
+        self.resumes = 0
+
+    def enter(self, state: State) -> None:
+        """Say what the supervisor does now (never STREAMING: see :meth:`streaming`)."""
+        if state is State.STREAMING:
+            raise ValueError('streaming is declared by streaming(), once a record arrived')
+        self.state = state
+
+    def streaming(self, start: str = '') -> None:
+        """
+        Declare the device streaming: call only once a record has arrived on this link.
+
+        ``start`` says how a new connection got there ('full' or 'resumed');
+        '' for a stream taken up again on the same link (after a stall or an
+        exclusive operation). What the observer found is past.
+        """
+        with self._lock:
+            self.state = State.STREAMING
+            self.advice = ''
+            if start:
+                self.last_start = start
+                if start == 'resumed':
+                    self.resumes += 1
+
+    def stalled(self) -> None:
+        """Count a stall: no record for longer than the stall timeout."""
+        with self._lock:
+            self.stalls += 1
+            self.state = State.STALLED
+
+    def records_flow(self) -> None:
+        """Forget what the observer found: records flow again."""
+        if self.advice:
+            self.advice = ''
+
+    def warn(self, key: str, message: str, period: float | None = None) -> None:
+        """Log ``message`` once, then again at most every ``period`` s (a reminder)."""
+        self.last_error = message
+        if self._throttle.allow(key, period):
+            self.log.warning(message)
+
+    def finding(self, finding: Finding) -> None:
+        """Report what the line observer found (reader thread; never blocks long)."""
+        self.advice = finding.message
+        self.warn(f'observed {finding.kind}', finding.message)
+
+    def failed(self, error: PortError) -> None:
+        """Keep why the port can never work; the supervisor stops."""
+        with self._lock:
+            self.fatal_error = error
+            self.last_error = str(error)
+            self.state = State.STOPPED
+
+    def fields(self) -> dict[str, Any]:
+        """Return the report's fields at one moment, named as in DeviceStatus."""
+        with self._lock:
+            return {
+                'state': self.state, 'stalls': self.stalls, 'last_error': self.last_error,
+                'advice': self.advice, 'last_start': self.last_start, 'resumes': self.resumes,
+                'fatal_error': str(self.fatal_error) if self.fatal_error is not None else ''}

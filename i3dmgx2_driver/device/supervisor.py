@@ -16,32 +16,53 @@
 """
 Keep the device streaming for the life of the driver, plain or managed.
 
-:class:`DeviceSupervisor` is what the node holds: it builds the pieces of
-the device side and offers them as the node needs them. The pieces, each in
-a module of its own:
+:class:`DeviceSupervisor` is what the node holds, and it is the one place
+that decides about the connection: it holds the one open link, takes the
+start-up steps on it, runs the thread that keeps the stream going and lends
+the sensor to a service. What it builds on, each read and tested alone:
 
 - ``dialogue.py``: :class:`~.dialogue.SensorDialogue`, what to say to the
-  sensor (quiet, identity, rate, continuous mode, resume; each phase in a
-  module of its own); no thread.
-- ``connection.py``: :class:`~.connection.Connection`, the one open link,
-  opened and closed safely from any thread, counted across reconnects.
-- ``startup.py``: :class:`~.startup.StartUp`, the steps from an open port
-  to a stream, shared by the thread and the phases.
-- ``recovery.py``: :class:`~.recovery.RecoveryLoop`, the supervisor thread
-  (stalls, unplugs, back-off), with its policies in ``watchdog.py``.
-- ``exclusive.py``: :class:`~.exclusive.ExclusiveAccess`, the sensor lent
-  to a service with the stream stopped.
-- ``report.py``: :class:`~.report.DeviceReport`, the state and counters,
+  sensor (quiet, identity, rate, continuous mode, resume); no thread.
+- ``link.py``: :class:`~.link.DeviceLink`, one open port and its reader.
+- ``watchdog.py``: when a stream has stalled and when to try the port again
+  (the reconnect back-off), decided on a clock passed in.
+- ``status.py``: :class:`~.status.DeviceReport`, the state and counters,
   changed in one place each; :meth:`DeviceSupervisor.status` makes the one
-  immutable snapshot (``status.py``) that diagnostics and services read.
+  immutable :class:`~.status.DeviceStatus` that diagnostics and services read.
 
-The plain node's :meth:`~DeviceSupervisor.start` runs the whole bring-up in
-the thread, retrying forever instead of failing. A managed (lifecycle) node
-must know at each step whether it worked, so the same steps are offered as
-phases: :meth:`~DeviceSupervisor.connect` (port, quiet, identity, rate; no
-stream), :meth:`~DeviceSupervisor.start_streaming` (the stream, then the
-thread that keeps it going), :meth:`~DeviceSupervisor.stop_streaming` (0xFA,
-the port stays open) and :meth:`~DeviceSupervisor.stop` (the port closed).
+**The link.** The supervisor thread opens links; a lifecycle phase or
+:meth:`~DeviceSupervisor.stop` on another thread may close the current one
+at any moment, even while a new one is being opened. A lock decides who owns
+the link, and a link opened after the driver was told to stop is closed at
+once. Every link is made the same way (its line observer, the cancel event,
+the reader thread's scheduling); what outlives a link is kept here: how many
+were opened, the parser counters summed over all of them, what the port
+granted of low-latency mode and the reader of its scheduling (each logged
+when it changes, not at every reconnect).
+
+**The start-up steps.** The thread and the lifecycle phases take the same
+steps in different orders and with different answers to failure: the thread
+retries forever, a phase fails with the reason. Each step (initialise,
+resume, begin the stream, take it up again, quiet it) has the dialogue say
+what to say, starts the reader when needed (letting the consumer re-anchor
+before a new link's first record) and moves the report's state, so that the
+thread and the phases cannot tell a different story about the same step.
+
+**The thread.** The plain node's :meth:`~DeviceSupervisor.start` runs the
+whole bring-up in the ``gx2-supervisor`` thread, retrying forever instead of
+failing, then watches the stream. A stall re-requests continuous mode and
+then reopens the port; an unplug reopens it after the back-off, forever.
+What goes wrong is said once and reminded; a port that can never work ends
+the thread, and ``on_fatal`` is told, once. The thread decides only when to
+try again: it knows no command byte and touches no sample (the link's
+reader thread publishes).
+
+A managed (lifecycle) node must know at each step whether it worked, so the
+same steps are offered as phases: :meth:`~DeviceSupervisor.connect` (port,
+quiet, identity, rate; no stream), :meth:`~DeviceSupervisor.start_streaming`
+(the stream, then the thread that keeps it going),
+:meth:`~DeviceSupervisor.stop_streaming` (0xFA, the port stays open) and
+:meth:`~DeviceSupervisor.stop` (the port closed).
 
 A reconnect to a sensor already identified is short: what the driver knows
 (identity, data-rate divider) is not asked again. One serial-number read
@@ -50,6 +71,20 @@ the base station is unplugged, so its records usually flow already; if not,
 continuous mode is requested). Records are published from the moment they
 arrive. Another serial number, or no answer, gets the full dialogue.
 Streaming is announced when the first record has arrived, never before.
+
+**Exclusive use.** A gyro bias capture or a built-in test runs in a
+service's executor thread while the supervisor thread watches the stream.
+For their duration the stream is stopped on purpose, so three others must
+know: the watch must not take the silence for a stall (it skips its look
+while ``_paused`` is set), the line observer must not report it (it is
+paused), and diagnostics say PAUSED. Afterwards the stream is asked for
+again, whatever the operation did. Which bytes stop the stream is the
+dialogue's; this is only the lending.
+
+**Cancelling** is this class's alone: its ``_cancel`` event, set by
+:meth:`~DeviceSupervisor.stop`, :meth:`~DeviceSupervisor.stop_streaming` or
+a port that can never work, and cleared when a stream is wanted again. The
+dialogue, every link and the back-off's wait are handed it to read.
 """
 
 from collections.abc import Callable
@@ -57,20 +92,17 @@ import logging
 import threading
 from typing import Any
 
-from .connection import Connection
 from .dialogue import SensorDialogue
-from .exclusive import ExclusiveAccess
-from .identity import DeviceInfo
 from .link import DeviceLink, DeviceTimeout, RecordCallback
-from .port import PortError
-from .port_opener import PortParts
-from .recovery import RecoveryLoop
-from .report import DeviceReport
+from .observer import LineObserver
+from .port import PortDisconnected, PortError, PortUnusable
+from .port_opener import PortOpener, PortParts
+from .realtime import PolicyOutcome
 from .settings import DeviceConfig
 from .shared_port import SharedPort
-from .startup import StartUp
-from .status import DeviceStatus, State
-from ..forwarding import Forwarded
+from .status import DeviceReport, DeviceStatus, State
+from .throttle import EVENT_PERIOD
+from .watchdog import ReopenWait, StallWatch
 
 
 class DeviceSupervisor:
@@ -78,23 +110,24 @@ class DeviceSupervisor:
     Own the connection to one device for the life of the driver.
 
     ``on_record`` runs in the reader thread for every streamed record;
-    ``on_connect`` runs in the supervisor thread each time a link is made
-    (the node checks its clock there). ``log`` is any object with
-    ``debug/info/warning/error`` methods (a ``logging.Logger`` by default;
-    the node passes its rclpy logger). ``on_fatal`` runs in the supervisor
-    thread, once, when the port can never work (``fatal_error`` then holds
-    the error; without it the error is logged); the supervisor has stopped
-    by then. ``port`` says how the port is opened and whom its reader tells
-    (port_opener.py): its
+    ``on_connect`` runs in the supervisor thread each time a link is made,
+    before its first record reaches the consumer (the node checks its clock
+    there). ``log`` is any object with ``debug/info/warning/error`` methods
+    (a ``logging.Logger`` by default; the node passes its rclpy logger).
+    ``on_fatal`` runs in the supervisor thread, once, when the port can never
+    work (``status().fatal_error`` then says why; without it the error is
+    logged); the supervisor has stopped by then. ``port`` says how the port
+    is opened and whom its reader tells (port_opener.py): its
     ``port_factory`` opens the port (SerialPort; a subclass to observe it);
     its ``on_bytes`` runs in the reader thread with every read's raw bytes
     and read time (a raw capture); its ``timings``, if given, is told every
     port open and every link up (right after ``on_connect``) and handed to
     every link, which tells it the read and the parse of each sample
     (hot_path.py). ``shared``, if given, is the port this sensor shares
-    with others behind the same base station (shared_port.py): it opens and
-    closes the port, and this supervisor keeps only its sensor streaming (a
-    supervisor per sensor, each with its own thread).
+    with others behind the same base station (shared_port.py): the links
+    come from it and go back to it, the port is its to open and close, no
+    line observer watches it, and this supervisor keeps only its sensor
+    streaming (a supervisor per sensor, each with its own thread).
     """
 
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
@@ -106,78 +139,88 @@ class DeviceSupervisor:
         self._shared = shared
         port = port if port is not None else PortParts()
         log = log or logging.getLogger('i3dmgx2_driver')
+        self._log = log
         #: Set means "no stream wanted now": the thread ends, and every request on the
-        #: link gives up within a few tens of milliseconds (the link's ``cancel`` event).
-        #: Whoever set it decides what becomes of the port: stop() closes it,
+        #: link gives up within a few tens of milliseconds (the link's ``cancel`` event),
+        #: and a link opened meanwhile is closed at once. Only this class sets or clears
+        #: it; whoever set it decides what becomes of the port: stop() closes it,
         #: stop_streaming() keeps it.
-        self._stop = threading.Event()
-        self.report = DeviceReport(log)
-        self.connection = Connection(config, log, port, on_record, self.report.finding,
-                                     self._stop, shared)
+        self._cancel = threading.Event()
+        #: Set while a service's operation has the sensor: the stream is quiet on purpose.
+        self._paused = threading.Event()
+        self._report = DeviceReport(log)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
-        self.dialogue = SensorDialogue(config, log, self.report.warn, self._stop)
-        timings = port.timings
-        self._startup = StartUp(self.connection, self.dialogue, self.report, self._stop,
-                                _then(on_connect, timings.connected if timings else None))
-        self._exclusive = ExclusiveAccess(self.connection, self.dialogue, self._startup,
-                                          self.report, self._stop)
-        self.recovery = RecoveryLoop(
-            config, self.connection, self._startup, self.report, self._stop,
-            self._exclusive.paused, on_fatal or (lambda error: log.error(str(error))))
+        self.dialogue = SensorDialogue(config, log, self._report.warn, self._cancel)
+        self._on_record = on_record
+        self._on_connect = on_connect
+        self._on_fatal = on_fatal or (lambda error: log.error(str(error)))
+        self._timings = port.timings
+        self._opener = PortOpener(config, log, port)
+        self._reopen_wait = ReopenWait(config.port, config.reconnect_interval,
+                                       config.prompt_reopen, self._cancel.wait)
+        self._thread: threading.Thread | None = None
+        self._link: DeviceLink | None = None
+        #: Guards who owns ``_link``: the thread opening one, or a caller releasing it.
+        self._lock = threading.Lock()
+        self._observer: LineObserver | None = None
+        self._policy_logged = PolicyOutcome()
+        #: Links opened so far, and how many of them were reconnections.
+        self._connections = 0
+        self._reconnects = 0
+        self._low_latency_state = ''
+        self._parser_totals: dict[str, int] = {}
 
     # -- what others read ---------------------------------------------------------------
 
     def status(self) -> DeviceStatus:
         """Return the device side as one snapshot (from any thread)."""
-        dialogue, connection = self.dialogue, self.connection
-        link = connection.link
+        dialogue, cfg, link = self.dialogue, self.config, self._link
         line_warning = dialogue.line_warning
         if self._shared is not None and dialogue.divider and not line_warning:
-            line_warning = self._shared.line_warning(self.config.address, self.config.stream,
+            line_warning = self._shared.line_warning(cfg.address, cfg.stream,
                                                      dialogue.expected_rate_hz)
         return DeviceStatus(
-            **self.report.fields(), connections=connection.connections,
-            reconnects=connection.reconnects, low_latency_state=connection.low_latency_state,
-            parser=connection.parser_stats(), radio=link.radio if link is not None else None,
+            **self._report.fields(), port=cfg.port, address=cfg.address,
+            wireless=cfg.wireless, connections=self._connections,
+            reconnects=self._reconnects, low_latency_state=self._low_latency_state,
+            parser=self._parser_stats(), radio=link.radio if link is not None else None,
             connected=link is not None, ping_ok=dialogue.ping_ok, info=dialogue.info,
             divider=dialogue.divider, expected_rate_hz=dialogue.expected_rate_hz,
             eeprom_writes=dialogue.eeprom_writes, line_use=dialogue.line_use,
-            line_warning=line_warning, strays=connection.strays())
+            line_warning=line_warning, strays=self._strays())
 
-    state: 'State' = Forwarded('report', 'What the supervisor is doing now.')
-
-    fatal_error: 'PortError | None' = Forwarded(
-        'report', 'Why the port can never work, once found (None otherwise).')
-
-    link: 'DeviceLink | None' = Forwarded(
-        'connection', 'The current link, or None while disconnected.')
+    @property
+    def link(self) -> DeviceLink | None:
+        """Return the current link, or None while disconnected."""
+        return self._link
 
     def streaming_link(self) -> DeviceLink | None:
         """Return the link while the device streams (a poll may share it), else None."""
-        link = self.connection.link
-        return link if link is not None and self.report.state is State.STREAMING else None
-
-    info: 'DeviceInfo | None' = Forwarded('dialogue', "The device's identity, once read.")
-
-    divider: 'int | None' = Forwarded('dialogue', 'The data-rate divider, once known.')
-
-    expected_rate_hz: 'float | None' = Forwarded(
-        'dialogue', 'The rate the divider gives, once known.')
+        link = self._link
+        return link if link is not None and self._report.state is State.STREAMING else None
 
     # -- the plain node: one thread for everything ----------------------------------------
 
     def start(self) -> None:
         """Start the supervisor thread: open, initialise, stream, recover, forever."""
-        self._stop.clear()
-        self.recovery.start(self.connection.link)
+        self._cancel.clear()
+        self._start_thread(self._link)
 
     def stop(self, timeout: float = 1.5) -> None:
         """Stop streaming (0xFA), stop the threads, close the port."""
-        self._stop.set()
-        self.connection.abort()
-        self.recovery.join(timeout)
-        self.connection.release(send_stop=True)
-        self.report.enter(State.STOPPED)
+        self._cancel.set()
+        link = self._link
+        if link is not None:
+            link.abort()  # its reader and any waiting request give up
+        self.join(timeout)
+        self._release(send_stop=True)
+        self._report.enter(State.STOPPED)
+
+    def join(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` s for the supervisor thread to end; True once it has."""
+        if self._thread is not None:
+            self._thread.join(timeout)
+        return not self._running()
 
     # -- the managed node: one phase per transition ----------------------------------------
 
@@ -194,16 +237,16 @@ class DeviceSupervisor:
         the polled requests (about 3 s), a talking one answers in well under
         a second.
         """
-        self._stop.clear()
-        link = self.connection.open_link()
+        self._cancel.clear()
+        link = self._open_link()
         try:
-            self._startup.initialise(link, require_answer=True)
+            self._initialise(link, require_answer=True)
         except BaseException:
-            self.connection.release()
-            self.report.enter(State.STOPPED)
+            self._release()
+            self._report.enter(State.STOPPED)
             raise
-        self.report.enter(State.READY)
-        self.connection.observe(False)
+        self._report.enter(State.READY)
+        self._observe(False)
 
     def start_streaming(self) -> None:
         """
@@ -215,29 +258,29 @@ class DeviceSupervisor:
         and initialised first. From then on stalls and unplugs are recovered
         as :meth:`start` recovers them.
         """
-        if self.recovery.running:
+        if self._running():
             raise DeviceTimeout('the supervisor is still stopping: try again')
-        self._stop.clear()
-        self.connection.observe(True)
-        link = self.connection.link
+        self._cancel.clear()
+        self._observe(True)
+        link = self._link
         try:
-            if self.connection.lost():
-                self.connection.release()
-                link = self.connection.open_link()
-                self._startup.initialise(link)
-            self._startup.begin_stream(link)
+            if link is None or link.disconnected.is_set():
+                self._release()
+                link = self._open_link()
+                self._initialise(link)
+            self._begin_stream(link)
         except PortError:
-            self.connection.release()
-            self.report.enter(State.DISCONNECTED)
+            self._release()
+            self._report.enter(State.DISCONNECTED)
             raise
         except DeviceTimeout:
-            if self.connection.link is not None:
-                self._startup.quiet(self.connection.link)
+            if self._link is not None:
+                self._quiet(self._link)
             raise
-        if self._stop.is_set():
+        if self._cancel.is_set():
             # stop() came while the stream was starting: it has the port; no thread.
             raise DeviceTimeout('the driver stopped while the stream was starting')
-        self.recovery.start(link)
+        self._start_thread(link)
 
     def start_retrying(self) -> None:
         """
@@ -247,8 +290,8 @@ class DeviceSupervisor:
         configure or activate is retried in the background (it may be
         switched on later) while the others stream.
         """
-        self.connection.release()
-        self.report.enter(State.DISCONNECTED)
+        self._release()
+        self._report.enter(State.DISCONNECTED)
         self.start()
 
     def stop_streaming(self, timeout: float = 1.5) -> None:
@@ -258,31 +301,282 @@ class DeviceSupervisor:
         The deactivate phase of a managed node. If the port was lost while
         streaming it stays closed (DISCONNECTED) until the next start.
         """
-        self._stop.set()
-        self.recovery.join(timeout)
-        link = self.connection.link
+        self._cancel.set()
+        self.join(timeout)
+        link = self._link
         if link is not None and not link.disconnected.is_set():
-            self._startup.quiet(link)
+            self._quiet(link)
 
-    # -- for services ---------------------------------------------------------------------
+    # -- for services: the sensor lent for an operation -----------------------------------
 
     def run_paused(self, operation: Callable[[DeviceLink], Any]) -> Any:
         """
         Stop the stream, run ``operation(link)``, then restart the stream.
 
         Used by services that need the device's full attention (gyro bias
-        capture, built-in test). Raises PortError or DeviceTimeout.
+        capture, built-in test), one at a time. Raises DeviceTimeout at once
+        unless the device streams (or has stalled); PortError or
+        DeviceTimeout from the operation or the restart.
         """
-        return self._exclusive.run(operation)
+        link = self._link
+        state = self._report.state
+        if link is None or state not in (State.STREAMING, State.STALLED):
+            raise DeviceTimeout(f'device not streaming (state: {state.value})')
+        self._paused.set()
+        self._report.enter(State.PAUSED)
+        self._observe(False)  # a long operation (a 30 s bias capture) is quiet
+        try:
+            return self.dialogue.run_exclusive(link, operation)
+        finally:
+            try:
+                self._observe(True)
+                if not self._cancel.is_set():
+                    self._restart_stream(link)
+            finally:
+                self._paused.clear()
 
+    # -- the supervisor thread: stream and recover ---------------------------------------
 
-def _then(first: Callable[[], None] | None,
-          second: Callable[[], None] | None) -> Callable[[], None] | None:
-    """Return a callable that calls ``first`` then ``second`` (either may be None)."""
-    if first is None or second is None:
-        return first or second
+    def _start_thread(self, link: DeviceLink | None) -> None:
+        """Start the thread on ``link``, one already streaming, or None: it opens one."""
+        self._thread = threading.Thread(target=self._run, args=(link,),
+                                        name='gx2-supervisor', daemon=True)
+        self._thread.start()
 
-    def both() -> None:
-        first()
-        second()
-    return both
+    def _running(self) -> bool:
+        """Whether the supervisor thread is alive."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def _run(self, link: DeviceLink | None) -> None:
+        """Stream and recover until cancelled."""
+        report = self._report
+        while not self._cancel.is_set():
+            stalled = False
+            try:
+                if link is None:
+                    report.enter(State.CONNECTING)
+                    link = self._open_link()
+                    if not self._resume(link):
+                        self._initialise(link)
+                        self._begin_stream(link)
+                self._watch(link)
+                stalled = True
+            except PortUnusable as exc:
+                self._fail(exc)
+            except (PortError, DeviceTimeout) as exc:
+                if not self._cancel.is_set():  # else: cut short on purpose
+                    self._say(exc)
+            if self._cancel.is_set():
+                break  # whoever stopped us decides about the port
+            self._release()
+            link = None
+            report.enter(State.DISCONNECTED)
+            self._reopen_wait(after_stall=stalled)
+
+    def _say(self, exc: PortError | DeviceTimeout) -> None:
+        """Say why this attempt failed, and that the loop goes on."""
+        if isinstance(exc, DeviceTimeout):
+            self._report.warn('timeout', f'device not answering: {exc} (wrong port or '
+                                         f'address? ros2 run i3dmgx2_driver discover '
+                                         f'finds sensors)')
+            return
+        # An unplug is an event; a port that stays missing is a condition.
+        period = EVENT_PERIOD if isinstance(exc, PortDisconnected) else None
+        self._report.warn(type(exc).__name__, f'{exc} (retrying every '
+                                              f'{self.config.reconnect_interval:g} s)', period)
+
+    def _fail(self, exc: PortUnusable) -> None:
+        """Give up for good: keep why, stop, and let the entry point say it and exit."""
+        self._report.failed(exc)
+        self._cancel.set()
+        self._on_fatal(exc)
+
+    def _watch(self, link: DeviceLink) -> None:
+        """Return when the link is lost or cannot be revived; recover stalls."""
+        report = self._report
+        watch = StallWatch(self.config.stall_timeout, self.dialogue.period)
+        while not self._cancel.wait(watch.tick):
+            if link.disconnected.is_set():
+                raise PortDisconnected(link.error or 'device disconnected')
+            if self._paused.is_set():
+                continue
+            if not watch.stalled(link.last_data_mono):
+                report.records_flow()  # what was observed is past
+                continue
+            report.stalled()
+            report.warn('stall', f'no data for {watch.stall_after:.1f} s: re-requesting '
+                                 f'continuous mode', EVENT_PERIOD)
+            try:
+                resumed = self._restart_stream(link)
+            except DeviceTimeout:
+                report.warn('stall', 'stream did not resume: reopening the port', EVENT_PERIOD)
+                return
+            if resumed:
+                report.log.info('stream resumed')
+
+    # -- the steps from an open port to a stream ----------------------------------------
+
+    def _initialise(self, link: DeviceLink, require_answer: bool = False) -> None:
+        """Quiet the device, start reading, and have the dialogue learn what it is."""
+        self._report.enter(State.INITIALISING)
+        self.dialogue.quiet(link)
+        if link.running.is_set():
+            # The reader runs already (a resume that was not confirmed): anchor afresh.
+            self._anchor()
+        else:
+            self._start_reader(link)
+        self.dialogue.initialise(link, require_answer, self._observed)
+
+    def _resume(self, link: DeviceLink) -> bool:
+        """
+        Resume a known sensor after a reconnect, or return False for the full dialogue.
+
+        Returns False, with nothing done or the reader running, when the
+        driver knows no sensor yet (or must not resume), or when the sensor
+        does not answer or another serial number does.
+        """
+        dialogue = self.dialogue
+        if not dialogue.can_resume():
+            return False
+        self._report.enter(State.INITIALISING)
+        dialogue.expect_stream(link)
+        self._start_reader(link)
+        if not dialogue.resume(link):
+            return False
+        if not self._cancel.is_set():
+            self._report.streaming('resumed')
+        return True
+
+    def _begin_stream(self, link: DeviceLink) -> None:
+        """Start continuous mode on an initialised link; announce it once records arrive."""
+        if self.dialogue.start_continuous(link):
+            self._report.streaming('full')
+            self.dialogue.announce_streaming()
+
+    def _restart_stream(self, link: DeviceLink) -> bool:
+        """
+        Ask for the stream again on the same link (after a stall or a pause).
+
+        True once records arrive again, False if cancelled first; raises
+        DeviceTimeout when none comes, PortDisconnected if the port goes.
+        """
+        if not self.dialogue.start_continuous(link):
+            return False
+        self._report.streaming()
+        return True
+
+    def _quiet(self, link: DeviceLink) -> None:
+        """Stop the device's stream and drop what is in flight: READY, or DISCONNECTED."""
+        try:
+            self.dialogue.quiet(link)
+            self._report.enter(State.READY)
+            self._observe(False)
+        except PortError as exc:
+            self._report.warn(type(exc).__name__, str(exc))
+            self._release()
+            self._report.enter(State.DISCONNECTED)
+
+    def _anchor(self) -> None:
+        """Let the consumer re-anchor before the first record of a new link reaches it."""
+        if self._on_connect is not None:
+            self._on_connect()
+        if self._timings is not None:
+            self._timings.connected()
+
+    def _start_reader(self, link: DeviceLink) -> None:
+        """Anchor the consumer, start the reader thread; log its scheduling when it changes."""
+        self._anchor()
+        link.start()
+        if not link.running.wait(1.0):
+            return
+        outcome = link.policy_outcome
+        if outcome != self._policy_logged:
+            self._policy_logged = outcome
+            if outcome.applied:
+                self._log.info(f'reader thread: {", ".join(outcome.applied)}')
+            for refusal in outcome.refused:
+                self._log.warning(refusal)
+
+    # -- the one open link ---------------------------------------------------------------
+
+    def _open_link(self) -> DeviceLink:
+        """Open the port and make it the current link (reader not started); raise PortError."""
+        cfg = self.config
+        if self._shared is not None:
+            link = self._shared.attach(cfg.address, self._on_record, self._cancel)
+            self._low_latency_state = self._shared.low_latency_state
+            return self._own(link)
+        port = self._opener.open_port()
+        self._low_latency_state = self._opener.low_latency_state
+        observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
+                                                 cfg.baud, self._report.finding)
+        link = DeviceLink(port, cfg.address, self._on_record,
+                          self._opener.reader_options(observer, self._cancel))
+        return self._own(link)
+
+    def _own(self, link: DeviceLink) -> DeviceLink:
+        """Make ``link`` the current one, unless the driver was told to stop meanwhile."""
+        cfg = self.config
+        with self._lock:
+            if self._cancel.is_set():
+                # Stopped while opening: the caller has released the link already.
+                self._close(link)
+                raise PortDisconnected(f'{cfg.port}: closed, the driver is stopping')
+            self._link = link
+        self._connections += 1
+        if self._connections > 1:
+            self._reconnects += 1
+        return link
+
+    def _release(self, send_stop: bool = False) -> None:
+        """Close the current link, if any (once, whichever thread gets here first)."""
+        with self._lock:
+            link, self._link = self._link, None
+        if link is None:
+            return
+        link.stop()
+        if send_stop:
+            try:
+                link.stop_streaming(repeats=2, gap=0.01)
+            except PortError:
+                pass
+        self._close(link)
+        if self._shared is None:
+            for key, value in link.parser.stats.as_dict().items():
+                self._parser_totals[key] = self._parser_totals.get(key, 0) + value
+
+    def _close(self, link: DeviceLink) -> None:
+        """Close the link's port, or hand the link back to the shared one."""
+        if self._shared is not None:
+            self._shared.detach(link)
+        else:
+            link.port.close()
+
+    def _parser_stats(self) -> dict[str, int]:
+        """Parser counters summed over every connection so far (shared: the open port's)."""
+        if self._shared is not None:
+            return self._shared.parser_stats()
+        totals = dict(self._parser_totals)
+        link = self._link
+        if link is not None:
+            for key, value in link.parser.stats.as_dict().items():
+                totals[key] = totals.get(key, 0) + value
+        return totals
+
+    def _strays(self) -> dict[int, int]:
+        """Packets of addresses no sensor on a shared port has, by address (else empty)."""
+        return self._shared.strays() if self._shared is not None else {}
+
+    def _observe(self, on: bool) -> None:
+        """Resume or pause the line observer: silence is a symptom only while we ask."""
+        observer = self._observer
+        if observer is not None:
+            if on:
+                observer.resume()
+            else:
+                observer.pause()
+
+    def _observed(self) -> str:
+        """Say what the line observer last found on this link ('' if nothing)."""
+        seen = self._observer.last_finding if self._observer is not None else None
+        return seen.message if seen is not None else ''

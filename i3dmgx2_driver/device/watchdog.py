@@ -16,18 +16,19 @@
 """
 When a stream has stalled, and when to try a port again: two small policies.
 
-Both are decisions on the monotonic clock that the recovery thread
-(recovery.py) acts on. They are apart from it so that each rule is read in
+Both are decisions on the monotonic clock that the supervisor thread
+(supervisor.py) acts on. They are apart from it so that each rule is read in
 one place and tested with a fake clock, without a thread, a port or a wait:
 
 - :class:`StallWatch`: the stream has stalled when no record came for the
   stall timeout, or three sample periods if those are longer (a slow rate
   is no stall); it is looked at four times per timeout, at most every 50 ms.
-- :class:`ReopenWait`: after a failure the port is tried again
-  ``reconnect_interval`` later, or sooner: an unplugged adapter's device
-  node goes and comes back when it is plugged in again, so a port seen
-  missing is reopened once it is back (after a moment for udev to set its
-  permissions). Looking for it costs a stat() every few tens of ms.
+- :class:`ReopenWait`: the reconnect back-off. After a failure the port is
+  tried again ``reconnect_interval`` later, or sooner: an unplugged
+  adapter's device node goes and comes back when it is plugged in again, so
+  a port seen missing is reopened once it is back (after a moment for udev
+  to set its permissions), and a port closed for a stall is still there, so
+  it is reopened at once. Looking for it costs a stat() every few tens of ms.
 """
 
 from collections.abc import Callable
@@ -61,7 +62,8 @@ class ReopenWait:
     Wait before the port at ``path`` is tried again: ``interval`` s, or until it is back.
 
     ``wait(seconds)`` waits and returns True when the driver stops meanwhile
-    (an Event's ``wait``); ``prompt=False`` always waits the whole interval.
+    (an Event's ``wait``); ``prompt=False`` always waits the whole interval
+    (``prompt_reopen`` false).
     """
 
     def __init__(self, path: str, interval: float, prompt: bool,
@@ -74,8 +76,15 @@ class ReopenWait:
         self._exists = exists
         self._clock = clock
 
-    def __call__(self) -> None:
-        """Return when the port may be tried again, or the driver stops."""
+    def __call__(self, after_stall: bool = False) -> None:
+        """
+        Return when the port may be tried again, or the driver stops.
+
+        ``after_stall``: the port was closed because its stream stalled, not
+        lost; it is still there, and tried again at once (unless not prompt).
+        """
+        if after_stall and self.prompt:
+            return
         if not self.prompt:
             self._wait(self.interval)
             return

@@ -41,10 +41,8 @@ from rclpy.node import Node
 
 from .calibration import Calibration, RATE_TOLERANCE
 from .qos import create_publisher
-from ..device.link import RadioStats
 from ..device.sample_clock import ClockStatus, Restart
-from ..device.settings import DeviceConfig
-from ..device.status import DeviceStatus, State
+from ..device.status import DeviceStatus, RadioStats, State
 
 OK = 0
 WARN = 1
@@ -109,7 +107,7 @@ def _vector(values: Iterable[float], digits: int = 5) -> str:
     return '(' + ', '.join(f'{v:.{digits}f}' for v in values) + ')'
 
 
-def connection_status(settings: DeviceConfig, device: DeviceStatus, capture: str) -> Status:
+def connection_status(device: DeviceStatus, capture: str) -> Status:
     """
     Say whether the port is open and the device streaming.
 
@@ -122,7 +120,7 @@ def connection_status(settings: DeviceConfig, device: DeviceStatus, capture: str
     """
     state, advice, last_error = device.state, device.advice, device.last_error
     connections, reconnects = device.connections, device.reconnects
-    wireless = settings.wireless
+    wireless = device.wireless
     if state is State.STREAMING:
         level, message = OK, 'streaming'
     elif state is State.READY:
@@ -143,8 +141,8 @@ def connection_status(settings: DeviceConfig, device: DeviceStatus, capture: str
     else:
         level, message = ERROR, f'disconnected: {last_error or "port lost"}'
     return Status(level, 'connection', message, (
-        ('port', settings.port),
-        ('node address', str(settings.address)),
+        ('port', device.port),
+        ('node address', str(device.address)),
         ('link', 'wireless' if wireless else 'wired'),
         ('state', state.value),
         ('connections', str(connections)),
@@ -455,9 +453,10 @@ class DiagnosticsPublisher:
     """
     Publish the driver's diagnostics on ``/diagnostics`` every :data:`PERIOD` s.
 
-    ``driver`` returns the DriverCore to report on (its supervisor, stream
-    stats, clock model, services, temperature and capture are read, never
-    changed), or None while there is none (a managed node before configure).
+    ``driver`` returns the DriverCore to report on (of the device side only
+    its supervisor's one ``DeviceStatus`` snapshot is read; its stream stats,
+    clock status, services, temperature and capture too, never changed), or
+    None while there is none (a managed node before configure).
     ``lifecycle``, for a managed node, returns its lifecycle state's label,
     reported first. The timer runs in its own callback group, so a
     multi-threaded executor keeps it ticking during a long service call.
@@ -496,16 +495,16 @@ class DiagnosticsPublisher:
         """Read the driver's state and build every status (advances the period)."""
         core = self._driver()
         statuses = []
+        device = core.supervisor.status() if core is not None else None
         if self._lifecycle is not None:
             statuses.append(lifecycle_status(
-                self._lifecycle(), core.supervisor.state if core is not None else None))
+                self._lifecycle(), device.state if device is not None else None))
         if core is not self._core():
             self._core = weakref.ref(core) if core is not None else (lambda: None)
             self._forget()
-        if core is None:
+        if core is None or device is None:
             self._last_tick = time.monotonic()
             return statuses
-        device = core.supervisor.status()
         cfg = core.config
         stats = core.stats
         now = time.monotonic()
@@ -533,9 +532,9 @@ class DiagnosticsPublisher:
         services = core.device_services
         last, good = services.calibration()
         statuses += [
-            connection_status(core.device_config, device, core.raw_capture.describe()),
+            connection_status(device, core.raw_capture.describe()),
             stream_status(device, seen),
-            radio_status(cfg.wireless, radio, fresh),
+            radio_status(device.wireless, radio, fresh),
             parser_status(parser, self._last_parser, device.strays),
             device_status(device, core.sensor.address, core.temperature.latest),
             time_status(cfg.time_source, core.clock_status(), now,
@@ -548,7 +547,7 @@ class DiagnosticsPublisher:
     def hardware_id(self) -> str:
         """Return the device's serial number once known, else ''."""
         core = self._driver()
-        info = core.supervisor.info if core is not None else None
+        info = core.supervisor.status().info if core is not None else None
         return info.serial_number if info is not None and info.serial_number else ''
 
     def tick(self) -> None:

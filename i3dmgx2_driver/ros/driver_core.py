@@ -237,7 +237,7 @@ class DriverCore:
         self.records.forget_last_sample()
 
     def _expected_ticks(self) -> int | None:
-        divider = self.supervisor.divider
+        divider = self.supervisor.dialogue.divider
         return ticks_per_cycle(divider) if divider else None
 
     def shutdown(self, report: bool = True) -> None:

@@ -214,8 +214,8 @@ class LifecycleDriverNode(LifecycleNode):
             log.warning(f'configure: node {core.sensor.address} does not answer ({exc}); '
                         f'the others go on, and it is retried once active')
         ready = [core for core in drivers.cores if core not in {c for c, _ in failed}]
-        sup = ready[0].supervisor
-        rate = f', {sup.expected_rate_hz:.1f} Hz' if sup.expected_rate_hz else ''
+        expected_hz = ready[0].supervisor.status().expected_rate_hz
+        rate = f', {expected_hz:.1f} Hz' if expected_hz else ''
         nodes = ', '.join(str(core.sensor.address) for core in ready)
         log.info(f'configure: {config.port} open, node{"s" if len(ready) > 1 else ""} '
                  f'{nodes} ready{rate} ({time.monotonic() - start:.2f} s)')
