@@ -16,7 +16,6 @@
 
 from types import SimpleNamespace
 
-from i3dmgx2_driver.device.link import DeviceLink
 from i3dmgx2_driver.forwarding import Forwarded
 import pytest
 
@@ -56,4 +55,4 @@ def test_a_read_only_one_refuses_as_a_property_does():
 
 def test_the_class_shows_the_descriptor_and_its_doc():
     assert Facade.total.__doc__ == 'The sum, under another name.'
-    assert DeviceLink.streamed.writable and not DeviceLink.records.writable
+    assert Facade.code.writable and not Facade.count.writable

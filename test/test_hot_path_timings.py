@@ -109,7 +109,7 @@ def test_the_link_reports_each_read_then_its_parse():
         records.append(packet)
 
     port = _CannedPort([packet[:10], packet[10:] + packet, b''])
-    DeviceLink(port, ADDRESS, on_record, LinkOptions(timings=timings))._run()  # in this thread
+    DeviceLink(port, ADDRESS, on_record, LinkOptions(timings=timings)).reader._run()  # here
     assert len(records) == 2
     # The second read completes two records: both are handed over after its parse.
     assert timings.calls == ['read', 'parsed', 'read', 'parsed', 'record', 'record',
@@ -119,7 +119,7 @@ def test_the_link_reports_each_read_then_its_parse():
 def test_without_an_observer_the_link_runs_as_before():
     records = []
     port = _CannedPort([FIXTURE_DATA_PACKET])
-    DeviceLink(port, ADDRESS, lambda p, t, m: records.append(p))._run()
+    DeviceLink(port, ADDRESS, lambda p, t, m: records.append(p)).reader._run()
     assert len(records) == 1
 
 

@@ -13,12 +13,13 @@
 # limitations under the License.
 
 """
-The pieces a link and a connection are made of, each on its own, without a port.
+A link on its own, without a port or a thread; the pieces of a connection.
 
-Which data packet is a reply, a record of the stream or both
-(``StreamWatch``), the radio's quality sums (``RadioQuality``), how a port
-is opened for a connection and a shared port alike (``PortOpener``), and
-the hot-path observer that notes nothing (``QuietObserver``).
+Which data packet is a reply, a record of the stream or both, and the
+radio's quality sums (``DeviceLink``, fed as its reader would feed it), what
+the reader tells a link that joins it late, how a port is opened for a
+connection and a shared port alike (``PortOpener``), and the hot-path
+observer that notes nothing (``QuietObserver``).
 """
 
 import threading
@@ -26,12 +27,12 @@ import threading
 from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.records import AccelAngRate, Magnetometer
-from i3dmgx2_driver.device.exchange import Pending
 from i3dmgx2_driver.device.hot_path import QuietObserver
+from i3dmgx2_driver.device.link import DeviceLink, PortReader, RadioStats
+from i3dmgx2_driver.device.port import PortDisconnected
 from i3dmgx2_driver.device.port_opener import PortOpener, PortParts
-from i3dmgx2_driver.device.radio import RadioQuality, RadioStats
 from i3dmgx2_driver.device.settings import DeviceConfig
-from i3dmgx2_driver.device.stream_watch import StreamWatch
+import pytest
 
 ZERO = (0.0, 0.0, 0.0)
 
@@ -40,76 +41,93 @@ def _packet(record: object, lqi: int | None = 200, rssi: int | None = 150) -> Da
     return DataPacket(95, record, lqi, rssi)
 
 
-class _Exchange:
-    """What the watch reads of the exchange: the request waiting, if any."""
+class _Line:
+    """A port whose every write runs ``answer`` at once, as if the reply came back."""
 
     def __init__(self) -> None:
-        self.pending: Pending | None = None
-        self.woken = 0
+        self.written: list[bytes] = []
+        self.answer = lambda: None
 
-    def wake(self) -> None:
-        self.woken += 1
+    def write(self, data: bytes) -> None:
+        self.written.append(data)
+        self.answer()
+
+    def read_some(self, timeout: float) -> bytes:
+        raise PortDisconnected('unplugged')
 
 
-def _watch() -> tuple[StreamWatch, _Exchange, RadioQuality, list]:
-    exchange, radio, seen = _Exchange(), RadioQuality(), []
-    watch = StreamWatch(lambda event, now, mono: seen.append((event.record, now, mono)),
-                        exchange, radio)  # type: ignore[arg-type]
-    return watch, exchange, radio, seen
+def _link() -> tuple[DeviceLink, _Line, list]:
+    line, seen = _Line(), []
+    link = DeviceLink(line, 95, lambda event, now, mono: seen.append((event.record, now, mono)))
+    return link, line, seen
 
 
 def test_radio_quality_keeps_latest_lowest_and_mean() -> None:
-    radio = RadioQuality()
-    assert radio.stats is None
+    link, _, _ = _link()
+    assert link.radio is None
     for lqi, rssi in ((200, 150), (180, 160), (220, 140)):
-        radio.note(lqi, rssi)
-    assert radio.stats == RadioStats(220, 140, 180, 140, 200.0, 150.0)
+        link.on_data(_packet(Magnetometer(ZERO, 7), lqi, rssi), 10.0, 1.0)
+    assert link.radio == RadioStats(220, 140, 180, 140, 200.0, 150.0)
 
 
 def test_any_record_counts_while_nothing_is_streamed() -> None:
-    watch, _, radio, seen = _watch()
-    watch.on_data(_packet(Magnetometer(ZERO, 7)), 10.0, 1.0)
-    assert (watch.records, watch.replies, watch.last_code) == (1, 0, layouts.MAGNETOMETER)
-    assert (watch.last_data_time, watch.last_data_mono) == (10.0, 1.0)
+    link, _, seen = _link()
+    assert not link.heard
+    link.on_data(_packet(Magnetometer(ZERO, 7)), 10.0, 1.0)
+    assert (link.records, link.last_code, link.last_data_mono) == (1, layouts.MAGNETOMETER, 1.0)
     assert seen == [(Magnetometer(ZERO, 7), 10.0, 1.0)]
-    assert radio.stats is not None and radio.stats.lqi == 200
+    assert link.heard and link.radio is not None and link.radio.lqi == 200
 
 
 def test_a_polled_reply_of_another_code_is_a_reply_only() -> None:
-    watch, exchange, _, seen = _watch()
-    watch.streamed = layouts.ACCEL_ANG_RATE
-    pending = exchange.pending = Pending(layouts.MAGNETOMETER)
-    watch.on_data(_packet(Magnetometer(ZERO, 7)), 10.0, 1.0)
-    assert pending.done.is_set() and pending.reply == Magnetometer(ZERO, 7)
-    assert (watch.records, watch.replies, seen) == (0, 1, [])
+    link, line, seen = _link()
+    link.set_streamed(layouts.ACCEL_ANG_RATE)
+    line.answer = lambda: link.on_data(_packet(Magnetometer(ZERO, 7)), 10.0, 1.0)
+    reply = link.request(bytes((layouts.MAGNETOMETER,)), layouts.MAGNETOMETER, 0.2, 1)
+    assert reply == Magnetometer(ZERO, 7)
+    assert (link.records, seen, link.heard) == (0, [], True)
     # Not the stream's record: the stall watch must not take it for one.
-    assert watch.last_data_mono == 0.0
+    assert link.last_data_mono == 0.0
 
 
 def test_a_polled_reply_of_the_streamed_code_is_both() -> None:
-    watch, exchange, _, seen = _watch()
-    watch.streamed = layouts.ACCEL_ANG_RATE
-    pending = exchange.pending = Pending(layouts.ACCEL_ANG_RATE)
+    link, line, seen = _link()
+    link.set_streamed(layouts.ACCEL_ANG_RATE)
     record = AccelAngRate(ZERO, ZERO, 9)
-    watch.on_data(_packet(record, None, None), 11.0, 2.0)
-    assert pending.reply == record
-    assert (watch.records, watch.replies, watch.last_data_mono) == (1, 1, 2.0)
+    line.answer = lambda: link.on_data(_packet(record, None, None), 11.0, 2.0)
+    assert link.request(bytes((layouts.ACCEL_ANG_RATE,)), layouts.ACCEL_ANG_RATE, 0.2, 1) \
+        == record
+    assert (link.records, link.last_data_mono) == (1, 2.0)
     assert seen == [(record, 11.0, 2.0)]
 
 
 def test_another_record_while_streaming_is_handed_on_but_keeps_no_stream_alive() -> None:
-    watch, _, radio, seen = _watch()
-    watch.streamed = layouts.ACCEL_ANG_RATE
-    watch.on_data(_packet(Magnetometer(ZERO, 7), None, None), 12.0, 3.0)
-    assert (watch.records, watch.last_code) == (0, layouts.MAGNETOMETER)
-    assert watch.last_data_mono == 0.0
-    assert len(seen) == 1 and radio.stats is None
+    link, _, seen = _link()
+    link.set_streamed(layouts.ACCEL_ANG_RATE)
+    link.on_data(_packet(Magnetometer(ZERO, 7), None, None), 12.0, 3.0)
+    assert (link.records, link.last_code) == (0, layouts.MAGNETOMETER)
+    assert link.last_data_mono == 0.0
+    assert len(seen) == 1 and link.radio is None
 
 
-def test_wake_tells_the_exchange() -> None:
-    watch, exchange, _, _ = _watch()
-    watch.wake()
-    assert exchange.woken == 1
+def test_a_port_lost_wakes_the_waiting_request_with_why() -> None:
+    link, line, _ = _link()
+    line.answer = lambda: link.port_lost('unplugged')
+    with pytest.raises(PortDisconnected, match='unplugged'):
+        link.request(bytes((layouts.MAGNETOMETER,)), layouts.MAGNETOMETER, 5.0, 3)
+    assert len(line.written) == 1  # no retry on a dead port
+
+
+def test_a_link_that_joins_a_reader_late_is_told_what_it_missed() -> None:
+    line = _Line()
+    reader = PortReader(line, None)
+    reader._run()  # in this thread: it starts, then finds the port gone
+    assert reader.disconnected.is_set() and reader.error == 'unplugged'
+    link = DeviceLink(line, 17, lambda event, now, mono: None, reader=reader)
+    assert not link.running.is_set() and link.error is None
+    reader.route(17, link)
+    assert link.running.is_set() and link.error == 'unplugged'
+    assert link.policy_outcome == reader.policy_outcome
 
 
 class _Port:

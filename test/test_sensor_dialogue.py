@@ -223,7 +223,7 @@ def test_a_sensor_still_streaming_loses_no_record_to_the_first_polls(stream):
                 time.sleep(0.01)
             begin = time.time()
             for _ in range(20):  # the first polls, many times over: each a chance to collide
-                talk.dialogue.identification.introduce(talk.link)
+                talk.dialogue.initialise(talk.link)
             end = time.time()
             time.sleep(0.1)
         finally:

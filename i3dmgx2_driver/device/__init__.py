@@ -16,12 +16,13 @@
 The device layer: the serial port and the protocol dialogue, no ROS.
 
 ``port`` opens the serial port and reads what is there as soon as it is
-there; ``link`` is one sensor's connection (its pieces: ``port_reader``,
-the reader thread; ``exchange``, the request/reply exchanges;
-``stream_watch`` and ``radio``, what its packets say); ``port_opener``
+there; ``link`` is one sensor's connection (the reader thread, the
+request/reply exchanges, what its packets say); ``shared_port`` lets
+several sensors' links share one port and its reader; ``port_opener``
 opens a port the same way for ``supervisor`` and ``shared_port``;
-``dialogue`` says what the sensor needs to hear (its phases:
-``identification``, ``rate_setting``, ``continuous``); ``supervisor`` keeps a
+``dialogue`` says what the sensor needs to hear (quiet, identity, data
+rate, continuous mode); ``identity`` reads what a sensor says it is, for
+the dialogue and discovery alike; ``supervisor`` keeps a
 link alive through stalls and unplugs (its policies in ``watchdog``, its
 state and counters in ``status``);
 ``clock`` and ``sample_clock`` turn device timer ticks into host timestamps.

@@ -27,11 +27,14 @@ that, and drive this object through the start-up steps (startup.py). It has
 no thread and starts none; it can be tested with a link and a simulator alone.
 
 What it learns (identity, divider, whether the ping was answered, the line's
-use) it keeps as attributes for the supervisor's status snapshot. Each phase
-lives in a module of its own: who answers and what it is
-(``identification.py``), the data rate and its EEPROM write
-(``rate_setting.py``), continuous mode and the resume (``continuous.py``);
-this class says in which order, and is what the callers hold.
+use) it keeps as attributes for the supervisor's status snapshot. The
+phases share what they learn: continuous mode waits as long as the rate
+says, the resume compares the serial number the identification read.
+
+The data rate's divider cell wears with every write, so what was written and
+how often is kept here, with the one rule that guards it: one change of
+setting writes the cell once, however rough the radio, and never again from
+this driver's run.
 """
 
 from collections.abc import Callable
@@ -39,14 +42,32 @@ import threading
 import time
 from typing import Any
 
-from .continuous import ContinuousMode
-from .dialogue_parts import DialogueParts, Warn
-from .identification import Identification
-from .identity import DeviceInfo
-from .link import DeviceLink
-from .rate_setting import RateSetting
+from . import timeouts
+from .identity import DeviceInfo, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR
+from .link import DeviceLink, DeviceTimeout
+from .port import PortDisconnected
 from .settings import DeviceConfig
-from ..forwarding import Forwarded
+from .throttle import EVENT_PERIOD, Throttle
+from ..codec import commands, layouts, streams
+from ..codec.data_rate import divider_for_rate, RATE_BASE_HZ, RATE_DIVIDER_ADDRESS
+
+#: ``warn(key, message, period)``: say a problem (throttled per key), keep it as the last error.
+Warn = Callable[[str, str, float | None], None]
+
+
+def first_poll_code(stream: int) -> int:
+    """
+    Return what the first polled requests ask for: never the record being streamed.
+
+    A sensor may still stream while the dialogue starts it in full (its stop
+    lost on the radio, or streaming from power-up); a record of the stream
+    that arrives while a poll of the same code waits is taken for its reply,
+    so it is neither published nor the answer, and the real reply, coming
+    next, is published in its place (found by the hour-long soak, stream
+    ``inertial``). 0xC2, or the magnetometer alone (0xC7, no stream's
+    record) when 0xC2 is the stream.
+    """
+    return layouts.MAGNETOMETER if stream == layouts.ACCEL_ANG_RATE else layouts.ACCEL_ANG_RATE
 
 
 class SensorDialogue:
@@ -55,43 +76,46 @@ class SensorDialogue:
 
     ``log`` has ``debug/info/warning/error``; ``warn`` says a problem once
     per key and period; ``cancel`` set makes the waits give up (the driver
-    is stopping or pausing the stream).
+    is stopping or pausing the stream; a failed read is then no reason to
+    warn).
     """
 
     def __init__(self, config: DeviceConfig, log: Any, warn: Warn,
                  cancel: threading.Event) -> None:
         self.config = config
-        parts = DialogueParts(config, log, warn, cancel)
-        #: Who answers and what it is (ping, polled requests, identity).
-        self.identification = Identification(parts)
-        #: The data-rate divider, its EEPROM write, the line's use.
-        self.rate = RateSetting(parts)
-        #: Starting and resuming the stream.
-        self.continuous = ContinuousMode(parts, self.identification, self.rate)
+        self._log = log
+        self._warn = warn
+        self._cancel = cancel
+        self._throttle = Throttle()
+        #: The device's identity, once read.
+        self.info: DeviceInfo | None = None
+        self._info_logged: DeviceInfo | None = None
+        #: Whether the base station's ping was answered (None: wired, or not asked).
+        self.ping_ok: bool | None = None
+        #: The data-rate divider, once known.
+        self.divider: int | None = None
+        #: EEPROM write commands sent (the divider's cell; each may wear it).
+        self.eeprom_writes = 0
+        #: Dividers written (or tried): never written again by this dialogue.
+        self._divider_written: set[int] = set()
+        #: The stream's use of the line at the device's rate (once the rate is known),
+        #: and, when it does not fit, what to do about it ('' when it fits).
+        self.line_use = ''
+        self.line_warning = ''
 
-    # -- what it learned (the supervisor's status snapshot) ------------------------------
+    @property
+    def expected_rate_hz(self) -> float | None:
+        """Return the rate the divider gives, once known."""
+        return RATE_BASE_HZ / self.divider if self.divider else None
 
-    info: 'DeviceInfo | None' = Forwarded('identification', "The device's identity, once read.")
+    @property
+    def period(self) -> float:
+        """Return the time between samples (s), or 10 ms while the rate is unknown."""
+        return 1.0 / self.expected_rate_hz if self.divider else 0.01
 
-    ping_ok: 'bool | None' = Forwarded(
-        'identification',
-        "Whether the base station's ping was answered (None: wired, or not asked).")
-
-    divider: 'int | None' = Forwarded('rate', 'The data-rate divider, once known.')
-
-    eeprom_writes: 'int' = Forwarded(
-        'rate', "The EEPROM write commands sent (the divider's cell; each may wear it).")
-
-    line_use: 'str' = Forwarded(
-        'rate', "The stream's use of the line at the device's rate ('' while unknown).")
-
-    line_warning: 'str' = Forwarded(
-        'rate', "What to do when the stream does not fit the line ('' when it fits).")
-
-    expected_rate_hz: 'float | None' = Forwarded('rate', 'The rate the divider gives, once known.')
-
-    period: 'float' = Forwarded(
-        'rate', 'The time between samples (s), or 10 ms while the rate is unknown.')
+    def _serial_number(self) -> str:
+        """Return the known sensor's serial number ('' while none is known)."""
+        return self.info.serial_number if self.info is not None else ''
 
     # -- quiet --------------------------------------------------------------------------
 
@@ -100,11 +124,11 @@ class SensorDialogue:
         if not link.running.is_set():
             link.flush_input()
         link.stop_streaming()
-        link.streamed = None  # a polled record is a reply only now
+        link.set_streamed(None)  # a polled record is a reply only now
         time.sleep(0.05)
         link.flush_input()
 
-    # -- bring-up -----------------------------------------------------------------------
+    # -- bring-up: who answers, what it is, its data rate -------------------------------
 
     def initialise(self, link: DeviceLink, require_answer: bool = False,
                    observed: Callable[[], str] = str) -> None:
@@ -117,31 +141,247 @@ class SensorDialogue:
         soon, with the reason; the plain node just retries). ``observed()``
         says what the line carried meanwhile, for that message.
         """
-        self.identification.introduce(link, require_answer, observed)
-        self.rate.configure(link)
-        self.rate.check_line()
+        self._introduce(link, require_answer, observed)
+        self._configure_rate(link)
+        self._check_line()
 
-    # -- streaming (continuous.py) ------------------------------------------------------
+    def _introduce(self, link: DeviceLink, require_answer: bool,
+                   observed: Callable[[], str]) -> None:
+        """
+        Ping, make the first polled requests, read the identity.
+
+        The first words to a sensor after it was quieted: whether the base
+        station reaches it, a couple of polled requests (which make
+        continuous mode dependable later), and what it says it is. A silent
+        sensor is told apart here, with what the line carried instead.
+        """
+        cfg = self.config
+        if link.wireless:
+            self.ping_ok = link.ping(timeout=timeouts.PING_TIMEOUT,
+                                     retries=timeouts.PING_RETRIES)
+            if not self.ping_ok:
+                self._warn('ping', f'node {cfg.address} does not answer the base station '
+                                   f'ping: check it is powered, its address (ros2 run '
+                                   f'i3dmgx2_driver discover lists the nodes on the air) and '
+                                   f'the radio channel', None)
+        # The thesis author found continuous mode unreliable as the very first
+        # command: a couple of polled requests first make it dependable.
+        code = first_poll_code(cfg.stream)
+        for _ in range(2):
+            try:
+                link.request(bytes((code,)), code, timeout=cfg.request_timeout, retries=2)
+            except DeviceTimeout:
+                pass
+        if require_answer and not self.ping_ok and not link.heard:
+            silent = (f'node {cfg.address} is silent: no answer to the base station '
+                      f'ping or to polled requests (check it is powered, its address and the '
+                      f'radio channel)' if link.wireless else
+                      f'the sensor on {cfg.port} is silent: no answer to polled '
+                      f'requests (check it is powered and the baud rate)')
+            # What the line carried instead says what to change (address, framing, baud).
+            seen = observed()
+            raise DeviceTimeout(silent + (f'; observed on the line: {seen}' if seen else ''))
+        self._identify(link)
+
+    def _identify(self, link: DeviceLink) -> None:
+        cfg = self.config
+        info = read_identity(link, cfg.request_timeout, cfg.request_retries)
+        if self._cancel.is_set():
+            return
+        if not any(info):
+            self._warn('identity', 'the device did not tell its identity (0xEA, 0xE9): right '
+                                   'port? ros2 run i3dmgx2_driver discover finds sensors', None)
+            return
+        self.info = info
+        if info != self._info_logged:
+            self._info_logged = info
+            self._log.info(f'device: model {info.model_name or "?"} '
+                           f'({info.model_number or "?"}), serial {info.serial_number or "?"}, '
+                           f'firmware {info.firmware or "?"}, options {info.options or "-"}, '
+                           f'node {cfg.address}')
+
+    def _configure_rate(self, link: DeviceLink) -> None:
+        """Read the divider; write the one ``config.data_rate_hz`` asks for, if it differs."""
+        cfg = self.config
+        try:
+            current = link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
+                                   layouts.READ_EEPROM, cfg.request_timeout,
+                                   cfg.request_retries).value
+        except DeviceTimeout:
+            if cfg.data_rate_hz is not None or self._cancel.is_set():
+                raise
+            # Nothing to set, so streaming can go on without knowing the rate
+            # (a replayed capture answers no request; lost packets and the
+            # rate check in diagnostics then wait for a known divider).
+            self._warn('rate', 'the device did not tell its data rate (EEPROM 0xFCA2)', None)
+            return
+        self.divider = current
+        if cfg.data_rate_hz is None:
+            return
+        wanted = divider_for_rate(cfg.data_rate_hz)
+        if wanted == current:
+            return
+        if wanted in self._divider_written:
+            # Written before: a retry, a reconnect or a restart of the stream must not
+            # write the cell again. The sensor (or a reply that only looks valid, or
+            # another sensor put in its place) says otherwise; go on with what it says,
+            # and say so. (Not even the serial number can be trusted for this: a reply
+            # that only looks valid can carry any.)
+            self._warn('rate', f'the device reports divider {current} though {wanted} was '
+                               f'written before: not writing its EEPROM again (restart the '
+                               f'driver to write it)', None)
+            return
+        # Noted before the first write goes out: from then on the cell may be written,
+        # whatever the replies say (found by the stateful dialogue test: a forged
+        # read-back made the next initialise write again).
+        self._divider_written.add(wanted)
+        self.divider = self._write_divider(link, current, wanted)
+        self._log.warning(
+            f'data rate of node {cfg.address} set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM '
+            f'0xFCA2: {current} -> {wanted}); this persists across power cycles')
+
+    def _write_divider(self, link: DeviceLink, current: int, wanted: int) -> int:
+        """
+        Write the divider once; return it as read back.
+
+        An EEPROM cell wears with every write, so a write is never resent
+        blindly: when its reply does not come, the write may have reached
+        the sensor and only the reply been lost. The divider is read back
+        instead, and written again only if the sensor still has the old one
+        (the command itself was lost). So one change of setting writes the
+        cell once, however rough the radio.
+        """
+        cfg = self.config
+        readback = current
+        for _ in range(cfg.request_retries):
+            self.eeprom_writes += 1
+            try:
+                link.request(commands.write_eeprom(RATE_DIVIDER_ADDRESS, wanted),
+                             layouts.WRITE_EEPROM, cfg.request_timeout, 1)
+            except DeviceTimeout:
+                pass  # written or not: the read below tells
+            readback = link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
+                                    layouts.READ_EEPROM, cfg.request_timeout,
+                                    cfg.request_retries).value
+            if readback != current:
+                break
+        if readback != wanted:
+            raise DeviceTimeout(f'data rate: wrote divider {wanted}, read back {readback}')
+        return readback
+
+    def _check_line(self) -> None:
+        """
+        Warn when the device's rate is more than the line carries for the stream.
+
+        A requested rate that does not fit was refused before the node
+        started; this catches a device already set (data_rate 0) to a rate the
+        stream cannot keep, which would otherwise show only as records missing.
+        """
+        if not self.divider:
+            return
+        cfg = self.config
+        stream = streams.BY_CODE[cfg.stream]
+        budget = streams.line_budget(stream, self.expected_rate_hz, cfg.baud, cfg.wireless)
+        self.line_use = streams.describe(budget)
+        if budget.fits:
+            self.line_warning = ''
+            return
+        self.line_warning = ('the device is set to a rate the line cannot carry, records '
+                             'will be skipped: ' + streams.advice(stream, budget))
+        if self._throttle.allow('line'):
+            self._log.warning(self.line_warning)
+
+    # -- continuous mode ----------------------------------------------------------------
+    #
+    # The stream counts as started only once a record has arrived (a lost reply
+    # may hide a stream that runs, a reply may come with no stream after it).
+    # After a reconnect, a sensor already identified is confirmed with one
+    # serial-number read and kept streaming; anything else gets the full dialogue.
 
     def start_continuous(self, link: DeviceLink) -> bool:
-        """Ask for continuous mode until records arrive (:meth:`.ContinuousMode.start`)."""
-        return self.continuous.start(link)
+        """
+        Ask for continuous mode of the configured record until records actually arrive.
+
+        Returns True once a record has arrived, False if cancelled first;
+        raises DeviceTimeout when none comes, PortDisconnected if the port goes.
+        """
+        cfg = self.config
+        # From now on a record of the streamed code is a sample, even one that also
+        # answers a polled request.
+        link.set_streamed(cfg.stream)
+        for _ in range(cfg.continuous_retries):
+            before = link.records
+            try:
+                link.request(commands.set_continuous(cfg.stream), layouts.SET_CONTINUOUS,
+                             cfg.request_timeout, 1)
+            except DeviceTimeout:
+                pass  # the reply may be lost while the stream started: look for records
+            deadline = time.monotonic() + max(0.3, 5 * self.period)
+            while time.monotonic() < deadline and not self._cancel.is_set():
+                if link.records > before:
+                    return True
+                if link.disconnected.is_set():
+                    raise PortDisconnected(link.error or 'device disconnected')
+                time.sleep(0.01)
+            if self._cancel.is_set():
+                return False
+        raise DeviceTimeout(f'continuous mode: no records after {cfg.continuous_retries} '
+                            f'requests')
 
     def announce_streaming(self) -> None:
         """Say that records flow: called only once one has arrived on this link."""
-        self.continuous.announce()
+        cfg = self.config
+        stream = streams.BY_CODE[cfg.stream]
+        self._log.info(f'streaming {stream.label} from node {cfg.address} on {cfg.port}'
+                       + (f' at {self.expected_rate_hz:.1f} Hz' if self.divider else '')
+                       + ' (first record received)')
 
     def resume(self, link: DeviceLink) -> bool:
-        """Confirm the known sensor is back; keep it streaming (:meth:`.ContinuousMode.resume`)."""
-        return self.continuous.resume(link)
+        """
+        Confirm with one serial-number read that the known sensor is back; keep it streaming.
+
+        The link's reader runs already, with records of the stream counted as
+        samples from the first one. Returns False when the driver knows no
+        sensor yet (or must not resume), or when the sensor does not answer or
+        another serial number does: the caller then runs the full dialogue.
+        """
+        cfg = self.config
+        known = self._serial_number()
+        try:
+            serial = read_identifier(link, SERIAL_NUMBER_SELECTOR, cfg.resume_timeout,
+                                     cfg.resume_retries)
+        except DeviceTimeout:
+            if self._cancel.is_set():
+                raise
+            if self._throttle.allow('resume', EVENT_PERIOD):
+                self._log.info(f'node {cfg.address} did not confirm its serial number: '
+                               f'starting it in full')
+            return False
+        if serial != known:
+            self._log.warning(f'another sensor answers as node {cfg.address}: serial '
+                              f'{serial or "?"}, not {known}; identifying it in full')
+            self.info = None
+            return False
+        deadline = time.monotonic() + min(2 * self.period, 0.1)
+        while link.last_code != cfg.stream and time.monotonic() < deadline \
+                and not self._cancel.is_set():
+            time.sleep(0.002)
+        # Not streaming (power-cycled meanwhile), or streaming another record: ask for it.
+        if link.last_code != cfg.stream and not self.start_continuous(link):
+            return True  # cancelled: nothing more to do here
+        self._log.info(f'streaming {streams.BY_CODE[cfg.stream].label} again from node '
+                       f'{cfg.address} on {cfg.port}: same sensor (serial {serial}), identity '
+                       f'and data rate not asked again')
+        return True
 
     def expect_stream(self, link: DeviceLink) -> None:
         """Drop what is in flight; count records of the stream as samples from the first."""
-        self.continuous.expect_stream(link)
+        link.flush_input()
+        link.set_streamed(self.config.stream)
 
     def can_resume(self) -> bool:
         """Whether a reconnect may try :meth:`resume` (a known sensor, and allowed to)."""
-        return self.continuous.can_resume()
+        return bool(self.config.fast_reconnect and self._serial_number())
 
     # -- exclusive operations -----------------------------------------------------------
 
@@ -155,6 +395,6 @@ class SensorDialogue:
         link.stop_streaming()
         # Paused, a polled record of the streamed code (a self test's 0xC2, with
         # the built-in test skewing it) is a reply only, never a sample.
-        link.streamed = None
+        link.set_streamed(None)
         time.sleep(0.05)
         return operation(link)

@@ -13,30 +13,288 @@
 # limitations under the License.
 
 """
-One connection to one sensor: what the other layers hold and call.
+One connection to one sensor: the thread that reads its port, its requests and its records.
 
-:class:`DeviceLink` puts together the pieces of a sensor's connection,
-each in a module of its own: the reader thread (``port_reader.py``,
-:class:`~.port_reader.PortReader`, its own or a port's that several sensors
-share), the request/reply exchange (``exchange.py``), the stream's
-bookkeeping the reader hands each data packet to (``stream_watch.py``) and
-the radio's link quality (``radio.py``). It owns no behaviour of its own but
-starting and stopping: a change to one of those belongs in its module.
+A single thread reads the port, feeds the parser and hands every record to
+the sensor's link the moment it is complete: no queue, no executor in
+between, so nothing else can delay a sample. :class:`PortReader` is that
+thread; it knows nothing of requests or streams, only whom each event goes
+to: a data packet to the link of its address, the base station's answers
+(which carry no address) to the link that holds the port now.
+
+:class:`DeviceLink` is what the other layers hold: the requests to one
+sensor with their retries (the radio loses commands both ways), the request
+waiting for its reply, which data packet is a reply, a record of the stream
+or both, when the stream was last heard, and the radio's link quality. Alone
+on its port it makes its own reader; on a port several sensors share
+(shared_port.py) it joins that port's reader. The reader tells a link what
+happens through four methods (:meth:`DeviceLink.on_data`,
+:meth:`~DeviceLink.answer`, :meth:`~DeviceLink.reader_started`,
+:meth:`~DeviceLink.port_lost`), as pyserial's ``ReaderThread`` tells its
+``Protocol``; neither writes the other's fields.
 """
 
+from collections.abc import Callable, Iterator
+import contextlib
+from dataclasses import dataclass
 import threading
-from typing import Any
+import time
+from typing import Any, NamedTuple
 
-from .exchange import DeviceNack, DeviceTimeout, Exchange
-from .port import SerialPort
-from .port_reader import BytesCallback, LinkOptions, PortReader, RecordCallback
-from .radio import RadioQuality, RadioStats
-from .realtime import PolicyOutcome
-from .stream_watch import StreamWatch
-from ..forwarding import Forwarded
+from . import timeouts
+from .hot_path import HotPathObserver
+from .observer import LineObserver, QUIET_AFTER
+from .port import PortDisconnected, SerialPort
+from .realtime import apply_to_current_thread, NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
+from ..codec import commands, layouts
+from ..codec.commands import _LAYOUT_BY_TYPE
+from ..codec.framing import DataPacket, encode_command_packet
+from ..codec.parser import Ack, Nack, SensorStreamParser
+from ..codec.records import PingReply
 
 __all__ = ['BytesCallback', 'DeviceLink', 'DeviceNack', 'DeviceTimeout', 'LinkOptions',
            'PortReader', 'RadioStats', 'RecordCallback']
+
+#: Called from the reader thread with each data packet and its read time.
+#: Called with a record, the system-clock time its last byte was read and the same
+#: instant on the monotonic clock (what intervals and the device-clock fit use: the
+#: system clock can be stepped).
+RecordCallback = Callable[[DataPacket, float, float], None]
+#: Called from the reader thread with each read's bytes and their read time.
+BytesCallback = Callable[[bytes, float], None]
+
+
+@dataclass(frozen=True)
+class LinkOptions:
+    """
+    How a link reads and whom it tells, besides the consumer of records.
+
+    ``wireless=False`` speaks to a wired sensor (no packets, no ACKs).
+    ``read_timeout`` bounds each read (s). ``on_bytes``, if given, receives
+    every read's bytes as read, before they are parsed (a raw capture); it
+    runs in the reader thread and must not raise or block. ``observer``, if
+    given, is fed every read while no packet of ours has arrived for
+    ``QUIET_AFTER`` s (never while records flow). ``cancel``, if given and
+    set, makes requests give up within tens of milliseconds while the reader
+    goes on (the stream is being stopped, the port kept: nobody waits for
+    the answers any more). ``thread_policy`` is applied by the reader thread
+    to itself before its first read. ``timings``, if given, is told when each
+    read returned and when the parser was done with it (hot_path.py); None
+    costs one test per stage.
+    """
+
+    wireless: bool = True
+    read_timeout: float = 0.2
+    on_bytes: BytesCallback | None = None
+    observer: LineObserver | None = None
+    cancel: threading.Event | None = None
+    thread_policy: ThreadPolicy = NORMAL_SCHEDULING
+    timings: HotPathObserver | None = None
+
+
+class DeviceTimeout(Exception):
+    """A request got no reply after every retry."""
+
+
+class DeviceNack(DeviceTimeout):
+    """The base station rejected a request on every try."""
+
+
+class RadioStats(NamedTuple):
+    """Latest, lowest and mean LQI and RSSI of the packets received."""
+
+    lqi: int
+    rssi: int
+    lqi_min: int
+    rssi_min: int
+    lqi_mean: float
+    rssi_mean: float
+
+
+class Pending:
+    """A request waiting for its reply, filled in by the reader thread."""
+
+    def __init__(self, code: int | None) -> None:
+        self.code = code
+        self.done = threading.Event()
+        self.reply: Any = None
+        self.acked = threading.Event()
+        self.nacked = threading.Event()
+
+    def fulfil(self, reply: Any) -> None:
+        """Hand the waiting request its reply (reader thread)."""
+        self.reply = reply
+        self.done.set()
+
+
+class PortReader:
+    """
+    The one thread that reads a port, and whom it hands each event.
+
+    Data packets go to the link of their address (:meth:`route`); a port
+    with one sensor has its link as ``fallback`` and an empty table (its
+    parser keeps the other addresses out), so the hot path is one dict
+    lookup. The base station's answers (ACK, NACK, a ping's byte) carry no
+    address: they go to the link that holds the port now (:meth:`holding`),
+    and since one link at a time may hold it, that is the only one who can
+    be waiting for them. ``address`` None (a port shared by several sensors)
+    reads every node's packets; those of an address no link routes are
+    counted by address in ``strays``.
+    """
+
+    def __init__(self, port: SerialPort, address: int | None,
+                 options: LinkOptions | None = None,
+                 fallback: 'DeviceLink | None' = None) -> None:
+        options = options if options is not None else LinkOptions()
+        self.port = port
+        self.wireless = options.wireless
+        self.parser = SensorStreamParser(address=address if self.wireless else None,
+                                         wireless=self.wireless)
+        self._routes: dict[int | None, DeviceLink] = {}
+        self._fallback = fallback
+        #: The link that holds the port now (set under ``_request_lock``).
+        self._requester: DeviceLink | None = None
+        #: Packets of addresses no link routes, by address (a port shared by several).
+        self.strays: dict[int, int] = {}
+        self._request_lock = threading.Lock()
+        self._write_lock = threading.Lock()
+        self._on_bytes = options.on_bytes
+        self._observer = options.observer
+        self._timings = options.timings
+        self._read_timeout = options.read_timeout
+        self._thread_policy = options.thread_policy
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._start_lock = threading.Lock()
+        self.disconnected = threading.Event()
+        #: Why the port was lost (None while it works); set before ``disconnected``.
+        self.error: str | None = None
+        #: What the scheduler granted the thread (set once it runs).
+        self.policy_outcome = PolicyOutcome()
+        #: Set by the thread once its policy is applied, before its first read.
+        self.running = threading.Event()
+
+    @property
+    def stopping(self) -> bool:
+        """Whether the reader was told to stop (requests on it give up)."""
+        return self._stop.is_set()
+
+    # -- who gets what -------------------------------------------------------
+
+    def route(self, address: int | None, link: 'DeviceLink') -> None:
+        """
+        Hand the data packets of ``address`` to ``link`` from now on.
+
+        A link that joins a reader already running (or already dead) is told
+        so at once, as those routed before were when it happened.
+        """
+        self._routes[address] = link
+        # The thread sets running (error) before it tells the links it routes: either
+        # it saw this route, or this sees what it set.
+        if self.running.is_set():
+            link.reader_started(self.policy_outcome)
+        if self.error is not None:
+            link.port_lost(self.error)
+
+    def unroute(self, address: int | None, link: 'DeviceLink') -> None:
+        """Stop handing ``address``'s packets to ``link`` (if they still go to it)."""
+        if self._routes.get(address) is link:
+            del self._routes[address]
+
+    @contextlib.contextmanager
+    def holding(self, link: 'DeviceLink') -> Iterator[None]:
+        """Hold the port for ``link``: the base station's answers go to it, and no other's."""
+        with self._request_lock:
+            self._requester = link
+            try:
+                yield
+            finally:
+                self._requester = None
+
+    def write(self, data: bytes) -> None:
+        """Write ``data`` whole, whichever thread or link else writes (raises PortError)."""
+        with self._write_lock:
+            self.port.write(data)
+
+    def _links(self) -> list['DeviceLink']:
+        links = list(self._routes.values())
+        if self._fallback is not None:
+            links.append(self._fallback)
+        return links
+
+    # -- the thread ----------------------------------------------------------
+
+    def start(self) -> None:
+        """Start the reader thread (once; later calls do nothing)."""
+        with self._start_lock:
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name='gx2-reader',
+                                                daemon=True)
+                self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the reader thread and wait for it (a read times out quickly)."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+
+    def abort(self) -> None:
+        """Make the reader give up (driver shutdown)."""
+        self._stop.set()
+
+    def _run(self) -> None:
+        if self._thread_policy.requested:
+            self.policy_outcome = apply_to_current_thread(self._thread_policy)
+        self.running.set()
+        for link in self._links():
+            link.reader_started(self.policy_outcome)
+        parser = self.parser
+        read = self.port.read_some
+        observer = self._observer
+        timings = self._timings
+        routes = self._routes
+        while not self._stop.is_set():
+            timeout = 0.02 if parser.pending == 1 else self._read_timeout
+            try:
+                data = read(timeout)
+            except PortDisconnected as exc:
+                self.error = str(exc)
+                # Every link knows why before anyone sees the port gone.
+                for link in self._links():
+                    link.port_lost(self.error)
+                self.disconnected.set()
+                return
+            now = time.time()
+            mono = time.monotonic()
+            if timings is not None:
+                timings.read(len(data), now)
+            if data and self._on_bytes is not None:
+                self._on_bytes(data, now)
+            if observer is not None and observer.active and self._fallback is not None \
+                    and mono - self._fallback.last_data_mono > QUIET_AFTER:
+                observer.feed(data, mono, self._fallback.last_data_mono)
+            events = parser.feed(data) if data else parser.idle()
+            if timings is not None:
+                timings.parsed()
+            fallback = self._fallback
+            for event in events:
+                if type(event) is DataPacket:
+                    link = routes.get(event.address, fallback)
+                    if link is not None:
+                        link.on_data(event, now, mono)
+                    else:
+                        self._stray(event.address)
+                else:
+                    requester = self._requester
+                    if requester is not None:
+                        requester.answer(event)
+
+    def _stray(self, address: int) -> None:
+        """Count a packet of an address no link routes (a foreign frame, as the parser would)."""
+        self.strays[address] = self.strays.get(address, 0) + 1
+        stats = self.parser.stats
+        stats.good_frames -= 1
+        stats.foreign_frames += 1
 
 
 class DeviceLink:
@@ -46,16 +304,16 @@ class DeviceLink:
     ``address`` selects the sensor behind a base station; ``on_record``
     receives every data packet not claimed by a pending request; ``options``
     say how to read and whom else to tell (:class:`LinkOptions`).
-    ``streamed`` is the command byte of the record being streamed, None
-    while the device is not streaming (the dialogue sets it): a polled
-    reply of that code is then both the reply and a record of the stream.
     ``policy_outcome`` says what the scheduler granted the reader thread.
 
     Alone on its port (``reader`` None) the link makes its own
     :class:`PortReader` and starts and stops it. Given a ``reader`` that
     several sensors share, it only joins it: :meth:`start` routes its
     address to it, :meth:`stop` takes that route away, and the port, its
-    reader and flushes belong to whoever shares it (shared_port.py).
+    reader and flushes belong to whoever shares it (shared_port.py). Then
+    this sensor's requests are serialised by a lock of its own, and the port
+    is held only while the base station's answer (which carries no address)
+    is due.
     """
 
     def __init__(self, port: SerialPort, address: int | None, on_record: RecordCallback,
@@ -63,118 +321,289 @@ class DeviceLink:
         options = options if options is not None else LinkOptions()
         self.port = port
         self.wireless = options.wireless
+        #: The node address requests go to (:meth:`retarget` changes it).
+        self.address = address
         self.shared = reader is not None
         if reader is None:
-            reader = PortReader(port, address, options)
+            reader = PortReader(port, address, options, fallback=self)
         self.reader = reader
         self.parser = reader.parser
-        cancel = options.cancel if options.cancel is not None else threading.Event()
-        self.exchange = Exchange(port, address, reader, cancel, self.shared)
-        self._radio = RadioQuality()
-        self.watch = StreamWatch(on_record, self.exchange, self._radio)
-        if not self.shared:
-            reader.fallback = self.watch
         self.disconnected = reader.disconnected
+        #: Why the port was lost (None while it works).
+        self.error: str | None = None
+        #: What the scheduler granted the reader thread (once it runs).
+        self.policy_outcome = PolicyOutcome()
         #: Set once the link receives its packets (its own reader runs, or its
-        #: address is routed on the shared one).
-        self.running = reader.running if not self.shared else threading.Event()
+        #: address is routed on a shared one that runs).
+        self.running = threading.Event()
+        self._on_record = on_record
+        self._cancel = options.cancel if options.cancel is not None else threading.Event()
+        #: One exchange at a time with this sensor.
+        self._lock = threading.Lock()
+        #: Set when the link stops: every request gives up.
+        self._stopped = threading.Event()
+        #: The request waiting for its reply (read by the reader thread).
+        self._pending: Pending | None = None
+        #: The command byte of the record being streamed, None while none is
+        #: (:meth:`set_streamed`): a polled reply of that code is then both the
+        #: reply and a record of the stream.
+        self._streamed: int | None = None
+        #: Records of the stream (of any code while none is streamed) received so far.
+        self.records = 0
+        #: The command byte of the last record handed on (None before one).
+        self.last_code: int | None = None
+        #: The monotonic time the stream was last heard, for stall detection.
+        self.last_data_mono = 0.0
+        #: Whether a reply to one of this link's requests arrived.
+        self._replied = False
+        #: Latest LQI and RSSI, their lowest, their sums and the packets counted.
+        self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
 
-    # -- what the pieces know ------------------------------------------------
-
-    address: 'int | None' = Forwarded(
-        'exchange', 'The node address requests go to (:meth:`retarget` changes it).')
-
-    streamed: 'int | None' = Forwarded(
-        'watch', 'The command byte of the record being streamed, or None while none is.',
-        writable=True)
-
-    records: 'int' = Forwarded('watch', 'The records of the stream received so far.')
-
-    replies: 'int' = Forwarded('watch', "The replies to this link's requests received so far.")
-
-    last_code: 'int | None' = Forwarded(
-        'watch', 'The command byte of the last record handed on (None before one).')
-
-    last_data_time: 'float' = Forwarded(
-        'watch', 'The system-clock time the stream was last heard.')
-
-    last_data_mono: 'float' = Forwarded(
-        'watch', 'The same instant on the monotonic clock, for stall detection.')
+    # -- what the link knows -------------------------------------------------
 
     @property
     def heard(self) -> bool:
         """Whether any packet of this sensor arrived on this link (a record or a reply)."""
-        return bool(self.watch.records or self.watch.replies)
+        return self._replied or self.records > 0
 
-    radio: 'RadioStats | None' = Forwarded(
-        '_radio', 'Radio link quality so far, or None before the first packet.', 'stats')
+    @property
+    def radio(self) -> RadioStats | None:
+        """Radio link quality so far, or None before the first packet."""
+        r = self._radio
+        if not r[6]:
+            return None
+        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
 
-    error: 'str | None' = Forwarded('reader', 'Why the port was lost (None while it works).')
+    def set_streamed(self, code: int | None) -> None:
+        """
+        Say which record the device streams from now on (None: none).
 
-    policy_outcome: 'PolicyOutcome' = Forwarded(
-        'reader', 'What the scheduler granted the reader thread.')
+        While one streams, a polled reply of its code is both the reply and
+        a record of the stream, and only its records keep the stream alive;
+        while none does, a polled record is a reply only.
+        """
+        self._streamed = code
 
-    # -- reader thread -------------------------------------------------------
+    # -- the reader thread's side --------------------------------------------
+
+    def on_data(self, event: DataPacket, now: float, mono: float) -> None:
+        """
+        Take one data packet of this sensor (reader thread, for every sample).
+
+        A reply to the request waiting for it, a record of the stream, or
+        both; this allocates nothing and takes no lock.
+        """
+        code = _LAYOUT_BY_TYPE[type(event.record)].code
+        streamed = self._streamed
+        # While a stream runs, only its records keep it alive: a sensor power-cycled
+        # into its EEPROM auto-start streams another record, and the stall watch
+        # and the wait for the stream must not take that one for it (found by the
+        # long soak).
+        ours = streamed is None or code == streamed
+        if ours:
+            self.last_data_mono = mono
+        lqi = event.lqi
+        if lqi is not None:
+            radio = self._radio
+            rssi = event.rssi
+            radio[0], radio[1] = lqi, rssi
+            radio[2] = min(radio[2], lqi)
+            radio[3] = min(radio[3], rssi)
+            radio[4] += lqi
+            radio[5] += rssi
+            radio[6] += 1
+        pending = self._pending
+        if pending is not None and pending.code == code:
+            pending.fulfil(event.record)
+            self._replied = True
+            if code != streamed:
+                return
+        if ours:
+            self.records += 1
+        self.last_code = code
+        self._on_record(event, now, mono)
+
+    def answer(self, event: Any) -> None:
+        """Take the base station's answer to this link's request (ACK, NACK, ping)."""
+        pending = self._pending
+        if pending is None:
+            return
+        if isinstance(event, Ack):
+            pending.acked.set()
+        elif isinstance(event, Nack):
+            pending.nacked.set()
+        elif isinstance(event, PingReply) and pending.code == layouts.PING:
+            pending.fulfil(event)
+
+    def reader_started(self, outcome: PolicyOutcome) -> None:
+        """Take the news that the reader reads for this link now, with what it was granted."""
+        self.policy_outcome = outcome
+        self.running.set()
+
+    def port_lost(self, error: str) -> None:
+        """Take the news that the port is gone (``error`` says why): wake a waiting request."""
+        self.error = error
+        self._wake()
+
+    def _wake(self) -> None:
+        pending = self._pending
+        if pending is not None:
+            pending.done.set()
+
+    # -- starting and stopping -----------------------------------------------
 
     def start(self) -> None:
         """Start receiving: the reader thread, or this address's route on the shared one."""
-        reader = self.reader
         if self.shared:
-            reader.routes[self.address] = self.watch
-            reader.start()
-            if reader.running.wait(1.0):
-                self.running.set()
-        else:
-            reader.start()
+            self.reader.route(self.address, self)
+        self.reader.start()
 
     def stop(self) -> None:
         """Stop receiving: the reader thread (waited for), or this address's route."""
-        self.exchange.stopped.set()
+        self._stopped.set()
         if self.shared:
-            if self.reader.routes.get(self.address) is self.watch:
-                del self.reader.routes[self.address]
-            self.exchange.wake()
+            self.reader.unroute(self.address, self)
+            self._wake()
         else:
             self.reader.stop()
 
     def abort(self) -> None:
         """Make the reader (if the link's own) and any waiting request give up."""
-        self.exchange.stopped.set()
+        self._stopped.set()
         if not self.shared:
             self.reader.abort()
-        self.exchange.wake()
-
-    def _run(self) -> None:
-        """Read in the calling thread (tests); the link's own reader only."""
-        self.reader._run()
+        self._wake()
 
     def flush_input(self) -> None:
         """Drop what the port holds unread; not on a shared port (the others' packets)."""
         if not self.shared:
             self.port.flush_input()
 
-    # -- requests (exchange.py) ------------------------------------------------
+    # -- requests ------------------------------------------------------------
 
     def send(self, command: bytes) -> None:
         """Write one command, framed for the link; no waiting."""
-        self.exchange.send(command)
+        data = encode_command_packet(self.address, command) if self.wireless else command
+        self.reader.write(data)
 
     def request(self, command: bytes, reply_code: int | None, timeout: float = 0.5,
                 retries: int = 3) -> Any:
-        """Send ``command`` until its reply arrives (:meth:`.Exchange.request`)."""
-        return self.exchange.request(command, reply_code, timeout, retries)
+        """
+        Send ``command`` until its reply (a record of ``reply_code``) arrives.
+
+        Returns the reply record. A NACK resends at once; silence resends
+        after ``timeout``. Raises DeviceTimeout (DeviceNack if every try was
+        rejected) after ``retries`` tries, PortDisconnected if the port died.
+        """
+        with self._lock:
+            nacks = 0
+            for _ in range(retries):
+                self._check_cancelled()
+                pending = Pending(reply_code)
+                self._pending = pending
+                try:
+                    if self.shared:
+                        self._exchange_shared(command, pending, timeout)
+                    else:
+                        with self.reader.holding(self):
+                            self.send(command)
+                            self._wait(pending, timeout)
+                finally:
+                    self._pending = None
+                self._check_port()
+                self._check_cancelled()
+                if pending.done.is_set():
+                    return pending.reply
+                if pending.nacked.is_set():
+                    nacks += 1
+            name = layouts.LAYOUTS[command[0]].name
+            if nacks == retries:
+                raise DeviceNack(f'{name}: the base station rejected it {retries} times')
+            raise DeviceTimeout(f'{name}: no reply after {retries} tries')
+
+    def _exchange_shared(self, command: bytes, pending: Pending, timeout: float) -> None:
+        """
+        Send on a shared port: hold it until the ACK or NACK, then wait for the reply alone.
+
+        The reply is a data packet with this sensor's address, routed to this
+        link whoever else streams or asks meanwhile; only the base station's
+        one-byte answer must not be mistaken for another sensor's.
+        """
+        deadline = time.monotonic() + timeout
+        with self.reader.holding(self):
+            self.send(command)
+            ack_deadline = time.monotonic() + min(timeouts.ACK_TIMEOUT, timeout)
+            while not (pending.acked.is_set() or pending.nacked.is_set()
+                       or pending.done.is_set() or self._cancel.is_set()):
+                left = ack_deadline - time.monotonic()
+                if left <= 0:
+                    break
+                pending.acked.wait(min(left, 0.01))
+        if not pending.nacked.is_set():
+            self._wait(pending, deadline - time.monotonic())
+
+    def _wait(self, pending: Pending, timeout: float, nack_ends: bool = True) -> None:
+        """Wait for a reply, a NACK (if ``nack_ends``), a cancel or the timeout."""
+        deadline = time.monotonic() + timeout
+        while not (nack_ends and pending.nacked.is_set()) and not self._cancel.is_set():
+            left = deadline - time.monotonic()
+            if left <= 0 or pending.done.wait(min(left, 0.02)):
+                break
+
+    def _check_port(self) -> None:
+        # The reader tells each link why (port_lost) before it sets ``disconnected``.
+        if self.error is not None or self.disconnected.is_set():
+            raise PortDisconnected(self.error or 'device disconnected')
+
+    def _check_cancelled(self) -> None:
+        if self._stopped.is_set() or self.reader.stopping:
+            raise DeviceTimeout('the link is shutting down')
+        if self._cancel.is_set():
+            raise DeviceTimeout('cancelled: the stream is being stopped')
 
     def ping(self, timeout: float = 0.5, retries: int = 3) -> bool:
         """Ask the base station whether the sensor answers over the radio."""
-        return self.exchange.ping(timeout, retries)
+        for _ in range(retries):
+            answer = self.ping_once(self.address, timeout)
+            if answer is not None:
+                return answer
+        return False
 
     def ping_once(self, address: int, timeout: float) -> bool | None:
-        """Ping ``address`` once (:meth:`.Exchange.ping_once`): True, False or None."""
-        return self.exchange.ping_once(address, timeout)
+        """
+        Ping ``address`` once: True (link OK), False (0x21: no such node).
+
+        None means no answer at all, which a base station never gives: a
+        wired sensor, or nothing, is on the port (what discovery needs to
+        tell apart from a node that is not there).
+        """
+        parser = self.parser
+        with self._lock, self.reader.holding(self):
+            for _ in range(2):
+                skipped = parser.stats.bytes_skipped
+                pending = Pending(layouts.PING)
+                self._pending = pending
+                try:
+                    parser.expect_ping()
+                    self.reader.write(commands.ping(address))
+                    self._wait(pending, timeout, nack_ends=False)
+                finally:
+                    self._pending = None
+                self._check_port()
+                self._check_cancelled()
+                # The answer is one byte, 0x02 or 0x21, found between frames. While
+                # the parser skips garbage (the tail of another node's packet cut by
+                # a flush) a byte of that garbage can pass for it; the parser is in
+                # step with the stream after it, so a second ping is trustworthy.
+                if pending.reply is None or parser.stats.bytes_skipped == skipped:
+                    break
+            return None if pending.reply is None else bool(pending.reply.ok)
 
     def stop_streaming(self, repeats: int = 3, gap: float = 0.02) -> None:
         """Send 0xFA several times: it has no reply and the radio may drop it."""
-        self.exchange.stop_streaming(repeats, gap)
+        for _ in range(repeats):
+            self.send(commands.stop_continuous())
+            time.sleep(gap)
 
     def retarget(self, address: int | None) -> None:
         """
@@ -184,6 +613,6 @@ class DeviceLink:
         accepts data packets from every node (listening for sensors that
         already stream); requests need an address again before they are sent.
         """
-        self.exchange.address = address
+        self.address = address
         if self.wireless:
             self.parser.address = address

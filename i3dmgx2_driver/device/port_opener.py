@@ -29,9 +29,9 @@ import threading
 from typing import Any
 
 from .hot_path import HotPathObserver
+from .link import BytesCallback, LinkOptions
 from .observer import LineObserver
 from .port import SerialPort
-from .port_reader import BytesCallback, LinkOptions
 from .settings import DeviceConfig
 
 
