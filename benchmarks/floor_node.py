@@ -60,7 +60,9 @@ from i3dmgx2_driver.codec import layouts, streams  # noqa: E402, I100
 from i3dmgx2_driver.codec.framing import DATA_FLAGS, DATA_TRAILER_SIZE, HEADER_SIZE  # noqa: E402
 from i3dmgx2_driver.device import realtime  # noqa: E402
 from i3dmgx2_driver.device.hot_path import recorder_from_environment  # noqa: E402
-from i3dmgx2_driver.ros.conversions import MessageFactory, probe_records  # noqa: E402
+from i3dmgx2_driver.ros.conversions import (  # noqa: E402
+    MessageFactory, MessageSettings, probe_records,
+)
 
 _LAYOUT = layouts.LAYOUTS[layouts.ACCEL_ANG_RATE_MAG_ORIENTATION]
 PACKET_SIZE = HEADER_SIZE + _LAYOUT.record_size + DATA_TRAILER_SIZE
@@ -97,7 +99,7 @@ def main() -> int:
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                      reliability=ReliabilityPolicy.RELIABLE)
     publisher = node.create_publisher(Imu, 'imu/raw_data', qos)
-    factory = MessageFactory('imu_link', 'enu', 0.0, 0.0, 0.0, 0.0, streams.DEFAULT)
+    factory = MessageFactory(MessageSettings('imu_link', 'enu', stream=streams.DEFAULT))
     stamp = time.time()
     message = factory.imu_cdr(probe_records(streams.DEFAULT)[0], stamp)
     executor = MultiThreadedExecutor(num_threads=4)

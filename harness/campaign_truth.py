@@ -32,7 +32,7 @@ from i3dmgx2_driver.codec.framing import HEADER_SIZE
 from i3dmgx2_driver.codec.layouts import LAYOUTS
 from i3dmgx2_driver.codec.orientation import ENU
 from i3dmgx2_driver.codec.streams import STREAMS
-from i3dmgx2_driver.ros.conversions import MessageFactory, STANDARD_GRAVITY
+from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings, STANDARD_GRAVITY
 from i3dmgx2_driver.simulator import PtySimulator
 
 _KEY = struct.Struct('<6d')
@@ -73,7 +73,7 @@ def imu_key(accel, rate) -> bytes:
 #: For each stream's record type: the node's own message factory (ENU) and the record's
 #: size in a packet, so that every stream's published values are computed as the node does.
 _FACTORIES = {
-    stream.record_type: (MessageFactory('imu_link', ENU, 0.0, 0.0, 0.0, 0.0, stream),
+    stream.record_type: (MessageFactory(MessageSettings('imu_link', ENU, stream=stream)),
                          LAYOUTS[stream.code].record_size, stream.code)
     for stream in STREAMS}
 

@@ -21,15 +21,21 @@ the node processes of test_node_params.py and test_node_every_stream.py
 check the same end to end.
 """
 
+from dataclasses import fields
 import os
+import re
 
+from i3dmgx2_driver.device.realtime import ThreadPolicy
+from i3dmgx2_driver.device.settings import DeviceConfig
+from i3dmgx2_driver.ros.conversions import MessageSettings
 from i3dmgx2_driver.ros.parameters import (
-    ANGULAR_VELOCITY_STDDEV, declare_parameters, LINEAR_ACCELERATION_STDDEV,
-    ORIENTATION_STDDEV, ParameterError,
+    ANGULAR_VELOCITY_STDDEV, declare_parameters, driver_config, DriverConfig,
+    LINEAR_ACCELERATION_STDDEV, ORIENTATION_STDDEV, ParameterError, SPECS, unknown_message,
+    unknown_names, warn_unknown_parameters,
 )
-from i3dmgx2_driver.ros.publishers import ALONE_TOPICS, SensorTopics
-from i3dmgx2_driver.ros.qos import create_publisher, override_names
-from i3dmgx2_driver.ros.unknown_parameters import warn_unknown_parameters
+from i3dmgx2_driver.ros.publishers import (
+    ALONE_TOPICS, create_publisher, override_names, SensorTopics,
+)
 import pytest
 import rclpy
 from rclpy.node import Node
@@ -154,19 +160,23 @@ def test_covariance_defaults_come_from_the_sensor_and_zero_still_means_unknown(m
 
 
 def test_the_parameters_never_write_rclpys_private_overrides():
+    """The unknown-parameter warning reads them (getattr); nothing assigns or indexes them."""
     with open(os.path.join(REPO, 'i3dmgx2_driver', 'ros', 'parameters.py')) as handle:
-        assert '_parameter_overrides' not in handle.read()
+        text = handle.read()
+    assert "getattr(node, '_parameter_overrides', None)" in text
+    assert not re.search(r'\._parameter_overrides\b', text)
+    assert 'setattr(' not in text
 
 
 def test_rclpy_still_keeps_the_overrides_where_the_unknown_parameter_warning_reads_them(
         make_node):
-    # rclpy has no public view of the overrides; unknown_parameters.py reads this
+    # rclpy has no public view of the overrides; parameters.py reads this
     # private field. If rclpy renames or reshapes it, this fails rather than the
     # warning going silent.
     node = make_node('-p', 'data_rat:=200.0')
     overrides = getattr(node, '_parameter_overrides', None)
     assert isinstance(overrides, dict), (
-        'rclpy no longer has Node._parameter_overrides: unknown_parameters.py must find '
+        'rclpy no longer has Node._parameter_overrides: warn_unknown_parameters must find '
         'the overrides another way')
     assert overrides['data_rat'].value == 200.0
     lines = warn_unknown_parameters(node, ['data_rate'])
@@ -194,3 +204,69 @@ def test_qos_overrides_of_each_of_several_sensors_are_known_names(make_node):
     assert 'qos_overrides./left_arm/mag.publisher.reliability' in known
     assert 'qos_overrides./i3dmgx2_driver/left_arm/is_calibrated.publisher.durability' in known
     assert 'qos_overrides./imu/raw_data.publisher.depth' not in known
+
+
+# -- unknown names: which are unknown, and the closest real name ------------------
+
+KNOWN = [spec.name for spec in SPECS] + ['use_sim_time', 'start_type_description_service']
+
+
+def test_typos_get_the_closest_real_name():
+    given = ['adress', 'data_rat', 'prot', 'wirless', 'frame', 'port', 'use_sim_time']
+    assert unknown_names(given, KNOWN) == [
+        ('adress', 'address'), ('data_rat', 'data_rate'), ('frame', 'frame_id'),
+        ('prot', 'port'), ('wirless', 'wireless')]
+
+
+def test_a_name_like_none_gets_no_suggestion():
+    assert unknown_names(['qos_overrides./imu.publisher.depth', 'xyz'], KNOWN) == [
+        ('qos_overrides./imu.publisher.depth', None), ('xyz', None)]
+
+
+def test_declared_names_are_never_reported():
+    assert unknown_names(KNOWN, KNOWN) == []
+
+
+def test_the_message_names_both():
+    assert unknown_message('data_rat', 'data_rate') == (
+        "unknown parameter 'data_rat' (did you mean 'data_rate'?): ignored, the driver has "
+        'no such parameter (ros2 param list shows those it has)')
+    assert unknown_message('xyz', None).startswith("unknown parameter 'xyz': ignored")
+
+
+# -- each parameter typed once, in the configuration it feeds ---------------------
+
+def test_each_parameter_feeds_a_field_that_exists_and_the_drivers_own_are_all_fed():
+    device = {field.name for field in fields(DeviceConfig)}
+    messages = {field.name for field in fields(MessageSettings)}
+    own = {field.name for field in fields(DriverConfig)} - {'device', 'messages', 'sensors'}
+    fed: dict[str, set[str]] = {'device': set(), 'messages': set(), 'driver': set()}
+    for spec in SPECS:
+        config, _, field = spec.feeds.partition('.')
+        assert config in {'device', 'messages', 'driver', 'sensors', 'node'}, spec.name
+        if config in fed:
+            fed[config].add(field or spec.name)
+    assert fed['device'] <= device
+    # The frame and the stream are each sensor's (sensor_set.py).
+    assert fed['messages'] == messages - {'frame_id', 'stream'}
+    assert fed['driver'] == own
+
+
+def test_the_parameters_reach_the_device_and_message_settings_of_each_sensor(make_node):
+    values = declare_parameters(make_node(
+        '-p', 'addresses:=[17, 95]', '-p', 'streams:=[full, inertial]',
+        '-p', 'data_rates:=[50, 0]', '-p', 'read_timeout:=2', '-p', 'realtime_priority:=5',
+        '-p', 'port:=/dev/ttyUSB3', '-p', 'frame_convention:=ned'))
+    config = driver_config(values)
+    left, right = config.sensors
+    device = config.device_for(right)
+    assert (device.port, device.address, device.stream, device.data_rate_hz) == \
+        ('/dev/ttyUSB3', 95, 0xC2, None)
+    assert (device.stall_timeout, device.thread_policy) == (2.0, ThreadPolicy(5))
+    assert config.device == config.device_for(left)
+    assert (config.device.address, config.device.data_rate_hz) == (17, 50.0)
+    messages = config.messages_for(right)
+    assert (messages.frame_id, messages.frame_convention, messages.stream.name) == \
+        ('imu_95_link', 'ned', 'inertial')
+    assert messages.orientation_stddev == ORIENTATION_STDDEV
+    assert config.messages == config.messages_for(left)

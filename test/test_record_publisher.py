@@ -25,8 +25,9 @@ from i3dmgx2_driver.codec import streams
 from i3dmgx2_driver.codec.data_rate import ticks_per_cycle
 from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.records import AccelAngRate, Magnetometer, TICKS_PER_SECOND
+from i3dmgx2_driver.ros.conversions import MessageSettings
 from i3dmgx2_driver.ros.publishers import calibrated_qos, Publishers
-from i3dmgx2_driver.ros.record_publisher import packing, RecordPublisher, Stamping
+from i3dmgx2_driver.ros.record_publisher import RecordPublisher, Stamping
 import pytest
 import rclpy
 from rclpy.node import Node
@@ -47,8 +48,7 @@ def records():
     stream = streams.parse('inertial')
     publishers = Publishers(node.create_publisher(Imu, 'imu/raw_data', 10), None, None,
                             node.create_publisher(Bool, '~/is_calibrated', calibrated_qos()))
-    packers = packing(('imu_link', 'enu', 0.0, 0.0, 0.0, 0.0, stream))
-    yield RecordPublisher(publishers, packers, stream.record_type,
+    yield RecordPublisher(publishers, MessageSettings('imu_link', 'enu', stream=stream),
                           Stamping(device_time=True, offset=0.0, wire_time=0.0),
                           lambda: TICKS, node.get_logger(), publishing=False)
     node.destroy_node()

@@ -22,7 +22,6 @@ and the README's table of what N sensors fit on the line, against the code.
 import math
 import os
 import re
-from types import SimpleNamespace
 
 from harness.processes import REPO
 from i3dmgx2_driver.codec import line_budget, streams
@@ -42,7 +41,7 @@ def settings(**given):
     unknown = given.keys() - DEFAULTS.keys()
     assert not unknown, f'no such parameter: {sorted(unknown)}'
     values = {NODE_NAMES.get(name, name): value for name, value in {**DEFAULTS, **given}.items()}
-    return sensor_settings(SimpleNamespace(**values))
+    return sensor_settings(values)
 
 
 def test_one_sensor_is_named_imu_as_always():

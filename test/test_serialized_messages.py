@@ -27,7 +27,7 @@ import random
 
 from i3dmgx2_driver.codec.orientation import matrix_from_quaternion, Quaternion
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
-from i3dmgx2_driver.ros.conversions import MessageFactory, stamp_parts
+from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings, stamp_parts
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import Imu, MagneticField
@@ -50,7 +50,10 @@ def _random_record(rng: random.Random) -> AccelAngRateMagOrientation:
 
 
 def _factory(frame: str, convention: str) -> MessageFactory:
-    return MessageFactory(frame, convention, 0.01, 0.002, 0.03, 1e-6)
+    return MessageFactory(MessageSettings(
+        frame_id=frame, frame_convention=convention, orientation_stddev=0.01,
+        angular_velocity_stddev=0.002, linear_acceleration_stddev=0.03,
+        magnetic_field_stddev=1e-6))
 
 
 @pytest.mark.parametrize('convention', ['enu', 'ned'])

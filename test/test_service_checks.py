@@ -23,9 +23,10 @@ with one log line instead of taking the driver down.
 import os
 
 from i3dmgx2_driver.capture import read_capture
-from i3dmgx2_driver.ros.gyro_bias import judge_capture, MAX_GYRO_BIAS
 from i3dmgx2_driver.ros.raw_capture import RawCapture
-from i3dmgx2_driver.ros.self_test import format_report, gravity_step, rate_step, Step
+from i3dmgx2_driver.ros.services import (
+    format_report, gravity_step, judge_capture, MAX_GYRO_BIAS, rate_step, Step,
+)
 import pytest
 
 BIAS = (-0.0033, -0.0217, -0.0052)

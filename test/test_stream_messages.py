@@ -25,7 +25,7 @@ import math
 
 from i3dmgx2_driver.codec import streams
 from i3dmgx2_driver.codec.orientation import euler_from_matrix, matrix_from_euler
-from i3dmgx2_driver.ros.conversions import MessageFactory, probe_records
+from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings, probe_records
 from i3dmgx2_driver.simulator.motion import Motion, MotionConfig
 from i3dmgx2_driver.simulator.sensor import SimulatedSensor
 import numpy as np
@@ -40,7 +40,10 @@ MISSING = [-1.0] + [0.0] * 8
 
 
 def factory(stream: streams.Stream, convention: str) -> MessageFactory:
-    return MessageFactory('imu_link', convention, 0.01, 0.002, 0.03, 1e-6, stream)
+    return MessageFactory(MessageSettings(
+        frame_id='imu_link', frame_convention=convention, orientation_stddev=0.01,
+        angular_velocity_stddev=0.002, linear_acceleration_stddev=0.03,
+        magnetic_field_stddev=1e-6, stream=stream))
 
 
 def moving_sensor(seed: int) -> SimulatedSensor:

@@ -18,7 +18,9 @@ How to reach one device and how patient to be with it.
 
 One frozen settings object for the supervisor (the port, the retry and
 recovery timing) and the dialogue (the address, the stream, the request
-timeouts): the node builds it once from its parameters.
+timeouts). The node fills it from its parameter table, where each parameter
+names the field it sets (``Spec.feeds`` in ros/parameters.py); a field no
+parameter sets keeps its default here.
 """
 
 from dataclasses import dataclass

@@ -37,6 +37,7 @@ on many records of every stream.
 """
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 import math
 from operator import attrgetter
 import struct
@@ -123,6 +124,24 @@ def _cdr_header(frame_id: str) -> tuple[str, bytes]:
     return f'iII{len(text)}s{-(12 + len(text)) % 8}x', text
 
 
+@dataclass(frozen=True)
+class MessageSettings:
+    """
+    How one sensor's records become messages: its frame, the axes, the covariances.
+
+    The fields are named as the parameters that set them (ros/parameters.py);
+    a standard deviation of 0 is unknown (all-zero covariance).
+    """
+
+    frame_id: str
+    frame_convention: str
+    orientation_stddev: float = 0.0
+    angular_velocity_stddev: float = 0.0
+    linear_acceleration_stddev: float = 0.0
+    magnetic_field_stddev: float = 0.0
+    stream: Stream = streams.DEFAULT
+
+
 class MessageFactory:
     """
     Fill ``Imu`` and ``MagneticField`` messages from the records of one stream.
@@ -133,12 +152,10 @@ class MessageFactory:
     stream's row of the table; the per-record work is only the arithmetic.
     """
 
-    def __init__(self, frame_id: str, convention: str, orientation_stddev: float,
-                 angular_velocity_stddev: float, linear_acceleration_stddev: float,
-                 magnetic_field_stddev: float, stream: Stream = streams.DEFAULT) -> None:
-        self.convention = convention
-        self.stream = stream
-        self.frame_id = frame_id_for(frame_id, convention)
+    def __init__(self, settings: MessageSettings) -> None:
+        self.convention = convention = settings.frame_convention
+        self.stream = stream = settings.stream
+        self.frame_id = frame_id_for(settings.frame_id, convention)
         # Each Imu part: how to get it from a record, and its covariance (missing: -1).
         if stream.orientation == streams.MATRIX:
             self._attitude = attrgetter('matrix')
@@ -149,12 +166,14 @@ class MessageFactory:
             self._attitude = None
         self._rate = attrgetter(stream.angular_rate) if stream.angular_rate else None
         self._accel = attrgetter(stream.accel) if stream.accel else None
-        self._orientation_cov = (tuple(diagonal_covariance(orientation_stddev))
+        self._orientation_cov = (tuple(diagonal_covariance(settings.orientation_stddev))
                                  if self._attitude else MISSING_COVARIANCE)
-        self._angular_velocity_cov = (tuple(diagonal_covariance(angular_velocity_stddev))
-                                      if self._rate else MISSING_COVARIANCE)
-        self._linear_acceleration_cov = (tuple(diagonal_covariance(linear_acceleration_stddev))
-                                         if self._accel else MISSING_COVARIANCE)
+        self._angular_velocity_cov = (
+            tuple(diagonal_covariance(settings.angular_velocity_stddev))
+            if self._rate else MISSING_COVARIANCE)
+        self._linear_acceleration_cov = (
+            tuple(diagonal_covariance(settings.linear_acceleration_stddev))
+            if self._accel else MISSING_COVARIANCE)
         imu = Imu()
         imu.header.frame_id = self.frame_id
         imu.orientation_covariance = self._orientation_cov
@@ -164,7 +183,7 @@ class MessageFactory:
         self.imu = imu
         mag = MagneticField()
         mag.header.frame_id = self.frame_id
-        mag.magnetic_field_covariance = diagonal_covariance(magnetic_field_stddev)
+        mag.magnetic_field_covariance = diagonal_covariance(settings.magnetic_field_stddev)
         self.mag = mag
         # The same messages in CDR: header, then Imu's 37 float64 (orientation 4 and its
         # covariance 9, angular velocity 3 and 9, linear acceleration 3 and 9), or

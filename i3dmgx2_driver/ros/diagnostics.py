@@ -40,7 +40,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from .calibration import Calibration, RATE_TOLERANCE
-from .qos import create_publisher
+from .publishers import create_publisher
 from ..device.sample_clock import ClockStatus, Restart
 from ..device.status import DeviceStatus, RadioStats, State
 
@@ -537,7 +537,7 @@ class DiagnosticsPublisher:
             radio_status(device.wireless, radio, fresh),
             parser_status(parser, self._last_parser, device.strays),
             device_status(device, core.sensor.address, core.temperature.latest),
-            time_status(cfg.time_source, core.clock_status(), now,
+            time_status(cfg.time_source, core.records.clock_status(), now,
                         time_offset=cfg.time_offset),
             calibration_status(last, good, time.time()),
         ]

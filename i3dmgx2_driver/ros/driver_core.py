@@ -15,14 +15,18 @@
 """
 The driver behind both executables: device records in, sensor_msgs out, on time.
 
-:class:`DriverCore` is everything the driver does for one configuration:
-the publishers, the message factory, stamping and loss counting, the
-device supervisor, the services, the temperature poller and the raw
-capture. It lives on an rclpy node it does not own: the plain node
-(``imu_node.py``) makes one at start and starts its supervisor at once; the
-managed node (``lifecycle_node.py``) makes one at each configure, with
-lifecycle publishers, drives the supervisor's phases from its transitions
-and destroys the core at cleanup. Neither holds a copy of this code.
+:class:`DriverCore` is everything the driver does for one sensor: the
+publishers, the message factory, stamping and loss counting (its
+:class:`~.record_publisher.RecordPublisher`), the device supervisor, the
+services and the temperature poller. :class:`DriverSet` is every sensor the
+node serves, each a core, on one port, with the port's raw capture. It lives
+on an rclpy node it does not own: the plain node (``imu_node.py``) makes one
+at start and starts its supervisors at once; the managed node
+(``lifecycle_node.py``) makes one at each configure, with lifecycle
+publishers, drives the supervisors' phases from its transitions and
+destroys the set at cleanup. Neither holds a copy of this code. Others use
+a core's parts themselves (``core.records``, ``core.supervisor``,
+``core.device_services``): the core forwards nothing.
 
 The supervisor's reader thread calls the core's
 :meth:`~.record_publisher.RecordPublisher.on_record` for every valid
@@ -30,36 +34,42 @@ record, which stamps it, packs its messages and publishes at once. The
 executor is left free for parameters, services and diagnostics, and nothing
 it does can delay a sample.
 
+With one sensor (``address``) the set holds one core that opens its port
+itself, exactly as the driver always did: nothing on its hot path changes.
+With several (``addresses``) the cores share one
+:class:`~..device.shared_port.SharedPort` (one reader thread routing each
+packet to its sensor's core) and the raw capture of the port; each core has
+its own publishers, clock, counters, supervisor, services and diagnostics
+(sensor_set.py says how they are named). Stopping stops them all at once, so
+that several sensors stop as fast as one.
+
 The first-contact checks live here too, so that both executables run them:
 :func:`load_config` names every parameter override the node does not
-declare, and the core refuses a port path that can never work
-(:class:`~..device.port.PortUnusable`, before anything is started), and
-keeps in :attr:`DriverCore.fatal_error` the one the supervisor finds later.
+declare, and the set refuses a port path that can never work
+(:class:`~..device.port.PortUnusable`, before anything is started), and each
+core keeps in :attr:`DriverCore.fatal_error` the one its supervisor finds
+later.
 """
 
 from collections.abc import Callable
-from dataclasses import dataclass
 import sys
+import threading
 import time
 
 from rclpy.node import Node
 
-from .parameters import declare_parameters, driver_config, DriverConfig, SPECS
-from .publishers import ALONE_TOPICS, create_publishers, Publishers, SensorTopics
-from .qos import override_names
+from .parameters import (declare_parameters, driver_config, DriverConfig, SPECS,
+                         warn_unknown_parameters)
+from .publishers import ALONE_TOPICS, create_publishers, override_names, Publishers, SensorTopics
 from .raw_capture import RawCapture
-from .record_publisher import packing, RecordPublisher, Stamping
+from .record_publisher import RecordPublisher, Stamping
 from .sensor_set import SensorSetting
 from .services import DeviceServices
 from .temperature import TemperaturePoller
-from .unknown_parameters import warn_unknown_parameters
 from ..codec.data_rate import ticks_per_cycle
 from ..device.hot_path import HotPathObserver
 from ..device.port import check_port_path, PortError, SerialPort
 from ..device.port_opener import PortParts
-from ..device.realtime import ThreadPolicy
-from ..device.sample_clock import ClockStatus
-from ..device.settings import DeviceConfig
 from ..device.shared_port import SharedPort
 from ..device.supervisor import DeviceSupervisor
 
@@ -84,133 +94,78 @@ def load_config(node: Node) -> DriverConfig:
     return config
 
 
-def device_config(config: DriverConfig, sensor: SensorSetting) -> DeviceConfig:
-    """Return how the device side reaches and treats ``sensor``, from the parameters."""
-    return DeviceConfig(
-        port=config.port, address=sensor.address, baud=config.baud, wireless=config.wireless,
-        low_latency=config.low_latency, stall_timeout=config.read_timeout,
-        reconnect_interval=config.reconnect_interval, data_rate_hz=sensor.data_rate_hz,
-        stream=sensor.stream_choice.code, thread_policy=ThreadPolicy(config.realtime_priority))
-
-
-@dataclass(frozen=True)
-class CoreRole:
-    """
-    What the owning node decides for its core.
-
-    ``publishers``: the data publishers to use (a managed node's lifecycle
-    publishers, see :func:`create_publishers`); None: the core makes plain
-    ones. ``publishing`` False: records are counted, not published, until
-    the owner turns publishing on. ``refusal`` tells the services why they
-    must refuse now ('' to serve).
-    """
-
-    publishers: Publishers | None = None
-    publishing: bool = True
-    refusal: Callable[[], str] | None = None
-
-
-@dataclass(frozen=True)
-class Probes:
-    """
-    What a test or benchmark injects; the defaults are what the node runs with.
-
-    ``timings``, if given, is told every stage boundary of every sample's
-    path (device/hot_path.py); None costs nothing. ``port_factory`` opens
-    the port (SerialPort; a subclass to observe it).
-    """
-
-    timings: HotPathObserver | None = None
-    port_factory: Callable[..., SerialPort] = SerialPort
-
-
-@dataclass(frozen=True)
-class SensorSlot:
-    """
-    Which sensor a core serves, and what it shares with the others on its port.
-
-    ``sensor``: default the one the parameters name. With several behind
-    one base station (driver_set.py) each has a core, ``shared`` is the port
-    they share and ``raw_capture`` the port's one capture, which the set
-    closes.
-    """
-
-    sensor: SensorSetting | None = None
-    shared: SharedPort | None = None
-    raw_capture: RawCapture | None = None
-
-
 class DriverCore:
     """
-    Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField.
+    Publish the records of ``sensor``'s stream as sensor_msgs/Imu and MagneticField.
 
     ``node`` is the rclpy node the services and logs belong to; ``config``
-    the validated parameters; ``role`` what the owning node decides,
-    ``probes`` what a test injects, ``slot`` the sensor served and what it
-    shares (each class says more). The core starts nothing: its owner drives
-    :attr:`supervisor`. A port path that exists but is no serial port raises
-    PortUnusable here, before anything is made. The records themselves go
-    through :attr:`records` (record_publisher.py), which the supervisor's
-    reader thread calls.
+    the validated parameters; ``publishers`` the sensor's data publishers
+    (plain ones, or a managed node's lifecycle publishers: see
+    :func:`create_publishers`); ``raw_capture`` the port's capture (its
+    :class:`DriverSet` closes it). What the owning node decides:
+    ``publishing`` False: records are counted, not published, until the
+    owner turns publishing on (``records.set_publishing``); ``refusal``
+    tells the services why they must refuse now ('' to serve). What a test
+    or benchmark injects (the defaults are what the node runs with):
+    ``timings``, told every stage boundary of every sample's path
+    (device/hot_path.py; None costs nothing), and ``port_factory``, which
+    opens the port (SerialPort; a subclass to observe it). ``shared``: the
+    port the sensors behind one base station share (None: the core opens
+    its own).
 
-    With several sensors on one port the core's services are under its
-    sensor's name (``~/<name>/self_test``).
+    The core starts nothing: its owner drives :attr:`supervisor`. The records
+    themselves go through :attr:`records` (record_publisher.py), which the
+    supervisor's reader thread calls. With several sensors on one port the
+    core's services are under its sensor's name (``~/<name>/self_test``).
     """
 
-    def __init__(self, node: Node, config: DriverConfig, role: CoreRole = CoreRole(),
-                 probes: Probes = Probes(), slot: SensorSlot = SensorSlot()) -> None:
-        check_port_path(config.port)
-        timings, port_factory, shared = probes.timings, probes.port_factory, slot.shared
+    def __init__(self, node: Node, config: DriverConfig, sensor: SensorSetting,
+                 publishers: Publishers, raw_capture: RawCapture, *,
+                 publishing: bool = True, refusal: Callable[[], str] | None = None,
+                 timings: HotPathObserver | None = None,
+                 port_factory: Callable[..., SerialPort] = SerialPort,
+                 shared: SharedPort | None = None) -> None:
         self.node = node
         self.config = cfg = config
         #: The sensor this core serves: address, name (topic prefix), frame, stream.
-        self.sensor = sensor = slot.sensor if slot.sensor is not None else cfg.sensors[0]
+        self.sensor = sensor
         #: Why the port can never work, once the supervisor found out.
         self.fatal_error: PortError | None = None
         self.stream = sensor.stream_choice
-        self.publishers = role.publishers or create_publishers(node, cfg, sensor=sensor)
-        packers = packing((sensor.frame_id, cfg.frame_convention, cfg.orientation_stddev,
-                           cfg.angular_velocity_stddev, cfg.linear_acceleration_stddev,
-                           cfg.magnetic_field_stddev, self.stream))
-        self.messages = packers.messages
+        self.publishers = publishers
         #: Stamping, counting and publishing of each record, in the reader thread.
         self.records = RecordPublisher(
-            self.publishers, packers, self.stream.record_type, Stamping.of(cfg, self.stream),
-            self._expected_ticks, node.get_logger(), role.publishing, timings)
+            self.publishers, cfg.messages_for(sensor), Stamping.of(cfg, self.stream),
+            self._expected_ticks, node.get_logger(), publishing, timings)
         self.stats = self.records.stats
-        # The reader thread and the supervisor call the record publisher itself.
-        self._on_record = self.records.on_record
-        self._on_connect = self.records.link_changed
-        #: Whether this core's sensor shares its port with others (driver_set.py).
+        #: Whether this core's sensor shares its port with others.
         self._shared = shared is not None
-        #: The port's raw capture: this core's own, or the one the sensors share.
-        self._owns_capture = slot.raw_capture is None
-        self.raw_capture = slot.raw_capture if slot.raw_capture is not None else RawCapture(
-            cfg.capture_file, node.get_logger(), port=cfg.port, address=sensor.address,
-            baud=cfg.baud, wireless=cfg.wireless, node=node.get_fully_qualified_name())
+        #: The port's raw capture (shown on diagnostics).
+        self.raw_capture = raw_capture
         #: How the device side reaches and treats the sensor.
-        self.device_config = device_config(cfg, sensor)
-        capture = self.raw_capture.on_bytes if self.raw_capture.active else None
+        self.device_config = cfg.device_for(sensor)
+        capture = raw_capture.on_bytes if raw_capture.active and shared is None else None
         self.supervisor = DeviceSupervisor(
             self.device_config,
-            on_record=self._on_record, log=node.get_logger(), on_connect=self._on_connect,
-            on_fatal=self._on_fatal, port=PortParts(
-                port_factory, capture if shared is None else None, timings),
-            shared=shared)
+            on_record=self.records.on_record, log=node.get_logger(),
+            on_connect=self.records.link_changed, on_fatal=self._on_fatal,
+            port=PortParts(port_factory, capture, timings), shared=shared)
         self.records.announce_calibrated(False)
         self.device_services = DeviceServices(
             node, self.supervisor, self.records.published, self.records.forget_last_sample,
-            capture_on_start=cfg.capture_gyro_bias_on_start, refusal=role.refusal,
+            capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal,
             calibrated=self.records.announce_calibrated,
             prefix='~/' if shared is None else f'~/{sensor.name}/')
+        frame_id = self.records.messages.frame_id
         self.temperature = TemperaturePoller(
-            node, self.supervisor.streaming_link, self.messages.frame_id,
+            node, self.supervisor.streaming_link, frame_id,
             cfg.temperature_period, self.publishers.temperature, cfg.time_offset)
+        convention = cfg.messages.frame_convention
         node.get_logger().info(
-            f'i3dmgx2_driver: port {cfg.port}, node address {sensor.address}, '
+            f'i3dmgx2_driver: port {cfg.device.port}, node address {sensor.address}, '
             + (f'topics {sensor.name}/..., ' if shared is not None else '')
-            + f'stream {self.stream.label}, frame {self.messages.frame_id} '
-            f'({cfg.frame_convention}), '
+            + f'stream {self.stream.label}, frame {frame_id} '
+            f'({convention}), '
             f'time source {cfg.time_source}'
             + (f', time offset {cfg.time_offset:+g} s' if cfg.time_offset else ''))
 
@@ -224,31 +179,17 @@ class DriverCore:
         self.fatal_error = error
         self.node.get_logger().fatal(str(error))
 
-    def clock_status(self) -> ClockStatus:
-        """Return a snapshot of the stamping clock (from any thread)."""
-        return self.records.clock_status()
-
-    def set_publishing(self, on: bool) -> None:
-        """Publish the records (a managed node while active), or only count them."""
-        self.records.set_publishing(on)
-
-    def forget_last_sample(self) -> None:
-        """Let the next record start afresh: a deliberate pause is no packet loss."""
-        self.records.forget_last_sample()
-
     def _expected_ticks(self) -> int | None:
         divider = self.supervisor.dialogue.divider
         return ticks_per_cycle(divider) if divider else None
 
     def shutdown(self, report: bool = True) -> None:
-        """Stop the device stream and close the port (bounded in time); log it if ``report``."""
+        """Stop the device stream (bounded in time); log it if ``report``."""
         start = time.monotonic()
         self.device_services.stop()
         self.temperature.stop()
         self.supervisor.stop()
         self.device_services.wait_idle(1.0)
-        if self._owns_capture:
-            self.raw_capture.close()
         if not report:
             return
         of = f' of node {self.sensor.address}' if self._shared else ''
@@ -260,12 +201,86 @@ class DriverCore:
             # After SIGINT the context is gone and /rosout with it: plain stderr.
             print(f'[i3dmgx2_driver] {message}', file=sys.stderr, flush=True)
 
+
+class DriverSet:
+    """
+    The cores of every sensor in ``config`` on ``node``, sharing their port if several.
+
+    ``publishers``, if given, holds each sensor's (a managed node's lifecycle
+    publishers, in the order of ``config.sensors``; else the set makes plain
+    ones); the other arguments are handed to every core (see DriverCore). A
+    port path that exists but is no serial port raises PortUnusable here,
+    before anything is made.
+    """
+
+    def __init__(self, node: Node, config: DriverConfig,
+                 publishers: list[Publishers] | None = None, publishing: bool = True,
+                 refusal: Callable[[], str] | None = None,
+                 timings: HotPathObserver | None = None,
+                 port_factory: Callable[..., SerialPort] = SerialPort) -> None:
+        device = config.device
+        check_port_path(device.port)
+        sensors = config.sensors
+        self.config = config
+        publishers = publishers or [create_publishers(node, config, sensor=sensor)
+                                    for sensor in sensors]
+        #: The port's one raw capture, for every sensor on it; closed after them all.
+        self._capture = capture = RawCapture(
+            config.capture_file, node.get_logger(), port=device.port,
+            address=sensors[0].address, baud=device.baud, wireless=device.wireless,
+            node=node.get_fully_qualified_name())
+        self.shared: SharedPort | None = None
+        if len(sensors) > 1:
+            self.shared = SharedPort(
+                device, node.get_logger(), port_factory,
+                capture.on_bytes if capture.active else None, timings)
+        self.cores = [
+            DriverCore(node, config, sensor, sensor_publishers, capture,
+                       publishing=publishing, refusal=refusal, timings=timings,
+                       port_factory=port_factory, shared=self.shared)
+            for sensor, sensor_publishers in zip(sensors, publishers, strict=True)]
+
+    @property
+    def several(self) -> bool:
+        """Whether the set serves several sensors on a shared port."""
+        return self.shared is not None
+
+    @property
+    def fatal_error(self) -> PortError | None:
+        """Return why the port can never work, once a supervisor found out (else None)."""
+        return next((core.fatal_error for core in self.cores if core.fatal_error), None)
+
+    def start(self) -> None:
+        """Start every sensor's supervisor (the plain node: stream, recover, forever)."""
+        for core in self.cores:
+            core.supervisor.start()
+
+    def set_publishing(self, on: bool) -> None:
+        """Publish the records (a managed node while active), or only count them."""
+        for core in self.cores:
+            core.records.set_publishing(on)
+
+    def shutdown(self, report: bool = True) -> None:
+        """Stop every stream and close the port, the sensors at once (bounded in time)."""
+        if len(self.cores) == 1:
+            self.cores[0].shutdown(report)
+        else:
+            threads = [threading.Thread(target=core.shutdown, args=(report,),
+                                        name=f'gx2-stop-{core.sensor.address}')
+                       for core in self.cores]
+            for thread in threads:
+                thread.start()
+            for thread in threads:
+                thread.join(5.0)
+        self._capture.close()
+
     def destroy(self) -> None:
         """
-        Remove the core's services from the node (after shutdown).
+        Remove every core's services from the node (after shutdown).
 
-        For the managed node's cleanup: a later configure makes a new core.
+        For the managed node's cleanup: a later configure makes a new set.
         The publishers stay: they belong to whoever made them (see
         :func:`create_publishers` for why a managed node keeps them).
         """
-        self.device_services.destroy()
+        for core in self.cores:
+            core.device_services.destroy()

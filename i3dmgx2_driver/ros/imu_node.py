@@ -28,8 +28,7 @@ from collections.abc import Callable
 from rclpy.node import Node
 
 from .diagnostics import DiagnosticsPublisher
-from .driver_core import DriverCore, load_config
-from .driver_set import DriverSet
+from .driver_core import DriverCore, DriverSet, load_config
 from .parameters import DriverConfig
 from ..device.hot_path import HotPathObserver
 from ..device.port import PortError, SerialPort
@@ -49,7 +48,7 @@ class ImuDriverNode(Node):
                  port_factory: Callable[..., SerialPort] = SerialPort, **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         self.config: DriverConfig = load_config(self)
-        #: Every sensor's core (one, unless ``addresses`` lists several: driver_set.py).
+        #: Every sensor's core (one, unless ``addresses`` lists several: DriverSet).
         self.drivers = DriverSet(self, self.config, timings=timings, port_factory=port_factory)
         self.core: DriverCore = self.drivers.cores[0]
         self.diagnostics = [

@@ -43,7 +43,7 @@ logged in one line:
 ``/diagnostics`` runs in every state and reports the lifecycle state first.
 
 With several sensors (``addresses``) every step is taken for each sensor at
-once (driver_set.py): configure fails only if no listed sensor answers, and
+once (DriverSet, driver_core.py): configure fails only if no listed sensor answers, and
 says which did not; a sensor that did not answer, or whose stream does not
 start at activate, is retried in the background while the others stream
 (as the plain node retries it); activate fails only if no sensor streams.
@@ -61,8 +61,7 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from .diagnostics import DiagnosticsPublisher
-from .driver_core import DriverCore, load_config
-from .driver_set import DriverSet
+from .driver_core import DriverCore, DriverSet, load_config
 from .main import run
 from .parameters import declare_parameters, driver_config, DriverConfig, ParameterError
 from .publishers import create_publishers, Publishers
@@ -186,7 +185,7 @@ class LifecycleDriverNode(LifecycleNode):
             log.error(f'configure failed: {exc}')
             return FAILURE
         try:
-            check_port_path(config.port)  # the words of the plain node's exit 2
+            check_port_path(config.device.port)  # the words of the plain node's exit 2
         except PortUnusable as exc:
             log.error(f'configure failed: {exc}')
             return FAILURE
@@ -217,7 +216,7 @@ class LifecycleDriverNode(LifecycleNode):
         expected_hz = ready[0].supervisor.status().expected_rate_hz
         rate = f', {expected_hz:.1f} Hz' if expected_hz else ''
         nodes = ', '.join(str(core.sensor.address) for core in ready)
-        log.info(f'configure: {config.port} open, node{"s" if len(ready) > 1 else ""} '
+        log.info(f'configure: {config.device.port} open, node{"s" if len(ready) > 1 else ""} '
                  f'{nodes} ready{rate} ({time.monotonic() - start:.2f} s)')
         return SUCCESS
 
@@ -230,7 +229,7 @@ class LifecycleDriverNode(LifecycleNode):
         if result != SUCCESS or drivers is None:
             return FAILURE
         for core in drivers.cores:
-            core.forget_last_sample()  # the pause since the last activation is no loss
+            core.records.forget_last_sample()  # the pause since the last activation is no loss
         drivers.set_publishing(True)
         failed = _each(drivers.cores, lambda core: core.supervisor.start_streaming())
         if len(failed) == len(drivers.cores):

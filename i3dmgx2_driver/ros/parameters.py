@@ -27,12 +27,30 @@ Values are taken as people type them (``-p data_rate:=300`` for a double,
 given is read through a dynamically typed declaration, converted, and the
 parameter then declared with its own type and descriptor (:func:`given_value`).
 The QoS of the publishers is not here: rclpy declares its standard
-``qos_overrides`` parameters itself (``qos.py``); ``qos_reliability`` and
-``qos_depth`` remain for one release, warned about when given.
+``qos_overrides`` parameters itself (``publishers.py``); ``qos_reliability``
+and ``qos_depth`` remain for one release, warned about when given.
+
+Each parameter is typed once, in its ``Spec``, which also names the
+configuration it feeds (``Spec.feeds``): a field of the device side's
+``DeviceConfig`` (device/settings.py), of the messages' ``MessageSettings``
+(conversions.py), the sensor set (sensor_set.py), or the ROS side's own
+``DriverConfig``. :func:`driver_config` fills each from the table, so a new
+parameter that reaches the dialogue is its entry here and its use there.
+
+rclpy silently ignores ``-p data_rat:=200.0`` (a typo of ``data_rate``): the
+user believes the rate is set. :func:`warn_unknown_parameters` names every
+override given on the command line or in a params file (under ``/**`` or the
+node's name) that the node does not declare and that is not one of the
+driver's own names (they may not be declared yet when a required one is
+missing), in one warning each, with the closest real name when one is close.
+rclpy's own parameters (``use_sim_time``, ``start_type_description_service``)
+are declared by rclpy itself, so they are never reported. Only a missing
+required parameter stops the node; an unknown one does not.
 """
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, replace
+import difflib
 import math
 from typing import Any, NamedTuple
 
@@ -41,12 +59,14 @@ from rclpy.exceptions import InvalidParameterValueException, ParameterUninitiali
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from .conversions import MessageSettings
 from .sensor_set import check_shared_budget, sensor_settings, SensorSetting
 from ..codec import streams
 from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.orientation import CONVENTIONS
-from ..device.realtime import MAX_PRIORITY
+from ..device.realtime import MAX_PRIORITY, ThreadPolicy
+from ..device.settings import DeviceConfig
 from ..device.timeouts import STALL_TIMEOUT
 
 TIME_SOURCES = ('device', 'host')
@@ -63,6 +83,8 @@ LINEAR_ACCELERATION_STDDEV = 0.098
 TIME_OFFSET_LIMIT = 10.0
 RELIABILITIES = ('reliable', 'best_effort')
 _REQUIRED = object()
+#: How alike two names must be (difflib's ratio) for "did you mean".
+CLOSE_ENOUGH = 0.6
 
 
 class ParameterError(ValueError):
@@ -87,6 +109,13 @@ class Spec(NamedTuple):
     replaced_by: str = ''
     #: For a required one: not required when this other parameter is given.
     unless: str = ''
+    #: Which configuration the value goes to: ``device.<field>`` (DeviceConfig),
+    #: ``messages.<field>`` (MessageSettings), ``sensors`` (sensor_set.py, each
+    #: sensor's address, name, frame, stream and rate), ``driver`` (the
+    #: DriverConfig field of its name), or ``node`` (read from the node when used).
+    feeds: str = 'driver'
+    #: What the value becomes in the configuration it feeds (None: itself).
+    convert: Callable[[Any], Any] | None = None
 
 
 #: Several sensors behind one base station, served by one driver (ros/sensor_set.py).
@@ -94,57 +123,64 @@ SENSOR_SET_SPECS = (
     Spec('addresses', Parameter.Type.INTEGER_ARRAY, [],
          'Node addresses of several sensors behind the one base station, served by this '
          "driver (instead of 'address'); each gets its topics under its name (see Several "
-         'sensors).'),
+         'sensors).', feeds='sensors'),
     Spec('sensor_names', Parameter.Type.STRING_ARRAY, [],
          "With addresses: each sensor's name, the prefix of its topics (<name>/raw_data); "
-         "default imu_<address>. For one sensor: 'imu'."),
+         "default imu_<address>. For one sensor: 'imu'.", feeds='sensors'),
     Spec('frame_ids', Parameter.Type.STRING_ARRAY, [],
          "With addresses: each sensor's frame; default <name>_link (frame_id is one "
-         "sensor's)."),
+         "sensor's).", feeds='sensors'),
     Spec('streams', Parameter.Type.STRING_ARRAY, [],
          "With addresses: each sensor's stream (or one for all); default: stream for all.",
-         from_integer=lambda code: f'0x{code:02X}'),
+         from_integer=lambda code: f'0x{code:02X}', feeds='sensors'),
     Spec('data_rates', Parameter.Type.DOUBLE_ARRAY, [],
          "With addresses: each sensor's data rate (Hz; or one for all; 0: as the device "
-         'is); default: data_rate for all. Together they must fit the serial line.'),
+         'is); default: data_rate for all. Together they must fit the serial line.',
+         feeds='sensors'),
 )
 
 
 SPECS: list[Spec] = [
     Spec('port', Parameter.Type.STRING, '/dev/ttyUSB0',
-         'Serial port of the base station (or wired sensor).'),
+         'Serial port of the base station (or wired sensor).', feeds='device.port'),
     Spec('address', Parameter.Type.INTEGER, _REQUIRED,
          'Node address of the sensor (factory: last two digits of its serial number).',
-         (MIN_ADDRESS, MAX_ADDRESS), unless='addresses'),
+         (MIN_ADDRESS, MAX_ADDRESS), unless='addresses', feeds='sensors'),
     # Several sensors behind one base station (ros/sensor_set.py): the defaults,
     # empty, leave the one sensor of 'address' as it always was.
     *SENSOR_SET_SPECS,
-    Spec('baud', Parameter.Type.INTEGER, 115200, 'Serial baud rate.', (9600, 921600)),
+    Spec('baud', Parameter.Type.INTEGER, 115200, 'Serial baud rate.', (9600, 921600),
+         feeds='device.baud'),
     Spec('wireless', Parameter.Type.BOOL, True,
-         'True: through a wireless base station (packets, ACK/NACK); false: wired sensor.'),
+         'True: through a wireless base station (packets, ACK/NACK); false: wired sensor.',
+         feeds='device.wireless'),
     Spec('stream', Parameter.Type.STRING, streams.DEFAULT.name,
          'What the sensor streams: a stream name, or the command byte of its record as '
          "text (e.g. '0xC2'); see Choosing a stream. With data_rate it must fit the "
          'serial line, or the node refuses to start.',
-         from_integer=lambda code: f'0x{code:02X}'),
+         from_integer=lambda code: f'0x{code:02X}', feeds='sensors'),
     Spec('frame_id', Parameter.Type.STRING, 'imu_link',
-         'Frame of the published messages (_ned is appended in the ned convention).'),
+         'Frame of the published messages (_ned is appended in the ned convention).',
+         feeds='sensors'),
     Spec('frame_convention', Parameter.Type.STRING, 'enu',
          'enu: REP-103 (ENU world, x-forward/y-left/z-up body); ned: device axes '
-         '(NED world, x-forward/y-right/z-down body).', choices=CONVENTIONS),
+         '(NED world, x-forward/y-right/z-down body).', choices=CONVENTIONS,
+         feeds='messages.frame_convention'),
     Spec('orientation_stddev', Parameter.Type.DOUBLE, ORIENTATION_STDDEV,
          'Orientation standard deviation (rad); 0: unknown. Default: 2.0 degrees, the '
          "3DM-GX2 datasheet's dynamic orientation accuracy (0.5 degrees static), as the ROS 1 "
-         'microstrain_3dmgx2_imu driver.', (0.0, 10.0)),
+         'microstrain_3dmgx2_imu driver.', (0.0, 10.0), feeds='messages.orientation_stddev'),
     Spec('angular_velocity_stddev', Parameter.Type.DOUBLE, ANGULAR_VELOCITY_STDDEV,
          'Angular velocity standard deviation (rad/s); 0: unknown. Default: the ROS 1 '
-         "microstrain_3dmgx2_imu driver's figure for this sensor.", (0.0, 10.0)),
+         "microstrain_3dmgx2_imu driver's figure for this sensor.", (0.0, 10.0),
+         feeds='messages.angular_velocity_stddev'),
     Spec('linear_acceleration_stddev', Parameter.Type.DOUBLE, LINEAR_ACCELERATION_STDDEV,
          'Linear acceleration standard deviation (m/s^2); 0: unknown. Default: the ROS 1 '
-         "microstrain_3dmgx2_imu driver's figure for this sensor (10 mg).", (0.0, 100.0)),
+         "microstrain_3dmgx2_imu driver's figure for this sensor (10 mg).", (0.0, 100.0),
+         feeds='messages.linear_acceleration_stddev'),
     Spec('magnetic_field_stddev', Parameter.Type.DOUBLE, 0.0,
          'Magnetic field standard deviation (T); 0: unknown (no published figure).',
-         (0.0, 1.0)),
+         (0.0, 1.0), feeds='messages.magnetic_field_stddev'),
     Spec('time_source', Parameter.Type.STRING, 'device',
          'device: sample time from the sensor timer aligned to the host clock; '
          'host: time the packet was read.', choices=TIME_SOURCES),
@@ -162,23 +198,26 @@ SPECS: list[Spec] = [
          'qos_overrides./imu/raw_data.publisher.depth. QoS history depth of the data '
          'publishers.', (1, 1000), replaced_by='depth'),
     Spec('read_timeout', Parameter.Type.DOUBLE, STALL_TIMEOUT,
-         'Seconds without data before the stream counts as stalled.', (0.1, 60.0)),
+         'Seconds without data before the stream counts as stalled.', (0.1, 60.0),
+         feeds='device.stall_timeout'),
     Spec('reconnect_interval', Parameter.Type.DOUBLE, 1.0,
-         'Seconds between attempts to reopen a lost port.', (0.1, 60.0)),
+         'Seconds between attempts to reopen a lost port.', (0.1, 60.0),
+         feeds='device.reconnect_interval'),
     Spec('publish_mag', Parameter.Type.BOOL, True,
          'Publish sensor_msgs/MagneticField on imu/mag (NaN readings are skipped).'),
     Spec('data_rate', Parameter.Type.DOUBLE, 0.0,
          f'Data rate (Hz) to write to the device (EEPROM 0xFCA2, persists); 0: leave the '
          f'device as it is; otherwise {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f}, and the stream '
          f'must fit the serial line at that rate (see Choosing a stream).',
-         (0.0, round(MAX_RATE_HZ, 1))),
+         (0.0, round(MAX_RATE_HZ, 1)), feeds='sensors'),
     Spec('low_latency', Parameter.Type.BOOL, True,
-         'Put the serial port in Linux low-latency mode (USB adapters) when it supports it.'),
+         'Put the serial port in Linux low-latency mode (USB adapters) when it supports it.',
+         feeds='device.low_latency'),
     Spec('gyro_bias_sampling_ms', Parameter.Type.INTEGER, 10000,
          'Sampling time (ms) of ~/capture_gyro_bias (0xCD); the sensor must stay still that '
          'long. The protocol advises 10000..30000; down to 100 is accepted for tests and the '
          'simulator, at the cost of a noisier bias.',
-         (100, 30000), read_only=False),
+         (100, 30000), read_only=False, feeds='node'),
     Spec('capture_gyro_bias_on_start', Parameter.Type.BOOL, False,
          'Capture the gyro bias once, right after streaming first starts (the sensor must '
          'be still then).'),
@@ -188,7 +227,8 @@ SPECS: list[Spec] = [
     Spec('realtime_priority', Parameter.Type.INTEGER, 0,
          'SCHED_FIFO priority of the thread that reads the port and publishes; 0: normal '
          'scheduling. Where the system refuses it (no rtprio limit) one warning is logged and '
-         'the thread runs as usual.', (0, MAX_PRIORITY)),
+         'the thread runs as usual.', (0, MAX_PRIORITY),
+         feeds='device.thread_policy', convert=ThreadPolicy),
     Spec('capture_file', Parameter.Type.STRING, '',
          'Write every byte read from the port, with its receive time, to this capture file '
          '(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '
@@ -199,54 +239,41 @@ SPECS: list[Spec] = [
 
 @dataclass(frozen=True)
 class DriverConfig:
-    """The validated parameters, as plain values."""
+    """
+    The validated parameters, each in the configuration it feeds (``Spec.feeds``).
 
-    port: str
-    #: 0 when ``addresses`` lists the sensors instead.
-    address: int
-    addresses: tuple[int, ...]
-    sensor_names: tuple[str, ...]
-    frame_ids: tuple[str, ...]
-    streams: tuple[str, ...]
-    data_rates: tuple[float, ...]
-    baud: int
-    wireless: bool
-    stream: str
-    frame_id: str
-    frame_convention: str
-    orientation_stddev: float
-    angular_velocity_stddev: float
-    linear_acceleration_stddev: float
-    magnetic_field_stddev: float
+    The fields below ``sensors`` are the ROS side's own: what no other
+    configuration holds.
+    """
+
+    #: How the device side reaches and treats the first sensor (the port, the line,
+    #: the patience); :meth:`device_for` gives any sensor's.
+    device: DeviceConfig
+    #: How the first sensor's records become messages; :meth:`messages_for`: any sensor's.
+    messages: MessageSettings
+    #: Every sensor to serve: address, name (topic prefix), frame, stream, rate.
+    sensors: tuple[SensorSetting, ...]
     time_source: str
     time_offset: float
     qos_reliability: str
     qos_depth: int
-    read_timeout: float
-    reconnect_interval: float
     publish_mag: bool
-    data_rate: float
-    low_latency: bool
-    gyro_bias_sampling_ms: int
     capture_gyro_bias_on_start: bool
     temperature_period: float
-    realtime_priority: int
     capture_file: str
 
-    @property
-    def data_rate_hz(self) -> float | None:
-        """Return the rate to set, or None to leave the device as it is."""
-        return self.data_rate or None
+    def device_for(self, sensor: SensorSetting) -> DeviceConfig:
+        """Return how the device side reaches and treats ``sensor``."""
+        return _sensor_device(self.device, sensor)
 
-    @property
-    def stream_choice(self) -> streams.Stream:
-        """Return the stream the ``stream`` parameter names."""
-        return streams.parse(self.stream)
+    def messages_for(self, sensor: SensorSetting) -> MessageSettings:
+        """Return how ``sensor``'s records become messages (its frame and stream)."""
+        return replace(self.messages, frame_id=sensor.frame_id, stream=sensor.stream_choice)
 
-    @property
-    def sensors(self) -> list[SensorSetting]:
-        """Return every sensor to serve, with its name, frame and stream (sensor_set.py)."""
-        return sensor_settings(self)
+
+def _sensor_device(device: DeviceConfig, sensor: SensorSetting) -> DeviceConfig:
+    return replace(device, address=sensor.address, data_rate_hz=sensor.data_rate_hz,
+                   stream=sensor.stream_choice.code)
 
 
 def _valid_range(spec: Spec) -> str:
@@ -414,7 +441,7 @@ def _check(spec: Spec, value: Any) -> Any:
     return value
 
 
-def declare_parameters(node: Node, extra: tuple[Spec, ...] = ()) -> dict:
+def declare_parameters(node: Node) -> dict[str, Any]:
     """
     Declare every parameter on ``node``; return the validated values by name.
 
@@ -423,21 +450,36 @@ def declare_parameters(node: Node, extra: tuple[Spec, ...] = ()) -> dict:
     checked all the same: the same bad value gives the same message.
     """
     values = {}
-    for spec in (*SPECS, *extra):
+    for spec in SPECS:
         values[spec.name] = _check(spec, _declare(node, spec))
     return values
 
 
-def driver_config(values: dict) -> DriverConfig:
-    """Build the driver's configuration from validated values; check the line budget."""
-    fields = DriverConfig.__dataclass_fields__
-    config = DriverConfig(**{name: values[name] for name in fields})
+def driver_config(values: Mapping[str, Any]) -> DriverConfig:
+    """
+    Build the driver's configuration from validated values; check the line budget.
+
+    Each value goes where its ``Spec.feeds`` says, converted if it says how.
+    """
     try:
-        sensors = config.sensors
+        sensors = tuple(sensor_settings(values))
         if len(sensors) > 1:
-            check_shared_budget(sensors, config.baud, config.wireless)
+            check_shared_budget(sensors, values['baud'], values['wireless'])
     except ValueError as exc:
         raise ParameterError(str(exc)) from None
+    fed: dict[str, dict[str, Any]] = {'device': {}, 'messages': {}, 'driver': {}}
+    for spec in SPECS:
+        config, _, field = spec.feeds.partition('.')
+        if config in fed:
+            value = values[spec.name]
+            fed[config][field or spec.name] = (value if spec.convert is None
+                                               else spec.convert(value))
+    first = sensors[0]
+    config = DriverConfig(
+        device=_sensor_device(DeviceConfig(address=first.address, **fed['device']), first),
+        messages=MessageSettings(frame_id=first.frame_id, stream=first.stream_choice,
+                                 **fed['messages']),
+        sensors=sensors, **fed['driver'])
     check_line_budget(config)
     return config
 
@@ -455,8 +497,50 @@ def check_line_budget(config: DriverConfig) -> None:
     if len(sensors) > 1 or sensors[0].data_rate_hz is None:
         return  # several sensors: the budget of them all (sensor_set.py)
     stream, rate = sensors[0].stream_choice, sensors[0].data_rate
-    budget = streams.line_budget(stream, rate, config.baud, config.wireless)
+    budget = streams.line_budget(stream, rate, config.device.baud, config.device.wireless)
     if not budget.fits:
         raise ParameterError(f"parameter 'data_rate' ({rate:g} Hz) does not fit "
                              f'the line with stream {stream.name!r}: '
                              + streams.advice(stream, budget))
+
+
+def unknown_names(given: Iterable[str], known: Iterable[str]) -> list[tuple[str, str | None]]:
+    """
+    Return (unknown name, closest known name or None) for each given name not known.
+
+    Pure, sorted by name, so that messages come in a stable order.
+    """
+    known = sorted(set(known))
+    out = []
+    for name in sorted(set(given) - set(known)):
+        close = difflib.get_close_matches(name, known, n=1, cutoff=CLOSE_ENOUGH)
+        out.append((name, close[0] if close else None))
+    return out
+
+
+def unknown_message(name: str, closest: str | None) -> str:
+    """One line about one unknown parameter: what it is, and what was probably meant."""
+    meant = f" (did you mean '{closest}'?)" if closest else ''
+    return (f"unknown parameter '{name}'{meant}: ignored, the driver has no such parameter "
+            f'(ros2 param list shows those it has)')
+
+
+def warn_unknown_parameters(node: Node, expected: Iterable[str]) -> list[str]:
+    """
+    Warn once about each override ``node`` does not declare; return the messages.
+
+    ``expected`` are the names the entry point declares (or is about to):
+    the rest of the known names are those ``node`` has declared so far,
+    rclpy's own among them.
+    """
+    # rclpy offers no public view of the overrides it was given (-p, params files):
+    # this one read of its private field is the only one in the driver (the
+    # parameters themselves go through public API, above), and
+    # test/test_parameter_typing.py fails loudly if rclpy renames or reshapes it.
+    given = getattr(node, '_parameter_overrides', None) or {}
+    declared = node.list_parameters([], 0).names
+    lines = [unknown_message(name, closest)
+             for name, closest in unknown_names(given, [*expected, *declared])]
+    for line in lines:
+        node.get_logger().warning(line)
+    return lines

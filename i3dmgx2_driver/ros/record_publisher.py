@@ -27,13 +27,12 @@ driver core (driver_core.py), which builds it and hands its
 from collections.abc import Callable
 from dataclasses import dataclass
 import threading
-from typing import Any, NamedTuple
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.impl.rcutils_logger import RcutilsLogger
 from std_msgs.msg import Bool
 
-from .conversions import mag_is_valid, MessageFactory
+from .conversions import mag_is_valid, MessageFactory, MessageSettings
 from .parameters import DriverConfig
 from .publishers import Publishers
 from ..codec import line_budget
@@ -45,7 +44,7 @@ from ..device.sample_clock import ClockStatus, Restart, SampleClock
 #: Whether ready-serialized messages read back right, by the message factory's
 #: settings: checked once per process, because a managed node makes a core at
 #: every configure and rclpy's deserialize_message keeps a little memory per call.
-_SERIALIZED_MATCHES: dict[tuple, bool] = {}
+_SERIALIZED_MATCHES: dict[MessageSettings, bool] = {}
 
 
 @dataclass
@@ -65,30 +64,6 @@ class StreamStats:
     counting: bool = False
 
 
-class Packing(NamedTuple):
-    """The message factory, and the packers the hot path calls for each record."""
-
-    messages: MessageFactory
-    imu: Callable[[Any, float], Any]
-    mag: Callable[[Any, float], Any]
-
-
-def packing(settings: tuple) -> Packing:
-    """
-    Return the message factory of ``settings`` (MessageFactory's arguments) and its packers.
-
-    The messages are published ready-serialized (conversions.py says why)
-    when they read back right with this middleware; otherwise as message
-    objects.
-    """
-    messages = MessageFactory(*settings)
-    if settings not in _SERIALIZED_MATCHES:
-        _SERIALIZED_MATCHES[settings] = messages.serialized_matches()
-    if _SERIALIZED_MATCHES[settings]:
-        return Packing(messages, messages.imu_cdr, messages.mag_cdr)
-    return Packing(messages, messages.fill_imu, messages.fill_mag)
-
-
 @dataclass(frozen=True)
 class Stamping:
     """How a record's stamp is made: which clock, the offset, the packet's time on the wire."""
@@ -101,13 +76,16 @@ class Stamping:
     def of(cls, config: DriverConfig, stream: Stream) -> 'Stamping':
         """Return the stamping the parameters ask for, for ``stream``'s packets."""
         return cls(config.time_source == 'device', config.time_offset,
-                   line_budget.wire_time(stream.code, config.baud, config.wireless))
+                   line_budget.wire_time(stream.code, config.device.baud,
+                                         config.device.wireless))
 
 
 class RecordPublisher:
     """
-    Stamp and publish each record of ``record_type`` on ``publishers``; count the rest.
+    Stamp and publish each record of the stream ``messages`` names; count the rest.
 
+    ``messages`` says how the records become messages on ``publishers``
+    (frame, axes, covariances, stream); ``stamping`` how they are stamped.
     ``expected_ticks()`` returns the timer ticks between two records once
     the rate divider is known (else None): a larger step counts the records
     in between as lost. ``publishing`` False: records are counted, not
@@ -116,15 +94,24 @@ class RecordPublisher:
     costs nothing.
     """
 
-    def __init__(self, publishers: Publishers, packers: Packing, record_type: type,
+    def __init__(self, publishers: Publishers, messages: MessageSettings,
                  stamping: Stamping, expected_ticks: Callable[[], int | None],
                  log: RcutilsLogger, publishing: bool = True,
                  timings: HotPathObserver | None = None) -> None:
         self.publishers = publishers
         self.imu_pub = publishers.imu
         self.mag_pub = publishers.mag
-        self._imu_message, self._mag_message = packers.imu, packers.mag
-        self._record_type = record_type
+        #: The message factory (its ``frame_id`` is the one published, _ned and all).
+        self.messages = factory = MessageFactory(messages)
+        # Published ready-serialized (conversions.py says why) when the bytes read
+        # back right with this middleware; otherwise as message objects.
+        if messages not in _SERIALIZED_MATCHES:
+            _SERIALIZED_MATCHES[messages] = factory.serialized_matches()
+        if _SERIALIZED_MATCHES[messages]:
+            self._imu_message, self._mag_message = factory.imu_cdr, factory.mag_cdr
+        else:
+            self._imu_message, self._mag_message = factory.fill_imu, factory.fill_mag
+        self._record_type = messages.stream.record_type
         self.stats = StreamStats()
         #: Device timer -> system-clock stamps, through resets, rollovers and gaps.
         self.sample_clock = SampleClock()

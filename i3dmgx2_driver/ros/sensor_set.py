@@ -31,9 +31,9 @@ tested without a node; a bad combination raises ValueError with a message
 that names the parameter, what was given and what is valid.
 """
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 import re
-from typing import NamedTuple, Protocol
+from typing import Any, NamedTuple
 
 from ..codec import streams
 from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
@@ -89,38 +89,21 @@ def _names(name: str, given: Sequence[str]) -> None:
                          f'{list(given)}')
 
 
-class SensorParameters(Protocol):
-    """
-    The parameters that say which sensors to serve (the node's DriverConfig is one).
-
-    Per sensor, the arrays (empty: not given); for all of them, the single
-    values the arrays leave to them.
-    """
-
-    address: int | None
-    addresses: Sequence[int]
-    sensor_names: Sequence[str]
-    frame_ids: Sequence[str]
-    streams: Sequence[str]
-    data_rates: Sequence[float]
-    frame_id: str
-    stream: str
-    data_rate: float
-    wireless: bool
-
-
-def sensor_settings(given: SensorParameters) -> list[SensorSetting]:
+def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
     """
     Return the sensors the parameters ``given`` ask for, each with its name, frame and stream.
+
+    ``given``: the parameters' values by name; per sensor, the arrays (empty:
+    not given); for all of them, the single values the arrays leave to them.
 
     Raises ValueError naming the parameter for: ``address`` and
     ``addresses`` both given, an address out of range or given twice, an
     array of the wrong length, a name that is no ROS name token or used
     twice, a stream or rate out of range, several sensors on a wired line.
     """
-    address, addresses, wireless = given.address, given.addresses, given.wireless
-    names, frame_ids = given.sensor_names, given.frame_ids
-    stream_texts, data_rates = given.streams, given.data_rates
+    address, addresses, wireless = given['address'], given['addresses'], given['wireless']
+    names, frame_ids = given['sensor_names'], given['frame_ids']
+    stream_texts, data_rates = given['streams'], given['data_rates']
     if addresses and address:
         raise ValueError(f"parameters 'address' ({address}) and 'addresses' "
                          f'({list(addresses)}) both given: give one (address for one '
@@ -158,11 +141,11 @@ def sensor_settings(given: SensorParameters) -> list[SensorSetting]:
     out = []
     for i, value in enumerate(listed):
         name = names[i] if names else (default_name(value) if several else SINGLE_NAME)
-        frame = frame_ids[i] if frame_ids else (f'{name}_link' if several else given.frame_id)
+        frame = frame_ids[i] if frame_ids else (f'{name}_link' if several else given['frame_id'])
         text = (stream_texts[i if len(stream_texts) > 1 else 0] if stream_texts
-                else given.stream)
+                else given['stream'])
         rate = (data_rates[i if len(data_rates) > 1 else 0] if data_rates
-                else given.data_rate)
+                else given['data_rate'])
         out.append(SensorSetting(value, name, frame, text, float(rate)))
     return out
 
