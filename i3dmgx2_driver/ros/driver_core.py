@@ -47,12 +47,12 @@ from rclpy.node import Node
 from .parameters import declare_parameters, driver_config, DriverConfig, SPECS
 from .publishers import ALONE_TOPICS, create_publishers, Publishers, SensorTopics
 from .qos import override_names
-from .raw_capture import RawCapture
 from .record_publisher import packing, RecordPublisher, Stamping
 from .sensor_set import SensorSetting
 from .services import DeviceServices
 from .temperature import TemperaturePoller
 from .unknown_parameters import warn_unknown_parameters
+from ..capture import RawCapture
 from ..codec.data_rate import ticks_per_cycle
 from ..device.hot_path import HotPathObserver
 from ..device.port import check_port_path, PortError, SerialPort

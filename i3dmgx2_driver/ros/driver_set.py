@@ -33,7 +33,7 @@ from rclpy.node import Node
 from .driver_core import CoreRole, device_config, DriverCore, Probes, SensorSlot
 from .parameters import DriverConfig
 from .publishers import Publishers
-from .raw_capture import RawCapture
+from ..capture import RawCapture
 from ..device.hot_path import HotPathObserver
 from ..device.port import check_port_path, PortError, SerialPort
 from ..device.shared_port import SharedPort
