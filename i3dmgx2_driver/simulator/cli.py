@@ -29,12 +29,13 @@ import threading
 import time
 
 from i3dmgx2_driver.codec import framing
+from i3dmgx2_driver.codec.data_rate import MAX_DIVIDER, MIN_DIVIDER
 
 from .config import SimulatorConfig
 from .faults import FaultConfig
 from .motion import MotionConfig
 from .pty_link import PtySimulator
-from .sensor import MAX_DIVIDER, MIN_DIVIDER, STREAMABLE
+from .sensor import STREAMABLE
 from ..arguments import in_range
 
 
