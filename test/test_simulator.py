@@ -68,7 +68,9 @@ class Host:
                  timeout: float = 0.02, wireless: bool | None = None) -> None:
         self.sim = sim
         self.address = address
-        self.wireless = getattr(sim, 'wireless', True) if wireless is None else wireless
+        if wireless is None:  # a bare port (test_simulator_cli.py's) is a base station's
+            wireless = sim.config.wireless if isinstance(sim, PtySimulator) else True
+        self.wireless = wireless
         self.serial = serial.Serial(sim.port, 115200, timeout=timeout)
         #: After the open, which flushed whatever the port held before.
         self.opened = time.time()
@@ -210,12 +212,12 @@ def host(sim):
 def test_port_is_a_stable_symlink_to_a_raw_pty(sim):
     assert os.path.islink(sim.port)
     assert os.path.basename(sim.port) == 'ttyGX2'
-    assert os.path.realpath(sim.port) == sim.device
+    assert os.path.realpath(sim.port) == sim.pty.device
     assert stat.S_ISCHR(os.stat(sim.port).st_mode)
     # Through /proc/<pid>/fd: a link left by a killed simulator dangles instead of
     # leading to whatever pseudo-terminal reuses the number.
-    assert os.readlink(sim.port) == sim.link_target
-    assert sim.link_target.startswith(f'/proc/{os.getpid()}/fd/')
+    assert os.readlink(sim.port) == sim.pty.link_target
+    assert sim.pty.link_target.startswith(f'/proc/{os.getpid()}/fd/')
 
 
 @pytest.mark.slow
