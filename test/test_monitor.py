@@ -20,8 +20,8 @@ import sys
 import time
 
 from harness.processes import isolate_ros_domain, NodeProcess, REPO, ros_env
-from i3dmgx2_driver.tools.monitor import roll_pitch_yaw
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from i3dmgx2_driver.tools.monitor import roll_pitch_yaw
 import pytest
 
 
