@@ -225,7 +225,7 @@ def test_a_killed_simulator_leaves_no_usable_port(tmp_path):
     link = tmp_path / 'port'
     code = ('import os, time; from i3dmgx2_driver.simulator import PtySimulator, '
             f'SimulatorConfig; s = PtySimulator(SimulatorConfig(symlink={str(link)!r})); '
-            's.start(); print(s.device, flush=True); time.sleep(60)')
+            's.start(); print(s.pty.device, flush=True); time.sleep(60)')
     child = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True,
                              cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     try:
