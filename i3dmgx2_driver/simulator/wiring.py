@@ -20,7 +20,9 @@ seeds (drawn in the order they always were, so that a seeded run stays the
 same run), the lock and its conditions, the ground truth, the pty, the line
 end (base station or wired line), the reader, every sensor's unit, the
 cable and the fault schedule. ``PtySimulator`` hands each of its pieces only
-the parts it uses.
+the parts it uses. The stranger's address and a stall of every sensor are
+worked out here for the build and again by the simulator when its faults
+change.
 """
 
 import collections.abc
