@@ -47,7 +47,7 @@ setup(
             'simulator = i3dmgx2_driver.simulator.cli:main',
             'replay = i3dmgx2_driver.tools.replay:main',
             'plot = i3dmgx2_driver.tools.plot:main',
-            'monitor = i3dmgx2_driver.ros.monitor:main',
+            'monitor = i3dmgx2_driver.tools.monitor:main',
             'discover = i3dmgx2_driver.tools.discover:main',
             'bringup = i3dmgx2_driver.tools.bringup:main',
         ],

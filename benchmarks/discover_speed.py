@@ -38,7 +38,7 @@ import tty
 from bench_common import OtherLoad, REPO, report, Result
 from harness.processes import ros_env, SimProcess
 
-from i3dmgx2_driver.device.probe import probe_port, ProbeConfig  # noqa: I100 - after the path
+from i3dmgx2_driver.tools.discover import probe_port, ProbeConfig  # noqa: I100 - after the path
 
 
 def _probe_times(path: str, runs: int, config: ProbeConfig) -> tuple[list[float], list[float],

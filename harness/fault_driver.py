@@ -80,7 +80,7 @@ class FaultDriver(threading.Thread):
         start = time.time()
         self.sim.set_faults(FaultConfig())
         self.sim.stall(0.0)
-        if not self.sim.plugged:
+        if not self.sim.pty.plugged.is_set():
             self.sim.replug()
         self._unsafe = False
         self.events.append(FaultEvent('all_off', start, time.time(), ''))

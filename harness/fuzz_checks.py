@@ -26,7 +26,8 @@ the inputs kept in ``test/fixtures/fuzz/``). Every input goes through:
 * ``decode_record``, ``decode_data_packet``, ``decode_wired_record``,
   ``decode_command_packet`` and ``decode_command`` on the whole input and on
   slices starting at every 0xAA (and the start);
-* the orientation functions and the timer unwrapper on every record decoded.
+* the orientation functions on every record decoded, and the driver's
+  ``SampleClock`` on their timers (read one every 10 ms).
 
 Properties (:func:`check_input` raises ``PropertyViolation`` naming the one
 broken): the one-shot decoders raise nothing but ``CodecError`` subclasses;
@@ -62,19 +63,20 @@ class PropertyViolation(Exception):
 
 def load_codec():
     """Import the codec (under atheris' instrumentation when it is used)."""
-    from i3dmgx2_driver.codec import commands, framing, orientation, timer
+    from i3dmgx2_driver.codec import commands, framing, orientation
     from i3dmgx2_driver.codec import parser as stream
     from i3dmgx2_driver.codec.errors import CodecError
-    return commands, framing, orientation, stream, timer, CodecError
+    from i3dmgx2_driver.device import sample_clock
+    return commands, framing, orientation, stream, sample_clock, CodecError
 
 
-commands = framing = orientation = stream = timer = CodecError = None
+commands = framing = orientation = stream = sample_clock = CodecError = None
 
 
 def bind(modules) -> None:
     """Use these codec modules (``load_codec()``'s) from now on."""
-    global commands, framing, orientation, stream, timer, CodecError
-    commands, framing, orientation, stream, timer, CodecError = modules
+    global commands, framing, orientation, stream, sample_clock, CodecError
+    commands, framing, orientation, stream, sample_clock, CodecError = modules
 
 
 # -- reference encoders: built here from the protocol, not with the codec's encoders ------
@@ -342,10 +344,10 @@ def check_one_shot(data: bytes) -> list:
 
 
 def check_records(records: list) -> None:
-    """Orientation and timer functions on decoded (garbage) records."""
-    unwrapper = timer.TimerUnwrapper()
+    """Orientation functions and the driver's sample clock on decoded (garbage) records."""
+    clock = sample_clock.SampleClock(offset=lambda: 0.0)
     last = None
-    for record in records:
+    for index, record in enumerate(records):
         matrix = getattr(record, 'matrix', None)
         try:
             if matrix is not None:
@@ -368,10 +370,10 @@ def check_records(records: list) -> None:
                         orientation.body_vector(vector, convention)
             ticks = getattr(record, 'timer', None)
             if ticks is not None:
-                total = unwrapper.update(ticks)
-                if last is not None and not unwrapper.last_was_reset and total < last:
-                    raise PropertyViolation('timer_went_backwards', f'{last} -> {total}')
-                last = total
+                clock.stamp(ticks, index * 0.01)
+                if last is not None and not clock.restarted and clock.ticks < last:
+                    raise PropertyViolation('timer_went_backwards', f'{last} -> {clock.ticks}')
+                last = clock.ticks
         except PropertyViolation:
             raise
         except Exception as exc:  # any exception is the finding

@@ -38,8 +38,8 @@ from harness.processes import LifecycleClient, NodeProcess, process_cpu_seconds
 from harness.soak_nodes import final_stats, leg_node_name, SoakNodes, topic
 from harness.soak_plan import Leg, LongSoakConfig
 from harness.soak_recovery import recoveries, TRY_COST
+from i3dmgx2_driver.codec.data_rate import RATE_DIVIDER_ADDRESS
 from i3dmgx2_driver.simulator import PtySimulator
-from i3dmgx2_driver.simulator.sensor import RATE_DIVIDER_ADDRESS
 
 
 class LegResult(NamedTuple):

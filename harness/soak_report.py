@@ -27,7 +27,7 @@ from harness.soak_leg import LegResult
 from harness.soak_plan import LongSoakConfig
 from i3dmgx2_driver.codec.data_rate import divider_for_rate
 from i3dmgx2_driver.codec.streams import STREAMS
-from i3dmgx2_driver.simulator.sensor import FACTORY_DIVIDER
+from i3dmgx2_driver.simulator.eeprom import FACTORY_DIVIDER
 
 
 @dataclasses.dataclass

@@ -12,17 +12,23 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The capture format: round trip, crash tolerance, threads, the fixture's timing."""
+"""
+The capture format: round trip, crash tolerance, threads, the fixture's timing.
+
+And the node's raw capture: one that cannot write turns itself off with one
+log line instead of taking the driver down.
+"""
 
 import itertools
 import json
+import os
 import threading
 import time
 import warnings
 
 from i3dmgx2_driver.capture import (
     CaptureFormatError, CaptureWriter, CHUNK_HEADER, fixture_chunks, FIXTURE_GAP,
-    fixture_to_capture, load_fixture, MAGIC, read_capture, record_timer,
+    fixture_to_capture, load_fixture, MAGIC, RawCapture, read_capture, record_timer,
     TruncatedCaptureWarning,
 )
 from i3dmgx2_driver.codec import DataPacket, SensorStreamParser
@@ -238,3 +244,72 @@ def test_fixture_capture_is_reproducible(tmp_path, fixture_path):
     b = fixture_to_capture(fixture_path, tmp_path / 'b.gx2cap')
     assert a == b
     assert (tmp_path / 'a.gx2cap').read_bytes() == (tmp_path / 'b.gx2cap').read_bytes()
+
+
+# -- the node's raw capture ---------------------------------------------------
+
+class Log:
+    """Collects log lines the way the node's logger would print them."""
+
+    def __init__(self):
+        self.lines = []
+
+    def info(self, text):
+        self.lines.append(('info', text))
+
+    def error(self, text):
+        self.lines.append(('error', text))
+
+
+def test_raw_capture_writes_reads_as_read(tmp_path):
+    path = tmp_path / 'raw.gx2'
+    log = Log()
+    capture = RawCapture(str(path), log, port='/dev/ttyUSB0', address=95, baud=115200,
+                         wireless=True)
+    assert capture.active
+    capture.on_bytes(b'\xaa\x07\x00', 100.0)
+    capture.on_bytes(b'\x00\x5f', 100.5)
+    assert '2 reads, 5 bytes' in capture.describe()
+    capture.close()
+    header, chunks = read_capture(path)
+    assert (header['port'], header['address'], header['baud'], header['wireless']) == \
+        ('/dev/ttyUSB0', 95, 115200, True)
+    assert header['driver_version'] and header['start_time'] > 0
+    assert list(chunks) == [(100.0, b'\xaa\x07\x00'), (100.5, b'\x00\x5f')]
+    assert not any(level == 'error' for level, _ in log.lines)
+
+
+def test_raw_capture_that_cannot_open_is_off_and_said_once(tmp_path):
+    log = Log()
+    capture = RawCapture(str(tmp_path / 'no' / 'such' / 'dir.gx2'), log)
+    assert not capture.active
+    capture.on_bytes(b'abc', 1.0)
+    capture.close()
+    errors = [text for level, text in log.lines if level == 'error']
+    assert len(errors) == 1 and 'keeps running' in errors[0]
+    assert capture.describe().startswith('stopped:')
+
+
+@pytest.mark.skipif(not os.path.exists('/dev/full'), reason='needs /dev/full')
+def test_raw_capture_on_a_full_disk_is_off_and_said_once():
+    log = Log()
+    capture = RawCapture('/dev/full', log)
+    for _ in range(3):
+        capture.on_bytes(b'x' * 100_000, 1.0)
+    capture.close()
+    errors = [text for level, text in log.lines if level == 'error']
+    assert len(errors) == 1, log.lines
+    assert 'No space left' in errors[0]
+
+
+def test_raw_capture_failing_mid_stream_stops_once(tmp_path):
+    log = Log()
+    capture = RawCapture(str(tmp_path / 'raw.gx2'), log)
+    capture.on_bytes(b'good', 1.0)
+    capture._writer.error = OSError(27, 'File too large')  # as the flusher thread keeps it
+    for _ in range(5):
+        capture.on_bytes(b'more', 2.0)
+    capture.close()
+    errors = [text for level, text in log.lines if level == 'error']
+    assert len(errors) == 1 and 'File too large' in errors[0]
+    assert not capture.active

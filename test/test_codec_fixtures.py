@@ -33,6 +33,7 @@ import math
 import re
 
 from fixture_files import real_records_path
+from i3dmgx2_driver.capture import FixtureSet, timeline
 from i3dmgx2_driver.codec import (
     DataPacket, decode_data_packet, encode_data_packet, encode_record, SensorStreamParser,
 )
@@ -40,7 +41,8 @@ from i3dmgx2_driver.codec.orientation import (
     attitude_enu, attitude_ned, body_vector, euler_from_matrix, orientation, shepperd,
 )
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation, TICKS_PER_SECOND
-from i3dmgx2_driver.codec.timer import ticks_to_seconds, TIMER_MODULUS, TimerUnwrapper
+from i3dmgx2_driver.codec.timer import ticks_to_seconds, TIMER_MODULUS
+from i3dmgx2_driver.device.sample_clock import SampleClock
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -226,14 +228,31 @@ def test_timer_steps_match_the_poll_rate(pose):
     assert regular / len(steps) > 0.9
 
 
+def stamped(pose: PoseSet) -> tuple[SampleClock, list[int], list[bool]]:
+    """
+    Stamp the set's records with the driver's clock, read when a replay of the fixture plays them.
+
+    A replay (``capture.timeline``) plays each record a timer step later than
+    the one before, every step taken forward modulo 2^32. Returns the clock,
+    its unwrapped ticks and whether each record restarted the fit.
+    """
+    clock = SampleClock(offset=lambda: 0.0)
+    ticks, restarted = [], []
+    for seconds, _, raw in timeline([FixtureSet(pose.name, pose.header, pose.raw)]):
+        clock.stamp(int.from_bytes(raw[-4:], 'big'), seconds)
+        ticks.append(clock.ticks)
+        restarted.append(clock.restarted)
+    return clock, ticks, restarted
+
+
 @pytest.mark.parametrize('pose', SETS[:3], ids=SET_IDS[:3])
 def test_timer_without_rollover(pose):
     """The three short sets never wrap: the unwrapped timer is the raw one, increasing."""
-    unwrapper = TimerUnwrapper()
-    out = [unwrapper.update(r.timer) for r in BY_SET[pose.name]]
+    clock, out, restarted = stamped(pose)
     assert out == [r.timer for r in BY_SET[pose.name]]
     assert all(b > a for a, b in itertools.pairwise(out))
-    assert (unwrapper.wraps, unwrapper.resets) == (0, 0)
+    assert restarted[1:] == [False] * (len(out) - 1)
+    assert (clock.rollovers, clock.resets) == (0, 0)
 
 
 def test_timer_rollover_is_unwrapped():
@@ -243,34 +262,28 @@ def test_timer_rollover_is_unwrapped():
     It wraps three times: at record 616 (4,291,397,513 -> 2,984,329: a step of 6,554,112
     ticks, 1/3 s), at 770, and at 216 after a 60.5 s gap. Between records 750 and 751 the raw
     timer jumps from 858,295,945 to 4,171,399,561: 168.5 s forward, or 49.9 s back. A forward
-    step of more than half the range is indistinguishable from a step back, so the unwrapper
-    reports it as a reset (a new epoch), by design (given host times it would not: see
-    test_codec_timer.test_host_time_resolves_the_fixture_gap). Within each epoch the timer
-    strictly increases, and across the clean rollover it moves by exactly the raw step
-    (6,554,112 ticks: 1/3 s, the poll period).
+    step of more than half the range cannot be told from a step back by the timer alone;
+    the driver's clock tells them apart by the host time that elapsed, so read as a replay
+    plays them (168.5 s later) the records run on through it, with no reset (read 1 s later,
+    it is one: test_sample_clock.test_host_time_resolves_the_fixture_gap). Across the clean
+    rollover the count moves by exactly the raw step (6,554,112 ticks: 1/3 s, the poll
+    period).
     """
     timers = [r.timer for r in BY_SET['set1']]
     assert timers[616] > timers[617] and timers[616] > 4_290_000_000 and timers[617] < 3_000_000
-    unwrapper = TimerUnwrapper()
-    out = []
-    resets_at = []
-    for index, raw in enumerate(timers):
-        out.append(unwrapper.update(raw))
-        if unwrapper.last_was_reset:
-            resets_at.append(index)
-    assert unwrapper.wraps == 3
-    assert resets_at == [751]
-    assert unwrapper.resets == 1
+    set1 = next(pose for pose in SETS if pose.name == 'set1')
+    clock, out, restarted = stamped(set1)
+    assert clock.rollovers == 3
+    assert clock.resets == 0 and restarted[1:] == [False] * (len(out) - 1)
     for index in range(1, len(out)):
-        if index not in resets_at:
-            assert out[index] > out[index - 1], index
+        assert out[index] > out[index - 1], index
         assert out[index] % TIMER_MODULUS == timers[index]
     assert out[617] - out[616] == 6_554_112
     assert ticks_to_seconds(out[617] - out[616]) == pytest.approx(1 / 3, abs=1e-4)
     assert out[616] < TIMER_MODULUS * 2 < out[617]
-    assert out[750] == 2 * TIMER_MODULUS + timers[750]
-    assert out[751] == timers[751]  # new epoch: starts again from the raw value
-    assert out[-1] == TIMER_MODULUS + timers[-1]
+    assert out[751] - out[750] == timers[751] - timers[750]
+    assert ticks_to_seconds(out[751] - out[750]) == pytest.approx(168.5, abs=0.1)
+    assert out[-1] == 3 * TIMER_MODULUS + timers[-1]
 
 
 def test_euler_angles_follow_protocol_formulas():

@@ -328,7 +328,7 @@ def test_unplug_while_active_is_recovered_and_the_node_stays_active():
             time.sleep(0.05)
         assert status.level == DiagnosticStatus.WARN and 'recovering' in status.message
         assert statuses['i3dmgx2_driver: connection'].level == DiagnosticStatus.ERROR
-        assert sim.wait_for_port(10)
+        assert sim.pty.plugged.wait(10)
         listener.clear()
         assert len(listener.wait_for('imu/raw_data', 30)) >= 30, node.output()
         assert client.state() == 'active'

@@ -20,8 +20,8 @@ import sys
 import time
 
 from harness.processes import isolate_ros_domain, NodeProcess, REPO, ros_env
-from i3dmgx2_driver.ros.monitor import roll_pitch_yaw
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from i3dmgx2_driver.tools.monitor import roll_pitch_yaw
 import pytest
 
 
@@ -40,7 +40,7 @@ def test_monitor_prints_rate_and_values_of_a_running_node():
         with node:
             assert node.wait_for_output('streaming 0xCC'), node.output()
             out = subprocess.run(
-                [sys.executable, '-m', 'i3dmgx2_driver.ros.monitor', '--duration', '4'],
+                [sys.executable, '-m', 'i3dmgx2_driver.tools.monitor', '--duration', '4'],
                 env=ros_env(), cwd=REPO, capture_output=True, text=True, timeout=60)
             assert out.returncode == 0, out.stdout + out.stderr
             lines = [line for line in out.stdout.splitlines() if ' Hz ' in line]
@@ -59,7 +59,7 @@ MONITOR_WITH_SIGINT = (
     'import os, signal, sys\n'
     "signal.signal(signal.SIGINT, signal.SIG_IGN if sys.argv[1] == 'ignored' "
     'else signal.SIG_DFL)\n'
-    "os.execv(sys.executable, [sys.executable, '-m', 'i3dmgx2_driver.ros.monitor'])\n")
+    "os.execv(sys.executable, [sys.executable, '-m', 'i3dmgx2_driver.tools.monitor'])\n")
 
 
 @pytest.mark.parametrize(('sent', 'sigint'), [

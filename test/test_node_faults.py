@@ -148,7 +148,7 @@ def test_unplug_and_replug_reconnects_every_time():
     with streaming(seed=25, count=30) as (sim, listener, node):
         for _ in range(2):
             sim.unplug(seconds=1.0)
-            assert sim.wait_for_port(10)
+            assert sim.pty.plugged.wait(10)
             listener.clear()
             got = listener.wait_for('imu/raw_data', 30, timeout=30)
             assert len(got) >= 30, node.output()

@@ -23,7 +23,7 @@ temporary files standing in for /dev/ttyUSB*.
 
 import os
 
-from i3dmgx2_driver.device.port_listing import (
+from i3dmgx2_driver.tools.port_listing import (
     by_id_path, describe_path, KIND_MICROSTRAIN, list_ports, port_kind, PortInfo,
 )
 import pytest

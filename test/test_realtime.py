@@ -108,7 +108,7 @@ def test_refused_realtime_priority_logs_one_line_and_streaming_goes_on():
         with Listener({'imu/raw_data': Imu}) as listener, node:
             assert len(listener.wait_for('imu/raw_data', 30, timeout=30)) >= 30, node.output()
             sim.unplug(seconds=0.5)
-            assert sim.wait_for_port(10)
+            assert sim.pty.plugged.wait(10)
             listener.clear()
             assert len(listener.wait_for('imu/raw_data', 30, timeout=30)) >= 30, node.output()
             policies = {policy for policy, _ in _thread_policies(node.proc.pid).values()}
@@ -142,7 +142,7 @@ def test_granted_realtime_priority_applies_to_the_reader_thread_only():
             assert 'reader thread: SCHED_FIFO priority 30' in node.output()
             # A new connection gets a new reader thread, with the same policy.
             sim.unplug(seconds=0.5)
-            assert sim.wait_for_port(10)
+            assert sim.pty.plugged.wait(10)
             listener.clear()
             assert len(listener.wait_for('imu/raw_data', 30, timeout=30)) >= 30, node.output()
             assert fifo_threads() == [(os.SCHED_FIFO, 30)]

@@ -136,7 +136,7 @@ def test_replay_delivers_exactly_the_packets_in_order():
     with Replayer(chunks, speed=0, wait_for_host=True) as replayer:
         link = replayer.port
         assert os.path.islink(link)
-        assert os.path.realpath(replayer.port) == replayer.pty_name
+        assert os.path.realpath(replayer.port) == replayer.pty.pty_name
         with _open(replayer.port) as ser:
             ser.write(_command())  # the driver speaks first; playback starts
             events, _, parser = _read_packets(ser, COUNT)
@@ -218,7 +218,7 @@ def test_link_option_names_the_port_and_is_removed(tmp_path):
     link = tmp_path / 'ttyGX2'
     with Replayer(_chunks(count=2), speed=0, link=str(link)) as replayer:
         assert replayer.port == str(link)
-        assert link.is_symlink() and os.readlink(link) == replayer.pty_name
+        assert link.is_symlink() and os.readlink(link) == replayer.pty.pty_name
     assert not link.exists() and not link.is_symlink()
     regular = tmp_path / 'file'
     regular.write_text('keep me')

@@ -30,8 +30,9 @@ the real simulator and node in test_stamps_through_faults.py.
 import random
 from typing import NamedTuple
 
+from hypothesis import given, settings, strategies as st
 from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
-from i3dmgx2_driver.codec.timer import TIMER_MODULUS
+from i3dmgx2_driver.codec.timer import ticks_to_seconds, TIMER_MODULUS
 from i3dmgx2_driver.device.sample_clock import Restart, SampleClock
 import pytest
 
@@ -375,3 +376,205 @@ def test_system_clock_offset_ignores_a_read_interrupted_by_preemption(monkeypatc
     monkeypatch.setattr(sample_clock.time, 'time', lambda: next(wall))
     offset = sample_clock.system_clock_offset()
     assert offset == pytest.approx(wall_minus_mono, abs=1e-6)
+
+
+# -- the timer's rollover, record by record --------------------------------------------------
+#
+# docs/protocol.md §8: a uint32 counting 19,660,800 ticks per second from power-up, so it
+# wraps every 2^32 ticks, about 218.45 s. The clock reads each raw value as the device time
+# that best fits the host time elapsed since the record before: across any number of
+# wraps, and a step that time cannot explain is a restarted timer (a reset).
+
+CI = settings(max_examples=300, deadline=None, database=None)
+HALF = 1 << 31
+
+
+def unwrapping() -> SampleClock:
+    """Return a clock whose stamps are not of interest here: no system clock read."""
+    return SampleClock(offset=lambda: 0.0)
+
+
+def read(clock: SampleClock, ticks: int, host: float | None = None) -> int:
+    """Stamp a record of device time ``ticks``, read at ``host`` (default: its device time)."""
+    clock.stamp(ticks % TIMER_MODULUS, ticks / TICKS_PER_SECOND if host is None else host)
+    return clock.ticks
+
+
+def test_first_value_is_taken_as_it_is():
+    """The first raw value starts the count; nothing is a wrap or a reset yet."""
+    clock = unwrapping()
+    assert read(clock, 123_456) == 123_456
+    assert (clock.rollovers, clock.resets, clock.last_restart) == (0, 0, 'start')
+
+
+def test_unwrap_across_a_rollover():
+    """0xFFFFFF9C then 50: 150 ticks later, one wrap, 2^32 + 50."""
+    clock = unwrapping()
+    assert read(clock, TIMER_MODULUS - 100) == TIMER_MODULUS - 100
+    assert read(clock, TIMER_MODULUS + 50) == TIMER_MODULUS + 50
+    assert clock.rollovers == 1 and clock.resets == 0
+    assert not clock.restarted
+    assert read(clock, TIMER_MODULUS + 196_658) == TIMER_MODULUS + 196_658
+
+
+def test_multiple_wraps():
+    """A timer stepping 1e9 ticks at a time, for 20 steps, wraps 5 times and stays exact."""
+    clock = unwrapping()
+    start = 3_000_000_000
+    out = [read(clock, start + k * 1_000_000_000) for k in range(21)]
+    assert out == [start + k * 1_000_000_000 for k in range(21)]
+    assert clock.rollovers == (start + 20 * 1_000_000_000) // TIMER_MODULUS == 5
+    assert clock.resets == 0
+
+
+def test_half_range_is_no_boundary():
+    """
+    A forward step of 2^31 - 1 ticks or of 2^31 (109 s) is time passing if the host saw it pass.
+
+    The timer alone cannot tell a step of more than half its range from a
+    step back; the host time can, so the same two steps read 10 ms after the
+    record before are a restarted timer.
+    """
+    for step in (HALF - 1, HALF):
+        clock = unwrapping()
+        read(clock, 0)
+        assert read(clock, step) == step
+        assert not clock.restarted and clock.resets == 0
+        clock = unwrapping()
+        read(clock, 0)
+        assert read(clock, step, host=0.01) == step  # a new fit, from the raw value
+        assert clock.last_restart == 'reset' and clock.resets == 1
+
+
+def test_repeated_value_is_not_a_reset():
+    """The same timer twice (a repeated record, read a little later): no advance, no reset."""
+    clock = unwrapping()
+    read(clock, TIMER_MODULUS - 1)
+    read(clock, TIMER_MODULUS + 5)
+    assert read(clock, TIMER_MODULUS + 5, host=(TIMER_MODULUS + 5) / TICKS_PER_SECOND + 0.001) \
+        == TIMER_MODULUS + 5
+    assert (clock.rollovers, clock.resets, clock.restarted) == (1, 0, False)
+
+
+def test_device_reset_is_detected():
+    """A step backwards is a device reset: flagged once, counted, a new fit from the raw value."""
+    clock = unwrapping()
+    read(clock, TIMER_MODULUS - 10)
+    assert read(clock, TIMER_MODULUS + 5) == TIMER_MODULUS + 5            # a wrap
+    assert read(clock, TIMER_MODULUS + 100) == TIMER_MODULUS + 100
+    now = (TIMER_MODULUS + 100) / TICKS_PER_SECOND
+    assert read(clock, 3, host=now + 0.01) == 3                           # rebooted: 97 back
+    assert clock.restarted and clock.last_restart == 'reset'
+    assert (clock.rollovers, clock.resets) == (1, 1)
+    assert read(clock, 196_611, host=now + 0.02) == 196_611               # the new fit runs on
+    assert not clock.restarted
+    assert read(clock, 1, host=now + 0.03) == 1                           # and another reset
+    assert clock.resets == 2 and clock.restarted
+
+
+def test_clear_forgets_the_history_but_keeps_the_counters():
+    """clear() after a reconnect: the next value starts afresh; rollovers and resets remain."""
+    clock = unwrapping()
+    read(clock, TIMER_MODULUS - 10)
+    read(clock, TIMER_MODULUS + 10)
+    read(clock, 5, host=(TIMER_MODULUS + 10) / TICKS_PER_SECOND + 0.01)  # a reset
+    clock.clear()
+    assert not clock.restarted
+    assert read(clock, TIMER_MODULUS - 1, host=1000.0) == TIMER_MODULUS - 1  # no history
+    assert clock.last_restart == 'start'
+    assert (clock.rollovers, clock.resets) == (1, 1)
+    assert read(clock, 0, host=1000.0 + 1 / TICKS_PER_SECOND) == TIMER_MODULUS
+    assert (clock.rollovers, clock.resets) == (2, 1)
+
+
+@CI
+@given(start=st.integers(0, TIMER_MODULUS - 1),
+       steps=st.lists(st.integers(0, HALF - 1), max_size=50))
+def test_forward_steps_unwrap_exactly(start, steps):
+    """Property: any forward steps, read when they happened, unwrap to the exact running sum."""
+    clock = unwrapping()
+    total = start
+    assert read(clock, start) == start
+    previous = start
+    for step in steps:
+        total += step
+        out = read(clock, total)
+        assert out == total
+        assert out >= previous
+        assert not clock.restarted
+        previous = out
+    assert clock.rollovers == total // TIMER_MODULUS
+    assert clock.resets == 0
+
+
+@CI
+@given(start=st.integers(0, TIMER_MODULUS - 1), back=st.integers(1, HALF))
+def test_any_step_back_is_a_reset(start, back):
+    """Property: a step back of up to half the range, read 10 ms later, is always a reset."""
+    clock = unwrapping()
+    read(clock, start)
+    raw = (start - back) % TIMER_MODULUS
+    assert read(clock, raw, host=start / TICKS_PER_SECOND + 0.01) == raw
+    assert clock.last_restart == 'reset' and clock.resets == 1
+
+
+def test_host_time_unwraps_a_long_pause():
+    """A 300 s outage (more than a whole wrap) is unwrapped exactly by the host time."""
+    start = TIMER_MODULUS - 1000
+    pause = 300 * TICKS_PER_SECOND  # 5,898,240,000 ticks: 1.37 wraps
+    clock = unwrapping()
+    read(clock, start, host=100.0)
+    assert read(clock, start + pause, host=400.0) == start + pause
+    assert clock.rollovers == (start + pause) // TIMER_MODULUS == 2
+    assert not clock.restarted
+    # A host that saw only the raw step pass (81.5 s) reads it modulo 2^32.
+    short = unwrapping()
+    read(short, start, host=100.0)
+    step = pause - TIMER_MODULUS
+    assert read(short, start + pause, host=100.0 + ticks_to_seconds(step)) == start + step
+
+
+def test_records_read_late_in_a_burst_count_the_time_that_passed():
+    """
+    Records read in a burst, 0.4 s late, still count as the 10 ms that passed.
+
+    Later than ``RESET_S`` (0.5 s) no read comes: then the timer is taken for
+    a restarted one.
+    """
+    clock = unwrapping()
+    read(clock, 1_000_000, host=10.0)
+    assert read(clock, 1_196_608, host=10.41) == 1_196_608
+    assert not clock.restarted and clock.resets == 0
+    assert clock.ticks_since_last == 196_608
+    clock = unwrapping()
+    read(clock, 1_000_000, host=10.0)
+    read(clock, 1_196_608, host=11.5)
+    assert clock.last_restart == 'reset'
+
+
+def test_host_time_detects_a_reset():
+    """The device timer goes from 100 s to 0.5 s while the host saw 1 s pass: a reset."""
+    clock = unwrapping()
+    read(clock, 100 * TICKS_PER_SECOND, host=50.0)
+    assert read(clock, TICKS_PER_SECOND // 2, host=51.0) == TICKS_PER_SECOND // 2
+    assert clock.last_restart == 'reset' and clock.resets == 1
+
+
+def test_host_time_resolves_the_fixture_gap():
+    """
+    The fixture's long set jumps from 858,295,945 to 4,171,399,561 ticks.
+
+    That is 168.5 s forward or 49.9 s back; a host that saw 168.5 s pass
+    reads it forward (see test_codec_fixtures.test_timer_rollover_is_unwrapped),
+    one that saw 1 s pass takes it for a reset.
+    """
+    before, after = 858_295_945, 4_171_399_561
+    clock = unwrapping()
+    read(clock, before, host=0.0)
+    assert read(clock, after, host=ticks_to_seconds(after - before)) == after
+    assert not clock.restarted and clock.resets == 0
+    assert ticks_to_seconds(after - before) == pytest.approx(168.5, abs=0.1)
+    soon = unwrapping()
+    read(soon, before, host=0.0)
+    read(soon, after, host=1.0)
+    assert soon.last_restart == 'reset'

@@ -13,21 +13,15 @@
 # limitations under the License.
 
 """
-The judgements behind the services and the raw capture's failure handling, no node.
+The judgements behind the services, no node.
 
-Whether a gyro bias capture is trusted, whether gravity and the rate pass
-the self test, and that a raw capture that cannot write turns itself off
-with one log line instead of taking the driver down.
+Whether a gyro bias capture is trusted, and whether gravity and the rate
+pass the self test.
 """
 
-import os
-
-from i3dmgx2_driver.capture import read_capture
-from i3dmgx2_driver.ros.raw_capture import RawCapture
 from i3dmgx2_driver.ros.services import (
     format_report, gravity_step, judge_capture, MAX_GYRO_BIAS, rate_step, Step,
 )
-import pytest
 
 BIAS = (-0.0033, -0.0217, -0.0052)
 DOWN = (0.0, 0.0, -1.0)
@@ -70,70 +64,3 @@ def test_report_has_one_line_per_step_and_a_summary():
     assert report.splitlines() == ['PASS a: fine', 'FAIL b: broken',
                                    'self test FAILED: 1/2 steps passed']
     assert format_report([Step('a', True, 'x')]).endswith('self test passed: 1/1 steps passed')
-
-
-class Log:
-    """Collects log lines the way the node's logger would print them."""
-
-    def __init__(self):
-        self.lines = []
-
-    def info(self, text):
-        self.lines.append(('info', text))
-
-    def error(self, text):
-        self.lines.append(('error', text))
-
-
-def test_raw_capture_writes_reads_as_read(tmp_path):
-    path = tmp_path / 'raw.gx2'
-    log = Log()
-    capture = RawCapture(str(path), log, port='/dev/ttyUSB0', address=95, baud=115200,
-                         wireless=True)
-    assert capture.active
-    capture.on_bytes(b'\xaa\x07\x00', 100.0)
-    capture.on_bytes(b'\x00\x5f', 100.5)
-    assert '2 reads, 5 bytes' in capture.describe()
-    capture.close()
-    header, chunks = read_capture(path)
-    assert (header['port'], header['address'], header['baud'], header['wireless']) == \
-        ('/dev/ttyUSB0', 95, 115200, True)
-    assert header['driver_version'] and header['start_time'] > 0
-    assert list(chunks) == [(100.0, b'\xaa\x07\x00'), (100.5, b'\x00\x5f')]
-    assert not any(level == 'error' for level, _ in log.lines)
-
-
-def test_raw_capture_that_cannot_open_is_off_and_said_once(tmp_path):
-    log = Log()
-    capture = RawCapture(str(tmp_path / 'no' / 'such' / 'dir.gx2'), log)
-    assert not capture.active
-    capture.on_bytes(b'abc', 1.0)
-    capture.close()
-    errors = [text for level, text in log.lines if level == 'error']
-    assert len(errors) == 1 and 'keeps running' in errors[0]
-    assert capture.describe().startswith('stopped:')
-
-
-@pytest.mark.skipif(not os.path.exists('/dev/full'), reason='needs /dev/full')
-def test_raw_capture_on_a_full_disk_is_off_and_said_once():
-    log = Log()
-    capture = RawCapture('/dev/full', log)
-    for _ in range(3):
-        capture.on_bytes(b'x' * 100_000, 1.0)
-    capture.close()
-    errors = [text for level, text in log.lines if level == 'error']
-    assert len(errors) == 1, log.lines
-    assert 'No space left' in errors[0]
-
-
-def test_raw_capture_failing_mid_stream_stops_once(tmp_path):
-    log = Log()
-    capture = RawCapture(str(tmp_path / 'raw.gx2'), log)
-    capture.on_bytes(b'good', 1.0)
-    capture._writer.error = OSError(27, 'File too large')  # as the flusher thread keeps it
-    for _ in range(5):
-        capture.on_bytes(b'more', 2.0)
-    capture.close()
-    errors = [text for level, text in log.lines if level == 'error']
-    assert len(errors) == 1 and 'File too large' in errors[0]
-    assert not capture.active

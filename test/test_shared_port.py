@@ -141,7 +141,7 @@ def test_an_unplug_stops_all_and_brings_all_back():
             assert wait(lambda: all(sink.count > 50 for _, sink in sups.values()))
             sim.unplug(1.0)
             counts = {a: sink.count for a, (_, sink) in sups.items()}
-            assert sim.wait_for_port(5.0)
+            assert sim.pty.plugged.wait(5.0)
             assert wait(lambda: all(sink.count > counts[a] + 50
                                     for a, (_, sink) in sups.items()), 15.0)
             assert shared.opens == 2

@@ -36,7 +36,7 @@ from i3dmgx2_driver.codec import commands as cmd
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec import records as rec
 from i3dmgx2_driver.codec.parser import PingReply
-from i3dmgx2_driver.codec.timer import TimerUnwrapper
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 from i3dmgx2_driver.simulator import FaultConfig, MotionConfig, PtySimulator, SimulatorConfig
 import pytest
 import serial
@@ -68,7 +68,9 @@ class Host:
                  timeout: float = 0.02, wireless: bool | None = None) -> None:
         self.sim = sim
         self.address = address
-        self.wireless = getattr(sim, 'wireless', True) if wireless is None else wireless
+        if wireless is None:  # a bare port (test_simulator_cli.py's) is a base station's
+            wireless = sim.config.wireless if isinstance(sim, PtySimulator) else True
+        self.wireless = wireless
         self.serial = serial.Serial(sim.port, 115200, timeout=timeout)
         #: After the open, which flushed whatever the port held before.
         self.opened = time.time()
@@ -210,12 +212,12 @@ def host(sim):
 def test_port_is_a_stable_symlink_to_a_raw_pty(sim):
     assert os.path.islink(sim.port)
     assert os.path.basename(sim.port) == 'ttyGX2'
-    assert os.path.realpath(sim.port) == sim.device
+    assert os.path.realpath(sim.port) == sim.pty.device
     assert stat.S_ISCHR(os.stat(sim.port).st_mode)
     # Through /proc/<pid>/fd: a link left by a killed simulator dangles instead of
     # leading to whatever pseudo-terminal reuses the number.
-    assert os.readlink(sim.port) == sim.link_target
-    assert sim.link_target.startswith(f'/proc/{os.getpid()}/fd/')
+    assert os.readlink(sim.port) == sim.pty.link_target
+    assert sim.pty.link_target.startswith(f'/proc/{os.getpid()}/fd/')
 
 
 @pytest.mark.slow
@@ -223,7 +225,7 @@ def test_a_killed_simulator_leaves_no_usable_port(tmp_path):
     link = tmp_path / 'port'
     code = ('import os, time; from i3dmgx2_driver.simulator import PtySimulator, '
             f'SimulatorConfig; s = PtySimulator(SimulatorConfig(symlink={str(link)!r})); '
-            's.start(); print(s.device, flush=True); time.sleep(60)')
+            's.start(); print(s.pty.device, flush=True); time.sleep(60)')
     child = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True,
                              cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     try:
@@ -365,10 +367,10 @@ def test_timer_crosses_the_rollover():
             lambda: any(r.timer < 2**31 for r in host.records(lay.ACCEL_ANG_RATE)), 5.0)
         host.pump(0.1)
         stop_stream(host)
-        unwrapper = TimerUnwrapper()
-        ticks = [unwrapper.update(r.timer) for r in host.records(lay.ACCEL_ANG_RATE)]
-    assert unwrapper.wraps == 1 and unwrapper.resets == 0
-    assert all(b > a for a, b in pairwise(ticks))
+        timers = [r.timer for r in host.records(lay.ACCEL_ANG_RATE)]
+    steps = [(b - a) % TIMER_MODULUS for a, b in pairwise(timers)]
+    assert all(0 < step < TPS for step in steps), 'each record a little after the one before'
+    assert sum(b < a for a, b in pairwise(timers)) == 1, 'one rollover'
 
 
 @pytest.mark.slow
@@ -404,10 +406,9 @@ def test_power_cycle_restarts_the_timer_and_the_auto_start(sim, host):
     sim.power_cycle()
     assert host.pump_until(lambda: len(host.records(lay.ACCEL_ANG_RATE)) >= 4)
     stop_stream(host)
-    unwrapper = TimerUnwrapper()
-    for record in host.records(lay.ACCEL_ANG_RATE):
-        unwrapper.update(record.timer)
-    assert unwrapper.resets == 1, 'the timer starts again from timer_start'
+    timers = [record.timer for record in host.records(lay.ACCEL_ANG_RATE)]
+    jumps = [(a, b) for a, b in pairwise(timers) if not 0 < (b - a) % TIMER_MODULUS < TPS]
+    assert len(jumps) == 1, 'the timer starts again from timer_start'
     assert host.records(lay.ACCEL_ANG_RATE)[1].timer != before
 
 

@@ -196,18 +196,18 @@ def test_a_scheduled_power_cycle_from_the_fault_config():
 def test_unplug_and_replug_at_the_same_path():
     with simulator() as sim:
         host = Host(sim)
-        first_device = sim.device
+        first_device = sim.pty.device
         start_stream(host, lay.ACCEL_ANG_RATE)
         host.pump(0.2)
         sim.unplug(0.8)
-        assert not sim.plugged and not os.path.lexists(sim.port)
+        assert not sim.pty.plugged.is_set() and not os.path.lexists(sim.port)
         # Reads fail: pyserial raises SerialException, or OSError (EIO) from in_waiting.
         with pytest.raises((serial.SerialException, OSError)):
             host.pump(1.0)
         host.close()
         with pytest.raises(serial.SerialException):
             serial.Serial(sim.port, 115200, timeout=0.05)
-        assert sim.wait_for_port(5.0)
+        assert sim.pty.plugged.wait(5.0)
         assert os.path.islink(sim.port)
         with Host(sim) as again:
             # The wireless sensor never lost power: it still streams, its timer runs on.
@@ -217,7 +217,7 @@ def test_unplug_and_replug_at_the_same_path():
             after = again.records(lay.ACCEL_ANG_RATE)[0].timer
             assert 0 < (after - before) % 2**32 < 5 * rec.TICKS_PER_SECOND
         assert sim.stats.unplugs == 1 and len(faulty(sim, 'unplugged')) >= 10
-        assert first_device is not None and sim.device is not None
+        assert first_device is not None and sim.pty.device is not None
 
 
 def test_command_loss_acks_but_never_answers():
@@ -246,7 +246,7 @@ def test_streaming_needs_a_polled_request_first_after_each_open():
     with simulator(needs_polled_first=True) as sim:
         for _ in range(2):
             with Host(sim) as host:
-                assert sim.wait_until(lambda: sim.last_port_open is not None, 2.0)
+                assert sim.wait_until(lambda: sim.host_reader.last_port_open is not None, 2.0)
                 host.send(cmd.set_continuous(CC))
                 host.pump(0.3)
                 assert host.packets == [], 'streaming as the very first command must fail'

@@ -27,9 +27,9 @@ from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 from i3dmgx2_driver.simulator.eeprom import (
     AUTOSTART_ADDRESS, ERASED_WORD, FACTORY_DIVIDER, SensorEeprom,
 )
-from i3dmgx2_driver.simulator.fault_control import foreign_address
 from i3dmgx2_driver.simulator.faults import FaultConfig
 from i3dmgx2_driver.simulator.sensor_unit import unit_at
+from i3dmgx2_driver.simulator.wiring import foreign_address
 import pytest
 
 
@@ -81,7 +81,7 @@ def test_a_simulation_starts_once_and_stops_as_often_as_asked() -> None:
     sim.stop()
     with sim:
         port = sim.port
-        assert sim.started and sim.start_time is not None and sim.plugged
+        assert sim.started and sim.start_time is not None and sim.pty.plugged.is_set()
         assert port is not None and os.path.lexists(port)
         with pytest.raises(RuntimeError, match='already started'):
             sim.start()

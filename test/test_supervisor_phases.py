@@ -194,7 +194,7 @@ def test_start_streaming_reopens_a_port_lost_while_inactive():
         sup = supervisor(sim.port, records)
         sup.connect()
         sim.unplug(seconds=0.5)
-        assert sim.wait_for_port(10)
+        assert sim.pty.plugged.wait(10)
         sup.start_streaming()
         assert records.wait_for(20) >= 20
         assert sup.status().connections == 2

@@ -30,7 +30,7 @@ import re
 import runpy
 
 from i3dmgx2_driver.device.port import UDEV_RULE_NAME
-from i3dmgx2_driver.device.port_listing import MICROSTRAIN_VID
+from i3dmgx2_driver.tools.port_listing import MICROSTRAIN_VID
 import pytest
 import setuptools
 

@@ -33,7 +33,8 @@ from .layouts import (
 )
 from .records import DeviceIdentifier
 
-_LAYOUT_BY_TYPE: dict[type, Layout] = {
+#: The layout of each record type: which command byte a record answers.
+LAYOUT_BY_TYPE: dict[type, Layout] = {
     layout.record_type: layout for layout in LAYOUTS.values()
     if layout.record_type is not None and layout.reply is not None
 }
@@ -163,7 +164,7 @@ def _decode_known(layout: Layout, data: bytes) -> Any:
 
 def encode_record(record: Any) -> bytes:
     """Encode a record as the sensor sends it (echo byte and data)."""
-    layout = _LAYOUT_BY_TYPE.get(type(record))
+    layout = LAYOUT_BY_TYPE.get(type(record))
     if layout is None:
         raise EncodeError(f'{type(record).__name__} is not a record of the protocol')
     flat = _flatten(layout.reply, tuple(record), layout.name)

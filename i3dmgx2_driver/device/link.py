@@ -47,7 +47,7 @@ from .observer import LineObserver, QUIET_AFTER
 from .port import PortDisconnected, SerialPort
 from .realtime import apply_to_current_thread, NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
 from ..codec import commands, layouts
-from ..codec.commands import _LAYOUT_BY_TYPE
+from ..codec.commands import LAYOUT_BY_TYPE
 from ..codec.framing import DataPacket, encode_command_packet
 from ..codec.parser import Ack, Nack, SensorStreamParser
 from ..codec.records import PingReply
@@ -393,7 +393,7 @@ class DeviceLink:
         A reply to the request waiting for it, a record of the stream, or
         both; this allocates nothing and takes no lock.
         """
-        code = _LAYOUT_BY_TYPE[type(event.record)].code
+        code = LAYOUT_BY_TYPE[type(event.record)].code
         streamed = self._streamed
         # While a stream runs, only its records keep it alive: a sensor power-cycled
         # into its EEPROM auto-start streams another record, and the stall watch

@@ -18,7 +18,7 @@ How long the driver and ``discover`` wait for the radio: the one place.
 Every wait for an answer that crosses the radio (a ping, a command's reply,
 the first record after continuous mode is asked for, the next record of a
 stream) is named here, with the setting that changes it, so that the node
-(``settings.DeviceConfig``, the dialogue), ``discover`` (``probe.ProbeConfig``)
+(``settings.DeviceConfig``, the dialogue), ``discover`` (``tools.discover.ProbeConfig``)
 and ``bringup``, which measures the real round trips and warns when one comes
 within a factor 2 of a timeout, cannot disagree about them.
 """

@@ -48,7 +48,6 @@ OK = 0
 WARN = 1
 ERROR = 2
 STALE = 3
-LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 
 #: Prefix of every status name, as diagnostic_aggregator analyzers expect.
 PREFIX = 'i3dmgx2_driver: '

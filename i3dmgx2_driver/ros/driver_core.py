@@ -61,11 +61,11 @@ from rclpy.node import Node
 from .parameters import (declare_parameters, driver_config, DriverConfig, SPECS,
                          warn_unknown_parameters)
 from .publishers import ALONE_TOPICS, create_publishers, override_names, Publishers, SensorTopics
-from .raw_capture import RawCapture
 from .record_publisher import RecordPublisher, Stamping
 from .sensor_set import SensorSetting
 from .services import DeviceServices
 from .temperature import TemperaturePoller
+from ..capture import RawCapture
 from ..codec.data_rate import ticks_per_cycle
 from ..device.hot_path import HotPathObserver
 from ..device.port import check_port_path, PortError, SerialPort

@@ -67,7 +67,6 @@ class TemperaturePoller:
         self._streaming_link = streaming_link
         self.period = period
         self.published = 0
-        self.failures = 0
         #: The last temperature read (deg C), None before the first.
         self.latest: float | None = None
         self._stop = threading.Event()
@@ -106,7 +105,6 @@ class TemperaturePoller:
             reply = link.request(bytes((layouts.TEMPERATURES,)), layouts.TEMPERATURES,
                                  POLL_TIMEOUT, POLL_RETRIES)
         except (DeviceTimeout, PortError) as exc:
-            self.failures += 1
             if self._throttle.allow('poll') and not self._stop.is_set():
                 self.node.get_logger().warning(f'temperature poll failed: {exc}')
             return False

@@ -26,8 +26,9 @@ records on their way: timing) with ``packet_faults`` and ``line_writer``,
 ``host_reader`` (the reader thread), ``power``, ``cable`` and
 ``fault_schedule`` (power cycles, unplugging, timed faults), ``pty_port``
 (the pseudo-terminal, its symlink), ``ground_truth`` and ``truth_queries``
-(the record of it all), and
-``pty_link`` (``PtySimulator``, which puts them together).
+(the record of it all), ``wiring`` (every part built and wired), and
+``pty_link`` (``PtySimulator``, which starts and stops them and changes their
+faults).
 ``python -m i3dmgx2_driver.simulator`` runs it from a shell. Pure Python on
 top of the codec: the simulator and the driver share one implementation of
 every byte.

@@ -23,7 +23,6 @@ cable is back.
 """
 
 import threading
-import time
 
 from .ground_truth import GroundTruth
 from .host_reader import HostReader
@@ -33,7 +32,7 @@ from .pty_port import PtyPort
 
 class Cable:
     """
-    Unplugs and replugs the port; its actions run on the reader thread.
+    Unplugs and replugs the port; its actions run on the reader thread (posted there).
 
     ``changed`` is a condition on the simulator's lock, notified when the
     port is back. ``power`` is the wired sensor's power, which the cable
@@ -49,18 +48,6 @@ class Cable:
         self._changed = changed
         self._power = power
         self._stop = stop
-
-    def pull_out(self, seconds: float | None, timeout: float) -> None:
-        """Unplug on the reader thread (see :meth:`unplug`); return once the port is gone."""
-        self._reader.post(0.0, lambda: self.unplug(seconds))
-        deadline = time.monotonic() + timeout
-        while self._port.plugged.is_set() and time.monotonic() < deadline:
-            time.sleep(0.005)
-
-    def plug_in(self, timeout: float) -> bool:
-        """Replug on the reader thread; return whether the port is back within ``timeout``."""
-        self._reader.post(0.0, self.replug)
-        return self._port.plugged.wait(timeout)
 
     def unplug(self, seconds: float | None) -> None:
         """Pull the cable now; plug it back in after ``seconds`` (None: never by itself)."""

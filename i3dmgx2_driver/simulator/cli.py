@@ -29,12 +29,13 @@ import threading
 import time
 
 from i3dmgx2_driver.codec import framing
+from i3dmgx2_driver.codec.data_rate import MAX_DIVIDER, MIN_DIVIDER
 
 from .config import SimulatorConfig
 from .faults import FaultConfig
 from .motion import MotionConfig
 from .pty_link import PtySimulator
-from .sensor import MAX_DIVIDER, MIN_DIVIDER, STREAMABLE
+from .sensor import STREAMABLE
 from ..arguments import in_range
 
 
@@ -210,12 +211,13 @@ def status_line(sim: PtySimulator, elapsed: float) -> str:
     if len(sim.addresses) > 1:
         streaming = ','.join(f'{a}:' + (f'0x{sim.streaming_of(a):02X}' if sim.streaming_of(a)
                                         else 'no') for a in sim.addresses)
-    link = (f'acks={stats.acks} nacks={stats.nacks}' if sim.wireless
+    link = (f'acks={stats.acks} nacks={stats.nacks}' if sim.config.wireless
             else 'wired')
+    plugged = 'plugged' if sim.pty.plugged.is_set() else 'unplugged'
     line = (f'[{elapsed:8.1f} s] records={stats.records_sent} replies={stats.replies_sent} '
             f'commands={stats.commands_received} {link} '
             f'streaming={streaming} rate={sim.sensor.rate_hz:g}Hz '
-            f'port={"plugged" if sim.plugged else "unplugged"} opens={stats.port_opens}')
+            f'port={plugged} opens={stats.port_opens}')
     extra = {name: value for name, value in stats.as_dict().items() if value and name in (
         'garbage_bytes', 'corrupted_checksum', 'corrupted_length', 'foreign', 'dropped',
         'stalled', 'unplugged_lost', 'overflow_packets', 'commands_lost', 'commands_ignored',

@@ -24,8 +24,10 @@ are the state a sensor set up earlier would power up in.
 import dataclasses
 
 from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec.data_rate import MAX_DIVIDER, MIN_DIVIDER, RATE_DIVIDER_ADDRESS
 
 from . import sensor as sns
+from .eeprom import AUTOSTART_ADDRESS
 from .faults import FaultConfig
 from .motion import MotionConfig
 
@@ -119,8 +121,8 @@ class SimulatorConfig:
             raise ValueError(f'chunks must be (min, max) with 1 <= min <= max, got {self.chunks}')
         if self.latency_s < 0 or self.chunk_gap_s < 0:
             raise ValueError('latency_s and chunk_gap_s must not be negative')
-        if self.divider is not None and not sns.MIN_DIVIDER <= self.divider <= sns.MAX_DIVIDER:
-            raise ValueError(f'divider must be in {sns.MIN_DIVIDER}..{sns.MAX_DIVIDER} '
+        if self.divider is not None and not MIN_DIVIDER <= self.divider <= MAX_DIVIDER:
+            raise ValueError(f'divider must be in {MIN_DIVIDER}..{MAX_DIVIDER} '
                              f'(rate 51200 / divider Hz), got {self.divider}')
         for address, value in self.eeprom.items():
             if not (0 <= address <= 0xFFFF and 0 <= value <= 0xFFFF):
@@ -170,7 +172,7 @@ class SimulatorConfig:
         """EEPROM words the sensor starts with, presets applied (on top of the factory ones)."""
         words = dict(self.eeprom)
         if self.divider is not None:
-            words[sns.RATE_DIVIDER_ADDRESS] = self.divider
+            words[RATE_DIVIDER_ADDRESS] = self.divider
         if self.start_stream:
-            words[sns.AUTOSTART_ADDRESS] = (0x8000 if self.wireless else 0) | self.start_stream
+            words[AUTOSTART_ADDRESS] = (0x8000 if self.wireless else 0) | self.start_stream
         return words

@@ -28,8 +28,7 @@ from i3dmgx2_driver.codec.data_rate import (
     MAX_DIVIDER, MIN_DIVIDER, RATE_BASE_HZ, RATE_DIVIDER_ADDRESS,
 )
 
-__all__ = ['AUTOSTART_ADDRESS', 'ERASED_WORD', 'FACTORY_DIVIDER', 'MAX_DIVIDER', 'MIN_DIVIDER',
-           'RATE_DIVIDER_ADDRESS', 'SensorEeprom']
+__all__ = ['AUTOSTART_ADDRESS', 'ERASED_WORD', 'FACTORY_DIVIDER', 'SensorEeprom']
 
 #: The divider a sensor leaves the factory with (100 Hz).
 FACTORY_DIVIDER = 512

@@ -50,21 +50,34 @@ heard. Unplugging a wired sensor's cable powers it off: it comes back
 from power-up (timer restarted, EEPROM auto-start) when plugged in again.
 The radio faults (command loss, NACK, foreign packets, corrupted length
 bytes) do not exist wired and are refused.
+
+Start creates the pty and its symlink, powers the sensors up (under the
+lock) and starts the threads: the reader and one transmitter per sensor.
+Stop ends them and removes the port, also at interpreter exit if nobody
+called it, so that no symlink is left behind. The order of these steps is
+what keeps a host from seeing a port before its sensor is up, or a sensor
+after its port is gone. While it runs, the faults in effect change
+(``set_faults``), the radio is silenced (``stall``) or a sensor restarted
+(``power_cycle``): every sensor takes the change under the lock, and the
+timed faults it names are scheduled from now. This class is the one place
+that knows which sensor a fault hits: the base station (all of them), one
+address, or the first sensor.
 """
 
+import atexit
 import dataclasses
+import threading
 import time
 import typing
 from typing import Any
 
-from .config import SimulatorConfig
-from .fault_control import FaultControl
+from .config import DEFAULT_STREAM, SimulatorConfig
 from .faults import FaultConfig
-from .lifecycle import Lifecycle
+from .host_reader import HostReader
+from .pty_port import PtyPort
 from .sensor_unit import SensorUnit, unit_at
 from .truth_queries import TruthQueries
-from .wiring import SimulatorParts
-from ..forwarding import Forwarded
+from .wiring import foreign_address, SimulatorParts, stall_every
 
 if typing.TYPE_CHECKING:  # typing.Self is new in Python 3.11; Jazzy allows 3.10
     from typing import Self
@@ -76,15 +89,16 @@ class PtySimulator(TruthQueries):
     """
     A 3DM-GX2 and its wireless base station on a pseudo-terminal, or a wired 3DM-GX2.
 
-    Use as a context manager, or call :meth:`start` and :meth:`stop`. After
-    start, ``port`` is the path to open (stable across unplugs). The ground
-    truth (``truth``, ``commands``, ``host_log``, ``stats``, ``stream_changes``:
-    see :class:`TruthQueries`) is thread-safe to read at any time; the
+    Use as a context manager, or call :meth:`start` and :meth:`stop` (from
+    one thread). After start, ``port`` is the path to open (stable across
+    unplugs); ``pty`` is the pseudo-terminal behind it and ``host_reader``
+    the thread that reads the host's bytes. The ground truth (``truth``,
+    ``commands``, ``host_log``, ``stats``, ``stream_changes``: see
+    :class:`TruthQueries`) is thread-safe to read at any time; the
     properties return copies. The module's docstring tells how a wired
-    sensor differs. The parts are built by ``SimulatorParts`` (``wiring``),
-    started and stopped by ``Lifecycle`` (``lifecycle``), and their faults
-    changed by ``FaultControl`` (``fault_control``): this class is the face
-    that tests, the harness and the benchmarks use.
+    sensor differs. The parts are built by ``SimulatorParts`` (``wiring``);
+    this class starts and stops them and changes their faults: it is the
+    face that tests, the harness and the benchmarks use.
     """
 
     def __init__(self, config: SimulatorConfig | None = None, **overrides: Any) -> None:
@@ -99,31 +113,81 @@ class PtySimulator(TruthQueries):
         #: may be held while taking the port's ``io_lock``, never the reverse.
         self.lock = parts.lock
         self._wake = parts.wake
+        self._stop = parts.stop
         #: Every sensor's parts, by address, in the order given (sensor_unit.py).
         self.units: dict[int, SensorUnit] = parts.units
+        first = unit_at(self.units, None)
         #: The device model of the first sensor; touch it only while holding ``sim.lock``.
-        self.sensor = unit_at(self.units, None).sensor
-        self._pty, self._reader, self._cable = parts.pty, parts.reader, parts.cable
-        self._life = Lifecycle(parts.pty, parts.reader, parts.wake, parts.stop,
-                               parts.transmitters(), self._power_up)
-        self._control = FaultControl(config, self.units, parts.wake, parts.record,
-                                     parts.foreign, parts.fault_rng, parts.schedule,
-                                     lambda: self._life.started)
+        self.sensor = first.sensor
+        #: The pseudo-terminal behind ``port``: ``device`` (the pty now, None while
+        #: unplugged), ``link_target`` (what the symlink points to now) and
+        #: ``plugged`` (an event, set while the port exists).
+        self.pty: PtyPort = parts.pty
+        #: Reads the host's bytes and runs the scheduled actions; ``last_port_open``
+        #: is the wall-clock time the host last opened the port (or flushed its input).
+        self.host_reader: HostReader = parts.reader
+        self._cable = parts.cable
+        self._transmitters = parts.transmitters()
+        self._threads: list[threading.Thread] = []
+        self._foreign = parts.foreign
+        self._fault_rng = parts.fault_rng
+        self._schedule = parts.schedule
+        #: The first sensor's faults in effect (every sensor has the same configuration).
+        self._faults = first.faults
+        self._inbox = first.inbox
+        #: Path to open: a symlink that survives unplug and replug (None before start).
+        self.port: str | None = None
+        #: Whether the threads run.
+        self.started = False
+        #: Wall-clock time of start() (the sensor's power-up).
+        self.start_time: float | None = None
 
     # -- lifecycle --------------------------------------------------------------------------
 
     def start(self) -> 'PtySimulator':
         """Create the port, power the sensor up and start the threads."""
-        self._life.start()
+        if self.started:
+            raise RuntimeError('the simulator is already started')
+        self._stop.clear()
+        self.port = self.pty.create()
+        self.host_reader.open_pipe()
+        self.host_reader.plug_in()
+        now = time.time()
+        with self._wake:
+            self.start_time = now
+            self._power_up(now)
+        self.started = True
+        # An interpreter that exits without stop() still removes the port.
+        atexit.register(self.stop)
+        self._threads = [
+            threading.Thread(target=self.host_reader.run, args=(self._stop,),
+                             name='gx2sim-rx', daemon=True),
+            *(threading.Thread(target=tx.run, args=(self._stop,), name=name, daemon=True)
+              for name, tx in self._transmitters),
+        ]
+        for thread in self._threads:
+            thread.start()
         return self
 
     def stop(self) -> None:
         """Stop the threads, close the pty and remove the port symlink."""
-        self._life.stop()
+        if not self.started:
+            return
+        self._stop.set()
+        self.host_reader.wake()
+        with self._wake:
+            self._wake.notify_all()
+        for thread in self._threads:
+            thread.join(timeout=5.0)
+        self.pty.pull_out()
+        self.host_reader.close_pipe()
+        self.pty.remove()
+        self.started = False
+        atexit.unregister(self.stop)
 
     def __enter__(self) -> 'Self':
         """Start (if not yet started) for a ``with`` block."""
-        if not self._life.started:
+        if not self.started:
             self.start()
         return self
 
@@ -131,37 +195,16 @@ class PtySimulator(TruthQueries):
         """Stop at the end of the ``with`` block."""
         self.stop()
 
-    started: 'bool' = Forwarded('_life', 'Whether the threads run.')
-
-    start_time: 'float | None' = Forwarded(
-        '_life', "Wall-clock time of start() (the sensor's power-up).")
-
     def _power_up(self, now: float) -> None:
         """Power every sensor up at start (lock held), then the stranger and the timed faults."""
         for unit in self.units.values():
             unit.sensor.power_up(now)
             self._record.note_streaming(now, unit.sensor.streaming)
-        self._control.start(now)
+        # The stranger's clock somewhere; the timed faults from now.
+        self._foreign.power_up(now - 1000.0 * self._fault_rng.random())
+        self._schedule.schedule(self._faults.config, now, None)
 
     # -- the port ---------------------------------------------------------------------------
-
-    port: 'str | None' = Forwarded(
-        '_pty', 'Path to open: a symlink that survives unplug and replug (None before start).',
-        'path')
-
-    device: 'str | None' = Forwarded(
-        '_pty', 'The pseudo-terminal the symlink points to now (None while unplugged).')
-
-    link_target: 'str | None' = Forwarded(
-        '_pty', 'What the port symlink points to now: ``/proc/<pid>/fd/<n>`` or the device.')
-
-    @property
-    def plugged(self) -> bool:
-        """Whether the port exists now (False between unplug and replug)."""
-        return self._pty.plugged.is_set()
-
-    last_port_open: 'float | None' = Forwarded(
-        '_reader', 'Wall-clock time the host last opened the port (or flushed its input).')
 
     def unplug(self, seconds: float | None = None, timeout: float = 5.0) -> None:
         """
@@ -171,17 +214,17 @@ class PtySimulator(TruthQueries):
         and a new pty appears at the same path after the delay (None: only on
         :meth:`replug`). A wireless sensor keeps running meanwhile; a wired one
         loses its power and starts again from power-up when plugged back in.
-        Returns once the port is gone.
+        Returns once the port is gone (the cable is pulled on the reader thread).
         """
-        self._cable.pull_out(seconds, timeout)
+        self.host_reader.post(0.0, lambda: self._cable.unplug(seconds))
+        deadline = time.monotonic() + timeout
+        while self.pty.plugged.is_set() and time.monotonic() < deadline:
+            time.sleep(0.005)
 
     def replug(self, timeout: float = 5.0) -> bool:
-        """Plug the base station back in now; return whether the port is back."""
-        return self._cable.plug_in(timeout)
-
-    def wait_for_port(self, timeout: float = 10.0) -> bool:
-        """Wait until the port exists (after an unplug); return whether it does."""
-        return self._pty.plugged.wait(timeout)
+        """Plug the base station back in now; return whether the port is back in ``timeout`` s."""
+        self.host_reader.post(0.0, self._cable.replug)
+        return self.pty.plugged.wait(timeout)
 
     # -- run-time control -------------------------------------------------------------------
 
@@ -192,9 +235,16 @@ class PtySimulator(TruthQueries):
         ``address`` stalls that sensor alone (its radio link), the others
         streaming on; None the base station (every sensor).
         """
-        self._control.stall(seconds, address)
+        with self._wake:
+            if address is None:
+                stall_every(self.units, time.time(), seconds)
+            else:
+                unit_at(self.units, address).faults.stall(time.time(), seconds)
 
-    faults: 'FaultConfig' = Forwarded('_control', 'The faults in effect.')
+    @property
+    def faults(self) -> FaultConfig:
+        """Return the faults in effect."""
+        return self._faults.config
 
     def set_faults(self, faults: FaultConfig | None = None, **changes: Any) -> FaultConfig:
         """
@@ -204,7 +254,25 @@ class PtySimulator(TruthQueries):
         now. Turning ``already_streaming`` on makes the sensor stream 0xCC now.
         A wired simulator refuses the radio's faults (ValueError).
         """
-        return self._control.set_faults(faults, changes)
+        with self._wake:
+            old = self._faults.config
+            new = faults if faults is not None else dataclasses.replace(old, **changes)
+            if not self.config.wireless:
+                new.check_wired()
+            for unit in self.units.values():
+                unit.faults.config = new
+            self._foreign.address = foreign_address(self.config, new)
+            if new.ignore_first_continuous and not old.ignore_first_continuous:
+                self._inbox.ignore_next_continuous = True
+            now = time.time()
+            if new.already_streaming and not old.already_streaming and self.started:
+                for unit in self.units.values():
+                    unit.sensor.start_streaming(DEFAULT_STREAM, now)
+                    self._record.note_streaming(now, unit.sensor.streaming)
+            if self.started:
+                self._schedule.schedule(new, now, None if faults is not None else changes)
+            self._wake.notify_all()
+        return new
 
     def set_moving(self, moving: bool) -> None:
         """Start or stop the sensor's motion now (a capture while moving goes wrong)."""
@@ -228,7 +296,7 @@ class PtySimulator(TruthQueries):
         sensor's from then on), the stream as the EEPROM auto-start says.
         ``address``: that sensor, the others going on; None: the first.
         """
-        self._control.power_cycle(off_seconds, timer_start, address)
+        unit_at(self.units, address).power.cycle(off_seconds, timer_start)
 
     # -- the device now ---------------------------------------------------------------------
 
@@ -247,9 +315,6 @@ class PtySimulator(TruthQueries):
     def addresses(self) -> tuple[int, ...]:
         """Return the address of every sensor behind the base station, the first first."""
         return tuple(self.units)
-
-    wireless: 'bool' = Forwarded(
-        'config', 'Whether this is a base station with a wireless sensor (False: a wired sensor).')
 
     @property
     def eeprom(self) -> dict[int, int]:

@@ -52,10 +52,7 @@ from .cycle_clock import CycleClock
 from .data_records import BiasCorrections, float32, RecordMaker
 # The EEPROM's words and limits are read here by the configuration, the command line
 # and the harness, as they always were.
-from .eeprom import (  # noqa: F401
-    AUTOSTART_ADDRESS, FACTORY_DIVIDER, MAX_DIVIDER, MIN_DIVIDER, RATE_DIVIDER_ADDRESS,
-    SensorEeprom,
-)
+from .eeprom import SensorEeprom
 from .motion import Motion
 
 #: Ticks per second of the device timer.

@@ -127,12 +127,3 @@ class TruthQueries:
         self.wait_until(lambda: len(matches()) >= count, timeout)
         with self._changed:
             return matches()
-
-    def wait_for_truth(self, count: int, timeout: float = 5.0,
-                       predicate: collections.abc.Callable[[SentRecord], bool] | None = None
-                       ) -> bool:
-        """Wait until ``count`` truth entries (matching ``predicate``) exist."""
-        if predicate is None:
-            return self.wait_until(lambda: self._record.truth_index >= count, timeout)
-        return self.wait_until(
-            lambda: sum(1 for e in (self._record.truth or ()) if predicate(e)) >= count, timeout)

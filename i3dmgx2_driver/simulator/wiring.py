@@ -20,9 +20,12 @@ seeds (drawn in the order they always were, so that a seeded run stays the
 same run), the lock and its conditions, the ground truth, the pty, the line
 end (base station or wired line), the reader, every sensor's unit, the
 cable and the fault schedule. ``PtySimulator`` hands each of its pieces only
-the parts it uses.
+the parts it uses. The stranger's address and a stall of every sensor are
+worked out here for the build and again by the simulator when its faults
+change.
 """
 
+import collections.abc
 import functools
 import random
 import threading
@@ -32,9 +35,8 @@ from i3dmgx2_driver.codec.commands import Command
 from .base_station import BaseStation
 from .cable import Cable
 from .config import SimulatorConfig
-from .fault_control import foreign_address, stall_every
 from .fault_schedule import FaultSchedule
-from .faults import FaultState
+from .faults import FaultConfig, FaultState
 from .ground_truth import GroundTruth
 from .host_reader import HostReader
 from .line_writer import LineWriter
@@ -46,6 +48,22 @@ from .sensor_unit import (
 )
 from .transmitter import SharedLine, Transmitter
 from .wired_line import WiredLine
+
+Units = collections.abc.Mapping[int, SensorUnit]
+
+
+def foreign_address(config: SimulatorConfig, faults: FaultConfig) -> int:
+    """Return the stranger's address: next to the first sensor's, and none of ours."""
+    address = faults.foreign_of(config.address)
+    while faults.foreign_address is None and address in config.all_addresses:
+        address = faults.foreign_of(address)
+    return address
+
+
+def stall_every(units: Units, start: float, seconds: float) -> None:
+    """Silence every sensor from ``start`` for ``seconds``: the base station stalls."""
+    for unit in units.values():
+        unit.faults.stall(start, seconds)
 
 
 class SimulatorParts:

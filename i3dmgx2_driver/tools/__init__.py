@@ -13,8 +13,11 @@
 # limitations under the License.
 
 """
-Command-line tools: ``replay`` and ``plot`` around captures, ``discover``.
+Command-line tools: ``replay`` and ``plot`` around captures, ``discover`` and ``bringup``.
 
 They never use ROS, so that a capture can be replayed into a driver, or
-looked at, and a sensor found, on any machine with Python.
+looked at, and a sensor found, on any machine with Python. The one
+exception is ``monitor``, a person's one-line view of the node's IMU topic:
+a ROS subscriber, which nothing else imports, so that rclpy is loaded only
+when it runs.
 """

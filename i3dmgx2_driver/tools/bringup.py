@@ -48,6 +48,7 @@ from typing import Any, TextIO
 
 from .bringup_round_trips import MEASURE_TIMEOUT, note_longest, RoundTrips, spread
 from .bringup_sensor import HeardRecords, SensorControl
+from .port_listing import latency_timer_ms
 from ..arguments import seconds, whole_number
 from ..capture import CaptureWriter, default_header
 from ..codec import line_budget, streams
@@ -62,11 +63,9 @@ from ..device.clock import DeviceClock
 from ..device.identity import read_identity
 from ..device.link import DeviceLink, DeviceTimeout, LinkOptions
 from ..device.port import port_group, PortError, SerialPort
-from ..device.port_listing import latency_timer_ms
 
 EXIT_OK = 0
 EXIT_FAILED = 1
-EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
 _count = whole_number(1, 1000, 'count')

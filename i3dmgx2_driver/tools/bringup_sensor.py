@@ -52,17 +52,14 @@ class HeardRecords:
             self.last_mono = mono
             if self.log is not None:
                 record = packet.record
-                code = _CODE_OF_TYPE.get(type(record), 0)
+                layout = commands.LAYOUT_BY_TYPE.get(type(record))
+                code = layout.code if layout is not None else 0
                 self.log.append((mono, code, getattr(record, 'timer', 0), packet.lqi,
                                  packet.rssi))
 
     def snapshot(self) -> tuple[int, float]:
         with self.lock:
             return self.count, self.last_mono
-
-
-_CODE_OF_TYPE = {layout.record_type: code for code, layout in layouts.LAYOUTS.items()
-                 if layout.record_type is not None}
 
 
 class SensorControl:

@@ -49,7 +49,6 @@ from .replay_answers import ACK_HOLD, BaseStationAnswers
 from .replay_pty import POLL, ReplayPty
 from .replay_stats import ReplayStats
 from ..capture import FIXTURE_ADDRESS, fixture_chunks, read_capture
-from ..forwarding import Forwarded
 
 Chunk = tuple[float, bytes]
 
@@ -80,10 +79,10 @@ class Replayer:
     """
     Play ``(receive_time, bytes)`` chunks into a new pseudo-terminal.
 
-    ``start()`` opens the pty and returns the path to give the driver: the
-    symlink ``link`` if one was asked for, else a symlink in a private
-    temporary directory (so the path is stable and says what it is); the pty
-    itself is :attr:`pty_name`. ``speed`` is the pace relative to the
+    ``start()`` opens the pty and returns the path to give the driver
+    (:attr:`port`): the symlink ``link`` if one was asked for, else a
+    symlink in a private temporary directory (so the path is stable and says
+    what it is); the pty itself is ``pty.pty_name``. ``speed`` is the pace relative to the
     recording (0: as fast as the reader takes the bytes). ``wireless``
     selects the base station's ACK/NACK answers (a wired sensor sends none).
     With ``wait_for_host`` the playback starts when the host first writes,
@@ -108,18 +107,15 @@ class Replayer:
         self._wake = threading.Event()
         self._finished = threading.Event()
         self._threads: list[threading.Thread] = []
-        self._pty = ReplayPty(link, self._stop)
-        self._answers = BaseStationAnswers(self._pty, self.stats, wireless, self._wake,
+        #: The pseudo-terminal played into: ``pty_name``, ``pending_output()``.
+        self.pty = ReplayPty(link, self._stop)
+        self._answers = BaseStationAnswers(self.pty, self.stats, wireless, self._wake,
                                            self._stop)
         self._dropping = False
+        #: Path for the driver's ``port`` parameter (None before start).
+        self.port: str | None = None
 
     # Public interface --------------------------------------------------------
-
-    port: 'str | None' = Forwarded(
-        '_pty', "Path for the driver's ``port`` parameter (None before start).", 'path')
-
-    pty_name: 'str | None' = Forwarded(
-        '_pty', 'The pty itself, behind the link (None before start).')
 
     @property
     def finished(self) -> bool:
@@ -130,30 +126,27 @@ class Replayer:
         """Open the pty, start playing and answering; return :attr:`port`."""
         if self._threads:
             raise RuntimeError('replayer already started')
-        self._pty.create()
+        self.pty.create()
+        self.port = self.pty.path
         self._threads = [
             threading.Thread(target=self._play, name='replay-play', daemon=True),
             threading.Thread(target=self._answers.listen, name='replay-listen', daemon=True),
         ]
         for thread in self._threads:
             thread.start()
-        _LOG.info('replaying %d chunks into %s (%s), speed %s%s', len(self.chunks),
-                  self.port, self.pty_name, self.speed or 'max', ', looping' if self.loop else '')
+        _LOG.info('replaying %d chunks into %s (%s), speed %s%s', len(self.chunks), self.port,
+                  self.pty.pty_name, self.speed or 'max', ', looping' if self.loop else '')
         return self.port
 
     def wait(self, timeout: float | None = None) -> bool:
         """Wait for the end of the playback; True if it ended."""
         return self._finished.wait(timeout)
 
-    def pending_output(self) -> int:
-        """Bytes played but not yet read by the driver (0 only if none; 0 after stop)."""
-        return self._pty.pending_output()
-
     def drain(self, timeout: float, abort: threading.Event | None = None) -> bool:
         """Wait up to ``timeout`` s for the driver to read what was played."""
         deadline = time.monotonic() + timeout
         abort = abort or self._stop
-        while self.pending_output() > 0:
+        while self.pty.pending_output() > 0:
             if time.monotonic() >= deadline or abort.wait(POLL) or self._stop.is_set():
                 return False
         return True
@@ -165,7 +158,7 @@ class Replayer:
         for thread in self._threads:
             if thread is not threading.current_thread():
                 thread.join()
-        self._pty.close()
+        self.pty.close()
 
     def __enter__(self) -> 'Replayer':
         self.start()
@@ -183,7 +176,7 @@ class Replayer:
             while not self._stop.is_set():  # keep answering commands until stopped
                 self._wake.wait(POLL)
                 self._wake.clear()
-                self._send_answers(force=True)
+                self._answers.send(force=True)
         except OSError as exc:
             if not self._stop.is_set():
                 _LOG.error('replay stopped: %s', exc)
@@ -194,7 +187,7 @@ class Replayer:
             while not self._answers.host_seen.wait(POLL):
                 if self._stop.is_set():
                     return
-                self._send_answers(force=True)
+                self._answers.send(force=True)
         if not self.chunks:
             return
         period = self._loop_period()
@@ -205,7 +198,7 @@ class Replayer:
             for offset, (_, data) in zip(self._offsets, self.chunks, strict=True):
                 if self.speed > 0 and not self._sleep_until(start + (base + offset) / self.speed):
                     return
-                self._send_answers()
+                self._answers.send()
                 if self._stop.is_set():
                     return
                 self._send_chunk(data)
@@ -221,7 +214,7 @@ class Replayer:
     def _sleep_until(self, deadline: float) -> bool:
         """Sleep to ``deadline``, answering commands meanwhile; False if stopped."""
         while True:
-            self._send_answers()
+            self._answers.send()
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return not self._stop.is_set()
@@ -231,7 +224,7 @@ class Replayer:
             self._wake.clear()
 
     def _send_chunk(self, data: bytes) -> None:
-        sent = self._pty.write(data, paced=self.speed > 0)
+        sent = self.pty.write(data, paced=self.speed > 0)
         self.stats.chunks_sent += 1
         self.stats.bytes_sent += sent
         if sent < len(data):
@@ -243,9 +236,6 @@ class Replayer:
         else:
             self._dropping = False
         self._answers.played(data[:sent])
-
-    def _send_answers(self, force: bool = False) -> None:
-        self._answers.send(force)
 
 
 # Command line -----------------------------------------------------------------
@@ -325,7 +315,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not stop.is_set():
             drained = replayer.drain(args.linger, stop)
             if not drained and not stop.is_set():
-                _LOG.info('%d bytes were not read by anyone', replayer.pending_output())
+                _LOG.info('%d bytes were not read by anyone', replayer.pty.pending_output())
     finally:
         replayer.stop()
         for signum, handler in previous.items():
