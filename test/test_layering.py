@@ -13,12 +13,18 @@
 # limitations under the License.
 
 """
-Who may import whom, outside the driver package: read from the sources with ast.
+Who may import whom: read from the sources with ast.
 
 ``test/`` and ``benchmarks/`` never import each other, neither by name nor
 by putting the other's directory on ``sys.path``; what both need is in
 ``harness/`` (harness/__init__.py). ``harness/`` imports neither of them,
 and the driver package imports none of the three.
+
+Inside the package, imports run down the layers (codec → device,
+simulator, capture → ros, tools) and never in a circle: no module imports
+one that imports it back, however far round, ``TYPE_CHECKING`` blocks and
+imports inside functions included (a cycle hidden from the interpreter is
+still two pieces that cannot be read or changed alone).
 """
 
 import ast
@@ -157,3 +163,128 @@ def test_the_check_sees_imports_and_path_insertions(tmp_path, monkeypatch):
         'benchmarks/x.py:4 puts test/ on sys.path',
         'benchmarks/x.py:6 puts test/ on sys.path',
     ]
+
+
+PACKAGE = 'i3dmgx2_driver'
+#: The rooms of the package each room may import (its own besides); ``''`` is the
+#: package's ``__init__``, ``arguments`` the argument types every command line shares.
+LAYERS = {
+    'codec': (),
+    '': (),
+    'arguments': (),
+    'device': ('codec',),
+    'simulator': ('codec', 'arguments'),
+    'capture': ('codec', ''),
+    'ros': ('codec', 'device', 'capture', ''),
+    'tools': ('codec', 'device', 'simulator', 'capture', 'arguments', ''),
+}
+
+
+def package_imports(root: Path = REPO / PACKAGE) -> dict[str, set[str]]:
+    """Return each module of the package (dotted name) with the package modules it imports."""
+    modules: dict[str, tuple[Path, bool]] = {}
+    for path in sorted(root.rglob('*.py')):
+        if '__pycache__' in path.parts:
+            continue
+        parts = list(path.relative_to(root.parent).with_suffix('').parts)
+        is_package = parts[-1] == '__init__'
+        modules['.'.join(parts[:-1] if is_package else parts)] = (path, is_package)
+    graph = {}
+    for name, (path, is_package) in modules.items():
+        here = name.split('.') if is_package else name.split('.')[:-1]
+        found = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = here[:len(here) - (node.level - 1)]
+                    target = '.'.join(base + (node.module.split('.') if node.module else []))
+                else:
+                    target = node.module or ''
+                if target in modules:
+                    found.update(f'{target}.{alias.name}' if f'{target}.{alias.name}' in modules
+                                 else target for alias in node.names)
+            elif isinstance(node, ast.Import):
+                found.update(alias.name for alias in node.names if alias.name in modules)
+        graph[name] = found - {name}
+    return graph
+
+
+def room(module: str) -> str:
+    """Return the room of a package module: its subpackage, or '' for the package itself."""
+    parts = module.split('.')
+    return parts[1] if len(parts) > 1 else ''
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[str]:
+    """Return every import of a room the importing room may not reach."""
+    return sorted(f'{module} imports {target}' for module, targets in graph.items()
+                  for target in targets
+                  if room(target) != room(module) and room(target) not in LAYERS[room(module)])
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Return the groups of modules that import each other, however far round (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(module: str) -> None:
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        on_stack.add(module)
+        for target in sorted(graph.get(module, ())):
+            if target not in index:
+                visit(target)
+                low[module] = min(low[module], low[target])
+            elif target in on_stack:
+                low[module] = min(low[module], index[target])
+        if low[module] == index[module]:
+            group = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                group.append(member)
+                if member == module:
+                    break
+            if len(group) > 1:
+                found.append(sorted(group))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return found
+
+
+def test_every_room_of_the_package_has_a_layer():
+    rooms = {room(module) for module in package_imports()}
+    assert rooms <= set(LAYERS), f'rooms with no layer: {sorted(rooms - set(LAYERS))}'
+
+
+def test_package_imports_run_down_the_layers():
+    assert not upward_imports(package_imports())
+
+
+def test_no_module_of_the_package_imports_one_that_imports_it_back():
+    assert circles(package_imports()) == []
+
+
+def test_the_checks_see_a_hidden_circle_and_an_upward_import(tmp_path):
+    package = tmp_path / PACKAGE
+    (package / 'device').mkdir(parents=True)
+    (package / 'ros').mkdir()
+    for init in (package, package / 'device', package / 'ros'):
+        (init / '__init__.py').write_text('')
+    (package / 'device' / 'reader.py').write_text(
+        'from typing import TYPE_CHECKING\n'
+        'if TYPE_CHECKING:\n'
+        '    from .exchange import Exchange\n')
+    (package / 'device' / 'exchange.py').write_text('from . import reader\n')
+    (package / 'device' / 'uses_ros.py').write_text(
+        'def f():\n'
+        '    from ..ros.node import Node\n')
+    (package / 'ros' / 'node.py').write_text('from ..device.reader import x\n')
+    graph = package_imports(package)
+    assert circles(graph) == [[f'{PACKAGE}.device.exchange', f'{PACKAGE}.device.reader']]
+    assert upward_imports(graph) == [f'{PACKAGE}.device.uses_ros imports {PACKAGE}.ros.node']
