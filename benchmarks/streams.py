@@ -63,7 +63,7 @@ class StreamRun:
             measured = node.published[first:]
             sim.silence()
             node.wait_quiet()
-            self.node_lost = node.node.core.stats.lost
+            self.node_lost = node.node.core.records.stats.lost
         finally:
             if node is not None:
                 node.close()

@@ -167,7 +167,7 @@ def _snapshot(node, final: bool) -> dict:
     if core is None:
         return {'time': time.time(), 'final': final, 'pid': os.getpid(), 'configures': 0,
                 'heap': heap_figures()}
-    stats = core.stats
+    stats = core.records.stats
     device = core.supervisor.status()
     with _events_lock:
         events = list(_events)

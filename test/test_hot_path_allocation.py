@@ -53,7 +53,7 @@ rclpy.init()
 node = ImuDriverNode(parameter_overrides=[
     Parameter('port', value=port), Parameter('address', value=95),
     Parameter('publish_mag', value=False)])
-stats = node.core.stats
+stats = node.core.records.stats
 deadline = time.monotonic() + 60.0
 while stats.published < 100 and time.monotonic() < deadline:
     time.sleep(0.05)

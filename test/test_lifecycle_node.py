@@ -410,9 +410,9 @@ def test_cleanup_lets_go_of_every_core():
                 assert node.trigger_activate() == success
                 core = node.core
                 deadline = time.monotonic() + 10
-                while core.stats.published < 10 and time.monotonic() < deadline:
+                while core.records.stats.published < 10 and time.monotonic() < deadline:
                     time.sleep(0.01)
-                assert core.stats.published >= 10
+                assert core.records.stats.published >= 10
                 cores.append(weakref.ref(core))
                 del core
                 assert node.trigger_deactivate() == success

@@ -490,11 +490,18 @@ class DiagnosticsPublisher:
         self._last_good_frames = 0
         self._last_radio: RadioStats | None = None
 
-    def collect(self) -> list[Status]:
-        """Read the driver's state and build every status (advances the period)."""
+    def collect(self, device: DeviceStatus | None = None) -> list[Status]:
+        """
+        Build every status from one snapshot of the device (advances the period).
+
+        ``device`` is the supervisor's snapshot for this tick (taken here if
+        not given): every device-side figure of one tick comes from it, so
+        that no two statuses can disagree about the same moment.
+        """
         core = self._driver()
         statuses = []
-        device = core.supervisor.status() if core is not None else None
+        if device is None and core is not None:
+            device = core.supervisor.status()
         if self._lifecycle is not None:
             statuses.append(lifecycle_status(
                 self._lifecycle(), device.state if device is not None else None))
@@ -505,7 +512,7 @@ class DiagnosticsPublisher:
             self._last_tick = time.monotonic()
             return statuses
         cfg = core.config
-        stats = core.stats
+        stats = core.records.stats
         now = time.monotonic()
         period = now - self._last_tick
         self._last_tick = now
@@ -543,17 +550,19 @@ class DiagnosticsPublisher:
         self._last_parser = parser
         return statuses
 
-    def hardware_id(self) -> str:
+    @staticmethod
+    def hardware_id(device: DeviceStatus | None) -> str:
         """Return the device's serial number once known, else ''."""
-        core = self._driver()
-        info = core.supervisor.status().info if core is not None else None
+        info = device.info if device is not None else None
         return info.serial_number if info is not None and info.serial_number else ''
 
     def tick(self) -> None:
         """Build and publish one DiagnosticArray (the timer callback)."""
         array = DiagnosticArray()
         array.header.stamp = self.node.get_clock().now().to_msg()
-        array.status = to_message(self.collect(), self.hardware_id(), self.prefix)
+        core = self._driver()
+        device = core.supervisor.status() if core is not None else None
+        array.status = to_message(self.collect(device), self.hardware_id(device), self.prefix)
         try:
             self.publisher.publish(array)
         except RCLError:

@@ -137,7 +137,6 @@ class DriverCore:
         self.records = RecordPublisher(
             self.publishers, cfg.messages_for(sensor), Stamping.of(cfg, self.stream),
             self._expected_ticks, node.get_logger(), publishing, timings)
-        self.stats = self.records.stats
         #: Whether this core's sensor shares its port with others.
         self._shared = shared is not None
         #: The port's raw capture (shown on diagnostics).
@@ -193,7 +192,7 @@ class DriverCore:
         if not report:
             return
         of = f' of node {self.sensor.address}' if self._shared else ''
-        message = (f'stopped: {self.stats.published} records{of} published, port closed '
+        message = (f'stopped: {self.records.stats.published} records{of} published, port closed '
                    f'({time.monotonic() - start:.2f} s)')
         if self.node.context.ok():
             self.node.get_logger().info(message)

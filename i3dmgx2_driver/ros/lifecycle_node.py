@@ -295,7 +295,7 @@ class LifecycleDriverNode(LifecycleNode):
                 self.get_logger().info(f'{what}: nothing open')
             return
         drivers.set_publishing(False)
-        published = sum(core.stats.published for core in drivers.cores)
+        published = sum(core.records.stats.published for core in drivers.cores)
         drivers.shutdown(report=False)
         drivers.destroy()
         if what:
