@@ -15,7 +15,7 @@
 """
 The long soak's report: the per-leg and per-stream tables, and every check in one list.
 
-Kept apart from the run so that the report's form (what the README quotes)
+Kept apart from the run so that the report's form (what docs/soak.md quotes)
 changes here and nowhere else.
 """
 

@@ -22,9 +22,9 @@ with one serial-number read, and lend the sensor to a service for an
 exclusive operation. Each request is retried a few times because the radio
 loses commands both ways; that is part of speaking to this device. What to
 do when the dialogue fails (reopen, back off, give up) is not: the
-recovery loop (recovery.py) and the lifecycle phases (supervisor.py) decide
-that, and drive this object through the start-up steps (startup.py). It has
-no thread and starts none; it can be tested with a link and a simulator alone.
+supervisor's thread and its lifecycle phases (supervisor.py) decide that,
+and drive this object through their start-up steps. It has no thread and
+starts none; it can be tested with a link and a simulator alone.
 
 What it learns (identity, divider, whether the ping was answered, the line's
 use) it keeps as attributes for the supervisor's status snapshot. The

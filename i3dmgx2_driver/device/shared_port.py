@@ -17,15 +17,15 @@ One port, one reader thread, several sensors: a base station shared by all of th
 
 The node opens the port exclusively, as it must: two readers would split the
 byte stream. With several sensors behind one base station, each sensor still
-has its own supervisor (dialogue, recovery loop, reconnects, counters); what
+has its own supervisor (dialogue, thread, reconnects, counters); what
 they share is this: :class:`SharedPort` opens the port when the first
-sensor's connection asks for a link, gives every sensor a
+sensor's supervisor asks for a link, gives every sensor a
 :class:`~.link.DeviceLink` of its own on the one
 :class:`~.link.PortReader` (which routes each data packet to the link of its
 address), and closes the port when the last link is handed back.
 
 An unplug is seen by every link at once (they share the reader's
-``disconnected``): each sensor's recovery loop hands its link back and asks
+``disconnected``): each sensor's supervisor thread hands its link back and asks
 for a new one, and the first to ask opens the port again, the others join
 it; the dead reader is closed then, whoever still held it. So the port-level
 recovery stops all sensors and brings all back, and a sensor switched off

@@ -411,7 +411,7 @@ def _parser() -> argparse.ArgumentParser:
     source.add_argument('--fixture', metavar='PATH', help='plot the real-records fixture')
     source.add_argument('--stamp-errors', metavar='CSV',
                         help='plot a stamp-error series (time,error; benchmarks/'
-                             'stamp_faults.py writes them)')
+                             'stamp_errors.py writes them)')
     parser.add_argument('--address', type=int,
                         help='only records from this node address (captures)')
     parser.add_argument('--convention', choices=CONVENTIONS, default=None,

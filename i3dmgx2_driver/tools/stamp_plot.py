@@ -16,7 +16,7 @@
 Plot a stamp-error series: how far each stamp was from the true sample time.
 
 ``plot --stamp-errors FILE.csv`` draws what the stamp benchmark
-(``benchmarks/stamp_faults.py``) writes: one row per record, ``time`` (the
+(``benchmarks/stamp_errors.py``) writes: one row per record, ``time`` (the
 true sample time, s) and ``error`` (stamp minus sample time, s), with events
 (a power cycle, a clock step) as comment lines ``# event,TIME,LABEL``. The
 error is drawn in milliseconds against seconds from the first record, each
