@@ -29,7 +29,7 @@ from i3dmgx2_driver.device.realtime import ThreadPolicy
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.ros.conversions import MessageSettings
 from i3dmgx2_driver.ros.parameters import (
-    ANGULAR_VELOCITY_STDDEV, declare_parameters, driver_config, DriverConfig,
+    ANGULAR_VELOCITY_STDDEV, declare_parameters, DEVICE_DEFAULTS, driver_config, DriverConfig,
     LINEAR_ACCELERATION_STDDEV, ORIENTATION_STDDEV, ParameterError, SPECS, unknown_message,
     unknown_names, warn_unknown_parameters,
 )
@@ -250,6 +250,15 @@ def test_each_parameter_feeds_a_field_that_exists_and_the_drivers_own_are_all_fe
     # The frame and the stream are each sensor's (sensor_set.py).
     assert fed['messages'] == messages - {'frame_id', 'stream'}
     assert fed['driver'] == own
+
+
+def test_a_parameter_that_feeds_the_device_takes_the_device_sides_default():
+    # The default is the device side's, not typed a second time here (the port's is the
+    # one exception: DeviceConfig has none, a node without hardware needs one).
+    for spec in SPECS:
+        config, _, field = spec.feeds.partition('.')
+        if config == 'device' and spec.convert is None and spec.name != 'port':
+            assert spec.default == DEVICE_DEFAULTS[field], spec.name
 
 
 def test_the_parameters_reach_the_device_and_message_settings_of_each_sensor(make_node):

@@ -49,7 +49,7 @@ required parameter stops the node; an unknown one does not.
 """
 
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 import difflib
 import math
 from typing import Any, NamedTuple
@@ -67,7 +67,6 @@ from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.orientation import CONVENTIONS
 from ..device.realtime import MAX_PRIORITY, ThreadPolicy
 from ..device.settings import DeviceConfig
-from ..device.timeouts import STALL_TIMEOUT
 
 TIME_SOURCES = ('device', 'host')
 #: Default standard deviations, per axis. No noise density of the 3DM-GX2 was
@@ -85,6 +84,11 @@ RELIABILITIES = ('reliable', 'best_effort')
 _REQUIRED = object()
 #: How alike two names must be (difflib's ratio) for "did you mean".
 CLOSE_ENOUGH = 0.6
+
+
+#: The device side's own defaults, which a parameter that feeds ``DeviceConfig`` takes
+#: rather than typing them a second time.
+DEVICE_DEFAULTS = {field.name: field.default for field in fields(DeviceConfig)}
 
 
 class ParameterError(ValueError):
@@ -149,9 +153,10 @@ SPECS: list[Spec] = [
     # Several sensors behind one base station (ros/sensor_set.py): the defaults,
     # empty, leave the one sensor of 'address' as it always was.
     *SENSOR_SET_SPECS,
-    Spec('baud', Parameter.Type.INTEGER, 115200, 'Serial baud rate.', (9600, 921600),
+    Spec('baud', Parameter.Type.INTEGER, DEVICE_DEFAULTS['baud'], 'Serial baud rate.',
+         (9600, 921600),
          feeds='device.baud'),
-    Spec('wireless', Parameter.Type.BOOL, True,
+    Spec('wireless', Parameter.Type.BOOL, DEVICE_DEFAULTS['wireless'],
          'True: through a wireless base station (packets, ACK/NACK); false: wired sensor.',
          feeds='device.wireless'),
     Spec('stream', Parameter.Type.STRING, streams.DEFAULT.name,
@@ -197,10 +202,10 @@ SPECS: list[Spec] = [
          'Deprecated (removed in the next release): use '
          'qos_overrides./imu/raw_data.publisher.depth. QoS history depth of the data '
          'publishers.', (1, 1000), replaced_by='depth'),
-    Spec('read_timeout', Parameter.Type.DOUBLE, STALL_TIMEOUT,
+    Spec('read_timeout', Parameter.Type.DOUBLE, DEVICE_DEFAULTS['stall_timeout'],
          'Seconds without data before the stream counts as stalled.', (0.1, 60.0),
          feeds='device.stall_timeout'),
-    Spec('reconnect_interval', Parameter.Type.DOUBLE, 1.0,
+    Spec('reconnect_interval', Parameter.Type.DOUBLE, DEVICE_DEFAULTS['reconnect_interval'],
          'Seconds between attempts to reopen a lost port.', (0.1, 60.0),
          feeds='device.reconnect_interval'),
     Spec('publish_mag', Parameter.Type.BOOL, True,
@@ -210,7 +215,7 @@ SPECS: list[Spec] = [
          f'device as it is; otherwise {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f}, and the stream '
          f'must fit the serial line at that rate (see Choosing a stream).',
          (0.0, round(MAX_RATE_HZ, 1)), feeds='sensors'),
-    Spec('low_latency', Parameter.Type.BOOL, True,
+    Spec('low_latency', Parameter.Type.BOOL, DEVICE_DEFAULTS['low_latency'],
          'Put the serial port in Linux low-latency mode (USB adapters) when it supports it.',
          feeds='device.low_latency'),
     Spec('gyro_bias_sampling_ms', Parameter.Type.INTEGER, 10000,
