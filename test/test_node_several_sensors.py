@@ -200,9 +200,14 @@ def test_each_sensors_packet_loss_is_counted_from_its_own_timer():
                 if status.name.endswith(': stream'):
                     lost[status.name] = {k.key: k.value for k in status.values}
     lost_17 = int(lost['i3dmgx2_driver: imu_17: stream']['lost (timer gaps)'])
+    lost_95 = int(lost['i3dmgx2_driver: imu_95: stream']['lost (timer gaps)'])
     truth_17 = sum(1 for t in sim.truth if t.address == 17 and t.fault == 'stall')
-    assert truth_17 >= 15 and lost_17 == truth_17
-    assert lost['i3dmgx2_driver: imu_95: stream']['lost (timer gaps)'] == '0'
+    # A simulator that falls behind on a loaded machine skips records it is late for
+    # (never sent, so never in the truth): those are lost too, of either sensor (seen
+    # once in CI: 17 lost 25 for a stall of 20).
+    late = sim.stats.late_skipped + sim.stats.line_rate_skipped
+    assert truth_17 >= 15 and lost_17 >= truth_17
+    assert (lost_17 - truth_17) + lost_95 <= late, (lost_17, truth_17, lost_95, late)
 
 
 def test_devices_left_at_rates_that_overflow_the_line_together_are_warned_about():
