@@ -231,6 +231,40 @@ def test_gyro_bias_capture_is_due_after_its_sampling_time_and_then_applied():
     assert s.biases.gyro == reply.record.bias
 
 
+def test_written_biases_live_in_ram_and_a_stored_one_survives_a_power_cycle():
+    s = sensor(motion=Motion(MotionConfig(static=True)))
+    [gyro] = s.handle(cmd.write_gyro_bias((0.01, -0.02, 0.03)), T0 + 1.0)
+    [accel] = s.handle(cmd.write_accel_bias((0.001, 0.002, -0.003)), T0 + 1.0)
+    # Echoed as float32, the sensor's own numbers.
+    assert gyro.record.bias == pytest.approx((0.01, -0.02, 0.03), abs=1e-7)
+    assert accel.record.bias == pytest.approx((0.001, 0.002, -0.003), abs=1e-7)
+    assert s.biases.gyro == gyro.record.bias and s.biases.accel == accel.record.bias
+    # RAM only: a power cycle loses both.
+    s.power_off()
+    s.power_up(T0 + 2.0)
+    assert s.biases.gyro == s.biases.accel == (0.0, 0.0, 0.0)
+    # Stored (0xD0, 2: the gyro bias), the gyro bias is what the next power-up loads.
+    s.handle(cmd.write_gyro_bias((0.01, -0.02, 0.03)), T0 + 3.0)
+    [stored] = s.handle(cmd.transfer_to_non_volatile(rec.GYRO_BIAS_QUANTITY), T0 + 3.0)
+    assert stored.record.quantity == rec.GYRO_BIAS_QUANTITY and s.settings.bias_stores == 1
+    s.power_off()
+    s.power_up(T0 + 4.0)
+    assert s.biases.gyro == gyro.record.bias
+    assert s.biases.accel == (0.0, 0.0, 0.0)
+
+
+def test_a_memory_that_refuses_answers_0xffff_and_keeps_what_it_had():
+    s = sensor()
+    s.settings.refuse_bias_store = True
+    s.handle(cmd.write_gyro_bias((0.01, 0.01, 0.01)), T0 + 1.0)
+    [refused] = s.handle(cmd.transfer_to_non_volatile(rec.GYRO_BIAS_QUANTITY), T0 + 1.0)
+    assert refused.record.quantity == rec.INVALID_QUANTITY == 0xFFFF
+    assert s.settings.bias_stores == 0
+    s.power_off()
+    s.power_up(T0 + 2.0)
+    assert s.biases.gyro == (0.0, 0.0, 0.0)
+
+
 def test_a_capture_while_moving_is_off():
     config = MotionConfig()
     s = sensor(motion=Motion(config))

@@ -157,6 +157,13 @@ class EulerAnglesAngRate(NamedTuple):
     timer: int
 
 
+#: 0xD0's quantities: which bias to store in non-volatile memory.
+ACCEL_BIAS_QUANTITY = 1
+GYRO_BIAS_QUANTITY = 2
+#: 0xD0's reply when it stored nothing (an invalid quantity, or refused).
+INVALID_QUANTITY = 0xFFFF
+
+
 class TransferToNonVolatile(NamedTuple):
     """0xD0: the quantity stored to EEPROM (0xFFFF: invalid request)."""
 

@@ -34,10 +34,18 @@ says, the resume compares the serial number the identification read.
 The data rate's divider cell wears with every write, so what was written and
 how often is kept here, with the one rule that guards it: one change of
 setting writes the cell once, however rough the radio, and never again from
-this driver's run.
+this driver's run. A bias is stored in non-volatile memory (0xD0) only when a
+service asks, once per call, and counted with the same writes.
+
+Known biases (the ``gyro_bias`` and ``accel_bias`` parameters) go to the
+sensor's RAM at every start and every resume (0xCA, 0xC9: RAM only, so a
+power cycle loses them and no EEPROM wears), each checked against the echo
+the sensor sends back: a sensor that does not echo what was written is an
+error with the two values, never a silent difference.
 """
 
 from collections.abc import Callable
+import struct
 import threading
 import time
 from typing import Any
@@ -68,6 +76,15 @@ def first_poll_code(stream: int) -> int:
     record) when 0xC2 is the stream.
     """
     return layouts.MAGNETOMETER if stream == layouts.ACCEL_ANG_RATE else layouts.ACCEL_ANG_RATE
+
+
+def float32_vector(values: tuple[float, ...]) -> tuple[float, ...]:
+    """Return ``values`` as float32 gives them back: what a sensor echoes of a write."""
+    return struct.unpack('>3f', struct.pack('>3f', *values))
+
+
+def _vector(values: tuple[float, ...]) -> str:
+    return '(' + ', '.join(f'{v:.6g}' for v in values) + ')'
 
 
 class SensorDialogue:
@@ -102,6 +119,8 @@ class SensorDialogue:
         #: and, when it does not fit, what to do about it ('' when it fits).
         self.line_use = ''
         self.line_warning = ''
+        #: Whether the configured biases are in the sensor's RAM (echoed as written).
+        self.biases_written = False
 
     @property
     def expected_rate_hz(self) -> float | None:
@@ -143,6 +162,7 @@ class SensorDialogue:
         """
         self._introduce(link, require_answer, observed)
         self._configure_rate(link)
+        self.write_biases(link)
         self._check_line()
 
     def _introduce(self, link: DeviceLink, require_answer: bool,
@@ -269,6 +289,51 @@ class SensorDialogue:
             raise DeviceTimeout(f'data rate: wrote divider {wanted}, read back {readback}')
         return readback
 
+    # -- biases -------------------------------------------------------------------------
+
+    def write_biases(self, link: DeviceLink) -> None:
+        """
+        Write the configured gyro and accel biases to the sensor's RAM; check the echoes.
+
+        Raises DeviceTimeout when a write is not answered, or its echo is not
+        the bias written (as float32, which is what the sensor keeps).
+        """
+        cfg = self.config
+        writes = ((cfg.gyro_bias, 'gyro_bias', 'rad/s', commands.write_gyro_bias,
+                   layouts.WRITE_GYRO_BIAS),
+                  (cfg.accel_bias, 'accel_bias', 'g', commands.write_accel_bias,
+                   layouts.WRITE_ACCEL_BIAS))
+        for bias, name, unit, request, code in writes:
+            if bias is None:
+                continue
+            try:
+                echo = link.request(request(bias), code, cfg.request_timeout,
+                                    cfg.request_retries).bias
+            except DeviceTimeout as exc:
+                raise DeviceTimeout(f'{name}: the sensor did not echo the bias written '
+                                    f'(0x{code:02X}): {exc}') from None
+            if tuple(echo) != float32_vector(bias):
+                raise DeviceTimeout(
+                    f'{name}: wrote {_vector(bias)} {unit}, the sensor echoed '
+                    f'{_vector(echo)} {unit} (0x{code:02X}): it does not use the bias asked '
+                    f'for; check the parameter and the sensor')
+            self._log.info(f'{name} {_vector(bias)} {unit} written to node {cfg.address} '
+                           f'(RAM, echoed; lost at a power cycle, written again at start)')
+        self.biases_written = cfg.gyro_bias is not None or cfg.accel_bias is not None
+
+    def transfer_to_non_volatile(self, link: DeviceLink, quantity: int) -> int:
+        """
+        Store a bias in the sensor's EEPROM (0xD0: 1 accel, 2 gyro); return the reply.
+
+        Asked for once and counted as an EEPROM write: never resent blindly
+        (it wears the memory); :data:`codec.records.INVALID_QUANTITY` back: refused.
+        Raises DeviceTimeout when no reply comes (stored or not: unknown).
+        """
+        cfg = self.config
+        self.eeprom_writes += 1
+        return link.request(commands.transfer_to_non_volatile(quantity),
+                            layouts.TRANSFER_TO_NON_VOLATILE, cfg.request_timeout, 1).quantity
+
     def _check_line(self) -> None:
         """
         Warn when the device's rate is more than the line carries for the stream.
@@ -367,6 +432,8 @@ class SensorDialogue:
                 and not self._cancel.is_set():
             time.sleep(0.002)
         # Not streaming (power-cycled meanwhile), or streaming another record: ask for it.
+        # A power cycle meanwhile lost the biases in the sensor's RAM: write them again.
+        self.write_biases(link)
         if link.last_code != cfg.stream and not self.start_continuous(link):
             return True  # cancelled: nothing more to do here
         self._log.info(f'streaming {streams.BY_CODE[cfg.stream].label} again from node '

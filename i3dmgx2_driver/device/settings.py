@@ -25,6 +25,8 @@ parameter sets keeps its default here.
 
 from dataclasses import dataclass
 
+Vector3 = tuple[float, float, float]
+
 from . import timeouts
 from .realtime import NORMAL_SCHEDULING, ThreadPolicy
 from ..codec import streams
@@ -58,3 +60,7 @@ class DeviceConfig:
     #: again soon after the radio is back.
     resume_timeout: float = timeouts.RESUME_TIMEOUT
     resume_retries: int = timeouts.RESUME_RETRIES
+    #: Gyro bias (rad/s) and accelerometer bias (g) written to the sensor's RAM at
+    #: every start (0xCA, 0xC9) and checked against its echo; None: leave it as it is.
+    gyro_bias: Vector3 | None = None
+    accel_bias: Vector3 | None = None

@@ -226,6 +226,22 @@ SPECS: list[Spec] = [
     Spec('capture_gyro_bias_on_start', Parameter.Type.BOOL, False,
          'Capture the gyro bias once, right after streaming first starts (the sensor must '
          'be still then).'),
+    # A calibration that lasts (README, Calibration): known biases written at every
+    # start, and where a capture writes its result for the next start.
+    Spec('gyro_bias', Parameter.Type.DOUBLE_ARRAY, [],
+         "Gyro bias [x, y, z] (rad/s, the sensor's axes and units) written to the sensor "
+         "at every start (0xCA) and checked against its echo; []: leave the sensor's own. "
+         'One sensor only (not with addresses).', feeds='device.gyro_bias',
+         convert=lambda value: _bias('gyro_bias', value)),
+    Spec('accel_bias', Parameter.Type.DOUBLE_ARRAY, [],
+         "Accelerometer bias [x, y, z] (g, the sensor's axes and units) written to the "
+         "sensor at every start (0xC9) and checked against its echo; []: leave the sensor's "
+         'own. One sensor only (not with addresses).', feeds='device.accel_bias',
+         convert=lambda value: _bias('accel_bias', value)),
+    Spec('calibration_file', Parameter.Type.STRING, '',
+         'An accepted ~/capture_gyro_bias writes its bias to this YAML parameter file '
+         '(gyro_bias under the node\'s name, overwritten), to load at the next start; '
+         "'': off.", empty_ok=True, feeds='node'),
     Spec('temperature_period', Parameter.Type.DOUBLE, 0.0,
          'Seconds between polls of the temperatures (0xD1), published on imu/temperature; '
          '0: off.', (0.0, 3600.0)),
@@ -276,6 +292,24 @@ class DriverConfig:
         return replace(self.messages, frame_id=sensor.frame_id, stream=sensor.stream_choice)
 
 
+#: The bias parameters: what each of their three values is in.
+BIAS_UNITS = {'gyro_bias': 'rad/s', 'accel_bias': 'g'}
+
+
+def _bias_range(name: str) -> str:
+    return f'[] (as the sensor is), or three finite numbers [x, y, z] in {BIAS_UNITS[name]}'
+
+
+def _bias(name: str, value: Any) -> tuple[float, float, float] | None:
+    """Return a bias parameter's three values, or None when it is [] (left to the sensor)."""
+    if not value:
+        return None
+    if len(value) != 3 or not all(math.isfinite(v) for v in value):
+        raise ParameterError(f'parameter {name!r} must be {_bias_range(name)}, '
+                             f'got {list(value)!r}')
+    return tuple(float(v) for v in value)
+
+
 def _sensor_device(device: DeviceConfig, sensor: SensorSetting) -> DeviceConfig:
     return replace(device, address=sensor.address, data_rate_hz=sensor.data_rate_hz,
                    stream=sensor.stream_choice.code)
@@ -294,6 +328,8 @@ def _valid_range(spec: Spec) -> str:
         return f"[] (then 'address'), or distinct addresses {MIN_ADDRESS}..{MAX_ADDRESS}"
     if spec.name in ('streams', 'data_rates'):
         return f"[] (then '{spec.name[:-1]}' for all), one for all, or one per address"
+    if spec.name in BIAS_UNITS:
+        return _bias_range(spec.name)
     if isinstance(spec.default, list):
         return '[] (the default), or one distinct name per address'
     if spec.limits is not None:
@@ -480,6 +516,10 @@ def driver_config(values: Mapping[str, Any]) -> DriverConfig:
             fed[config][field or spec.name] = (value if spec.convert is None
                                                else spec.convert(value))
     first = sensors[0]
+    biases = [name for name in BIAS_UNITS if fed['device'][name] is not None]
+    if biases and len(sensors) > 1:
+        raise ParameterError(f'parameter {biases[0]!r} is one sensor\'s bias: it cannot be '
+                             f'given with addresses (several sensors)')
     config = DriverConfig(
         device=_sensor_device(DeviceConfig(address=first.address, **fed['device']), first),
         messages=MessageSettings(frame_id=first.frame_id, stream=first.stream_choice,

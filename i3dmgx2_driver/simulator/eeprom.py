@@ -20,6 +20,11 @@ powers up with. Two of its words set the sensor up: the data-rate divider
 (rate = 51200 / divider Hz, ``codec.data_rate``), which the firmware keeps
 only if it is in range, and the power-up auto-start (LSB: the record to
 stream; MSB 0x80: wireless). A word nobody wrote reads as erased flash.
+The bias corrections a 0xD0 transfer stores are kept with the corrections
+themselves (``data_records.BiasCorrections``); whether this memory takes
+them at all is decided here: ``refuse_bias_store`` makes it answer 0xD0 with
+0xFFFF and keep what it had (a worn or write-protected memory), so that a
+host can be shown a refused store.
 Kept apart from the device model so that a change to what the EEPROM
 stores, or refuses, is made in one small place.
 """
@@ -55,6 +60,17 @@ class SensorEeprom:
         if presets:
             self.words.update(presets)
         self.rate_override = rate_override
+        #: Refuse every 0xD0 transfer (answer 0xFFFF, store nothing).
+        self.refuse_bias_store = False
+        #: 0xD0 transfers stored (each one an EEPROM write).
+        self.bias_stores = 0
+
+    def take_bias_store(self) -> bool:
+        """Return whether a 0xD0 transfer may be stored now, counting it when it may."""
+        if self.refuse_bias_store:
+            return False
+        self.bias_stores += 1
+        return True
 
     @property
     def rate_hz(self) -> float:
