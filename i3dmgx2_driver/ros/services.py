@@ -13,9 +13,9 @@
 # limitations under the License.
 
 """
-The node's services: ``~/capture_gyro_bias``, ``~/self_test`` and ``~/diagnostic_self_test``.
+The node's services: ``~/capture_gyro_bias``, ``~/store_gyro_bias``, ``~/self_test``, ...
 
-The first two are std_srvs/Trigger (a yes or no and a text); the self test
+... and ``~/diagnostic_self_test``. All but the last are std_srvs/Trigger (a yes or no and a text); the self test
 is also served as diagnostic_msgs/SelfTest, the ROS message for exactly
 this (the sensor's serial number, passed, one DiagnosticStatus per step),
 from the same steps.
@@ -31,7 +31,9 @@ operation runs at a time; a second call is refused at once, not queued.
 In the order of this file: what both operations share (the device as a
 small ``Device`` Protocol the supervisor satisfies, the errors an operation
 may end with, polled inertial readings averaged); the gyro bias capture
-(0xCD) and whether to trust what it captured; the self test's steps and
+(0xCD), whether to trust what it captured, and how an accepted capture is
+kept (stored on the sensor, 0xD0, or written to a parameter file for the
+next start); the self test's steps and
 their report; and :class:`DeviceServices`, which serves them. Each
 judgement is a pure function of the numbers, tested without a device.
 What a capture came to is a ``Calibration`` (calibration.py), so that
@@ -40,6 +42,7 @@ diagnostics reads it without importing this module.
 
 from collections.abc import Callable, Sequence
 import math
+import os
 import threading
 import time
 from typing import Any, NamedTuple, Protocol
@@ -54,6 +57,8 @@ from std_srvs.srv import Trigger
 from .calibration import Calibration, RATE_TOLERANCE
 from ..codec import commands, layouts
 from ..codec.errors import CodecError
+from ..codec.records import GYRO_BIAS_QUANTITY, INVALID_QUANTITY
+from ..device.dialogue import SensorDialogue
 from ..device.link import DeviceLink, DeviceTimeout
 from ..device.port import PortError
 from ..device.status import DeviceStatus, State
@@ -94,6 +99,9 @@ def poll_inertial(link: DeviceLink, count: int = POLLS, timeout: float = 0.5,
 
 class Device(Protocol):
     """What the services need of the device side (the supervisor is one)."""
+
+    #: What is said to the sensor (the EEPROM writes it counts, for diagnostics).
+    dialogue: SensorDialogue
 
     def status(self) -> DeviceStatus:
         """Return the device side's snapshot."""
@@ -209,9 +217,87 @@ class GyroBiasCapture:
         self.last_capture = self.good_capture = calibration
         self._calibrated(True)
         message = (f'gyro bias captured over {sampling_ms} ms: {text} rad/s; the device uses '
-                   f'it until power-off (not stored in non-volatile memory)')
+                   f'it until power-off (not stored in non-volatile memory: '
+                   f'~/store_gyro_bias stores it)')
         self._log.info(message)
         return True, message
+
+    # -- keeping it ----------------------------------------------------------
+    #
+    # An accepted capture lives in the sensor's RAM. Two ways keep it: the
+    # sensor's non-volatile memory (0xD0, asked for by ~/store_gyro_bias, one
+    # EEPROM write each), or a parameter file the node loads at its next start
+    # and writes with 0xCA (no EEPROM wear). Only the last capture, and only
+    # when it was accepted: after a refused one the device holds the moved
+    # bias, and storing would keep that.
+
+    def store(self) -> tuple[bool, str]:
+        """Store the last capture in the sensor's non-volatile memory; return (success, message)."""
+        good = self.good_capture
+        if good is None or self.last_capture is not good:
+            why = ('no gyro bias was captured in this session' if self.last_capture is None
+                   else f'the last capture was not accepted ({self.last_capture.summary}), '
+                        f'and the device uses what it captured')
+            return False, (f'refused: {why}. Nothing stored: capture with the sensor still '
+                           f'(~/capture_gyro_bias), then store.')
+        text = format_vector(good.bias)
+
+        def operation(link: DeviceLink) -> int:
+            quantity = self._device.dialogue.transfer_to_non_volatile(link, GYRO_BIAS_QUANTITY)
+            self._forget()  # the pause is the operation's, not the radio's
+            return quantity
+
+        try:
+            quantity = self._device.run_paused(operation)
+        except OPERATION_ERRORS as exc:
+            message = (f'gyro bias store (0xD0) not confirmed: {exc}; the sensor may or may '
+                       f'not have stored {text} rad/s (counted as an EEPROM write)')
+            self._log.warning(message)
+            return False, message
+        if quantity != GYRO_BIAS_QUANTITY:
+            refused = 'refused (0xFFFF)' if quantity == INVALID_QUANTITY else \
+                f'answered quantity {quantity}, not {GYRO_BIAS_QUANTITY}'
+            message = (f'gyro bias store {refused}: the sensor did not store {text} rad/s in '
+                       f'its non-volatile memory; it uses it until power-off. Use the '
+                       f'gyro_bias parameter (or calibration_file) to apply it at every start')
+            self._log.error(message)
+            return False, message
+        message = (f'gyro bias {text} rad/s stored in the sensor\'s non-volatile memory '
+                   f'(0xD0, one EEPROM write): it loads it at every power-up')
+        self._log.warning(message)
+        return True, message
+
+
+def calibration_yaml(node_name: str, bias: Vector3) -> str:
+    """
+    Return a ROS 2 parameter file that sets ``gyro_bias`` for ``node_name``.
+
+    The values are written with ``repr``, which reads back as the same double,
+    so the bias the node writes next time is the one captured, to the bit; a
+    mantissa without a point gets one (``1e-09`` is text to YAML 1.1, and a
+    string is no bias).
+    """
+    def number(value: float) -> str:
+        text = repr(float(value))
+        mantissa, e, exponent = text.partition('e')
+        return text if '.' in mantissa else f'{mantissa}.0{e}{exponent}'
+
+    values = ', '.join(number(v) for v in bias)
+    return (f'# Written by ~/capture_gyro_bias (i3dmgx2_driver) at '
+            f'{time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}: load it with\n'
+            f'# --params-file <this file> (after the main one) to write this bias at start.\n'
+            f'{node_name}:\n'
+            f'  ros__parameters:\n'
+            f'    gyro_bias: [{values}]\n')
+
+
+def write_calibration_file(path: str, node_name: str, bias: Vector3) -> None:
+    """Write ``calibration_yaml`` to ``path`` whole (a new file renamed over the old)."""
+    path = os.path.expanduser(path)
+    temporary = f'{path}.tmp'
+    with open(temporary, 'w') as handle:
+        handle.write(calibration_yaml(node_name, bias))
+    os.replace(temporary, path)
 
 
 # -- the self test -------------------------------------------------------------------
@@ -390,7 +476,7 @@ class SelfTestRun:
 
 class DeviceServices:
     """
-    The ``~/capture_gyro_bias`` and ``~/self_test`` services of the driver.
+    The ``~/capture_gyro_bias``, ``~/store_gyro_bias`` and ``~/self_test`` services.
 
     ``node`` provides the services, the logger and the
     ``gyro_bias_sampling_ms`` parameter; ``device`` the status and the
@@ -402,7 +488,11 @@ class DeviceServices:
     active answers so at once. ``calibrated(flag)``, if given, is told
     whether the device uses a good gyro bias after every capture that
     reached the device (``~/is_calibrated``). ``prefix`` goes before the
-    services' names (``~/<name>/`` for each of several sensors).
+    services' names (``~/<name>/`` for each of several sensors). With one
+    sensor, an accepted capture is written to the ``calibration_file``
+    parameter's file when it names one, and a configured ``gyro_bias`` (the
+    dialogue writes it at every start) makes the device calibrated from the
+    start.
     """
 
     def __init__(self, node: Node, device: Device, published: Callable[[], tuple[int, float]],
@@ -427,6 +517,12 @@ class DeviceServices:
         group = MutuallyExclusiveCallbackGroup()
         self.capture_service = node.create_service(
             Trigger, f'{prefix}capture_gyro_bias', self._on_capture, callback_group=group)
+        self.store_service = node.create_service(
+            Trigger, f'{prefix}store_gyro_bias', self._on_store, callback_group=group)
+        #: One sensor's node: the calibration file and a known bias are its (parameters.py).
+        self._single = prefix == '~/'
+        if self._single and self._parameter('gyro_bias'):
+            self._calibrated(True)
         self.self_test_service = node.create_service(
             Trigger, f'{prefix}self_test', self._on_self_test, callback_group=group)
         self.diagnostic_self_test_service = node.create_service(
@@ -446,6 +542,7 @@ class DeviceServices:
         """Stop, and remove the services from the node (the managed node's cleanup)."""
         self.stop()
         self.node.destroy_service(self.capture_service)
+        self.node.destroy_service(self.store_service)
         self.node.destroy_service(self.self_test_service)
         self.node.destroy_service(self.diagnostic_self_test_service)
 
@@ -470,6 +567,11 @@ class DeviceServices:
     def _on_capture(self, request: Trigger.Request, response: Trigger.Response
                     ) -> Trigger.Response:
         response.success, response.message = self.capture_gyro_bias()
+        return response
+
+    def _on_store(self, request: Trigger.Request, response: Trigger.Response
+                  ) -> Trigger.Response:
+        response.success, response.message = self.store_gyro_bias()
         return response
 
     def _on_self_test(self, request: Trigger.Request, response: Trigger.Response
@@ -506,8 +608,32 @@ class DeviceServices:
         """Capture the gyro bias (0xCD) with the stream paused; return (success, message)."""
         return self._exclusive('gyro bias capture', self._capture)
 
+    def _parameter(self, name: str) -> Any:
+        """Return a parameter's value, or None when the node does not declare it."""
+        if not self.node.has_parameter(name):
+            return None
+        return self.node.get_parameter(name).value
+
     def _capture(self) -> tuple[bool, str]:
-        return self.gyro_bias.run(int(self.node.get_parameter('gyro_bias_sampling_ms').value))
+        ok, message = self.gyro_bias.run(int(self._parameter('gyro_bias_sampling_ms')))
+        path = self._parameter('calibration_file') if self._single else ''
+        if ok and path:
+            bias = self.gyro_bias.good_capture.bias
+            try:
+                write_calibration_file(path, self.node.get_fully_qualified_name(), bias)
+            except OSError as exc:
+                note = f'calibration_file {path} not written: {exc}'
+                self._log.error(note)
+                return False, f'{message}; but {note}'
+            note = (f'written to {path} (gyro_bias): load it with --params-file {path} at '
+                    f'the next start')
+            self._log.info(f'gyro bias {note}')
+            message = f'{message}; {note}'
+        return ok, message
+
+    def store_gyro_bias(self) -> tuple[bool, str]:
+        """Store the last accepted capture on the sensor (0xD0); return (success, message)."""
+        return self._exclusive('gyro bias store', self.gyro_bias.store)
 
     def _capture_on_start(self) -> None:
         """Wait for the first streaming start, then capture once (own thread)."""

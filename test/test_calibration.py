@@ -1,0 +1,193 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+A calibration that lasts, without a node: what is stored, what is written, what is refused.
+
+The store (0xD0) of a capture, judged on a fake device: only the last
+capture, only when accepted, a refusal (0xFFFF) said; the parameter file a
+capture writes reads back as the same bias; the biases the dialogue writes at
+start are checked against the sensor's echo, against the simulated sensor
+itself and against one that echoes something else; the bias parameters are
+refused unless they are three finite numbers.
+"""
+
+from typing import Any
+
+from i3dmgx2_driver.codec import layouts
+from i3dmgx2_driver.codec.commands import decode_command
+from i3dmgx2_driver.codec.records import GyroBias, INVALID_QUANTITY
+from i3dmgx2_driver.device.dialogue import float32_vector, SensorDialogue
+from i3dmgx2_driver.device.link import DeviceTimeout
+from i3dmgx2_driver.device.settings import DeviceConfig
+from i3dmgx2_driver.ros.calibration import Calibration
+from i3dmgx2_driver.ros.parameters import _bias, ParameterError
+from i3dmgx2_driver.ros.services import calibration_yaml, GyroBiasCapture
+from i3dmgx2_driver.simulator import SimulatedSensor
+import pytest
+import yaml
+
+BIAS = (-0.0033, -0.0217, -0.0052)
+
+
+class Log:
+    """Keeps what is said, by severity."""
+
+    def __init__(self) -> None:
+        self.said: list[tuple[str, str]] = []
+
+    def __getattr__(self, level: str) -> Any:
+        return lambda message: self.said.append((level, message))
+
+
+class FakeDialogue:
+    """Answers 0xD0 with ``answer`` (or times out), counting the writes as the real one."""
+
+    def __init__(self, answer: int | None) -> None:
+        self.answer = answer
+        self.eeprom_writes = 0
+        self.asked: list[int] = []
+
+    def transfer_to_non_volatile(self, link: object, quantity: int) -> int:
+        self.eeprom_writes += 1
+        self.asked.append(quantity)
+        if self.answer is None:
+            raise DeviceTimeout('no reply to 0xD0')
+        return quantity if self.answer == 0 else self.answer
+
+
+class FakeDevice:
+    """Runs an operation on no link; the dialogue is a fake."""
+
+    def __init__(self, answer: int | None = 0) -> None:
+        self.dialogue = FakeDialogue(answer)
+
+    def run_paused(self, operation: Any) -> Any:
+        return operation(None)
+
+
+def capture(device: FakeDevice, *outcomes: bool) -> GyroBiasCapture:
+    """A capture whose attempts came to ``outcomes`` (accepted or not), in order."""
+    log = Log()
+    made = GyroBiasCapture(device, lambda: None, lambda flag: None, log)
+    for accepted in outcomes:
+        made.last_capture = Calibration(0.0, accepted, BIAS, 400, 'bias' if accepted else
+                                        'the sensor moved: gravity vector changed')
+        if accepted:
+            made.good_capture = made.last_capture
+    return made
+
+
+def test_an_accepted_capture_is_stored_once_and_said():
+    device = FakeDevice()
+    made = capture(device, True)
+    ok, message = made.store()
+    assert ok, message
+    assert device.dialogue.asked == [2] and device.dialogue.eeprom_writes == 1
+    assert "stored in the sensor's non-volatile memory" in message
+    assert '(-0.00330, -0.02170, -0.00520)' in message
+    assert made._log.said[-1][1] == message
+
+
+def test_nothing_is_stored_without_a_capture_or_after_a_refused_one():
+    for outcomes in ((), (False,), (True, False)):
+        device = FakeDevice()
+        ok, message = capture(device, *outcomes).store()
+        assert not ok and message.startswith('refused: '), message
+        assert 'Nothing stored' in message
+        assert device.dialogue.asked == [], outcomes  # 0xD0 never sent
+    # A refused capture after a good one: the device uses the moved bias.
+    _, message = capture(FakeDevice(), True, False).store()
+    assert 'the last capture was not accepted (the sensor moved' in message
+
+
+def test_a_refused_store_is_reported_and_a_lost_reply_is_not_taken_for_success():
+    device = FakeDevice(INVALID_QUANTITY)
+    made = capture(device, True)
+    ok, message = made.store()
+    assert not ok and 'refused (0xFFFF)' in message and 'did not store' in message
+    assert made._log.said[-1][0] == 'error'
+    assert device.dialogue.eeprom_writes == 1  # the attempt counts all the same
+    device = FakeDevice(None)
+    ok, message = capture(device, True).store()
+    assert not ok and 'not confirmed' in message and 'may or may not' in message
+    assert device.dialogue.asked == [2]  # asked once, never resent blindly
+
+
+def test_the_calibration_file_reads_back_as_the_same_bias():
+    bias = (-0.003300000052154064, 0.1 + 0.2, 1e-9)
+    loaded = yaml.safe_load(calibration_yaml('/robot/imu', bias))
+    assert loaded == {'/robot/imu': {'ros__parameters': {'gyro_bias': list(bias)}}}
+
+
+class Link:
+    """Answers the bias writes as ``sensor`` does, or echoes ``wrong`` instead."""
+
+    wireless = False
+
+    def __init__(self, sensor: SimulatedSensor, wrong: tuple | None = None,
+                 silent: bool = False) -> None:
+        self.sensor, self.wrong, self.silent = sensor, wrong, silent
+        self.sent: list[Any] = []
+
+    def request(self, data: bytes, code: int, timeout: float, retries: int) -> Any:
+        self.sent.append(decode_command(data))
+        if self.silent:
+            raise DeviceTimeout(f'no reply to 0x{code:02X}')
+        [reply] = self.sensor.handle(data, 1.0)
+        if self.wrong is not None:
+            return GyroBias(self.wrong, reply.record.timer)
+        return reply.record
+
+
+def dialogue(**biases: Any) -> tuple[SensorDialogue, Log]:
+    import threading
+    log = Log()
+    config = DeviceConfig(port='/dev/null', address=95, **biases)
+    return SensorDialogue(config, log, lambda *args: None, threading.Event()), log
+
+
+def test_the_biases_are_written_to_ram_and_checked_against_the_echo():
+    sensor = SimulatedSensor(seed=1)
+    talk, log = dialogue(gyro_bias=BIAS, accel_bias=(0.001, 0.0, -0.002))
+    link = Link(sensor)
+    talk.write_biases(link)
+    assert [c.code for c in link.sent] == [layouts.WRITE_GYRO_BIAS, layouts.WRITE_ACCEL_BIAS]
+    assert sensor.biases.gyro == float32_vector(BIAS)
+    assert sensor.biases.accel == float32_vector((0.001, 0.0, -0.002))
+    assert talk.biases_written and talk.eeprom_writes == 0  # RAM: no EEPROM worn
+    assert any('gyro_bias (-0.0033, -0.0217, -0.0052) rad/s written' in m for _, m in log.said)
+    # None configured: nothing said to the sensor.
+    talk, _ = dialogue()
+    link = Link(sensor)
+    talk.write_biases(link)
+    assert link.sent == [] and not talk.biases_written
+
+
+def test_an_echo_that_differs_or_none_is_a_clear_error():
+    talk, _ = dialogue(gyro_bias=BIAS)
+    with pytest.raises(DeviceTimeout, match=r'gyro_bias: wrote \(-0.0033, -0.0217, -0.0052\) '
+                                            r'rad/s, the sensor echoed \(0, 0, 0\) rad/s'):
+        talk.write_biases(Link(SimulatedSensor(seed=1), wrong=(0.0, 0.0, 0.0)))
+    assert not talk.biases_written
+    with pytest.raises(DeviceTimeout, match='gyro_bias: the sensor did not echo'):
+        talk.write_biases(Link(SimulatedSensor(seed=1), silent=True))
+
+
+def test_a_bias_parameter_is_three_finite_numbers_or_nothing():
+    assert _bias('gyro_bias', []) is None
+    assert _bias('accel_bias', (0.001, 0, -0.002)) == (0.001, 0.0, -0.002)
+    for bad in ([0.1, 0.2], [0.1, 0.2, 0.3, 0.4], [0.1, float('nan'), 0.0]):
+        with pytest.raises(ParameterError, match="'gyro_bias' must be .* in rad/s"):
+            _bias('gyro_bias', bad)
