@@ -18,7 +18,9 @@ The node's services, called through rclpy from this process, against the simulat
 One simulated sensor at rest and one node serve the module (the node is
 started with ``capture_gyro_bias_on_start`` so that path is covered too).
 The simulator's true gyro bias is known, so the captured one can be checked
-against it; ``set_moving`` shakes the sensor to see a capture refused.
+against it; ``set_moving`` shakes the sensor to see a capture refused. A
+store (``~/store_gyro_bias``, 0xD0) follows only an accepted capture, survives
+the simulator's power cycle, and a memory that refuses it is reported.
 """
 
 import re
@@ -114,6 +116,57 @@ def test_capture_refused_while_moving(rig):
     assert not response.success, response.message
     assert 'refused: the sensor moved' in response.message
     assert 'capture again with the sensor still' in response.message
+    assert_streaming(listener)
+
+
+def stores(sim):
+    return [c.args for _, c in sim.commands if c.code == layouts.TRANSFER_TO_NON_VOLATILE]
+
+
+def test_a_moved_capture_is_never_stored(rig):
+    # After test_capture_refused_while_moving: the device holds the moved bias.
+    sim, listener, _ = rig
+    before = stores(sim)
+    response = call(listener, 'store_gyro_bias')
+    assert not response.success
+    assert response.message.startswith('refused: the last capture was not accepted')
+    assert stores(sim) == before
+
+
+def test_a_stored_capture_survives_a_power_cycle_and_counts_as_an_eeprom_write(rig):
+    sim, listener, node = rig
+    captured = call(listener, 'capture_gyro_bias')
+    assert captured.success, captured.message
+    response = call(listener, 'store_gyro_bias')
+    assert response.success, response.message
+    assert "stored in the sensor's non-volatile memory" in response.message
+    assert stores(sim)[-1] == (2,)
+    assert node.wait_for_output('one EEPROM write', timeout=5), node.output()
+    with sim.lock:
+        in_use = sim.sensor.biases.gyro
+    assert in_use == pytest.approx(bias_in(captured.message), abs=1e-5)
+    listener.clear()
+    arrays = listener.wait_for('/diagnostics', 2, timeout=10)
+    device = {s.name: s for s in arrays[-1].status}['i3dmgx2_driver: device']
+    assert {kv.key: kv.value for kv in device.values}['EEPROM writes'] == '1'
+    sim.power_cycle(0.2)
+    time.sleep(0.5)
+    with sim.lock:
+        assert sim.sensor.biases.gyro == in_use  # loaded from non-volatile memory
+    assert_streaming(listener, timeout=30.0)
+
+
+def test_a_refused_store_is_reported(rig):
+    sim, listener, _ = rig
+    captured = call(listener, 'capture_gyro_bias')
+    assert captured.success, captured.message
+    sim.sensor.settings.refuse_bias_store = True
+    try:
+        response = call(listener, 'store_gyro_bias')
+    finally:
+        sim.sensor.settings.refuse_bias_store = False
+    assert not response.success
+    assert 'gyro bias store refused (0xFFFF)' in response.message
     assert_streaming(listener)
 
 

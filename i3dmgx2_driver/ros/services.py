@@ -50,6 +50,7 @@ from typing import Any, NamedTuple, Protocol
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from diagnostic_msgs.srv import SelfTest
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.node import Node
 from std_srvs.srv import Trigger
@@ -609,10 +610,13 @@ class DeviceServices:
         return self._exclusive('gyro bias capture', self._capture)
 
     def _parameter(self, name: str) -> Any:
-        """Return a parameter's value, or None when the node does not declare it."""
+        """Return a parameter's value; None when the node does not declare it or it is unset."""
         if not self.node.has_parameter(name):
             return None
-        return self.node.get_parameter(name).value
+        try:
+            return self.node.get_parameter(name).value
+        except ParameterUninitializedException:
+            return None  # an empty array (the bias left to the sensor) is declared unset
 
     def _capture(self) -> tuple[bool, str]:
         ok, message = self.gyro_bias.run(int(self._parameter('gyro_bias_sampling_ms')))
