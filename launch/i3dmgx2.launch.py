@@ -19,6 +19,10 @@ Launch the 3DM-GX2 driver with the installed parameter file.
     ros2 launch i3dmgx2_driver i3dmgx2.launch.py address:=95 managed:=true
     ros2 launch i3dmgx2_driver i3dmgx2.launch.py address:=95 managed:=true autostart:=true
     ros2 launch i3dmgx2_driver i3dmgx2.launch.py address:=95 stream:=0xC2 data_rate:=250
+    ros2 launch i3dmgx2_driver i3dmgx2.launch.py addresses:='[95, 12]' \
+        sensor_names:='[front, rear]' streams:="['full', '0xC2']" data_rates:='[100, 50]'
+    ros2 launch i3dmgx2_driver i3dmgx2.launch.py address:=95 \
+        gyro_bias:='[0.0125, -0.0031, 0.0007]' calibration_file:=$HOME/imu_bias.yaml
 
 The driver publishes ``imu/raw_data``, ``imu/mag`` and ``imu/temperature``
 (REP-145 would call ``imu/raw_data`` ``imu/data`` for the ``full`` stream, which
@@ -46,6 +50,15 @@ written as with ``-p`` (``stream:=inertial`` or ``stream:=0xC2``,
 ``data_rate:=250``). Left out, the parameter file decides; so they are
 passed to the node only when given, which is why the node is built once the
 arguments are known (``OpaqueFunction``).
+
+Several sensors behind one base station, served by one node (README,
+Several sensors), take the same way: ``addresses`` instead of ``address``
+(one of the two is required; the node says so when neither is given),
+``sensor_names``, ``frame_ids``, ``streams`` and ``data_rates``, each a
+YAML list as with ``-p`` (quote a stream written as a command byte,
+``"['full', '0xC2']"``: unquoted, 0xC2 is a number in a list of names).
+So do the calibration settings (README, Calibration): ``gyro_bias`` and
+``accel_bias`` (three numbers, rad/s and g) and ``calibration_file`` (text).
 """
 
 import os
@@ -64,10 +77,11 @@ from launch_ros.parameter_descriptions import ParameterValue
 from lifecycle_msgs.msg import Transition
 
 
-#: Launch arguments that override the parameter file only when given.
-OPTIONAL_PARAMETERS = ('stream', 'data_rate')
+#: Launch arguments that override the parameter file only when given, read as YAML.
+OPTIONAL_PARAMETERS = ('address', 'stream', 'data_rate', 'addresses', 'sensor_names',
+                       'frame_ids', 'streams', 'data_rates', 'gyro_bias', 'accel_bias')
 #: The same, always passed as text (a frame named ``1`` is no number).
-OPTIONAL_TEXT_PARAMETERS = ('frame_id',)
+OPTIONAL_TEXT_PARAMETERS = ('frame_id', 'calibration_file')
 #: Launch argument -> the driver's topic it renames (remaps) when given.
 TOPIC_ARGUMENTS = {'imu_topic': 'imu/raw_data', 'mag_topic': 'imu/mag',
                    'temperature_topic': 'imu/temperature'}
@@ -112,10 +126,7 @@ def driver_actions(context: LaunchContext) -> list:
         'emulate_tty': True,
         'parameters': [
             LaunchConfiguration('params_file'),
-            {
-                'port': LaunchConfiguration('port'),
-                'address': ParameterValue(LaunchConfiguration('address'), value_type=int),
-            },
+            {'port': LaunchConfiguration('port')},
             optional_overrides(context),
         ],
     }
@@ -145,9 +156,35 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription([
         DeclareLaunchArgument('port', default_value='/dev/ttyUSB0',
                               description='Serial port of the base station'),
-        # No default: the node must not talk to a sensor nobody chose.
-        DeclareLaunchArgument('address',
-                              description='Node address of the sensor (1..65534), required'),
+        # Empty: none, and the node refuses to start unless addresses names several: it
+        # must not talk to a sensor nobody chose.
+        DeclareLaunchArgument('address', default_value='',
+                              description='Node address of the sensor (1..65534); required '
+                                          'unless addresses is given'),
+        DeclareLaunchArgument('addresses', default_value='',
+                              description="Several sensors behind the base station, e.g. "
+                                          "'[95, 12]' (instead of address); empty: one"),
+        DeclareLaunchArgument('sensor_names', default_value='',
+                              description="With addresses: each sensor's name (topic "
+                                          "prefix), e.g. '[front, rear]'; empty: imu_<address>"),
+        DeclareLaunchArgument('frame_ids', default_value='',
+                              description="With addresses: each sensor's frame; empty: "
+                                          '<name>_link'),
+        DeclareLaunchArgument('streams', default_value='',
+                              description="With addresses: each sensor's stream, e.g. "
+                                          "\"['full', '0xC2']\"; empty: stream for all"),
+        DeclareLaunchArgument('data_rates', default_value='',
+                              description="With addresses: each sensor's data rate (Hz), e.g. "
+                                          "'[100, 50]'; empty: data_rate for all"),
+        DeclareLaunchArgument('gyro_bias', default_value='',
+                              description='Gyro bias [x, y, z] in rad/s written at every start; '
+                                          'empty: as the parameter file says'),
+        DeclareLaunchArgument('accel_bias', default_value='',
+                              description='Accelerometer bias [x, y, z] in g written at every '
+                                          'start; empty: as the parameter file says'),
+        DeclareLaunchArgument('calibration_file', default_value='',
+                              description='Parameter file an accepted gyro bias capture is '
+                                          'written to; empty: as the parameter file says'),
         DeclareLaunchArgument('namespace', default_value='',
                               description='Namespace of the node and its topics'),
         DeclareLaunchArgument('node_name', default_value='i3dmgx2_driver',

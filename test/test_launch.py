@@ -16,14 +16,18 @@
 The launch file, read as code: ``launch`` is not on PyPI, so it cannot run here.
 
 What can be checked without it is checked: it compiles, declares the
-arguments the README documents (``address`` without a default), starts the
+arguments the README documents (``address`` empty: the node requires it
+unless ``addresses`` is given), starts the
 ``node`` executable of this package, or ``lifecycle_node`` with
 ``managed:=true``, passes the installed params file, puts the node under the
 ``namespace`` argument, and with ``autostart:=true`` configures the managed
 node and activates it once configured. ``stream`` and ``data_rate`` reach
 the node only when given (the parameter file decides otherwise), and as
 substitutions, which launch_ros reads as YAML the way ``-p`` is read;
-``frame_id`` likewise, as text. ``node_name`` names the node and the topic
+``frame_id`` likewise, as text. So do the several sensors' arguments
+(``addresses``, ``sensor_names``, ``frame_ids``, ``streams``,
+``data_rates``) and the calibration ones (``gyro_bias``, ``accel_bias``,
+``calibration_file`` as text), each named as the node's parameter. ``node_name`` names the node and the topic
 arguments remap its topics, so that two sensors run side by side: the
 launch file's own functions are run with two command lines and nothing the
 two nodes make may collide. The README's two-sensor launch file compiles and
@@ -35,6 +39,11 @@ import os
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LAUNCH = os.path.join(REPO, 'launch', 'i3dmgx2.launch.py')
+
+
+#: The launch arguments of several sensors and of the calibration: the node's parameters.
+SEVERAL = ('addresses', 'sensor_names', 'frame_ids', 'streams', 'data_rates')
+CALIBRATION = ('gyro_bias', 'accel_bias', 'calibration_file')
 
 
 def calls(tree: ast.AST, name: str) -> list:
@@ -67,8 +76,12 @@ def test_launch_file_declares_the_documented_arguments():
     declared = {c.args[0].value: keywords(c) for c in calls(tree, 'DeclareLaunchArgument')}
     assert set(declared) == {'port', 'address', 'namespace', 'params_file', 'managed',
                              'autostart', 'stream', 'data_rate', 'node_name', 'frame_id',
-                             'imu_topic', 'mag_topic', 'temperature_topic'}
-    assert 'default_value' not in declared['address'], 'address must have no default'
+                             'imu_topic', 'mag_topic', 'temperature_topic', *SEVERAL,
+                             *CALIBRATION}
+    # No address of its own: the node refuses to start unless one is given (or addresses).
+    assert declared['address']['default_value'] == ''
+    for name in (*SEVERAL, *CALIBRATION):
+        assert declared[name]['default_value'] == '', name
     assert declared['port']['default_value'] == '/dev/ttyUSB0'
     # The plain node unless asked; a managed node waits for its manager unless asked.
     assert declared['managed']['default_value'] == 'false'
@@ -180,7 +193,7 @@ def _launch_functions(arguments: dict) -> dict:
 def _optional_overrides(arguments: dict) -> dict:
     """Run the launch file's optional_overrides with ``arguments`` as the command line."""
     namespace = _launch_functions(arguments)
-    assert namespace['OPTIONAL_PARAMETERS'] == ('stream', 'data_rate')
+    assert namespace['OPTIONAL_PARAMETERS'][:3] == ('address', 'stream', 'data_rate')
     return namespace['optional_overrides'](None)
 
 
@@ -195,6 +208,37 @@ def test_stream_and_rate_reach_the_node_only_when_given_and_as_substitutions():
     overrides = _optional_overrides({'stream': 'inertial', 'data_rate': '250'})
     assert sorted(overrides) == ['data_rate', 'stream']
     assert overrides['data_rate'].name == 'data_rate'
+
+
+def test_several_sensors_and_the_calibration_reach_either_node_only_when_given():
+    assert _optional_overrides({'address': '', **{name: '' for name in SEVERAL},
+                                **{name: '' for name in CALIBRATION}}) == {}
+    several = {'addresses': '[95, 12]', 'sensor_names': '[front, rear]',
+               'frame_ids': '[front_link, rear_link]', 'streams': "['full', '0xC2']",
+               'data_rates': '[100, 50]'}
+    overrides = _optional_overrides(several)
+    # Each as a substitution under the parameter's own name, read as YAML like -p.
+    assert sorted(overrides) == sorted(several)
+    for name, value in overrides.items():
+        assert not isinstance(value, (str, ParameterValue)) and value.name == name
+    overrides = _optional_overrides({'address': '95', 'gyro_bias': '[0.01, 0.0, -0.02]',
+                                     'accel_bias': '[0.001, 0, 0]',
+                                     'calibration_file': '/home/robot/bias.yaml'})
+    assert sorted(overrides) == ['accel_bias', 'address', 'calibration_file', 'gyro_bias']
+    assert overrides['address'].name == 'address'
+    assert overrides['gyro_bias'].name == 'gyro_bias'
+    assert isinstance(overrides['calibration_file'], ParameterValue)
+    assert overrides['calibration_file'].value_type is str
+    # The same overrides go to both node kinds: the common arguments hold them.
+    source, tree = parse()
+    assert 'optional_overrides(context)' in ast.get_source_segment(
+        source, assigned(tree, 'common'))
+    # Every one names a parameter the node declares.
+    from i3dmgx2_driver.ros.parameters import SPECS
+    names = {spec.name for spec in SPECS}
+    functions = _launch_functions({})
+    assert set(functions['OPTIONAL_PARAMETERS']) <= names
+    assert set(functions['OPTIONAL_TEXT_PARAMETERS']) <= names
 
 
 def test_frame_id_reaches_the_node_only_when_given_and_as_text():
