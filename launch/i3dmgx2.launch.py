@@ -162,7 +162,7 @@ def generate_launch_description() -> LaunchDescription:
                               description='Node address of the sensor (1..65534); required '
                                           'unless addresses is given'),
         DeclareLaunchArgument('addresses', default_value='',
-                              description="Several sensors behind the base station, e.g. "
+                              description='Several sensors behind the base station, e.g. '
                                           "'[95, 12]' (instead of address); empty: one"),
         DeclareLaunchArgument('sensor_names', default_value='',
                               description="With addresses: each sensor's name (topic "

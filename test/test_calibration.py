@@ -78,7 +78,7 @@ class FakeDevice:
 
 
 def capture(device: FakeDevice, *outcomes: bool) -> GyroBiasCapture:
-    """A capture whose attempts came to ``outcomes`` (accepted or not), in order."""
+    """Return a capture whose attempts came to ``outcomes`` (accepted or not), in order."""
     log = Log()
     made = GyroBiasCapture(device, lambda: None, lambda flag: None, log)
     for accepted in outcomes:
@@ -189,5 +189,5 @@ def test_a_bias_parameter_is_three_finite_numbers_or_nothing():
     assert _bias('gyro_bias', []) is None
     assert _bias('accel_bias', (0.001, 0, -0.002)) == (0.001, 0.0, -0.002)
     for bad in ([0.1, 0.2], [0.1, 0.2, 0.3, 0.4], [0.1, float('nan'), 0.0]):
-        with pytest.raises(ParameterError, match="'gyro_bias' must be .* in rad/s"):
+        with pytest.raises(ParameterError, match=r"'gyro_bias' must be .* in rad/s"):
             _bias('gyro_bias', bad)

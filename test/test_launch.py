@@ -26,9 +26,10 @@ the node only when given (the parameter file decides otherwise), and as
 substitutions, which launch_ros reads as YAML the way ``-p`` is read;
 ``frame_id`` likewise, as text. So do the several sensors' arguments
 (``addresses``, ``sensor_names``, ``frame_ids``, ``streams``,
-``data_rates``) and the calibration ones (``gyro_bias``, ``accel_bias``,
-``calibration_file`` as text), each named as the node's parameter. ``node_name`` names the node and the topic
-arguments remap its topics, so that two sensors run side by side: the
+``data_rates``) and the calibration ones (``gyro_bias``,
+``accel_bias``, ``calibration_file`` as text), each named as the node's
+parameter. ``node_name`` names the node and the topic arguments remap its
+topics, so that two sensors run side by side: the
 launch file's own functions are run with two command lines and nothing the
 two nodes make may collide. The README's two-sensor launch file compiles and
 passes only arguments this one declares.
@@ -211,8 +212,8 @@ def test_stream_and_rate_reach_the_node_only_when_given_and_as_substitutions():
 
 
 def test_several_sensors_and_the_calibration_reach_either_node_only_when_given():
-    assert _optional_overrides({'address': '', **{name: '' for name in SEVERAL},
-                                **{name: '' for name in CALIBRATION}}) == {}
+    assert _optional_overrides({'address': '', **dict.fromkeys(SEVERAL, ''),
+                                **dict.fromkeys(CALIBRATION, '')}) == {}
     several = {'addresses': '[95, 12]', 'sensor_names': '[front, rear]',
                'frame_ids': '[front_link, rear_link]', 'streams': "['full', '0xC2']",
                'data_rates': '[100, 50]'}

@@ -25,11 +25,11 @@ parameter sets keeps its default here.
 
 from dataclasses import dataclass
 
-Vector3 = tuple[float, float, float]
-
 from . import timeouts
 from .realtime import NORMAL_SCHEDULING, ThreadPolicy
 from ..codec import streams
+
+Vector3 = tuple[float, float, float]
 
 
 @dataclass(frozen=True)

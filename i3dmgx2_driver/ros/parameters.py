@@ -240,7 +240,7 @@ SPECS: list[Spec] = [
          convert=lambda value: _bias('accel_bias', value)),
     Spec('calibration_file', Parameter.Type.STRING, '',
          'An accepted ~/capture_gyro_bias writes its bias to this YAML parameter file '
-         '(gyro_bias under the node\'s name, overwritten), to load at the next start; '
+         "(gyro_bias under the node's name, overwritten), to load at the next start; "
          "'': off.", empty_ok=True, feeds='node'),
     Spec('temperature_period', Parameter.Type.DOUBLE, 0.0,
          'Seconds between polls of the temperatures (0xD1), published on imu/temperature; '
@@ -518,7 +518,7 @@ def driver_config(values: Mapping[str, Any]) -> DriverConfig:
     first = sensors[0]
     biases = [name for name in BIAS_UNITS if fed['device'][name] is not None]
     if biases and len(sensors) > 1:
-        raise ParameterError(f'parameter {biases[0]!r} is one sensor\'s bias: it cannot be '
+        raise ParameterError(f"parameter {biases[0]!r} is one sensor's bias: it cannot be "
                              f'given with addresses (several sensors)')
     config = DriverConfig(
         device=_sensor_device(DeviceConfig(address=first.address, **fed['device']), first),

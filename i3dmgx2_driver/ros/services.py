@@ -13,14 +13,15 @@
 # limitations under the License.
 
 """
-The node's services: ``~/capture_gyro_bias``, ``~/store_gyro_bias``, ``~/self_test``, ...
+The node's services: capture and store the gyro bias, and the self test.
 
-... and ``~/diagnostic_self_test``. All but the last are std_srvs/Trigger (a yes or no and a text); the self test
-is also served as diagnostic_msgs/SelfTest, the ROS message for exactly
-this (the sensor's serial number, passed, one DiagnosticStatus per step),
-from the same steps.
+``~/capture_gyro_bias``, ``~/store_gyro_bias`` and ``~/self_test`` are
+std_srvs/Trigger (a yes or no and a text); the self test is also served as
+``~/diagnostic_self_test``, a diagnostic_msgs/SelfTest, the ROS message for
+exactly this (the sensor's serial number, passed, one DiagnosticStatus per
+step), from the same steps.
 
-Both need the device to themselves, so they run through the supervisor's
+Each needs the device to itself, so they run through the supervisor's
 ``run_paused``: the stream stops, the exchange runs, the stream restarts.
 The reader thread keeps running throughout (it claims the replies), so
 nothing waits on the executor but the service call itself; the services sit
@@ -233,7 +234,7 @@ class GyroBiasCapture:
     # bias, and storing would keep that.
 
     def store(self) -> tuple[bool, str]:
-        """Store the last capture in the sensor's non-volatile memory; return (success, message)."""
+        """Store the last capture in the sensor's non-volatile memory: (success, message)."""
         good = self.good_capture
         if good is None or self.last_capture is not good:
             why = ('no gyro bias was captured in this session' if self.last_capture is None
@@ -263,7 +264,7 @@ class GyroBiasCapture:
                        f'gyro_bias parameter (or calibration_file) to apply it at every start')
             self._log.error(message)
             return False, message
-        message = (f'gyro bias {text} rad/s stored in the sensor\'s non-volatile memory '
+        message = (f"gyro bias {text} rad/s stored in the sensor's non-volatile memory "
                    f'(0xD0, one EEPROM write): it loads it at every power-up')
         self._log.warning(message)
         return True, message
