@@ -32,10 +32,14 @@ from i3dmgx2_driver.device.dialogue import float32_vector, SensorDialogue
 from i3dmgx2_driver.device.link import DeviceTimeout
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.ros.calibration import Calibration
-from i3dmgx2_driver.ros.parameters import _bias, ParameterError
+from i3dmgx2_driver.ros.parameters import (
+    _bias, declare_parameters, driver_config, ParameterError,
+)
 from i3dmgx2_driver.ros.services import calibration_yaml, GyroBiasCapture
 from i3dmgx2_driver.simulator import SimulatedSensor
 import pytest
+import rclpy
+from rclpy.node import Node
 import yaml
 
 BIAS = (-0.0033, -0.0217, -0.0052)
@@ -191,3 +195,27 @@ def test_a_bias_parameter_is_three_finite_numbers_or_nothing():
     for bad in ([0.1, 0.2], [0.1, 0.2, 0.3, 0.4], [0.1, float('nan'), 0.0]):
         with pytest.raises(ParameterError, match=r"'gyro_bias' must be .* in rad/s"):
             _bias('gyro_bias', bad)
+
+
+def parameters(*arguments: str) -> dict:
+    """Declare the driver's parameters on a node with ``arguments``; return the values."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = Node('i3dmgx2_driver', context=context, cli_args=['--ros-args', *arguments])
+    try:
+        return declare_parameters(node)
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+
+
+def test_the_bias_parameters_reach_the_dialogue_and_are_one_sensors():
+    config = driver_config(parameters('-p', 'address:=95', '-p', 'gyro_bias:=[0.01, 0.0, -0.02]',
+                                      '-p', 'accel_bias:=[0, 0, 1]'))
+    assert config.device.gyro_bias == (0.01, 0.0, -0.02)
+    assert config.device.accel_bias == (0.0, 0.0, 1.0)  # integers stand for doubles
+    assert driver_config(parameters('-p', 'address:=95')).device.gyro_bias is None
+    with pytest.raises(ParameterError, match=r"'gyro_bias' is one sensor's bias"):
+        driver_config(parameters('-p', 'addresses:=[17, 95]', '-p', 'gyro_bias:=[0.01, 0.0, 0.0]'))
+    with pytest.raises(ParameterError, match=r"'accel_bias' must be .* in g, got \[0.1\]"):
+        driver_config(parameters('-p', 'address:=95', '-p', 'accel_bias:=[0.1]'))

@@ -223,7 +223,7 @@ def test_several_sensors_and_the_calibration_reach_either_node_only_when_given()
     for name, value in overrides.items():
         assert not isinstance(value, (str, ParameterValue)) and value.name == name
     overrides = _optional_overrides({'address': '95', 'gyro_bias': '[0.01, 0.0, -0.02]',
-                                     'accel_bias': '[0.001, 0, 0]',
+                                     'accel_bias': '[0.001, 0.0, 0.0]',
                                      'calibration_file': '/home/robot/bias.yaml'})
     assert sorted(overrides) == ['accel_bias', 'address', 'calibration_file', 'gyro_bias']
     assert overrides['address'].name == 'address'
