@@ -586,7 +586,7 @@ CHUNK_COST = 120
 #: The ring's cap in bytes is this many times the line's bytes per second at the
 #: baud times its seconds: room for the data and CHUNK_COST per read at any rate
 #: the line carries, while a flood of one-byte reads still cannot grow it further.
-RING_BUDGET_FACTOR = 2
+RING_BUDGET_FACTOR = 4
 #: Seconds of the stream after a fault kept in its file: the recovery, or not.
 FAULT_AFTER = 2.0
 #: How often the writer thread asks what went wrong (s).

@@ -134,7 +134,7 @@ class Counters:
         self.device = DeviceStatus(state=State.STREAMING, parser={})
         self.resets = 0
 
-    def set(self, **changes) -> None:
+    def change(self, **changes) -> None:
         self.device = dataclasses.replace(self.device, **changes)
 
 
@@ -150,7 +150,7 @@ def test_each_fault_counted_is_told_once(change, cause):
     counters = Counters()
     watch = FaultWatch(lambda: counters.device, lambda: counters.resets, prefix='left-')
     assert watch.look(0.0) == []
-    counters.set(**change)
+    counters.change(**change)
     if not change:
         counters.resets += 1
     assert watch.look(0.25) == [f'left-{cause}']
@@ -159,17 +159,17 @@ def test_each_fault_counted_is_told_once(change, cause):
 
 def test_what_is_not_a_fault():
     counters = Counters()
-    counters.set(state=State.CONNECTING)
+    counters.change(state=State.CONNECTING)
     watch = FaultWatch(lambda: counters.device, lambda: counters.resets)
     watch.look(0.0)
     # The port missing at start, a NACK in the bring-up, corrupted packets now and then.
-    counters.set(state=State.DISCONNECTED, parser={'nacks': 2})
+    counters.change(state=State.DISCONNECTED, parser={'nacks': 2})
     assert watch.look(0.25) == []
-    counters.set(state=State.STREAMING, parser={'nacks': 2, 'checksum_failures': 1})
+    counters.change(state=State.STREAMING, parser={'nacks': 2, 'checksum_failures': 1})
     assert watch.look(1.0) == []
-    counters.set(parser={'nacks': 2, 'checksum_failures': CORRUPT_BURST})
+    counters.change(parser={'nacks': 2, 'checksum_failures': CORRUPT_BURST})
     assert watch.look(4.0) == []  # spread over more than the window
-    counters.set(parser={'nacks': 2, 'checksum_failures': 2 * CORRUPT_BURST})
+    counters.change(parser={'nacks': 2, 'checksum_failures': 2 * CORRUPT_BURST})
     assert watch.look(4.5) == ['corrupt']
 
 

@@ -128,8 +128,7 @@ def test_a_stall_capture_replays_into_the_records_published_at_the_time(tmp_path
             name = wait_for_cause(directory, 'stall', node)
             assert node.stop()[0] == 0
             published = Counter(key(m) for m in listener.received('imu/raw_data'))
-    header, chunks = read_capture(directory / name)
-    chunks = list(chunks)
+    chunks = list(read_capture(directory / name)[1])
     parser = SensorStreamParser(address=95)
     records = [e for _, data in chunks for e in parser.feed(data) if isinstance(e, DataPacket)]
     assert len(records) >= 100

@@ -68,7 +68,7 @@ class FaultWatch:
         self._corrupt: deque[tuple[float, int]] = deque()
 
     def look(self, now: float) -> list[str]:
-        """Return the causes seen since the last look (``now``: monotonic seconds)."""
+        """Return the causes seen since the one before, ``now`` in monotonic seconds."""
         device, resets = self._status(), self._resets()
         bad = corrupted(device.parser)
         self._corrupt.append((now, bad))

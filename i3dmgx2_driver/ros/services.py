@@ -36,6 +36,10 @@ their report; and :class:`DeviceServices`, which serves them. Each
 judgement is a pure function of the numbers, tested without a device.
 What a capture came to is a ``Calibration`` (calibration.py), so that
 diagnostics reads it without importing this module.
+
+Last, in its own section, ``~/save_capture`` (:class:`SaveCaptureService`):
+the fault capture's last seconds written on demand. It borrows nothing from
+the device, so it is not one of the operations above.
 """
 
 from collections.abc import Callable, Sequence
