@@ -16,7 +16,8 @@
 The fault capture in a running node: each fault writes a file, and a file replays.
 
 A stall, a power cycle (a device reset), an unplug (a disconnect), a burst
-of corrupted packets and a call of ``~/save_capture`` each write a capture
+of corrupted packets, a refused command (the base station NACKs the
+temperature polls) and a call of ``~/save_capture`` each write a capture
 named by its cause into ``fault_capture_dir``; the node logs where. A file
 played back through the node (``tools.replay``) is published as the same
 records the node published when the fault happened: a fault seen in the
@@ -80,7 +81,7 @@ def test_each_fault_writes_a_capture_named_by_its_cause(tmp_path):
     directory = tmp_path / 'faults'
     with PtySimulator(SimulatorConfig(seed=81)) as sim:
         listener = Listener({'imu/raw_data': Imu})
-        node = NodeProcess(node_parameters(sim, directory))
+        node = NodeProcess(dict(node_parameters(sim, directory), temperature_period=0.2))
         with listener, node:
             assert node.wait_for_output('fault capture: the last 3 s', timeout=30), \
                 node.output()
@@ -103,6 +104,11 @@ def test_each_fault_writes_a_capture_named_by_its_cause(tmp_path):
             time.sleep(1.0)
             sim.set_faults(corrupt_checksum_probability=0.0)
             wait_for_cause(directory, 'corrupt', node)
+            time.sleep(SECONDS)
+            # The base station refuses the temperature polls made while streaming.
+            sim.set_faults(nack_probability=1.0)
+            wait_for_cause(directory, 'refused', node)
+            sim.set_faults(nack_probability=0.0)
             assert node.stop()[0] == 0
             output = node.output()
     assert f'written to {directory / name}' in output
