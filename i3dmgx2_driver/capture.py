@@ -604,7 +604,8 @@ class RecentBytes:
     reference, not copied) and drops the oldest that are older than
     ``seconds`` or beyond ``max_bytes`` (each read counted with
     :data:`CHUNK_COST`), so the memory held is bounded whatever the line
-    does. One uncontended lock per read keeps :meth:`snapshot` (another
+    does (a system clock stepped back, which keeps the age from trimming,
+    included). One uncontended lock per read keeps :meth:`snapshot` (another
     thread) from seeing the deque change under it.
     """
 
