@@ -106,7 +106,7 @@ def _vector(values: Iterable[float], digits: int = 5) -> str:
     return '(' + ', '.join(f'{v:.{digits}f}' for v in values) + ')'
 
 
-def connection_status(device: DeviceStatus, capture: str) -> Status:
+def connection_status(device: DeviceStatus, capture: str, fault_capture: str = '') -> Status:
     """
     Say whether the port is open and the device streaming.
 
@@ -115,7 +115,9 @@ def connection_status(device: DeviceStatus, capture: str) -> Status:
     paused for an operation the driver itself started is OK. ``advice`` is
     what the line observer found while no record arrived (another address,
     the other framing, unreadable bytes, silence): an ERROR that says what
-    to change. ``capture`` says what the raw capture is doing.
+    to change. ``capture`` says what the raw capture is doing,
+    ``fault_capture`` what the fault capture keeps and where it last wrote
+    ('' leaves its line out).
     """
     state, advice, last_error = device.state, device.advice, device.last_error
     connections, reconnects = device.connections, device.reconnects
@@ -152,6 +154,7 @@ def connection_status(device: DeviceStatus, capture: str) -> Status:
         ('base station ping', {None: 'not tried', True: 'ok', False: 'no answer'}[
             device.ping_ok] if wireless else 'n/a (wired)'),
         ('raw capture', capture),
+        *((('fault capture', fault_capture),) if fault_capture else ()),
         ('observed on the line', advice or '-'),
     ))
 
@@ -538,7 +541,8 @@ class DiagnosticsPublisher:
         services = core.device_services
         last, good = services.calibration()
         statuses += [
-            connection_status(device, core.raw_capture.describe()),
+            connection_status(device, core.raw_capture.describe(),
+                              core.fault_capture.describe()),
             stream_status(device, seen),
             radio_status(device.wireless, radio, fresh),
             parser_status(parser, self._last_parser, device.strays),

@@ -19,7 +19,9 @@ The driver behind both executables: device records in, sensor_msgs out, on time.
 publishers, the message factory, stamping and loss counting (its
 :class:`~.record_publisher.RecordPublisher`), the device supervisor, the
 services and the temperature poller. :class:`DriverSet` is every sensor the
-node serves, each a core, on one port, with the port's raw capture. It lives
+node serves, each a core, on one port, with the port's raw capture and its
+fault capture (the last seconds, written when a fault is seen; the
+``~/save_capture`` service). It lives
 on an rclpy node it does not own: the plain node (``imu_node.py``) makes one
 at start and starts its supervisors at once; the managed node
 (``lifecycle_node.py``) makes one at each configure, with lifecycle
@@ -58,14 +60,15 @@ import time
 
 from rclpy.node import Node
 
+from .fault_watch import FaultWatch
 from .parameters import (declare_parameters, driver_config, DriverConfig, SPECS,
                          warn_unknown_parameters)
 from .publishers import ALONE_TOPICS, create_publishers, override_names, Publishers, SensorTopics
 from .record_publisher import RecordPublisher, Stamping
 from .sensor_set import SensorSetting
-from .services import DeviceServices
+from .services import DeviceServices, SaveCaptureService
 from .temperature import TemperaturePoller
-from ..capture import RawCapture
+from ..capture import bytes_sink, FaultCapture, RawCapture
 from ..codec.data_rate import ticks_per_cycle
 from ..device.hot_path import HotPathObserver
 from ..device.port import check_port_path, PortError, SerialPort
@@ -102,7 +105,8 @@ class DriverCore:
     the validated parameters; ``publishers`` the sensor's data publishers
     (plain ones, or a managed node's lifecycle publishers: see
     :func:`create_publishers`); ``raw_capture`` the port's capture (its
-    :class:`DriverSet` closes it). What the owning node decides:
+    :class:`DriverSet` closes it), ``fault_capture`` the port's last seconds
+    (None: off; its :class:`DriverSet` starts and closes it). What the owning node decides:
     ``publishing`` False: records are counted, not published, until the
     owner turns publishing on (``records.set_publishing``); ``refusal``
     tells the services why they must refuse now ('' to serve). What a test
@@ -124,7 +128,8 @@ class DriverCore:
                  publishing: bool = True, refusal: Callable[[], str] | None = None,
                  timings: HotPathObserver | None = None,
                  port_factory: Callable[..., SerialPort] = SerialPort,
-                 shared: SharedPort | None = None) -> None:
+                 shared: SharedPort | None = None,
+                 fault_capture: FaultCapture | None = None) -> None:
         self.node = node
         self.config = cfg = config
         #: The sensor this core serves: address, name (topic prefix), frame, stream.
@@ -143,7 +148,12 @@ class DriverCore:
         self.raw_capture = raw_capture
         #: How the device side reaches and treats the sensor.
         self.device_config = cfg.device_for(sensor)
-        capture = raw_capture.on_bytes if raw_capture.active and shared is None else None
+        #: The port's last seconds, written when a fault is seen (shown on diagnostics).
+        self.fault_capture = fault_capture or FaultCapture(None, 1.0, 1, node.get_logger())
+        capture = None
+        if shared is None:
+            capture = bytes_sink(raw_capture.on_bytes if raw_capture.active else None,
+                                 self.fault_capture.on_bytes)
         self.supervisor = DeviceSupervisor(
             self.device_config,
             on_record=self.records.on_record, log=node.get_logger(),
@@ -155,6 +165,10 @@ class DriverCore:
             capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal,
             calibrated=self.records.announce_calibrated,
             prefix='~/' if shared is None else f'~/{sensor.name}/')
+        #: The faults of this sensor the fault capture is written for.
+        self.fault_watch = FaultWatch(self.supervisor.status,
+                                      lambda: self.records.stats.device_resets,
+                                      prefix='' if shared is None else f'{sensor.name}-')
         frame_id = self.records.messages.frame_id
         self.temperature = TemperaturePoller(
             node, self.supervisor.streaming_link, frame_id,
@@ -228,16 +242,33 @@ class DriverSet:
             config.capture_file, node.get_logger(), port=device.port,
             address=sensors[0].address, baud=device.baud, wireless=device.wireless,
             node=node.get_fully_qualified_name())
+        #: The port's last seconds, kept always, written when a fault is seen or on request.
+        self.fault_capture = faults = FaultCapture(
+            config.fault_capture_dir, config.fault_capture_seconds, config.fault_captures_kept,
+            node.get_logger(), port=device.port, address=sensors[0].address, baud=device.baud,
+            wireless=device.wireless, node=node.get_fully_qualified_name())
         self.shared: SharedPort | None = None
         if len(sensors) > 1:
             self.shared = SharedPort(
                 device, node.get_logger(), port_factory,
-                capture.on_bytes if capture.active else None, timings)
+                bytes_sink(capture.on_bytes if capture.active else None, faults.on_bytes),
+                timings)
         self.cores = [
             DriverCore(node, config, sensor, sensor_publishers, capture,
                        publishing=publishing, refusal=refusal, timings=timings,
-                       port_factory=port_factory, shared=self.shared)
+                       port_factory=port_factory, shared=self.shared, fault_capture=faults)
             for sensor, sensor_publishers in zip(sensors, publishers, strict=True)]
+        self.save_capture = SaveCaptureService(node, faults)
+        if faults.active:
+            node.get_logger().info(
+                f'fault capture: the last {config.fault_capture_seconds:g} s of the port kept, '
+                f'written to {faults.directory} when a fault is seen')
+        faults.start(self._faults)
+
+    def _faults(self) -> list[str]:
+        """Return what went wrong with any sensor since the last look (the fault capture's)."""
+        now = time.monotonic()
+        return [cause for core in self.cores for cause in core.fault_watch.look(now)]
 
     @property
     def several(self) -> bool:
@@ -261,6 +292,7 @@ class DriverSet:
 
     def shutdown(self, report: bool = True) -> None:
         """Stop every stream and close the port, the sensors at once (bounded in time)."""
+        self.fault_capture.close()  # our own stop is no fault
         if len(self.cores) == 1:
             self.cores[0].shutdown(report)
         else:
@@ -283,3 +315,4 @@ class DriverSet:
         """
         for core in self.cores:
             core.device_services.destroy()
+        self.save_capture.destroy()

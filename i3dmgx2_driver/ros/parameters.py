@@ -255,6 +255,19 @@ SPECS: list[Spec] = [
          '(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '
          "'': off.",
          empty_ok=True),
+    # The fault capture (capture.py FaultCapture): the last seconds, kept always.
+    Spec('fault_capture_dir', Parameter.Type.STRING, '~/.ros/i3dmgx2_captures',
+         'Keep the last fault_capture_seconds of bytes read from the port in memory, and '
+         'write them to a capture file in this directory (named by UTC time and cause) on a '
+         'stall, a disconnect, a device reset, a burst of corrupted packets, a refused '
+         "command, or a ~/save_capture call; '': off.",
+         empty_ok=True),
+    Spec('fault_capture_seconds', Parameter.Type.DOUBLE, 30.0,
+         'Seconds of the port kept in memory for a fault capture (also the least time '
+         'between two of its files: faults closer together share one).', (1.0, 600.0)),
+    Spec('fault_captures_kept', Parameter.Type.INTEGER, 20,
+         'Fault capture files kept in fault_capture_dir; the oldest are deleted.',
+         (1, 10000)),
 ]
 
 
@@ -282,6 +295,9 @@ class DriverConfig:
     capture_gyro_bias_on_start: bool
     temperature_period: float
     capture_file: str
+    fault_capture_dir: str
+    fault_capture_seconds: float
+    fault_captures_kept: int
 
     def device_for(self, sensor: SensorSetting) -> DeviceConfig:
         """Return how the device side reaches and treats ``sensor``."""

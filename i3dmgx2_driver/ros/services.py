@@ -39,6 +39,10 @@ their report; and :class:`DeviceServices`, which serves them. Each
 judgement is a pure function of the numbers, tested without a device.
 What a capture came to is a ``Calibration`` (calibration.py), so that
 diagnostics reads it without importing this module.
+
+Last, in its own section, ``~/save_capture`` (:class:`SaveCaptureService`):
+the fault capture's last seconds written on demand. It borrows nothing from
+the device, so it is not one of the operations above.
 """
 
 from collections.abc import Callable, Sequence
@@ -57,6 +61,7 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from .calibration import Calibration, RATE_TOLERANCE
+from ..capture import FaultCapture
 from ..codec import commands, layouts
 from ..codec.errors import CodecError
 from ..codec.records import GYRO_BIAS_QUANTITY, INVALID_QUANTITY
@@ -667,3 +672,38 @@ class DeviceServices:
     def _self_test(self) -> tuple[bool, str]:
         steps = self.self_test_run.steps()
         return all(step.passed for step in steps), format_report(steps)
+
+
+# -- ~/save_capture: the fault capture's last seconds, on demand ------------------------
+
+class SaveCaptureService:
+    """
+    ``~/save_capture`` (std_srvs/Trigger): write the fault capture's last seconds now.
+
+    One per node (the capture is the port's, whichever sensors share it).
+    The reply's message is the file's path, or why none was written (the
+    fault capture off, nothing read yet, the directory not writable). Its
+    own callback group: writing a few hundred kilobytes never waits for a
+    30 s gyro bias capture, nor holds one up.
+    """
+
+    def __init__(self, node: Node, capture: FaultCapture) -> None:
+        self._node = node
+        self._capture = capture
+        self.service = node.create_service(
+            Trigger, '~/save_capture', self._save,
+            callback_group=MutuallyExclusiveCallbackGroup())
+
+    def _save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        try:
+            path = self._capture.save('request')
+        except (OSError, ValueError) as exc:
+            response.success, response.message = False, f'no capture written: {exc}'
+            return response
+        self._node.get_logger().info(f'capture saved on request: {path}')
+        response.success, response.message = True, path
+        return response
+
+    def destroy(self) -> None:
+        """Remove the service from the node (a managed node's cleanup)."""
+        self._node.destroy_service(self.service)
