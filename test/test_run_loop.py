@@ -19,7 +19,9 @@ The run loop's executor thread: it serves, ends when halted, passes on errors.
 work) while the main thread waits for a signal. What the main thread did
 itself before must still happen: callbacks run, a callback that raises
 stops the node and its error reaches ``run``, and a halt ends the thread
-even when nothing wakes the executor. Real rclpy, in a process of its own.
+even when nothing wakes the executor; the stop it sets is run()'s
+(``lifetime.StopSignal``), which any thread may set. Real rclpy, in a process
+of its own.
 """
 
 import subprocess
@@ -35,6 +37,7 @@ import threading
 import rclpy
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from i3dmgx2_driver.lifetime import StopSignal
 from i3dmgx2_driver.ros.main import _Spinner
 
 rclpy.init()
@@ -43,7 +46,7 @@ ran = threading.Event()
 node.create_timer(0.01, ran.set)
 executor = MultiThreadedExecutor(num_threads=2)
 executor.add_node(node)
-stop = threading.Event()
+stop = StopSignal()  # what run() hands it
 spinner = _Spinner(executor, stop)
 spinner.start()
 print('callbacks ran', ran.wait(10.0))
@@ -55,7 +58,7 @@ def fail():
     raise RuntimeError('boom')
 
 node.create_timer(0.01, fail)
-stop = threading.Event()
+stop = StopSignal()  # what run() hands it
 spinner = _Spinner(executor, stop)
 spinner.start()
 print('stopped by the error', stop.wait(10.0), repr(spinner.error))
