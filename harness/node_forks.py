@@ -58,7 +58,7 @@ def _send(message: dict) -> None:
 
 def _child(request: dict, entries: dict[str, Callable[[], int]], inherited: list[int]) -> None:
     """Become the requested executable: never returns (SystemExit, the process's own exit)."""
-    for fd in inherited:
+    for fd in inherited:  # the server's watches on its other children
         os.close(fd)
     log = os.open(request['log'], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
     os.dup2(log, 1)
@@ -76,10 +76,11 @@ def serve() -> int:
     """Fork a child for every request line on standard input, until it ends."""
     from i3dmgx2_driver.ros import lifecycle_node, main as node_main
     entries = {'node': node_main.main, 'lifecycle_node': lifecycle_node.main}
-    tasks = os.listdir('/proc/self/task')
-    if len(tasks) != 1:
-        print(f'node_forks: {len(tasks)} threads after the imports: cannot fork safely',
-              file=sys.stderr)
+    # No Python thread may run when it forks. The C libraries' own (lttng-ust's two
+    # listeners, blocked in a futex) are not copied into a child, and hold nothing it needs.
+    if threading.active_count() != 1:
+        print(f'node_forks: {threading.active_count()} Python threads after the imports: '
+              f'cannot fork safely', file=sys.stderr)
         return 1
     children: dict[int, tuple[Any, int]] = {}  # pidfd -> (request id, pid)
     pending = b''
@@ -108,7 +109,7 @@ def serve() -> int:
                 request = json.loads(line)
                 pid = os.fork()
                 if pid == 0:
-                    _child(request, entries, [0, *children])
+                    _child(request, entries, list(children))
                 children[os.pidfd_open(pid)] = (request['id'], pid)
                 _send({'id': request['id'], 'pid': pid, 'started': time.monotonic()})
 
@@ -196,7 +197,7 @@ class ForkServer:
     def __init__(self, env: dict[str, str] | None = None, tree: str | None = None) -> None:
         # Not at the top: the server itself imports only this module and the driver.
         from harness.processes import REPO, ros_env
-        env = ros_env(env)
+        env = ros_env({'OPENBLAS_NUM_THREADS': '1', **(env or {})})
         if tree is not None:
             env['PYTHONPATH'] = os.pathsep.join((tree, env['PYTHONPATH']))
         self.proc = subprocess.Popen(

@@ -60,6 +60,8 @@ EXIT_PAST_DEADLINE = 1
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 #: prctl(2) option: the signal the process gets when its parent ends.
 _PR_SET_PDEATHSIG = 1
+#: Where the deadline writes when the process has no standard error.
+_DEVNULL: Any = None
 
 
 class StopSignal:
@@ -194,8 +196,16 @@ def arm_deadline(seconds: float = SHUTDOWN_DEADLINE) -> None:
     Make sure the process ends within ``seconds``: past them, every thread's stack, then exit 1.
 
     Written to standard error (the log); armed again, the count starts afresh.
+    Without a standard error to write to, the deadline still ends the process.
     """
-    faulthandler.dump_traceback_later(seconds, exit=True, file=sys.__stderr__ or sys.stderr)
+    try:
+        faulthandler.dump_traceback_later(seconds, exit=True,
+                                          file=sys.__stderr__ or sys.stderr)
+    except (AttributeError, RuntimeError, ValueError, OSError):
+        global _DEVNULL
+        if _DEVNULL is None:
+            _DEVNULL = open(os.devnull, 'w')  # noqa: SIM115 - kept for the process's life
+        faulthandler.dump_traceback_later(seconds, exit=True, file=_DEVNULL)
 
 
 def cancel_deadline() -> None:

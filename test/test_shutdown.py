@@ -79,6 +79,13 @@ print('all stopped', flush=True)
 """
 
 _HANGING_STOP = _PRELUDE + """
+def BESIDE():
+    threading.Event().wait()  # another thread, waiting too: its stack is written as well
+
+
+threading.Thread(target=BESIDE, daemon=True).start()
+
+
 def HOLD():
     print('stopping', flush=True)
     threading.Event().wait()  # the injected wait: this stop never ends by itself
@@ -160,8 +167,8 @@ def test_a_stop_that_hangs_ends_at_the_deadline_with_every_threads_stack():
     assert SHUTDOWN_DEADLINE - 0.5 < took < SHUTDOWN_DEADLINE + 3.0, took
     # faulthandler's words: the deadline, then each thread, where it waited.
     assert 'Timeout (0:00:03)!' in out, out
-    assert out.count('most recent call first') >= 2, out  # the main thread and the others
-    assert 'in HOLD' in out and 'in shutdown' in out, out
+    assert out.count('most recent call first') >= 2, out  # the main thread and the other
+    assert 'in HOLD' in out and 'in shutdown' in out and 'in BESIDE' in out, out
 
 
 @pytest.mark.slow

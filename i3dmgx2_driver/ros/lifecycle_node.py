@@ -131,6 +131,8 @@ class LifecycleDriverNode(LifecycleNode):
         self._data_publishers: list[Publishers] | None = None
         self._transition_lock = threading.RLock()
         self._finished = threading.Event()
+        #: Set by a signal's shutdown(): a transition under way does not start the device again.
+        self._stopping = threading.Event()
         config: DriverConfig | None = None
         try:
             # Declared now so that ``ros2 param`` shows them before configure, and
@@ -204,6 +206,10 @@ class LifecycleDriverNode(LifecycleNode):
         drivers = DriverSet(self, config, publishers=self._data_publishers, publishing=False,
                             refusal=self._refusal, **self._core_options)
         self.drivers = drivers
+        if self._stopping.is_set():
+            # A signal came while the set was made, before shutdown() could see it.
+            self._release()
+            return FAILURE
         failed = _each(drivers.cores, lambda core: core.supervisor.connect())
         if len(failed) == len(drivers.cores):
             self._release()
@@ -229,6 +235,8 @@ class LifecycleDriverNode(LifecycleNode):
         """Enable the publishers, start the stream; fail if no record comes."""
         start = time.monotonic()
         drivers = self.drivers
+        if self._stopping.is_set():
+            return FAILURE  # a signal stopped the device meanwhile: it stays stopped
         result = super().on_activate(state)
         if result != SUCCESS or drivers is None:
             return FAILURE
@@ -321,6 +329,7 @@ class LifecycleDriverNode(LifecycleNode):
         """
         if self._finished.is_set():
             return
+        self._stopping.set()
         drivers = self.drivers
         if drivers is not None:
             drivers.set_publishing(False)

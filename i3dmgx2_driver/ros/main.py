@@ -56,6 +56,7 @@ import rclpy
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 
 from .imu_node import ImuDriverNode
 from .parameters import ParameterError
@@ -81,7 +82,11 @@ class _Spinner:
     def __init__(self, executor: MultiThreadedExecutor, stop: lifetime.StopSignal) -> None:
         self._executor = executor
         self._stop = stop
-        self._halt = threading.Event()
+        #: Done once halted. The executor's wait ends on it: a wake alone only has the
+        #: wait set rebuilt and the wait go on, and a thread still in rclpy's wait when
+        #: the interpreter exits aborts the process ("terminate called without an
+        #: active exception", exit -6), as a node with no timer due did.
+        self._halt = Future()
         self.error: BaseException | None = None
         self._thread = threading.Thread(target=self._spin, name='gx2-executor', daemon=True)
 
@@ -90,8 +95,8 @@ class _Spinner:
 
     def _spin(self) -> None:
         try:
-            while not self._halt.is_set() and rclpy.ok():
-                self._executor.spin_once()
+            while not self._halt.done() and rclpy.ok():
+                self._executor.spin_once_until_future_complete(self._halt)
         except ExternalShutdownException:
             pass  # ROS shut down under the node: it ends like a signal
         except BaseException as exc:  # a callback's error ends the node, as it did in main
@@ -100,8 +105,9 @@ class _Spinner:
             self._stop.set()
 
     def halt(self, timeout: float = 1.0) -> None:
-        """Stop spinning: wake the executor's wait and let the thread end."""
-        self._halt.set()
+        """Stop spinning: end the executor's wait and let the thread end."""
+        if not self._halt.done():
+            self._halt.set_result(True)
         self._executor.wake()
         self._thread.join(timeout)
 

@@ -485,7 +485,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``bringup``; return the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    # A closed terminal, SIGTERM or its parent's end take Ctrl-C's way out: the sensor left as found.
+    # A closed terminal, SIGTERM or its parent's end take Ctrl-C's way out: the sensor is
+    # left as found.
     lifetime.interrupt_on_stop_signals()
     try:
         _streams(args.streams)

@@ -724,7 +724,8 @@ class _ProgressLine:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``discover``; return the exit status."""
     args = build_parser().parse_args(argv)
-    # A closed terminal, SIGTERM or its parent's end take Ctrl-C's way out: the port closed, the sensors as found.
+    # A closed terminal, SIGTERM or its parent's end take Ctrl-C's way out: the port is
+    # closed, the sensors left as found.
     lifetime.interrupt_on_stop_signals()
     out = sys.stdout
     if args.port:
