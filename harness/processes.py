@@ -42,14 +42,13 @@ import threading
 import time
 from typing import Any, ClassVar, NamedTuple
 
+from i3dmgx2_driver.lifetime import StopSignal
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-
-from i3dmgx2_driver.lifetime import StopSignal
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: How ``NodeProcess`` starts the node from the source tree, as ``ros2 run`` does.

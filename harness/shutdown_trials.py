@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Shutdown at a random moment of every phase, thousands of times: does the node always end?
+Shutdown at a random moment of every phase, thousands of times: whether the node always ends.
 
 One trial starts a node (plain or managed, through the fork server of
 ``node_forks.py``) against a simulated sensor in this process, brings it to
@@ -85,7 +85,7 @@ class Outcome:
 
     @property
     def clean(self) -> bool:
-        """Ended by itself, in time, with code 0."""
+        """Whether it ended by itself, in time, with code 0."""
         return (not self.hung and self.code == 0 and self.seconds <= SHUTDOWN_DEADLINE)
 
 
@@ -100,11 +100,11 @@ class Tally:
         self.outcomes.append(outcome)
 
     def ran(self) -> list[Outcome]:
-        """The trials that reached their phase and were signalled."""
+        """Return the trials that reached their phase and were signalled."""
         return [o for o in self.outcomes if not o.setup_error]
 
     def summary(self) -> dict[str, object]:
-        """Runs, hangs, forced kills, past the deadline, other exit codes, slowest exit."""
+        """Return runs, hangs, forced kills, exits past the deadline, exit codes, slowest."""
         ran = self.ran()
         codes = Counter(o.code for o in ran if not o.hung)
         return {
@@ -118,7 +118,7 @@ class Tally:
         }
 
     def by_phase(self) -> dict[str, list[Outcome]]:
-        """The trials that ran, by phase."""
+        """Return the trials that ran, by phase."""
         phases: dict[str, list[Outcome]] = {}
         for outcome in self.ran():
             phases.setdefault(outcome.phase, []).append(outcome)
@@ -136,7 +136,7 @@ class Slot:
         self._client: LifecycleClient | None = None
 
     def client(self) -> LifecycleClient:
-        """The lifecycle client in this slot's domain (made once)."""
+        """Return the lifecycle client in this slot's domain (made once)."""
         if self._client is None:
             self._listener = Listener({}, domain=self.domain)
             self._client = LifecycleClient(self._listener)
@@ -148,7 +148,7 @@ class Slot:
             self._listener.close()
 
     def env(self) -> dict[str, str]:
-        """The node's environment: this slot's domain, on this machine only."""
+        """Return the node's environment: this slot's domain, on this machine only."""
         return {'ROS_DOMAIN_ID': str(self.domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
 
     def trial(self, phase: str, signum: int) -> Outcome:
@@ -289,5 +289,5 @@ def run_trials(count: int, slots: int = 3, seed: int = 1, phases: tuple[str, ...
 
 
 def machine_load() -> str:
-    """The load average now, for the report."""
+    """Return the load average now, for the report."""
     return ' / '.join(f'{v:.2f}' for v in os.getloadavg())

@@ -61,7 +61,7 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 #: prctl(2) option: the signal the process gets when its parent ends.
 _PR_SET_PDEATHSIG = 1
 #: Where the deadline writes when the process has no standard error.
-_DEVNULL: Any = None
+_DEVNULL: list[Any] = []
 
 
 class StopSignal:
@@ -106,7 +106,7 @@ class StopSignal:
         self.signum = signum
         self.set()
 
-    def set(self) -> None:
+    def set(self) -> None:  # noqa: A003 - threading.Event's name, for the same use
         """Set the flag and wake whoever waits (any thread, or a signal handler)."""
         self._set = True
         try:
@@ -202,10 +202,9 @@ def arm_deadline(seconds: float = SHUTDOWN_DEADLINE) -> None:
         faulthandler.dump_traceback_later(seconds, exit=True,
                                           file=sys.__stderr__ or sys.stderr)
     except (AttributeError, RuntimeError, ValueError, OSError):
-        global _DEVNULL
-        if _DEVNULL is None:
-            _DEVNULL = open(os.devnull, 'w')  # noqa: SIM115 - kept for the process's life
-        faulthandler.dump_traceback_later(seconds, exit=True, file=_DEVNULL)
+        if not _DEVNULL:
+            _DEVNULL.append(open(os.devnull, 'w'))  # noqa: SIM115 - for the process's life
+        faulthandler.dump_traceback_later(seconds, exit=True, file=_DEVNULL[0])
 
 
 def cancel_deadline() -> None:

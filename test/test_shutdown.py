@@ -36,9 +36,8 @@ import sys
 import time
 
 from harness.processes import isolate_ros_domain, REPO, ros_env
-import pytest
-
 from i3dmgx2_driver.lifetime import EXIT_PAST_DEADLINE, SHUTDOWN_DEADLINE, StopSignal
+import pytest
 
 _PRELUDE = """
 import os, random, signal, sys, threading, time

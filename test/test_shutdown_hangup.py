@@ -38,9 +38,8 @@ import threading
 import time
 
 from harness.processes import ADDRESS, isolate_ros_domain, REPO
-import pytest
-
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+import pytest
 
 pytestmark = pytest.mark.slow
 
@@ -61,7 +60,7 @@ def _alive(pid: int) -> bool:
 
 
 def _family(root: int) -> set[int]:
-    """``root`` and every process below it now."""
+    """Return ``root`` and every process below it now."""
     children: dict[int, list[int]] = {}
     for entry in os.listdir('/proc'):
         if not entry.isdigit():
@@ -82,7 +81,7 @@ def _family(root: int) -> set[int]:
 
 
 def _left(pids: set[int], within: float) -> set[int]:
-    """The processes of ``pids`` still running after ``within`` s (reaping our own child)."""
+    """Return the processes of ``pids`` still running after ``within`` s (reaping ours)."""
     deadline = time.monotonic() + within
     while True:
         for pid in pids:
@@ -147,10 +146,10 @@ class Terminal:
                 self._text += data
 
     def text(self) -> str:
-        """What was written to the terminal so far."""
+        """Return what was written to the terminal so far."""
         return self._text.decode(errors='replace')
 
-    def type(self, line: str) -> None:
+    def send_line(self, line: str) -> None:
         """Type ``line`` and Enter."""
         os.write(self._master, line.encode() + b'\n')
 
@@ -184,7 +183,7 @@ def sim():
 
 
 def _tool_argv(tool: str, sim: PtySimulator, tmp_path: Path) -> tuple[list[str], str]:
-    """The command line of ``tool`` and what it writes once it runs ('' to just wait)."""
+    """Return the command line of ``tool`` and what it writes once it runs ('' to wait)."""
     ros = ['--ros-args', '-p', f'port:={sim.port}', '-p', f'address:={ADDRESS}']
     return {
         'simulator': (['--quiet'], 'port: '),
@@ -251,7 +250,7 @@ def test_each_tool_in_a_session_of_its_own_ends_with_its_parent(tool, sim, tmp_p
 
 def _demo(terminal: Terminal) -> set[int]:
     """Start the demo from the terminal's shell; return the shell's processes once it streams."""
-    terminal.type(f'cd {REPO} && bash scripts/demo.sh')
+    terminal.send_line(f'cd {REPO} && bash scripts/demo.sh')
     assert terminal.wait_for('[demo] ros2 run i3dmgx2_driver monitor', 300.0), terminal.text()
     # The monitor's first line with data: the whole demo runs.
     assert terminal.wait_for(' Hz  accel', 30.0), terminal.text()

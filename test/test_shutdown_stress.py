@@ -27,9 +27,8 @@ within about two minutes on two cores.
 
 from harness.processes import isolate_ros_domain
 from harness.shutdown_trials import PHASES, run_trials
-import pytest
-
 from i3dmgx2_driver.lifetime import SHUTDOWN_DEADLINE
+import pytest
 
 pytestmark = pytest.mark.slow
 
