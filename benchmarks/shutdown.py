@@ -54,24 +54,33 @@ def run(runs: int, slots: int = 3) -> list[Result]:
     ]
 
 
+def _counts(outcomes: list[Outcome]) -> tuple[int, int, int]:
+    """Exits with code 0, ended by the signal itself (before the handlers), other codes."""
+    ended = [o for o in outcomes if not o.hung]
+    zero = sum(o.code == 0 for o in ended)
+    by_signal = sum(o.before_handlers for o in ended)
+    return zero, by_signal, len(ended) - zero - by_signal
+
+
 def _table(tally: Tally) -> str:
-    lines = ['| phase | runs | SIGINT / SIGTERM | hangs | forced kills | exit code not 0 '
-             '| past 3 s | exit p50 / max (s) |',
+    lines = ['| phase | runs | SIGINT / SIGTERM | hangs | forced kills '
+             '| exit 0 / by the signal / other | past 3 s | exit p50 / max (s) |',
              '|---|---|---|---|---|---|---|---|']
     for phase, outcomes in sorted(tally.by_phase().items()):
         ended = [o.seconds for o in outcomes if not o.hung]
         sigint = sum(o.signal == 'SIGINT' for o in outcomes)
+        zero, by_signal, other = _counts(outcomes)
         lines.append(
             f'| {phase} | {len(outcomes)} | {sigint} / {len(outcomes) - sigint} '
             f'| {sum(o.hung for o in outcomes)} | {sum(o.killed for o in outcomes)} '
-            f'| {sum(o.code != 0 for o in outcomes if not o.hung)} '
+            f'| {zero} / {by_signal} / {other} '
             f'| {sum(s > SHUTDOWN_DEADLINE for s in ended)} '
             f'| {statistics.median(ended) if ended else 0.0:.2f} / '
             f'{max(ended, default=0.0):.2f} |')
     summary = tally.summary()
+    zero, by_signal, other = _counts(tally.ran())
     lines.append(f'| **all** | **{summary["runs"]}** | | **{summary["hangs"]}** '
-                 f'| **{summary["forced kills"]}** '
-                 f'| **{sum(n for c, n in summary["exit codes"].items() if c != 0)}** '
+                 f'| **{summary["forced kills"]}** | {zero} / {by_signal} / **{other}** '
                  f'| **{summary["past the deadline"]}** '
                  f'| max **{summary["slowest exit"]:.2f}** |')
     return '\n'.join(lines)
@@ -110,7 +119,8 @@ def main(argv: list[str] | None = None) -> int:
         f'Exit codes: {summary["exit codes"]}. An exit is the time from the signal to the '
         f'end of the process (its pidfd readable in the fork server).',
         'A hang: not ended 10 s after the signal (then SIGABRT: its stacks; a forced kill: '
-        'SIGKILL after that).',
+        'SIGKILL after that). "By the signal": the node ended by the signal\'s own action, '
+        'sent before its handlers were installed (the first milliseconds of a forked start).',
     ]
     text = '\n'.join(['## Shutdown at random moments', '', machine_table(), '',
                       _table(tally), '', *[f'- {n}' for n in notes]]) + '\n'

@@ -68,6 +68,10 @@ def _child(request: dict, entries: dict[str, Callable[[], int]], inherited: list
     os.dup2(devnull, 0)
     os.close(devnull)
     os.environ.update(request['env'])
+    # As from a terminal: SIGINT not ignored (a script's background job, as the run
+    # that started this server may be, starts with it ignored, and the child would
+    # lose a SIGINT that comes before the node's handlers exist).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     sys.argv = [request['kind'], *request['argv']]
     sys.exit(entries[request['kind']]())
 

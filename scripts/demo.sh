@@ -54,9 +54,11 @@ cleanup() {
   # half-way (set -e), nor a second signal (a closed terminal sends SIGHUP after Ctrl-C).
   set +e
   trap '' INT TERM HUP
-  [ -n "$MONITOR_PID" ] && kill -INT "$MONITOR_PID" 2>/dev/null
-  [ -n "$NODE_PID" ] && kill -INT "$NODE_PID" 2>/dev/null && wait "$NODE_PID" 2>/dev/null
-  [ -n "$SIM_PID" ] && kill -INT "$SIM_PID" 2>/dev/null && wait "$SIM_PID" 2>/dev/null
+  # SIGTERM, which each stops on as on Ctrl-C: a background job starts with SIGINT ignored,
+  # so a SIGINT that came before its handlers were installed would be lost, and wait hang.
+  [ -n "$MONITOR_PID" ] && kill -TERM "$MONITOR_PID" 2>/dev/null
+  [ -n "$NODE_PID" ] && kill -TERM "$NODE_PID" 2>/dev/null && wait "$NODE_PID" 2>/dev/null
+  [ -n "$SIM_PID" ] && kill -TERM "$SIM_PID" 2>/dev/null && wait "$SIM_PID" 2>/dev/null
   rm -rf "$WORK"
 }
 trap cleanup EXIT

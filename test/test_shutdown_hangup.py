@@ -37,12 +37,13 @@ import subprocess
 import threading
 import time
 
-from harness.processes import ADDRESS, isolate_ros_domain, REPO
+from harness.processes import ADDRESS, isolate_ros_domain, REPO as REPO_PATH
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
 
 pytestmark = pytest.mark.slow
 
+REPO = Path(REPO_PATH)
 LIB = Path(os.environ.get('I3DMGX2_LIB')
            or REPO / 'install' / 'i3dmgx2_driver' / 'lib' / 'i3dmgx2_driver')
 #: How long after the hang-up (or the kill) every process must be gone (s).
