@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
         'sent before its handlers were installed (the first milliseconds of a forked start).',
     ]
     text = '\n'.join(['## Shutdown at random moments', '', machine_table(), '',
-                      _table(tally), '', *[f'- {n}' for n in notes]]) + '\n'
+                      _table(tally), '', notes[0], *[f'- {n}' for n in notes[1:]]]) + '\n'
     emit(text, args.output)
     return 0
 

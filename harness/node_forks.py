@@ -68,16 +68,16 @@ def _child(request: dict, entries: dict[str, Callable[[], int]], inherited: list
     os.dup2(devnull, 0)
     os.close(devnull)
     os.environ.update(request['env'])
-    # As from a terminal: SIGINT not ignored (a script's background job, as the run
-    # that started this server may be, starts with it ignored, and the child would
-    # lose a SIGINT that comes before the node's handlers exist).
-    signal.signal(signal.SIGINT, signal.default_int_handler)
     sys.argv = [request['kind'], *request['argv']]
     sys.exit(entries[request['kind']]())
 
 
 def serve() -> int:
     """Fork a child for every request line on standard input, until it ends."""
+    # As from a terminal, from the fork on: SIGINT not ignored (a script's background job, as
+    # the run that started this server may be, starts with it ignored, and a child would
+    # lose a SIGINT that comes before the node's handlers exist).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     from i3dmgx2_driver.ros import lifecycle_node, main as node_main
     entries = {'node': node_main.main, 'lifecycle_node': lifecycle_node.main}
     # No Python thread may run when it forks. The C libraries' own (lttng-ust's two
