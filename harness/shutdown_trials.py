@@ -38,7 +38,7 @@ if even that does not end it (a forced kill). The shutdown deadline of the
 node itself (3 s, ``i3dmgx2_driver/lifetime.py``) shows as exit code 1 with
 its stacks in the log. Several slots run side by side, each in a ROS domain
 of its own. ``benchmarks/shutdown.py`` runs thousands;
-``test/test_shutdown_stress.py`` 120.
+``test/test_shutdown_stress.py`` 300.
 """
 
 from collections import Counter
