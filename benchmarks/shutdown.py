@@ -55,7 +55,7 @@ def run(runs: int, slots: int = 3) -> list[Result]:
 
 
 def _counts(outcomes: list[Outcome]) -> tuple[int, int, int]:
-    """Exits with code 0, ended by the signal itself (before the handlers), other codes."""
+    """Count the exits with code 0, by the signal itself (before the handlers), other codes."""
     ended = [o for o in outcomes if not o.hung]
     zero = sum(o.code == 0 for o in ended)
     by_signal = sum(o.before_handlers for o in ended)
