@@ -17,8 +17,9 @@ Every benchmark, one table: ``python benchmarks/run_all.py [--quick]``.
 
 Runs the codec throughput (``codec_throughput.py``, in a process of its own
 because it pins itself to one core), then latency, sustained rate, CPU,
-timestamps, publishing under executor load and every stream at the line's
-limit, and prints one Markdown table
+timestamps, publishing under executor load, every stream at the line's
+limit and shutdown at random moments (a few hundred; ``shutdown.py`` runs
+thousands), and prints one Markdown table
 (metric, value, target, met?) with the machine it ran on; the same text goes
 to ``benchmarks/output/results.md``. The full run takes about 15 minutes,
 ``--quick`` about 3. The figures depend on the machine and on whatever else
@@ -40,6 +41,7 @@ import executor_load
 from harness.processes import ros_env
 import latency
 import several_sensors
+import shutdown
 import streams
 import throughput
 import timestamps
@@ -83,6 +85,7 @@ def main() -> int:
         ('executor load', lambda: executor_load.run(8.0 if quick else 30.0)),
         ('streams', lambda: streams.run(6.0 if quick else 20.0)[0]),
         ('several sensors', lambda: several_sensors.run(6.0 if quick else 20.0)),
+        ('shutdown', lambda: shutdown.run(48 if quick else 240)),
     ]
     results: list[Result] = []
     for name, step in steps:

@@ -42,6 +42,7 @@ import threading
 import time
 from typing import Any, ClassVar, NamedTuple
 
+from i3dmgx2_driver.lifetime import StopSignal
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 import rclpy
@@ -201,16 +202,16 @@ class NodeProcess:
 
 # -- helper processes that save JSON: the simulator, a subscriber ----------------------------
 
-def stop_on_signal_or_eof() -> threading.Event:
+def stop_on_signal_or_eof() -> StopSignal:
     """
     Return an event set by SIGINT, SIGTERM or the end of standard input.
 
     The helper processes stop on any of them, so a run that dies (and closes
-    their stdin) never leaves them running.
+    their stdin) never leaves them running. A :class:`StopSignal`, not a
+    ``threading.Event``, whose ``set()`` in a signal handler can wait for
+    good on the lock of the ``wait()`` it interrupted (lifetime.py).
     """
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
+    stop = StopSignal().install((signal.SIGINT, signal.SIGTERM))
 
     def watch_stdin() -> None:
         sys.stdin.read()
@@ -220,7 +221,7 @@ def stop_on_signal_or_eof() -> threading.Event:
     return stop
 
 
-def start_helper_node(name: str) -> tuple[threading.Event, Any]:
+def start_helper_node(name: str) -> tuple[StopSignal, Any]:
     """
     Start ROS in a helper process and make its node; return (stop event, node).
 
@@ -233,7 +234,7 @@ def start_helper_node(name: str) -> tuple[threading.Event, Any]:
     return stop, rclpy.create_node(name)
 
 
-def spin_until(stop: threading.Event, executor: Any, node: Any, save: Any) -> None:
+def spin_until(stop: StopSignal, executor: Any, node: Any, save: Any) -> None:
     """Spin ``executor`` until ``stop`` is set; then ``save()`` and tear ROS down."""
     try:
         while not stop.is_set():
@@ -380,12 +381,16 @@ class SubscriberProcess(ChildProcess):
 # -- subscribers and clients in this process -------------------------------------------------
 
 class Listener:
-    """An rclpy node in the test process that records what it receives."""
+    """
+    An rclpy node in the test process that records what it receives.
+
+    ``domain``: the ROS domain, if not this process's (several nodes side by side).
+    """
 
     def __init__(self, topics: dict[str, type], reliable: bool = True, depth: int = 1000,
-                 namespace: str = '') -> None:
+                 namespace: str = '', domain: int | None = None) -> None:
         self.context = rclpy.Context()
-        rclpy.init(context=self.context)
+        rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node('i3dmgx2_test_listener', namespace=namespace,
                                       context=self.context)
         qos = QoSProfile(

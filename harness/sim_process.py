@@ -36,6 +36,8 @@ import sys
 import threading
 from typing import Any
 
+from i3dmgx2_driver.lifetime import StopSignal
+
 
 def build_config(spec: dict) -> Any:
     """Turn a JSON dict into a SimulatorConfig."""
@@ -66,11 +68,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--config', default='{}', help='SimulatorConfig fields as JSON')
     parser.add_argument('--truth', required=True, help='where to write the ground truth')
     args = parser.parse_args(argv)
-    stop = threading.Event()
-    silence = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
-    signal.signal(signal.SIGUSR1, lambda *_: silence.set())
+    # Not threading.Events: a signal handler may not take a lock (i3dmgx2_driver/lifetime.py).
+    stop = StopSignal().install((signal.SIGINT, signal.SIGTERM))
+    silence = StopSignal().install((signal.SIGUSR1,))
+    silent = False
 
     def watch_stdin() -> None:
         sys.stdin.read()  # returns at end of input: the benchmark went away
@@ -85,8 +86,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         print(f'port: {sim.port}', flush=True)
         while not stop.wait(0.05):
-            if silence.is_set():
-                silence.clear()
+            if silence.is_set() and not silent:
+                silent = True
                 sim.stall(1e9)
                 print('silent', flush=True)
     finally:

@@ -48,13 +48,27 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST
 WORK="$(mktemp -d /tmp/i3dmgx2-demo-XXXXXX)"
 SIM_PID=''
 NODE_PID=''
+MONITOR_PID=''
 cleanup() {
-  [ -n "$NODE_PID" ] && kill -INT "$NODE_PID" 2>/dev/null && wait "$NODE_PID" 2>/dev/null
-  [ -n "$SIM_PID" ] && kill -INT "$SIM_PID" 2>/dev/null && wait "$SIM_PID" 2>/dev/null
+  # To the end, whatever fails or arrives meanwhile: a failed kill or wait must not stop it
+  # half-way (set -e), nor a second signal (a closed terminal sends SIGHUP after Ctrl-C).
+  set +e
+  trap '' INT TERM HUP
+  # SIGTERM, which each stops on as on Ctrl-C: a background job starts with SIGINT ignored,
+  # so a SIGINT that came before its handlers were installed would be lost, and wait hang.
+  [ -n "$MONITOR_PID" ] && kill -TERM "$MONITOR_PID" 2>/dev/null
+  [ -n "$NODE_PID" ] && kill -TERM "$NODE_PID" 2>/dev/null && wait "$NODE_PID" 2>/dev/null
+  [ -n "$SIM_PID" ] && kill -TERM "$SIM_PID" 2>/dev/null && wait "$SIM_PID" 2>/dev/null
   rm -rf "$WORK"
 }
 trap cleanup EXIT
-trap 'exit 130' INT TERM
+# Ctrl-C, SIGTERM and a closed terminal (SIGHUP) all end the demo through cleanup. Should
+# this script die without it (SIGKILL), each executable ends with it all the same: it asks
+# for a signal when its parent ends (i3dmgx2_driver/lifetime.py), the simulator too,
+# although its session, which a closed terminal does not reach, is its own.
+trap 'exit 130' INT
+trap 'exit 143' TERM
+trap 'exit 129' HUP
 
 if [ -z "$PORT" ]; then
   echo '[demo] no --port given: starting the simulated 3DM-GX2 and base station'
@@ -77,4 +91,7 @@ echo "[demo] ros2 run i3dmgx2_driver node --ros-args -p port:=$PORT -p address:=
 NODE_PID=$!
 sleep 1
 echo '[demo] ros2 run i3dmgx2_driver monitor   (Ctrl-C to stop)'
-"$I3DMGX2_LIB/monitor" --duration "$DURATION"
+# Waited for rather than run in the foreground, so that a signal's trap runs at once.
+"$I3DMGX2_LIB/monitor" --duration "$DURATION" &
+MONITOR_PID=$!
+wait "$MONITOR_PID"

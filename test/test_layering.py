@@ -167,16 +167,18 @@ def test_the_check_sees_imports_and_path_insertions(tmp_path, monkeypatch):
 
 PACKAGE = 'i3dmgx2_driver'
 #: The rooms of the package each room may import (its own besides); ``''`` is the
-#: package's ``__init__``, ``arguments`` the argument types every command line shares.
+#: package's ``__init__``, ``arguments`` the argument types every command line shares,
+#: ``lifetime`` how every executable ends (signals, its parent's end, the deadline).
 LAYERS = {
     'codec': (),
     '': (),
     'arguments': (),
+    'lifetime': (),
     'device': ('codec',),
-    'simulator': ('codec', 'arguments'),
+    'simulator': ('codec', 'arguments', 'lifetime'),
     'capture': ('codec', ''),
-    'ros': ('codec', 'device', 'capture', ''),
-    'tools': ('codec', 'device', 'simulator', 'capture', 'arguments', ''),
+    'ros': ('codec', 'device', 'capture', 'lifetime', ''),
+    'tools': ('codec', 'device', 'simulator', 'capture', 'arguments', 'lifetime', ''),
 }
 
 

@@ -19,7 +19,10 @@ The run loop's executor thread: it serves, ends when halted, passes on errors.
 work) while the main thread waits for a signal. What the main thread did
 itself before must still happen: callbacks run, a callback that raises
 stops the node and its error reaches ``run``, and a halt ends the thread
-even when nothing wakes the executor. Real rclpy, in a process of its own.
+at once even when nothing wakes the executor (no timer due: the process
+used to abort at exit with the thread still in rclpy's wait); the stop it sets is run()'s
+(``lifetime.StopSignal``), which any thread may set. Real rclpy, in a process
+of its own.
 """
 
 import subprocess
@@ -32,9 +35,11 @@ pytestmark = pytest.mark.slow
 
 _SCRIPT = """
 import threading
+import time
 import rclpy
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from i3dmgx2_driver.lifetime import StopSignal
 from i3dmgx2_driver.ros.main import _Spinner
 
 rclpy.init()
@@ -43,7 +48,7 @@ ran = threading.Event()
 node.create_timer(0.01, ran.set)
 executor = MultiThreadedExecutor(num_threads=2)
 executor.add_node(node)
-stop = threading.Event()
+stop = StopSignal()  # what run() hands it
 spinner = _Spinner(executor, stop)
 spinner.start()
 print('callbacks ran', ran.wait(10.0))
@@ -55,13 +60,28 @@ def fail():
     raise RuntimeError('boom')
 
 node.create_timer(0.01, fail)
-stop = threading.Event()
+stop = StopSignal()  # what run() hands it
 spinner = _Spinner(executor, stop)
 spinner.start()
 print('stopped by the error', stop.wait(10.0), repr(spinner.error))
 spinner.halt()
 executor.shutdown()
 node.destroy_node()
+
+# Nothing due: no timer, no request. A wake alone only rebuilds the executor's wait; the
+# thread must end all the same, and at once, or it is in rclpy's wait when the
+# interpreter exits (the process aborts).
+idle = Node('spinner_idle')
+executor = MultiThreadedExecutor(num_threads=2)
+executor.add_node(idle)
+spinner = _Spinner(executor, StopSignal())
+spinner.start()
+time.sleep(0.3)
+start = time.monotonic()
+spinner.halt()
+print('halted with nothing due', not spinner._thread.is_alive(), time.monotonic() - start < 0.5)
+executor.shutdown()
+idle.destroy_node()
 rclpy.try_shutdown()
 """
 
@@ -76,4 +96,5 @@ def test_executor_thread_serves_halts_and_passes_on_a_callbacks_error():
         'stopped before halt False',
         'ended by halt True True',
         "stopped by the error True RuntimeError('boom')",
+        'halted with nothing due True True',
     ], done.stdout + done.stderr

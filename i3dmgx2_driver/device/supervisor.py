@@ -218,8 +218,11 @@ class DeviceSupervisor:
 
     def join(self, timeout: float) -> bool:
         """Wait up to ``timeout`` s for the supervisor thread to end; True once it has."""
-        if self._thread is not None:
-            self._thread.join(timeout)
+        thread = self._thread
+        # Not yet started (a transition is starting it as a signal stops us): nothing to
+        # wait for, and it ends at once, the cancel set. Thread.join() would raise.
+        if thread is not None and thread.is_alive():
+            thread.join(timeout)
         return not self._running()
 
     # -- the managed node: one phase per transition ----------------------------------------

@@ -296,13 +296,16 @@ class DriverSet:
         if len(self.cores) == 1:
             self.cores[0].shutdown(report)
         else:
+            # Daemons, waited for 5 s altogether: a stop that hangs is left to the
+            # process's deadline (lifetime.py) instead of holding up its exit.
             threads = [threading.Thread(target=core.shutdown, args=(report,),
-                                        name=f'gx2-stop-{core.sensor.address}')
+                                        name=f'gx2-stop-{core.sensor.address}', daemon=True)
                        for core in self.cores]
             for thread in threads:
                 thread.start()
+            end = time.monotonic() + 5.0
             for thread in threads:
-                thread.join(5.0)
+                thread.join(max(end - time.monotonic(), 0.0))
         self._capture.close()
 
     def destroy(self) -> None:

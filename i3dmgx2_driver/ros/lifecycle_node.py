@@ -65,6 +65,7 @@ from .driver_core import DriverCore, DriverSet, load_config
 from .main import run
 from .parameters import declare_parameters, driver_config, DriverConfig, ParameterError
 from .publishers import create_publishers, Publishers
+from .. import lifetime
 from ..device.hot_path import HotPathObserver
 from ..device.link import DeviceTimeout
 from ..device.port import check_port_path, PortError, PortUnusable, SerialPort
@@ -77,6 +78,9 @@ DEVICE_ERRORS = (PortError, DeviceTimeout)
 #: How long a signal waits for a transition under way to end (s); the
 #: device was cut off first, so it ends within milliseconds.
 TRANSITION_WAIT = 1.0
+#: How long a signal waits for every sensor's supervisor to stop (s); each
+#: stop is bounded by its own joins (about 1.5 s), the process by its deadline.
+STOP_WAIT = 2.0
 #: How long the process stays up after a signal's shutdown transition (s), so
 #: that its transition events reach the subscribers before the middleware
 #: goes: a sample still in shared memory when the writer's process exits is
@@ -127,6 +131,8 @@ class LifecycleDriverNode(LifecycleNode):
         self._data_publishers: list[Publishers] | None = None
         self._transition_lock = threading.RLock()
         self._finished = threading.Event()
+        #: Set by a signal's shutdown(): a transition under way does not start the device again.
+        self._stopping = threading.Event()
         config: DriverConfig | None = None
         try:
             # Declared now so that ``ros2 param`` shows them before configure, and
@@ -200,6 +206,10 @@ class LifecycleDriverNode(LifecycleNode):
         drivers = DriverSet(self, config, publishers=self._data_publishers, publishing=False,
                             refusal=self._refusal, **self._core_options)
         self.drivers = drivers
+        if self._stopping.is_set():
+            # A signal came while the set was made, before shutdown() could see it.
+            self._release()
+            return FAILURE
         failed = _each(drivers.cores, lambda core: core.supervisor.connect())
         if len(failed) == len(drivers.cores):
             self._release()
@@ -225,6 +235,8 @@ class LifecycleDriverNode(LifecycleNode):
         """Enable the publishers, start the stream; fail if no record comes."""
         start = time.monotonic()
         drivers = self.drivers
+        if self._stopping.is_set():
+            return FAILURE  # a signal stopped the device meanwhile: it stays stopped
         result = super().on_activate(state)
         if result != SUCCESS or drivers is None:
             return FAILURE
@@ -317,10 +329,11 @@ class LifecycleDriverNode(LifecycleNode):
         """
         if self._finished.is_set():
             return
+        self._stopping.set()
         drivers = self.drivers
         if drivers is not None:
             drivers.set_publishing(False)
-            _each(drivers.cores, lambda core: core.supervisor.stop())
+            _each(drivers.cores, lambda core: core.supervisor.stop(), timeout=STOP_WAIT)
         locked = self._transition_lock.acquire(timeout=TRANSITION_WAIT)
         try:
             if locked and not self._finished.is_set():
@@ -337,14 +350,16 @@ class LifecycleDriverNode(LifecycleNode):
             self._finished.set()
 
 
-def _each(cores: list[DriverCore],
-          step: Callable[[DriverCore], None]) -> list[tuple[DriverCore, Exception]]:
+def _each(cores: list[DriverCore], step: Callable[[DriverCore], None],
+          timeout: float | None = None) -> list[tuple[DriverCore, Exception]]:
     """
     Take ``step`` for every core at once (one thread each if several); return who failed.
 
     With several sensors a silent one would otherwise hold up the others by
     its timeouts; one core takes its step in the calling thread, as always.
     Only the device's or the port's errors count as failures; others raise.
+    ``timeout`` bounds the wait for the threads altogether (the stop on a
+    signal: a step still running then is left to the process's deadline).
     """
     failed: list[tuple[DriverCore, Exception]] = []
 
@@ -357,17 +372,20 @@ def _each(cores: list[DriverCore],
     if len(cores) == 1:
         take(cores[0])
         return failed
-    threads = [threading.Thread(target=take, args=(core,), name='gx2-transition')
+    threads = [threading.Thread(target=take, args=(core,), name='gx2-transition',
+                                daemon=True)
                for core in cores]
     for thread in threads:
         thread.start()
+    end = None if timeout is None else time.monotonic() + timeout
     for thread in threads:
-        thread.join()
+        thread.join(None if end is None else max(end - time.monotonic(), 0.0))
     return sorted(failed, key=lambda pair: cores.index(pair[0]))
 
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``ros2 run i3dmgx2_driver lifecycle_node``: run until shut down."""
+    lifetime.die_with_parent()
     return run(LifecycleDriverNode, args)
 
 

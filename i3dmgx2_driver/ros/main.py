@@ -15,17 +15,24 @@
 """
 Entry point of ``ros2 run i3dmgx2_driver node``, and the run loop of both executables.
 
-SIGINT and SIGTERM are handled here rather than by rclpy, so that the
-driver can stop the device's stream (0xFA) and close the port while ROS is
-still up, then shut ROS down: a clean exit (code 0) well within 2 s. An
-invalid parameter exits with code 2 and a message that names it and its
-valid range; so does a port that can never work (a path that is no serial
-port), with one FATAL line that says what the path is and how to find the
-right one: at once when the node is made, or later when the node reports it
-as ``fatal_error``. :func:`run` does all of it for any driver node class (the plain
-node here, the managed node in ``lifecycle_node.py``): the class is made
-with no arguments and provides ``shutdown()`` and ``finished`` (True once
-it is done by itself, as a managed node after its shutdown transition).
+SIGINT, SIGTERM and SIGHUP (a closed terminal) are handled here rather than
+by rclpy, so that the driver can stop the device's stream (0xFA) and close
+the port while ROS is still up, then shut ROS down: a clean exit (code 0)
+well within 2 s. The handler only sets a flag (``lifetime.StopSignal``: a
+``threading.Event`` set from a handler hung the node once in about a hundred
+stops). From the moment the stop begins, the process has
+``lifetime.SHUTDOWN_DEADLINE`` (3 s) to end: past it, every thread's stack
+goes to the log and the exit code is 1, rather than a hang. The node also
+ends (SIGTERM) when the process that started it ends
+(``lifetime.die_with_parent``). An invalid parameter exits with code 2 and a
+message that names it and its valid range; so does a port that can never
+work (a path that is no serial port), with one FATAL line that says what
+the path is and how to find the right one: at once when the node is made,
+or later when the node reports it as ``fatal_error``. :func:`run` does all
+of it for any driver node class (the plain node here, the managed node in
+``lifecycle_node.py``): the class is made with no arguments and provides
+``shutdown()`` and ``finished`` (True once it is done by itself, as a
+managed node after its shutdown transition).
 Once the node is made, the start-up heap is frozen (device/realtime.py says
 why). With ``I3DMGX2_TIMINGS`` naming a file, the plain node records every
 sample's hot-path stage times and writes them there as it exits
@@ -41,7 +48,6 @@ threads save the reader.
 
 from collections.abc import Callable
 import functools
-import signal
 import sys
 import threading
 from typing import Any
@@ -50,9 +56,11 @@ import rclpy
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 
 from .imu_node import ImuDriverNode
 from .parameters import ParameterError
+from .. import lifetime
 from ..device import realtime
 from ..device.hot_path import recorder_from_environment
 from ..device.port import PortUnusable
@@ -71,10 +79,14 @@ EXECUTOR_THREADS = 4
 class _Spinner:
     """Spins an executor in a thread of its own until halted; keeps what it raised."""
 
-    def __init__(self, executor: MultiThreadedExecutor, stop: threading.Event) -> None:
+    def __init__(self, executor: MultiThreadedExecutor, stop: lifetime.StopSignal) -> None:
         self._executor = executor
         self._stop = stop
-        self._halt = threading.Event()
+        #: Done once halted. The executor's wait ends on it: a wake alone only has the
+        #: wait set rebuilt and the wait go on, and a thread still in rclpy's wait when
+        #: the interpreter exits aborts the process ("terminate called without an
+        #: active exception", exit -6), as a node with no timer due did.
+        self._halt = Future()
         self.error: BaseException | None = None
         self._thread = threading.Thread(target=self._spin, name='gx2-executor', daemon=True)
 
@@ -83,8 +95,8 @@ class _Spinner:
 
     def _spin(self) -> None:
         try:
-            while not self._halt.is_set() and rclpy.ok():
-                self._executor.spin_once()
+            while not self._halt.done() and rclpy.ok():
+                self._executor.spin_once_until_future_complete(self._halt)
         except ExternalShutdownException:
             pass  # ROS shut down under the node: it ends like a signal
         except BaseException as exc:  # a callback's error ends the node, as it did in main
@@ -93,27 +105,33 @@ class _Spinner:
             self._stop.set()
 
     def halt(self, timeout: float = 1.0) -> None:
-        """Stop spinning: wake the executor's wait and let the thread end."""
-        self._halt.set()
+        """Stop spinning: end the executor's wait and let the thread end."""
+        if not self._halt.done():
+            self._halt.set_result(True)
         self._executor.wake()
         self._thread.join(timeout)
 
 
 def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
-    """Run the node ``make_node()`` returns until SIGINT, SIGTERM or it is finished."""
+    """
+    Run the node ``make_node()`` returns until SIGINT, SIGTERM, SIGHUP or it is finished.
+
+    The stop's deadline (``lifetime.arm_deadline``) is armed as the stop
+    begins and stays armed after this returns, for the rest of the process's
+    way out (the interpreter waits for the executor's worker threads); a
+    caller that goes on afterwards disarms it (``lifetime.cancel_deadline``).
+    The signal handlers stay too: a second signal on the way out (a closed
+    terminal's SIGHUP, then a script's SIGINT) changes nothing, where the
+    default one would raise KeyboardInterrupt in the interpreter's exit.
+    """
+    # Before anything else: a signal during start-up is a stop once the node is made.
+    stop = lifetime.StopSignal().install()
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:
         # rcl's own words name the argument it could not parse.
         print(f'[FATAL] [i3dmgx2_driver]: invalid ROS arguments: {exc}', file=sys.stderr)
         return EXIT_BAD_PARAMETER
-    stop = threading.Event()
-
-    def request_stop(signum: int, frame: object) -> None:
-        stop.set()
-
-    previous = {sig: signal.signal(sig, request_stop)
-                for sig in (signal.SIGINT, signal.SIGTERM)}
     node = None
     spinner = None
     # Several threads, so that a long service call (a 30 s gyro bias capture)
@@ -142,28 +160,34 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
         if spinner.error is not None:
             raise spinner.error
     finally:
-        if spinner is not None:
-            spinner.halt()
-        if node is not None:
-            node.shutdown()
-            executor.remove_node(node)
-            node.destroy_node()
-        executor.shutdown(timeout_sec=0.5)
-        rclpy.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        # From here the process ends within the deadline, or says where it waited.
+        lifetime.arm_deadline()
+        try:
+            if spinner is not None:
+                spinner.halt()
+            if node is not None:
+                node.shutdown()
+                executor.remove_node(node)
+                node.destroy_node()
+        finally:
+            executor.shutdown(timeout_sec=0.5)
+            rclpy.try_shutdown()
     return code
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the driver node until SIGINT or SIGTERM (recording its timings if asked)."""
+    """Run the driver node until a signal or its parent's end (recording its timings if asked)."""
+    lifetime.die_with_parent()
     timings, path = recorder_from_environment()
     if timings is None:
         return run(ImuDriverNode, args)
     try:
         return run(functools.partial(ImuDriverNode, timings=timings), args)
     finally:
+        # Writing the file is no part of the stop: the deadline counts afresh after it.
+        lifetime.cancel_deadline()
         timings.save(path)
+        lifetime.arm_deadline()
 
 
 if __name__ == '__main__':

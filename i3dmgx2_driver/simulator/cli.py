@@ -19,13 +19,13 @@ The first line printed is ``port: <path>`` (flushed at once), so that a script
 or a person can hand the path to the driver (``port:=<path>``); then a status
 line every few seconds. SIGINT, SIGTERM and SIGHUP stop it cleanly with exit
 status 0 (the port symlink is removed), so that it can run under a launch file
-or a test harness.
+or a test harness; so does the end of the process that started it (SIGTERM,
+``lifetime.die_with_parent``: the demo's simulator runs in a session of its
+own, which a closed terminal does not reach).
 """
 
 import argparse
 import math
-import signal
-import threading
 import time
 
 from i3dmgx2_driver.codec import framing
@@ -36,6 +36,7 @@ from .faults import FaultConfig
 from .motion import MotionConfig
 from .pty_link import PtySimulator
 from .sensor import STREAMABLE
+from .. import lifetime
 from ..arguments import in_range
 
 
@@ -235,18 +236,16 @@ def _say(text: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the simulator until SIGINT, SIGTERM, SIGHUP or ``--duration``; return 0."""
+    """Run the simulator until SIGINT, SIGTERM, SIGHUP, ``--duration`` or its parent's end."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         config = config_from_args(args)
     except ValueError as error:  # a combination argparse cannot see, e.g. --wired --nack
         parser.error(str(error))
-    stop = threading.Event()
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-            previous[signum] = signal.signal(signum, lambda *_: stop.set())
+    lifetime.die_with_parent()
+    # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).
+    stop = lifetime.StopSignal().install()
     try:
         with PtySimulator(config) as sim:
             _say(f'port: {sim.port}')
@@ -267,6 +266,5 @@ def main(argv: list[str] | None = None) -> int:
             if not args.quiet:
                 _say(status_line(sim, time.monotonic() - start))
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        stop.restore()
     return 0

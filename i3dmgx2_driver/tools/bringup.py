@@ -49,6 +49,7 @@ from typing import Any, TextIO
 from .bringup_round_trips import MEASURE_TIMEOUT, note_longest, RoundTrips, spread
 from .bringup_sensor import HeardRecords, SensorControl
 from .port_listing import latency_timer_ms
+from .. import lifetime
 from ..arguments import seconds, whole_number
 from ..capture import CaptureWriter, default_header
 from ..codec import line_budget, streams
@@ -484,6 +485,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``bringup``; return the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    # A closed terminal, SIGTERM or its parent's end take Ctrl-C's way out: the sensor is
+    # left as found.
+    lifetime.interrupt_on_stop_signals()
     try:
         _streams(args.streams)
     except ValueError as exc:

@@ -55,6 +55,7 @@ from .port_listing import (
     BY_ID_DIR, DEFAULT_LATENCY_TIMER_MS, describe_path, latency_timer_ms, list_ports, PortInfo,
     SYS_CLASS_TTY,
 )
+from .. import lifetime
 from ..arguments import seconds
 from ..codec import commands, layouts
 from ..codec.data_rate import RATE_BASE_HZ, RATE_DIVIDER_ADDRESS
@@ -723,6 +724,9 @@ class _ProgressLine:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``discover``; return the exit status."""
     args = build_parser().parse_args(argv)
+    # A closed terminal, SIGTERM or its parent's end take Ctrl-C's way out: the port is
+    # closed, the sensors left as found.
+    lifetime.interrupt_on_stop_signals()
     out = sys.stdout
     if args.port:
         ports = [describe_path(path, args.by_id_dir) for path in args.port]

@@ -23,7 +23,6 @@ the README's first command shows that data flows without the ``ros2`` CLI.
 
 import argparse
 import math
-import signal
 import sys
 import threading
 import time
@@ -34,6 +33,8 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
+
+from .. import lifetime
 
 
 def roll_pitch_yaw(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
@@ -78,12 +79,12 @@ class Monitor(Node):
             return self.latest, count
 
 
-def _spin(executor: SingleThreadedExecutor, stopped: threading.Event) -> None:
+def _spin(executor: SingleThreadedExecutor, stopped: lifetime.StopSignal) -> None:
     """
     Spin until main stops the executor, or something else shuts the context down.
 
     ``stopped`` tells the printing loop that no message will come any more
-    (main's SIGINT/SIGTERM handler sets it too, whatever SIGINT's disposition
+    (main's SIGINT/SIGTERM/SIGHUP handler sets it too, whatever SIGINT's disposition
     was when the process started: a background job of a script starts with
     it ignored).
     """
@@ -105,15 +106,15 @@ def main(argv: list[str] | None = None) -> int:
                         help='subscribe best effort (for a best_effort publisher)')
     parser.add_argument('--period', type=float, default=0.5, help='seconds between lines')
     args = parser.parse_args(rclpy.utilities.remove_ros_args(argv or sys.argv)[1:])
+    lifetime.die_with_parent()
     # Signals only set a flag, as in the driver's main: rclpy's own handler would shut the
     # context down under the spinning thread while this one tears it down too (it crashed).
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     node = Monitor(args.topic, args.best_effort)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    stopped = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda signum, frame: stopped.set())
+    # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).
+    stopped = lifetime.StopSignal().install()
     spinner = threading.Thread(target=_spin, args=(executor, stopped), daemon=True)
     spinner.start()
     start = last = time.monotonic()

@@ -55,6 +55,7 @@ import numpy as np
 
 from .figures import agg_figure, have_matplotlib, MATPLOTLIB_HINT, patch
 from .stamp_plot import read_stamp_errors, render_stamp_errors
+from .. import lifetime
 from ..capture import (
     FIXTURE_ADDRESS, fixture_chunks, is_capture, load_fixture, read_capture, timeline,
 )
@@ -429,6 +430,7 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the plot command line; return the exit status."""
     args = _parser().parse_args(argv)
+    lifetime.die_with_parent()
     if not have_matplotlib():
         print(f'plot: {MATPLOTLIB_HINT}', file=sys.stderr)
         return 1

@@ -38,7 +38,6 @@ import argparse
 from collections.abc import Iterable, Sequence
 import itertools
 import logging
-import signal
 import statistics
 import sys
 import threading
@@ -48,6 +47,7 @@ from typing import Any
 from .replay_answers import ACK_HOLD, BaseStationAnswers
 from .replay_pty import POLL, ReplayPty
 from .replay_stats import ReplayStats
+from .. import lifetime
 from ..capture import FIXTURE_ADDRESS, fixture_chunks, read_capture
 
 Chunk = tuple[float, bytes]
@@ -296,11 +296,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     replayer = Replayer(chunks, speed=args.speed, loop=args.loop, link=args.link,
                         wireless=wireless, max_gap=args.max_gap,
                         wait_for_host=args.wait_for_host)
-    stop = threading.Event()
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            previous[signum] = signal.signal(signum, lambda *_: stop.set())
+    lifetime.die_with_parent()
+    # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).
+    stop = lifetime.StopSignal().install()
     try:
         try:
             port = replayer.start()
@@ -318,8 +316,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 _LOG.info('%d bytes were not read by anyone', replayer.pty.pending_output())
     finally:
         replayer.stop()
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        stop.restore()
     _LOG.info('done: %r', replayer.stats)
     return 0
 
