@@ -94,10 +94,13 @@ class SteppedSystemClock:
     def __init__(self) -> None:
         self.step = 0.0
         self.applied = 0.0
+        #: The offset last returned (what a recording replays the stamps with).
+        self.last = 0.0
 
     def offset(self) -> float:
         self.applied = self.step
-        return system_clock_offset() + self.step
+        self.last = system_clock_offset() + self.step
+        return self.last
 
 
 @dataclasses.dataclass
@@ -109,6 +112,10 @@ class Run:
     event_time: float | None
     clock: SampleClock
     log: list
+    #: Per row: (raw timer, monotonic read time, system clock offset used): a recording
+    #: that :func:`restamp` stamps again offline, through the clock as it is then.
+    reads: list = dataclasses.field(default_factory=list)
+    wire: float = 0.0
 
 
 class Log:
@@ -134,12 +141,14 @@ def run(event: Event | None, before: float = 3.0, after: float = 4.0,
     system = SteppedSystemClock()
     clock = SampleClock(offset=system.offset)
     rows = []
+    reads = []
     lock = threading.Lock()
 
     def on_record(packet, read_time: float, read_mono: float) -> None:
         with lock:
             stamp = clock.stamp(packet.record.timer, read_mono, wire)
             rows.append((packet.record, stamp, system.applied))
+            reads.append((packet.record.timer, read_mono, system.last))
 
     def on_connect() -> None:
         with lock:
@@ -170,7 +179,7 @@ def run(event: Event | None, before: float = 3.0, after: float = 4.0,
             sup.stop()
         truth = {t.record: t.sample_time for t in simulator.truth
                  if t.valid and t.source == 'stream'}
-    return Run(rows, truth, event_time, clock, log.lines)
+    return Run(rows, truth, event_time, clock, log.lines, reads, wire)
 
 
 def errors(result: Run) -> list[tuple[float, float]]:
@@ -181,6 +190,23 @@ def errors(result: Run) -> list[tuple[float, float]]:
         if sample_time is not None:
             out.append((sample_time, stamp - step - sample_time))
     return out
+
+
+def restamp(result: Run) -> Run:
+    """
+    Return the run with every record stamped again, offline, by a new clock.
+
+    The recording (raw timer, read time, system clock offset of each record)
+    goes through a :class:`SampleClock` as the node would have fed it (but
+    for the link's changes, which it does not hold: for runs without events):
+    how a change to the clock is judged on the very delays a live run met.
+    """
+    offsets = iter(offset for _, _, offset in result.reads)
+    clock = SampleClock(offset=lambda: next(offsets))
+    rows = []
+    for (record, _, step), (timer, read_mono, _) in zip(result.rows, result.reads, strict=True):
+        rows.append((record, clock.stamp(timer, read_mono, result.wire), step))
+    return dataclasses.replace(result, rows=rows, clock=clock)
 
 
 def check(result: Run) -> dict:
