@@ -58,8 +58,12 @@ MAX_TREND_PPM = 300.0
 
 
 def check_series(series: list[tuple[float, float]], event_time: float | None,
-                 context: object = '') -> dict:
-    """Assert the series keeps the bounds; return the worst error after a grace and more."""
+                 context: object = '', early_tolerance: float = EARLY_TOLERANCE) -> dict:
+    """
+    Assert the series keeps the bounds; return the worst error after a grace and more.
+
+    ``early_tolerance`` bounds the stamps in the graces (EARLY_TOLERANCE unless given).
+    """
     start = series[0][0]
     event = event_time if event_time is not None else float('inf')
     steady = statistics.median(e for t, e in series if start + GRACE <= t < event)
@@ -71,7 +75,7 @@ def check_series(series: list[tuple[float, float]], event_time: float | None,
         since = min(t - g for g in graces if t >= g)
         off = abs(e - steady)
         if since < GRACE:
-            assert off <= EARLY_TOLERANCE, (f'{t - start:.3f} s in, {since:.3f} s after a '
+            assert off <= early_tolerance, (f'{t - start:.3f} s in, {since:.3f} s after a '
                                             f'start: {off * 1e3:.3f} ms off', context)
             continue
         settled.append((t, e))
@@ -209,8 +213,8 @@ def restamp(result: Run) -> Run:
     return dataclasses.replace(result, rows=rows, clock=clock)
 
 
-def check(result: Run) -> dict:
+def check(result: Run, early_tolerance: float = EARLY_TOLERANCE) -> dict:
     """Assert a run's error series is true after every grace; return its figures."""
     series = errors(result)
     assert len(series) > 200, result.log
-    return check_series(series, result.event_time, result.log)
+    return check_series(series, result.event_time, result.log, early_tolerance)

@@ -94,15 +94,17 @@ def test_a_stall_at_the_streams_line_max_rate_keeps_every_stamp_true(code, secon
     """
     Every stream at the highest rate its line allows, 0..3 ms of jitter, a stall.
 
-    The first record after the stall may come late by the jitter: the fit
-    goes on (or starts afresh, quietly, when it came later than 5 ms), and
-    from 0.5 s after the return every stamp is within 1 ms again. The
-    device never restarted.
+    The first record after the stall may come late (the jitter, a busy
+    host): the fit goes on, or starts afresh, quietly, when it came later
+    than 5 ms, and then stamps that first record at its read time (23-32 ms
+    late were seen on the 2-core machine at a load average of 5 to 9, so
+    the grace is bounded at 0.1 s here). From 0.5 s after the return every
+    stamp is within 1 ms again. The device never restarted.
     """
     rate = round(line_budget.max_rate(code, 115200, True), 1)
     result = run(lambda sim, sup, system: sim.stall(seconds), before=3.0, after=3.0,
                  stream=code, data_rate_hz=rate, faults=FaultConfig(jitter_ms=3.0))
-    check(result)
+    check(result, early_tolerance=0.1)
     assert 'reset' not in result.clock.status().restarts
 
 
