@@ -265,8 +265,8 @@ def test_a_window_entering_or_leaving_the_history_does_not_move_the_line():
     stamps = run(DeviceClock(), samples)
     check_guarantees(samples, stamps)
     # The odd packet's own stamp is its read time (never later): it is left out.
-    settled = [stamp - s.true_time for i, (s, stamp) in enumerate(zip(samples, stamps,
-                                                                       strict=True))
+    pairs = enumerate(zip(samples, stamps, strict=True))
+    settled = [stamp - s.true_time for i, (s, stamp) in pairs
                if s.true_time - T0 >= 10.0 and i != odd]
     steps = [abs(b - a) for a, b in itertools.pairwise(settled)]
     assert max(steps) < STEP_BOUND, f'{max(steps) * 1e6:.1f} us'

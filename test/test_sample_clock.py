@@ -255,7 +255,7 @@ def test_a_queue_after_a_gap_keeps_the_fit_at_every_streams_line_max_rate(code, 
 @pytest.mark.parametrize('gap', [0.1, 1.0, 3.0])
 def test_a_queue_on_a_full_line_drains_for_seconds_and_the_fit_holds(gap):
     """
-    The same on a line that something else fills (garbage, another sensor): 0.3 % free.
+    The same on a line run past its budget's margin: 0.3 % of it free.
 
     The queue of 6 ms then takes two seconds to drain; no record comes near
     the line meanwhile, which the probation alone took for lost device time

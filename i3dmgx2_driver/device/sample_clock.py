@@ -40,8 +40,8 @@ written down in docs/clock.md; in short:
   time after all (a restart whose timer happened to fit), and the fit starts
   afresh.
 - A queue draining after a gap is not lost time. A line run at its limit
-  (or one that garbage shares) holds the records that follow a gap in a
-  queue, and they reach the host late, one wire time apart: their lateness
+  holds the records that follow a gap in a queue, and they reach the
+  host late, one wire time apart: their lateness
   falls by the sample period less the wire time with every record, where a
   restarted timer's offset is a step that stays. So while the records since
   the gap come at the line's rate (each read within ``QUEUE_TOL_S`` of one
