@@ -58,8 +58,12 @@ MAX_TREND_PPM = 300.0
 
 
 def check_series(series: list[tuple[float, float]], event_time: float | None,
-                 context: object = '') -> dict:
-    """Assert the series keeps the bounds; return the worst error after a grace and more."""
+                 context: object = '', early_tolerance: float = EARLY_TOLERANCE) -> dict:
+    """
+    Assert the series keeps the bounds; return the worst error after a grace and more.
+
+    ``early_tolerance`` bounds the stamps in the graces (EARLY_TOLERANCE unless given).
+    """
     start = series[0][0]
     event = event_time if event_time is not None else float('inf')
     steady = statistics.median(e for t, e in series if start + GRACE <= t < event)
@@ -71,7 +75,7 @@ def check_series(series: list[tuple[float, float]], event_time: float | None,
         since = min(t - g for g in graces if t >= g)
         off = abs(e - steady)
         if since < GRACE:
-            assert off <= EARLY_TOLERANCE, (f'{t - start:.3f} s in, {since:.3f} s after a '
+            assert off <= early_tolerance, (f'{t - start:.3f} s in, {since:.3f} s after a '
                                             f'start: {off * 1e3:.3f} ms off', context)
             continue
         settled.append((t, e))
@@ -94,10 +98,13 @@ class SteppedSystemClock:
     def __init__(self) -> None:
         self.step = 0.0
         self.applied = 0.0
+        #: The offset last returned (what a recording replays the stamps with).
+        self.last = 0.0
 
     def offset(self) -> float:
         self.applied = self.step
-        return system_clock_offset() + self.step
+        self.last = system_clock_offset() + self.step
+        return self.last
 
 
 @dataclasses.dataclass
@@ -109,6 +116,10 @@ class Run:
     event_time: float | None
     clock: SampleClock
     log: list
+    #: Per row: (raw timer, monotonic read time, system clock offset used): a recording
+    #: that :func:`restamp` stamps again offline, through the clock as it is then.
+    reads: list = dataclasses.field(default_factory=list)
+    wire: float = 0.0
 
 
 class Log:
@@ -134,12 +145,14 @@ def run(event: Event | None, before: float = 3.0, after: float = 4.0,
     system = SteppedSystemClock()
     clock = SampleClock(offset=system.offset)
     rows = []
+    reads = []
     lock = threading.Lock()
 
     def on_record(packet, read_time: float, read_mono: float) -> None:
         with lock:
             stamp = clock.stamp(packet.record.timer, read_mono, wire)
             rows.append((packet.record, stamp, system.applied))
+            reads.append((packet.record.timer, read_mono, system.last))
 
     def on_connect() -> None:
         with lock:
@@ -170,7 +183,7 @@ def run(event: Event | None, before: float = 3.0, after: float = 4.0,
             sup.stop()
         truth = {t.record: t.sample_time for t in simulator.truth
                  if t.valid and t.source == 'stream'}
-    return Run(rows, truth, event_time, clock, log.lines)
+    return Run(rows, truth, event_time, clock, log.lines, reads, wire)
 
 
 def errors(result: Run) -> list[tuple[float, float]]:
@@ -183,8 +196,25 @@ def errors(result: Run) -> list[tuple[float, float]]:
     return out
 
 
-def check(result: Run) -> dict:
+def restamp(result: Run) -> Run:
+    """
+    Return the run with every record stamped again, offline, by a new clock.
+
+    The recording (raw timer, read time, system clock offset of each record)
+    goes through a :class:`SampleClock` as the node would have fed it (but
+    for the link's changes, which it does not hold: for runs without events):
+    how a change to the clock is judged on the very delays a live run met.
+    """
+    offsets = iter(offset for _, _, offset in result.reads)
+    clock = SampleClock(offset=lambda: next(offsets))
+    rows = []
+    for (record, _, step), (timer, read_mono, _) in zip(result.rows, result.reads, strict=True):
+        rows.append((record, clock.stamp(timer, read_mono, result.wire), step))
+    return dataclasses.replace(result, rows=rows, clock=clock)
+
+
+def check(result: Run, early_tolerance: float = EARLY_TOLERANCE) -> dict:
     """Assert a run's error series is true after every grace; return its figures."""
     series = errors(result)
     assert len(series) > 200, result.log
-    return check_series(series, result.event_time, result.log)
+    return check_series(series, result.event_time, result.log, early_tolerance)

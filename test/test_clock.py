@@ -41,6 +41,12 @@ LATENCY = 0.002
 JITTER = 0.005
 RATE = 100.0
 T0 = 1_700_000_000.0
+#: The largest change of the stamp error from one record to the next once settled (s): a
+#: window's least delay enters the line with a weight of 1 in some tens (the line that
+#: rested on a hull jumped by 300 us here).
+STEP_BOUND = 25e-6
+#: How near (ppm) the drift is after 10 s of a stream with 0..5 ms of jitter at 100 Hz.
+DRIFT_AT_10_PPM = 10.0
 
 
 class Sample(NamedTuple):
@@ -235,3 +241,58 @@ def test_one_packet_read_unusually_early_does_not_tilt_the_line(early_us):
     settled = errors_after(samples, stamps, settle=60.0)
     assert statistics.pstdev(settled) < 15e-6
     assert max(settled) - min(settled) < 100e-6
+
+
+def test_a_window_entering_or_leaving_the_history_does_not_move_the_line():
+    """
+    No step between one stamp and the next: the line changes smoothly, window by window.
+
+    Three minutes with one packet read 300 us early (at 30 s, a window that
+    enters the history and leaves it two minutes later) and four seconds of a
+    busy host (every read 3 ms late, at 70 s). A line that rests on the
+    lower hull of the windows' least delays jumped where such a window
+    became a vertex of the hull, or left it, and the early packet dragged
+    every stamp after it down until the next fit: 300 us here. From 10 s on
+    the stamp errors of consecutive records must differ by little (16 us at
+    most here, in the first seconds, 8 us from 30 s on).
+    """
+    samples = stream(180.0, 40.0, seed=81)
+    odd = 3000
+    samples[odd] = samples[odd]._replace(
+        read_time=samples[odd].true_time + LATENCY + WIRE - 300e-6)
+    samples = [s._replace(read_time=s.read_time + 0.003) if 7000 <= i < 7400 else s
+               for i, s in enumerate(samples)]
+    stamps = run(DeviceClock(), samples)
+    check_guarantees(samples, stamps)
+    # The odd packet's own stamp is its read time (never later): it is left out.
+    pairs = enumerate(zip(samples, stamps, strict=True))
+    settled = [stamp - s.true_time for i, (s, stamp) in pairs
+               if s.true_time - T0 >= 10.0 and i != odd]
+    steps = [abs(b - a) for a, b in itertools.pairwise(settled)]
+    assert max(steps) < STEP_BOUND, f'{max(steps) * 1e6:.1f} us'
+
+
+@pytest.mark.parametrize('seed', range(6))
+@pytest.mark.parametrize('ppm', [-80.0, 40.0])
+def test_the_drift_is_learnt_in_the_first_seconds(seed, ppm):
+    """
+    From 10 s on the stamps have no trend: the drift is learnt in the first seconds.
+
+    The line's slope was taken as 0 until its windows spanned 4 s, and then
+    from the two windows of a hull: over a 20-s run the stamps trended by
+    -18 ppm on an independent simulated sensor.
+    """
+    samples = stream(40.0, ppm, seed=seed + 90)
+    clock = DeviceClock()
+    stamps = []
+    drift_at_10 = None
+    for s in samples:
+        stamps.append(clock.stamp(s.ticks, s.read_time, WIRE))
+        if drift_at_10 is None and s.true_time - T0 >= 10.0:
+            drift_at_10 = clock.drift_ppm
+    assert drift_at_10 == pytest.approx(-ppm, abs=DRIFT_AT_10_PPM)
+    start = samples[0].true_time
+    after = [(s.true_time - start, stamp - s.true_time)
+             for s, stamp in zip(samples, stamps, strict=True) if s.true_time - start >= 10.0]
+    trend = statistics.linear_regression([t for t, _ in after], [e for _, e in after]).slope
+    assert abs(trend) * 1e6 < 5.0

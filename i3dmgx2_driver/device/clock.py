@@ -20,30 +20,43 @@ least the time the packet takes on the wire and at most that plus whatever
 the USB adapter, the kernel and the scheduler add (milliseconds, random).
 The device timer, by contrast, ticks evenly (±0.01 %) at the moment of each
 sample. So the stamp is the device time mapped onto the host clock by a line
-fitted to the *lower envelope* of (host read time - device time): the
-minimum delay over each one-second window is nearly constant, the mean is
-not. The line is fitted to those minima in three steps, each for a reason:
+fitted to the *lower envelope* of (host read time - device time): the least
+delay over each one-second window is nearly constant, the mean is not.
 
-1. The edge of their lower convex hull that spans their mean time (the
-   linear-programming estimate of Moon, Skelly and Towsley, 1999): the line
-   below every minimum that comes closest to them on average. It ignores
-   windows a busy host delayed, however many, which a least-squares line
-   would not.
-2. Its slope, though, rests on two points only: one odd window (a packet
-   read unusually early) or a floor a few tens of microseconds lower for a
-   while tilts it, and the stamp is that line extrapolated a minute past
-   the points' mean time. So the slope is taken again by least squares
-   through the minima near the hull line (within ``BAND`` times their
-   median distance from it): every ordinary window counts, busy ones still
-   do not.
-3. The line's height is a low quantile (``QUANTILE``) of the minima's
-   distances from that slope, not the lowest of them: one odd window moves
-   a quantile by one rank, where it would move a hull by all its depth.
+The line is a weighted least-squares line through every window's least
+delay, and every weight changes smoothly, so that the line never jumps:
 
-On recorded runs of the simulator with radio-like jitter this cut the
-settled noise of the stamps most where the hull alone was worst (from 60
-and 48 us to 7 and 17 us; docs/timestamps.md). The slope is the device
-clock's drift.
+- **Odd windows weigh little.** A window a busy host delayed lies far above
+  the others; one whose packet was read unusually early, below them. A
+  window's weight falls with its distance from the line fitted a window
+  before (beyond ``BAND`` times the windows' scatter, as the fourth power
+  of the ratio): however many there are, they barely move the line, and
+  there is no threshold at which one flips in or out.
+- **The line leans on the low windows.** A window's least delay has a sharp
+  floor and a loose top, so a window above the line weighs
+  1 / (1 + (distance / scatter) ** 2): the line follows the floor rather
+  than the mean (on six recorded runs, 15.0 us of settled noise on average
+  where the plain weights gave 16.7).
+- **Old windows fade out.** The history holds ``HISTORY`` windows; the
+  oldest ``TAPER`` of them weigh less the older they are, down to nothing
+  as they leave. A window that leaves moves the line by nothing.
+- **The drift is learnt early.** The slope is fitted from ``MIN_SPAN_S`` of
+  windows on, held towards 0 by a prior (``SLOPE_PRIOR_S2``: a window's
+  scatter of about 100 us against a crystal's drift of up to 100 ppm) that
+  matters over the first seconds only.
+- **The height.** The line is put ``DEPTH`` times the windows' weighted
+  scatter below their weighted mean: under nearly every packet, and moving
+  only as smoothly as the mean and the scatter do. A packet that comes in
+  under it anyway is stamped at its read time; only two in a row (the
+  delay shrank) lower the line at once, so that one packet read unusually
+  early does not drag the stamps after it down.
+
+The line it replaced rested on the two windows of the lower convex hull that
+spanned the points' mean time (Moon, Skelly and Towsley, 1999), refitted
+through the windows near it and set at a low quantile: each time a window
+entered or left the hull, or crossed the band or the quantile, the line
+jumped, and its slope was taken as 0 for the first 4 s (docs/timestamps.md
+has the figures before and after). The slope is the device clock's drift.
 
 The host clock given here must be one that nothing steps (the monotonic
 clock): :class:`~.sample_clock.SampleClock` feeds it and moves its stamps to
@@ -56,36 +69,48 @@ stamps a sample later than it was read.
 """
 
 from collections import deque
-from collections.abc import Sequence
+import math
 import statistics
 
 from ..codec.records import TICKS_PER_SECOND
 
 #: Envelope points (one-second windows) the line is fitted to: two minutes. A longer
-#: baseline pins the drift better (the stamp is the line extrapolated to now, half the
-#: history past the points' mean time); the crystal's drift must stay nearly constant over
-#: it, which it does over minutes (measured on recorded pseudo-terminal runs and made-up
-#: streams: 60 windows gave 24-52 us of settled noise where 120 gave 13-23 us; with the
-#: drift changing 1 ppm a minute, both stay near 10 us).
+#: baseline pins the drift better (the stamp is the line extrapolated to now, about half
+#: the history past the points' mean time); the crystal's drift must stay nearly constant
+#: over it, which it does over minutes.
 HISTORY = 120
 
-#: Span (s of device time) the envelope points must cover before the line's slope is
-#: trusted. Over a shorter baseline the slope is the envelope's noise divided by the span
-#: (+-100 us over 1-2 s on a loaded host: hundreds of ppm, extrapolated to a stamp 1 ms off
-#: at 2.8 s in one measured run); until then the drift is taken as 0 (a crystal against an
-#: NTP-disciplined clock: tens of ppm, 0.2 ms over these seconds at most).
-MIN_SPAN_S = 4.0
+#: The oldest this many windows of a full history fade out: a window's weight is 1 until
+#: it is HISTORY - TAPER windows old, then falls linearly to 0 at HISTORY, when it leaves.
+TAPER = 30
 
-#: Envelope points further above the hull line than this many times their median distance
-#: from it (plus BAND_FLOOR_S) are left out of the slope's least squares: windows a busy
-#: host delayed. Ordinary windows scatter over one to two medians.
+#: Span (s of device time) and number of envelope points before the line is fitted at
+#: all; until then the least delay seen so far is the offset and the drift is 0.
+MIN_SPAN_S = 2.0
+MIN_POINTS = 3
+
+#: The slope's prior, as (window scatter / drift scale) squared, in s^2: 100 us of
+#: scatter against 100 ppm. Added to the weighted sum of squared times (times the windows'
+#: mean weight), it holds a slope from two or three noisy windows near 0 (over 1-2 s,
+#: +-100 us of scatter is hundreds of ppm: extrapolated, a stamp 1 ms off in one measured
+#: run of an early fit); after ten seconds it shrinks the slope by about 1 %, after a
+#: minute by nothing one could measure.
+SLOPE_PRIOR_S2 = 1.0
+
+#: Envelope points further from the line than BAND times the windows' weighted scatter
+#: (plus BAND_FLOOR_S) weigh (limit / distance) ** 4: above, windows a busy host delayed;
+#: below, a window whose one packet was read unusually early (it widened the scatter, and
+#: so lowered the line, by 110 us on a made-up stream when it counted in full). The floor
+#: keeps a line that is still learning its drift from shutting out the windows that
+#: would correct it.
 BAND = 3.0
-BAND_FLOOR_S = 20e-6
+BAND_FLOOR_S = 50e-6
 
-#: The line's height: this quantile of the envelope points' distances from the fitted
-#: slope (the 6th lowest of 120). Low, so that few packets come in under the line (each
-#: such packet is stamped at its read time and lowers the line until the next fit).
-QUANTILE = 0.05
+#: The line's height: this many weighted standard deviations of the envelope points below
+#: their weighted mean. Lower puts fewer packets under the line, but the scatter's own
+#: noise moves the line DEPTH times as much (2 gave 19.3 us of settled noise on recorded
+#: runs where 1 gave 16.7).
+DEPTH = 1.0
 
 #: Least step between two stamps: 1 us. A float64 near today's epoch (1.8e9 s) cannot
 #: hold a step below 2.4e-7 s, and a message stamp counts whole nanoseconds.
@@ -115,9 +140,13 @@ class DeviceClock:
         self._origin: float | None = None
         self._offset = 0.0
         self._drift = 0.0
-        #: Whether the line has been fitted (the points span MIN_SPAN_S).
-        self._fitted = False
+        #: The last fit's weighted mean line (offset at t = 0) and the windows' scatter
+        #: about it: what the next fit weighs the windows by (None: no fit yet).
+        self._centre: float | None = None
+        self._scatter = 0.0
         self._last_stamp = float('-inf')
+        #: Whether the last sample came in under the line.
+        self._under = False
         self.samples = 0
         self.anchors += 1
 
@@ -164,15 +193,26 @@ class DeviceClock:
         self._add(t, latest - device)
         stamp = device + self._offset + self._drift * t
         if stamp > latest:
-            # The line says this sample was taken after it was read: the
-            # envelope is too high (first samples, or the delay just shrank).
-            self._offset -= stamp - latest
+            # The line says this sample was taken after it was read. One such
+            # packet is stamped at its read time and no more: a packet read
+            # unusually early would otherwise drag every stamp after it down
+            # until the next fit (by 277 us on a made-up stream). Two in a row
+            # say the envelope is too high (the delay shrank): lowered at once.
+            if self._under:
+                self._offset -= stamp - latest
+            self._under = True
             stamp = latest
+        else:
+            self._under = False
         if stamp <= self._last_stamp:
             stamp = self._last_stamp + MIN_STEP
         self._last_stamp = stamp
         self.samples += 1
         return stamp
+
+    def keep_after(self, other: 'DeviceClock') -> None:
+        """Stamp nothing at or before ``other``'s last stamp (it stamped in between)."""
+        self._last_stamp = max(self._last_stamp, other._last_stamp)
 
     def _add(self, t: float, excess: float) -> None:
         bucket = int(t // self.window)
@@ -185,55 +225,49 @@ class DeviceClock:
         elif excess < self._bucket_min[1]:
             self._bucket_min = (t, excess)
         # Until there is a line, the running minimum is the best offset.
-        if not self._fitted and (
+        if self._centre is None and (
                 self.samples == 0 or excess < self._offset + self._drift * t):
             self._offset = excess - self._drift * t
 
     def _fit(self) -> None:
-        """Fit the line to the envelope points (module docstring: hull, slope, height)."""
+        """Fit the line to the envelope points (module docstring: weights, slope, height)."""
         points = self._points
-        if len(points) < 2 or points[-1][0] - points[0][0] < MIN_SPAN_S:
+        n = len(points)
+        if n < MIN_POINTS or points[-1][0] - points[0][0] < MIN_SPAN_S:
             return
-        self._fitted = True
-        drift, offset = _hull_line(points)
-        drift, offset = _floor_slope(points, drift, offset)
-        distances = sorted(e - (offset + drift * t) for t, e in points)
-        self._drift = drift
-        self._offset = offset + distances[int(QUANTILE * (len(distances) - 1))]
-
-
-def _hull_line(points: Sequence[tuple[float, float]]) -> tuple[float, float]:
-    """Return (slope, intercept) of the lower-hull edge of ``points`` at their mean time."""
-    # The points come in time order (one per window), so one pass builds the hull.
-    hull: list[tuple[float, float]] = []
-    for point in points:
-        while len(hull) >= 2 and _cross(hull[-2], hull[-1], point) <= 0.0:
-            hull.pop()
-        hull.append(point)
-    mean_t = sum(p[0] for p in points) / len(points)
-    edge = next(i for i in range(1, len(hull)) if hull[i][0] >= mean_t)
-    (t0, e0), (t1, e1) = hull[edge - 1], hull[edge]
-    slope = (e1 - e0) / (t1 - t0)
-    return slope, e0 - slope * t0
-
-
-def _floor_slope(points: Sequence[tuple[float, float]], slope: float,
-                 intercept: float) -> tuple[float, float]:
-    """
-    Return the least-squares line through the points near the given one (slope, intercept).
-
-    Near: within BAND times the points' median distance above it. The line
-    given is returned when those points span less than MIN_SPAN_S.
-    """
-    distances = [e - (intercept + slope * t) for t, e in points]
-    limit = BAND * statistics.median(distances) + BAND_FLOOR_S
-    near = [p for p, d in zip(points, distances, strict=True) if d <= limit]
-    if len(near) < 3 or near[-1][0] - near[0][0] < MIN_SPAN_S:
-        return slope, intercept
-    fit = statistics.linear_regression([t for t, _ in near], [e for _, e in near])
-    return fit.slope, fit.intercept
-
-
-def _cross(a: tuple[float, float], b: tuple[float, float], c: tuple[float, float]) -> float:
-    """Positive when a -> b -> c turns left (b lies below the chord a-c)."""
-    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+        if self._centre is None:
+            # The first fit weighs the windows by their distance from their median
+            # (drift 0), the scatter their median distance from it (as a std).
+            centre, drift = statistics.median(e for _, e in points), 0.0
+            scatter = 1.4826 * statistics.median(abs(e - centre) for _, e in points)
+        else:
+            centre, drift, scatter = self._centre, self._drift, self._scatter
+        limit = BAND * scatter + BAND_FLOOR_S
+        fading = self.history - TAPER
+        weights = []
+        for age, (t, e) in enumerate(reversed(points)):
+            w = 1.0 if age < fading else (self.history - age) / TAPER
+            above = e - (centre + drift * t)
+            off = abs(above)
+            if above > 0.0:
+                w /= 1.0 + (above / (scatter + BAND_FLOOR_S)) ** 2
+            if off > limit:
+                w *= (limit / off) ** 4
+            weights.append(w)
+        weights.reverse()
+        total = sum(weights)
+        mean_t = sum(w * t for w, (t, _) in zip(weights, points, strict=True)) / total
+        mean_e = sum(w * e for w, (_, e) in zip(weights, points, strict=True)) / total
+        stt = sum(w * (t - mean_t) ** 2 for w, (t, _) in zip(weights, points, strict=True))
+        ste = sum(w * (t - mean_t) * (e - mean_e)
+                  for w, (t, e) in zip(weights, points, strict=True))
+        # The prior weighs as one window of average weight: busy windows, weighing little,
+        # do not let it hold the slope at 0 (a floor that rose, once the old windows left).
+        slope = ste / (stt + SLOPE_PRIOR_S2 * total / n)
+        centre = mean_e - slope * mean_t
+        variance = sum(w * (e - centre - slope * t) ** 2
+                       for w, (t, e) in zip(weights, points, strict=True)) / total
+        self._centre = centre
+        self._scatter = math.sqrt(variance)
+        self._drift = slope
+        self._offset = centre - DEPTH * self._scatter
