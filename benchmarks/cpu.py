@@ -43,13 +43,19 @@ WARM_UP_S = 5.0
 
 
 def measure(rate_hz: float, seconds: float, warm_up: float = WARM_UP_S,
-            tree: Path | None = None) -> tuple[float, int]:
-    """Return the node's CPU (% of one core) and how many messages the subscriber got."""
+            tree: Path | None = None, params: dict | None = None) -> tuple[float, int]:
+    """
+    Return the node's CPU (% of one core) and how many messages the subscriber got.
+
+    ``params`` are given to the node besides the port and address (another
+    benchmark's switch, measured on and off with the same rig).
+    """
     sim = SimProcess(rate_hz=rate_hz)
     subscriber = SubscriberProcess()
     # qos_depth (deprecated, warned about) rather than qos_overrides: the A/B run's other
     # tree may predate the standard parameters, and both trees take this name.
-    node = NodeProcess({'port': sim.port, 'address': ADDRESS, 'qos_depth': 1000}, tree=tree)
+    node = NodeProcess({'port': sim.port, 'address': ADDRESS, 'qos_depth': 1000,
+                        **(params or {})}, tree=tree)
     try:
         if not node.wait_for_output('streaming 0xCC', timeout=30.0):
             raise RuntimeError(f'the node did not start streaming:\n{node.output()}')

@@ -30,9 +30,8 @@ import time
 import tracemalloc
 
 from bench_common import report, Result, standard_args
-from harness.processes import (
-    ADDRESS, isolate_ros_domain, NodeProcess, SimProcess, SubscriberProcess,
-)
+import cpu
+from harness.processes import isolate_ros_domain
 from i3dmgx2_driver.capture import CHUNK_COST, RecentBytes, RING_BUDGET_FACTOR
 from i3dmgx2_driver.codec.line_budget import packet_size
 
@@ -76,23 +75,9 @@ def append_cost(reads: int = 200_000) -> float:
 
 def measure(seconds: float, on: bool, directory: str) -> float:
     """Return the node's CPU at 100 Hz (% of one core), the fault capture on or off."""
-    sim = SimProcess(rate_hz=RATE_HZ)
-    subscriber = SubscriberProcess()
-    node = NodeProcess({'port': sim.port, 'address': ADDRESS, 'qos_depth': 1000,
-                        'fault_capture_dir': directory if on else "''"})
-    try:
-        if not node.wait_for_output('streaming 0xCC', timeout=30.0):
-            raise RuntimeError(f'the node did not start streaming:\n{node.output()}')
-        time.sleep(WARM_UP_S)
-        cpu0, wall0 = node.cpu_seconds(), time.monotonic()
-        time.sleep(seconds)
-        cpu1, wall1 = node.cpu_seconds(), time.monotonic()
-    finally:
-        node.stop()
-        subscriber.stop()
-        sim.stop()
-        node.close()
-    return 100.0 * (cpu1 - cpu0) / (wall1 - wall0)
+    percent, _ = cpu.measure(RATE_HZ, seconds, WARM_UP_S,
+                             params={'fault_capture_dir': directory if on else "''"})
+    return percent
 
 
 def run(seconds: float, rounds: int) -> list[Result]:
