@@ -606,7 +606,14 @@ class RecentBytes:
     :data:`CHUNK_COST`), so the memory held is bounded whatever the line
     does (a system clock stepped back, which keeps the age from trimming,
     included). One uncontended lock per read keeps :meth:`snapshot` (another
-    thread) from seeing the deque change under it.
+    thread) from seeing the deques change under it.
+
+    The times and the chunks are kept in two deques rather than one of
+    ``(time, bytes)`` tuples: a float and a bytes object are not tracked by
+    the garbage collector, a tuple is, so a ring of tuples would leave one
+    tracked object behind per read for ``seconds`` and bring back the
+    collections the sample's path is built to avoid
+    (test/test_hot_path_allocation.py).
     """
 
     def __init__(self, seconds: float, max_bytes: int) -> None:
@@ -614,30 +621,33 @@ class RecentBytes:
             raise ValueError(f'a ring needs seconds and bytes, got {seconds!r}, {max_bytes!r}')
         self.seconds = seconds
         self.max_bytes = max_bytes
-        self._chunks: deque[Chunk] = deque()
+        self._times: deque[float] = deque()
+        self._data: deque[bytes] = deque()
         self._held = 0
         self._lock = threading.Lock()
 
     def on_bytes(self, data: bytes, receive_time: float) -> None:
         """Keep one read and forget what is now too old (the reader thread; never raises)."""
         with self._lock:
-            chunks = self._chunks
-            chunks.append((receive_time, data))
+            times, chunks = self._times, self._data
+            times.append(receive_time)
+            chunks.append(data)
             self._held += len(data) + CHUNK_COST
             oldest = receive_time - self.seconds
-            while chunks and (chunks[0][0] < oldest or self._held > self.max_bytes):
-                self._held -= len(chunks.popleft()[1]) + CHUNK_COST
+            while times and (times[0] < oldest or self._held > self.max_bytes):
+                times.popleft()
+                self._held -= len(chunks.popleft()) + CHUNK_COST
 
     def snapshot(self) -> list[Chunk]:
         """Return the reads kept now, oldest first."""
         with self._lock:
-            return list(self._chunks)
+            return list(zip(self._times, self._data))
 
     @property
     def held(self) -> tuple[int, int]:
         """Return the reads kept and the bytes counted for them (data and CHUNK_COST)."""
         with self._lock:
-            return len(self._chunks), self._held
+            return len(self._times), self._held
 
 
 class FaultCapture:
