@@ -51,7 +51,7 @@ import time
 from typing import NamedTuple
 
 import bench_common  # noqa: F401 - puts the repository on the path
-from harness.instrumented_node import STATS_ENV
+from harness.instrumented_node import EVENTS_ENV, STATS_ENV
 from harness.process_sampler import rss_kinds
 from harness.processes import (
     ADDRESS, isolate_ros_domain, LifecycleClient, Listener, NodeProcess, ros_env,
@@ -132,6 +132,16 @@ class Messages:
             return self._changed.wait_for(lambda: self.count >= count + BACK_AFTER, timeout)
 
 
+def _node_env(plan: 'Run', path: str) -> dict[str, str]:
+    """Return what the node's environment adds: where its figures go, and the options."""
+    env = {STATS_ENV: path}
+    if plan.arena_max:
+        env['MALLOC_ARENA_MAX'] = str(plan.arena_max)
+    if not plan.events:
+        env[EVENTS_ENV] = '0'
+    return env
+
+
 class Run(NamedTuple):
     """What a run is asked to do."""
 
@@ -142,6 +152,10 @@ class Run(NamedTuple):
     managed: bool
     cycle_every: int
     row_every: float
+    #: glibc's ``MALLOC_ARENA_MAX`` for the node (None: glibc's default, 8 per core).
+    arena_max: int | None = None
+    #: Whether the node keeps the rig's list of port events (the soak's checks read it).
+    events: bool = True
 
 
 def run(plan: Run) -> list[Row]:
@@ -157,7 +171,7 @@ def run(plan: Run) -> list[Row]:
         path = os.path.join(workdir, 'stats.json')
         messages = Messages(listener)
         node = NodeProcess({'port': sim.port, 'address': ADDRESS}, command=command,
-                           env=ros_env({STATS_ENV: path}))
+                           env=ros_env(_node_env(plan, path)))
         client = LifecycleClient(listener) if plan.managed else None
         try:
             if client is not None and not (client.wait_ready(60.0) and client.change('configure')
@@ -317,6 +331,11 @@ def main() -> None:
                         help='managed: deactivate, clean up, configure and activate it every '
                              'this many faults (0: never; the soak: about 45 a leg)')
     parser.add_argument('--row-every', type=float, default=60.0, help='seconds between rows')
+    parser.add_argument('--arena-max', type=int, default=None,
+                        help="the node's MALLOC_ARENA_MAX (glibc's default: 8 per core)")
+    parser.add_argument('--no-events', action='store_true',
+                        help="the node keeps no list of port events (the soak's, read by "
+                             "its checks, not here): its memory without the rig's")
     parser.add_argument('--csv', metavar='PATH', help='write the rows here')
     parser.add_argument('--plot', metavar='PNG', help='draw the rows here')
     parser.add_argument('--replot', metavar='CSV', nargs='+',
@@ -331,10 +350,13 @@ def main() -> None:
             plot(runs, args.plot)
         return
     rows = run(Run(args.minutes, args.faults, args.every, args.warm_up, args.managed,
-                   args.cycle_every if args.managed else 0, args.row_every))
+                   args.cycle_every if args.managed else 0, args.row_every, args.arena_max,
+                   not args.no_events))
     print('\n'.join(slopes(rows)))
     label = (f'managed node, a lifecycle cycle every {args.cycle_every} faults'
-             if args.managed else 'plain node')
+             if args.managed else 'plain node') + (
+                 f', MALLOC_ARENA_MAX={args.arena_max}' if args.arena_max else '') + (
+                 ', no port events kept' if args.no_events else '')
     if args.csv:
         write_csv(args.csv, rows, label)
     if args.plot:
