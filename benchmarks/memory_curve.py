@@ -43,6 +43,7 @@ import itertools
 import json
 import math
 import os
+import signal
 import statistics
 import sys
 import tempfile
@@ -168,6 +169,8 @@ def run(plan: Run) -> list[Row]:
     with tempfile.TemporaryDirectory(prefix='i3dmgx2-memory-') as workdir, \
             PtySimulator(SimulatorConfig(address=ADDRESS, seed=3, rate_hz=100)) as sim, \
             Listener({}) as listener:
+        # rclpy.init took SIGINT for its contexts: Ctrl-C stops the run again.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         path = os.path.join(workdir, 'stats.json')
         messages = Messages(listener)
         node = NodeProcess({'port': sim.port, 'address': ADDRESS}, command=command,
@@ -247,8 +250,8 @@ def slopes(rows: list[Row]) -> list[str]:
     """Return the lines that give each figure's slope by thirds: per hour and per 100 faults."""
     lines = ['slopes by thirds of the run (per hour | per 100 faults, \u00b1 standard error):']
     parts = thirds(rows)
-    lines.append('  faults met   ' + ';  '.join(f'{p[0].faults}-{p[-1].faults}' if p else '-'
-                                               for p in parts))
+    spans = [f'{p[0].faults}-{p[-1].faults}' if p else '-' for p in parts]
+    lines.append('  faults met      ' + ';  '.join(spans))
     for field, name, scale, unit in (('anon_kib', 'anonymous RSS', 1 / 1024, ' MiB'),
                                      ('c_heap_kib', 'C heap', 1 / 1024, ' MiB'),
                                      ('python_blocks', 'CPython blocks', 1.0, '')):
