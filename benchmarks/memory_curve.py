@@ -18,14 +18,22 @@ Issue #18: a node's memory against the faults it has met, to see whether it leve
 The long soak's managed processes meet about 180 faults an hour and grow
 by 1-2 MiB/h of anonymous memory; whether that is a warm-up (it levels
 off) or a leak (it keeps its pace) needs many more faults than that. Here
-one plain driver node (its own process, the instrumented one, which writes
-its heaps in use) reads the simulator (in this process) streaming ``full``
-at 100 Hz, and meets a fault every ``--every`` seconds, in turn: an unplug,
-a power cycle, a stall long enough for a reconnect, and a burst of
-garbage, corrupted and foreign packets. Every minute a row: faults so far,
-anonymous RSS, the C heap in use, CPython's blocks; at the end, the slopes
-of each by thirds of the run, per hour and per 100 faults. A warm-up shows
-as thirds that fall off; a leak as thirds alike.
+one driver node (its own process, the instrumented one, which writes its
+heaps in use; ``--managed``: the managed node, configured and activated,
+and taken through deactivate / cleanup / configure / activate every
+``--cycle-every`` faults, as the soak's legs take it) reads the simulator
+(in this process) streaming ``full`` at 100 Hz, and meets faults in turn:
+an unplug, a power cycle, a stall long enough for a reconnect, and a burst
+of garbage, corrupted and foreign packets. Each fault ends, and the node's
+messages come back (received here, by a subscriber) before the next one,
+which starts ``--every`` seconds after the last at the soonest. Every
+``--row-every`` seconds a row: faults so far, anonymous RSS, the C heap in
+use, CPython's blocks; at the end, the slopes of each by thirds of the run,
+per hour and per 100 faults, with their standard errors. A warm-up shows as
+thirds that fall off to nothing; a leak as thirds alike.
+
+``--csv`` writes the rows, ``--plot`` draws them (matplotlib, an optional
+extra); ``--replot`` draws the CSVs of earlier runs without running.
 
 Prints numbers; passes or fails nothing.
 """
@@ -33,19 +41,47 @@ Prints numbers; passes or fails nothing.
 import argparse
 import itertools
 import json
+import math
 import os
+import signal
+import statistics
 import sys
 import tempfile
+import threading
 import time
+from typing import NamedTuple
 
 import bench_common  # noqa: F401 - puts the repository on the path
-from harness.instrumented_node import STATS_ENV
-from harness.process_sampler import rss_kinds, slope_per_hour
-from harness.processes import ADDRESS, isolate_ros_domain, NodeProcess, ros_env
+from harness.instrumented_node import EVENTS_ENV, STATS_ENV
+from harness.process_sampler import rss_kinds
+from harness.processes import (
+    ADDRESS, isolate_ros_domain, LifecycleClient, Listener, NodeProcess, ros_env,
+)
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
+from i3dmgx2_driver.tools.figures import agg_figure
+
+#: The faults, in turn.
+KINDS = ('unplug', 'power cycle', 'stall', 'noise')
+#: Messages received after a fault ended that say the stream is back.
+BACK_AFTER = 10
+#: How long a stream may take to come back before the run says so (s).
+BACK_WITHIN = 20.0
+#: The CSV's columns.
+COLUMNS = ('seconds', 'faults', 'cycles', 'anon_kib', 'c_heap_kib', 'python_blocks')
 
 
-def _fault(sim: PtySimulator, kind: str) -> None:
+class Row(NamedTuple):
+    """One sample of the node's memory."""
+
+    seconds: float
+    faults: int
+    cycles: int
+    anon_kib: int
+    c_heap_kib: int
+    python_blocks: int
+
+
+def inflict(sim: PtySimulator, kind: str) -> None:
     """Inflict one fault and return once it has ended."""
     if kind == 'unplug':
         sim.unplug(None)
@@ -75,71 +111,259 @@ def _heap(path: str) -> tuple[int, int | None]:
     raise RuntimeError(f'the node wrote no heap figures to {path}')
 
 
-def run(minutes: float, every: float, warm_up: float) -> None:
-    """Stream ``warm_up`` s, then a fault every ``every`` s for ``minutes``; print the figures."""
+class Messages:
+    """Counts the node's Imu messages, received by a subscriber in this process."""
+
+    def __init__(self, listener: Listener, topic: str = 'imu/raw_data') -> None:
+        from rclpy.qos import qos_profile_sensor_data
+        from sensor_msgs.msg import Imu
+
+        self.count = 0
+        self._changed = threading.Condition()
+        listener.node.create_subscription(Imu, topic, self._on_message, qos_profile_sensor_data)
+
+    def _on_message(self, _msg: object) -> None:
+        with self._changed:
+            self.count += 1
+            self._changed.notify_all()
+
+    def wait_past(self, count: int, timeout: float = BACK_WITHIN) -> bool:
+        """Wait for ``BACK_AFTER`` messages after the ``count``-th; tell whether they came."""
+        with self._changed:
+            return self._changed.wait_for(lambda: self.count >= count + BACK_AFTER, timeout)
+
+
+def _node_env(plan: 'Run', path: str) -> dict[str, str]:
+    """Return what the node's environment adds: where its figures go, and the options."""
+    env = {STATS_ENV: path}
+    if plan.arena_max:
+        env['MALLOC_ARENA_MAX'] = str(plan.arena_max)
+    if not plan.events:
+        env[EVENTS_ENV] = '0'
+    return env
+
+
+class Run(NamedTuple):
+    """What a run is asked to do."""
+
+    minutes: float
+    faults: int | None
+    every: float
+    warm_up: float
+    managed: bool
+    cycle_every: int
+    row_every: float
+    #: glibc's ``MALLOC_ARENA_MAX`` for the node (None: glibc's default, 8 per core).
+    arena_max: int | None = None
+    #: Whether the node keeps the rig's list of port events (the soak's checks read it).
+    events: bool = True
+
+
+def run(plan: Run) -> list[Row]:
+    """Stream ``warm_up`` s, then fault after fault until the end; return the rows."""
     isolate_ros_domain()
-    kinds = itertools.cycle(('unplug', 'power cycle', 'stall', 'noise'))
-    rows: list[tuple[float, int, int, int, int]] = []  # (t, faults, anon KiB, C KiB, blocks)
+    kinds = itertools.cycle(KINDS)
+    rows: list[Row] = []
+    command = (sys.executable, '-m', 'harness.instrumented_node') + (
+        ('--lifecycle',) if plan.managed else ())
     with tempfile.TemporaryDirectory(prefix='i3dmgx2-memory-') as workdir, \
-            PtySimulator(SimulatorConfig(address=ADDRESS, seed=3, rate_hz=100)) as sim:
+            PtySimulator(SimulatorConfig(address=ADDRESS, seed=3, rate_hz=100)) as sim, \
+            Listener({}) as listener:
+        # rclpy.init took SIGINT for its contexts: Ctrl-C stops the run again.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         path = os.path.join(workdir, 'stats.json')
-        node = NodeProcess({'port': sim.port, 'address': ADDRESS},
-                           command=(sys.executable, '-m', 'harness.instrumented_node'),
-                           env=ros_env({STATS_ENV: path}))
+        messages = Messages(listener)
+        node = NodeProcess({'port': sim.port, 'address': ADDRESS}, command=command,
+                           env=ros_env(_node_env(plan, path)))
+        client = LifecycleClient(listener) if plan.managed else None
         try:
-            if not node.wait_for_output('first record received', timeout=30):
+            if client is not None and not (client.wait_ready(60.0) and client.change('configure')
+                                           and client.change('activate')):
+                raise RuntimeError('the managed node did not activate: ' + node.output()[-2000:])
+            if not messages.wait_past(0, timeout=60.0):
                 raise RuntimeError('the node did not stream: ' + node.output()[-2000:])
-            time.sleep(warm_up)
-            print(f'{"min":>4} {"faults":>6} {"anon KiB":>9} {"C heap KiB":>10} '
+            time.sleep(plan.warm_up)
+            print(f'{"min":>5} {"faults":>6} {"cycles":>6} {"anon KiB":>9} {"C heap KiB":>10} '
                   f'{"blocks":>7}', flush=True)
             start = time.monotonic()
-            faults = 0
+            faults = cycles = late = 0
             next_row = start
             while True:
                 now = time.monotonic()
-                if now >= next_row:
+                done = (plan.faults is not None and faults >= plan.faults) \
+                    or now - start >= plan.minutes * 60.0
+                if now >= next_row or done:
                     blocks, native = _heap(path)
                     anon = (rss_kinds(node.proc.pid) or (0, 0, 0))[0]
-                    rows.append((now - start, faults, anon, native or 0, blocks))
-                    print(f'{(now - start) / 60:4.0f} {faults:6d} {anon:9d} {native or 0:10d} '
-                          f'{blocks:7d}', flush=True)
-                    next_row += 60.0
-                    if now - start >= minutes * 60.0:
+                    rows.append(Row(now - start, faults, cycles, anon, native or 0, blocks))
+                    print(f'{(now - start) / 60:5.1f} {faults:6d} {cycles:6d} {anon:9d} '
+                          f'{native or 0:10d} {blocks:7d}', flush=True)
+                    next_row += plan.row_every
+                    if done:
                         break
                 began = time.monotonic()
-                _fault(sim, next(kinds))
+                if client is not None and plan.cycle_every and faults \
+                        and faults // plan.cycle_every > cycles:
+                    cycles += 1
+                    mark = messages.count
+                    if not all(client.change(step) for step in (
+                            'deactivate', 'cleanup', 'configure', 'activate')):
+                        raise RuntimeError(f'lifecycle cycle {cycles} failed: '
+                                           + node.output()[-2000:])
+                    messages.wait_past(mark)
+                kind = next(kinds)
+                inflict(sim, kind)
                 faults += 1
-                time.sleep(max(0.0, every - (time.monotonic() - began)))
+                if not messages.wait_past(messages.count):
+                    late += 1
+                    print(f'fault {faults} ({kind}): the stream was not back within '
+                          f'{BACK_WITHIN:g} s', flush=True)
+                time.sleep(max(0.0, plan.every - (time.monotonic() - began)))
         finally:
             node.stop()
-    _slopes(rows)
+    print(f'{faults} faults, {cycles} lifecycle cycles in {rows[-1].seconds / 60:.1f} min; '
+          f'{late} returns slower than {BACK_WITHIN:g} s')
+    return rows
 
 
-def _slopes(rows: list[tuple[float, int, int, int, int]]) -> None:
-    """Print each figure's slope by thirds of the run: per hour, and per 100 faults."""
-    third = rows[-1][0] / 3.0
-    print('slopes by thirds of the run (per hour | per 100 faults):')
-    for column, name, scale in ((2, 'anonymous RSS', 1 / 1024), (3, 'C heap', 1 / 1024),
-                                (4, 'CPython blocks', 1.0)):
-        parts = []
-        for k in range(3):
-            part = [r for r in rows if k * third <= r[0] <= (k + 1) * third]
-            hourly = slope_per_hour([(r[0], r[column] * scale) for r in part])
-            per_fault = slope_per_hour([(r[1], r[column] * scale) for r in part])
-            unit = ' MiB' if scale != 1.0 else ''
-            parts.append('n/a' if hourly is None or per_fault is None else
-                         f'{hourly:+.3f}{unit} | {per_fault / 36:+.3f}{unit}')
-        print(f'  {name:15s} ' + ';  '.join(parts))
+def fit(points: list[tuple[float, float]]) -> tuple[float, float] | None:
+    """Least-squares slope of (x, y) points and its standard error; None if too few."""
+    if len(points) < 4:
+        return None
+    xs, ys = [x for x, _ in points], [y for _, y in points]
+    mx, my = statistics.fmean(xs), statistics.fmean(ys)
+    sxx = sum((x - mx) ** 2 for x in xs)
+    if sxx == 0:
+        return None
+    slope = sum((x - mx) * (y - my) for x, y in zip(xs, ys, strict=True)) / sxx
+    residual = sum((y - my - slope * (x - mx)) ** 2 for x, y in zip(xs, ys, strict=True))
+    return slope, math.sqrt(residual / (len(xs) - 2) / sxx)
+
+
+def thirds(rows: list[Row]) -> list[list[Row]]:
+    """Split the rows into thirds of the run's time (a row on a boundary in both)."""
+    third = rows[-1].seconds / 3.0
+    return [[r for r in rows if k * third <= r.seconds <= (k + 1) * third] for k in range(3)]
+
+
+def slopes(rows: list[Row]) -> list[str]:
+    """Return the lines that give each figure's slope by thirds: per hour and per 100 faults."""
+    lines = ['slopes by thirds of the run (per hour | per 100 faults, \u00b1 standard error):']
+    parts = thirds(rows)
+    spans = [f'{p[0].faults}-{p[-1].faults}' if p else '-' for p in parts]
+    lines.append('  faults met      ' + ';  '.join(spans))
+    for field, name, scale, unit in (('anon_kib', 'anonymous RSS', 1 / 1024, ' MiB'),
+                                     ('c_heap_kib', 'C heap', 1 / 1024, ' MiB'),
+                                     ('python_blocks', 'CPython blocks', 1.0, '')):
+        said = []
+        for part in parts:
+            hourly = fit([(r.seconds / 3600, getattr(r, field) * scale) for r in part])
+            per_fault = fit([(r.faults / 100, getattr(r, field) * scale) for r in part])
+            said.append('n/a' if hourly is None or per_fault is None else
+                        f'{hourly[0]:+.3f}\u00b1{hourly[1]:.3f}{unit} | '
+                        f'{per_fault[0]:+.3f}\u00b1{per_fault[1]:.3f}{unit}')
+        lines.append(f'  {name:15s} ' + ';  '.join(said))
+    anon = [r.anon_kib / 1024 for r in rows]
+    lines.append(f'anonymous RSS: first {anon[0]:.2f} MiB, highest {max(anon):.2f} MiB '
+                 f'(after {rows[anon.index(max(anon))].faults} faults), last {anon[-1]:.2f} MiB')
+    return lines
+
+
+def write_csv(path: str, rows: list[Row], label: str) -> None:
+    """Write the rows, the run's label as a comment line first."""
+    with open(path, 'w') as out:
+        out.write(f'# {label}\n{",".join(COLUMNS)}\n')
+        for row in rows:
+            out.write(f'{row.seconds:.1f},{row.faults},{row.cycles},{row.anon_kib},'
+                      f'{row.c_heap_kib},{row.python_blocks}\n')
+
+
+def read_csv(path: str) -> tuple[str, list[Row]]:
+    """Read what :func:`write_csv` wrote: (label, rows)."""
+    label, rows = os.path.basename(path), []
+    with open(path) as source:
+        for line in source:
+            if line.startswith('#'):
+                label = line[1:].strip()
+            elif line.strip() and not line.startswith(COLUMNS[0]):
+                seconds, *counts = line.strip().split(',')
+                rows.append(Row(float(seconds), *(int(c) for c in counts)))
+    return label, rows
+
+
+def plot(runs: list[tuple[str, list[Row]]], output: str) -> None:
+    """Draw anonymous RSS and the C heap in use against faults met, one line per run."""
+    fig = agg_figure(figsize=(8, 5), dpi=90)
+    top = fig.add_subplot(2, 1, 1)
+    bottom = fig.add_subplot(2, 1, 2, sharex=top)
+    for label, rows in runs:
+        faults = [r.faults for r in rows]
+        line, = top.plot(faults, [r.anon_kib / 1024 for r in rows], '.-', markersize=3,
+                         label=label)
+        bottom.plot(faults, [r.c_heap_kib / 1024 for r in rows], '.-', markersize=3,
+                    color=line.get_color())
+        last = thirds(rows)[2]
+        if last:
+            top.axvspan(last[0].faults, last[-1].faults, color=line.get_color(), alpha=0.08)
+    top.set_ylabel('anonymous RSS (MiB)')
+    bottom.set_ylabel('C heap in use (MiB)')
+    bottom.set_xlabel('faults met (after 2 min of streaming; shaded: the last third)')
+    for axes in (top, bottom):
+        axes.grid(True, alpha=0.3)
+    top.legend(loc='lower right', fontsize='small')
+    fig.suptitle("A driver node's memory against the faults it has met", fontsize='medium')
+    fig.tight_layout()
+    fig.savefig(output)
 
 
 def main() -> None:
     """Run from the command line."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--minutes', type=float, default=45.0, help='minutes of faults')
-    parser.add_argument('--every', type=float, default=3.0, help='seconds between faults')
+    parser.add_argument('--minutes', type=float, default=45.0,
+                        help='minutes of faults at most')
+    parser.add_argument('--faults', type=int, default=None,
+                        help='stop after this many faults (default: when the minutes end)')
+    parser.add_argument('--every', type=float, default=3.0,
+                        help='seconds from one fault to the next at the soonest (each waits '
+                             'for the stream to come back)')
     parser.add_argument('--warm-up', type=float, default=120.0,
                         help="seconds of streaming before the first row (the start-up's own)")
-    run(**vars(parser.parse_args()))
+    parser.add_argument('--managed', action='store_true',
+                        help='run the managed node (configured and activated) instead')
+    parser.add_argument('--cycle-every', type=int, default=45,
+                        help='managed: deactivate, clean up, configure and activate it every '
+                             'this many faults (0: never; the soak: about 45 a leg)')
+    parser.add_argument('--row-every', type=float, default=60.0, help='seconds between rows')
+    parser.add_argument('--arena-max', type=int, default=None,
+                        help="the node's MALLOC_ARENA_MAX (glibc's default: 8 per core)")
+    parser.add_argument('--no-events', action='store_true',
+                        help="the node keeps no list of port events (the soak's, read by "
+                             "its checks, not here): its memory without the rig's")
+    parser.add_argument('--csv', metavar='PATH', help='write the rows here')
+    parser.add_argument('--plot', metavar='PNG', help='draw the rows here')
+    parser.add_argument('--replot', metavar='CSV', nargs='+',
+                        help='draw these CSVs to --plot, without running')
+    args = parser.parse_args()
+    if args.replot:
+        runs = [read_csv(path) for path in args.replot]
+        for label, rows in runs:
+            print(label)
+            print('\n'.join(slopes(rows)))
+        if args.plot:
+            plot(runs, args.plot)
+        return
+    rows = run(Run(args.minutes, args.faults, args.every, args.warm_up, args.managed,
+                   args.cycle_every if args.managed else 0, args.row_every, args.arena_max,
+                   not args.no_events))
+    print('\n'.join(slopes(rows)))
+    label = (f'managed node, a lifecycle cycle every {args.cycle_every} faults'
+             if args.managed else 'plain node') + (
+                 f', MALLOC_ARENA_MAX={args.arena_max}' if args.arena_max else '') + (
+                 ', no port events kept' if args.no_events else '')
+    if args.csv:
+        write_csv(args.csv, rows, label)
+    if args.plot:
+        plot([(label, rows)], args.plot)
 
 
 if __name__ == '__main__':

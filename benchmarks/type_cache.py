@@ -28,11 +28,22 @@ for ``--minutes``; every minute it prints the blocks alive whose allocation
 lies in ``publish()``; then ``sys._clear_type_cache()`` empties the cache,
 and the count falls to a few dozen, and refills, never past the table.
 
+With ``--faults N`` it looks for what grows with the faults instead: the
+node (in this process) reads the simulator (in this process too, its
+allocations left out) and meets faults in turn, as in ``memory_curve.py``,
+each ended and the stream back before the next; after ``--warm-up-faults``
+and again after ``N`` more, tracemalloc's snapshot and the live objects by
+type are taken, and what grew between them is printed, by allocation site
+(with its callers) and by type. Something that keeps a little of every fault
+shows as a site whose count grows with ``N``.
+
 Prints numbers; passes or fails nothing.
 """
 
 import argparse
+import collections
 import gc
+import itertools
 import sys
 import threading
 import time
@@ -40,6 +51,7 @@ import tracemalloc
 
 import bench_common  # noqa: F401 - puts the repository on the path
 from harness.processes import ADDRESS, isolate_ros_domain, SimProcess
+from memory_curve import inflict, KINDS
 
 #: Entries of CPython's type method cache (1 << MCACHE_SIZE_EXP): the most it keeps.
 TYPE_CACHE_ENTRIES = 4096
@@ -93,11 +105,98 @@ def run(minutes: float) -> None:
     print(f'(the type cache has {TYPE_CACHE_ENTRIES} entries: what it keeps is bounded)')
 
 
+def _by_type() -> collections.Counter:
+    """Count the objects the garbage collector tracks, by type name."""
+    gc.collect()
+    return collections.Counter(type(o).__qualname__ for o in gc.get_objects())
+
+
+#: Left out of the snapshots: the simulator's threads (its ground truth grows by design),
+#: tracemalloc's own and the import machinery's.
+_NOT_THE_NODE = (tracemalloc.Filter(False, '*/simulator/*', all_frames=True),
+                 tracemalloc.Filter(False, tracemalloc.__file__),
+                 tracemalloc.Filter(False, '<frozen importlib._bootstrap*>'))
+
+
+def run_faults(faults: int, warm_up: int, top: int) -> None:
+    """Meet ``warm_up`` faults, then ``faults`` more; print what grew in between."""
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from i3dmgx2_driver.ros.imu_node import ImuDriverNode
+    from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+
+    isolate_ros_domain()
+    rclpy.init()
+    tracemalloc.start(12)
+    kinds = itertools.cycle(KINDS)
+    with PtySimulator(SimulatorConfig(address=ADDRESS, seed=3, rate_hz=100)) as sim:
+        node = ImuDriverNode(parameter_overrides=[Parameter('port', value=sim.port),
+                                                  Parameter('address', value=ADDRESS)])
+        executor = MultiThreadedExecutor(num_threads=4)
+        executor.add_node(node)
+        threading.Thread(target=executor.spin, daemon=True).start()
+
+        def published() -> int:
+            return node.core.records.stats.published
+
+        def back_after(count: int, timeout: float = 20.0) -> bool:
+            deadline = time.monotonic() + timeout
+            while published() < count + 10:
+                if time.monotonic() > deadline:
+                    return False
+                time.sleep(0.02)
+            return True
+
+        def meet(n: int) -> None:
+            for _ in range(n):
+                kind = next(kinds)
+                inflict(sim, kind)
+                if not back_after(published()):
+                    print(f'{kind}: the stream was not back within 20 s', flush=True)
+
+        try:
+            back_after(0, 30.0)
+            meet(warm_up)
+            before, types_before = tracemalloc.take_snapshot(), _by_type()
+            blocks_before = sys.getallocatedblocks()
+            began = time.monotonic()
+            meet(faults)
+            after, types_after = tracemalloc.take_snapshot(), _by_type()
+            print(f'{faults} faults in {time.monotonic() - began:.0f} s after {warm_up}: '
+                  f'CPython blocks {blocks_before} -> {sys.getallocatedblocks()}')
+        finally:
+            node.shutdown()
+            executor.shutdown()
+            node.destroy_node()
+            rclpy.shutdown()
+    growth = after.filter_traces(_NOT_THE_NODE).compare_to(
+        before.filter_traces(_NOT_THE_NODE), 'traceback')
+    print(f'allocation sites that grew most (blocks, KiB), top {top}:')
+    for stat in [s for s in growth if s.count_diff > 0][:top]:
+        print(f'  {stat.count_diff:+6d} blocks {stat.size_diff / 1024:+8.1f} KiB, at')
+        for line in stat.traceback.format(limit=6, most_recent_first=True):
+            print(f'      {line}')
+    grew = (types_after - types_before).most_common(top)
+    print('objects by type that grew: ' + (', '.join(f'{name} +{n}' for name, n in grew)
+                                           or 'none'))
+
+
 def main() -> None:
     """Run from the command line."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--minutes', type=float, default=5.0, help='minutes of streaming')
-    run(parser.parse_args().minutes)
+    parser.add_argument('--faults', type=int, default=0,
+                        help='look for what grows with this many faults instead')
+    parser.add_argument('--warm-up-faults', type=int, default=40,
+                        help='faults before the first snapshot (with --faults)')
+    parser.add_argument('--top', type=int, default=15, help='sites and types printed')
+    args = parser.parse_args()
+    if args.faults:
+        run_faults(args.faults, args.warm_up_faults, args.top)
+    else:
+        run(args.minutes)
 
 
 if __name__ == '__main__':

@@ -56,9 +56,13 @@ STATS_ENV = 'I3DMGX2_SOAK_STATS'
 #: How often the counters are written while the node runs (s).
 DUMP_PERIOD = 0.5
 
+#: Environment variable that sets how many port events are kept (default EVENTS_KEPT).
+EVENTS_ENV = 'I3DMGX2_SOAK_EVENTS'
 #: Port events kept (the newest): far more than a leg makes, so that an hour's run in
-#: one process holds a bounded list rather than one that grows with every fault.
-EVENTS_KEPT = 4096
+#: one process holds a bounded list rather than one that grows with every fault. A run
+#: that reads no events (benchmarks/memory_curve.py) sets 0 in EVENTS_ENV: the list and
+#: its copy in every write are the rig's memory, not the node's.
+EVENTS_KEPT = int(os.environ.get(EVENTS_ENV, '4096'))
 
 _events: collections.deque[tuple[str, float, int]] = collections.deque(maxlen=EVENTS_KEPT)
 _events_lock = threading.Lock()
