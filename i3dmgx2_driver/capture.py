@@ -641,7 +641,7 @@ class RecentBytes:
     def snapshot(self) -> list[Chunk]:
         """Return the reads kept now, oldest first."""
         with self._lock:
-            return list(zip(self._times, self._data))
+            return list(zip(self._times, self._data, strict=True))
 
     @property
     def held(self) -> tuple[int, int]:
