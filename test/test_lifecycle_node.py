@@ -194,6 +194,25 @@ def test_transitions_gate_the_stream_and_the_port():
             assert line in output, output
 
 
+def test_a_transition_the_state_does_not_have_leaves_the_node_as_it_is():
+    # rclpy's lifecycle service raises (rather than answers) a transition asked for by id
+    # that the current state has not: configure to an active node, as a lifecycle manager
+    # repeating itself would send. It once ended the node (found by the memory curve).
+    with PtySimulator(SimulatorConfig(seed=57)) as sim, Listener(TOPICS) as listener, \
+            start(sim.port) as node:
+        client = rig(listener, node)
+        assert client.change('configure') and client.change('activate'), node.output()
+        assert len(listener.wait_for('imu/raw_data', 20)) >= 20, node.output()
+        client.change('configure', timeout=3.0)  # refused: answered or not, never fatal
+        assert node.proc.poll() is None, node.output()
+        assert client.state() == 'active'
+        seen = len(listener.received('imu/raw_data'))
+        assert len(listener.wait_for('imu/raw_data', seen + 20)) >= seen + 20, node.output()
+        assert 'lifecycle request refused' in node.output(), node.output()
+        assert client.change('shutdown')
+        assert node.wait(timeout=10) == 0, node.output()
+
+
 def test_configure_fails_on_a_missing_port_then_succeeds_once_it_appears():
     link = os.path.join(tempfile.mkdtemp(prefix='i3dmgx2-lc-'), 'ttyGX2')
     with Listener(TOPICS) as listener, start(link) as node:

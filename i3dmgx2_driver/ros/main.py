@@ -66,6 +66,8 @@ from ..device.hot_path import recorder_from_environment
 from ..device.port import PortUnusable
 
 EXIT_BAD_PARAMETER = 2
+#: What rcl says of a transition the current state does not have.
+NOT_A_TRANSITION = 'Transition is not registered'
 #: How often the main thread looks whether the node is finished (s); signals wake it at once.
 _POLL_PERIOD = 0.1
 #: Once a node is finished by itself, how long the executor goes on spinning (s), so
@@ -96,7 +98,17 @@ class _Spinner:
     def _spin(self) -> None:
         try:
             while not self._halt.done() and rclpy.ok():
-                self._executor.spin_once_until_future_complete(self._halt)
+                try:
+                    self._executor.spin_once_until_future_complete(self._halt)
+                except RCLError as exc:
+                    if NOT_A_TRANSITION not in str(exc):
+                        raise
+                    # rclpy's lifecycle service raises, rather than answers, a transition
+                    # asked for by id that the current state does not have (configure to an
+                    # active node, a lifecycle manager's repeated request): the request was
+                    # wrong, not the node, which goes on in the state it is in.
+                    rclpy.logging.get_logger('i3dmgx2_driver').warning(
+                        f'lifecycle request refused, the node stays as it is: {exc}')
         except ExternalShutdownException:
             pass  # ROS shut down under the node: it ends like a signal
         except BaseException as exc:  # a callback's error ends the node, as it did in main
