@@ -23,6 +23,7 @@ itself and against one that echoes something else; the bias parameters are
 refused unless they are three finite numbers.
 """
 
+import threading
 from typing import Any
 
 from i3dmgx2_driver.codec import layouts
@@ -156,7 +157,6 @@ class Link:
 
 
 def dialogue(**biases: Any) -> tuple[SensorDialogue, Log]:
-    import threading
     log = Log()
     config = DeviceConfig(port='/dev/null', address=95, **biases)
     return SensorDialogue(config, log, lambda *args: None, threading.Event()), log
@@ -177,6 +177,23 @@ def test_the_biases_are_written_to_ram_and_checked_against_the_echo():
     link = Link(sensor)
     talk.write_biases(link)
     assert link.sent == [] and not talk.biases_written
+
+
+def test_an_accepted_capture_is_the_bias_written_back_and_said_each_time():
+    sensor = SimulatedSensor(seed=1)
+    told: list[bool] = []
+    config = DeviceConfig(port='/dev/null', address=95, gyro_bias=BIAS)
+    talk = SensorDialogue(config, Log(), lambda *args: None, threading.Event(),
+                          on_gyro_bias=lambda: told.append(True))
+    talk.write_biases(Link(sensor))
+    captured = (0.001, -0.002, 0.003)
+    talk.keep_gyro_bias(captured)
+    link = Link(sensor)
+    talk.write_biases(link)  # what a stall recovery after a power cycle does
+    assert [c.args[0] for c in link.sent] == [pytest.approx(captured, abs=1e-7)]
+    assert sensor.biases.gyro == float32_vector(captured)
+    assert told == [True, True]
+    assert config.gyro_bias == BIAS  # the parameter is not rewritten
 
 
 def test_an_echo_that_differs_or_none_is_a_clear_error():

@@ -19,7 +19,9 @@ A node started with ``gyro_bias`` and ``accel_bias`` writes them to the
 sensor's RAM (0xCA, 0xC9) before streaming and says it is calibrated from
 the start; a capture writes its bias to ``calibration_file``; a second node
 started with that file as a parameter file writes the captured bias, to the
-bit. A bias parameter that is not three numbers stops the node, named.
+bit. A sensor power-cycled while the node runs gets the kept bias back (the
+parameter's, then an accepted capture's) without a restart. A bias parameter
+that is not three numbers stops the node, named.
 """
 
 import os
@@ -101,6 +103,60 @@ def test_known_biases_are_written_at_start_and_a_capture_is_kept_for_the_next(tm
                 float32_vector(captured['gyro_bias'])
             assert latest_calibrated(listener) is True
             assert again.stop()[0] == 0, again.output()
+
+
+def wait_until(condition, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.02)
+    return condition()
+
+
+def test_a_power_cycle_while_running_gets_the_kept_bias_back_a_capture_included():
+    """
+    A sensor power-cycled with the port open stalls; the recovery writes the kept bias.
+
+    The parameter's at first; after an accepted capture, the captured one
+    (never the parameter's over it); ``~/is_calibrated`` stays true through both.
+    """
+    isolate_ros_domain()
+    config = SimulatorConfig(seed=53, motion=MotionConfig(static=True))
+    with PtySimulator(config) as sim:
+        listener = Listener({'imu/raw_data': Imu})
+        node = NodeProcess({'port': sim.port, 'address': 95, 'gyro_bias_sampling_ms': 400,
+                            'gyro_bias': list(GYRO), 'accel_bias': list(ACCEL)})
+        with listener, node:
+            assert listener.wait_for('imu/raw_data', 20, timeout=30), node.output()
+            assert len(written(sim, layouts.WRITE_GYRO_BIAS)) == 1
+            sim.power_cycle(0.5)  # its RAM loses the bias at power-up
+            assert wait_until(lambda: len(written(sim, layouts.WRITE_GYRO_BIAS)) == 2, 20), \
+                node.output()
+            count = len(listener.received('imu/raw_data')) + 20
+            assert len(listener.wait_for('imu/raw_data', count, timeout=20)) >= count, \
+                node.output()
+            with sim.lock:
+                assert sim.sensor.biases.gyro == float32_vector(GYRO)
+                assert sim.sensor.biases.accel == float32_vector(ACCEL)
+            assert latest_calibrated(listener) is True
+            # An accepted capture is the bias kept from now on.
+            response = listener.call(Trigger, '/i3dmgx2_driver/capture_gyro_bias', 30)
+            assert response.success, response.message
+            with sim.lock:
+                captured = sim.sensor.biases.gyro
+            assert captured != float32_vector(GYRO)
+            writes = len(written(sim, layouts.WRITE_GYRO_BIAS))
+            sim.power_cycle(0.5)
+            assert wait_until(
+                lambda: len(written(sim, layouts.WRITE_GYRO_BIAS)) == writes + 1, 20), \
+                node.output()
+            count = len(listener.received('imu/raw_data')) + 20
+            assert len(listener.wait_for('imu/raw_data', count, timeout=20)) >= count, \
+                node.output()
+            assert written(sim, layouts.WRITE_GYRO_BIAS)[-1] == pytest.approx(captured, abs=0)
+            with sim.lock:
+                assert sim.sensor.biases.gyro == captured
+            assert latest_calibrated(listener) is True
+            assert node.stop()[0] == 0, node.output()
 
 
 def test_a_bias_that_is_not_three_numbers_stops_the_node():

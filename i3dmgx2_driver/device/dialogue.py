@@ -41,7 +41,13 @@ Known biases (the ``gyro_bias`` and ``accel_bias`` parameters) go to the
 sensor's RAM at every start and every resume (0xCA, 0xC9: RAM only, so a
 power cycle loses them and no EEPROM wears), each checked against the echo
 the sensor sends back: a sensor that does not echo what was written is an
-error with the two values, never a silent difference.
+error with the two values, never a silent difference. They go again after a
+stall the supervisor recovers on the same port, since a sensor power-cycled
+while the port stayed open (a battery swap) stalls and has lost them too.
+What is written is the gyro bias this dialogue keeps: the parameter's at
+first, then each capture the driver accepted (:meth:`keep_gyro_bias`), so a
+rewrite never undoes a calibration made while running, and after a refused
+(moved) capture a power cycle brings back the last good bias, not the moved one.
 """
 
 from collections.abc import Callable
@@ -98,7 +104,8 @@ class SensorDialogue:
     """
 
     def __init__(self, config: DeviceConfig, log: Any, warn: Warn,
-                 cancel: threading.Event) -> None:
+                 cancel: threading.Event,
+                 on_gyro_bias: Callable[[], None] | None = None) -> None:
         self.config = config
         self._log = log
         self._warn = warn
@@ -119,8 +126,14 @@ class SensorDialogue:
         #: and, when it does not fit, what to do about it ('' when it fits).
         self.line_use = ''
         self.line_warning = ''
-        #: Whether the configured biases are in the sensor's RAM (echoed as written).
+        #: Whether the kept biases are in the sensor's RAM (echoed as written).
         self.biases_written = False
+        #: The biases written at every start, resume and stall recovery: the
+        #: parameters' at first; an accepted capture replaces the gyro bias.
+        self.gyro_bias: tuple[float, float, float] | None = config.gyro_bias
+        self.accel_bias: tuple[float, float, float] | None = config.accel_bias
+        #: Told each time a kept gyro bias was written and echoed (``~/is_calibrated``).
+        self._on_gyro_bias = on_gyro_bias or (lambda: None)
 
     @property
     def expected_rate_hz(self) -> float | None:
@@ -291,17 +304,26 @@ class SensorDialogue:
 
     # -- biases -------------------------------------------------------------------------
 
+    def keep_gyro_bias(self, bias: tuple[float, float, float]) -> None:
+        """
+        Keep an accepted capture's gyro bias: the one written from now on.
+
+        The sensor holds it in RAM already (it captured it); a power cycle
+        loses it, and the next stall recovery, resume or start writes it back.
+        """
+        self.gyro_bias = bias
+
     def write_biases(self, link: DeviceLink) -> None:
         """
-        Write the configured gyro and accel biases to the sensor's RAM; check the echoes.
+        Write the kept gyro and accel biases to the sensor's RAM; check the echoes.
 
         Raises DeviceTimeout when a write is not answered, or its echo is not
         the bias written (as float32, which is what the sensor keeps).
         """
         cfg = self.config
-        writes = ((cfg.gyro_bias, 'gyro_bias', 'rad/s', commands.write_gyro_bias,
+        writes = ((self.gyro_bias, 'gyro_bias', 'rad/s', commands.write_gyro_bias,
                    layouts.WRITE_GYRO_BIAS),
-                  (cfg.accel_bias, 'accel_bias', 'g', commands.write_accel_bias,
+                  (self.accel_bias, 'accel_bias', 'g', commands.write_accel_bias,
                    layouts.WRITE_ACCEL_BIAS))
         for bias, name, unit, request, code in writes:
             if bias is None:
@@ -318,8 +340,11 @@ class SensorDialogue:
                     f'{_vector(echo)} {unit} (0x{code:02X}): it does not use the bias asked '
                     f'for; check the parameter and the sensor')
             self._log.info(f'{name} {_vector(bias)} {unit} written to node {cfg.address} '
-                           f'(RAM, echoed; lost at a power cycle, written again at start)')
-        self.biases_written = cfg.gyro_bias is not None or cfg.accel_bias is not None
+                           f'(RAM, echoed; lost at a power cycle, written again at start '
+                           f'and after a stall)')
+        self.biases_written = self.gyro_bias is not None or self.accel_bias is not None
+        if self.gyro_bias is not None:
+            self._on_gyro_bias()
 
     def transfer_to_non_volatile(self, link: DeviceLink, quantity: int) -> int:
         """

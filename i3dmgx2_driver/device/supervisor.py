@@ -128,13 +128,16 @@ class DeviceSupervisor:
     come from it and go back to it, the port is its to open and close, no
     line observer watches it, and this supervisor keeps only its sensor
     streaming (a supervisor per sensor, each with its own thread).
+    ``on_gyro_bias`` runs each time the dialogue wrote its kept gyro bias
+    and the sensor echoed it (at start, resume and after a stall).
     """
 
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
                  log: Any = None, on_connect: Callable[[], None] | None = None,
                  on_fatal: Callable[[PortError], None] | None = None,
                  port: PortParts | None = None,
-                 shared: SharedPort | None = None) -> None:
+                 shared: SharedPort | None = None,
+                 on_gyro_bias: Callable[[], None] | None = None) -> None:
         self.config = config
         self._shared = shared
         port = port if port is not None else PortParts()
@@ -150,7 +153,8 @@ class DeviceSupervisor:
         self._paused = threading.Event()
         self._report = DeviceReport(log)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
-        self.dialogue = SensorDialogue(config, log, self._report.warn, self._cancel)
+        self.dialogue = SensorDialogue(config, log, self._report.warn, self._cancel,
+                                       on_gyro_bias)
         self._on_record = on_record
         self._on_connect = on_connect
         self._on_fatal = on_fatal or (lambda error: log.error(str(error)))
@@ -410,6 +414,9 @@ class DeviceSupervisor:
             report.warn('stall', f'no data for {watch.stall_after:.1f} s: re-requesting '
                                  f'continuous mode', EVENT_PERIOD)
             try:
+                # A sensor power-cycled meanwhile (a battery swap) lost the biases
+                # in its RAM: the kept ones go back before its stream does.
+                self.dialogue.write_biases(link)
                 resumed = self._restart_stream(link)
             except DeviceTimeout:
                 report.warn('stall', 'stream did not resume: reopening the port', EVENT_PERIOD)

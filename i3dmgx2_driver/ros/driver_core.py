@@ -141,7 +141,8 @@ class DriverCore:
         #: Stamping, counting and publishing of each record, in the reader thread.
         self.records = RecordPublisher(
             self.publishers, cfg.messages_for(sensor), Stamping.of(cfg, self.stream),
-            self._expected_ticks, node.get_logger(), publishing, timings)
+            self._expected_ticks, node.get_logger(), publishing, timings,
+            bias_kept=self._bias_kept)
         #: Whether this core's sensor shares its port with others.
         self._shared = shared is not None
         #: The port's raw capture (shown on diagnostics).
@@ -158,7 +159,8 @@ class DriverCore:
             self.device_config,
             on_record=self.records.on_record, log=node.get_logger(),
             on_connect=self.records.link_changed, on_fatal=self._on_fatal,
-            port=PortParts(port_factory, capture, timings), shared=shared)
+            port=PortParts(port_factory, capture, timings), shared=shared,
+            on_gyro_bias=lambda: self.records.announce_calibrated(True))
         self.records.announce_calibrated(False)
         self.device_services = DeviceServices(
             node, self.supervisor, self.records.published, self.records.forget_last_sample,
@@ -191,6 +193,9 @@ class DriverCore:
         """
         self.fatal_error = error
         self.node.get_logger().fatal(str(error))
+
+    def _bias_kept(self) -> bool:
+        return self.supervisor.dialogue.gyro_bias is not None
 
     def _expected_ticks(self) -> int | None:
         divider = self.supervisor.dialogue.divider

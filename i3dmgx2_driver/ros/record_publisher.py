@@ -91,13 +91,16 @@ class RecordPublisher:
     in between as lost. ``publishing`` False: records are counted, not
     published, until :meth:`set_publishing`. ``timings``, if given, is told
     every stage boundary of every sample's path (device/hot_path.py); None
-    costs nothing.
+    costs nothing. ``bias_kept()`` says whether the device side keeps a gyro
+    bias it writes back after a power cycle (before the stream restarts), so
+    that a power cycle seen in the timer leaves ``~/is_calibrated`` true.
     """
 
     def __init__(self, publishers: Publishers, messages: MessageSettings,
                  stamping: Stamping, expected_ticks: Callable[[], int | None],
                  log: RcutilsLogger, publishing: bool = True,
-                 timings: HotPathObserver | None = None) -> None:
+                 timings: HotPathObserver | None = None,
+                 bias_kept: Callable[[], bool] | None = None) -> None:
         self.publishers = publishers
         self.imu_pub = publishers.imu
         self.mag_pub = publishers.mag
@@ -123,6 +126,7 @@ class RecordPublisher:
         self._time_offset = stamping.offset
         self._wire_time = stamping.wire_time
         self._expected_ticks = expected_ticks
+        self._bias_kept = bias_kept or (lambda: False)
         self._log = log
         self._timings = timings
         self._publish_lock = threading.Lock()
@@ -134,7 +138,9 @@ class RecordPublisher:
         False from the start (a bias captured by an earlier process may be
         gone with a power cycle), True after a capture the driver accepted,
         False again after one refused (the device uses the moved bias) and
-        when the sensor's timer shows a power cycle (the bias lives in RAM).
+        when the sensor's timer shows a power cycle (the bias lives in RAM),
+        unless the driver keeps a bias it wrote back (a parameter's, or an
+        accepted capture's): True again whenever that one is written.
         """
         try:
             self.publishers.is_calibrated.publish(Bool(data=calibrated))
@@ -197,7 +203,7 @@ class RecordPublisher:
                 timings.stamped()
             if clock.restarted and clock.last_restart == Restart.RESET.value:
                 stats.device_resets += 1
-                self.announce_calibrated(False)
+                self.announce_calibrated(self._bias_kept())
                 self._log.warning(
                     "the sensor's timer restarted (a power cycle or brown-out): "
                     'timestamps start afresh from its new clock')

@@ -222,6 +222,8 @@ class GyroBiasCapture:
             return False, message
         calibration = Calibration(started, True, bias, sampling_ms, f'bias {text} rad/s')
         self.last_capture = self.good_capture = calibration
+        # Written back after a power cycle from now on, in place of the parameter's.
+        self._device.dialogue.keep_gyro_bias(bias)
         self._calibrated(True)
         message = (f'gyro bias captured over {sampling_ms} ms: {text} rad/s; the device uses '
                    f'it until power-off (not stored in non-volatile memory: '
