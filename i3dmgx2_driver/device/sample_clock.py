@@ -39,20 +39,28 @@ written down in docs/clock.md; in short:
   record in that time comes within ``CONFIRM_S`` of the line, the device lost
   time after all (a restart whose timer happened to fit), and the fit starts
   afresh.
-- A queue draining after a gap is not lost time. A line run at its limit
-  holds the records that follow a gap in a queue, and they reach the
-  host late, one wire time apart: their lateness
-  falls by the sample period less the wire time with every record, where a
-  restarted timer's offset is a step that stays. So while the records since
-  the gap come at the line's rate (each read within ``QUEUE_TOL_S`` of one
-  wire time after the one before), the probation's clock does not run; and
-  a fit that started afresh on the first of them (it came later than
-  ``CONTINUE_LATE_S``) is given up, after ``QUEUE_RECORDS`` such records,
-  for the line it replaced, which stamps the queue true.
+- A queue draining after a gap is not lost time. A line run near its limit
+  holds the records that follow a gap in a queue (the radio's link coming
+  back, garbage or another sensor's packets taking the line), and they reach
+  the host late, each a little less than the one before: the line carries
+  them faster than they were sampled. A restarted timer's offset is a step
+  that stays. So a record that comes after a gap later than
+  ``CONTINUE_LATE_S`` starts a fresh fit but the line it replaced is kept:
+  each record after it is placed on that line too, and once one comes
+  within ``CONFIRM_S`` of it, or ``QUEUE_RECORDS`` have come whose residuals
+  on it fall (a least-squares slope, against device time, that stands out of
+  their scatter by ``QUEUE_SIGMAS`` standard errors), the lateness
+  was a queue's: the old line comes back and stamps the rest of the queue
+  true. Otherwise the fresh fit stands. (Until the records tell, the fresh
+  fit stamps them: a power cycle whose timer lands a few tens of
+  milliseconds after the line, near a rollover, is stamped true from its
+  first record, and a queue's first records within the grace.) A
+  probation's clock does not run out while the residuals fall that way either.
 
 Not thread-safe: the caller stamps from one thread (the reader) or holds a lock.
 """
 
+from collections import deque
 from collections.abc import Callable
 import copy
 from dataclasses import dataclass, field
@@ -89,15 +97,17 @@ GAP_DRIFT = 100e-6
 #: in that time must come for the continuation to stand.
 PROBATION_S = 0.3
 CONFIRM_S = 0.001
-#: A record read within this (s) of one wire time after the one before came behind it in a
-#: queue on the line: the line carries one packet a wire time while it has a queue. Less
-#: than a sample period less the wire time at any stream's highest rate (the line budget
-#: keeps 5 % of the line free: 0.18 ms at 272 Hz), so that records that merely follow
-#: their sampling never pass for queued ones.
-QUEUE_TOL_S = 100e-6
-#: Records in a row from the gap on, read at the line's rate, that say a queue is draining
-#: (a jittery stream at its line's limit queues a few records in a row by chance).
-QUEUE_RECORDS = 8
+#: Records after a late record after a gap whose residuals tell a queue from a step.
+QUEUE_RECORDS = 16
+#: The least fall (s per s of device time) of the residuals that may be a queue's: the
+#: line carries a queue away with what it has free (a stream's line budget keeps 5 % of
+#: it free at its highest rate; a line run past that margin, less).
+QUEUE_FALL = 0.001
+#: And the fall must stand out of the residuals' own scatter: a least-squares slope this
+#: many standard errors below zero. The records of a restarted timer scatter about a step
+#: that stays (radio jitter, read times): their slope is that far below zero about once
+#: in ten thousand; a queue's, read with 1 ms of jitter, is ten and more standard errors.
+QUEUE_SIGMAS = 5.0
 #: Reads of the system clock's offset from the monotonic one (see system_clock_offset):
 #: at most this many, until two monotonic reads around the wall clock's lie within
 #: OFFSET_GOOD_S (about 0.2 us apart when nothing interrupts the thread).
@@ -208,9 +218,10 @@ class SampleClock:
         self._last_host = 0.0
         self._probation_end: float | None = None
         self._probation_best = 0.0
-        #: Records read one wire time after the one before, each, since the last gap (a
-        #: queue on the line draining); None once one was not (or before any gap).
-        self._queue_run: int | None = None
+        #: (device time, residual) of the records since the last gap, on the line the
+        #: late record after it replaced, or on the line while on probation: whether
+        #: they fall as a queue's do.
+        self._trail: deque[tuple[float, float]] = deque(maxlen=QUEUE_RECORDS)
         self._replaced: _Replaced | None = None
         self.ticks = 0
         self.ticks_since_last: int | None = None
@@ -248,14 +259,6 @@ class SampleClock:
         """Place ``raw`` on the current fit, or restart the fit if it cannot be placed."""
         step = (raw - self._last_raw) % TIMER_MODULUS
         elapsed = host - self._last_host
-        if self._queue_run is not None:
-            if wire_time > 0.0 and abs(elapsed - wire_time) <= QUEUE_TOL_S:
-                self._queue_run += 1
-            else:
-                self._queue_run = None
-                self._replaced = None
-            if self._replaced is not None and self._queue_run >= QUEUE_RECORDS:
-                self._resume(host)
         wraps = max(0, round((elapsed * TICKS_PER_SECOND - step) / TIMER_MODULUS))
         ticks = self.ticks + step + wraps * TIMER_MODULUS
         rolled = wraps > 0 or raw < self._last_raw
@@ -264,7 +267,13 @@ class SampleClock:
         # that was merely late sees the next tick count and needs no check.
         gap = (step / TICKS_PER_SECOND > GAP_S
                or elapsed - step / TICKS_PER_SECOND > RESET_S)
-        if gap or rolled or self._check_next:
+        # A rollover between two records that follow each other is one: only one across
+        # host time (a restart whose timer landed just past the old one's wrap) is checked,
+        # so that a record late behind a queue as the timer wraps restarts nothing.
+        checked = gap or self._check_next or (rolled and elapsed > GAP_S)
+        if rolled and not checked:
+            self.rollovers += wraps + (raw < self._last_raw)
+        if checked:
             self._replaced = None
             off = self.fit.residual(ticks, read_time, wire_time)
             slack = GAP_DRIFT * max(elapsed, 0.0)
@@ -284,20 +293,33 @@ class SampleClock:
                 self._restart(Restart.RESYNC, raw, host, since=ticks - self.ticks)
                 if replaced is not None:
                     self._replaced = replaced
-                    self._queue_run = 0
+                    self._trail.append((ticks / TICKS_PER_SECOND, off))
                 return
             if gap or self._check_next:
                 self.gaps += 1
                 self._probation_end = host + PROBATION_S
                 self._probation_best = off
-                self._queue_run = 0
+                self._trail.clear()
+                self._trail.append((ticks / TICKS_PER_SECOND, off))
             self._check_next = False
             if rolled:
                 self.rollovers += wraps + (raw < self._last_raw)
+        elif self._replaced is not None:
+            replaced = self._replaced
+            on_old = ticks + replaced.shift
+            off = replaced.fit.residual(on_old, read_time, wire_time)
+            self._trail.append((on_old / TICKS_PER_SECOND, off))
+            if off <= CONFIRM_S or self._falling():
+                # The records caught up with the line before the gap: a queue drained.
+                self._resume(host, off)
+                ticks = on_old
+            elif len(self._trail) == QUEUE_RECORDS:
+                self._replaced = None  # a step that stays: the fresh fit stands
         elif self._probation_end is not None:
             off = self.fit.residual(ticks, read_time, wire_time)
             self._probation_best = min(self._probation_best, off)
-            if self._queue_run:
+            self._trail.append((ticks / TICKS_PER_SECOND, off))
+            if self._falling():
                 # A queue is draining: its records are late by what it still holds, and
                 # the time to come near the line counts from when it has drained.
                 self._probation_end = max(self._probation_end, host + PROBATION_S)
@@ -310,15 +332,39 @@ class SampleClock:
         self.ticks_since_last = ticks - self.ticks
         self.ticks = ticks
 
-    def _resume(self, host: float) -> None:
+    def _falling(self) -> bool:
+        """
+        Whether the residuals in the trail fall as a draining queue's do.
+
+        ``QUEUE_RECORDS`` of them, whose least-squares slope against device
+        time is below ``-QUEUE_FALL`` and ``QUEUE_SIGMAS`` standard errors
+        below zero.
+        """
+        trail = self._trail
+        n = len(trail)
+        if n < QUEUE_RECORDS:
+            return False
+        mean_t = sum(t for t, _ in trail) / n
+        mean_r = sum(r for _, r in trail) / n
+        stt = sum((t - mean_t) ** 2 for t, _ in trail)
+        if stt <= 0.0:
+            return False
+        slope = sum((t - mean_t) * (r - mean_r) for t, r in trail) / stt
+        if slope >= -QUEUE_FALL:
+            return False
+        scatter = sum((r - mean_r - slope * (t - mean_t)) ** 2 for t, r in trail) / (n - 2)
+        return slope * slope * stt > QUEUE_SIGMAS ** 2 * scatter
+
+    def _resume(self, host: float, off: float) -> None:
         """
         Go back to the fit a late record after a gap replaced: it was a queue's head.
 
-        The records since came one wire time apart (a queue on the line
-        draining), so the lateness was the queue's, not lost device time: the
-        line before the gap stamps them true, where the new fit, started
-        from queued records, would follow the queue out. The gap is then a
-        gap, on probation as any other; the restart is undone in the counts.
+        The records since caught up with that fit (one came near it, or their
+        residuals on it fell as a draining queue's do), so the lateness was
+        the queue's, not lost device time: the line before the gap stamps
+        them true, where the new fit, started from queued records, would
+        follow the queue out. The gap is then a gap, on probation as any
+        other; the restart is undone in the counts.
         """
         replaced, self._replaced = self._replaced, None
         replaced.fit.keep_after(self.fit)
@@ -332,7 +378,7 @@ class SampleClock:
         self.last_restart = replaced.last_restart
         self.gaps += 1
         self._probation_end = host + PROBATION_S
-        self._probation_best = float('inf')
+        self._probation_best = off
 
     def _restart(self, reason: Restart, raw: int, host: float = 0.0,
                  since: int | None = None) -> None:
@@ -348,7 +394,7 @@ class SampleClock:
         self._check_next = False
         self._probation_end = None
         self._replaced = None
-        self._queue_run = None
+        self._trail.clear()
 
     @property
     def resets(self) -> int:

@@ -97,6 +97,16 @@ class SimulatorConfig:
     limit_to_line_rate: bool = False
     #: When the writer falls this far behind (s), it skips cycles instead of bursting.
     max_lag_s: float = 1.0
+    #: The base station's serial line carries one packet at a time (one sensor): a
+    #: packet that arrives over the radio while the one before is still on the line
+    #: waits behind it, and the garbage and foreign packets written before it take
+    #: their time on the line too. A line run near its limit then holds a queue,
+    #: which leaves one packet (and what came with it) a wire time; needs ``wire_baud``.
+    line_queue: bool = False
+    #: After a gap in the stream (0.1 s or more, a stall), the first packet reaches the
+    #: base station's line this much later (s; the radio link coming back), and the
+    #: packets sampled meanwhile queue behind it (with ``line_queue``).
+    radio_hold_s: float = 0.0
     #: Point the port symlink at /proc/<pid>/fd/<slave> rather than /dev/pts/N, so
     #: that it dangles when the simulator dies, however it dies (see pty_port).
     link_via_proc: bool = True
@@ -119,8 +129,13 @@ class SimulatorConfig:
         low, high = self.chunks
         if not 1 <= low <= high:
             raise ValueError(f'chunks must be (min, max) with 1 <= min <= max, got {self.chunks}')
-        if self.latency_s < 0 or self.chunk_gap_s < 0:
-            raise ValueError('latency_s and chunk_gap_s must not be negative')
+        if self.latency_s < 0 or self.chunk_gap_s < 0 or self.radio_hold_s < 0:
+            raise ValueError('latency_s, chunk_gap_s and radio_hold_s must not be negative')
+        if self.line_queue and (not self.wire_baud or len(self.all_addresses) > 1):
+            raise ValueError('line_queue needs wire_baud and one sensor (several sensors '
+                             'share the line in turn already)')
+        if self.radio_hold_s and not self.line_queue:
+            raise ValueError('radio_hold_s needs line_queue (the packets queue behind it)')
         if self.divider is not None and not MIN_DIVIDER <= self.divider <= MAX_DIVIDER:
             raise ValueError(f'divider must be in {MIN_DIVIDER}..{MAX_DIVIDER} '
                              f'(rate 51200 / divider Hz), got {self.divider}')

@@ -68,6 +68,9 @@ WRITE_SPIN_S = 0.0003
 #: packet rather than queue it: several sensors sending more than the line
 #: carries lose packets there, as a buffer of a few packets would.
 LINE_BUFFER_S = 0.05
+#: Time between two packets the sensor sent (s) from which the radio's link is taken to
+#: have been away: the first packet after it is held ``radio_hold_s`` (``line_queue``).
+GAP_S = 0.1
 
 
 class SharedLine:
@@ -123,6 +126,11 @@ class Transmitter:
         self._seq = 0
         #: When the stream's last record leaves the line, by the device's schedule.
         self._stream_line_free_at = 0.0
+        #: The base station's serial line (``line_queue``): when its last byte left,
+        #: the send time of the last packet it carried, and till when a packet after a
+        #: gap is held back (wall clock).
+        self._uart_free_at = 0.0
+        self._uart_last_send: float | None = None
 
     def enqueue(self, reply: Reply, source: str, address: int) -> None:
         """Queue a record the sensor sends at ``reply.due``."""
@@ -197,12 +205,39 @@ class Transmitter:
             if self._config.limit_to_line_rate and item.source == 'stream':
                 self._stream_line_free_at = (max(item.send, self._stream_line_free_at)
                                              + len(packet) / LINE_BYTES_PER_SECOND)
+            before = self._record.stats.bytes_written
             packet, fault = self._faults.spoil(packet, reply.code, item.send)
-            _wait_until(item.write_at)
+            if self._config.line_queue:
+                write_at = self._through_uart(item, len(packet),
+                                              self._record.stats.bytes_written - before)
+            else:
+                write_at = item.write_at
+            _wait_until(write_at)
             error, first_write, write_time = self._writer.write(packet)
             valid = fault is None and error is None
             self._record.add(reply, write_time, packet, item.address, valid, fault or error,
                              item.source, first_write)
+
+    def _through_uart(self, item: Outgoing, size: int, before: int) -> float:
+        """
+        Return when ``item``'s last byte leaves the base station's line (``line_queue``).
+
+        It reached the base station over the radio at its due time less its
+        own wire time; it starts on the line once the line is free, after the
+        ``before`` bytes (garbage, a foreign packet) written ahead of it, and,
+        the first after a gap, ``radio_hold_s`` later. What it waited is the
+        queue: it leaves one wire time after the packet ahead of it.
+        """
+        config = self._config
+        byte_s = 10.0 / config.wire_baud
+        ready = item.write_at - size * byte_s
+        last = self._uart_last_send
+        if last is not None and item.send - last >= GAP_S:
+            ready += config.radio_hold_s
+        self._uart_last_send = item.send
+        done = max(ready, self._uart_free_at) + (before + size) * byte_s
+        self._uart_free_at = done
+        return done
 
     def _line_busy(self, item: Outgoing) -> str | None:
         """
