@@ -157,6 +157,8 @@ class Run(NamedTuple):
     arena_max: int | None = None
     #: Whether the node keeps the rig's list of port events (the soak's checks read it).
     events: bool = True
+    #: Whether the node keeps its fault capture ring and writes its files (the default).
+    fault_capture: bool = True
 
 
 def run(plan: Run) -> list[Row]:
@@ -173,7 +175,10 @@ def run(plan: Run) -> list[Row]:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         path = os.path.join(workdir, 'stats.json')
         messages = Messages(listener)
-        node = NodeProcess({'port': sim.port, 'address': ADDRESS}, command=command,
+        parameters = {'port': sim.port, 'address': ADDRESS}
+        if not plan.fault_capture:
+            parameters['fault_capture_dir'] = "''"
+        node = NodeProcess(parameters, command=command,
                            env=ros_env(_node_env(plan, path)))
         client = LifecycleClient(listener) if plan.managed else None
         try:
@@ -339,6 +344,9 @@ def main() -> None:
     parser.add_argument('--no-events', action='store_true',
                         help="the node keeps no list of port events (the soak's, read by "
                              "its checks, not here): its memory without the rig's")
+    parser.add_argument('--no-fault-capture', action='store_true',
+                        help="the node keeps no fault capture ring and writes no capture "
+                             "(fault_capture_dir ''): its memory without that feature")
     parser.add_argument('--csv', metavar='PATH', help='write the rows here')
     parser.add_argument('--plot', metavar='PNG', help='draw the rows here')
     parser.add_argument('--replot', metavar='CSV', nargs='+',
@@ -354,12 +362,13 @@ def main() -> None:
         return
     rows = run(Run(args.minutes, args.faults, args.every, args.warm_up, args.managed,
                    args.cycle_every if args.managed else 0, args.row_every, args.arena_max,
-                   not args.no_events))
+                   not args.no_events, not args.no_fault_capture))
     print('\n'.join(slopes(rows)))
     label = (f'managed node, a lifecycle cycle every {args.cycle_every} faults'
              if args.managed else 'plain node') + (
                  f', MALLOC_ARENA_MAX={args.arena_max}' if args.arena_max else '') + (
-                 ', no port events kept' if args.no_events else '')
+                 ', no port events kept' if args.no_events else '') + (
+                 ', no fault capture' if args.no_fault_capture else '')
     if args.csv:
         write_csv(args.csv, rows, label)
     if args.plot:

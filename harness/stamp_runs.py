@@ -35,6 +35,7 @@ error has no trend (a rate error would show as one).
 
 from collections.abc import Callable
 import dataclasses
+import itertools
 import statistics
 import threading
 import time
@@ -57,6 +58,21 @@ EARLY_TOLERANCE = 0.005
 MAX_TREND_PPM = 300.0
 
 
+def _return(series: list[tuple[float, float]], event: float) -> float | None:
+    """
+    Return when the stream came back after ``event``: the first record after it.
+
+    But for a gap that opens within half a second of the event (a stall, an
+    unplug): a record or two still in flight when the event was applied is
+    not the return, the first record after the gap is.
+    """
+    times = [t for t, _ in series]
+    for previous, t in itertools.pairwise(times):
+        if t > event and previous < event + 0.5 and t - previous > 0.1:
+            return t
+    return next((t for t in times if t > event), None)
+
+
 def check_series(series: list[tuple[float, float]], event_time: float | None,
                  context: object = '', early_tolerance: float = EARLY_TOLERANCE) -> dict:
     """
@@ -67,7 +83,7 @@ def check_series(series: list[tuple[float, float]], event_time: float | None,
     start = series[0][0]
     event = event_time if event_time is not None else float('inf')
     steady = statistics.median(e for t, e in series if start + GRACE <= t < event)
-    back = next((t for t, _ in series if t > event), None)
+    back = _return(series, event)
     graces = [start] + ([back] if back is not None else [])
     worst = 0.0
     settled = []
