@@ -18,13 +18,13 @@ Give the C heap's free pages back to the system after a fault.
 A fault is a burst of allocation in threads that live for one connection
 (a new reader, the dialogue's replies, the log lines, a capture written):
 glibc serves each thread from an arena of its own and keeps what they free
-for later, in the middle of the heap where it is never returned by itself.
-tracemalloc found nothing the node keeps growing with the faults, yet the
-memory curve's anonymous RSS rose with them (docs/soak.md): freed pages that
-stayed mapped. ``malloc_trim(0)`` walks every arena and hands back every
-whole free page (glibc 2.8 and later); it costs well under a millisecond on
-a driver's heap, and it is called once after a fault has passed, never on a
-sample's path. Where there is no glibc (musl, another platform) it is a no-op.
+for later, in the middle of the heap, where it is not returned by itself.
+``malloc_trim(0)`` walks every arena and hands back every whole free page
+(glibc 2.8 and later); it costs microseconds on a driver's heap, and it is
+called once after a fault has passed, never on a sample's path, so that a
+node that meets faults for weeks holds what it uses, not what it once used.
+(The memory curve's steady growth had another cause, a callback kept per
+executor wake: ros/main.py.) Where there is no glibc it is a no-op.
 """
 
 from collections.abc import Callable

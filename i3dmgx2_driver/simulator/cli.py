@@ -134,6 +134,13 @@ def build_parser() -> argparse.ArgumentParser:
                              '(default: 115200; 0: at once)')
     device.add_argument('--line-rate-limit', action='store_true',
                         help='skip streamed cycles a 115200-baud line could not carry')
+    device.add_argument('--line-queue', action='store_true',
+                        help="the base station's line carries one packet at a time: packets "
+                             'queue behind each other, garbage and foreign packets take their '
+                             'time on it too (one sensor)')
+    device.add_argument('--radio-hold-ms', type=_non_negative, default=0.0, metavar='N',
+                        help='with --line-queue: the first packet after a gap of 0.1 s or more '
+                             'reaches the line N ms late, the rest queue behind it')
     device.add_argument('--seed', type=int, help='seed for reproducible noise and faults')
 
     faults = parser.add_argument_group('faults')
@@ -201,6 +208,7 @@ def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
         timer_start=args.timer_start, latency_s=args.latency_ms / 1000.0,
         wire_baud=args.wire_baud or None,
         symlink=args.symlink, limit_to_line_rate=args.line_rate_limit,
+        line_queue=args.line_queue, radio_hold_s=args.radio_hold_ms / 1000.0,
         # A demo may run for hours: keep no ground truth, only the counters.
         truth_limit=0)
 
