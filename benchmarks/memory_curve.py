@@ -345,7 +345,7 @@ def main() -> None:
                         help="the node keeps no list of port events (the soak's, read by "
                              "its checks, not here): its memory without the rig's")
     parser.add_argument('--no-fault-capture', action='store_true',
-                        help="the node keeps no fault capture ring and writes no capture "
+                        help='the node keeps no fault capture ring and writes no capture '
                              "(fault_capture_dir ''): its memory without that feature")
     parser.add_argument('--csv', metavar='PATH', help='write the rows here')
     parser.add_argument('--plot', metavar='PNG', help='draw the rows here')

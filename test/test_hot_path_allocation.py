@@ -36,10 +36,12 @@ pytestmark = pytest.mark.slow
 
 #: Samples measured, and the most tracked objects they may leave behind in all: the device
 #: clock keeps one point per second of data (a few in the window), nothing per sample. A path
-#: that kept even one object per sample would leave SAMPLES behind; the bound sits far below
-#: that and well above the few the clock keeps.
+#: that kept even one object per sample would leave SAMPLES behind; the bound sits five times
+#: below that and above what the other threads hold at the moment of a reading on a loaded
+#: machine (the supervisor's watch, the fault capture's look at the status: 37 and 41 were
+#: seen with one core busy elsewhere, before and after the change that raised this from 30).
 SAMPLES = 300
-ALLOWED_GROWTH = SAMPLES // 10
+ALLOWED_GROWTH = SAMPLES // 5
 
 #: Run in the node's own process: prints "published N tracked M".
 _MEASURE = """
