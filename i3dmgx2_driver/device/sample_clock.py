@@ -48,8 +48,9 @@ written down in docs/clock.md; in short:
   ``CONTINUE_LATE_S`` starts a fresh fit but the line it replaced is kept:
   each record after it is placed on that line too, and once one comes
   within ``CONFIRM_S`` of it, or ``QUEUE_RECORDS`` have come whose residuals
-  on it fall (a least-squares slope, against device time, that stands out of
-  their scatter by ``QUEUE_SIGMAS`` standard errors), the lateness
+  on it fall (a slope against device time, by least squares or the median of
+  the slopes between every two, that stands out of their scatter by
+  ``QUEUE_SIGMAS`` standard errors), the lateness
   was a queue's: the old line comes back and stamps the rest of the queue
   true. Otherwise the fresh fit stands. (Until the records tell, the fresh
   fit stamps them: a power cycle whose timer lands a few tens of
@@ -65,6 +66,7 @@ from collections.abc import Callable
 import copy
 from dataclasses import dataclass, field
 import enum
+import statistics
 import time
 from typing import NamedTuple
 
@@ -336,24 +338,36 @@ class SampleClock:
         """
         Whether the residuals in the trail fall as a draining queue's do.
 
-        ``QUEUE_RECORDS`` of them, whose least-squares slope against device
-        time is below ``-QUEUE_FALL`` and ``QUEUE_SIGMAS`` standard errors
-        below zero.
+        ``QUEUE_RECORDS`` of them, whose slope against device time is below
+        ``-QUEUE_FALL`` and ``QUEUE_SIGMAS`` standard errors below zero: by
+        least squares, or by the median of the slopes between every two
+        with the residuals' median absolute deviation as their scatter (one
+        step among them, a reply or a burst of noise taking the line in the
+        middle of the queue, moves that little where it hides a least-squares
+        slope in its scatter).
         """
         trail = self._trail
         n = len(trail)
         if n < QUEUE_RECORDS:
             return False
-        mean_t = sum(t for t, _ in trail) / n
-        mean_r = sum(r for _, r in trail) / n
-        stt = sum((t - mean_t) ** 2 for t, _ in trail)
+        points = list(trail)
+        mean_t = sum(t for t, _ in points) / n
+        stt = sum((t - mean_t) ** 2 for t, _ in points)
         if stt <= 0.0:
             return False
-        slope = sum((t - mean_t) * (r - mean_r) for t, r in trail) / stt
+        mean_r = sum(r for _, r in points) / n
+        slope = sum((t - mean_t) * (r - mean_r) for t, r in points) / stt
+        scatter = sum((r - mean_r - slope * (t - mean_t)) ** 2 for t, r in points) / (n - 2)
+        if slope < -QUEUE_FALL and slope * slope * stt > QUEUE_SIGMAS ** 2 * scatter:
+            return True
+        slope = statistics.median([(r2 - r1) / (t2 - t1) for k, (t1, r1) in enumerate(points)
+                                   for t2, r2 in points[k + 1:] if t2 > t1])
         if slope >= -QUEUE_FALL:
             return False
-        scatter = sum((r - mean_r - slope * (t - mean_t)) ** 2 for t, r in trail) / (n - 2)
-        return slope * slope * stt > QUEUE_SIGMAS ** 2 * scatter
+        rest = [r - slope * t for t, r in points]
+        centre = statistics.median(rest)
+        spread = 1.4826 * statistics.median(abs(x - centre) for x in rest)
+        return slope * slope * stt > QUEUE_SIGMAS ** 2 * spread * spread
 
     def _resume(self, host: float, off: float) -> None:
         """
