@@ -93,7 +93,6 @@ import threading
 from typing import Any
 
 from .dialogue import SensorDialogue
-from .heap import release_free_heap
 from .link import DeviceLink, DeviceTimeout, RecordCallback
 from .observer import LineObserver
 from .port import PortDisconnected, PortError, PortUnusable
@@ -403,8 +402,6 @@ class DeviceSupervisor:
         """Return when the link is lost or cannot be revived; recover stalls."""
         report = self._report
         watch = StallWatch(self.config.stall_timeout, self.dialogue.period)
-        if self._connections > 1:
-            release_free_heap()  # a reconnect's churn is past (heap.py says why)
         while not self._cancel.wait(watch.tick):
             if link.disconnected.is_set():
                 raise PortDisconnected(link.error or 'device disconnected')
@@ -426,7 +423,6 @@ class DeviceSupervisor:
                 return
             if resumed:
                 report.log.info('stream resumed')
-                release_free_heap()
 
     # -- the steps from an open port to a stream ----------------------------------------
 
