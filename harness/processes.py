@@ -74,11 +74,22 @@ def ros_env(extra: dict[str, str] | None = None) -> dict[str, str]:
     return env
 
 
-def isolate_ros_domain() -> int:
-    """Pick a random ROS domain for this process and its children, localhost only."""
+#: The ROS domains the tests draw from, and the benchmarks' (never the same: a
+#: benchmark's node left publishing on a machine must not reach a test run).
+TEST_DOMAINS = (1, 100)
+BENCHMARK_DOMAINS = (101, 200)
+
+
+def isolate_ros_domain(domains: tuple[int, int] = TEST_DOMAINS) -> int:
+    """
+    Pick a random ROS domain in ``domains`` for this process and its children (localhost).
+
+    Once picked it stays (``$I3DMGX2_TEST_DOMAIN``): every child and every later call
+    shares it.
+    """
     domain = os.environ.get('I3DMGX2_TEST_DOMAIN')
     if domain is None:
-        domain = str(random.SystemRandom().randint(1, 100))
+        domain = str(random.SystemRandom().randint(*domains))
         os.environ['I3DMGX2_TEST_DOMAIN'] = domain
     os.environ['ROS_DOMAIN_ID'] = domain
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
