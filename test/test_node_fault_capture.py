@@ -18,22 +18,29 @@ The fault capture in a running node: each fault writes a file, and a file replay
 A stall, a power cycle (a device reset), an unplug (a disconnect), a burst
 of corrupted packets, a refused command (the base station NACKs the
 temperature polls) and a call of ``~/save_capture`` each write a capture
-named by its cause into ``fault_capture_dir``; the node logs where. A file
-played back through the node (``tools.replay``) is published as the same
-records the node published when the fault happened: a fault seen in the
-field is a test case offline.
+named by its cause into ``fault_capture_dir``; the node logs where. Each
+file, played back through a node of its own (``tools.replay``, from the
+node's request for the stream on), is published as exactly the records the
+capture holds, each once, and each one the node published when the fault
+happened: a fault seen in the field is a test case offline.
+
+One node meets the six in turn (the module's fixture); each capture is then
+replayed in a test of its own.
 """
 
 from collections import Counter
 import os
 import time
 
+from typing import NamedTuple
+
 from harness.processes import isolate_ros_domain, Listener, NodeProcess
 from i3dmgx2_driver.capture import read_capture
+from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.parser import SensorStreamParser
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
-from i3dmgx2_driver.tools.replay import Replayer, schedule
+from i3dmgx2_driver.tools.replay import Replayer
 import pytest
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
@@ -41,6 +48,8 @@ from std_srvs.srv import Trigger
 pytestmark = pytest.mark.slow
 
 SECONDS = 3.0
+#: The causes, in the order the field run meets them.
+CAUSES = ('request', 'stall', 'device_reset', 'disconnect', 'corrupt', 'refused')
 
 
 @pytest.fixture(autouse=True)
@@ -71,17 +80,33 @@ def wait_for_cause(directory, cause: str, node: NodeProcess, timeout: float = 20
     raise AssertionError(f'no {cause} capture in {files(directory)}:\n{node.output()}')
 
 
-def node_parameters(sim: PtySimulator, directory) -> dict:
-    return {'port': sim.port, 'address': 95, 'fault_capture_dir': str(directory),
+def node_parameters(port: str, directory) -> dict:
+    return {'port': port, 'address': 95, 'fault_capture_dir': str(directory),
             'fault_capture_seconds': SECONDS, 'fault_captures_kept': 10,
-            'read_timeout': 0.5}
+            'read_timeout': 0.5, 'temperature_period': 0.2}
 
 
-def test_each_fault_writes_a_capture_named_by_its_cause(tmp_path):
-    directory = tmp_path / 'faults'
+class FieldRun(NamedTuple):
+    """What the node met in the field: its captures, what it published, what it said."""
+
+    directory: object
+    #: The capture file of each cause.
+    names: dict[str, str]
+    #: Every record published, by its identity, with how often.
+    published: Counter
+    output: str
+    port: str
+
+
+@pytest.fixture(scope='module')
+def field(tmp_path_factory) -> FieldRun:
+    """Take one node through the six faults, each its own episode, every record kept."""
+    isolate_ros_domain()
+    directory = tmp_path_factory.mktemp('field') / 'faults'
+    names: dict[str, str] = {}
     with PtySimulator(SimulatorConfig(seed=81)) as sim:
-        listener = Listener({'imu/raw_data': Imu})
-        node = NodeProcess(dict(node_parameters(sim, directory), temperature_period=0.2))
+        listener = Listener({'imu/raw_data': Imu}, depth=20000)
+        node = NodeProcess(node_parameters(sim.port, directory))
         with listener, node:
             assert node.wait_for_output('fault capture: the last 3 s', timeout=30), \
                 node.output()
@@ -89,74 +114,81 @@ def test_each_fault_writes_a_capture_named_by_its_cause(tmp_path):
                 node.output()
             assert not files(directory), 'a start is no fault'
             reply = listener.call(Trigger, '/i3dmgx2_driver/save_capture')
-            assert reply.success and os.path.basename(reply.message) in files(directory)
-            assert files(directory)[os.path.basename(reply.message)] == 'request'
-            sim.stall(1.5)
-            wait_for_cause(directory, 'stall', node)
+            assert reply.success, reply.message
+            names['request'] = os.path.basename(reply.message)
             time.sleep(SECONDS)  # the next fault, a new episode
+            sim.stall(1.5)
+            names['stall'] = wait_for_cause(directory, 'stall', node)
+            time.sleep(SECONDS)
             sim.power_cycle(off_seconds=0.2, timer_start=12345)
-            wait_for_cause(directory, 'device_reset', node)
+            names['device_reset'] = wait_for_cause(directory, 'device_reset', node)
             time.sleep(SECONDS)
             sim.unplug(1.0)
-            name = wait_for_cause(directory, 'disconnect', node)
+            names['disconnect'] = wait_for_cause(directory, 'disconnect', node)
             time.sleep(SECONDS)
             sim.set_faults(corrupt_checksum_probability=0.5)
             time.sleep(1.0)
             sim.set_faults(corrupt_checksum_probability=0.0)
-            wait_for_cause(directory, 'corrupt', node)
+            names['corrupt'] = wait_for_cause(directory, 'corrupt', node)
             time.sleep(SECONDS)
             # The base station refuses the temperature polls made while streaming.
             sim.set_faults(nack_probability=1.0)
-            wait_for_cause(directory, 'refused', node)
+            names['refused'] = wait_for_cause(directory, 'refused', node)
             sim.set_faults(nack_probability=0.0)
+            time.sleep(1.0)
             assert node.stop()[0] == 0
-            output = node.output()
-    assert f'written to {directory / name}' in output
-    assert 'capture saved on request' in output
-    assert 'Traceback' not in output, output
+            published = Counter(key(m) for m in listener.received('imu/raw_data'))
+            return FieldRun(directory, names, published, node.output(), sim.port)
+
+
+def test_each_fault_writes_a_capture_named_by_its_cause(field):
+    directory = field.directory
+    written = files(directory)
+    assert set(field.names.values()) <= set(written)
+    assert written[field.names['request']] == 'request'
+    for cause, name in field.names.items():
+        assert cause in written[name].split('+'), (cause, written)
+    assert f'written to {directory / field.names["disconnect"]}' in field.output
+    assert 'capture saved on request' in field.output
+    assert 'Traceback' not in field.output, field.output
     # Each file holds the seconds kept, up to its fault (and FAULT_AFTER after it).
-    for name in files(directory):
+    for name in written:
         header, chunks = read_capture(directory / name)
         times = [t for t, _ in chunks]
         assert times and times[-1] - times[0] <= SECONDS
-        assert header['port'] == sim.port and header['address'] == 95
+        assert header['port'] == field.port and header['address'] == 95
 
 
-def test_a_stall_capture_replays_into_the_records_published_at_the_time(tmp_path):
-    directory = tmp_path / 'faults'
-    with PtySimulator(SimulatorConfig(seed=82)) as sim:
-        listener = Listener({'imu/raw_data': Imu}, depth=5000)
-        node = NodeProcess(dict(node_parameters(sim, directory), time_source='host'))
-        with listener, node:
-            assert len(listener.wait_for('imu/raw_data', 300, timeout=30)) >= 300, \
-                node.output()
-            sim.stall(1.0)
-            name = wait_for_cause(directory, 'stall', node)
-            assert node.stop()[0] == 0
-            published = Counter(key(m) for m in listener.received('imu/raw_data'))
-    chunks = list(read_capture(directory / name)[1])
+def streamed_records(chunks) -> int:
+    """Count the streamed records (0xCC of node 95) a capture holds, checksums good."""
     parser = SensorStreamParser(address=95)
-    records = [e for _, data in chunks for e in parser.feed(data) if isinstance(e, DataPacket)]
-    assert len(records) >= 100
-    # Played back as the node read it (its silence cut to 1 s), slowly enough that the
-    # node is streaming after its dialogue with a device that answers nothing (~12 s).
-    speed = schedule([t for t, _ in chunks], max_gap=1.0)[-1] / 30.0
-    replayer = Replayer(chunks, speed=speed, max_gap=1.0, wait_for_host=True)
+    record_type = layouts.LAYOUTS[layouts.ACCEL_ANG_RATE_MAG_ORIENTATION].record_type
+    return sum(1 for _, data in chunks for e in parser.feed(data)
+               if isinstance(e, DataPacket) and isinstance(e.record, record_type))
+
+
+@pytest.mark.parametrize('cause', CAUSES)
+def test_each_capture_replays_into_the_records_published_at_the_time(field, cause, tmp_path):
+    chunks = list(read_capture(field.directory / field.names[cause])[1])
+    expected = streamed_records(chunks)
+    assert expected >= 100
+    # Played from the node's request for the stream on, at the recorded pace: the
+    # node's own faults (a stall, a reset, a lost stream) come as they came.
+    replayer = Replayer(chunks, wait_for_stream=True)
     replayer.start()
     listener = Listener({'imu/raw_data': Imu}, depth=5000)
-    node = NodeProcess({'port': replayer.port, 'address': 95, 'time_source': 'host',
-                        'fault_capture_dir': "''"})
+    node = NodeProcess(node_parameters(replayer.port, "''"))
     try:
-        assert node.wait_for_output('streaming 0xCC', timeout=60), node.output()
-        assert replayer.wait(45), 'the playback did not end'
+        assert replayer.wait(60), f'the playback did not end:\n{node.output()}'
         replayer.drain(5.0)
-        time.sleep(0.5)
+        time.sleep(1.0)
         assert node.stop()[0] == 0
         replayed = Counter(key(m) for m in listener.received('imu/raw_data'))
     finally:
         node.close()
         listener.close()
         replayer.stop()
-    assert sum(replayed.values()) >= len(records) // 4, node.output()
-    assert set(replayed) <= set(published), 'a replayed record the node never published'
-    assert all(n <= published[v] for v, n in replayed.items()), 'a record published twice'
+    extra = {v: n for v, n in replayed.items() if n > field.published[v]}
+    assert not extra, f'replayed records the node did not publish as often: {extra}'
+    assert sum(replayed.values()) == expected, (sum(replayed.values()), expected,
+                                                node.output())

@@ -32,6 +32,7 @@ from i3dmgx2_driver.codec import (
     Ack, DataPacket, encode_command, encode_command_packet, encode_data_packet,
     encode_record, Nack, SensorStreamParser,
 )
+from i3dmgx2_driver.codec.commands import set_continuous
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.tools.replay import Replayer, schedule
 from i3dmgx2_driver.tools.replay_pty import unread_bytes
@@ -150,6 +151,24 @@ def test_replay_delivers_exactly_the_packets_in_order():
     assert replayer.stats.chunks_sent == len(chunks)
     assert replayer.stats.bytes_dropped == 0
     assert not os.path.lexists(link), 'the link is removed at stop'
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('wireless', [True, False])
+def test_wait_for_stream_starts_the_playback_at_the_request_for_a_stream(wireless):
+    chunks = _chunks(count=5)
+    wrap = ((lambda command: encode_command_packet(ADDRESS, command)) if wireless
+            else (lambda command: command))
+    with Replayer(chunks, speed=0, wireless=wireless, wait_for_stream=True) as replayer, \
+            _open(replayer.port) as ser:
+        # The dialogue before the stream (a poll, a stop of the stream) plays nothing.
+        ser.write(wrap(encode_command(0xCC)) + wrap(set_continuous(0)))
+        events, _, _ = _read_until(ser, lambda ev: _count(ev, DataPacket), 1.0)
+        assert _count(events, DataPacket) == 0 and not replayer.finished
+        ser.write(wrap(set_continuous(0xCC)))
+        events, _, _ = _read_packets(ser, 5)
+        assert [e.record.timer for e in events if isinstance(e, DataPacket)] == list(range(5))
+        assert replayer.wait(5.0)
 
 
 @pytest.mark.slow

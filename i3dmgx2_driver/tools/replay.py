@@ -86,12 +86,16 @@ class Replayer:
     recording (0: as fast as the reader takes the bytes). ``wireless``
     selects the base station's ACK/NACK answers (a wired sensor sends none).
     With ``wait_for_host`` the playback starts when the host first writes,
-    so that nothing is played before the driver is there.
+    so that nothing is played before the driver is there; with
+    ``wait_for_stream`` when it first asks for continuous mode, so that the
+    driver, which takes records for samples only from then on, gets every
+    record of the capture (its identity dialogue, unanswered, times out first).
     """
 
     def __init__(self, chunks: Iterable[Chunk], speed: float = 1.0, loop: bool = False,
                  link: str | None = None, wireless: bool = True,
-                 max_gap: float | None = None, wait_for_host: bool = False) -> None:
+                 max_gap: float | None = None, wait_for_host: bool = False,
+                 wait_for_stream: bool = False) -> None:
         if not speed >= 0:
             raise ValueError(f'speed must be >= 0 (0: as fast as possible), got {speed!r}')
         if max_gap is not None and not max_gap >= 0:
@@ -101,6 +105,7 @@ class Replayer:
         self.loop = loop
         self.wireless = wireless
         self.wait_for_host = wait_for_host
+        self.wait_for_stream = wait_for_stream
         self.stats = ReplayStats()
         self._offsets = schedule([t for t, _ in self.chunks], max_gap)
         self._stop = threading.Event()
@@ -183,8 +188,10 @@ class Replayer:
             self._finished.set()
 
     def _play_passes(self) -> None:
-        if self.wait_for_host:
-            while not self._answers.host_seen.wait(POLL):
+        awaited = (self._answers.stream_asked if self.wait_for_stream
+                   else self._answers.host_seen if self.wait_for_host else None)
+        if awaited is not None:
+            while not awaited.wait(POLL):
                 if self._stop.is_set():
                     return
                 self._answers.send(force=True)
@@ -264,6 +271,9 @@ def _parser() -> argparse.ArgumentParser:
                         help='shorten silences longer than S seconds to S')
     parser.add_argument('--wait-for-host', action='store_true',
                         help='start playing when the driver first writes to the port')
+    parser.add_argument('--wait-for-stream', action='store_true',
+                        help='start playing when the driver first asks for continuous mode '
+                             '(after its dialogue): every record of the capture reaches it')
     parser.add_argument('--linger', type=float, default=2.0, metavar='S',
                         help='at the end, wait up to S seconds for the driver to read '
                              'what was played (default %(default)s)')
@@ -295,7 +305,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     replayer = Replayer(chunks, speed=args.speed, loop=args.loop, link=args.link,
                         wireless=wireless, max_gap=args.max_gap,
-                        wait_for_host=args.wait_for_host)
+                        wait_for_host=args.wait_for_host,
+                        wait_for_stream=args.wait_for_stream)
     lifetime.die_with_parent()
     # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).
     stop = lifetime.StopSignal().install()

@@ -31,8 +31,11 @@ import time
 
 from .replay_pty import ReplayPty
 from .replay_stats import ReplayStats
+from ..codec import layouts
 from ..codec.framing import ACK, CommandPacket, NACK
-from ..codec.parser import CommandStreamParser, RejectedPacket, SensorStreamParser
+from ..codec.parser import (
+    CommandStreamParser, HostEvent, RawCommand, RejectedPacket, SensorStreamParser,
+)
 
 _LOG = logging.getLogger('i3dmgx2_driver.replay')
 #: An ACK waits for the end of the packet being sent, but never longer than this.
@@ -43,13 +46,28 @@ def _hex(data: bytes) -> str:
     return data.hex(' ')
 
 
+def _asks_for_stream(event: HostEvent) -> bool:
+    """Whether the host asks for continuous mode of a record (0xC4 not stopping it)."""
+    if not isinstance(event, (CommandPacket, RawCommand)):
+        return False
+    command = event.command
+    layout = layouts.LAYOUTS[layouts.SET_CONTINUOUS]
+    if command[:1] != bytes((layouts.SET_CONTINUOUS,)) or len(command) != layout.request_size:
+        return False
+    streamed, = layout.request_struct.unpack_from(command, 1 + len(layout.confirm))
+    return streamed != 0
+
+
 class BaseStationAnswers:
     """
     Answer the host's command packets on ``pty`` as a base station would (``wireless``).
 
     ``wake`` is set when an answer is queued, so that the playing thread
     sends it; ``stop`` ends :meth:`listen`. Counts go into ``stats``.
-    :attr:`host_seen` is set once the host first wrote.
+    :attr:`host_seen` is set once the host first wrote, :attr:`stream_asked`
+    once it first asked for continuous mode (0xC4 of a record): a driver
+    counts records as samples only from then on, so a playback started there
+    reaches it whole.
     """
 
     def __init__(self, pty: ReplayPty, stats: ReplayStats, wireless: bool,
@@ -60,6 +78,7 @@ class BaseStationAnswers:
         self._wake = wake
         self._stop = stop
         self.host_seen = threading.Event()
+        self.stream_asked = threading.Event()
         self._answers: list[bytes] = []
         self._answers_lock = threading.Lock()
         self._answer_due = 0.0
@@ -99,7 +118,7 @@ class BaseStationAnswers:
 
     def listen(self) -> None:
         """Read what the host writes until stopped, queueing the answers (own thread)."""
-        parser = CommandStreamParser(wireless=True)
+        parser = CommandStreamParser(wireless=self._wireless)
         while not self._stop.is_set():
             try:
                 data = self._pty.read()
@@ -112,9 +131,11 @@ class BaseStationAnswers:
             self._stats.host_bytes += len(data)
             self.host_seen.set()
             _LOG.debug('host wrote %d bytes: %s', len(data), _hex(data))
-            if not self._wireless:
-                continue
             for event in parser.feed(data):
+                if _asks_for_stream(event):
+                    self.stream_asked.set()
+                if not self._wireless:
+                    continue  # a wired sensor's host gets no base station's answers
                 if isinstance(event, CommandPacket):
                     self._stats.commands += 1
                     _LOG.info('host command to node %d: %s (ACK; replay does not answer it)',
