@@ -32,6 +32,11 @@ use, CPython's blocks; at the end, the slopes of each by thirds of the run,
 per hour and per 100 faults, with their standard errors. A warm-up shows as
 thirds that fall off to nothing; a leak as thirds alike.
 
+``--tracemalloc DIR``: the node traces its allocations and writes
+snapshots to ``DIR`` every minute (``harness/instrumented_node.py``), and
+``DIR/faults.csv`` says when each row was taken (``time.time()``) and the
+faults met by then; ``benchmarks/heap_sites.py DIR`` reads them.
+
 ``--csv`` writes the rows, ``--plot`` draws them (matplotlib, an optional
 extra); ``--replot`` draws the CSVs of earlier runs without running.
 
@@ -52,7 +57,7 @@ import time
 from typing import NamedTuple
 
 import bench_common  # noqa: F401 - puts the repository on the path
-from harness.instrumented_node import EVENTS_ENV, STATS_ENV
+from harness.instrumented_node import EVENTS_ENV, STATS_ENV, TRACEMALLOC_ENV
 from harness.process_sampler import rss_kinds
 from harness.processes import (
     ADDRESS, isolate_ros_domain, LifecycleClient, Listener, NodeProcess, ros_env,
@@ -140,6 +145,8 @@ def _node_env(plan: 'Run', path: str) -> dict[str, str]:
         env['MALLOC_ARENA_MAX'] = str(plan.arena_max)
     if not plan.events:
         env[EVENTS_ENV] = '0'
+    if plan.tracemalloc:
+        env[TRACEMALLOC_ENV] = plan.tracemalloc
     return env
 
 
@@ -159,6 +166,8 @@ class Run(NamedTuple):
     events: bool = True
     #: Whether the node keeps its fault capture ring and writes its files (the default).
     fault_capture: bool = True
+    #: A directory for the node's tracemalloc snapshots (None: not traced).
+    tracemalloc: str | None = None
 
 
 def run(plan: Run) -> list[Row]:
@@ -174,6 +183,8 @@ def run(plan: Run) -> list[Row]:
         # rclpy.init took SIGINT for its contexts: Ctrl-C stops the run again.
         signal.signal(signal.SIGINT, signal.default_int_handler)
         path = os.path.join(workdir, 'stats.json')
+        if plan.tracemalloc:
+            os.makedirs(plan.tracemalloc, exist_ok=True)
         messages = Messages(listener)
         parameters = {'port': sim.port, 'address': ADDRESS}
         if not plan.fault_capture:
@@ -203,6 +214,9 @@ def run(plan: Run) -> list[Row]:
                     rows.append(Row(now - start, faults, cycles, anon, native or 0, blocks))
                     print(f'{(now - start) / 60:5.1f} {faults:6d} {cycles:6d} {anon:9d} '
                           f'{native or 0:10d} {blocks:7d}', flush=True)
+                    if plan.tracemalloc:
+                        with open(os.path.join(plan.tracemalloc, 'faults.csv'), 'a') as out:
+                            out.write(f'{time.time():.3f},{faults}\n')
                     next_row += plan.row_every
                     if done:
                         break
@@ -347,6 +361,9 @@ def main() -> None:
     parser.add_argument('--no-fault-capture', action='store_true',
                         help='the node keeps no fault capture ring and writes no capture '
                              "(fault_capture_dir ''): its memory without that feature")
+    parser.add_argument('--tracemalloc', metavar='DIR',
+                        help="trace the node's allocations: snapshots and faults.csv in DIR "
+                             '(benchmarks/heap_sites.py reads them)')
     parser.add_argument('--csv', metavar='PATH', help='write the rows here')
     parser.add_argument('--plot', metavar='PNG', help='draw the rows here')
     parser.add_argument('--replot', metavar='CSV', nargs='+',
@@ -362,7 +379,8 @@ def main() -> None:
         return
     rows = run(Run(args.minutes, args.faults, args.every, args.warm_up, args.managed,
                    args.cycle_every if args.managed else 0, args.row_every, args.arena_max,
-                   not args.no_events, not args.no_fault_capture))
+                   not args.no_events, not args.no_fault_capture,
+                   os.path.abspath(args.tracemalloc) if args.tracemalloc else None))
     print('\n'.join(slopes(rows)))
     label = (f'managed node, a lifecycle cycle every {args.cycle_every} faults'
              if args.managed else 'plain node') + (

@@ -33,18 +33,26 @@ of the last one (``configures`` says which); an activate is noted as an
 anchor once it returns (records are published from then on), a deactivate
 as ``deactivate`` when it begins (they are not published from then on).
 
+With ``$I3DMGX2_TRACEMALLOC`` naming a directory, it also traces its
+allocations (``tracemalloc``) and writes a snapshot there every minute
+(``$I3DMGX2_TRACEMALLOC_PERIOD`` s) and at the end: ``HeapSnapshots``;
+``benchmarks/heap_sites.py`` reads them.
+
 Usage: ``I3DMGX2_SOAK_STATS=out.json python -m harness.instrumented_node
 [--lifecycle] --ros-args -p port:=... -p address:=...``.
 """
 
 import collections
+from collections.abc import Callable
 import ctypes
+import gc
 import json
 import os
 import sys
 import threading
 import time
 
+from i3dmgx2_driver import lifetime
 from i3dmgx2_driver.device.hot_path import QuietObserver
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.ros import main as node_main
@@ -63,6 +71,14 @@ EVENTS_ENV = 'I3DMGX2_SOAK_EVENTS'
 #: that reads no events (benchmarks/memory_curve.py) sets 0 in EVENTS_ENV: the list and
 #: its copy in every write are the rig's memory, not the node's.
 EVENTS_KEPT = int(os.environ.get(EVENTS_ENV, '4096'))
+
+#: Environment variable naming a directory for heap snapshots (tracemalloc), off if unset.
+TRACEMALLOC_ENV = 'I3DMGX2_TRACEMALLOC'
+#: Environment variable that sets the seconds between snapshots (default TRACEMALLOC_PERIOD).
+TRACEMALLOC_PERIOD_ENV = 'I3DMGX2_TRACEMALLOC_PERIOD'
+TRACEMALLOC_PERIOD = 60.0
+#: Frames kept of each allocation's traceback.
+TRACEMALLOC_FRAMES = 25
 
 _events: collections.deque[tuple[str, float, int]] = collections.deque(maxlen=EVENTS_KEPT)
 _events_lock = threading.Lock()
@@ -199,6 +215,79 @@ def _write(path: str, document: dict) -> None:
     os.replace(temporary, path)
 
 
+class HeapSnapshots:
+    """
+    Heap snapshots of the node's own process, at intervals and once at the end.
+
+    The memory curve shows how much the process's heaps hold, not where it
+    was allocated; tracemalloc run in the benchmark's process saw the
+    simulator's allocations too, which drowned the node's. Here, every
+    ``period`` s, a thread writes ``NNNN.tracemalloc`` (a ``tracemalloc``
+    snapshot, its tracebacks ``TRACEMALLOC_FRAMES`` deep) and ``NNNN.json``:
+    the blocks allocated, the collector's counts and statistics per
+    generation, the objects it tracks by type, and the supervisor's counters
+    (``counters()``), to put the snapshots against the faults met. The
+    collector is not run here: what waits for a full collection is part of
+    what the curve sees. The last pair is written as the node ends. Tracing
+    slows the node several times and its tables grow the C heap: it is for
+    finding where CPython objects are kept, never for timings or the C heap.
+    """
+
+    def __init__(self, directory: str, period: float,
+                 counters: Callable[[], dict[str, int]]) -> None:
+        import tracemalloc
+        self._tracemalloc = tracemalloc
+        self._directory = directory
+        self._period = period
+        self._counters = counters
+        self._count = 0
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        os.makedirs(directory, exist_ok=True)
+        tracemalloc.start(TRACEMALLOC_FRAMES)
+        self._thread = threading.Thread(target=self._run, name='heap-snapshots', daemon=True)
+
+    def start(self) -> 'HeapSnapshots':
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._period):
+            self.write()
+
+    def write(self, final: bool = False) -> None:
+        """Write one snapshot and its figures (``final``: the one as the node ends)."""
+        with self._lock:
+            stem = os.path.join(self._directory, f'{self._count:04d}')
+            self._count += 1
+            types = collections.Counter(type(o).__qualname__ for o in gc.get_objects())
+            figures = {
+                'time': time.time(), 'final': final, 'python_blocks': sys.getallocatedblocks(),
+                'gc_count': gc.get_count(), 'gc_stats': gc.get_stats(),
+                'gc_frozen': gc.get_freeze_count(), 'threads': threading.active_count(),
+                'counters': self._counters(), 'types': dict(types.most_common(400))}
+            self._tracemalloc.take_snapshot().dump(f'{stem}.tracemalloc')
+            _write(f'{stem}.json', figures)
+
+    def stop(self) -> None:
+        """Stop the thread and write the last snapshot."""
+        self._stop.set()
+        self._thread.join(self._period + 5.0)
+        self.write(final=True)
+
+
+def _counters(made: list) -> dict[str, int]:
+    """Return the supervisor's connections, reconnects and stalls so far (none before)."""
+    node = made[0] if made else None
+    core = None if node is None else (
+        node.core if node.core is not None else getattr(node, 'last_core', None))
+    if core is None:
+        return {}
+    device = core.supervisor.status()
+    return {'connections': device.connections, 'reconnects': device.reconnects,
+            'stalls': device.stalls}
+
+
 class LinkEvents(QuietObserver):
     """A hot-path observer that notes every link up ('anchor'); it times nothing."""
 
@@ -224,9 +313,16 @@ def main() -> int:
         made.append(node)
         return node
 
+    traced = os.environ.get(TRACEMALLOC_ENV)
+    snapshots = HeapSnapshots(traced, float(os.environ.get(
+        TRACEMALLOC_PERIOD_ENV, TRACEMALLOC_PERIOD)),
+        lambda: _counters(made)).start() if traced else None
     code = node_main.run(make_node)
     if made:
         _write(path, _snapshot(made[0], True))
+    if snapshots is not None:
+        lifetime.cancel_deadline()  # the last snapshot is no part of the stop
+        snapshots.stop()
     return code
 
 
