@@ -36,7 +36,6 @@ import math
 import os
 from pathlib import Path
 import platform
-import random
 import sys
 import tempfile
 import threading
@@ -50,14 +49,14 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from harness.processes import (  # noqa: E402 - the repository is on the path from here on
-    ADDRESS, BENCHMARK_DOMAINS, ChildProcess, NodeProcess, ros_env, TruthEntry,
+    ADDRESS, BENCHMARK_DOMAINS, ChildProcess, NodeProcess, reserve_ros_domain, ros_env,
+    TruthEntry,
 )
 from i3dmgx2_driver.codec import layouts, line_budget  # noqa: E402
 from i3dmgx2_driver.device.hot_path import QuietObserver  # noqa: E402
 # A benchmark's ROS domain is never one a test run draws (harness.processes.TEST_DOMAINS):
 # a benchmark's node still publishing must not reach the tests running beside it.
-os.environ.setdefault('I3DMGX2_TEST_DOMAIN',
-                      str(random.SystemRandom().randint(*BENCHMARK_DOMAINS)))
+reserve_ros_domain(BENCHMARK_DOMAINS)
 
 #: Highest rate of 0xCC packets (88 bytes through the base station) a 115200-baud line
 #: carries (11,520 bytes/s), from the codec's layout table.

@@ -29,14 +29,13 @@ any finding. For 30 minutes and at least a million packets:
 """
 
 import argparse
-import os
 from pathlib import Path
-import random
 import sys
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from harness.node_fuzz import FuzzConfig, run_node_fuzz  # noqa: E402, RUF100 - after the path
+from harness.processes import BENCHMARK_DOMAINS, reserve_ros_domain  # noqa: E402, RUF100
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -51,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.minutes <= 0 or args.rate <= 0 or args.packets < 0:
         parser.error('--minutes and --rate must be positive, --packets not negative')
-    os.environ.setdefault('I3DMGX2_TEST_DOMAIN', str(random.SystemRandom().randint(101, 232)))
+    reserve_ros_domain(BENCHMARK_DOMAINS)
     result = run_node_fuzz(FuzzConfig(minutes=args.minutes, packets=args.packets,
                                       rate_hz=args.rate, seed=args.seed))
     print(result.report(), flush=True)

@@ -37,9 +37,7 @@ hour:
 """
 
 import argparse
-import os
 from pathlib import Path
-import random
 import sys
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -47,6 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from harness.campaign import run_campaign  # noqa: E402, RUF100 - after the path
 from harness.campaign_config import CampaignConfig  # noqa: E402, RUF100 - after the path
 from harness.long_soak import run_long_soak  # noqa: E402, RUF100
+from harness.processes import BENCHMARK_DOMAINS, reserve_ros_domain  # noqa: E402, RUF100
 from harness.soak_plan import LongSoakConfig  # noqa: E402, RUF100
 
 
@@ -67,9 +66,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.minutes <= 0 or args.rate <= 0 or args.leg_minutes <= 0:
         parser.error('--minutes, --rate and --leg-minutes must be positive')
-    # A domain of its own, outside the 1..100 that the test harness draws from, so that
-    # a soak never hears (or is heard by) tests running on the same machine.
-    os.environ.setdefault('I3DMGX2_TEST_DOMAIN', str(random.SystemRandom().randint(101, 232)))
+    # A domain of its own, outside the tests', so that a soak never hears (or is
+    # heard by) tests running on the same machine.
+    reserve_ros_domain(BENCHMARK_DOMAINS)
     if args.every_stream:
         long_result = run_long_soak(LongSoakConfig(minutes=args.minutes, seed=args.seed,
                                                    leg_minutes=args.leg_minutes))

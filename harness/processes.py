@@ -80,17 +80,23 @@ TEST_DOMAINS = (1, 100)
 BENCHMARK_DOMAINS = (101, 200)
 
 
-def isolate_ros_domain(domains: tuple[int, int] = TEST_DOMAINS) -> int:
+def reserve_ros_domain(domains: tuple[int, int]) -> str:
     """
-    Pick a random ROS domain in ``domains`` for this process and its children (localhost).
+    Pick this process's ROS domain in ``domains``, unless one was picked already.
 
-    Once picked it stays (``$I3DMGX2_TEST_DOMAIN``): every child and every later call
-    shares it.
+    Kept in ``$I3DMGX2_TEST_DOMAIN``, so every child and every later call
+    shares it; :func:`isolate_ros_domain` puts it to use.
     """
     domain = os.environ.get('I3DMGX2_TEST_DOMAIN')
     if domain is None:
         domain = str(random.SystemRandom().randint(*domains))
         os.environ['I3DMGX2_TEST_DOMAIN'] = domain
+    return domain
+
+
+def isolate_ros_domain(domains: tuple[int, int] = TEST_DOMAINS) -> int:
+    """Use the reserved ROS domain (one in ``domains`` if none is), localhost only."""
+    domain = reserve_ros_domain(domains)
     os.environ['ROS_DOMAIN_ID'] = domain
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     return int(domain)

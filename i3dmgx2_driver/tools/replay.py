@@ -188,8 +188,11 @@ class Replayer:
             self._finished.set()
 
     def _play_passes(self) -> None:
-        awaited = (self._answers.stream_asked if self.wait_for_stream
-                   else self._answers.host_seen if self.wait_for_host else None)
+        awaited = None
+        if self.wait_for_stream:
+            awaited = self._answers.stream_asked
+        elif self.wait_for_host:
+            awaited = self._answers.host_seen
         if awaited is not None:
             while not awaited.wait(POLL):
                 if self._stop.is_set():
