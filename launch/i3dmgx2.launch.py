@@ -58,7 +58,10 @@ Several sensors), take the same way: ``addresses`` instead of ``address``
 YAML list as with ``-p`` (quote a stream written as a command byte,
 ``"['full', '0xC2']"``: unquoted, 0xC2 is a number in a list of names).
 So do the calibration settings (README, Calibration): ``gyro_bias`` and
-``accel_bias`` (three numbers, rad/s and g) and ``calibration_file`` (text).
+``accel_bias`` (three numbers, rad/s and g) and ``calibration_file`` (text);
+and the fault capture's (README, Fault captures): ``fault_capture_dir``
+(read as YAML like the rest, so that ``fault_capture_dir:="''"`` turns it
+off as ``-p`` does), ``fault_capture_seconds`` and ``fault_captures_kept``.
 """
 
 import os
@@ -79,7 +82,8 @@ from lifecycle_msgs.msg import Transition
 
 #: Launch arguments that override the parameter file only when given, read as YAML.
 OPTIONAL_PARAMETERS = ('address', 'stream', 'data_rate', 'addresses', 'sensor_names',
-                       'frame_ids', 'streams', 'data_rates', 'gyro_bias', 'accel_bias')
+                       'frame_ids', 'streams', 'data_rates', 'gyro_bias', 'accel_bias',
+                       'fault_capture_dir', 'fault_capture_seconds', 'fault_captures_kept')
 #: The same, always passed as text (a frame named ``1`` is no number).
 OPTIONAL_TEXT_PARAMETERS = ('frame_id', 'calibration_file')
 #: Launch argument -> the driver's topic it renames (remaps) when given.
@@ -185,6 +189,15 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument('calibration_file', default_value='',
                               description='Parameter file an accepted gyro bias capture is '
                                           'written to; empty: as the parameter file says'),
+        DeclareLaunchArgument('fault_capture_dir', default_value='',
+                              description="Directory of the fault captures, \"''\" to turn "
+                                          'them off; empty: as the parameter file says'),
+        DeclareLaunchArgument('fault_capture_seconds', default_value='',
+                              description='Seconds of the port kept for a fault capture; '
+                                          'empty: as the parameter file says'),
+        DeclareLaunchArgument('fault_captures_kept', default_value='',
+                              description='Fault captures kept, the oldest deleted; '
+                                          'empty: as the parameter file says'),
         DeclareLaunchArgument('namespace', default_value='',
                               description='Namespace of the node and its topics'),
         DeclareLaunchArgument('node_name', default_value='i3dmgx2_driver',

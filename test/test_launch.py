@@ -27,8 +27,9 @@ substitutions, which launch_ros reads as YAML the way ``-p`` is read;
 ``frame_id`` likewise, as text. So do the several sensors' arguments
 (``addresses``, ``sensor_names``, ``frame_ids``, ``streams``,
 ``data_rates``) and the calibration ones (``gyro_bias``,
-``accel_bias``, ``calibration_file`` as text), each named as the node's
-parameter. ``node_name`` names the node and the topic arguments remap its
+``accel_bias``, ``calibration_file`` as text) and the fault capture's
+(``fault_capture_dir``, ``fault_capture_seconds``, ``fault_captures_kept``),
+each named as the node's parameter. ``node_name`` names the node and the topic arguments remap its
 topics, so that two sensors run side by side: the
 launch file's own functions are run with two command lines and nothing the
 two nodes make may collide. The README's two-sensor launch file compiles and
@@ -45,6 +46,7 @@ LAUNCH = os.path.join(REPO, 'launch', 'i3dmgx2.launch.py')
 #: The launch arguments of several sensors and of the calibration: the node's parameters.
 SEVERAL = ('addresses', 'sensor_names', 'frame_ids', 'streams', 'data_rates')
 CALIBRATION = ('gyro_bias', 'accel_bias', 'calibration_file')
+CAPTURE = ('fault_capture_dir', 'fault_capture_seconds', 'fault_captures_kept')
 
 
 def calls(tree: ast.AST, name: str) -> list:
@@ -78,10 +80,10 @@ def test_launch_file_declares_the_documented_arguments():
     assert set(declared) == {'port', 'address', 'namespace', 'params_file', 'managed',
                              'autostart', 'stream', 'data_rate', 'node_name', 'frame_id',
                              'imu_topic', 'mag_topic', 'temperature_topic', *SEVERAL,
-                             *CALIBRATION}
+                             *CALIBRATION, *CAPTURE}
     # No address of its own: the node refuses to start unless one is given (or addresses).
     assert declared['address']['default_value'] == ''
-    for name in (*SEVERAL, *CALIBRATION):
+    for name in (*SEVERAL, *CALIBRATION, *CAPTURE):
         assert declared[name]['default_value'] == '', name
     assert declared['port']['default_value'] == '/dev/ttyUSB0'
     # The plain node unless asked; a managed node waits for its manager unless asked.
@@ -211,7 +213,7 @@ def test_stream_and_rate_reach_the_node_only_when_given_and_as_substitutions():
     assert overrides['data_rate'].name == 'data_rate'
 
 
-def test_several_sensors_and_the_calibration_reach_either_node_only_when_given():
+def test_several_sensors_calibration_and_capture_reach_either_node_only_when_given():
     assert _optional_overrides({'address': '', **dict.fromkeys(SEVERAL, ''),
                                 **dict.fromkeys(CALIBRATION, '')}) == {}
     several = {'addresses': '[95, 12]', 'sensor_names': '[front, rear]',
@@ -230,6 +232,14 @@ def test_several_sensors_and_the_calibration_reach_either_node_only_when_given()
     assert overrides['gyro_bias'].name == 'gyro_bias'
     assert isinstance(overrides['calibration_file'], ParameterValue)
     assert overrides['calibration_file'].value_type is str
+    assert _optional_overrides(dict.fromkeys(CAPTURE, '')) == {}
+    capture = {'fault_capture_dir': '/var/log/imu', 'fault_capture_seconds': '10',
+               'fault_captures_kept': '5'}
+    overrides = _optional_overrides(capture)
+    assert sorted(overrides) == sorted(capture)
+    # Read as YAML like -p (not as text): a number arrives as one, "''" as '' (off).
+    for name, value in overrides.items():
+        assert not isinstance(value, (str, ParameterValue)) and value.name == name
     # The same overrides go to both node kinds: the common arguments hold them.
     source, tree = parse()
     assert 'optional_overrides(context)' in ast.get_source_segment(
