@@ -64,7 +64,7 @@ import time
 from typing import NamedTuple
 
 import bench_common  # noqa: F401 - puts the repository on the path
-from harness.instrumented_node import EVENTS_ENV, STATS_ENV, TRACEMALLOC_ENV
+from harness.instrumented_node import EVENTS_ENV, HEAP_DETAIL_ENV, STATS_ENV, TRACEMALLOC_ENV
 from harness.process_sampler import rss_kinds
 from harness.processes import (
     ADDRESS, isolate_ros_domain, LifecycleClient, Listener, NodeProcess, ros_env,
@@ -79,7 +79,10 @@ BACK_AFTER = 10
 #: How long a stream may take to come back before the run says so (s).
 BACK_WITHIN = 20.0
 #: The CSV's columns.
-COLUMNS = ('seconds', 'faults', 'cycles', 'anon_kib', 'c_heap_kib', 'python_blocks')
+COLUMNS = ('seconds', 'faults', 'cycles', 'anon_kib', 'c_heap_kib', 'python_blocks',
+           'mmapped_kib', 'type_cache_names', 'arenas')
+#: A figure the node did not give (a CSV of an earlier run, or not glibc / CPython 3.11).
+UNKNOWN = -1
 
 
 class Row(NamedTuple):
@@ -91,6 +94,19 @@ class Row(NamedTuple):
     anon_kib: int
     c_heap_kib: int
     python_blocks: int
+    #: The part of the C heap in chunks with a mapping of their own (large buffers).
+    mmapped_kib: int = UNKNOWN
+    #: The blocks CPython's type cache alone keeps (harness/type_cache.py; at most 4,096).
+    type_cache_names: int = UNKNOWN
+    #: glibc's arenas (at most 8 per core by default).
+    arenas: int = UNKNOWN
+
+    @property
+    def blocks_besides_cache(self) -> int:
+        """CPython's blocks less those only the type cache keeps (UNKNOWN if not known)."""
+        if self.type_cache_names == UNKNOWN:
+            return UNKNOWN
+        return self.python_blocks - self.type_cache_names
 
 
 def inflict(sim: PtySimulator, kind: str) -> None:
@@ -111,13 +127,12 @@ def inflict(sim: PtySimulator, kind: str) -> None:
         sim.set_faults(FaultConfig())
 
 
-def _heap(path: str) -> tuple[int, int | None]:
-    """Return (CPython blocks, C heap in use KiB) the node last wrote."""
+def _heap(path: str) -> dict:
+    """Return the heap figures the node last wrote (harness/instrumented_node.HeapFigures)."""
     for _ in range(20):
         try:
             with open(path) as handle:
-                heap = json.load(handle)['heap']
-            return heap['python_blocks'], heap['malloc_in_use_kib']
+                return json.load(handle)['heap']
         except (OSError, ValueError, KeyError):
             time.sleep(0.1)
     raise RuntimeError(f'the node wrote no heap figures to {path}')
@@ -147,7 +162,7 @@ class Messages:
 
 def _node_env(plan: 'Run', path: str) -> dict[str, str]:
     """Return what the node's environment adds: where its figures go, and the options."""
-    env = {STATS_ENV: path}
+    env = {STATS_ENV: path, HEAP_DETAIL_ENV: '1'}
     if plan.arena_max:
         env['MALLOC_ARENA_MAX'] = str(plan.arena_max)
     if not plan.events:
@@ -208,7 +223,7 @@ def run(plan: Run) -> list[Row]:
                 raise RuntimeError('the node did not stream: ' + node.output()[-2000:])
             time.sleep(plan.warm_up)
             print(f'{"min":>5} {"faults":>6} {"cycles":>6} {"anon KiB":>9} {"C heap KiB":>10} '
-                  f'{"blocks":>7}', flush=True)
+                  f'{"mmapped":>7} {"arenas":>6} {"blocks":>7} {"cache":>5}', flush=True)
             start = time.monotonic()
             faults = cycles = late = 0
             next_row = start
@@ -217,11 +232,17 @@ def run(plan: Run) -> list[Row]:
                 done = (plan.faults is not None and faults >= plan.faults) \
                     or now - start >= plan.minutes * 60.0
                 if now >= next_row or done:
-                    blocks, native = _heap(path)
+                    heap = _heap(path)
                     anon = (rss_kinds(node.proc.pid) or (0, 0, 0))[0]
-                    rows.append(Row(now - start, faults, cycles, anon, native or 0, blocks))
+                    row = Row(now - start, faults, cycles, anon, heap['malloc_in_use_kib'] or 0,
+                              heap['python_blocks'], *(
+                                  UNKNOWN if heap.get(key) is None else heap[key] for key in (
+                                      'malloc_mmapped_kib', 'type_cache_names',
+                                      'malloc_arenas')))
+                    rows.append(row)
                     print(f'{(now - start) / 60:5.1f} {faults:6d} {cycles:6d} {anon:9d} '
-                          f'{native or 0:10d} {blocks:7d}', flush=True)
+                          f'{row.c_heap_kib:10d} {row.mmapped_kib:7d} {row.arenas:6d} '
+                          f'{row.python_blocks:7d} {row.type_cache_names:5d}', flush=True)
                     if plan.tracemalloc:
                         with open(os.path.join(plan.tracemalloc, 'faults.csv'), 'a') as out:
                             out.write(f'{time.time():.3f},{faults}\n')
@@ -281,7 +302,12 @@ def slopes(rows: list[Row]) -> list[str]:
     lines.append('  faults met      ' + ';  '.join(spans))
     for field, name, scale, unit in (('anon_kib', 'anonymous RSS', 1 / 1024, ' MiB'),
                                      ('c_heap_kib', 'C heap', 1 / 1024, ' MiB'),
-                                     ('python_blocks', 'CPython blocks', 1.0, '')):
+                                     ('mmapped_kib', ' mapped alone', 1 / 1024, ' MiB'),
+                                     ('python_blocks', 'CPython blocks', 1.0, ''),
+                                     ('type_cache_names', ' type cache', 1.0, ''),
+                                     ('blocks_besides_cache', ' the rest', 1.0, '')):
+        if any(getattr(r, field) == UNKNOWN for r in rows):
+            continue  # an earlier run's CSV, or a figure the node could not give
         said = []
         for part in parts:
             hourly = fit([(r.seconds / 3600, getattr(r, field) * scale) for r in part])
@@ -290,6 +316,9 @@ def slopes(rows: list[Row]) -> list[str]:
                         f'{hourly[0]:+.3f}\u00b1{hourly[1]:.3f}{unit} | '
                         f'{per_fault[0]:+.3f}\u00b1{per_fault[1]:.3f}{unit}')
         lines.append(f'  {name:15s} ' + ';  '.join(said))
+    if all(r.arenas != UNKNOWN for r in rows):
+        lines.append(f'glibc arenas: {rows[0].arenas} at first, {max(r.arenas for r in rows)} '
+                     f'at most, {rows[-1].arenas} last')
     anon = [r.anon_kib / 1024 for r in rows]
     lines.append(f'anonymous RSS: first {anon[0]:.2f} MiB, highest {max(anon):.2f} MiB '
                  f'(after {rows[anon.index(max(anon))].faults} faults), last {anon[-1]:.2f} MiB')
@@ -301,20 +330,22 @@ def write_csv(path: str, rows: list[Row], label: str) -> None:
     with open(path, 'w') as out:
         out.write(f'# {label}\n{",".join(COLUMNS)}\n')
         for row in rows:
-            out.write(f'{row.seconds:.1f},{row.faults},{row.cycles},{row.anon_kib},'
-                      f'{row.c_heap_kib},{row.python_blocks}\n')
+            out.write(f'{row.seconds:.1f},' + ','.join(str(v) for v in row[1:]) + '\n')
 
 
 def read_csv(path: str) -> tuple[str, list[Row]]:
     """Read what :func:`write_csv` wrote: (label, rows)."""
-    label, rows = os.path.basename(path), []
+    label, rows, columns = os.path.basename(path), [], COLUMNS
     with open(path) as source:
         for line in source:
             if line.startswith('#'):
                 label = line[1:].strip()
-            elif line.strip() and not line.startswith(COLUMNS[0]):
+            elif line.startswith(COLUMNS[0]):
+                columns = tuple(line.strip().split(','))  # an earlier run's CSV has fewer
+            elif line.strip():
                 seconds, *counts = line.strip().split(',')
-                rows.append(Row(float(seconds), *(int(c) for c in counts)))
+                rows.append(Row(float(seconds), **dict(zip(
+                    columns[1:], (int(c) for c in counts), strict=True))))
     return label, rows
 
 

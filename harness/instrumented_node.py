@@ -52,6 +52,7 @@ import sys
 import threading
 import time
 
+from harness.type_cache import TypeCacheReader
 from i3dmgx2_driver import lifetime
 from i3dmgx2_driver.device.hot_path import QuietObserver
 from i3dmgx2_driver.device.port import SerialPort
@@ -165,21 +166,67 @@ def _mallinfo2():  # noqa: ANN202 - a ctypes function, or None
 _MALLINFO2 = _mallinfo2()
 
 
-def heap_figures() -> dict:
+#: Environment variable that, set to 1, adds the heaps' detail to the figures
+#: (``heap_figures``): what the type cache keeps and glibc's arenas. Off by default:
+#: reading the type cache holds the GIL for a few ms, which the soak's stamps would see.
+HEAP_DETAIL_ENV = 'I3DMGX2_HEAP_DETAIL'
+
+
+def _malloc_arenas() -> int | None:
+    """Return how many arenas glibc's allocator has (``malloc_info``), None off glibc."""
+    libc = ctypes.CDLL(None)
+    try:
+        open_memstream, malloc_info = libc.open_memstream, libc.malloc_info
+    except AttributeError:
+        return None
+    buffer, size = ctypes.c_char_p(), ctypes.c_size_t()
+    open_memstream.restype = ctypes.c_void_p
+    stream = open_memstream(ctypes.byref(buffer), ctypes.byref(size))
+    if not stream:
+        return None
+    try:
+        malloc_info(0, ctypes.c_void_p(stream))
+    finally:
+        libc.fclose(ctypes.c_void_p(stream))
+    text = ctypes.string_at(buffer, size.value)
+    libc.free(buffer)
+    return text.count(b'<heap nr=')
+
+
+class HeapFigures:
     """
-    Return what the process's heaps hold in use, beside its RSS.
+    What the process's heaps hold in use, beside its RSS.
 
     RSS also counts memory an allocator keeps after it was freed (glibc's
     arenas, CPython's 1-MiB object arenas partly used), so a slope of RSS alone
     cannot tell a leak from an allocator settling: a leak shows in these too.
     ``python_blocks``: CPython's allocated memory blocks (objects alive);
-    ``malloc_in_use_kib``: the C heap in use over all arenas (None off glibc).
+    ``malloc_in_use_kib``: the C heap in use over all arenas (None off glibc),
+    ``malloc_mmapped_kib`` the part of it in chunks of their own mapping (one
+    large buffer shows there). With ``detail``: ``type_cache_names``, the
+    blocks CPython's type cache alone keeps (bounded, ``harness/type_cache.py``;
+    None where it cannot be read), and ``malloc_arenas``, glibc's arenas.
     """
-    native = None
-    if _MALLINFO2 is not None:
-        info = _MALLINFO2()
-        native = (info.uordblks + info.hblkhd) // 1024
-    return {'python_blocks': sys.getallocatedblocks(), 'malloc_in_use_kib': native}
+
+    def __init__(self, detail: bool) -> None:
+        self._type_cache = TypeCacheReader() if detail else None
+        self._detail = detail
+
+    def __call__(self) -> dict:
+        """Return the figures now."""
+        figures = {'python_blocks': sys.getallocatedblocks(), 'malloc_in_use_kib': None,
+                   'malloc_mmapped_kib': None}
+        if _MALLINFO2 is not None:
+            info = _MALLINFO2()
+            figures['malloc_in_use_kib'] = (info.uordblks + info.hblkhd) // 1024
+            figures['malloc_mmapped_kib'] = info.hblkhd // 1024
+        if self._detail:
+            figures['type_cache_names'] = self._type_cache.names_kept()
+            figures['malloc_arenas'] = _malloc_arenas()
+        return figures
+
+
+heap_figures = HeapFigures(os.environ.get(HEAP_DETAIL_ENV) == '1')
 
 
 def _snapshot(node, final: bool) -> dict:
