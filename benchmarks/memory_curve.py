@@ -103,7 +103,7 @@ class Row(NamedTuple):
 
     @property
     def blocks_besides_cache(self) -> int:
-        """CPython's blocks less those only the type cache keeps (UNKNOWN if not known)."""
+        """Return CPython's blocks less those only the type cache keeps (UNKNOWN if not known)."""
         if self.type_cache_names == UNKNOWN:
             return UNKNOWN
         return self.python_blocks - self.type_cache_names

@@ -1,0 +1,66 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The memory curve's figures mean what they say.
+
+The curve subtracts what CPython's type cache alone keeps from the blocks
+alive to show what else grows (``harness/type_cache.py``): the count must
+rise when lookups by fresh names fill the cache, never pass its 4,096
+entries, and fall to nothing when the cache is emptied. The curve's CSVs of
+earlier runs (six columns) must still be read beside today's.
+"""
+
+import sys
+
+from harness.instrumented_node import HeapFigures
+from harness.type_cache import ENTRIES, TypeCacheReader
+
+ON_3_11 = sys.implementation.name == 'cpython' and sys.version_info[:2] == (3, 11)
+
+
+def _look_up_fresh_names(count: int) -> None:
+    """Look attributes up by names built at run time, on new classes (new versions)."""
+    for index in range(count):
+        kind = type(f'Kind{index}', (), {'field': index})
+        name = ''.join(['fie', 'ld'])  # not the interned 'field': a str of its own
+        assert getattr(kind, name) == index
+
+
+def test_the_type_cache_reader_counts_the_names_only_the_cache_keeps():
+    reader = TypeCacheReader()
+    if not ON_3_11:
+        assert not reader.found and reader.names_kept() is None
+        return
+    assert reader.found
+    sys._clear_type_cache()
+    emptied = reader.names_kept()
+    _look_up_fresh_names(1000)
+    filled = reader.names_kept()
+    assert filled - emptied > 500  # most of the 1,000 fresh names took an entry
+    _look_up_fresh_names(20000)
+    assert reader.names_kept() <= ENTRIES
+    sys._clear_type_cache()
+    assert reader.names_kept() <= emptied + 20  # the test runner's own lookups at most
+
+
+def test_heap_figures_give_the_detail_only_when_asked():
+    plain, detailed = HeapFigures(detail=False)(), HeapFigures(detail=True)()
+    assert 'type_cache_names' not in plain and 'malloc_arenas' not in plain
+    assert plain['python_blocks'] > 0 and detailed['python_blocks'] > 0
+    if ON_3_11:
+        assert 0 <= detailed['type_cache_names'] <= ENTRIES
+    if plain['malloc_in_use_kib'] is not None:  # glibc
+        assert plain['malloc_mmapped_kib'] <= plain['malloc_in_use_kib']
+        assert detailed['malloc_arenas'] >= 1
