@@ -80,7 +80,8 @@ BACK_AFTER = 10
 BACK_WITHIN = 20.0
 #: The CSV's columns.
 COLUMNS = ('seconds', 'faults', 'cycles', 'anon_kib', 'c_heap_kib', 'python_blocks',
-           'mmapped_kib', 'type_cache_names', 'arenas')
+           'mmapped_kib', 'type_cache_names', 'arenas', 'full_collections',
+           'blocks_after_gc', 'cache_after_gc')
 #: A figure the node did not give (a CSV of an earlier run, or not glibc / CPython 3.11).
 UNKNOWN = -1
 
@@ -100,6 +101,12 @@ class Row(NamedTuple):
     type_cache_names: int = UNKNOWN
     #: glibc's arenas (at most 8 per core by default).
     arenas: int = UNKNOWN
+    #: The node's full collections so far (generation 2; its own, none run by the rig).
+    full_collections: int = UNKNOWN
+    #: CPython's blocks right after the last of them: no garbage waiting for the collector.
+    blocks_after_gc: int = UNKNOWN
+    #: The type cache's own names then.
+    cache_after_gc: int = UNKNOWN
 
     @property
     def blocks_besides_cache(self) -> int:
@@ -107,6 +114,13 @@ class Row(NamedTuple):
         if self.type_cache_names == UNKNOWN:
             return UNKNOWN
         return self.python_blocks - self.type_cache_names
+
+    @property
+    def kept_after_gc(self) -> int:
+        """Return the blocks after the last full collection, less the type cache's then."""
+        if UNKNOWN in (self.blocks_after_gc, self.cache_after_gc):
+            return UNKNOWN
+        return self.blocks_after_gc - self.cache_after_gc
 
 
 def inflict(sim: PtySimulator, kind: str) -> None:
@@ -223,7 +237,8 @@ def run(plan: Run) -> list[Row]:
                 raise RuntimeError('the node did not stream: ' + node.output()[-2000:])
             time.sleep(plan.warm_up)
             print(f'{"min":>5} {"faults":>6} {"cycles":>6} {"anon KiB":>9} {"C heap KiB":>10} '
-                  f'{"mmapped":>7} {"arenas":>6} {"blocks":>7} {"cache":>5}', flush=True)
+                  f'{"mmapped":>7} {"arenas":>6} {"blocks":>7} {"cache":>5} {"GCs":>4} '
+                  f'{"after GC":>7} {"cache":>5}', flush=True)
             start = time.monotonic()
             faults = cycles = late = 0
             next_row = start
@@ -234,15 +249,20 @@ def run(plan: Run) -> list[Row]:
                 if now >= next_row or done:
                     heap = _heap(path)
                     anon = (rss_kinds(node.proc.pid) or (0, 0, 0))[0]
+                    after = heap.get('after_full_gc') or {}
                     row = Row(now - start, faults, cycles, anon, heap['malloc_in_use_kib'] or 0,
                               heap['python_blocks'], *(
-                                  UNKNOWN if heap.get(key) is None else heap[key] for key in (
-                                      'malloc_mmapped_kib', 'type_cache_names',
-                                      'malloc_arenas')))
+                                  UNKNOWN if value is None else value for value in (
+                                      heap.get('malloc_mmapped_kib'),
+                                      heap.get('type_cache_names'), heap.get('malloc_arenas'),
+                                      after.get('full_collections'), after.get('blocks'),
+                                      after.get('type_cache'))))
                     rows.append(row)
                     print(f'{(now - start) / 60:5.1f} {faults:6d} {cycles:6d} {anon:9d} '
                           f'{row.c_heap_kib:10d} {row.mmapped_kib:7d} {row.arenas:6d} '
-                          f'{row.python_blocks:7d} {row.type_cache_names:5d}', flush=True)
+                          f'{row.python_blocks:7d} {row.type_cache_names:5d} '
+                          f'{row.full_collections:4d} {row.blocks_after_gc:7d} '
+                          f'{row.cache_after_gc:5d}', flush=True)
                     if plan.tracemalloc:
                         with open(os.path.join(plan.tracemalloc, 'faults.csv'), 'a') as out:
                             out.write(f'{time.time():.3f},{faults}\n')
@@ -305,11 +325,14 @@ def slopes(rows: list[Row]) -> list[str]:
                                      ('mmapped_kib', ' mapped alone', 1 / 1024, ' MiB'),
                                      ('python_blocks', 'CPython blocks', 1.0, ''),
                                      ('type_cache_names', ' type cache', 1.0, ''),
-                                     ('blocks_besides_cache', ' the rest', 1.0, '')):
-        if any(getattr(r, field) == UNKNOWN for r in rows):
+                                     ('blocks_besides_cache', ' the rest', 1.0, ''),
+                                     ('blocks_after_gc', 'after full GC', 1.0, ''),
+                                     ('kept_after_gc', ' less the cache', 1.0, '')):
+        if all(getattr(r, field) == UNKNOWN for r in rows):
             continue  # an earlier run's CSV, or a figure the node could not give
         said = []
         for part in parts:
+            part = [r for r in part if getattr(r, field) != UNKNOWN]  # none before a full GC
             hourly = fit([(r.seconds / 3600, getattr(r, field) * scale) for r in part])
             per_fault = fit([(r.faults / 100, getattr(r, field) * scale) for r in part])
             said.append('n/a' if hourly is None or per_fault is None else
@@ -319,6 +342,8 @@ def slopes(rows: list[Row]) -> list[str]:
     if all(r.arenas != UNKNOWN for r in rows):
         lines.append(f'glibc arenas: {rows[0].arenas} at first, {max(r.arenas for r in rows)} '
                      f'at most, {rows[-1].arenas} last')
+    if all(r.full_collections != UNKNOWN for r in rows):
+        lines.append(f"the node's full collections: {rows[-1].full_collections}")
     anon = [r.anon_kib / 1024 for r in rows]
     lines.append(f'anonymous RSS: first {anon[0]:.2f} MiB, highest {max(anon):.2f} MiB '
                  f'(after {rows[anon.index(max(anon))].faults} faults), last {anon[-1]:.2f} MiB')
@@ -350,25 +375,45 @@ def read_csv(path: str) -> tuple[str, list[Row]]:
 
 
 def plot(runs: list[tuple[str, list[Row]]], output: str) -> None:
-    """Draw anonymous RSS and the C heap in use against faults met, one line per run."""
-    fig = agg_figure(figsize=(8, 5), dpi=90)
-    top = fig.add_subplot(2, 1, 1)
-    bottom = fig.add_subplot(2, 1, 2, sharex=top)
+    """
+    Draw the node's memory against faults met, one line per run.
+
+    Anonymous RSS, the C heap in use, and CPython's blocks: all of them, and
+    (dashed, for runs that counted them) those alive right after the node's
+    last full collection less the type cache's names then: neither garbage
+    waiting for the collector nor the bounded cache hides whether the rest
+    is flat.
+    """
+    fig = agg_figure(figsize=(8, 7), dpi=90)
+    top = fig.add_subplot(3, 1, 1)
+    middle = fig.add_subplot(3, 1, 2, sharex=top)
+    bottom = fig.add_subplot(3, 1, 3, sharex=top)
     for label, rows in runs:
         faults = [r.faults for r in rows]
         line, = top.plot(faults, [r.anon_kib / 1024 for r in rows], '.-', markersize=3,
                          label=label)
-        bottom.plot(faults, [r.c_heap_kib / 1024 for r in rows], '.-', markersize=3,
-                    color=line.get_color())
+        colour = line.get_color()
+        middle.plot(faults, [r.c_heap_kib / 1024 for r in rows], '.-', markersize=3,
+                    color=colour)
+        bottom.plot(faults, [r.python_blocks / 1000 for r in rows], '.-', markersize=3,
+                    color=colour)
+        kept = [r for r in rows if r.kept_after_gc != UNKNOWN]
+        if kept:
+            bottom.plot([r.faults for r in kept], [r.kept_after_gc / 1000 for r in kept], '--',
+                        color=colour, label=f'{label}: after a full collection, less the '
+                                            'type cache')
         last = thirds(rows)[2]
         if last:
-            top.axvspan(last[0].faults, last[-1].faults, color=line.get_color(), alpha=0.08)
+            top.axvspan(last[0].faults, last[-1].faults, color=colour, alpha=0.08)
     top.set_ylabel('anonymous RSS (MiB)')
-    bottom.set_ylabel('C heap in use (MiB)')
+    middle.set_ylabel('C heap in use (MiB)')
+    bottom.set_ylabel('CPython blocks (1000s)')
     bottom.set_xlabel('faults met (after 2 min of streaming; shaded: the last third)')
-    for axes in (top, bottom):
+    for axes in (top, middle, bottom):
         axes.grid(True, alpha=0.3)
     top.legend(loc='lower right', fontsize='small')
+    if bottom.get_legend_handles_labels()[0]:
+        bottom.legend(loc='lower right', fontsize='small')
     fig.suptitle("A driver node's memory against the faults it has met", fontsize='medium')
     fig.tight_layout()
     fig.savefig(output)

@@ -146,6 +146,10 @@ class ObservedLifecycleNode(LifecycleDriverNode):
         return super().on_deactivate(state)
 
 
+#: The C library (and the rest of the process's symbols), opened once.
+_LIBC = ctypes.CDLL(None)
+
+
 class _MallInfo2(ctypes.Structure):
     """glibc's ``struct mallinfo2`` (every field a size_t)."""
 
@@ -156,7 +160,7 @@ class _MallInfo2(ctypes.Structure):
 
 def _mallinfo2():  # noqa: ANN202 - a ctypes function, or None
     try:
-        function = ctypes.CDLL(None).mallinfo2
+        function = _LIBC.mallinfo2
     except (AttributeError, OSError):
         return None  # not glibc, or older than 2.33
     function.restype = _MallInfo2
@@ -174,9 +178,8 @@ HEAP_DETAIL_ENV = 'I3DMGX2_HEAP_DETAIL'
 
 def _malloc_arenas() -> int | None:
     """Return how many arenas glibc's allocator has (``malloc_info``), None off glibc."""
-    libc = ctypes.CDLL(None)
     try:
-        open_memstream, malloc_info = libc.open_memstream, libc.malloc_info
+        open_memstream, malloc_info = _LIBC.open_memstream, _LIBC.malloc_info
     except AttributeError:
         return None
     buffer, size = ctypes.c_char_p(), ctypes.c_size_t()
@@ -187,9 +190,9 @@ def _malloc_arenas() -> int | None:
     try:
         malloc_info(0, ctypes.c_void_p(stream))
     finally:
-        libc.fclose(ctypes.c_void_p(stream))
+        _LIBC.fclose(ctypes.c_void_p(stream))
     text = ctypes.string_at(buffer, size.value)
-    libc.free(buffer)
+    _LIBC.free(buffer)
     return text.count(b'<heap nr=')
 
 
@@ -205,12 +208,29 @@ class HeapFigures:
     ``malloc_mmapped_kib`` the part of it in chunks of their own mapping (one
     large buffer shows there). With ``detail``: ``type_cache_names``, the
     blocks CPython's type cache alone keeps (bounded, ``harness/type_cache.py``;
-    None where it cannot be read), and ``malloc_arenas``, glibc's arenas.
+    None where it cannot be read), ``malloc_arenas``, glibc's arenas, and the
+    blocks and the type cache's names right after the last full collection
+    (``after_full_gc``, with ``full_collections`` so far): the blocks at any
+    moment also count garbage in reference cycles that waits for the collector,
+    which comes and goes by thousands; right after a full collection none of it
+    is left, so a level that rises there is objects kept. Taken by a callback
+    of the collector's own (``gc.callbacks``): the node's collections, not one
+    this rig runs.
     """
 
     def __init__(self, detail: bool) -> None:
         self._type_cache = TypeCacheReader() if detail else None
         self._detail = detail
+        self._after_full_gc: dict = {'full_collections': 0, 'blocks': None, 'type_cache': None}
+        if detail:
+            gc.callbacks.append(self._collected)
+
+    def _collected(self, phase: str, info: dict) -> None:
+        if phase == 'stop' and info['generation'] == 2:
+            self._after_full_gc = {
+                'full_collections': self._after_full_gc['full_collections'] + 1,
+                'blocks': sys.getallocatedblocks(),
+                'type_cache': self._type_cache.names_kept()}
 
     def __call__(self) -> dict:
         """Return the figures now."""
@@ -223,6 +243,7 @@ class HeapFigures:
         if self._detail:
             figures['type_cache_names'] = self._type_cache.names_kept()
             figures['malloc_arenas'] = _malloc_arenas()
+            figures['after_full_gc'] = dict(self._after_full_gc)
         return figures
 
 
