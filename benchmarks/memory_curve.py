@@ -332,9 +332,9 @@ def slopes(rows: list[Row]) -> list[str]:
             continue  # an earlier run's CSV, or a figure the node could not give
         said = []
         for part in parts:
-            part = [r for r in part if getattr(r, field) != UNKNOWN]  # none before a full GC
-            hourly = fit([(r.seconds / 3600, getattr(r, field) * scale) for r in part])
-            per_fault = fit([(r.faults / 100, getattr(r, field) * scale) for r in part])
+            known = [r for r in part if getattr(r, field) != UNKNOWN]  # none before a full GC
+            hourly = fit([(r.seconds / 3600, getattr(r, field) * scale) for r in known])
+            per_fault = fit([(r.faults / 100, getattr(r, field) * scale) for r in known])
             said.append('n/a' if hourly is None or per_fault is None else
                         f'{hourly[0]:+.3f}\u00b1{hourly[1]:.3f}{unit} | '
                         f'{per_fault[0]:+.3f}\u00b1{per_fault[1]:.3f}{unit}')
