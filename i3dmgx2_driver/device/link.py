@@ -235,7 +235,9 @@ class PortReader:
     def stop(self) -> None:
         """Stop the reader thread and wait for it (a read times out quickly)."""
         self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
+        if self._thread is None:
+            self._drop_links()  # never started: no thread will
+        elif self._thread is not threading.current_thread():
             self._thread.join(timeout=2.0)
 
     def abort(self) -> None:
@@ -243,6 +245,25 @@ class PortReader:
         self._stop.set()
 
     def _run(self) -> None:
+        try:
+            self._read()
+        finally:
+            self._drop_links()
+
+    def _drop_links(self) -> None:
+        """
+        Let go of the links, once nothing here will call them again.
+
+        The links hold this reader and it holds them back: a reference cycle,
+        which with the port, the parsers and the thread would otherwise wait
+        for a full collection, and those come seldom (the start-up heap is
+        frozen): the memory curve saw each reconnect's 60 objects and their
+        buffers stay for thousands of faults.
+        """
+        self._fallback = None
+        self._routes.clear()
+
+    def _read(self) -> None:
         if self._thread_policy.requested:
             self.policy_outcome = apply_to_current_thread(self._thread_policy)
         self.running.set()
