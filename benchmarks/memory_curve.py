@@ -28,9 +28,14 @@ of garbage, corrupted and foreign packets. Each fault ends, and the node's
 messages come back (received here, by a subscriber) before the next one,
 which starts ``--every`` seconds after the last at the soonest. Every
 ``--row-every`` seconds a row: faults so far, anonymous RSS, the C heap in
-use, CPython's blocks; at the end, the slopes of each by thirds of the run,
-per hour and per 100 faults, with their standard errors. A warm-up shows as
-thirds that fall off to nothing; a leak as thirds alike.
+use (and its chunks mapped alone), glibc's arenas, CPython's blocks, the
+names CPython's type cache alone keeps (bounded at 4,096:
+``harness/type_cache.py``), and the blocks right after the node's last full
+collection with the cache's names then (garbage in reference cycles waits
+for a full collection, which comes seldom: the blocks at any moment rise and
+fall by thousands with it); at the end, the slopes of each by thirds of the
+run, per hour and per 100 faults, with their standard errors. A warm-up
+shows as thirds that fall off to nothing; a leak as thirds alike.
 
 The node keeps no list of port events by default: the soak's rig keeps
 its newest 4,096 for its checks, and here, at about one a fault, that list
@@ -64,7 +69,9 @@ import time
 from typing import NamedTuple
 
 import bench_common  # noqa: F401 - puts the repository on the path
-from harness.instrumented_node import EVENTS_ENV, HEAP_DETAIL_ENV, STATS_ENV, TRACEMALLOC_ENV
+from harness.instrumented_node import (
+    EVENTS_ENV, HEAP_COLLECT_ENV, HEAP_DETAIL_ENV, STATS_ENV, TRACEMALLOC_ENV,
+)
 from harness.process_sampler import rss_kinds
 from harness.processes import (
     ADDRESS, isolate_ros_domain, LifecycleClient, Listener, NodeProcess, ros_env,
@@ -183,6 +190,8 @@ def _node_env(plan: 'Run', path: str) -> dict[str, str]:
         env[EVENTS_ENV] = '0'
     if plan.tracemalloc:
         env[TRACEMALLOC_ENV] = plan.tracemalloc
+    if plan.collect_every:
+        env[HEAP_COLLECT_ENV] = str(plan.collect_every)
     return env
 
 
@@ -205,6 +214,8 @@ class Run(NamedTuple):
     fault_capture: bool = True
     #: A directory for the node's tracemalloc snapshots (None: not traced).
     tracemalloc: str | None = None
+    #: Seconds between full collections the node is asked to run (0: only its own).
+    collect_every: float = 0.0
 
 
 def run(plan: Run) -> list[Row]:
@@ -451,6 +462,10 @@ def main() -> None:
     parser.add_argument('--tracemalloc', metavar='DIR',
                         help="trace the node's allocations: snapshots and faults.csv in DIR "
                              '(benchmarks/heap_sites.py reads them)')
+    parser.add_argument('--collect-every', type=float, default=0.0, metavar='S',
+                        help='the node runs a full collection every S seconds, so that the '
+                             'level right after one, what it keeps alive, is taken often '
+                             '(default: only its own collections, which come seldom)')
     parser.add_argument('--csv', metavar='PATH', help='write the rows here')
     parser.add_argument('--plot', metavar='PNG', help='draw the rows here')
     parser.add_argument('--replot', metavar='CSV', nargs='+',
@@ -467,12 +482,15 @@ def main() -> None:
     rows = run(Run(args.minutes, args.faults, args.every, args.warm_up, args.managed,
                    args.cycle_every if args.managed else 0, args.row_every, args.arena_max,
                    args.events and not args.no_events, not args.no_fault_capture,
-                   os.path.abspath(args.tracemalloc) if args.tracemalloc else None))
+                   os.path.abspath(args.tracemalloc) if args.tracemalloc else None,
+                   args.collect_every))
     print('\n'.join(slopes(rows)))
     label = (f'managed node, a lifecycle cycle every {args.cycle_every} faults'
              if args.managed else 'plain node') + (
                  f', MALLOC_ARENA_MAX={args.arena_max}' if args.arena_max else '') + (
                  ', port events kept' if args.events and not args.no_events else '') + (
+                 f', a full collection every {args.collect_every:g} s'
+                 if args.collect_every else '') + (
                  ', no fault capture' if args.no_fault_capture else '')
     if args.csv:
         write_csv(args.csv, rows, label)

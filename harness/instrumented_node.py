@@ -174,6 +174,11 @@ _MALLINFO2 = _mallinfo2()
 #: (``heap_figures``): what the type cache keeps and glibc's arenas. Off by default:
 #: reading the type cache holds the GIL for a few ms, which the soak's stamps would see.
 HEAP_DETAIL_ENV = 'I3DMGX2_HEAP_DETAIL'
+#: Environment variable that, set to S, has the node run a full collection every S
+#: seconds (with the detail): the level right after it, taken often, is what the
+#: node keeps alive. Off by default: the node's own collections are rare, and that
+#: rarity is part of what the curve measures.
+HEAP_COLLECT_ENV = 'I3DMGX2_HEAP_COLLECT_EVERY'
 
 
 def _malloc_arenas() -> int | None:
@@ -218,9 +223,11 @@ class HeapFigures:
     this rig runs.
     """
 
-    def __init__(self, detail: bool) -> None:
+    def __init__(self, detail: bool, collect_every: float = 0.0) -> None:
         self._type_cache = TypeCacheReader() if detail else None
         self._detail = detail
+        self._collect_every = collect_every
+        self._next_collect = time.monotonic() + collect_every
         self._after_full_gc: dict = {'full_collections': 0, 'blocks': None, 'type_cache': None}
         if detail:
             gc.callbacks.append(self._collected)
@@ -241,13 +248,17 @@ class HeapFigures:
             figures['malloc_in_use_kib'] = (info.uordblks + info.hblkhd) // 1024
             figures['malloc_mmapped_kib'] = info.hblkhd // 1024
         if self._detail:
+            if self._collect_every and time.monotonic() >= self._next_collect:
+                self._next_collect += self._collect_every
+                gc.collect()  # the callback takes the figures right after it
             figures['type_cache_names'] = self._type_cache.names_kept()
             figures['malloc_arenas'] = _malloc_arenas()
             figures['after_full_gc'] = dict(self._after_full_gc)
         return figures
 
 
-heap_figures = HeapFigures(os.environ.get(HEAP_DETAIL_ENV) == '1')
+heap_figures = HeapFigures(os.environ.get(HEAP_DETAIL_ENV) == '1',
+                           float(os.environ.get(HEAP_COLLECT_ENV, '0')))
 
 
 def _snapshot(node, final: bool) -> dict:
