@@ -232,6 +232,11 @@ class HeapFigures:
         if detail:
             gc.callbacks.append(self._collected)
 
+    def close(self) -> None:
+        """Take the callback off the collector (figures made for a moment, as in a test)."""
+        if self._collected in gc.callbacks:
+            gc.callbacks.remove(self._collected)
+
     def _collected(self, phase: str, info: dict) -> None:
         if phase == 'stop' and info['generation'] == 2:
             self._after_full_gc = {

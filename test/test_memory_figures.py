@@ -22,6 +22,7 @@ entries, and fall to nothing when the cache is emptied. The curve's CSVs of
 earlier runs (six columns) must still be read beside today's.
 """
 
+import gc
 import sys
 
 from harness.instrumented_node import HeapFigures
@@ -56,7 +57,9 @@ def test_the_type_cache_reader_counts_the_names_only_the_cache_keeps():
 
 
 def test_heap_figures_give_the_detail_only_when_asked():
-    plain, detailed = HeapFigures(detail=False)(), HeapFigures(detail=True)()
+    detail = HeapFigures(detail=True)
+    plain, detailed = HeapFigures(detail=False)(), detail()
+    detail.close()
     assert 'type_cache_names' not in plain and 'malloc_arenas' not in plain
     assert plain['python_blocks'] > 0 and detailed['python_blocks'] > 0
     if ON_3_11:
@@ -64,3 +67,17 @@ def test_heap_figures_give_the_detail_only_when_asked():
     if plain['malloc_in_use_kib'] is not None:  # glibc
         assert plain['malloc_mmapped_kib'] <= plain['malloc_in_use_kib']
         assert detailed['malloc_arenas'] >= 1
+
+
+def test_the_level_after_a_full_collection_is_taken_by_the_collectors_own_callback():
+    figures = HeapFigures(detail=True, collect_every=1e-6)
+    try:
+        first = figures()['after_full_gc']
+        assert first['full_collections'] >= 1  # asked for: collected before the figures
+        assert first['blocks'] > 0
+        if ON_3_11:
+            assert 0 <= first['type_cache'] <= ENTRIES
+        gc.collect()  # anyone's full collection counts, not only those asked for
+        assert figures()['after_full_gc']['full_collections'] >= first['full_collections'] + 1
+    finally:
+        figures.close()
