@@ -66,7 +66,7 @@ def _guarded_uses(function) -> tuple[int, list[str]]:
 
 
 @pytest.mark.parametrize(('function', 'stages'), [
-    (PortReader._run, 2),  # read, parsed
+    (PortReader._read, 2),  # read, parsed (the loop _run runs)
     (RecordPublisher.on_record, 3),  # stamped, packed, published
 ])
 def test_off_costs_one_test_per_stage(function, stages):
