@@ -61,8 +61,21 @@ def _mapping_end(address: int) -> int | None:
     return None
 
 
+def _probe(name: str) -> None:
+    """Look ``marker`` up on a ``_Probe`` by ``name``: a miss that leaves its entry."""
+    getattr(_Probe(), name)
+
+
 def _find_table() -> int | None:
-    """Return the address of the table's first entry, or None if it is not found."""
+    """
+    Return the address of the table's first entry, or None if it is not found.
+
+    Every place in the mapping that holds the probe's (name, value) pair is a
+    candidate (the first one seen may be a copy elsewhere in the state): the
+    table is where a second probe, by another fresh name, lands at the index
+    CPython's hash gives it. A few tries, in case another lookup took the
+    probe's entry first.
+    """
     if sys.implementation.name != 'cpython' or sys.version_info[:2] != (3, 11):
         return None
     get = ctypes.pythonapi.PyInterpreterState_Get
@@ -71,21 +84,32 @@ def _find_table() -> int | None:
     end = _mapping_end(interpreter)
     if end is None:
         return None
-    _Probe().marker  # noqa: B018 - the lookup gives the type its version tag
-    name = ''.join(['mar', 'ker'])  # a str of its own at its own address, not the interned one
-    getattr(_Probe(), name)  # a miss: its entry now holds this name and the marker
     length = min(_SEARCH, end - interpreter)
-    memory = bytes((ctypes.c_char * length).from_address(interpreter))
-    pattern = struct.pack('PP', id(name), id(_Probe.marker))
-    found = memory.find(pattern)
-    if found < 8:
-        return None
-    version = struct.unpack_from('I', memory, found - 8)[0]
-    index = (version ^ (id(name) >> 3)) & (ENTRIES - 1)
-    table = interpreter + found - 8 - index * _ENTRY
-    if table < interpreter or table + ENTRIES * _ENTRY > end:
-        return None
-    return table
+    _Probe().marker  # noqa: B018 - the lookup gives the type its version tag
+    for _ in range(5):
+        name = ''.join(['mar', 'ker'])  # a str of its own at its own address, not interned
+        _probe(name)  # a miss: its entry now holds this name and the marker
+        memory = bytes((ctypes.c_char * length).from_address(interpreter))
+        pattern = struct.pack('PP', id(name), id(_Probe.marker))
+        found = memory.find(pattern)
+        while found >= 8:
+            version = struct.unpack_from('I', memory, found - 8)[0]
+            index = (version ^ (id(name) >> 3)) & (ENTRIES - 1)
+            table = interpreter + found - 8 - index * _ENTRY
+            if interpreter <= table and table + ENTRIES * _ENTRY <= end \
+                    and _lands_at(table, version):
+                return table
+            found = memory.find(pattern, found + 1)
+    return None
+
+
+def _lands_at(table: int, version: int) -> bool:
+    """Tell whether a second probe's entry is where ``table`` and CPython's hash put it."""
+    other = ''.join(['mar', 'ker'])
+    _probe(other)
+    index = (version ^ (id(other) >> 3)) & (ENTRIES - 1)
+    entry = bytes((ctypes.c_char * _ENTRY).from_address(table + index * _ENTRY))
+    return entry[8:] == struct.pack('PP', id(other), id(_Probe.marker))
 
 
 class TypeCacheReader:

@@ -47,9 +47,9 @@ def test_the_type_cache_reader_counts_the_names_only_the_cache_keeps():
     assert reader.found
     sys._clear_type_cache()
     emptied = reader.names_kept()
-    _look_up_fresh_names(1000)
+    _look_up_fresh_names(3000)
     filled = reader.names_kept()
-    assert filled - emptied > 500  # most of the 1,000 fresh names took an entry
+    assert filled - emptied > 1000  # fresh names took entries (some share one, by hash)
     _look_up_fresh_names(20000)
     assert reader.names_kept() <= ENTRIES
     sys._clear_type_cache()
