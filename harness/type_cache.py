@@ -61,9 +61,16 @@ def _mapping_end(address: int) -> int | None:
     return None
 
 
-def _probe(name: str) -> None:
-    """Look ``marker`` up on a ``_Probe`` by ``name``: a miss that leaves its entry."""
+def _probe() -> str:
+    """
+    Look ``marker`` up on a ``_Probe`` by a fresh name; return the name.
+
+    A str of its own at its own address, not the interned one: a miss, which
+    leaves an entry holding this name and the marker.
+    """
+    name = ''.join(['mar', 'ker'])
     getattr(_Probe(), name)
+    return name
 
 
 def _find_table() -> int | None:
@@ -87,8 +94,7 @@ def _find_table() -> int | None:
     length = min(_SEARCH, end - interpreter)
     _Probe().marker  # noqa: B018 - the lookup gives the type its version tag
     for _ in range(5):
-        name = ''.join(['mar', 'ker'])  # a str of its own at its own address, not interned
-        _probe(name)  # a miss: its entry now holds this name and the marker
+        name = _probe()
         memory = bytes((ctypes.c_char * length).from_address(interpreter))
         pattern = struct.pack('PP', id(name), id(_Probe.marker))
         found = memory.find(pattern)
@@ -105,8 +111,7 @@ def _find_table() -> int | None:
 
 def _lands_at(table: int, version: int) -> bool:
     """Tell whether a second probe's entry is where ``table`` and CPython's hash put it."""
-    other = ''.join(['mar', 'ker'])
-    _probe(other)
+    other = _probe()
     index = (version ^ (id(other) >> 3)) & (ENTRIES - 1)
     entry = bytes((ctypes.c_char * _ENTRY).from_address(table + index * _ENTRY))
     return entry[8:] == struct.pack('PP', id(other), id(_Probe.marker))
