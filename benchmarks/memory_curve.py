@@ -393,7 +393,8 @@ def plot(runs: list[tuple[str, list[Row]]], output: str) -> None:
     (dashed, for runs that counted them) those alive right after the node's
     last full collection less the type cache's names then: neither garbage
     waiting for the collector nor the bounded cache hides whether the rest
-    is flat.
+    is flat. Only where the node collected more than once: a run with its
+    start-up collection alone would draw a level line that says nothing.
     """
     fig = agg_figure(figsize=(8, 7), dpi=90)
     top = fig.add_subplot(3, 1, 1)
@@ -409,7 +410,7 @@ def plot(runs: list[tuple[str, list[Row]]], output: str) -> None:
         bottom.plot(faults, [r.python_blocks / 1000 for r in rows], '.-', markersize=3,
                     color=colour)
         kept = [r for r in rows if r.kept_after_gc != UNKNOWN]
-        if kept:
+        if len({r.full_collections for r in kept}) > 1:
             bottom.plot([r.faults for r in kept], [r.kept_after_gc / 1000 for r in kept], '--',
                         color=colour, label=f'{label}: after a full collection, less the '
                                             'type cache')
