@@ -112,6 +112,14 @@ BAND_FLOOR_S = 50e-6
 #: runs where 1 gave 16.7).
 DEPTH = 1.0
 
+#: How near the samples come to the line: the least residual over each block of this much
+#: device time, the last NEAR_BLOCKS blocks, their median. What a gap's probation expects
+#: of the records after it: near the line within a block's time, as they came before. A
+#: host that reads on the scheduler's tick (its cores busy) reads every sample up to a tick
+#: late, and in 0.3 s none may come within 1 ms of the line, before a gap or after it.
+NEAR_S = 0.3
+NEAR_BLOCKS = 9
+
 #: Least step between two stamps: 1 us. A float64 near today's epoch (1.8e9 s) cannot
 #: hold a step below 2.4e-7 s, and a message stamp counts whole nanoseconds.
 MIN_STEP = 1e-6
@@ -147,6 +155,10 @@ class DeviceClock:
         self._last_stamp = float('-inf')
         #: Whether the last sample came in under the line.
         self._under = False
+        #: The least residuals of the last blocks of NEAR_S, and the block being filled.
+        self._near_blocks: deque[float] = deque(maxlen=NEAR_BLOCKS)
+        self._near_block: int | None = None
+        self._near_least = 0.0
         self.samples = 0
         self.anchors += 1
 
@@ -164,6 +176,18 @@ class DeviceClock:
     def started(self) -> bool:
         """Whether a sample has been stamped since the last reset (there is a line)."""
         return self._origin is not None
+
+    @property
+    def near(self) -> float:
+        """
+        How near the line (s) the samples came over a block of ``NEAR_S``, as a rule.
+
+        The median of the last blocks' least residuals (0 before the first
+        fit has closed a block): about 0.1 ms for a host that reads each
+        sample as it comes, up to a scheduler's tick for one whose cores are
+        busy.
+        """
+        return statistics.median(self._near_blocks) if self._near_blocks else 0.0
 
     def residual(self, ticks: int, host_time: float, wire_time: float = 0.0) -> float:
         """
@@ -192,6 +216,8 @@ class DeviceClock:
         t = device - self._origin
         self._add(t, latest - device)
         stamp = device + self._offset + self._drift * t
+        if self._centre is not None:
+            self._note_near(t, latest - stamp)
         if stamp > latest:
             # The line says this sample was taken after it was read. One such
             # packet is stamped at its read time and no more: a packet read
@@ -213,6 +239,16 @@ class DeviceClock:
     def keep_after(self, other: 'DeviceClock') -> None:
         """Stamp nothing at or before ``other``'s last stamp (it stamped in between)."""
         self._last_stamp = max(self._last_stamp, other._last_stamp)
+
+    def _note_near(self, t: float, residual: float) -> None:
+        block = int(t // NEAR_S)
+        if block != self._near_block:
+            if self._near_block is not None:
+                self._near_blocks.append(self._near_least)
+            self._near_block = block
+            self._near_least = residual
+        elif residual < self._near_least:
+            self._near_least = residual
 
     def _add(self, t: float, excess: float) -> None:
         bucket = int(t // self.window)

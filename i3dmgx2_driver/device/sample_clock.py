@@ -36,9 +36,10 @@ written down in docs/clock.md; in short:
   sensor): the fit starts afresh from this record. The timer value alone
   cannot tell a rollover from a restart just before one; what elapsed can.
 - A gap that was taken as continuing is watched for ``PROBATION_S``: if no
-  record in that time comes within ``CONFIRM_S`` of the line, the device lost
-  time after all (a restart whose timer happened to fit), and the fit starts
-  afresh.
+  record in that time comes within ``CONFIRM_S`` of the line (beyond how near
+  the records came before: the fit's ``near``, a scheduler's tick on a busy
+  host), the device lost time after all (a restart whose timer happened to
+  fit), and the fit starts afresh.
 - A queue draining after a gap is not lost time. A line run near its limit
   holds the records that follow a gap in a queue (the radio's link coming
   back, garbage or another sensor's packets taking the line), and they reach
@@ -47,10 +48,10 @@ written down in docs/clock.md; in short:
   that stays. So a record that comes after a gap later than
   ``CONTINUE_LATE_S`` starts a fresh fit but the line it replaced is kept:
   each record after it is placed on that line too, and once one comes
-  within ``CONFIRM_S`` of it, or ``QUEUE_RECORDS`` have come whose residuals
-  on it fall (a slope against device time, by least squares or the median of
-  the slopes between every two, that stands out of their scatter by
-  ``QUEUE_SIGMAS`` standard errors), the lateness
+  within ``CONFIRM_S`` of it (as near), or from ``QUEUE_RECORDS`` on, the
+  residuals on it fall (a slope against device time, by least squares or the
+  median of the slopes between every two, that stands out of their scatter by
+  ``QUEUE_SIGMAS`` standard errors; ``QUEUE_WATCH`` records are watched), the lateness
   was a queue's: the old line comes back and stamps the rest of the queue
   true. Otherwise the fresh fit stands. (Until the records tell, the fresh
   fit stamps them: a power cycle whose timer lands a few tens of
@@ -70,7 +71,7 @@ import statistics
 import time
 from typing import NamedTuple
 
-from .clock import DeviceClock
+from .clock import DeviceClock, NEAR_S
 from ..codec.records import TICKS_PER_SECOND
 from ..codec.timer import TIMER_MODULUS
 
@@ -96,11 +97,24 @@ EARLY_RESET_S = 0.05
 #: Added to both per second of gap: what a drift error of 100 ppm makes of it.
 GAP_DRIFT = 100e-6
 #: How long (s) a continued gap is watched, and how close (s) to the line some record
-#: in that time must come for the continuation to stand.
-PROBATION_S = 0.3
+#: in that time must come for the continuation to stand: nearer than the records came in
+#: as much time before the gap (the fit's ``near``, up to a scheduler's tick on a host
+#: whose cores are busy), plus CONFIRM_S.
+PROBATION_S = NEAR_S
 CONFIRM_S = 0.001
-#: Records after a late record after a gap whose residuals tell a queue from a step.
+#: Records after a late record after a gap whose residuals may first tell a queue from a step.
 QUEUE_RECORDS = 16
+#: How many records after it are watched for a queue's fall (the trail holds this many, and
+#: the line before the gap is given up when they have come without one). A host whose cores
+#: are busy reads on the scheduler's tick (4 or 10 ms): the residuals saw-tooth by up to a
+#: tick about the fall, which then stands out of their scatter only over more records than
+#: QUEUE_RECORDS (the standard error falls as the records' span to the power 1.5): at the
+#: streams' highest rates, a 50-ms queue read on a 10-ms tick stands out after about 30.
+QUEUE_WATCH = 64
+#: The robust slope (the median of the slopes between every two records: a square of the
+#: trail's length to compute) is taken every this many records, the least-squares one at
+#: every record: at most 0.1 ms a record on average, 0.5 ms on the one that takes it.
+ROBUST_EVERY = 4
 #: The least fall (s per s of device time) of the residuals that may be a queue's: the
 #: line carries a queue away with what it has free (a stream's line budget keeps 5 % of
 #: it free at its highest rate; a line run past that margin, less).
@@ -186,6 +200,72 @@ class _Replaced(NamedTuple):
     last_restart: str
 
 
+def _near_line(fit: DeviceClock, residual: float) -> bool:
+    """Whether a record ``residual`` s above ``fit``'s line came as near it as records do."""
+    return residual <= CONFIRM_S + max(0.0, fit.near)
+
+
+class _Trail:
+    """
+    The residuals of the records since a gap, and whether they fall as a draining queue's do.
+
+    (device time, residual) on the line the late record after the gap
+    replaced, or on the line while on probation: the last ``QUEUE_WATCH``.
+    """
+
+    def __init__(self) -> None:
+        self._points: deque[tuple[float, float]] = deque(maxlen=QUEUE_WATCH)
+        #: Records added since the trail was last cleared (when to take the robust slope).
+        self._added = 0
+
+    def __len__(self) -> int:
+        return len(self._points)
+
+    def clear(self) -> None:
+        self._points.clear()
+        self._added = 0
+
+    def add(self, device_time: float, residual: float) -> None:
+        self._points.append((device_time, residual))
+        self._added += 1
+
+    def falling(self) -> bool:
+        """
+        Whether the residuals fall as a draining queue's do.
+
+        At least ``QUEUE_RECORDS`` of them, whose slope against device time is
+        below ``-QUEUE_FALL`` and ``QUEUE_SIGMAS`` standard errors below zero:
+        by least squares, or (every ``ROBUST_EVERY`` records) by the median of
+        the slopes between every two with the residuals' median absolute
+        deviation as their scatter (one step among them, a reply or a burst of
+        noise taking the line in the middle of the queue, moves that little
+        where it hides a least-squares slope in its scatter).
+        """
+        n = len(self._points)
+        if n < QUEUE_RECORDS:
+            return False
+        points = list(self._points)
+        mean_t = sum(t for t, _ in points) / n
+        stt = sum((t - mean_t) ** 2 for t, _ in points)
+        if stt <= 0.0:
+            return False
+        mean_r = sum(r for _, r in points) / n
+        slope = sum((t - mean_t) * (r - mean_r) for t, r in points) / stt
+        scatter = sum((r - mean_r - slope * (t - mean_t)) ** 2 for t, r in points) / (n - 2)
+        if slope < -QUEUE_FALL and slope * slope * stt > QUEUE_SIGMAS ** 2 * scatter:
+            return True
+        if (self._added - QUEUE_RECORDS) % ROBUST_EVERY:
+            return False
+        slope = statistics.median([(r2 - r1) / (t2 - t1) for k, (t1, r1) in enumerate(points)
+                                   for t2, r2 in points[k + 1:] if t2 > t1])
+        if slope >= -QUEUE_FALL:
+            return False
+        rest = [r - slope * t for t, r in points]
+        centre = statistics.median(rest)
+        spread = 1.4826 * statistics.median(abs(x - centre) for x in rest)
+        return slope * slope * stt > QUEUE_SIGMAS ** 2 * spread * spread
+
+
 class SampleClock:
     """
     Turn (raw timer, monotonic read time) into a stamp on the system clock.
@@ -220,10 +300,8 @@ class SampleClock:
         self._last_host = 0.0
         self._probation_end: float | None = None
         self._probation_best = 0.0
-        #: (device time, residual) of the records since the last gap, on the line the
-        #: late record after it replaced, or on the line while on probation: whether
-        #: they fall as a queue's do.
-        self._trail: deque[tuple[float, float]] = deque(maxlen=QUEUE_RECORDS)
+        #: The records since the last gap: whether they fall as a queue's do.
+        self._trail = _Trail()
         self._replaced: _Replaced | None = None
         self.ticks = 0
         self.ticks_since_last: int | None = None
@@ -295,14 +373,14 @@ class SampleClock:
                 self._restart(Restart.RESYNC, raw, host, since=ticks - self.ticks)
                 if replaced is not None:
                     self._replaced = replaced
-                    self._trail.append((ticks / TICKS_PER_SECOND, off))
+                    self._trail.add(ticks / TICKS_PER_SECOND, off)
                 return
             if gap or self._check_next:
                 self.gaps += 1
                 self._probation_end = host + PROBATION_S
                 self._probation_best = off
                 self._trail.clear()
-                self._trail.append((ticks / TICKS_PER_SECOND, off))
+                self._trail.add(ticks / TICKS_PER_SECOND, off)
             self._check_next = False
             if rolled:
                 self.rollovers += wraps + (raw < self._last_raw)
@@ -310,64 +388,29 @@ class SampleClock:
             replaced = self._replaced
             on_old = ticks + replaced.shift
             off = replaced.fit.residual(on_old, read_time, wire_time)
-            self._trail.append((on_old / TICKS_PER_SECOND, off))
-            if off <= CONFIRM_S or self._falling():
+            self._trail.add(on_old / TICKS_PER_SECOND, off)
+            if _near_line(replaced.fit, off) or self._trail.falling():
                 # The records caught up with the line before the gap: a queue drained.
                 self._resume(host, off)
                 ticks = on_old
-            elif len(self._trail) == QUEUE_RECORDS:
+            elif len(self._trail) == QUEUE_WATCH:
                 self._replaced = None  # a step that stays: the fresh fit stands
         elif self._probation_end is not None:
             off = self.fit.residual(ticks, read_time, wire_time)
             self._probation_best = min(self._probation_best, off)
-            self._trail.append((ticks / TICKS_PER_SECOND, off))
-            if self._falling():
+            self._trail.add(ticks / TICKS_PER_SECOND, off)
+            if self._trail.falling():
                 # A queue is draining: its records are late by what it still holds, and
                 # the time to come near the line counts from when it has drained.
                 self._probation_end = max(self._probation_end, host + PROBATION_S)
             if host >= self._probation_end:
                 self._probation_end = None
-                if self._probation_best > CONFIRM_S:
+                if not _near_line(self.fit, self._probation_best):
                     # No record since the gap came near the line: the device lost time.
                     self._restart(Restart.RESYNC, raw, host, since=ticks - self.ticks)
                     return
         self.ticks_since_last = ticks - self.ticks
         self.ticks = ticks
-
-    def _falling(self) -> bool:
-        """
-        Whether the residuals in the trail fall as a draining queue's do.
-
-        ``QUEUE_RECORDS`` of them, whose slope against device time is below
-        ``-QUEUE_FALL`` and ``QUEUE_SIGMAS`` standard errors below zero: by
-        least squares, or by the median of the slopes between every two
-        with the residuals' median absolute deviation as their scatter (one
-        step among them, a reply or a burst of noise taking the line in the
-        middle of the queue, moves that little where it hides a least-squares
-        slope in its scatter).
-        """
-        trail = self._trail
-        n = len(trail)
-        if n < QUEUE_RECORDS:
-            return False
-        points = list(trail)
-        mean_t = sum(t for t, _ in points) / n
-        stt = sum((t - mean_t) ** 2 for t, _ in points)
-        if stt <= 0.0:
-            return False
-        mean_r = sum(r for _, r in points) / n
-        slope = sum((t - mean_t) * (r - mean_r) for t, r in points) / stt
-        scatter = sum((r - mean_r - slope * (t - mean_t)) ** 2 for t, r in points) / (n - 2)
-        if slope < -QUEUE_FALL and slope * slope * stt > QUEUE_SIGMAS ** 2 * scatter:
-            return True
-        slope = statistics.median([(r2 - r1) / (t2 - t1) for k, (t1, r1) in enumerate(points)
-                                   for t2, r2 in points[k + 1:] if t2 > t1])
-        if slope >= -QUEUE_FALL:
-            return False
-        rest = [r - slope * t for t, r in points]
-        centre = statistics.median(rest)
-        spread = 1.4826 * statistics.median(abs(x - centre) for x in rest)
-        return slope * slope * stt > QUEUE_SIGMAS ** 2 * spread * spread
 
     def _resume(self, host: float, off: float) -> None:
         """
