@@ -216,6 +216,9 @@ class Run(NamedTuple):
     tracemalloc: str | None = None
     #: Seconds between full collections the node is asked to run (0: only its own).
     collect_every: float = 0.0
+    #: Whether the node publishes its log on /rosout (the default; False:
+    #: ``--disable-rosout-logs``, to tell that publisher's memory from the rest).
+    rosout: bool = True
 
 
 def run(plan: Run) -> list[Row]:
@@ -237,8 +240,8 @@ def run(plan: Run) -> list[Row]:
         parameters = {'port': sim.port, 'address': ADDRESS}
         if not plan.fault_capture:
             parameters['fault_capture_dir'] = "''"
-        node = NodeProcess(parameters, command=command,
-                           env=ros_env(_node_env(plan, path)))
+        node = NodeProcess(parameters, () if plan.rosout else ('--disable-rosout-logs',),
+                           command=command, env=ros_env(_node_env(plan, path)))
         client = LifecycleClient(listener) if plan.managed else None
         try:
             if client is not None and not (client.wait_ready(60.0) and client.change('configure')
@@ -460,6 +463,10 @@ def main() -> None:
     parser.add_argument('--no-fault-capture', action='store_true',
                         help='the node keeps no fault capture ring and writes no capture '
                              "(fault_capture_dir ''): its memory without that feature")
+    parser.add_argument('--no-rosout', action='store_true',
+                        help='the node does not publish its log on /rosout '
+                             '(--disable-rosout-logs): its memory without that publisher, '
+                             'whose history keeps each buffer at the largest it held')
     parser.add_argument('--tracemalloc', metavar='DIR',
                         help="trace the node's allocations: snapshots and faults.csv in DIR "
                              '(benchmarks/heap_sites.py reads them)')
@@ -484,7 +491,7 @@ def main() -> None:
                    args.cycle_every if args.managed else 0, args.row_every, args.arena_max,
                    args.events and not args.no_events, not args.no_fault_capture,
                    os.path.abspath(args.tracemalloc) if args.tracemalloc else None,
-                   args.collect_every))
+                   args.collect_every, not args.no_rosout))
     print('\n'.join(slopes(rows)))
     label = (f'managed node, a lifecycle cycle every {args.cycle_every} faults'
              if args.managed else 'plain node') + (
@@ -492,7 +499,8 @@ def main() -> None:
                  ', port events kept' if args.events and not args.no_events else '') + (
                  f', a full collection every {args.collect_every:g} s'
                  if args.collect_every else '') + (
-                 ', no fault capture' if args.no_fault_capture else '')
+                 ', no fault capture' if args.no_fault_capture else '') + (
+                 ', no /rosout' if args.no_rosout else '')
     if args.csv:
         write_csv(args.csv, rows, label)
     if args.plot:
