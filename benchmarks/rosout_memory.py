@@ -30,7 +30,6 @@ Prints numbers; passes or fails nothing.
 """
 
 import argparse
-import ctypes
 import gc
 import os
 import random
@@ -38,18 +37,11 @@ import subprocess
 import sys
 
 import bench_common  # noqa: F401 - puts the repository on the path
+from harness.glibc_heap import mallinfo2
 from harness.processes import isolate_ros_domain
 
 #: Messages after which the heap is read.
 MILESTONES = (1, 100, 500, 1000, 2000, 5000, 10000, 20000, 50000, 100000, 150000)
-
-
-class _MallInfo2(ctypes.Structure):
-    """glibc's ``struct mallinfo2`` (every field a size_t)."""
-
-    _fields_ = [(name, ctypes.c_size_t) for name in (
-        'arena', 'ordblks', 'smblks', 'hblks', 'hblkhd', 'usmblks', 'fsmblks', 'uordblks',
-        'fordblks', 'keepcost')]
 
 
 def one_case(lo: int, hi: int, messages: int, rosout: bool) -> None:
@@ -57,12 +49,12 @@ def one_case(lo: int, hi: int, messages: int, rosout: bool) -> None:
     import rclpy
     from rclpy.node import Node
 
-    mallinfo2 = ctypes.CDLL(None).mallinfo2
-    mallinfo2.restype = _MallInfo2
     rclpy.init(args=['--ros-args'] + ([] if rosout else ['--disable-rosout-logs']))
     node = Node('rosout_memory', enable_rosout=rosout)
     logger = node.get_logger()
     rng = random.Random(1)
+    if mallinfo2() is None:
+        sys.exit("rosout_memory: the C heap's figures need glibc 2.33 or later (mallinfo2)")
     gc.collect()
     base = mallinfo2().uordblks
     for i in range(1, messages + 1):

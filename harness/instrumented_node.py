@@ -44,7 +44,6 @@ Usage: ``I3DMGX2_SOAK_STATS=out.json python -m harness.instrumented_node
 
 import collections
 from collections.abc import Callable
-import ctypes
 import gc
 import json
 import os
@@ -52,6 +51,7 @@ import sys
 import threading
 import time
 
+from harness.glibc_heap import mallinfo2, malloc_arenas
 from harness.type_cache import TypeCacheReader
 from i3dmgx2_driver import lifetime
 from i3dmgx2_driver.device.hot_path import QuietObserver
@@ -146,30 +146,6 @@ class ObservedLifecycleNode(LifecycleDriverNode):
         return super().on_deactivate(state)
 
 
-#: The C library (and the rest of the process's symbols), opened once.
-_LIBC = ctypes.CDLL(None)
-
-
-class _MallInfo2(ctypes.Structure):
-    """glibc's ``struct mallinfo2`` (every field a size_t)."""
-
-    _fields_ = [(name, ctypes.c_size_t) for name in (
-        'arena', 'ordblks', 'smblks', 'hblks', 'hblkhd', 'usmblks', 'fsmblks', 'uordblks',
-        'fordblks', 'keepcost')]
-
-
-def _mallinfo2():  # noqa: ANN202 - a ctypes function, or None
-    try:
-        function = _LIBC.mallinfo2
-    except (AttributeError, OSError):
-        return None  # not glibc, or older than 2.33
-    function.restype = _MallInfo2
-    return function
-
-
-_MALLINFO2 = _mallinfo2()
-
-
 #: Environment variable that, set to 1, adds the heaps' detail to the figures
 #: (``heap_figures``): what the type cache keeps and glibc's arenas. Off by default:
 #: reading the type cache holds the GIL for a few ms, which the soak's stamps would see.
@@ -179,26 +155,6 @@ HEAP_DETAIL_ENV = 'I3DMGX2_HEAP_DETAIL'
 #: node keeps alive. Off by default: the node's own collections are rare, and that
 #: rarity is part of what the curve measures.
 HEAP_COLLECT_ENV = 'I3DMGX2_HEAP_COLLECT_EVERY'
-
-
-def _malloc_arenas() -> int | None:
-    """Return how many arenas glibc's allocator has (``malloc_info``), None off glibc."""
-    try:
-        open_memstream, malloc_info = _LIBC.open_memstream, _LIBC.malloc_info
-    except AttributeError:
-        return None
-    buffer, size = ctypes.c_char_p(), ctypes.c_size_t()
-    open_memstream.restype = ctypes.c_void_p
-    stream = open_memstream(ctypes.byref(buffer), ctypes.byref(size))
-    if not stream:
-        return None
-    try:
-        malloc_info(0, ctypes.c_void_p(stream))
-    finally:
-        _LIBC.fclose(ctypes.c_void_p(stream))
-    text = ctypes.string_at(buffer, size.value)
-    _LIBC.free(buffer)
-    return text.count(b'<heap nr=')
 
 
 class HeapFigures:
@@ -248,8 +204,8 @@ class HeapFigures:
         """Return the figures now."""
         figures = {'python_blocks': sys.getallocatedblocks(), 'malloc_in_use_kib': None,
                    'malloc_mmapped_kib': None}
-        if _MALLINFO2 is not None:
-            info = _MALLINFO2()
+        info = mallinfo2()
+        if info is not None:
             figures['malloc_in_use_kib'] = (info.uordblks + info.hblkhd) // 1024
             figures['malloc_mmapped_kib'] = info.hblkhd // 1024
         if self._detail:
@@ -257,7 +213,7 @@ class HeapFigures:
                 self._next_collect += self._collect_every
                 gc.collect()  # the callback takes the figures right after it
             figures['type_cache_names'] = self._type_cache.names_kept()
-            figures['malloc_arenas'] = _malloc_arenas()
+            figures['malloc_arenas'] = malloc_arenas()
             figures['after_full_gc'] = dict(self._after_full_gc)
         return figures
 

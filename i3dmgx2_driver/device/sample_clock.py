@@ -453,11 +453,6 @@ class SampleClock:
         self._replaced = None
         self._trail.clear()
 
-    @property
-    def resets(self) -> int:
-        """How many times the device timer was found to have restarted."""
-        return self._restarts.get(Restart.RESET.value, 0)
-
     def status(self) -> ClockStatus:
         """Return a snapshot of the clock's state (safe to hand to another thread)."""
         return ClockStatus(
