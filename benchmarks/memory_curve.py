@@ -49,6 +49,12 @@ snapshots to ``DIR`` every minute (``harness/instrumented_node.py``), and
 ``DIR/faults.csv`` says when each row was taken (``time.time()``) and the
 faults met by then; ``benchmarks/heap_sites.py DIR`` reads them.
 
+``--mappings FILE``: at every row, the node's mappings too (from
+``/proc/PID/smaps``: start, size, name, anonymous KiB), as JSON lines;
+``--mappings-diff FILE [--from-faults N]`` says which of them gained
+anonymous memory from N faults on, and when each last changed: a region
+added, or pages touched for the first time in one that exists.
+
 ``--csv`` writes the rows, ``--plot`` draws them (matplotlib, an optional
 extra); ``--replot`` draws the CSVs of earlier runs without running.
 
@@ -72,7 +78,7 @@ import bench_common  # noqa: F401 - puts the repository on the path
 from harness.instrumented_node import (
     EVENTS_ENV, HEAP_COLLECT_ENV, HEAP_DETAIL_ENV, STATS_ENV, TRACEMALLOC_ENV,
 )
-from harness.process_sampler import rss_kinds
+from harness.process_sampler import anon_by_mapping, rss_kinds
 from harness.processes import (
     ADDRESS, isolate_ros_domain, LifecycleClient, Listener, NodeProcess, ros_env,
 )
@@ -219,6 +225,8 @@ class Run(NamedTuple):
     #: Whether the node publishes its log on /rosout (the default; False:
     #: ``--disable-rosout-logs``, to tell that publisher's memory from the rest).
     rosout: bool = True
+    #: A file for the node's mappings at every row, as JSON lines (None: not read).
+    mappings: str | None = None
 
 
 def run(plan: Run) -> list[Row]:
@@ -277,6 +285,12 @@ def run(plan: Run) -> list[Row]:
                           f'{row.python_blocks:7d} {row.type_cache_names:5d} '
                           f'{row.full_collections:4d} {row.blocks_after_gc:7d} '
                           f'{row.cache_after_gc:5d}', flush=True)
+                    if plan.mappings:
+                        with open(plan.mappings, 'a') as out:
+                            out.write(json.dumps({'seconds': round(row.seconds, 1),
+                                                  'faults': faults,
+                                                  'maps': anon_by_mapping(node.proc.pid)})
+                                      + '\n')
                     if plan.tracemalloc:
                         with open(os.path.join(plan.tracemalloc, 'faults.csv'), 'a') as out:
                             out.write(f'{time.time():.3f},{faults}\n')
@@ -361,6 +375,44 @@ def slopes(rows: list[Row]) -> list[str]:
     anon = [r.anon_kib / 1024 for r in rows]
     lines.append(f'anonymous RSS: first {anon[0]:.2f} MiB, highest {max(anon):.2f} MiB '
                  f'(after {rows[anon.index(max(anon))].faults} faults), last {anon[-1]:.2f} MiB')
+    return lines
+
+
+def _anon(row: dict, start: str) -> int:
+    """Return the anonymous KiB of the mapping at ``start`` in a --mappings row (0: none)."""
+    return row['maps'].get(start, (0, '', 0))[2]
+
+
+def mapping_changes(path: str, from_faults: int = 0) -> list[str]:
+    """
+    Return the lines that say which of the node's mappings gained anonymous memory.
+
+    From the first row at ``from_faults`` faults or more to the last, each
+    mapping whose anonymous KiB changed (or that came or went): by how much,
+    its size, its name, and the faults met when it last changed, so that a
+    region that stopped growing is told from one that still grows.
+    """
+    with open(path) as source:
+        rows = [json.loads(line) for line in source if line.strip()]
+    rows = [r for r in rows if r['maps']]
+    base = next((i for i, r in enumerate(rows) if r['faults'] >= from_faults), len(rows) - 1)
+    first, last = rows[base]['maps'], rows[-1]['maps']
+    lines = [f'{len(rows)} rows; mappings from {rows[base]["faults"]} faults '
+             f'({rows[base]["seconds"] / 60:.1f} min) to {rows[-1]["faults"]} '
+             f'({rows[-1]["seconds"] / 60:.1f} min):']
+    for start in sorted(set(first) | set(last)):
+        before, after = first.get(start, (0, '', 0)), last.get(start, (0, '', 0))
+        if before[2] == after[2]:
+            continue  # a heap's reserve moves as the heap grows into it: never touched
+        changed = rows[base]['faults']
+        for earlier, later in itertools.pairwise(rows[base:]):
+            if _anon(earlier, start) != _anon(later, start):
+                changed = later['faults']
+        lines.append(f'  {after[2] - before[2]:+6d} KiB  {start}  {before[0]}->{after[0]} KiB '
+                     f'{after[1] or before[1] or "[anonymous]"}  ({before[2]} -> {after[2]}; '
+                     f'last changed at {changed} faults)')
+    total = [sum(v[2] for v in maps.values()) for maps in (first, last)]
+    lines.append(f'  anonymous in all mappings: {total[0]} -> {total[1]} KiB')
     return lines
 
 
@@ -474,11 +526,22 @@ def main() -> None:
                         help='the node runs a full collection every S seconds, so that the '
                              'level right after one, what it keeps alive, is taken often '
                              '(default: only its own collections, which come seldom)')
+    parser.add_argument('--mappings', metavar='PATH',
+                        help="append the node's mappings at every row (/proc/PID/smaps: start, "
+                             'size, name, anonymous KiB) here, as JSON lines')
+    parser.add_argument('--mappings-diff', metavar='PATH',
+                        help='say which mappings of a --mappings file gained anonymous memory, '
+                             'without running')
+    parser.add_argument('--from-faults', type=int, default=0, metavar='N',
+                        help='with --mappings-diff: from the first row at N faults or more')
     parser.add_argument('--csv', metavar='PATH', help='write the rows here')
     parser.add_argument('--plot', metavar='PNG', help='draw the rows here')
     parser.add_argument('--replot', metavar='CSV', nargs='+',
                         help='draw these CSVs to --plot, without running')
     args = parser.parse_args()
+    if args.mappings_diff:
+        print('\n'.join(mapping_changes(args.mappings_diff, args.from_faults)))
+        return
     if args.replot:
         runs = [read_csv(path) for path in args.replot]
         for label, rows in runs:
@@ -491,7 +554,8 @@ def main() -> None:
                    args.cycle_every if args.managed else 0, args.row_every, args.arena_max,
                    args.events and not args.no_events, not args.no_fault_capture,
                    os.path.abspath(args.tracemalloc) if args.tracemalloc else None,
-                   args.collect_every, not args.no_rosout))
+                   args.collect_every, not args.no_rosout,
+                   os.path.abspath(args.mappings) if args.mappings else None))
     print('\n'.join(slopes(rows)))
     label = (f'managed node, a lifecycle cycle every {args.cycle_every} faults'
              if args.managed else 'plain node') + (

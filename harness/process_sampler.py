@@ -99,6 +99,35 @@ def rss_kinds(pid: int) -> tuple[int, int, int] | None:
     return None if status is None else tuple(status[k] for k in RSS_KINDS)
 
 
+def anon_by_mapping(pid: int) -> dict[str, tuple[int, str, int]] | None:
+    """
+    Return a process's mappings as {start address: (size KiB, name, anonymous KiB)}.
+
+    Anonymous RSS that keeps rising after a warm-up is either a region
+    added (a new arena, a buffer mapped alone) or pages touched for the first
+    time inside regions that exist: the mappings, read from
+    ``/proc/<pid>/smaps``, tell which (a glibc thread heap keeps its start as
+    it grows into its reserve). None if the process is gone.
+    """
+    found: dict[str, tuple[int, str, int]] = {}
+    start = ''
+    try:
+        with open(f'/proc/{pid}/smaps') as handle:
+            for line in handle:
+                head = line.split(maxsplit=5)
+                if '-' in head[0] and not head[0].endswith(':'):
+                    begin, _, end = head[0].partition('-')
+                    start = begin
+                    name = head[5].strip() if len(head) > 5 else ''
+                    found[start] = ((int(end, 16) - int(begin, 16)) // 1024, name, 0)
+                elif head[0] == 'Anonymous:':
+                    size, name, _ = found[start]
+                    found[start] = (size, name, int(head[1]))
+    except OSError:
+        return None
+    return found
+
+
 class Sampler(threading.Thread):
     """
     Sample RSS, descriptors and threads of the processes it is given, all run long.
