@@ -78,7 +78,7 @@ import bench_common  # noqa: F401 - puts the repository on the path
 from harness.instrumented_node import (
     EVENTS_ENV, HEAP_COLLECT_ENV, HEAP_DETAIL_ENV, STATS_ENV, TRACEMALLOC_ENV,
 )
-from harness.process_sampler import anon_by_mapping, rss_kinds
+from harness.process_sampler import append_mappings, mapping_changes, rss_kinds
 from harness.processes import (
     ADDRESS, isolate_ros_domain, LifecycleClient, Listener, NodeProcess, ros_env,
 )
@@ -286,11 +286,7 @@ def run(plan: Run) -> list[Row]:
                           f'{row.full_collections:4d} {row.blocks_after_gc:7d} '
                           f'{row.cache_after_gc:5d}', flush=True)
                     if plan.mappings:
-                        with open(plan.mappings, 'a') as out:
-                            out.write(json.dumps({'seconds': round(row.seconds, 1),
-                                                  'faults': faults,
-                                                  'maps': anon_by_mapping(node.proc.pid)})
-                                      + '\n')
+                        append_mappings(plan.mappings, node.proc.pid, row.seconds, faults)
                     if plan.tracemalloc:
                         with open(os.path.join(plan.tracemalloc, 'faults.csv'), 'a') as out:
                             out.write(f'{time.time():.3f},{faults}\n')
@@ -375,44 +371,6 @@ def slopes(rows: list[Row]) -> list[str]:
     anon = [r.anon_kib / 1024 for r in rows]
     lines.append(f'anonymous RSS: first {anon[0]:.2f} MiB, highest {max(anon):.2f} MiB '
                  f'(after {rows[anon.index(max(anon))].faults} faults), last {anon[-1]:.2f} MiB')
-    return lines
-
-
-def _anon(row: dict, start: str) -> int:
-    """Return the anonymous KiB of the mapping at ``start`` in a --mappings row (0: none)."""
-    return row['maps'].get(start, (0, '', 0))[2]
-
-
-def mapping_changes(path: str, from_faults: int = 0) -> list[str]:
-    """
-    Return the lines that say which of the node's mappings gained anonymous memory.
-
-    From the first row at ``from_faults`` faults or more to the last, each
-    mapping whose anonymous KiB changed (or that came or went): by how much,
-    its size, its name, and the faults met when it last changed, so that a
-    region that stopped growing is told from one that still grows.
-    """
-    with open(path) as source:
-        rows = [json.loads(line) for line in source if line.strip()]
-    rows = [r for r in rows if r['maps']]
-    base = next((i for i, r in enumerate(rows) if r['faults'] >= from_faults), len(rows) - 1)
-    first, last = rows[base]['maps'], rows[-1]['maps']
-    lines = [f'{len(rows)} rows; mappings from {rows[base]["faults"]} faults '
-             f'({rows[base]["seconds"] / 60:.1f} min) to {rows[-1]["faults"]} '
-             f'({rows[-1]["seconds"] / 60:.1f} min):']
-    for start in sorted(set(first) | set(last)):
-        before, after = first.get(start, (0, '', 0)), last.get(start, (0, '', 0))
-        if before[2] == after[2]:
-            continue  # a heap's reserve moves as the heap grows into it: never touched
-        changed = rows[base]['faults']
-        for earlier, later in itertools.pairwise(rows[base:]):
-            if _anon(earlier, start) != _anon(later, start):
-                changed = later['faults']
-        lines.append(f'  {after[2] - before[2]:+6d} KiB  {start}  {before[0]}->{after[0]} KiB '
-                     f'{after[1] or before[1] or "[anonymous]"}  ({before[2]} -> {after[2]}; '
-                     f'last changed at {changed} faults)')
-    total = [sum(v[2] for v in maps.values()) for maps in (first, last)]
-    lines.append(f'  anonymous in all mappings: {total[0]} -> {total[1]} KiB')
     return lines
 
 

@@ -21,6 +21,8 @@ hands them to the :class:`Sampler`; :func:`fit_slopes` turns the samples into
 lines of the report and, for a run long enough, checks.
 """
 
+import itertools
+import json
 import os
 import statistics
 import threading
@@ -126,6 +128,51 @@ def anon_by_mapping(pid: int) -> dict[str, tuple[int, str, int]] | None:
     except OSError:
         return None
     return found
+
+
+def append_mappings(path: str, pid: int, seconds: float, faults: int) -> None:
+    """Append a process's mappings (:func:`anon_by_mapping`) to ``path`` as one JSON line."""
+    with open(path, 'a') as out:
+        out.write(json.dumps({'seconds': round(seconds, 1), 'faults': faults,
+                              'maps': anon_by_mapping(pid)}) + '\n')
+
+
+def _anon(row: dict, start: str) -> int:
+    """Return the anonymous KiB of the mapping at ``start`` in a --mappings row (0: none)."""
+    return row['maps'].get(start, (0, '', 0))[2]
+
+
+def mapping_changes(path: str, from_faults: int = 0) -> list[str]:
+    """
+    Return the lines that say which mappings of an :func:`append_mappings` file gained memory.
+
+    Anonymous memory, from the first row at ``from_faults`` faults or more to the last, each
+    mapping whose anonymous KiB changed (or that came or went): by how much,
+    its size, its name, and the faults met when it last changed, so that a
+    region that stopped growing is told from one that still grows.
+    """
+    with open(path) as source:
+        rows = [json.loads(line) for line in source if line.strip()]
+    rows = [r for r in rows if r['maps']]
+    base = next((i for i, r in enumerate(rows) if r['faults'] >= from_faults), len(rows) - 1)
+    first, last = rows[base]['maps'], rows[-1]['maps']
+    lines = [f'{len(rows)} rows; mappings from {rows[base]["faults"]} faults '
+             f'({rows[base]["seconds"] / 60:.1f} min) to {rows[-1]["faults"]} '
+             f'({rows[-1]["seconds"] / 60:.1f} min):']
+    for start in sorted(set(first) | set(last)):
+        before, after = first.get(start, (0, '', 0)), last.get(start, (0, '', 0))
+        if before[2] == after[2]:
+            continue  # a heap's reserve moves as the heap grows into it: never touched
+        changed = rows[base]['faults']
+        for earlier, later in itertools.pairwise(rows[base:]):
+            if _anon(earlier, start) != _anon(later, start):
+                changed = later['faults']
+        lines.append(f'  {after[2] - before[2]:+6d} KiB  {start}  {before[0]}->{after[0]} KiB '
+                     f'{after[1] or before[1] or "[anonymous]"}  ({before[2]} -> {after[2]}; '
+                     f'last changed at {changed} faults)')
+    total = [sum(v[2] for v in maps.values()) for maps in (first, last)]
+    lines.append(f'  anonymous in all mappings: {total[0]} -> {total[1]} KiB')
+    return lines
 
 
 class Sampler(threading.Thread):

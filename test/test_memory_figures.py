@@ -19,13 +19,19 @@ The curve subtracts what CPython's type cache alone keeps from the blocks
 alive to show what else grows (``harness/type_cache.py``): the count must
 rise when lookups by fresh names fill the cache, never pass its 4,096
 entries, and fall to nothing when the cache is emptied. The curve's CSVs of
-earlier runs (six columns) must still be read beside today's.
+earlier runs (six columns) must still be read beside today's. The mappings
+it reads (``--mappings``) must place pages touched for the first time in a
+region that exists, and say when that region last grew.
 """
 
+import ctypes
 import gc
+import mmap
+import os
 import sys
 
 from harness.instrumented_node import HeapFigures
+from harness.process_sampler import anon_by_mapping, append_mappings, mapping_changes
 from harness.type_cache import ENTRIES, TypeCacheReader
 
 ON_3_11 = sys.implementation.name == 'cpython' and sys.version_info[:2] == (3, 11)
@@ -81,3 +87,39 @@ def test_the_level_after_a_full_collection_is_taken_by_the_collectors_own_callba
         assert figures()['after_full_gc']['full_collections'] >= first['full_collections'] + 1
     finally:
         figures.close()
+
+
+def _holding(address: int) -> str:
+    """Return the start of this process's mapping that holds ``address``."""
+    for start, (size, _, _) in anon_by_mapping(os.getpid()).items():
+        if int(start, 16) <= address < int(start, 16) + size * 1024:
+            return start
+    raise AssertionError(f'no mapping holds {address:x}')
+
+
+def test_the_mappings_place_pages_touched_for_the_first_time_and_when(tmp_path):
+    if not os.path.exists(f'/proc/{os.getpid()}/smaps'):
+        assert anon_by_mapping(os.getpid()) is None
+        return
+    page = mmap.PAGESIZE
+    # Anonymous and private, like an allocator's arena: no page touched yet.
+    region = mmap.mmap(-1, 64 * page, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    try:
+        view = ctypes.c_char.from_buffer(region)
+        start = _holding(ctypes.addressof(view))  # the kernel may merge it with a neighbour
+        del view
+        path = str(tmp_path / 'mappings.jsonl')
+        append_mappings(path, os.getpid(), 0.0, 0)
+        untouched = anon_by_mapping(os.getpid())[start][2]
+        for index in range(10):
+            region[index * page] = 1
+        append_mappings(path, os.getpid(), 60.0, 100)
+        assert anon_by_mapping(os.getpid())[start][2] - untouched == 10 * page // 1024
+        append_mappings(path, os.getpid(), 120.0, 200)  # nothing more touched
+        line = next(text for text in mapping_changes(path) if f' {start} ' in text)
+        assert line.split()[0] == f'+{10 * page // 1024}'
+        assert line.endswith('last changed at 100 faults)')
+        later = mapping_changes(path, from_faults=100)  # from the row at 100 on: none
+        assert not any(f' {start} ' in text for text in later)
+    finally:
+        region.close()
