@@ -105,9 +105,14 @@ def test_the_mappings_place_pages_touched_for_the_first_time_and_when(tmp_path):
     # Anonymous and private, like an allocator's arena: no page touched yet.
     region = mmap.mmap(-1, 64 * page, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
     try:
+        # A flag of its own, so that the kernel does not merge it with a neighbour
+        # (one of CPython's arenas, say) whose pages this process touches meanwhile.
+        region.madvise(mmap.MADV_DONTFORK)
         view = ctypes.c_char.from_buffer(region)
-        start = _holding(ctypes.addressof(view))  # the kernel may merge it with a neighbour
+        address = ctypes.addressof(view)
         del view
+        start = _holding(address)
+        assert int(start, 16) == address
         path = str(tmp_path / 'mappings.jsonl')
         append_mappings(path, os.getpid(), 0.0, 0)
         untouched = anon_by_mapping(os.getpid())[start][2]
