@@ -137,19 +137,23 @@ def append_mappings(path: str, pid: int, seconds: float, faults: int) -> None:
                               'maps': anon_by_mapping(pid)}) + '\n')
 
 
+#: A mapping absent from a row: no size, no name, nothing resident.
+_ABSENT = (0, '', 0)
+
+
 def _anon(row: dict, start: str) -> int:
     """Return the anonymous KiB of the mapping at ``start`` in a --mappings row (0: none)."""
-    return row['maps'].get(start, (0, '', 0))[2]
+    return row['maps'].get(start, _ABSENT)[2]
 
 
 def mapping_changes(path: str, from_faults: int = 0) -> list[str]:
     """
-    Return the lines that say which mappings of an :func:`append_mappings` file gained memory.
+    Say which mappings of an :func:`append_mappings` file gained anonymous memory.
 
-    Anonymous memory, from the first row at ``from_faults`` faults or more to the last, each
-    mapping whose anonymous KiB changed (or that came or went): by how much,
-    its size, its name, and the faults met when it last changed, so that a
-    region that stopped growing is told from one that still grows.
+    From the first row at ``from_faults`` faults or more to the last: each
+    mapping whose anonymous KiB changed, by how much, its size and name, and
+    the faults met when it last changed, so that a region that stopped
+    growing is told from one that still grows.
     """
     with open(path) as source:
         rows = [json.loads(line) for line in source if line.strip()]
@@ -160,7 +164,7 @@ def mapping_changes(path: str, from_faults: int = 0) -> list[str]:
              f'({rows[base]["seconds"] / 60:.1f} min) to {rows[-1]["faults"]} '
              f'({rows[-1]["seconds"] / 60:.1f} min):']
     for start in sorted(set(first) | set(last)):
-        before, after = first.get(start, (0, '', 0)), last.get(start, (0, '', 0))
+        before, after = first.get(start, _ABSENT), last.get(start, _ABSENT)
         if before[2] == after[2]:
             continue  # a heap's reserve moves as the heap grows into it: never touched
         changed = rows[base]['faults']
