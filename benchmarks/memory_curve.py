@@ -94,7 +94,7 @@ BACK_WITHIN = 20.0
 #: The CSV's columns.
 COLUMNS = ('seconds', 'faults', 'cycles', 'anon_kib', 'c_heap_kib', 'python_blocks',
            'mmapped_kib', 'type_cache_names', 'arenas', 'full_collections',
-           'blocks_after_gc', 'cache_after_gc')
+           'blocks_after_gc', 'cache_after_gc', 'threads_started')
 #: A figure the node did not give (a CSV of an earlier run, or not glibc / CPython 3.11).
 UNKNOWN = -1
 
@@ -120,6 +120,8 @@ class Row(NamedTuple):
     blocks_after_gc: int = UNKNOWN
     #: The type cache's own names then.
     cache_after_gc: int = UNKNOWN
+    #: Python threads the node started so far (its first ones counted as running at import).
+    threads_started: int = UNKNOWN
 
     @property
     def blocks_besides_cache(self) -> int:
@@ -260,7 +262,7 @@ def run(plan: Run) -> list[Row]:
             time.sleep(plan.warm_up)
             print(f'{"min":>5} {"faults":>6} {"cycles":>6} {"anon KiB":>9} {"C heap KiB":>10} '
                   f'{"mmapped":>7} {"arenas":>6} {"blocks":>7} {"cache":>5} {"GCs":>4} '
-                  f'{"after GC":>7} {"cache":>5}', flush=True)
+                  f'{"after GC":>7} {"cache":>5} {"threads":>7}', flush=True)
             start = time.monotonic()
             faults = cycles = late = 0
             next_row = start
@@ -278,13 +280,13 @@ def run(plan: Run) -> list[Row]:
                                       heap.get('malloc_mmapped_kib'),
                                       heap.get('type_cache_names'), heap.get('malloc_arenas'),
                                       after.get('full_collections'), after.get('blocks'),
-                                      after.get('type_cache'))))
+                                      after.get('type_cache'), heap.get('threads_started'))))
                     rows.append(row)
                     print(f'{(now - start) / 60:5.1f} {faults:6d} {cycles:6d} {anon:9d} '
                           f'{row.c_heap_kib:10d} {row.mmapped_kib:7d} {row.arenas:6d} '
                           f'{row.python_blocks:7d} {row.type_cache_names:5d} '
                           f'{row.full_collections:4d} {row.blocks_after_gc:7d} '
-                          f'{row.cache_after_gc:5d}', flush=True)
+                          f'{row.cache_after_gc:5d} {row.threads_started:7d}', flush=True)
                     if plan.mappings:
                         append_mappings(plan.mappings, node.proc.pid, row.seconds, faults)
                     if plan.tracemalloc:
@@ -368,6 +370,12 @@ def slopes(rows: list[Row]) -> list[str]:
                      f'at most, {rows[-1].arenas} last')
     if all(r.full_collections != UNKNOWN for r in rows):
         lines.append(f"the node's full collections: {rows[-1].full_collections}")
+    if all(r.threads_started != UNKNOWN for r in rows):
+        parts = [p for p in thirds(rows) if p]
+        lines.append('threads the node started: ' + ', '.join(
+            f'{p[-1].threads_started - p[0].threads_started} over faults '
+            f'{p[0].faults}-{p[-1].faults}' for p in parts)
+            + f' ({rows[-1].threads_started} in all)')
     anon = [r.anon_kib / 1024 for r in rows]
     lines.append(f'anonymous RSS: first {anon[0]:.2f} MiB, highest {max(anon):.2f} MiB '
                  f'(after {rows[anon.index(max(anon))].faults} faults), last {anon[-1]:.2f} MiB')

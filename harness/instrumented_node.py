@@ -171,7 +171,10 @@ class HeapFigures:
     blocks CPython's type cache alone keeps (bounded, ``harness/type_cache.py``;
     None where it cannot be read), ``malloc_arenas``, glibc's arenas, and the
     blocks and the type cache's names right after the last full collection
-    (``after_full_gc``, with ``full_collections`` so far): the blocks at any
+    (``after_full_gc``, with ``full_collections`` so far), and
+    ``threads_started``, the Python threads the process started so far (each
+    new one rebuilds ``threading``'s table of running threads in the next of
+    glibc's arenas: docs/soak.md, "The end of the curve"): the blocks at any
     moment also count garbage in reference cycles that waits for the collector,
     which comes and goes by thousands; right after a full collection none of it
     is left, so a level that rises there is objects kept. Taken by a callback
@@ -185,13 +188,24 @@ class HeapFigures:
         self._collect_every = collect_every
         self._next_collect = time.monotonic() + collect_every
         self._after_full_gc: dict = {'full_collections': 0, 'blocks': None, 'type_cache': None}
+        self._threads_started = threading.active_count()
+        self._thread_start = start = threading.Thread.start
+
+        def counted_start(thread: threading.Thread) -> None:
+            self._threads_started += 1
+            start(thread)
+
+        self._counted_start = counted_start
         if detail:
             gc.callbacks.append(self._collected)
+            threading.Thread.start = counted_start
 
     def close(self) -> None:
-        """Take the callback off the collector (figures made for a moment, as in a test)."""
+        """Take the callback off the collector and the count off threads (as in a test)."""
         if self._collected in gc.callbacks:
             gc.callbacks.remove(self._collected)
+        if threading.Thread.start is self._counted_start:
+            threading.Thread.start = self._thread_start
 
     def _collected(self, phase: str, info: dict) -> None:
         if phase == 'stop' and info['generation'] == 2:
@@ -215,6 +229,7 @@ class HeapFigures:
             figures['type_cache_names'] = self._type_cache.names_kept()
             figures['malloc_arenas'] = malloc_arenas()
             figures['after_full_gc'] = dict(self._after_full_gc)
+            figures['threads_started'] = self._threads_started
         return figures
 
 

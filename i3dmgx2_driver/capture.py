@@ -150,11 +150,14 @@ class CaptureWriter:
     every ``flush_interval`` seconds, so that a crash (or a kill) loses at
     most that much of the stream. ``fsync`` also asks the OS to put each
     flush on disk, for captures that must survive a power cut.
+    ``flush_interval`` None starts no thread, for a file written whole at
+    once and closed (a fault capture): a thread started per file would cost
+    memory that stays (device/reader_threads.py says how).
     """
 
     def __init__(self, path: PathLike, header: dict[str, Any] | None = None,
-                 flush_interval: float = FLUSH_INTERVAL, fsync: bool = False) -> None:
-        if not flush_interval > 0:
+                 flush_interval: float | None = FLUSH_INTERVAL, fsync: bool = False) -> None:
+        if flush_interval is not None and not flush_interval > 0:
             raise ValueError(f'flush_interval must be positive, got {flush_interval!r}')
         line = _header_line(header or {})
         self.path = os.fspath(path)
@@ -174,9 +177,11 @@ class CaptureWriter:
             self._file.close()
             raise
         self._stop = threading.Event()
-        self._flusher = threading.Thread(
-            target=self._flush_loop, name='capture-flush', daemon=True)
-        self._flusher.start()
+        self._flusher: threading.Thread | None = None
+        if flush_interval is not None:
+            self._flusher = threading.Thread(
+                target=self._flush_loop, name='capture-flush', daemon=True)
+            self._flusher.start()
 
     def __enter__(self) -> 'CaptureWriter':
         return self
@@ -230,7 +235,7 @@ class CaptureWriter:
             finally:
                 self._file.close()
         self._stop.set()
-        if self._flusher is not threading.current_thread():
+        if self._flusher is not None and self._flusher is not threading.current_thread():
             self._flusher.join()
 
     def _flush_locked(self) -> None:
@@ -440,7 +445,7 @@ def fixture_to_capture(fixture_path: PathLike, capture_path: PathLike,
                f'synthesised; receive times from the device timer; {gap:g} s inserted '
                f"between the fixture's captures, whose timers do not continue."),
         segments=segments)
-    with CaptureWriter(capture_path, header) as writer:
+    with CaptureWriter(capture_path, header, flush_interval=None) as writer:
         for receive_time, packet in fixture_chunks(fixture_path, address, start_time, gap):
             writer.write(packet, receive_time)
     return header
@@ -824,7 +829,7 @@ class FaultCapture:
             notes=(f'fault capture by the i3dmgx2_driver node: the last {self.seconds:g} s '
                    f'of reads before it was written ({cause}), as read'),
             **self._header)
-        with CaptureWriter(path, header) as writer:
+        with CaptureWriter(path, header, flush_interval=None) as writer:
             for receive_time, data in chunks:
                 writer.write(data, receive_time)
         return path

@@ -29,6 +29,7 @@ import gc
 import mmap
 import os
 import sys
+import threading
 
 from harness.instrumented_node import HeapFigures
 from harness.process_sampler import anon_by_mapping, append_mappings, mapping_changes
@@ -63,9 +64,19 @@ def test_the_type_cache_reader_counts_the_names_only_the_cache_keeps():
 
 
 def test_heap_figures_give_the_detail_only_when_asked():
+    start_before = threading.Thread.start
     detail = HeapFigures(detail=True)
-    plain, detailed = HeapFigures(detail=False)(), detail()
-    detail.close()
+    try:
+        started = detail()['threads_started']
+        for _ in range(3):
+            thread = threading.Thread(target=lambda: None)
+            thread.start()
+            thread.join()
+        plain, detailed = HeapFigures(detail=False)(), detail()
+    finally:
+        detail.close()
+    assert threading.Thread.start is start_before
+    assert detailed['threads_started'] == started + 3
     assert 'type_cache_names' not in plain and 'malloc_arenas' not in plain
     assert plain['python_blocks'] > 0 and detailed['python_blocks'] > 0
     if ON_3_11:

@@ -17,7 +17,9 @@ The device layer: the serial port and the protocol dialogue, no ROS.
 
 ``port`` opens the serial port and reads what is there as soon as it is
 there; ``link`` is one sensor's connection (the reader thread, the
-request/reply exchanges, what its packets say); ``shared_port`` lets
+request/reply exchanges, what its packets say), read in one of
+``reader_threads``, kept for the process's life and handed port after port;
+``shared_port`` lets
 several sensors' links share one port and its reader; ``port_opener``
 opens a port the same way for ``supervisor`` and ``shared_port``;
 ``dialogue`` says what the sensor needs to hear (quiet, identity, data

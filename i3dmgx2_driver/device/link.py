@@ -45,7 +45,8 @@ from . import timeouts
 from .hot_path import HotPathObserver
 from .observer import LineObserver, QUIET_AFTER
 from .port import PortDisconnected, SerialPort
-from .realtime import apply_to_current_thread, NORMAL_SCHEDULING, PolicyOutcome, ThreadPolicy
+from .reader_threads import READERS
+from .realtime import NORMAL_SCHEDULING, NOTHING_GRANTED, PolicyOutcome, ThreadPolicy
 from ..codec import commands, layouts
 from ..codec.commands import LAYOUT_BY_TYPE
 from ..codec.framing import DataPacket, encode_command_packet
@@ -164,8 +165,11 @@ class PortReader:
         self._read_timeout = options.read_timeout
         self._thread_policy = options.thread_policy
         self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._started = False
         self._start_lock = threading.Lock()
+        #: The thread reading for this reader (once it runs); set once it has returned.
+        self._thread: threading.Thread | None = None
+        self._finished = threading.Event()
         self.disconnected = threading.Event()
         #: Why the port was lost (None while it works); set before ``disconnected``.
         self.error: str | None = None
@@ -225,30 +229,37 @@ class PortReader:
     # -- the thread ----------------------------------------------------------
 
     def start(self) -> None:
-        """Start the reader thread (once; later calls do nothing)."""
+        """
+        Start reading, in one of the process's reader threads (once; later calls do nothing).
+
+        The thread is not started for this port: it is one that read an earlier
+        port, or lives on for a later one (reader_threads.py says why).
+        """
         with self._start_lock:
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._run, name='gx2-reader',
-                                                daemon=True)
-                self._thread.start()
+            if not self._started:
+                self._started = True
+                READERS.run(self._run, self._thread_policy, self._finished)
 
     def stop(self) -> None:
-        """Stop the reader thread and wait for it (a read times out quickly)."""
+        """Stop reading and wait for it (a read times out quickly)."""
         self._stop.set()
-        if self._thread is None:
+        if not self._started:
             self._drop_links()  # never started: no thread will
         elif self._thread is not threading.current_thread():
-            self._thread.join(timeout=2.0)
+            self._finished.wait(timeout=2.0)
 
     def abort(self) -> None:
         """Make the reader give up (driver shutdown)."""
         self._stop.set()
 
-    def _run(self) -> None:
+    def _run(self, outcome: PolicyOutcome = NOTHING_GRANTED) -> None:
+        self._thread = threading.current_thread()
+        self.policy_outcome = outcome
         try:
             self._read()
         finally:
             self._drop_links()
+            self._thread = None
 
     def _drop_links(self) -> None:
         """
@@ -264,8 +275,6 @@ class PortReader:
         self._routes.clear()
 
     def _read(self) -> None:
-        if self._thread_policy.requested:
-            self.policy_outcome = apply_to_current_thread(self._thread_policy)
         self.running.set()
         for link in self._links():
             link.reader_started(self.policy_outcome)

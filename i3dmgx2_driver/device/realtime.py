@@ -65,6 +65,10 @@ class PolicyOutcome(NamedTuple):
     refused: tuple[str, ...] = ()
 
 
+#: What a thread that asked nothing was granted.
+NOTHING_GRANTED = PolicyOutcome()
+
+
 def apply_to_current_thread(policy: ThreadPolicy) -> PolicyOutcome:
     """
     Apply ``policy`` to the calling thread; return what was applied and what refused.
