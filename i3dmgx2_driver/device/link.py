@@ -167,8 +167,9 @@ class PortReader:
         self._stop = threading.Event()
         self._started = False
         self._start_lock = threading.Lock()
-        #: The thread reading for this reader (once it runs); set once it has returned.
+        #: The thread reading the port now (None before and after the reading).
         self._thread: threading.Thread | None = None
+        #: Set once the reading has returned and its thread is idle again.
         self._finished = threading.Event()
         self.disconnected = threading.Event()
         #: Why the port was lost (None while it works); set before ``disconnected``.
