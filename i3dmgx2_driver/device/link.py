@@ -201,6 +201,11 @@ class PortReader:
         if self.error is not None:
             link.port_lost(self.error)
 
+    def listen_to(self, address: int | None) -> None:
+        """Take the data packets of ``address`` alone from now on (None: every node's)."""
+        if self.wireless:
+            self.parser.address = address
+
     def unroute(self, address: int | None, link: 'DeviceLink') -> None:
         """Stop handing ``address``'s packets to ``link`` (if they still go to it)."""
         if self._routes.get(address) is link:
@@ -645,5 +650,4 @@ class DeviceLink:
         already stream); requests need an address again before they are sent.
         """
         self.address = address
-        if self.wireless:
-            self.parser.address = address
+        self.reader.listen_to(address)

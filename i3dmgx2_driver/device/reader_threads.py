@@ -41,38 +41,8 @@ __all__ = ['READERS', 'ReaderThreads', 'Reading']
 
 #: One reading of a port, run in a reader thread with what the scheduler granted it.
 Reading = Callable[[PolicyOutcome], None]
-
-
-class _ReaderThread:
-    """One thread: applies its policy once, then runs each reading handed to it."""
-
-    def __init__(self, owner: 'ReaderThreads', policy: ThreadPolicy, name: str) -> None:
-        self._owner = owner
-        self.policy = policy
-        self._work: queue.SimpleQueue[tuple[Reading, threading.Event]] = queue.SimpleQueue()
-        self.thread = threading.Thread(target=self._serve, name=name, daemon=True)
-        self.thread.start()
-
-    def hand(self, reading: Reading, done: threading.Event) -> None:
-        self._work.put((reading, done))
-
-    def _serve(self) -> None:
-        outcome = (apply_to_current_thread(self.policy) if self.policy.requested
-                   else NOTHING_GRANTED)
-        while True:
-            reading, done = self._work.get()
-            try:
-                reading(outcome)
-            except Exception:  # noqa: BLE001 - reported as a thread of its own would be
-                threading.excepthook(threading.ExceptHookArgs(
-                    (*sys.exc_info(), self.thread)))
-            # Nothing of the reading may stay referenced here while idle (its
-            # port, parser and links are freed by reference count when dropped),
-            # and whoever waits for it finds this thread idle again.
-            del reading
-            self._owner.idle(self)
-            done.set()
-            del done
+#: What a reader thread waits on: its next reading, and the event to set once it returned.
+_Work = queue.SimpleQueue[tuple[Reading, threading.Event]]
 
 
 class ReaderThreads:
@@ -81,7 +51,8 @@ class ReaderThreads:
     def __init__(self, name: str = 'gx2-reader') -> None:
         self._name = name
         self._lock = threading.Lock()
-        self._idle: dict[ThreadPolicy, list[_ReaderThread]] = {}
+        #: The idle threads by policy, each as the queue it waits on for its next reading.
+        self._idle: dict[ThreadPolicy, list[_Work]] = {}
         #: Threads started so far (what the reuse saves is told by this staying small).
         self.started = 0
 
@@ -89,17 +60,33 @@ class ReaderThreads:
         """Run ``reading`` in a reader thread of ``policy``; ``done`` is set once it returned."""
         with self._lock:
             idle = self._idle.get(policy)
-            worker = idle.pop() if idle else None
-            if worker is None:
+            work = idle.pop() if idle else None  # the most recently idle first
+            if work is None:
                 self.started += 1
-        if worker is None:
-            worker = _ReaderThread(self, policy, self._name)
-        worker.hand(reading, done)
+        if work is None:
+            work = queue.SimpleQueue()
+            threading.Thread(target=self._serve, args=(policy, work), name=self._name,
+                             daemon=True).start()
+        work.put((reading, done))
 
-    def idle(self, worker: _ReaderThread) -> None:
-        """Take ``worker`` back for the next reading (the most recent is handed out first)."""
-        with self._lock:
-            self._idle.setdefault(worker.policy, []).append(worker)
+    def _serve(self, policy: ThreadPolicy, work: _Work) -> None:
+        """Apply ``policy`` once, then run each reading put on ``work``, forever."""
+        outcome = apply_to_current_thread(policy) if policy.requested else NOTHING_GRANTED
+        while True:
+            reading, done = work.get()
+            try:
+                reading(outcome)
+            except Exception:  # noqa: BLE001 - reported as a thread of its own would be
+                threading.excepthook(threading.ExceptHookArgs(
+                    (*sys.exc_info(), threading.current_thread())))
+            # Nothing of the reading may stay referenced here while idle (its
+            # port, parser and links are freed by reference count when dropped),
+            # and whoever waits for it finds this thread idle again.
+            del reading
+            with self._lock:
+                self._idle.setdefault(policy, []).append(work)
+            done.set()
+            del done
 
 
 #: The process's reader threads.
