@@ -339,6 +339,44 @@ def test_a_queue_read_on_the_schedulers_tick_is_told_from_a_step(code, rate, gap
     assert clock.status().restarts == {'start': 1}
 
 
+def away(stream: list[Packet], at: float, seconds: float) -> list[Packet]:
+    """Deschedule the reader from ``at`` for ``seconds``: what came meanwhile is read at once."""
+    end = at + seconds
+    return [p._replace(read_time=end + k * 20e-6) if at <= p.read_time < end else p
+            for k, p in enumerate(stream)]
+
+
+@pytest.mark.parametrize('away_s', [0.05, 0.1, 0.2])
+@pytest.mark.parametrize('at', [0.05, 0.1, 0.15, 0.2, 0.3])
+@pytest.mark.parametrize(('code', 'rate'), LINE_MAX)
+@pytest.mark.parametrize('tick', [0.0, 0.004, 0.010])
+def test_a_queue_read_by_a_host_away_for_a_moment_is_told_from_a_step(code, rate, at, away_s,
+                                                                      tick):
+    """
+    A queue after a gap whose reader is descheduled ``away_s`` s, ``at`` s after the return.
+
+    What came meanwhile is read at once, each record later than its last
+    byte by up to ``away_s``: a lump of residuals, falling steeply within
+    itself, in the middle of the queue's gentle fall. It hid the fall from
+    both slopes, until the records watched had come and gone (the fresh fit
+    stood and followed the 50-ms queue out: 51 ms off 0.54 s after the
+    return, CI 2026-11-27) or after the line came back, until the
+    probation's 0.3 s ran out before the queue had drained (35 ms off).
+    Reads are only ever late: the least residual of each few records keeps
+    to the queue's fall, whatever the reader did between.
+    """
+    wire = line_budget.wire_time(code, 115200, True)
+    gap = 0.3
+    stream = through_line(packets([Life(0.0, 10.0 + gap + 8.0, 1_000_000, rate=rate)],
+                                  outages=((10.0, 10.0 + gap),), jitter=RADIO_JITTER),
+                          wire, 0.050, read_tick=tick)
+    back = next(p.read_time for p in stream if p.true_time >= 10.0 + gap)
+    clock, errors = stamp_all(away(stream, back + at, away_s), wire=wire)
+    check(errors, [10.0 + gap], early=0.050 + away_s + tick + TOLERANCE,
+          tolerance=tick / 2 + TOLERANCE)
+    assert clock.status().restarts == {'start': 1}
+
+
 @pytest.mark.parametrize('gap', [0.5, 1.0, 2.0])
 def test_a_probation_asks_records_as_near_the_line_as_they_came_before(gap):
     """

@@ -53,11 +53,13 @@ written down in docs/clock.md; in short:
   median of the slopes between every two, that stands out of their scatter by
   ``QUEUE_SIGMAS`` standard errors; ``QUEUE_WATCH`` records are watched), the lateness
   was a queue's: the old line comes back and stamps the rest of the queue
-  true. Otherwise the fresh fit stands. (Until the records tell, the fresh
-  fit stamps them: a power cycle whose timer lands a few tens of
-  milliseconds after the line, near a rollover, is stamped true from its
-  first record, and a queue's first records within the grace.) A
-  probation's clock does not run out while the residuals fall that way either.
+  true, on probation until the queue has drained at that fall. Otherwise
+  the fresh fit stands. (Until the records tell, the fresh fit stamps them:
+  a power cycle whose timer lands a few tens of milliseconds after the
+  line, near a rollover, is stamped true from its first record, and a
+  queue's first records within the grace.) Records read at once (the host
+  was away) count as the last of them, the least late; and a probation's
+  time is the records' device time, which a reader away does not use up.
 
 Not thread-safe: the caller stamps from one thread (the reader) or holds a lock.
 """
@@ -111,6 +113,9 @@ QUEUE_RECORDS = 16
 #: QUEUE_RECORDS (the standard error falls as the records' span to the power 1.5): at the
 #: streams' highest rates, a 50-ms queue read on a 10-ms tick stands out after about 30.
 QUEUE_WATCH = 64
+#: The longest (s of device time) a draining queue holds a probation open: a queue of
+#: 50 ms on a line with 1 % of it free drains in 5 s.
+QUEUE_DRAIN_S = 5.0
 #: The robust slope (the median of the slopes between every two records: a square of the
 #: trail's length to compute) is taken every this many records, the least-squares one at
 #: every record: at most 0.1 ms a record on average, 0.5 ms on the one that takes it.
@@ -200,6 +205,20 @@ class _Replaced(NamedTuple):
     last_restart: str
 
 
+def _drained(device_time: float, residual: float, fall: float) -> float:
+    """
+    Return the device time by which a queue ``residual`` s late, falling at ``fall``, has drained.
+
+    Twice over (the fall is known to a fifth at five standard errors, a
+    line's free share may shrink), at most ``QUEUE_DRAIN_S``, and a
+    probation after: the records must come near the line by then. Before,
+    a probation ran out 0.3 s after the residuals last fell clearly: a
+    reader away a moment or read on a busy host's tick blurred the fall for
+    longer, and the fit restarted from a queued record (35 ms off).
+    """
+    return device_time + min(2.0 * max(residual, 0.0) / fall, QUEUE_DRAIN_S) + PROBATION_S
+
+
 def _near_line(fit: DeviceClock, residual: float) -> bool:
     """Whether a record ``residual`` s above ``fit``'s line came as near it as records do."""
     return residual <= CONFIRM_S + max(0.0, fit.near)
@@ -211,12 +230,20 @@ class _Trail:
 
     (device time, residual) on the line the late record after the gap
     replaced, or on the line while on probation: the last ``QUEUE_WATCH``.
+    Records read together (closer than half a wire time: no line brings two
+    that close) waited in a buffer while the host was away, each by as long
+    as it came before the read; the last of them least, and it alone stands
+    for them. A reader descheduled for 0.1 s mid-queue otherwise put a lump
+    of residuals up to 0.1 s high, falling at one second a second within
+    itself, into the queue's gentle fall, and hid it from both slopes.
     """
 
     def __init__(self) -> None:
         self._points: deque[tuple[float, float]] = deque(maxlen=QUEUE_WATCH)
         #: Records added since the trail was last cleared (when to take the robust slope).
         self._added = 0
+        #: When the last record added was read (monotonic s).
+        self._last_read = float('-inf')
 
     def __len__(self) -> int:
         return len(self._points)
@@ -224,46 +251,53 @@ class _Trail:
     def clear(self) -> None:
         self._points.clear()
         self._added = 0
+        self._last_read = float('-inf')
 
-    def add(self, device_time: float, residual: float) -> None:
-        self._points.append((device_time, residual))
+    def add(self, device_time: float, residual: float, read_time: float,
+            wire_time: float) -> None:
+        if self._points and read_time - self._last_read <= 0.5 * wire_time:
+            self._points[-1] = (device_time, residual)  # read with the one before
+        else:
+            self._points.append((device_time, residual))
+        self._last_read = read_time
         self._added += 1
 
-    def falling(self) -> bool:
+    def fall(self) -> float | None:
         """
-        Whether the residuals fall as a draining queue's do.
+        Return how fast (s per s) the residuals fall, where they fall as a draining queue's do.
 
-        At least ``QUEUE_RECORDS`` of them, whose slope against device time is
-        below ``-QUEUE_FALL`` and ``QUEUE_SIGMAS`` standard errors below zero:
-        by least squares, or (every ``ROBUST_EVERY`` records) by the median of
-        the slopes between every two with the residuals' median absolute
+        None where they do not. At least ``QUEUE_RECORDS`` of them, whose
+        slope against device time is below ``-QUEUE_FALL`` and
+        ``QUEUE_SIGMAS`` standard errors below zero: by least squares, or
+        (every ``ROBUST_EVERY`` records) by the median of the slopes between
+        every two with the residuals' median absolute
         deviation as their scatter (one step among them, a reply or a burst of
         noise taking the line in the middle of the queue, moves that little
         where it hides a least-squares slope in its scatter).
         """
         n = len(self._points)
         if n < QUEUE_RECORDS:
-            return False
+            return None
         points = list(self._points)
         mean_t = sum(t for t, _ in points) / n
         stt = sum((t - mean_t) ** 2 for t, _ in points)
         if stt <= 0.0:
-            return False
+            return None
         mean_r = sum(r for _, r in points) / n
         slope = sum((t - mean_t) * (r - mean_r) for t, r in points) / stt
         scatter = sum((r - mean_r - slope * (t - mean_t)) ** 2 for t, r in points) / (n - 2)
         if slope < -QUEUE_FALL and slope * slope * stt > QUEUE_SIGMAS ** 2 * scatter:
-            return True
+            return -slope
         if (self._added - QUEUE_RECORDS) % ROBUST_EVERY:
-            return False
+            return None
         slope = statistics.median([(r2 - r1) / (t2 - t1) for k, (t1, r1) in enumerate(points)
                                    for t2, r2 in points[k + 1:] if t2 > t1])
         if slope >= -QUEUE_FALL:
-            return False
+            return None
         rest = [r - slope * t for t, r in points]
         centre = statistics.median(rest)
         spread = 1.4826 * statistics.median(abs(x - centre) for x in rest)
-        return slope * slope * stt > QUEUE_SIGMAS ** 2 * spread * spread
+        return -slope if slope * slope * stt > QUEUE_SIGMAS ** 2 * spread * spread else None
 
 
 class SampleClock:
@@ -298,6 +332,9 @@ class SampleClock:
         self._check_next = False
         self._last_raw: int | None = None
         self._last_host = 0.0
+        #: The device time (s, the fit's ticks) at which a probation ends: counted in the
+        #: records' time, not the host's, so that a reader away longer than a probation
+        #: (a busy host) does not run it out before the records it then reads are judged.
         self._probation_end: float | None = None
         self._probation_best = 0.0
         #: The records since the last gap: whether they fall as a queue's do.
@@ -373,14 +410,14 @@ class SampleClock:
                 self._restart(Restart.RESYNC, raw, host, since=ticks - self.ticks)
                 if replaced is not None:
                     self._replaced = replaced
-                    self._trail.add(ticks / TICKS_PER_SECOND, off)
+                    self._trail.add(ticks / TICKS_PER_SECOND, off, read_time, wire_time)
                 return
             if gap or self._check_next:
                 self.gaps += 1
-                self._probation_end = host + PROBATION_S
+                self._probation_end = ticks / TICKS_PER_SECOND + PROBATION_S
                 self._probation_best = off
                 self._trail.clear()
-                self._trail.add(ticks / TICKS_PER_SECOND, off)
+                self._trail.add(ticks / TICKS_PER_SECOND, off, read_time, wire_time)
             self._check_next = False
             if rolled:
                 self.rollovers += wraps + (raw < self._last_raw)
@@ -388,22 +425,27 @@ class SampleClock:
             replaced = self._replaced
             on_old = ticks + replaced.shift
             off = replaced.fit.residual(on_old, read_time, wire_time)
-            self._trail.add(on_old / TICKS_PER_SECOND, off)
-            if _near_line(replaced.fit, off) or self._trail.falling():
-                # The records caught up with the line before the gap: a queue drained.
-                self._resume(host, off)
+            self._trail.add(on_old / TICKS_PER_SECOND, off, read_time, wire_time)
+            near = _near_line(replaced.fit, off)
+            fall = None if near else self._trail.fall()
+            if near or fall is not None:
+                # The records caught up with the line before the gap, or fall towards it
+                # as a queue's do: a queue, drained or draining.
+                self._resume(on_old / TICKS_PER_SECOND, off, fall)
                 ticks = on_old
             elif len(self._trail) == QUEUE_WATCH:
                 self._replaced = None  # a step that stays: the fresh fit stands
         elif self._probation_end is not None:
             off = self.fit.residual(ticks, read_time, wire_time)
             self._probation_best = min(self._probation_best, off)
-            self._trail.add(ticks / TICKS_PER_SECOND, off)
-            if self._trail.falling():
+            self._trail.add(ticks / TICKS_PER_SECOND, off, read_time, wire_time)
+            fall = self._trail.fall()
+            if fall is not None:
                 # A queue is draining: its records are late by what it still holds, and
                 # the time to come near the line counts from when it has drained.
-                self._probation_end = max(self._probation_end, host + PROBATION_S)
-            if host >= self._probation_end:
+                self._probation_end = max(self._probation_end,
+                                          _drained(ticks / TICKS_PER_SECOND, off, fall))
+            if ticks / TICKS_PER_SECOND >= self._probation_end:
                 self._probation_end = None
                 if not _near_line(self.fit, self._probation_best):
                     # No record since the gap came near the line: the device lost time.
@@ -412,7 +454,7 @@ class SampleClock:
         self.ticks_since_last = ticks - self.ticks
         self.ticks = ticks
 
-    def _resume(self, host: float, off: float) -> None:
+    def _resume(self, device_time: float, off: float, fall: float | None) -> None:
         """
         Go back to the fit a late record after a gap replaced: it was a queue's head.
 
@@ -421,7 +463,9 @@ class SampleClock:
         the queue's, not lost device time: the line before the gap stamps
         them true, where the new fit, started from queued records, would
         follow the queue out. The gap is then a gap, on probation as any
-        other; the restart is undone in the counts.
+        other (``fall`` None: a record came near the line) or until the
+        queue has drained (``fall``: how fast its residuals fall); the restart
+        is undone in the counts.
         """
         replaced, self._replaced = self._replaced, None
         replaced.fit.keep_after(self.fit)
@@ -434,7 +478,8 @@ class SampleClock:
             self._restarts.pop(Restart.RESYNC.value, None)
         self.last_restart = replaced.last_restart
         self.gaps += 1
-        self._probation_end = host + PROBATION_S
+        self._probation_end = (device_time + PROBATION_S if fall is None
+                               else _drained(device_time, off, fall))
         self._probation_best = off
 
     def _restart(self, reason: Restart, raw: int, host: float = 0.0,
