@@ -363,6 +363,9 @@ class LinkEvents(QuietObserver):
 
 def main() -> int:
     """Run the driver node, observed; write its counters as it runs and once at the end."""
+    # As the node's own main: a benchmark stopped or killed takes its node with it
+    # (one outlived a memory curve stopped with SIGTERM, streaming on until found).
+    lifetime.die_with_parent()
     path = os.environ.get(STATS_ENV)
     if not path:
         print(f'{STATS_ENV} must name the file for the counters', file=sys.stderr)

@@ -34,9 +34,11 @@ import pty
 import select
 import signal
 import subprocess
+import sys
 import threading
 import time
 
+from harness.instrumented_node import STATS_ENV
 from harness.processes import ADDRESS, isolate_ros_domain, REPO as REPO_PATH
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
@@ -247,6 +249,41 @@ def test_each_tool_in_a_session_of_its_own_ends_with_its_parent(tool, sim, tmp_p
         assert not left, f'{tool} left {_describe(left)} behind:\n{log.read_text()[-3000:]}'
     finally:
         _kill_all(family)
+
+
+def test_the_benchmarks_observed_node_ends_with_its_parent(sim, tmp_path):
+    """
+    The node every soak and memory curve runs (``harness.instrumented_node``), in its own session.
+
+    Its parent (the benchmark) killed: the node must not stream on (one
+    outlived a memory curve stopped with SIGTERM, 2026-11-27).
+    """
+    log = tmp_path / 'out.txt'
+    command = ' '.join(f"'{part}'" for part in [
+        sys.executable, '-m', 'harness.instrumented_node', '--ros-args', '-p',
+        f'port:={sim.port}', '-p', f'address:={ADDRESS}'])
+    env = _env()
+    env[STATS_ENV] = str(tmp_path / 'stats.json')
+    env['PYTHONPATH'] = os.pathsep.join((str(REPO), env.get('PYTHONPATH', '')))
+    parent = subprocess.Popen(['bash', '-c', f'setsid {command} > {log} 2>&1 & wait'],
+                              env=env, stdin=subprocess.DEVNULL, cwd=str(REPO))
+    family: set[int] = set()
+    try:
+        deadline = time.monotonic() + 30.0
+        while 'start-up heap frozen' not in _text(log) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        family = _family(parent.pid) - {parent.pid}
+        assert family and all(_alive(pid) for pid in family), _text(log)
+        parent.kill()
+        parent.wait()
+        left = _left(family, GONE_WITHIN)
+        assert not left, f'the node left {_describe(left)} behind:\n{_text(log)[-3000:]}'
+    finally:
+        _kill_all(family)
+
+
+def _text(path: Path) -> str:
+    return path.read_text(errors='replace') if path.exists() else ''
 
 
 def _demo(terminal: Terminal) -> set[int]:
