@@ -229,26 +229,41 @@ def test_each_tool_ends_when_its_terminal_hangs_up(tool, sim, tmp_path):
         _kill_all(family | {terminal.pid})
 
 
-@pytest.mark.parametrize('tool', TOOLS)
-def test_each_tool_in_a_session_of_its_own_ends_with_its_parent(tool, sim, tmp_path):
-    # setsid: no terminal, no process group of the parent's; only the parent-death
-    # signal can tell it that the parent is gone.
-    args, _ = _tool_argv(tool, sim, tmp_path)
-    log = tmp_path / 'out.txt'
-    command = ' '.join(f"'{part}'" for part in [str(LIB / tool), *args])
+def _ends_with_its_killed_parent(name: str, argv: list[str], log: Path, env: dict[str, str],
+                                 marker: str = '') -> None:
+    """
+    Start ``argv`` in a session of its own under a shell, kill the shell; assert nothing is left.
+
+    setsid: no terminal, no process group of the parent's; only the
+    parent-death signal can tell it that the parent is gone. ``marker``:
+    what its output says once it runs ('' to give it 3 s).
+    """
+    command = ' '.join(f"'{part}'" for part in argv)
     parent = subprocess.Popen(['bash', '-c', f'setsid {command} > {log} 2>&1 & wait'],
-                              env=_env(), stdin=subprocess.DEVNULL)
+                              env=env, stdin=subprocess.DEVNULL, cwd=str(REPO))
     family: set[int] = set()
     try:
-        time.sleep(3.0)
+        deadline = time.monotonic() + (30.0 if marker else 3.0)
+        while time.monotonic() < deadline and not (marker and marker in _text(log)):
+            time.sleep(0.1)
         family = _family(parent.pid) - {parent.pid}
-        assert family and all(_alive(pid) for pid in family), log.read_text()
+        assert family and all(_alive(pid) for pid in family), _text(log)
         parent.kill()
         parent.wait()
         left = _left(family, GONE_WITHIN)
-        assert not left, f'{tool} left {_describe(left)} behind:\n{log.read_text()[-3000:]}'
+        assert not left, f'{name} left {_describe(left)} behind:\n{_text(log)[-3000:]}'
     finally:
         _kill_all(family)
+
+
+def _text(path: Path) -> str:
+    return path.read_text(errors='replace') if path.exists() else ''
+
+
+@pytest.mark.parametrize('tool', TOOLS)
+def test_each_tool_in_a_session_of_its_own_ends_with_its_parent(tool, sim, tmp_path):
+    args, _ = _tool_argv(tool, sim, tmp_path)
+    _ends_with_its_killed_parent(tool, [str(LIB / tool), *args], tmp_path / 'out.txt', _env())
 
 
 def test_the_benchmarks_observed_node_ends_with_its_parent(sim, tmp_path):
@@ -258,32 +273,13 @@ def test_the_benchmarks_observed_node_ends_with_its_parent(sim, tmp_path):
     Its parent (the benchmark) killed: the node must not stream on (one
     outlived a memory curve stopped with SIGTERM, 2026-11-27).
     """
-    log = tmp_path / 'out.txt'
-    command = ' '.join(f"'{part}'" for part in [
-        sys.executable, '-m', 'harness.instrumented_node', '--ros-args', '-p',
-        f'port:={sim.port}', '-p', f'address:={ADDRESS}'])
     env = _env()
     env[STATS_ENV] = str(tmp_path / 'stats.json')
     env['PYTHONPATH'] = os.pathsep.join((str(REPO), env.get('PYTHONPATH', '')))
-    parent = subprocess.Popen(['bash', '-c', f'setsid {command} > {log} 2>&1 & wait'],
-                              env=env, stdin=subprocess.DEVNULL, cwd=str(REPO))
-    family: set[int] = set()
-    try:
-        deadline = time.monotonic() + 30.0
-        while 'start-up heap frozen' not in _text(log) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        family = _family(parent.pid) - {parent.pid}
-        assert family and all(_alive(pid) for pid in family), _text(log)
-        parent.kill()
-        parent.wait()
-        left = _left(family, GONE_WITHIN)
-        assert not left, f'the node left {_describe(left)} behind:\n{_text(log)[-3000:]}'
-    finally:
-        _kill_all(family)
-
-
-def _text(path: Path) -> str:
-    return path.read_text(errors='replace') if path.exists() else ''
+    argv = [sys.executable, '-m', 'harness.instrumented_node', '--ros-args',
+            '-p', f'port:={sim.port}', '-p', f'address:={ADDRESS}']
+    _ends_with_its_killed_parent('the observed node', argv, tmp_path / 'out.txt', env,
+                                 marker='start-up heap frozen')
 
 
 def _demo(terminal: Terminal) -> set[int]:
