@@ -40,11 +40,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 import math
 from operator import attrgetter
-import struct
 from typing import Any
 
 from sensor_msgs.msg import Imu, MagneticField
 
+from .cdr import StampedDoubles
 from ..codec import streams
 from ..codec.orientation import body_vector, ENU, matrix_from_euler, orientation, Quaternion
 from ..codec.streams import Stream
@@ -90,8 +90,6 @@ def set_stamp(header, stamp: float) -> None:
     header.stamp.sec, header.stamp.nanosec = stamp_parts(stamp)
 
 
-#: Encapsulation header of a serialized message: plain CDR, little endian.
-CDR_LE = b'\x00\x01\x00\x00'
 #: Field values of the fixed records for the start-up check of the serialized messages.
 _PROBE_FIELDS = {
     'accel': (0.125, -0.5, -1.0), 'angular_rate': (0.01, -0.02, 0.03),
@@ -110,18 +108,6 @@ def probe_records(stream: Stream) -> list[Any]:
     elif stream.orientation == streams.EULER:
         out.append(record._replace(roll=math.nan, pitch=math.nan, yaw=math.nan))
     return out
-
-
-def _cdr_header(frame_id: str) -> tuple[str, bytes]:
-    """
-    Struct format and frame_id bytes of a std_msgs/Header in CDR, up to a float64.
-
-    sec (int32), nanosec (uint32), frame_id as its length with the NUL
-    (uint32), its bytes and a NUL, then padding to the 8-byte alignment of the
-    float64 that follows (alignment counts from after the encapsulation).
-    """
-    text = frame_id.encode() + b'\x00'
-    return f'iII{len(text)}s{-(12 + len(text)) % 8}x', text
 
 
 @dataclass(frozen=True)
@@ -188,9 +174,8 @@ class MessageFactory:
         # The same messages in CDR: header, then Imu's 37 float64 (orientation 4 and its
         # covariance 9, angular velocity 3 and 9, linear acceleration 3 and 9), or
         # MagneticField's 12 (field 3 and its covariance 9).
-        header, self._frame_cdr = _cdr_header(self.frame_id)
-        self._imu_struct = struct.Struct(f'<4s{header}37d')
-        self._mag_struct = struct.Struct(f'<4s{header}12d')
+        self._imu_layout = StampedDoubles(self.frame_id, 37)
+        self._mag_layout = StampedDoubles(self.frame_id, 12)
         self._magnetic_field_cov = tuple(mag.magnetic_field_covariance)
 
     def orientation(self, record: Any) -> tuple[Quaternion, tuple[float, ...]]:
@@ -237,9 +222,8 @@ class MessageFactory:
         """Return the Imu message of :meth:`fill_imu`, serialized (CDR bytes)."""
         sec, nanosec = stamp_parts(stamp)
         q, q_cov = self.orientation(record)
-        return self._imu_struct.pack(
-            CDR_LE, sec, nanosec, len(self._frame_cdr), self._frame_cdr,
-            *q, *q_cov, *self.angular_velocity(record), *self._angular_velocity_cov,
+        return self._imu_layout.pack(
+            sec, nanosec, *q, *q_cov, *self.angular_velocity(record), *self._angular_velocity_cov,
             *self.linear_acceleration(record), *self._linear_acceleration_cov)
 
     def mag_cdr(self, mag_gauss: Sequence[float], stamp: float) -> bytes:
@@ -247,9 +231,8 @@ class MessageFactory:
         sec, nanosec = stamp_parts(stamp)
         m = body_vector(mag_gauss, self.convention)
         t = TESLA_PER_GAUSS
-        return self._mag_struct.pack(
-            CDR_LE, sec, nanosec, len(self._frame_cdr), self._frame_cdr,
-            m[0] * t, m[1] * t, m[2] * t, *self._magnetic_field_cov)
+        return self._mag_layout.pack(
+            sec, nanosec, m[0] * t, m[1] * t, m[2] * t, *self._magnetic_field_cov)
 
     def serialized_matches(self) -> bool:
         """

@@ -26,6 +26,7 @@ driver core (driver_core.py), which builds it and hands its
 
 from collections.abc import Callable
 from dataclasses import dataclass
+import functools
 import threading
 
 from rclpy._rclpy_pybind11 import RCLError
@@ -45,6 +46,19 @@ from ..device.sample_clock import ClockStatus, Restart, SampleClock
 #: settings: checked once per process, because a managed node makes a core at
 #: every configure and rclpy's deserialize_message keeps a little memory per call.
 _SERIALIZED_MATCHES: dict[MessageSettings, bool] = {}
+
+
+@functools.cache
+def _bool_cdr(value: bool) -> bytes:
+    """
+    Return a ``std_msgs/Bool`` as the middleware serializes it: made once per value.
+
+    Published as bytes (``cdr.py`` says why): as an object, each one published
+    (at every power cycle and capture) left a name in CPython's type cache.
+    """
+    from rclpy.serialization import serialize_message
+
+    return serialize_message(Bool(data=value))
 
 
 @dataclass
@@ -143,7 +157,7 @@ class RecordPublisher:
         accepted capture's): True again whenever that one is written.
         """
         try:
-            self.publishers.is_calibrated.publish(Bool(data=calibrated))
+            self.publishers.is_calibrated.publish(_bool_cdr(calibrated))
         except RCLError:
             pass  # ROS is shutting down: nobody is left to tell
 

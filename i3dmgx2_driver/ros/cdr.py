@@ -1,0 +1,93 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Messages written as the bytes the middleware sends: plain CDR, little endian.
+
+rclpy publishes ``bytes`` as they are (``publish_raw``), which skips the
+conversion of a message object to C. That conversion is not only time: the
+generated C code looks every field up by a C string
+(``PyObject_GetAttrString``), a new ``str`` each time, and CPython's type
+cache keeps the last name of each of its 4,096 entries, indexed by the
+name's address, so a node that publishes message objects keeps a slowly
+growing set of dead names (docs/soak.md, "The type cache"). The node's
+records are packed with one ``struct`` each (:class:`StampedDoubles`); messages
+of variable shape (``/diagnostics``) go through :class:`CdrWriter`.
+
+Alignment counts from the end of the 4-byte encapsulation header, as
+Fast DDS and Cyclone DDS write it; whoever publishes these bytes checks once
+that the middleware in use reads them back as the message.
+"""
+
+import struct
+
+#: Encapsulation header of a serialized message: plain CDR, little endian.
+CDR_LE = b'\x00\x01\x00\x00'
+
+_U32 = struct.Struct('<I')
+_I32 = struct.Struct('<i')
+
+
+class StampedDoubles:
+    """
+    A message that is a ``std_msgs/Header`` and then float64s (Imu, MagneticField, Temperature).
+
+    One ``struct`` for the whole message: sec (int32), nanosec (uint32),
+    frame_id as its length with the NUL (uint32), its bytes and a NUL,
+    padding to the 8-byte alignment of the first float64, the float64s.
+    """
+
+    def __init__(self, frame_id: str, doubles: int) -> None:
+        self._frame = frame_id.encode() + b'\x00'
+        self._struct = struct.Struct(
+            f'<4siII{len(self._frame)}s{-(12 + len(self._frame)) % 8}x{doubles}d')
+
+    def pack(self, sec: int, nanosec: int, *values: float) -> bytes:
+        """Return the message stamped ``sec``, ``nanosec`` with ``values``, serialized."""
+        return self._struct.pack(CDR_LE, sec, nanosec, len(self._frame), self._frame, *values)
+
+
+class CdrWriter:
+    """Append the fields of a message, in order, each at its alignment."""
+
+    def __init__(self) -> None:
+        self._out = bytearray(CDR_LE)
+
+    def _align(self, size: int) -> None:
+        self._out += bytes(-(len(self._out) - len(CDR_LE)) % size)
+
+    def octet(self, value: int) -> None:
+        """Append a ``byte``, ``char`` or ``uint8``."""
+        self._out.append(value)
+
+    def uint32(self, value: int) -> None:
+        """Append a ``uint32`` (and the length of a sequence)."""
+        self._align(4)
+        self._out += _U32.pack(value)
+
+    def int32(self, value: int) -> None:
+        """Append an ``int32``."""
+        self._align(4)
+        self._out += _I32.pack(value)
+
+    def string(self, value: str) -> None:
+        """Append a ``string``: its length with the NUL, its UTF-8 bytes, the NUL."""
+        data = value.encode()
+        self.uint32(len(data) + 1)
+        self._out += data
+        self._out.append(0)
+
+    def serialized(self) -> bytes:
+        """Return the message so far, encapsulation header first."""
+        return bytes(self._out)
