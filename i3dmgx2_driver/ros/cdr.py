@@ -46,16 +46,20 @@ class StampedDoubles:
     One ``struct`` for the whole message: sec (int32), nanosec (uint32),
     frame_id as its length with the NUL (uint32), its bytes and a NUL,
     padding to the 8-byte alignment of the first float64, the float64s.
+    The hot path calls :attr:`struct` itself (one Python call less a record
+    than :meth:`pack`: 0.45 us of 3.5), with :data:`CDR_LE`, the stamp,
+    ``len(frame)`` and :attr:`frame` first.
     """
 
     def __init__(self, frame_id: str, doubles: int) -> None:
-        self._frame = frame_id.encode() + b'\x00'
-        self._struct = struct.Struct(
-            f'<4siII{len(self._frame)}s{-(12 + len(self._frame)) % 8}x{doubles}d')
+        #: The frame_id as it goes on the wire: UTF-8 and a NUL.
+        self.frame = frame_id.encode() + b'\x00'
+        self.struct = struct.Struct(
+            f'<4siII{len(self.frame)}s{-(12 + len(self.frame)) % 8}x{doubles}d')
 
     def pack(self, sec: int, nanosec: int, *values: float) -> bytes:
         """Return the message stamped ``sec``, ``nanosec`` with ``values``, serialized."""
-        return self._struct.pack(CDR_LE, sec, nanosec, len(self._frame), self._frame, *values)
+        return self.struct.pack(CDR_LE, sec, nanosec, len(self.frame), self.frame, *values)
 
 
 class CdrWriter:

@@ -44,7 +44,7 @@ from typing import Any
 
 from sensor_msgs.msg import Imu, MagneticField
 
-from .cdr import StampedDoubles
+from .cdr import CDR_LE, StampedDoubles
 from ..codec import streams
 from ..codec.orientation import body_vector, ENU, matrix_from_euler, orientation, Quaternion
 from ..codec.streams import Stream
@@ -174,8 +174,9 @@ class MessageFactory:
         # The same messages in CDR: header, then Imu's 37 float64 (orientation 4 and its
         # covariance 9, angular velocity 3 and 9, linear acceleration 3 and 9), or
         # MagneticField's 12 (field 3 and its covariance 9).
-        self._imu_layout = StampedDoubles(self.frame_id, 37)
-        self._mag_layout = StampedDoubles(self.frame_id, 12)
+        imu_layout = StampedDoubles(self.frame_id, 37)
+        self._imu_struct, self._frame_cdr = imu_layout.struct, imu_layout.frame
+        self._mag_struct = StampedDoubles(self.frame_id, 12).struct
         self._magnetic_field_cov = tuple(mag.magnetic_field_covariance)
 
     def orientation(self, record: Any) -> tuple[Quaternion, tuple[float, ...]]:
@@ -222,8 +223,9 @@ class MessageFactory:
         """Return the Imu message of :meth:`fill_imu`, serialized (CDR bytes)."""
         sec, nanosec = stamp_parts(stamp)
         q, q_cov = self.orientation(record)
-        return self._imu_layout.pack(
-            sec, nanosec, *q, *q_cov, *self.angular_velocity(record), *self._angular_velocity_cov,
+        return self._imu_struct.pack(
+            CDR_LE, sec, nanosec, len(self._frame_cdr), self._frame_cdr,
+            *q, *q_cov, *self.angular_velocity(record), *self._angular_velocity_cov,
             *self.linear_acceleration(record), *self._linear_acceleration_cov)
 
     def mag_cdr(self, mag_gauss: Sequence[float], stamp: float) -> bytes:
@@ -231,8 +233,9 @@ class MessageFactory:
         sec, nanosec = stamp_parts(stamp)
         m = body_vector(mag_gauss, self.convention)
         t = TESLA_PER_GAUSS
-        return self._mag_layout.pack(
-            sec, nanosec, m[0] * t, m[1] * t, m[2] * t, *self._magnetic_field_cov)
+        return self._mag_struct.pack(
+            CDR_LE, sec, nanosec, len(self._frame_cdr), self._frame_cdr,
+            m[0] * t, m[1] * t, m[2] * t, *self._magnetic_field_cov)
 
     def serialized_matches(self) -> bool:
         """
