@@ -315,6 +315,7 @@ def run(plan: Run) -> list[Row]:
                 time.sleep(max(0.0, plan.every - (time.monotonic() - began)))
         finally:
             node.stop()
+            node.close()
     print(f'{faults} faults, {cycles} lifecycle cycles in {rows[-1].seconds / 60:.1f} min; '
           f'{late} returns slower than {BACK_WITHIN:g} s')
     return rows

@@ -124,7 +124,11 @@ class LegRunner:
             return node, client
         rig.sim.unplug(None)
         node = rig.nodes.start_node(name, leg.stream, leg.rate_hz, lifecycle=False)
-        self._wait_publisher(name, node)
+        try:
+            self._wait_publisher(name, node)
+        except BaseException:
+            node.close()
+            raise
         time.sleep(1.0)
         rig.sim.replug()
         return node, None
@@ -174,12 +178,21 @@ class LegRunner:
 
     def run(self, leg: Leg) -> LegResult:
         """Bring the leg's node up, fault it, bring it down; analyse what it published."""
-        cfg, sim, subscriber = self.cfg, self.rig.sim, self.rig.subscriber
         name = leg_node_name(leg)
         self._take_rows()
         self._take_truth()
         begin = time.time()
         node, client = self._bring_up(leg, name)
+        try:
+            return self._run_node(leg, name, node, client, begin)
+        finally:
+            if client is None:  # a plain node lives one leg: its process and its log go
+                node.close()
+
+    def _run_node(self, leg: Leg, name: str, node: NodeProcess, client: LifecycleClient | None,
+                  begin: float) -> LegResult:
+        """Fault the node brought up at ``begin``, bring it down; analyse what it published."""
+        cfg, sim, subscriber = self.cfg, self.rig.sim, self.rig.subscriber
         if not self._wait_messages(1, 60.0):
             raise RuntimeError(f'leg {leg.number}: no message within 60 s:\n'
                                f'{node.output()[-3000:]}')

@@ -45,7 +45,7 @@ source "$ROOT/scripts/env.sh"
 # Keep the demo's DDS traffic on this machine.
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 
-WORK="$(mktemp -d /tmp/i3dmgx2-demo-XXXXXX)"
+WORK="$(mktemp -d "${TMPDIR:-/tmp}/i3dmgx2-demo-XXXXXX")"
 SIM_PID=''
 NODE_PID=''
 MONITOR_PID=''

@@ -30,7 +30,6 @@ import select
 import shutil
 import signal
 import sys
-import tempfile
 import threading
 import tty
 
@@ -279,8 +278,8 @@ def _has_group(name: str) -> bool:
 
 # -- a port missing at start: said once, retried, ERROR on /diagnostics ---------
 
-def test_a_missing_port_is_said_once_and_an_error_on_diagnostics():
-    path = os.path.join(tempfile.mkdtemp(prefix='i3dmgx2-missing-'), 'ttyUSB0')
+def test_a_missing_port_is_said_once_and_an_error_on_diagnostics(tmp_path):
+    path = str(tmp_path / 'ttyUSB0')
     listener = Listener({'/diagnostics': DiagnosticArray})
     node = NodeProcess({'port': path, 'address': 95, 'reconnect_interval': 0.2})
     with listener, node:

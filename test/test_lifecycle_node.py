@@ -26,7 +26,6 @@ passes or fails on how fast.
 import gc
 import os
 import signal
-import tempfile
 import threading
 import time
 import weakref
@@ -213,8 +212,8 @@ def test_a_transition_the_state_does_not_have_leaves_the_node_as_it_is():
         assert node.wait(timeout=10) == 0, node.output()
 
 
-def test_configure_fails_on_a_missing_port_then_succeeds_once_it_appears():
-    link = os.path.join(tempfile.mkdtemp(prefix='i3dmgx2-lc-'), 'ttyGX2')
+def test_configure_fails_on_a_missing_port_then_succeeds_once_it_appears(tmp_path):
+    link = str(tmp_path / 'ttyGX2')
     with Listener(TOPICS) as listener, start(link) as node:
         client = rig(listener, node)
         assert not client.change('configure')

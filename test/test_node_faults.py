@@ -23,9 +23,7 @@ fast something happened, apart from generous timeouts.
 """
 
 import contextlib
-import os
 import signal
-import tempfile
 import time
 
 from harness.processes import isolate_ros_domain, Listener, NodeProcess
@@ -163,8 +161,8 @@ def test_unplug_and_replug_reconnects_every_time():
         assert node.stop()[0] == 0
 
 
-def test_port_missing_at_start_then_appears():
-    link = os.path.join(tempfile.mkdtemp(prefix='i3dmgx2-late-'), 'ttyGX2')
+def test_port_missing_at_start_then_appears(tmp_path):
+    link = str(tmp_path / 'ttyGX2')
     listener = Listener({'imu/raw_data': Imu})
     node = NodeProcess({'port': link, 'address': 95, 'reconnect_interval': 0.3})
     with listener, node:

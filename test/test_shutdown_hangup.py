@@ -291,21 +291,30 @@ def _demo(terminal: Terminal) -> set[int]:
     return _family(terminal.pid)
 
 
-def test_the_demo_leaves_nothing_when_its_terminal_is_closed():
-    terminal = Terminal(['bash', '--norc', '--noprofile', '-i'], _env())
+def _demo_env(tmp_path: Path) -> dict[str, str]:
+    """Return the terminal's environment: the demo's work folder under ``tmp_path`` (TMPDIR)."""
+    return dict(_env(), TMPDIR=str(tmp_path))
+
+
+def test_the_demo_leaves_nothing_when_its_terminal_is_closed(tmp_path):
+    terminal = Terminal(['bash', '--norc', '--noprofile', '-i'], _demo_env(tmp_path))
     family: set[int] = set()
     try:
         family = _demo(terminal)
         assert len(family) >= 5, _describe(family)  # shell, script, simulator, node, monitor
+        assert len(list(tmp_path.glob('i3dmgx2-demo-*'))) == 1, terminal.text()[-3000:]
         terminal.close()
         left = _left(family, GONE_WITHIN)
         assert not left, f'left behind: {_describe(left)}\n{terminal.text()[-3000:]}'
+        # Nor a file: the script's own folder went with it.
+        assert not list(tmp_path.glob('i3dmgx2-demo-*')), terminal.text()[-3000:]
     finally:
         _kill_all(family | {terminal.pid})
 
 
-def test_the_demo_leaves_nothing_when_the_script_is_killed():
-    terminal = Terminal(['bash', '--norc', '--noprofile', '-i'], _env())
+def test_the_demo_leaves_nothing_when_the_script_is_killed(tmp_path):
+    # SIGKILL leaves the script's folder (no trap runs): under tmp_path, not /tmp.
+    terminal = Terminal(['bash', '--norc', '--noprofile', '-i'], _demo_env(tmp_path))
     family: set[int] = set()
     try:
         family = _demo(terminal)
