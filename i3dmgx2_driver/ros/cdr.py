@@ -27,10 +27,12 @@ of variable shape (``/diagnostics``) go through :class:`CdrWriter`.
 
 Alignment counts from the end of the 4-byte encapsulation header, as
 Fast DDS and Cyclone DDS write it; whoever publishes these bytes checks once
-that the middleware in use reads them back as the message.
+that the middleware in use reads them back as the message (:func:`reads_back`).
 """
 
+from collections.abc import Iterable
 import struct
+from typing import Any
 
 #: Encapsulation header of a serialized message: plain CDR, little endian.
 CDR_LE = b'\x00\x01\x00\x00'
@@ -95,3 +97,20 @@ class CdrWriter:
     def serialized(self) -> bytes:
         """Return the message so far, encapsulation header first."""
         return bytes(self._out)
+
+
+def reads_back(pairs: Iterable[tuple[bytes, Any]]) -> bool:
+    """
+    Tell whether each serialized message reads back as the message it stands for.
+
+    rclpy deserializes with the middleware in use, so a middleware that did
+    not read little-endian CDR makes the caller publish message objects
+    instead. Compared as messages, not bytes: a serializer may leave its
+    padding bytes uninitialised. The pairs are taken one at a time, so a
+    message refilled in place may stand in several of them (pass a generator).
+    Once per process and kind: ``deserialize_message`` keeps a little memory
+    per call.
+    """
+    from rclpy.serialization import deserialize_message
+
+    return all(deserialize_message(data, type(message)) == message for data, message in pairs)

@@ -44,7 +44,7 @@ from typing import Any
 
 from sensor_msgs.msg import Imu, MagneticField
 
-from .cdr import CDR_LE, StampedDoubles
+from .cdr import CDR_LE, reads_back, StampedDoubles
 from ..codec import streams
 from ..codec.orientation import body_vector, ENU, matrix_from_euler, orientation, Quaternion
 from ..codec.streams import Stream
@@ -238,25 +238,15 @@ class MessageFactory:
             m[0] * t, m[1] * t, m[2] * t, *self._magnetic_field_cov)
 
     def serialized_matches(self) -> bool:
-        """
-        Tell whether :meth:`imu_cdr` and :meth:`mag_cdr` read back as the messages.
-
-        rclpy deserializes with the middleware in use, so a middleware that
-        did not read little-endian CDR would make the node publish message
-        objects instead. (Compared as messages, not bytes: a serializer may
-        leave its padding bytes uninitialised.)
-        """
-        from rclpy.serialization import deserialize_message
-
+        """Tell whether :meth:`imu_cdr` and :meth:`mag_cdr` read back as the messages (cdr.py)."""
         stamp = 1_700_000_000.123456789
         probes = probe_records(self.stream)
-        for record in (*probes, probes[0]):
-            data = self.imu_cdr(record, stamp)
-            if deserialize_message(data, Imu) != self.fill_imu(record, stamp):
-                return False
         field = _PROBE_FIELDS['mag']
-        data = self.mag_cdr(field, stamp)
-        return deserialize_message(data, MagneticField) == self.fill_mag(field, stamp)
+        # A generator: fill_imu refills one message, compared before the next fill.
+        pairs = ((self.imu_cdr(record, stamp), self.fill_imu(record, stamp))
+                 for record in (*probes, probes[0]))
+        return reads_back(pairs) and reads_back(
+            [(self.mag_cdr(field, stamp), self.fill_mag(field, stamp))])
 
     def fill_mag(self, mag_gauss: Sequence[float], stamp: float) -> MagneticField:
         """Refill and return the MagneticField message (caller skips NaN)."""

@@ -41,7 +41,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from .calibration import Calibration, RATE_TOLERANCE
-from .cdr import CdrWriter
+from .cdr import CdrWriter, reads_back
 from .publishers import create_publisher
 from ..device.sample_clock import ClockStatus, Restart
 from ..device.status import DeviceStatus, RadioStats, State
@@ -459,21 +459,12 @@ def to_cdr(statuses: Iterable[Status], hardware_id: str, prefix: str, sec: int,
 
 @functools.cache
 def cdr_reads_back() -> bool:
-    """
-    Tell whether :func:`to_cdr`'s bytes read back as :func:`to_message`'s messages.
-
-    Once per process (rclpy's ``deserialize_message`` keeps a little memory
-    per call): a middleware that did not read little-endian CDR would make
-    the node publish message objects instead.
-    """
-    from rclpy.serialization import deserialize_message
-
+    """Tell whether :func:`to_cdr`'s bytes read back as :func:`to_message`'s messages (cdr.py)."""
     statuses = [Status(WARN, 'probe', 'ü', (('a', ''), ('key', 'value'))), Status(OK, 'empty', '')]
     array = DiagnosticArray()
     array.header.stamp.sec, array.header.stamp.nanosec = 1_700_000_000, 123_456_789
     array.status = to_message(statuses, '3095', PREFIX)
-    data = to_cdr(statuses, '3095', PREFIX, 1_700_000_000, 123_456_789)
-    return deserialize_message(data, DiagnosticArray) == array
+    return reads_back([(to_cdr(statuses, '3095', PREFIX, 1_700_000_000, 123_456_789), array)])
 
 
 class RateMeter:

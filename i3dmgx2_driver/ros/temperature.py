@@ -34,7 +34,7 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import Temperature
 
-from .cdr import StampedDoubles
+from .cdr import reads_back, StampedDoubles
 from .conversions import set_stamp, stamp_parts
 from ..codec import layouts
 from ..device.link import DeviceLink, DeviceTimeout
@@ -49,14 +49,11 @@ WARN_PERIOD = 60.0
 
 
 def _reads_back(layout: StampedDoubles, frame_id: str) -> bool:
-    """Tell whether ``layout``'s bytes read back as the Temperature they stand for."""
-    from rclpy.serialization import deserialize_message
-
+    """Tell whether ``layout``'s bytes read back as the Temperature they stand for (cdr.py)."""
     expected = Temperature(temperature=25.125, variance=0.0)
     expected.header.frame_id = frame_id
     expected.header.stamp.sec, expected.header.stamp.nanosec = 1_700_000_000, 123_456_789
-    data = layout.pack(1_700_000_000, 123_456_789, 25.125, 0.0)
-    return deserialize_message(data, Temperature) == expected
+    return reads_back([(layout.pack(1_700_000_000, 123_456_789, 25.125, 0.0), expected)])
 
 
 class TemperaturePoller:
