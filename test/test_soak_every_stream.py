@@ -24,6 +24,7 @@ managed nodes shut down from a random state. The pieces the verdict rests on
 """
 
 import os
+import tempfile
 
 from harness.long_soak import run_long_soak
 from harness.process_sampler import halves_per_hour, process_sample, rss_kinds, \
@@ -83,11 +84,15 @@ def test_rss_kinds_add_up_to_rss_and_a_gone_process_gives_none():
 
 
 @pytest.mark.slow
-def test_soak_every_stream_short():
+def test_soak_every_stream_short(tmp_path, monkeypatch):
+    # Every temporary file of the run (node logs, counters, the simulator's link) under
+    # tmp_path: each plain node's log was left behind (one a run, until 2026-11-27).
+    monkeypatch.setattr(tempfile, 'tempdir', str(tmp_path))
     cfg = LongSoakConfig(minutes=1.0, legs=3, leg_minutes=0.2, quiet=3.0,
                          event_gap=(0.3, 1.0), seed=7, log=None)
     result = run_long_soak(cfg)
     assert result.ok, result.report
+    assert not list(tmp_path.iterdir()), sorted(p.name for p in tmp_path.iterdir())
     # A managed node lives on after its leg and counts what it reads while inactive: those
     # two checks are the plain node's only, in the verdict and in the report.
     for name in ('clean exit on SIGINT', 'nothing left unpublished'):

@@ -86,9 +86,8 @@ class TemperaturePoller:
             # Published as bytes where they read back as the message (cdr.py says why).
             self._layout = StampedDoubles(frame_id, 2)
             self._serialized = _reads_back(self._layout, frame_id)
-            self._msg = Temperature()
+            self._msg = Temperature()  # variance 0.0: unknown (sensor_msgs)
             self._msg.header.frame_id = frame_id
-            self._msg.variance = 0.0
             self._thread = threading.Thread(target=self._run, name='gx2-temperature',
                                             daemon=True)
             self._thread.start()
