@@ -53,6 +53,7 @@ from harness.processes import (  # noqa: E402 - the repository is on the path fr
     TruthEntry,
 )
 from i3dmgx2_driver.codec import layouts, line_budget  # noqa: E402
+from i3dmgx2_driver.device import hot_path  # noqa: E402
 from i3dmgx2_driver.device.hot_path import QuietObserver  # noqa: E402
 # A benchmark's ROS domain is never one a test run draws (harness.processes.TEST_DOMAINS):
 # a benchmark's node still publishing must not reach the tests running beside it.
@@ -245,10 +246,11 @@ class InProcessNode:
 
     The executor runs in a thread of its own, the node's reader thread
     publishes, and ``published`` gets one entry per Imu message from the
-    node's hot-path observer (device/hot_path.py), told right after
-    ``publish()`` returned: the record's timer (to match the ground truth),
-    the time the reader got its last byte, the stamp, and ``time.time()`` at
-    that moment, the clock the simulator stamps its writes with.
+    hot path's observer (device/hot_path.py, this process's until
+    :meth:`close`), told right after ``publish()`` returned: the record's
+    timer (to match the ground truth), the time the reader got its last
+    byte, the stamp, and ``time.time()`` at that moment, the clock the
+    simulator stamps its writes with.
     """
 
     def __init__(self, port: str, **params: Any) -> None:
@@ -267,8 +269,9 @@ class InProcessNode:
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         params = {'port': port, 'address': ADDRESS, **params}
         self.published: list[Published] = []
+        hot_path.observe(_PublishedObserver(self._on_published))
         self.node = ImuDriverNode(
-            context=self.context, timings=_PublishedObserver(self._on_published),
+            context=self.context,
             parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
         # As main.py spins it: several threads, so that a long service call holds only its own,
         # and the start-up heap frozen as main.py freezes it.
@@ -318,6 +321,7 @@ class InProcessNode:
         self.executor.shutdown(timeout_sec=0.5)
         self.node.destroy_node()
         self._rclpy.try_shutdown(context=self.context)
+        hot_path.observe(None)
 
 
 def stamp_key(sec: int, nanosec: int) -> int:

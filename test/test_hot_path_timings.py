@@ -16,11 +16,13 @@
 The hot path's timings (device/hot_path.py): ordered and real when on, nothing when off.
 
 Off, the observer costs one ``is not None`` test per stage: the structure of
-the two functions on the path says so (every use of it is one call under
-that test), and the allocation test (test_hot_path_allocation.py) says that
-the path still leaves nothing behind. On, the real node (``I3DMGX2_TIMINGS``)
-against the simulator writes one row per published message whose stage
-times follow the path's order, each after the simulator wrote the packet.
+the functions on the path says so (every use of it is one call under that
+test), and the allocation test (test_hot_path_allocation.py) says that the
+path still leaves nothing behind. It is one hook, ``hot_path.timings``, set
+once for the process: the environment's recorder installs itself there.
+On, the real node (``I3DMGX2_TIMINGS``) against the simulator writes one
+row per published message whose stage times follow the path's order, each
+after the simulator wrote the packet.
 """
 
 import ast
@@ -30,9 +32,14 @@ import textwrap
 import time
 
 from harness.processes import isolate_ros_domain, NodeProcess, ros_env
-from i3dmgx2_driver.device.hot_path import ROW_FIELDS, TIMINGS_ENV, TimingsRecorder
-from i3dmgx2_driver.device.link import DeviceLink, LinkOptions, PortReader
+from i3dmgx2_driver.device import hot_path
+from i3dmgx2_driver.device.hot_path import (
+    recorder_from_environment, ROW_FIELDS, TIMINGS_ENV, TimingsRecorder,
+)
+from i3dmgx2_driver.device.link import DeviceLink, PortReader
 from i3dmgx2_driver.device.port import PortDisconnected
+from i3dmgx2_driver.device.port_opener import PortOpener
+from i3dmgx2_driver.device.supervisor import DeviceSupervisor
 from i3dmgx2_driver.ros.record_publisher import RecordPublisher
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
@@ -68,6 +75,8 @@ def _guarded_uses(function) -> tuple[int, list[str]]:
 @pytest.mark.parametrize(('function', 'stages'), [
     (PortReader._read, 2),  # read, parsed (the loop _run runs)
     (RecordPublisher.on_record, 3),  # stamped, packed, published
+    (PortOpener.open_port, 1),  # opened
+    (DeviceSupervisor._anchor, 1),  # connected
 ])
 def test_off_costs_one_test_per_stage(function, stages):
     guarded, stray = _guarded_uses(function)
@@ -99,9 +108,10 @@ class _CannedPort:
         return self._chunks.pop(0)
 
 
-def test_the_link_reports_each_read_then_its_parse():
+def test_the_link_reports_each_read_then_its_parse(monkeypatch):
     packet = FIXTURE_DATA_PACKET
     timings = _Calls()
+    monkeypatch.setattr(hot_path, 'timings', timings)
     records = []
 
     def on_record(packet, now, mono) -> None:
@@ -109,7 +119,7 @@ def test_the_link_reports_each_read_then_its_parse():
         records.append(packet)
 
     port = _CannedPort([packet[:10], packet[10:] + packet, b''])
-    DeviceLink(port, ADDRESS, on_record, LinkOptions(timings=timings)).reader._run()  # here
+    DeviceLink(port, ADDRESS, on_record).reader._run()  # here
     assert len(records) == 2
     # The second read completes two records: both are handed over after its parse.
     assert timings.calls == ['read', 'parsed', 'read', 'parsed', 'record', 'record',
@@ -117,6 +127,7 @@ def test_the_link_reports_each_read_then_its_parse():
 
 
 def test_without_an_observer_the_link_runs_as_before():
+    assert hot_path.timings is None  # off unless installed
     records = []
     port = _CannedPort([FIXTURE_DATA_PACKET])
     DeviceLink(port, ADDRESS, lambda p, t, m: records.append(p)).reader._run()
@@ -159,6 +170,21 @@ def _wait_count(sim: PtySimulator, count: int, timeout: float = 30.0) -> None:
     deadline = time.monotonic() + timeout
     while sim.truth_count < count and time.monotonic() < deadline:
         time.sleep(0.05)
+
+
+def test_the_environment_installs_its_recorder_as_the_one_observer(monkeypatch, tmp_path):
+    monkeypatch.setattr(hot_path, 'timings', None)
+    monkeypatch.delenv(TIMINGS_ENV, raising=False)
+    assert recorder_from_environment() == (None, '')
+    assert hot_path.timings is None
+    out = str(tmp_path / 'timings.json')
+    monkeypatch.setenv(TIMINGS_ENV, out)
+    recorder, path = recorder_from_environment()
+    try:
+        assert isinstance(recorder, TimingsRecorder) and path == out
+        assert hot_path.timings is recorder
+    finally:
+        recorder.save(path)  # takes its callback off the collector
 
 
 def test_the_recorder_keeps_one_row_per_published_message(tmp_path):

@@ -31,10 +31,11 @@ import weakref
 from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.records import AccelAngRate, Magnetometer
+from i3dmgx2_driver.device import hot_path
 from i3dmgx2_driver.device.hot_path import QuietObserver
 from i3dmgx2_driver.device.link import DeviceLink, PortReader, RadioStats
-from i3dmgx2_driver.device.port import PortDisconnected
-from i3dmgx2_driver.device.port_opener import PortOpener, PortParts
+from i3dmgx2_driver.device.port import PortDisconnected, SerialPort
+from i3dmgx2_driver.device.port_opener import PortOpener
 from i3dmgx2_driver.device.settings import DeviceConfig
 import pytest
 
@@ -197,11 +198,6 @@ def _unstarted(link: DeviceLink) -> DeviceLink:
     return link
 
 
-class _Port:
-    def __init__(self, state: str) -> None:
-        self.low_latency_state = state
-
-
 class _Log:
     def __init__(self) -> None:
         self.lines: list[str] = []
@@ -218,19 +214,22 @@ class _Opens(QuietObserver):
         self.opens += 1
 
 
-def test_port_opener_opens_as_configured_and_logs_only_a_change() -> None:
+def test_port_opener_opens_as_configured_and_logs_only_a_change(monkeypatch) -> None:
     states = iter(['on', 'on', 'refused'])
     calls = []
 
-    def factory(path: str, baud: int, low_latency: bool) -> _Port:
+    def opened(port: SerialPort, path: str, baud: int, low_latency: bool) -> None:
         calls.append((path, baud, low_latency))
-        return _Port(next(states))
+        port.low_latency_state = next(states)
 
+    # The opener opens SerialPort itself: its opening is replaced, the class kept.
+    monkeypatch.setattr(SerialPort, '__init__', opened)
     timings, log = _Opens(), _Log()
+    monkeypatch.setattr(hot_path, 'timings', timings)
     config = DeviceConfig(port='/dev/gx2', address=95, baud=115200, low_latency=False)
-    opener = PortOpener(config, log, PortParts(factory, None, timings))
+    opener = PortOpener(config, log)
     for _ in range(3):
-        opener.open_port()
+        assert type(opener.open_port()) is SerialPort
     assert calls == [('/dev/gx2', 115200, False)] * 3
     assert timings.opens == 3
     assert log.lines == ['/dev/gx2: low-latency mode on', '/dev/gx2: low-latency mode refused']
@@ -241,12 +240,10 @@ def test_port_opener_gives_every_reader_the_same_parts() -> None:
     def capture(data: bytes, when: float) -> None:
         pass
 
-    timings, cancel = _Opens(), threading.Event()
+    cancel = threading.Event()
     config = DeviceConfig(port='/dev/gx2', address=95, wireless=False)
-    options = PortOpener(config, _Log(), PortParts(on_bytes=capture, timings=timings)) \
-        .reader_options(cancel=cancel)
-    assert (options.wireless, options.on_bytes, options.timings, options.cancel) == (
-        False, capture, timings, cancel)
+    options = PortOpener(config, _Log(), on_bytes=capture).reader_options(cancel=cancel)
+    assert (options.wireless, options.on_bytes, options.cancel) == (False, capture, cancel)
     assert options.observer is None and options.thread_policy == config.thread_policy
 
 

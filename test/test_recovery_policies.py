@@ -17,8 +17,9 @@ The supervisor's decisions that need no port: policies on a fake clock, the repo
 
 StallWatch and ReopenWait (the reconnect back-off) decide on a clock passed
 in; DeviceReport is the one place that changes what diagnostics show; the
-supervisor's thread is driven here with a port factory that never opens, so
-that what it decides about a failed port is seen without a simulator (the
+supervisor's thread is driven here with a serial port that never opens (its
+class's opening replaced in this process), so that what it decides about a
+failed port is seen without a simulator (the
 exclusive access, which needs a streaming sensor, is driven in
 test_supervisor_phases.py).
 """
@@ -26,8 +27,7 @@ test_supervisor_phases.py).
 import time
 
 from i3dmgx2_driver.device.observer import Finding
-from i3dmgx2_driver.device.port import PortMissing, PortNotSerial
-from i3dmgx2_driver.device.port_opener import PortParts
+from i3dmgx2_driver.device.port import PortMissing, PortNotSerial, SerialPort
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.device.status import DeviceReport, State
 from i3dmgx2_driver.device.supervisor import DeviceSupervisor
@@ -157,22 +157,23 @@ def test_a_problem_is_said_once_and_kept_as_the_last_error():
 
 
 class FailingPort:
-    """A port factory whose port never opens: it raises ``error`` each time."""
+    """A serial port that never opens: it raises ``error`` each time, and counts the tries."""
 
-    def __init__(self, error: Exception) -> None:
+    def __init__(self, monkeypatch: pytest.MonkeyPatch, error: Exception) -> None:
         self.error = error
         self.opened = 0
+        monkeypatch.setattr(SerialPort, '__init__', self._open)
 
-    def __call__(self, *args, **kwargs):
+    def _open(self, *args, **kwargs) -> None:
         self.opened += 1
         raise self.error
 
 
-def supervisor_on(port: FailingPort, **config):
+def supervisor_on(**config):
     log, fatal = Log(), []
     sup = DeviceSupervisor(DeviceConfig(port='/dev/x', address=95, **config),
                            on_record=lambda packet, now, mono: None, log=log,
-                           on_fatal=fatal.append, port=PortParts(port_factory=port))
+                           on_fatal=fatal.append)
     return sup, fatal, log
 
 
@@ -183,10 +184,10 @@ def wait_until(condition, timeout: float = 5.0) -> bool:
     return condition()
 
 
-def test_a_port_that_can_never_work_ends_the_loop_once():
+def test_a_port_that_can_never_work_ends_the_loop_once(monkeypatch):
     error = PortNotSerial('/tmp: a directory, not a serial port')
-    port = FailingPort(error)
-    sup, fatal, log = supervisor_on(port)
+    port = FailingPort(monkeypatch, error)
+    sup, fatal, log = supervisor_on()
     sup.start()
     assert wait_until(lambda: fatal) and sup.join(5.0)
     assert port.opened == 1 and fatal == [error]
@@ -195,9 +196,9 @@ def test_a_port_that_can_never_work_ends_the_loop_once():
     assert log.lines == [], 'the entry point says it, once, as it exits'
 
 
-def test_a_missing_port_is_retried_and_said_once():
-    port = FailingPort(PortMissing('/dev/x: no such port'))
-    sup, fatal, log = supervisor_on(port, reconnect_interval=0.01, prompt_reopen=False)
+def test_a_missing_port_is_retried_and_said_once(monkeypatch):
+    port = FailingPort(monkeypatch, PortMissing('/dev/x: no such port'))
+    sup, fatal, log = supervisor_on(reconnect_interval=0.01, prompt_reopen=False)
     sup.start()
     try:
         assert wait_until(lambda: port.opened >= 5

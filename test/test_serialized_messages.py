@@ -24,18 +24,11 @@ second.
 
 import math
 import random
-import sys
 
-from diagnostic_msgs.msg import DiagnosticArray
-from harness.type_cache import TypeCacheReader
 from i3dmgx2_driver.codec.orientation import matrix_from_quaternion, Quaternion
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
-from i3dmgx2_driver.ros import diagnostics
 from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings, stamp_parts
-from i3dmgx2_driver.ros.diagnostics import Status
 import pytest
-import rclpy
-from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import Imu, MagneticField
 
@@ -121,60 +114,3 @@ def test_the_start_up_check_passes_with_this_middleware_and_catches_a_mistake():
 ])
 def test_stamp_parts(stamp, parts):
     assert stamp_parts(stamp) == parts
-
-
-def _statuses(rng: random.Random) -> list[Status]:
-    """Statuses of any shape: names of any length (the padding moves), Unicode, no values."""
-    def text() -> str:
-        return ''.join(rng.choice('abcü/: 0') for _ in range(rng.randrange(0, 14)))
-    return [Status(rng.randrange(4), text(), text(),
-                   tuple((text(), text()) for _ in range(rng.randrange(0, 6))))
-            for _ in range(rng.randrange(0, 9))]
-
-
-def test_the_serialized_diagnostics_read_back_as_the_messages():
-    rng = random.Random(7)
-    for _ in range(300):
-        statuses = _statuses(rng)
-        hardware_id = rng.choice(['', '3095', 'ü' * 3])
-        sec, nanosec = rng.randrange(2 ** 31), rng.randrange(10 ** 9)
-        array = DiagnosticArray()
-        array.header.stamp.sec, array.header.stamp.nanosec = sec, nanosec
-        array.status = diagnostics.to_message(statuses, hardware_id, 'gx2: ')
-        data = diagnostics.to_cdr(statuses, hardware_id, 'gx2: ', sec, nanosec)
-        assert deserialize_message(data, DiagnosticArray) == array
-    assert diagnostics.cdr_reads_back()
-
-
-def test_diagnostics_are_published_as_bytes_and_leave_no_names_in_the_type_cache():
-    """
-    A node's /diagnostics, once a second, published as bytes.
-
-    As message objects, rclpy's conversion looked each field up by a name
-    made afresh and CPython's type cache kept such names: the slow climb of
-    the memory curve's blocks (docs/soak.md). 300 ticks as objects keep
-    hundreds; as bytes, none beyond the test's own few.
-    """
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    node = Node('i3dmgx2_driver', context=context)
-    published = []
-    try:
-        publisher = diagnostics.DiagnosticsPublisher(node, lambda: None)
-        publish = publisher.publisher.publish
-        publisher.publisher.publish = lambda message: published.append(type(message)) or \
-            publish(message)
-        publisher.tick()  # the check that the bytes read back: once per process
-        reader = TypeCacheReader()
-        before = reader.names_kept()
-        for _ in range(300):
-            publisher.tick()
-        after = reader.names_kept()
-    finally:
-        node.destroy_node()
-        rclpy.shutdown(context=context)
-    assert set(published) == {bytes}
-    if reader.found:
-        assert after - before < 20, (before, after)
-    else:
-        assert sys.version_info[:2] != (3, 11)  # the reader knows 3.11's table only

@@ -23,10 +23,15 @@ without replacing any of its functions. The link reports the read and the
 parse (the codec knows bytes only and is timed from around its call), the
 driver core the stamp, the pack and the publish.
 
-Off (the default, None), it costs one ``is not None`` test per stage and
-allocates nothing. The node turns it on only when asked: ``main.py`` reads
-:data:`TIMINGS_ENV` and, if it names a file, records every sample's stage
-times with :class:`TimingsRecorder` and writes them there at shutdown.
+There is one observer for the process, :data:`timings`, here and nowhere
+else: every stage boundary reads it from this module, so no constructor of
+the driver takes one and nothing hands it down through the layers. It is
+installed once, before the node starts (:func:`observe`). Off (the default,
+None), it costs one ``is not None`` test per stage and allocates nothing.
+The node turns it on only when asked: ``main.py`` reads :data:`TIMINGS_ENV`
+through :func:`recorder_from_environment` and, if it names a file, records
+every sample's stage times with :class:`TimingsRecorder` and writes them
+there at shutdown.
 """
 
 import gc
@@ -180,7 +185,30 @@ class TimingsRecorder:
             json.dump(document, handle)
 
 
+#: The hot path's one observer, None while off: read at every stage boundary.
+timings: HotPathObserver | None = None
+
+
+def observe(observer: HotPathObserver | None) -> None:
+    """
+    Make ``observer`` the hot path's observer from now on (None: off).
+
+    Once, before the node starts: a reader already reading keeps the one it
+    found when it started.
+    """
+    global timings  # noqa: PLW0603 - the process's one hook, set before the node starts
+    timings = observer
+
+
 def recorder_from_environment() -> tuple[TimingsRecorder | None, str]:
-    """Return a recorder and the file it is for if :data:`TIMINGS_ENV` names one; else None."""
+    """
+    Return a recorder, installed as the observer, and its file if :data:`TIMINGS_ENV` names one.
+
+    Without the variable: (None, '') and the observer is left as it is.
+    """
     path = os.environ.get(TIMINGS_ENV, '')
-    return (TimingsRecorder() if path else None), path
+    if not path:
+        return None, path
+    recorder = TimingsRecorder()
+    observe(recorder)
+    return recorder, path

@@ -41,8 +41,7 @@ import threading
 import time
 from typing import Any, NamedTuple
 
-from . import timeouts
-from .hot_path import HotPathObserver
+from . import hot_path, timeouts
 from .observer import LineObserver, QUIET_AFTER
 from .port import PortDisconnected, SerialPort
 from .reader_threads import READERS
@@ -79,9 +78,7 @@ class LinkOptions:
     set, makes requests give up within tens of milliseconds while the reader
     goes on (the stream is being stopped, the port kept: nobody waits for
     the answers any more). ``thread_policy`` is applied by the reader thread
-    to itself before its first read. ``timings``, if given, is told when each
-    read returned and when the parser was done with it (hot_path.py); None
-    costs one test per stage.
+    to itself before its first read.
     """
 
     wireless: bool = True
@@ -90,7 +87,6 @@ class LinkOptions:
     observer: LineObserver | None = None
     cancel: threading.Event | None = None
     thread_policy: ThreadPolicy = NORMAL_SCHEDULING
-    timings: HotPathObserver | None = None
 
 
 class DeviceTimeout(Exception):
@@ -161,7 +157,6 @@ class PortReader:
         self._write_lock = threading.Lock()
         self._on_bytes = options.on_bytes
         self._observer = options.observer
-        self._timings = options.timings
         self._read_timeout = options.read_timeout
         self._thread_policy = options.thread_policy
         self._stop = threading.Event()
@@ -287,7 +282,9 @@ class PortReader:
         parser = self.parser
         read = self.port.read_some
         observer = self._observer
-        timings = self._timings
+        # The hot path's observer (hot_path.py), told when each read returned and
+        # when the parser was done with it; None costs one test per stage.
+        timings = hot_path.timings
         routes = self._routes
         while not self._stop.is_set():
             timeout = 0.02 if parser.pending == 1 else self._read_timeout

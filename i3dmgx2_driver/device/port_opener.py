@@ -17,46 +17,33 @@ How a sensor's port is opened, the same for a port of its own and a shared one.
 
 A connection that opens its own port and the port several sensors share
 (shared_port.py) open it the same way: the configured path, baud rate and
-low-latency mode, the hot-path observer told, the low-latency mode logged
-when it changes, and the reader made with the same raw capture, scheduling
-and observer. :class:`PortParts` groups what the node hands in for that;
-:class:`PortOpener` does it, once for both.
+low-latency mode, the hot-path observer told (hot_path.py), the low-latency
+mode logged when it changes, and the reader made with the same raw capture
+and scheduling. :class:`PortOpener` does it, once for both.
 """
 
-from collections.abc import Callable
-from dataclasses import dataclass
 import threading
 from typing import Any
 
-from .hot_path import HotPathObserver
+from . import hot_path
 from .link import BytesCallback, LinkOptions
 from .observer import LineObserver
 from .port import SerialPort
 from .settings import DeviceConfig
 
 
-@dataclass(frozen=True)
-class PortParts:
-    """
-    What opens a port and whom its reader tells, besides the consumer of records.
-
-    ``port_factory`` opens the port (SerialPort; a subclass to observe it);
-    ``on_bytes``, if given, receives every read's raw bytes (a raw capture);
-    ``timings``, if given, is told every port open and handed to the reader
-    (hot_path.py).
-    """
-
-    port_factory: Callable[..., SerialPort] = SerialPort
-    on_bytes: BytesCallback | None = None
-    timings: HotPathObserver | None = None
-
-
 class PortOpener:
-    """Open the port at ``config.port`` with ``parts``; log a change of its low-latency mode."""
+    """
+    Open the port at ``config.port``; log a change of its low-latency mode.
 
-    def __init__(self, config: DeviceConfig, log: Any, parts: PortParts) -> None:
+    ``on_bytes``, if given, receives every read's raw bytes (a raw capture)
+    from the reader of each port opened.
+    """
+
+    def __init__(self, config: DeviceConfig, log: Any,
+                 on_bytes: BytesCallback | None = None) -> None:
         self.config = config
-        self.parts = parts
+        self._on_bytes = on_bytes
         self._log = log
         #: What the last port opened granted of low-latency mode ('' before one).
         self.low_latency_state = ''
@@ -64,9 +51,10 @@ class PortOpener:
     def open_port(self) -> SerialPort:
         """Open the port (raises PortError); tell the observer; log a new low-latency mode."""
         cfg = self.config
-        port = self.parts.port_factory(cfg.port, cfg.baud, low_latency=cfg.low_latency)
-        if self.parts.timings is not None:
-            self.parts.timings.opened()
+        port = SerialPort(cfg.port, cfg.baud, low_latency=cfg.low_latency)
+        timings = hot_path.timings
+        if timings is not None:
+            timings.opened()
         if port.low_latency_state != self.low_latency_state:
             self.low_latency_state = port.low_latency_state
             self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
@@ -76,6 +64,6 @@ class PortOpener:
                        cancel: threading.Event | None = None) -> LinkOptions:
         """Return how the port's reader reads and whom it tells (``observer``, ``cancel``)."""
         cfg = self.config
-        return LinkOptions(wireless=cfg.wireless, on_bytes=self.parts.on_bytes,
+        return LinkOptions(wireless=cfg.wireless, on_bytes=self._on_bytes,
                            observer=observer, cancel=cancel,
-                           thread_policy=cfg.thread_policy, timings=self.parts.timings)
+                           thread_policy=cfg.thread_policy)

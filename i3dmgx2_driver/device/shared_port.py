@@ -32,14 +32,11 @@ recovery stops all sensors and brings all back, and a sensor switched off
 costs the others nothing but the time its requests hold the port.
 """
 
-from collections.abc import Callable
 import threading
 from typing import Any
 
-from .hot_path import HotPathObserver
 from .link import BytesCallback, DeviceLink, LinkOptions, PortReader, RecordCallback
-from .port import SerialPort
-from .port_opener import PortOpener, PortParts
+from .port_opener import PortOpener
 from .settings import DeviceConfig
 from ..codec import streams
 
@@ -48,17 +45,14 @@ class SharedPort:
     """
     The port at ``config.port``, shared by the sensors behind its base station.
 
-    ``on_bytes`` (a raw capture) and ``timings`` belong to the port's one
-    reader; ``port_factory`` opens it (SerialPort; a subclass to observe it).
+    ``on_bytes`` (a raw capture) belongs to the port's one reader.
     """
 
     def __init__(self, config: DeviceConfig, log: Any,
-                 port_factory: Callable[..., SerialPort] = SerialPort,
-                 on_bytes: BytesCallback | None = None,
-                 timings: HotPathObserver | None = None) -> None:
+                 on_bytes: BytesCallback | None = None) -> None:
         self.config = config
         self._log = log
-        self._opener = PortOpener(config, log, PortParts(port_factory, on_bytes, timings))
+        self._opener = PortOpener(config, log, on_bytes)
         self._lock = threading.Lock()
         self._reader: PortReader | None = None
         self._links: set[DeviceLink] = set()

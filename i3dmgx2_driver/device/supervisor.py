@@ -92,11 +92,12 @@ import logging
 import threading
 from typing import Any
 
+from . import hot_path
 from .dialogue import SensorDialogue
-from .link import DeviceLink, DeviceTimeout, RecordCallback
+from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .observer import LineObserver
 from .port import PortDisconnected, PortError, PortUnusable
-from .port_opener import PortOpener, PortParts
+from .port_opener import PortOpener
 from .realtime import PolicyOutcome
 from .settings import DeviceConfig
 from .shared_port import SharedPort
@@ -116,18 +117,16 @@ class DeviceSupervisor:
     (a ``logging.Logger`` by default; the node passes its rclpy logger).
     ``on_fatal`` runs in the supervisor thread, once, when the port can never
     work (``status().fatal_error`` then says why; without it the error is
-    logged); the supervisor has stopped by then. ``port`` says how the port
-    is opened and whom its reader tells (port_opener.py): its
-    ``port_factory`` opens the port (SerialPort; a subclass to observe it);
-    its ``on_bytes`` runs in the reader thread with every read's raw bytes
-    and read time (a raw capture); its ``timings``, if given, is told every
-    port open and every link up (right after ``on_connect``) and handed to
-    every link, which tells it the read and the parse of each sample
-    (hot_path.py). ``shared``, if given, is the port this sensor shares
-    with others behind the same base station (shared_port.py): the links
-    come from it and go back to it, the port is its to open and close, no
-    line observer watches it, and this supervisor keeps only its sensor
-    streaming (a supervisor per sensor, each with its own thread).
+    logged); the supervisor has stopped by then. ``on_bytes``, if given,
+    runs in the reader thread with every read's raw bytes and read time (a
+    raw capture). The hot path's observer (hot_path.py), when on, is told
+    every port open and every link up (right after ``on_connect``), and by
+    every link the read and the parse of each sample. ``shared``, if given,
+    is the port this sensor shares with others behind the same base station
+    (shared_port.py): the links come from it and go back to it, the port is
+    its to open and close, no line observer watches it, and this supervisor
+    keeps only its sensor streaming (a supervisor per sensor, each with its
+    own thread).
     ``on_gyro_bias`` runs each time the dialogue wrote its kept gyro bias
     and the sensor echoed it (at start, resume and after a stall).
     """
@@ -135,12 +134,11 @@ class DeviceSupervisor:
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
                  log: Any = None, on_connect: Callable[[], None] | None = None,
                  on_fatal: Callable[[PortError], None] | None = None,
-                 port: PortParts | None = None,
+                 on_bytes: BytesCallback | None = None,
                  shared: SharedPort | None = None,
                  on_gyro_bias: Callable[[], None] | None = None) -> None:
         self.config = config
         self._shared = shared
-        port = port if port is not None else PortParts()
         log = log or logging.getLogger('i3dmgx2_driver')
         self._log = log
         #: Set means "no stream wanted now": the thread ends, and every request on the
@@ -158,8 +156,7 @@ class DeviceSupervisor:
         self._on_record = on_record
         self._on_connect = on_connect
         self._on_fatal = on_fatal or (lambda error: log.error(str(error)))
-        self._timings = port.timings
-        self._opener = PortOpener(config, log, port)
+        self._opener = PortOpener(config, log, on_bytes)
         self._reopen_wait = ReopenWait(config.port, config.reconnect_interval,
                                        config.prompt_reopen, self._cancel.wait)
         self._thread: threading.Thread | None = None
@@ -490,8 +487,9 @@ class DeviceSupervisor:
         """Let the consumer re-anchor before the first record of a new link reaches it."""
         if self._on_connect is not None:
             self._on_connect()
-        if self._timings is not None:
-            self._timings.connected()
+        timings = hot_path.timings
+        if timings is not None:
+            timings.connected()
 
     def _start_reader(self, link: DeviceLink) -> None:
         """Anchor the consumer, start the reader thread; log its scheduling when it changes."""

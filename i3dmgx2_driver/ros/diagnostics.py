@@ -29,7 +29,6 @@ STALE for "no data to judge by" (nothing arrives, nothing measured yet).
 """
 
 from collections.abc import Callable, Iterable, Mapping
-import functools
 import math
 import time
 from typing import Any, NamedTuple
@@ -41,7 +40,6 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from .calibration import Calibration, RATE_TOLERANCE
-from .cdr import CdrWriter, reads_back
 from .publishers import create_publisher
 from ..device.sample_clock import ClockStatus, Restart
 from ..device.status import DeviceStatus, RadioStats, State
@@ -429,44 +427,6 @@ def to_message(statuses: Iterable[Status], hardware_id: str,
     return out
 
 
-def to_cdr(statuses: Iterable[Status], hardware_id: str, prefix: str, sec: int,
-           nanosec: int) -> bytes:
-    """
-    Return the ``DiagnosticArray`` of :func:`to_message`'s statuses, serialized (CDR bytes).
-
-    Published as bytes, not as a message object: rclpy's conversion of the
-    object looks up each field by a name made afresh, and CPython's type
-    cache keeps such names (``cdr.py`` says why); a node publishing
-    diagnostics once a second then kept a few dead names more by the hour.
-    """
-    out = CdrWriter()
-    out.int32(sec)  # header.stamp
-    out.uint32(nanosec)
-    out.string('')  # header.frame_id
-    statuses = list(statuses)
-    out.uint32(len(statuses))
-    for status in statuses:
-        out.octet(status.level)
-        out.string(prefix + status.name)
-        out.string(status.message)
-        out.string(hardware_id)
-        out.uint32(len(status.values))
-        for key, value in status.values:
-            out.string(key)
-            out.string(value)
-    return out.serialized()
-
-
-@functools.cache
-def cdr_reads_back() -> bool:
-    """Tell whether :func:`to_cdr`'s bytes read back as :func:`to_message`'s messages (cdr.py)."""
-    statuses = [Status(WARN, 'probe', 'ü', (('a', ''), ('key', 'value'))), Status(OK, 'empty', '')]
-    array = DiagnosticArray()
-    array.header.stamp.sec, array.header.stamp.nanosec = 1_700_000_000, 123_456_789
-    array.status = to_message(statuses, '3095', PREFIX)
-    return reads_back([(to_cdr(statuses, '3095', PREFIX, 1_700_000_000, 123_456_789), array)])
-
-
 class RateMeter:
     """
     Measure the record rate between two ticks from the records' read times.
@@ -601,19 +561,13 @@ class DiagnosticsPublisher:
         return info.serial_number if info is not None and info.serial_number else ''
 
     def tick(self) -> None:
-        """Build and publish one DiagnosticArray (the timer callback), as bytes."""
-        sec, nanosec = self.node.get_clock().now().seconds_nanoseconds()
+        """Build and publish one DiagnosticArray (the timer callback)."""
+        array = DiagnosticArray()
+        array.header.stamp = self.node.get_clock().now().to_msg()
         core = self._driver()
         device = core.supervisor.status() if core is not None else None
-        statuses = self.collect(device)
-        hardware_id = self.hardware_id(device)
-        if cdr_reads_back():
-            message = to_cdr(statuses, hardware_id, self.prefix, sec, nanosec)
-        else:
-            message = DiagnosticArray()
-            message.header.stamp.sec, message.header.stamp.nanosec = sec, nanosec
-            message.status = to_message(statuses, hardware_id, self.prefix)
+        array.status = to_message(self.collect(device), self.hardware_id(device), self.prefix)
         try:
-            self.publisher.publish(message)
+            self.publisher.publish(array)
         except RCLError:
             pass  # ROS is shutting down: nobody is left to tell

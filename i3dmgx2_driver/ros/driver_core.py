@@ -70,9 +70,7 @@ from .services import DeviceServices, SaveCaptureService
 from .temperature import TemperaturePoller
 from ..capture import bytes_sink, FaultCapture, RawCapture
 from ..codec.data_rate import ticks_per_cycle
-from ..device.hot_path import HotPathObserver
-from ..device.port import check_port_path, PortError, SerialPort
-from ..device.port_opener import PortParts
+from ..device.port import check_port_path, PortError
 from ..device.shared_port import SharedPort
 from ..device.supervisor import DeviceSupervisor
 
@@ -109,13 +107,9 @@ class DriverCore:
     (None: off; its :class:`DriverSet` starts and closes it). What the owning node decides:
     ``publishing`` False: records are counted, not published, until the
     owner turns publishing on (``records.set_publishing``); ``refusal``
-    tells the services why they must refuse now ('' to serve). What a test
-    or benchmark injects (the defaults are what the node runs with):
-    ``timings``, told every stage boundary of every sample's path
-    (device/hot_path.py; None costs nothing), and ``port_factory``, which
-    opens the port (SerialPort; a subclass to observe it). ``shared``: the
-    port the sensors behind one base station share (None: the core opens
-    its own).
+    tells the services why they must refuse now ('' to serve). ``shared``:
+    the port the sensors behind one base station share (None: the core
+    opens its own).
 
     The core starts nothing: its owner drives :attr:`supervisor`. The records
     themselves go through :attr:`records` (record_publisher.py), which the
@@ -126,8 +120,6 @@ class DriverCore:
     def __init__(self, node: Node, config: DriverConfig, sensor: SensorSetting,
                  publishers: Publishers, raw_capture: RawCapture, *,
                  publishing: bool = True, refusal: Callable[[], str] | None = None,
-                 timings: HotPathObserver | None = None,
-                 port_factory: Callable[..., SerialPort] = SerialPort,
                  shared: SharedPort | None = None,
                  fault_capture: FaultCapture | None = None) -> None:
         self.node = node
@@ -141,8 +133,7 @@ class DriverCore:
         #: Stamping, counting and publishing of each record, in the reader thread.
         self.records = RecordPublisher(
             self.publishers, cfg.messages_for(sensor), Stamping.of(cfg, self.stream),
-            self._expected_ticks, node.get_logger(), publishing, timings,
-            bias_kept=self._bias_kept)
+            self._expected_ticks, node.get_logger(), publishing, bias_kept=self._bias_kept)
         #: Whether this core's sensor shares its port with others.
         self._shared = shared is not None
         #: The port's raw capture (shown on diagnostics).
@@ -159,7 +150,7 @@ class DriverCore:
             self.device_config,
             on_record=self.records.on_record, log=node.get_logger(),
             on_connect=self.records.link_changed, on_fatal=self._on_fatal,
-            port=PortParts(port_factory, capture, timings), shared=shared,
+            on_bytes=capture, shared=shared,
             on_gyro_bias=lambda: self.records.announce_calibrated(True))
         self.records.announce_calibrated(False)
         self.device_services = DeviceServices(
@@ -233,9 +224,7 @@ class DriverSet:
 
     def __init__(self, node: Node, config: DriverConfig,
                  publishers: list[Publishers] | None = None, publishing: bool = True,
-                 refusal: Callable[[], str] | None = None,
-                 timings: HotPathObserver | None = None,
-                 port_factory: Callable[..., SerialPort] = SerialPort) -> None:
+                 refusal: Callable[[], str] | None = None) -> None:
         device = config.device
         check_port_path(device.port)
         sensors = config.sensors
@@ -255,13 +244,12 @@ class DriverSet:
         self.shared: SharedPort | None = None
         if len(sensors) > 1:
             self.shared = SharedPort(
-                device, node.get_logger(), port_factory,
-                bytes_sink(capture.on_bytes if capture.active else None, faults.on_bytes),
-                timings)
+                device, node.get_logger(),
+                bytes_sink(capture.on_bytes if capture.active else None, faults.on_bytes))
         self.cores = [
             DriverCore(node, config, sensor, sensor_publishers, capture,
-                       publishing=publishing, refusal=refusal, timings=timings,
-                       port_factory=port_factory, shared=self.shared, fault_capture=faults)
+                       publishing=publishing, refusal=refusal, shared=self.shared,
+                       fault_capture=faults)
             for sensor, sensor_publishers in zip(sensors, publishers, strict=True)]
         self.save_capture = SaveCaptureService(node, faults)
         if faults.active:

@@ -23,33 +23,22 @@ and starts the supervisor, which opens the port, and keeps the stream going,
 retrying forever.
 """
 
-from collections.abc import Callable
-
 from rclpy.node import Node
 
 from .diagnostics import DiagnosticsPublisher
 from .driver_core import DriverCore, DriverSet, load_config
 from .parameters import DriverConfig
-from ..device.hot_path import HotPathObserver
-from ..device.port import PortError, SerialPort
+from ..device.port import PortError
 
 
 class ImuDriverNode(Node):
-    """
-    Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField.
+    """Publish the records of the chosen stream as sensor_msgs/Imu and MagneticField."""
 
-    ``timings``, if given, is told every stage of every sample's path
-    (device/hot_path.py): ``main.py`` passes one when asked to record them.
-    ``port_factory`` opens the port (SerialPort; a subclass to observe it).
-    """
-
-    def __init__(self, node_name: str = 'i3dmgx2_driver',
-                 timings: HotPathObserver | None = None,
-                 port_factory: Callable[..., SerialPort] = SerialPort, **kwargs) -> None:
+    def __init__(self, node_name: str = 'i3dmgx2_driver', **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         self.config: DriverConfig = load_config(self)
         #: Every sensor's core (one, unless ``addresses`` lists several: DriverSet).
-        self.drivers = DriverSet(self, self.config, timings=timings, port_factory=port_factory)
+        self.drivers = DriverSet(self, self.config)
         self.core: DriverCore = self.drivers.cores[0]
         self.diagnostics = [
             DiagnosticsPublisher(self, lambda core=core: core,

@@ -67,9 +67,8 @@ from .main import run
 from .parameters import declare_parameters, driver_config, DriverConfig, ParameterError
 from .publishers import create_publishers, Publishers
 from .. import lifetime
-from ..device.hot_path import HotPathObserver
 from ..device.link import DeviceTimeout
-from ..device.port import check_port_path, PortError, PortUnusable, SerialPort
+from ..device.port import check_port_path, PortError, PortUnusable
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
@@ -114,18 +113,10 @@ def transition(name: str) -> Callable[[Transition], Transition]:
 
 
 class LifecycleDriverNode(LifecycleNode):
-    """
-    The 3DM-GX2 driver as a managed node; the cores exist from configure to cleanup.
+    """The 3DM-GX2 driver as a managed node; the cores exist from configure to cleanup."""
 
-    ``timings`` and ``port_factory`` go to every core a configure makes, as
-    the plain node's (imu_node.py): a run that observes the node uses them.
-    """
-
-    def __init__(self, node_name: str = 'i3dmgx2_driver',
-                 timings: HotPathObserver | None = None,
-                 port_factory: Callable[..., SerialPort] = SerialPort, **kwargs) -> None:
+    def __init__(self, node_name: str = 'i3dmgx2_driver', **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        self._core_options = {'timings': timings, 'port_factory': port_factory}
         #: Every sensor's core, from a successful configure to cleanup or shutdown.
         self.drivers: DriverSet | None = None
         #: Made at the first configure and kept (create_publishers says why), per sensor.
@@ -205,7 +196,7 @@ class LifecycleDriverNode(LifecycleNode):
                 log.error(f'configure failed: {exc}')
                 return FAILURE
         drivers = DriverSet(self, config, publishers=self._data_publishers, publishing=False,
-                            refusal=self._refusal, **self._core_options)
+                            refusal=self._refusal)
         self.drivers = drivers
         if self._stopping.is_set():
             # A signal came while the set was made, before shutdown() could see it.

@@ -47,7 +47,6 @@ threads save the reader.
 """
 
 from collections.abc import Callable
-import functools
 import sys
 import threading
 from typing import Any
@@ -196,16 +195,15 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
 def main(args: list[str] | None = None) -> int:
     """Run the driver node until a signal or its parent's end (recording its timings if asked)."""
     lifetime.die_with_parent()
-    timings, path = recorder_from_environment()
-    if timings is None:
-        return run(ImuDriverNode, args)
+    recorder, path = recorder_from_environment()  # installed as the hot path's observer
     try:
-        return run(functools.partial(ImuDriverNode, timings=timings), args)
+        return run(ImuDriverNode, args)
     finally:
-        # Writing the file is no part of the stop: the deadline counts afresh after it.
-        lifetime.cancel_deadline()
-        timings.save(path)
-        lifetime.arm_deadline()
+        if recorder is not None:
+            # Writing the file is no part of the stop: the deadline counts afresh after it.
+            lifetime.cancel_deadline()
+            recorder.save(path)
+            lifetime.arm_deadline()
 
 
 if __name__ == '__main__':

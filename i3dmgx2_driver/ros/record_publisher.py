@@ -26,7 +26,6 @@ driver core (driver_core.py), which builds it and hands its
 
 from collections.abc import Callable
 from dataclasses import dataclass
-import functools
 import threading
 
 from rclpy._rclpy_pybind11 import RCLError
@@ -39,26 +38,13 @@ from .publishers import Publishers
 from ..codec import line_budget
 from ..codec.framing import DataPacket
 from ..codec.streams import Stream
-from ..device.hot_path import HotPathObserver
+from ..device import hot_path
 from ..device.sample_clock import ClockStatus, Restart, SampleClock
 
 #: Whether ready-serialized messages read back right, by the message factory's
 #: settings: checked once per process, because a managed node makes a core at
 #: every configure and rclpy's deserialize_message keeps a little memory per call.
 _SERIALIZED_MATCHES: dict[MessageSettings, bool] = {}
-
-
-@functools.cache
-def _bool_cdr(value: bool) -> bytes:
-    """
-    Return a ``std_msgs/Bool`` as the middleware serializes it: made once per value.
-
-    Published as bytes (``cdr.py`` says why): as an object, each one published
-    (at every power cycle and capture) left a name in CPython's type cache.
-    """
-    from rclpy.serialization import serialize_message
-
-    return serialize_message(Bool(data=value))
 
 
 @dataclass
@@ -103,17 +89,17 @@ class RecordPublisher:
     ``expected_ticks()`` returns the timer ticks between two records once
     the rate divider is known (else None): a larger step counts the records
     in between as lost. ``publishing`` False: records are counted, not
-    published, until :meth:`set_publishing`. ``timings``, if given, is told
-    every stage boundary of every sample's path (device/hot_path.py); None
-    costs nothing. ``bias_kept()`` says whether the device side keeps a gyro
-    bias it writes back after a power cycle (before the stream restarts), so
-    that a power cycle seen in the timer leaves ``~/is_calibrated`` true.
+    published, until :meth:`set_publishing`. The hot path's observer
+    (device/hot_path.py), when on, is told the stamp, the pack and the
+    publish of every sample; off, it costs one test each. ``bias_kept()``
+    says whether the device side keeps a gyro bias it writes back after a
+    power cycle (before the stream restarts), so that a power cycle seen in
+    the timer leaves ``~/is_calibrated`` true.
     """
 
     def __init__(self, publishers: Publishers, messages: MessageSettings,
                  stamping: Stamping, expected_ticks: Callable[[], int | None],
                  log: RcutilsLogger, publishing: bool = True,
-                 timings: HotPathObserver | None = None,
                  bias_kept: Callable[[], bool] | None = None) -> None:
         self.publishers = publishers
         self.imu_pub = publishers.imu
@@ -142,7 +128,6 @@ class RecordPublisher:
         self._expected_ticks = expected_ticks
         self._bias_kept = bias_kept or (lambda: False)
         self._log = log
-        self._timings = timings
         self._publish_lock = threading.Lock()
 
     def announce_calibrated(self, calibrated: bool) -> None:
@@ -157,7 +142,7 @@ class RecordPublisher:
         accepted capture's): True again whenever that one is written.
         """
         try:
-            self.publishers.is_calibrated.publish(_bool_cdr(calibrated))
+            self.publishers.is_calibrated.publish(Bool(data=calibrated))
         except RCLError:
             pass  # ROS is shutting down: nobody is left to tell
 
@@ -212,7 +197,7 @@ class RecordPublisher:
                 return
             clock = self.sample_clock
             stamp = clock.stamp(record.timer, read_mono, self._wire_time)
-            timings = self._timings
+            timings = hot_path.timings
             if timings is not None:
                 timings.stamped()
             if clock.restarted and clock.last_restart == Restart.RESET.value:

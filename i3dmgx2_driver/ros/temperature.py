@@ -34,8 +34,7 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import Temperature
 
-from .cdr import reads_back, StampedDoubles
-from .conversions import set_stamp, stamp_parts
+from .conversions import set_stamp
 from ..codec import layouts
 from ..device.link import DeviceLink, DeviceTimeout
 from ..device.port import PortError
@@ -46,14 +45,6 @@ POLL_TIMEOUT = 0.3
 POLL_RETRIES = 2
 #: Seconds between two warnings about failed polls.
 WARN_PERIOD = 60.0
-
-
-def _reads_back(layout: StampedDoubles, frame_id: str) -> bool:
-    """Tell whether ``layout``'s bytes read back as the Temperature they stand for (cdr.py)."""
-    expected = Temperature(temperature=25.125, variance=0.0)
-    expected.header.frame_id = frame_id
-    expected.header.stamp.sec, expected.header.stamp.nanosec = 1_700_000_000, 123_456_789
-    return reads_back([(layout.pack(1_700_000_000, 123_456_789, 25.125, 0.0), expected)])
 
 
 class TemperaturePoller:
@@ -83,9 +74,6 @@ class TemperaturePoller:
         self._thread: threading.Thread | None = None
         self.publisher = publisher
         if period > 0 and publisher is not None:
-            # Published as bytes where they read back as the message (cdr.py says why).
-            self._layout = StampedDoubles(frame_id, 2)
-            self._serialized = _reads_back(self._layout, frame_id)
             self._msg = Temperature()  # variance 0.0: unknown (sensor_msgs)
             self._msg.header.frame_id = frame_id
             self._thread = threading.Thread(target=self._run, name='gx2-temperature',
@@ -121,12 +109,9 @@ class TemperaturePoller:
             return False
         read_time = time.time()
         self.latest = reply.accel_celsius
-        if self._serialized:
-            msg = self._layout.pack(*stamp_parts(read_time + self._time_offset), self.latest, 0.0)
-        else:
-            msg = self._msg
-            msg.temperature = self.latest
-            set_stamp(msg.header, read_time + self._time_offset)
+        msg = self._msg
+        msg.temperature = self.latest
+        set_stamp(msg.header, read_time + self._time_offset)
         try:
             self.publisher.publish(msg)
         except RCLError:

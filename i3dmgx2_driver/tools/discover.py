@@ -424,13 +424,12 @@ class _Prober:
 
 
 def probe_port(path: str, config: ProbeConfig | None = None,
-               progress: Progress | None = None,
-               port_factory: Callable[..., SerialPort] = SerialPort) -> PortProbe:
+               progress: Progress | None = None) -> PortProbe:
     """Open ``path`` exclusively and find the sensors behind it; never raises PortError."""
     cfg = config or ProbeConfig()
     start = time.monotonic()
     try:
-        port = port_factory(path, cfg.baud, low_latency=cfg.low_latency)
+        port = SerialPort(path, cfg.baud, low_latency=cfg.low_latency)
     except PortError as exc:
         status = {PortBusy: 'busy', PortMissing: 'missing',
                   PortPermissionDenied: 'denied'}.get(type(exc), 'error')
