@@ -56,8 +56,6 @@ from harness.processes import isolate_ros_domain
 from i3dmgx2_driver.device.hot_path import ROW_FIELDS
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 
-#: mode -> node parameters, and its column heading.
-MODES = {'fast': ({}, 'as shipped')}
 _PUBLISHED = ROW_FIELDS.index('published')
 #: How long the base station stays unplugged (s): uniform in this range.
 UNPLUG_S = (1.5, 2.5)
@@ -120,11 +118,11 @@ def run_scenarios(sim: PtySimulator, rng: random.Random) -> list[Trial]:
 
 
 class Figures(NamedTuple):
-    """Per scenario and mode: seconds to the first message, from the port back and opened."""
+    """Per scenario: seconds to the first message, from the port back and opened; commands."""
 
-    to_publish: dict[tuple[str, str], list[float]]
-    open_to_publish: dict[tuple[str, str], list[float]]
-    commands: dict[tuple[str, str], tuple[str, ...]]
+    to_publish: dict[str, list[float]]
+    open_to_publish: dict[str, list[float]]
+    commands: dict[str, tuple[str, ...]]
 
 
 def measure(rounds: int, seed: int) -> Figures:
@@ -132,28 +130,27 @@ def measure(rounds: int, seed: int) -> Figures:
     figures = Figures({}, {}, {})
     rng = random.Random(seed)
     for round_ in range(rounds):
-        for mode, (params, _) in MODES.items():
-            print(f'-- round {round_ + 1}/{rounds}: {mode}', file=sys.stderr, flush=True)
-            with PtySimulator(SimulatorConfig(seed=seed + round_)) as sim:
-                node = TimedNodeProcess(sim.port, **params)
-                try:
-                    time.sleep(3.0)
-                    trials = run_scenarios(sim, rng)
-                finally:
-                    node.stop()
-            published = sorted(row[_PUBLISHED] for row in node.rows)
-            for trial in trials:
-                key = (trial.scenario, mode)
-                first = next((t for t in published if t > trial.back), None)
-                if first is None:
-                    continue
-                figures.to_publish.setdefault(key, []).append(first - trial.back)
-                print(f'   {trial.scenario}: first message {(first - trial.back) * 1e3:.1f} ms '
-                      f'after the port or radio was back', file=sys.stderr, flush=True)
-                opened = [t for t in node.opens if trial.back <= t <= first]
-                if opened:
-                    figures.open_to_publish.setdefault(key, []).append(first - opened[0])
-                figures.commands[key] = trial.commands
+        print(f'-- round {round_ + 1}/{rounds}', file=sys.stderr, flush=True)
+        with PtySimulator(SimulatorConfig(seed=seed + round_)) as sim:
+            node = TimedNodeProcess(sim.port)
+            try:
+                time.sleep(3.0)
+                trials = run_scenarios(sim, rng)
+            finally:
+                node.stop()
+        published = sorted(row[_PUBLISHED] for row in node.rows)
+        for trial in trials:
+            key = trial.scenario
+            first = next((t for t in published if t > trial.back), None)
+            if first is None:
+                continue
+            figures.to_publish.setdefault(key, []).append(first - trial.back)
+            print(f'   {trial.scenario}: first message {(first - trial.back) * 1e3:.1f} ms '
+                  f'after the port or radio was back', file=sys.stderr, flush=True)
+            opened = [t for t in node.opens if trial.back <= t <= first]
+            if opened:
+                figures.open_to_publish.setdefault(key, []).append(first - opened[0])
+            figures.commands[key] = trial.commands
     return figures
 
 
@@ -178,23 +175,19 @@ def main(argv: list[str] | None = None) -> int:
     isolate_ros_domain()
     note = RunNote('reconnect.py', argv)
     figures = measure(args.rounds, args.seed)
-    modes = list(MODES)
-    heading = ' | '.join(f'{MODES[m][1]}: median / max' for m in modes)
     lines = ['## Data back after a reconnect (100 Hz)', '', machine_table(), '',
-             f'| scenario | from | {heading} |', '|---|---|' + '---|' * len(modes)]
+             '| scenario | from | as shipped: median / max |', '|---|---|---|']
     for scenario in SCENARIOS:
         origin = 'radio back' if 'stall' in scenario else 'port back'
-        cells = ' | '.join(_ms(figures.to_publish.get((scenario, m))) for m in modes)
-        lines.append(f'| {scenario} | {origin} -> first message published | {cells} |')
+        lines.append(f'| {scenario} | {origin} -> first message published | '
+                     f'{_ms(figures.to_publish.get(scenario))} |')
         if 'unplug' in scenario:
-            cells = ' | '.join(_ms(figures.open_to_publish.get((scenario, m))) for m in modes)
-            lines.append(f'| {scenario} | port opened -> first message published | {cells} |')
-    heading = ' | '.join(MODES[m][1] for m in modes)
-    lines += ['', f'| commands sent in the 3 s after the port or radio was back | {heading} |',
-              '|---|' + '---|' * len(modes)]
+            lines.append(f'| {scenario} | port opened -> first message published | '
+                         f'{_ms(figures.open_to_publish.get(scenario))} |')
+    lines += ['', '| commands sent in the 3 s after the port or radio was back | as shipped |',
+              '|---|---|']
     for scenario in SCENARIOS:
-        cells = ' | '.join(_commands(figures.commands.get((scenario, m), ())) for m in modes)
-        lines.append(f'| {scenario} | {cells} |')
+        lines.append(f'| {scenario} | {_commands(figures.commands.get(scenario, ()))} |')
     lines += ['', note.text()]
     emit('\n'.join(lines) + '\n', args.output)
     return 0

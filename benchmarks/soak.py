@@ -43,10 +43,9 @@ import sys
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from harness.campaign import run_campaign  # noqa: E402, RUF100 - after the path
-from harness.campaign_config import CampaignConfig  # noqa: E402, RUF100 - after the path
-from harness.long_soak import run_long_soak  # noqa: E402, RUF100
+from harness.campaign_verdict import CampaignConfig  # noqa: E402, RUF100 - after the path
+from harness.long_soak import LongSoakConfig, run_long_soak  # noqa: E402, RUF100
 from harness.processes import BENCHMARK_DOMAINS, reserve_ros_domain  # noqa: E402, RUF100
-from harness.soak_plan import LongSoakConfig  # noqa: E402, RUF100
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -28,23 +28,21 @@ imports it.
   those processes run.
 * ``percentiles``: a sample's percentile and summary.
 * ``campaign``: the soak and fault campaign (``benchmarks/soak.py`` runs it
-  for minutes, ``test/test_soak_short.py`` for half a minute): its settings
-  in ``campaign_config``, its faults in ``fault_driver``, the truth in
-  ``campaign_truth``, its subscriber in ``campaign_listener``, a run's data in
-  ``campaign_data``; ``campaign_analysis`` judges it from ``read_windows``,
-  ``campaign_match``, ``campaign_stamps``, ``campaign_counters`` and
-  ``campaign_health`` into ``campaign_result`` and ``campaign_report``.
+  for minutes, ``test/test_soak_short.py`` for half a minute): the truth,
+  the subscriber, the node process and the run, its faults in
+  ``fault_driver``; ``campaign_verdict`` judges what a run produced (the
+  checks and the report), for the campaign and the long soak alike.
 * ``run_config``: the settings the campaign, the long soak and the node fuzz share.
-* ``long_soak``: the campaign's legs over every stream for an hour, from
-  ``soak_plan`` (settings, legs), ``soak_nodes`` (the node processes),
-  ``soak_leg`` (one leg), ``soak_recovery`` (data back after a fault),
-  ``process_sampler`` (RSS, descriptors, threads, slopes) and ``soak_report``.
-* ``hostile``: a hostile base station (its attacks' bytes in
-  ``packet_mutation``, its oracle in ``hostile_oracle``); ``node_fuzz``
-  fuzzes the running node through it.
+* ``long_soak``: the campaign's legs over every stream for an hour, its node
+  processes sampled by ``process_sampler`` (RSS, descriptors, threads,
+  slopes; ``benchmarks/memory_curve.py`` samples with it too).
+* ``hostile``: a hostile base station, its attacks' bytes and its oracle;
+  ``node_fuzz`` fuzzes the running node through it.
 * ``fuzz_checks``: the codec's properties on one input (the fuzzer in
   ``benchmarks/fuzz_parser.py`` and ``test/test_fuzz_regressions.py``).
 * ``stamp_runs``: stamps against the simulator's truth, and their check.
+* ``shutdown_trials``: a signal at a random moment of every phase, on nodes
+  forked by ``node_forks``.
 
 The tests find it through pytest's ``pythonpath = .``; the benchmarks put
 the repository on ``sys.path`` themselves (``benchmarks/bench_common.py``).

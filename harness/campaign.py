@@ -17,71 +17,282 @@ The soak and fault campaign: the real node against a simulator that misbehaves.
 
 The node runs as its own process (``harness/instrumented_node.py``: the
 real node, with its counters written to a file) on a simulated base station
-whose faults change at random all through the run: line noise (garbage, with
-and without 0xAA bytes), corrupted checksums and lengths, packets from a
-foreign sensor, radio drops and lost commands, jitter, stalls short and long,
-unplug and replug, sensor power cycles (streaming again at once, or not), the
-sensor ignoring its first request to stream or wanting a polled request
-first. A real rclpy subscriber (reliable, deep history) records what the
-node publishes. Afterwards every published message is matched, by its exact
-values, to the simulator's ground truth, and the node's counters are
-reconciled with what the simulator wrote.
+whose faults change at random all through the run (``fault_driver.py``):
+line noise (garbage, with and without 0xAA bytes), corrupted checksums and
+lengths, packets from a foreign sensor, radio drops and lost commands,
+jitter, stalls short and long, unplug and replug, sensor power cycles
+(streaming again at once, or not), the sensor ignoring its first request to
+stream or wanting a polled request first. A real rclpy subscriber (reliable,
+deep history) records what the node publishes. Afterwards every published
+message is matched, by its exact values, to the simulator's ground truth,
+and the node's counters are reconciled with what the simulator wrote
+(``campaign_verdict.py``: the rules, the checks and the report).
 
 Used by ``benchmarks/soak.py`` (ten minutes) and ``test/test_soak_short.py``
 (about half a minute in CI). :func:`run_campaign` does everything and returns
-the checks and a printable report; the rules are stated in the report.
-
-Its pieces, one room each: the settings (``campaign_config.py``), the faults
-(``fault_driver.py``), the truth (``campaign_truth.py``), the subscriber
-(``campaign_listener.py``), what a run produced (``campaign_data.py``) and
-the analysis (``campaign_analysis.py``). Here: the run itself, set up, run
-through its fault and quiet phases, and collected.
+the checks and a printable report. Here: the truth kept compact with the
+values the node would publish for it, the subscriber, the node process, and
+the run itself, set up, run through its fault and quiet phases, and
+collected; the long soak's legs (``long_soak.py``) run on the same pieces.
 """
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 import json
 import os
 import random
 import shutil
+import struct
 import sys
 import tempfile
+import threading
 import time
 from typing import NamedTuple
 
-from harness.campaign_analysis import analyse
-from harness.campaign_config import CampaignConfig, rate_text
-from harness.campaign_data import RunData
-from harness.campaign_listener import Subscriber
-from harness.campaign_result import CampaignResult
-from harness.campaign_truth import TruthCollector
+from harness.campaign_verdict import (
+    analyse, CampaignConfig, CampaignResult, rate_text, RunData, Sent,
+)
 from harness.fault_driver import FaultDriver
 from harness.instrumented_node import STATS_ENV
-from harness.processes import isolate_ros_domain, NodeProcess, ros_env
+from harness.process_sampler import process_sample
+from harness.processes import isolate_ros_domain, Listener, NodeProcess, ros_env
+from harness.run_config import FaultedNodeConfig
+from i3dmgx2_driver.codec.commands import decode_record
+from i3dmgx2_driver.codec.data_rate import RATE_DIVIDER_ADDRESS
+from i3dmgx2_driver.codec.errors import CodecError
+from i3dmgx2_driver.codec.framing import HEADER_SIZE
+from i3dmgx2_driver.codec.layouts import LAYOUTS
+from i3dmgx2_driver.codec.orientation import ENU
+from i3dmgx2_driver.codec.streams import STREAMS
+from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings, STANDARD_GRAVITY
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from sensor_msgs.msg import Imu
 
+#: A published message's acceleration and angular velocity, packed: how a message is
+#: matched to its record, by its exact values (a run writes 10^5 records and more).
+VALUES = struct.Struct('<6d')
+#: Its orientation, packed.
+QUATERNION = struct.Struct('<4d')
+#: The bytes that can each become a spurious parser event (ACK/start of packet, NACK).
+_MARKS = (0xAA, 0x21)
+#: The node as the campaign runs it, its counters written to a file.
 NODE_COMMAND = (sys.executable, '-m', 'harness.instrumented_node')
 
 
-def read_rss_kib(pid: int) -> int | None:
-    """Return the VmRSS of a process (KiB), None if it is gone."""
-    try:
-        with open(f'/proc/{pid}/status') as handle:
-            for line in handle:
-                if line.startswith('VmRSS:'):
-                    return int(line.split()[1])
-    except OSError:
+# -- the truth, and the values the node publishes for it ---------------------------------------
+
+def imu_key(accel, rate) -> bytes:
+    """Pack what the node publishes for a 0xCC record, computed exactly as the node does."""
+    g = STANDARD_GRAVITY
+    return VALUES.pack(accel[0] * g, -accel[1] * g, -accel[2] * g,
+                       rate[0], -rate[1], -rate[2])
+
+
+def message_key(msg: Imu) -> bytes:
+    """Pack a received message's acceleration and angular velocity, as the truth's keys are."""
+    la, av = msg.linear_acceleration, msg.angular_velocity
+    return VALUES.pack(la.x, la.y, la.z, av.x, av.y, av.z)
+
+
+#: For each stream's record type: the node's own message factory (ENU), the record's
+#: size in a packet and its command byte, so that every stream's published values are
+#: computed as the node does.
+_FACTORIES = {
+    stream.record_type: (MessageFactory(MessageSettings('imu_link', ENU, stream=stream)),
+                         LAYOUTS[stream.code].record_size, stream.code)
+    for stream in STREAMS}
+
+
+def imu_values(record) -> tuple[bytes, bytes] | None:
+    """Return the packed (acceleration, rate) and orientation the node publishes, or None."""
+    made = _FACTORIES.get(type(record))
+    if made is None:
         return None
-    return None
+    factory = made[0]
+    key = VALUES.pack(*factory.linear_acceleration(record), *factory.angular_velocity(record))
+    return key, QUATERNION.pack(*factory.orientation(record)[0])
 
 
-def read_json(path: str) -> dict | None:
-    """Return a node's counters file, None while it is missing or half written."""
-    try:
-        with open(path) as handle:
-            return json.load(handle)
-    except (OSError, ValueError):
-        return None
+def compact(entry) -> Sent:
+    """Keep the parts of a SentRecord the checks need."""
+    record = entry.record
+    key = bad_key = quat = code = None
+    values = imu_values(record)
+    if values is not None:
+        key, quat = values
+        code = _FACTORIES[type(record)][2]
+        if entry.fault == 'checksum':
+            size = _FACTORIES[type(record)][1]
+            try:
+                bad = imu_values(decode_record(entry.packet[HEADER_SIZE:HEADER_SIZE + size]))
+                bad_key = bad[0] if bad is not None else None
+            except CodecError:
+                bad_key = None
+    marks = sum(1 for byte in entry.packet if byte in _MARKS)
+    return Sent(entry.index, entry.write_time, entry.valid, entry.fault, entry.address,
+                entry.source, key, bad_key, quat, entry.timer, entry.sample_time, marks,
+                len(entry.packet), code)
 
+
+class TruthCollector(threading.Thread):
+    """
+    Move the simulator's truth into compact form as it is produced.
+
+    Twice a second, so that the simulator's bounded truth never overflows.
+    """
+
+    def __init__(self, sim: PtySimulator) -> None:
+        super().__init__(name='soak-truth', daemon=True)
+        self.sim = sim
+        self.entries: list[Sent] = []
+        self.missed = 0
+        self._next = 0
+        self._halt = threading.Event()
+        self._lock = threading.Lock()
+
+    def collect(self) -> None:
+        """Take whatever is new in the simulator's truth."""
+        with self._lock:
+            fresh = [e for e in self.sim.truth if e.index >= self._next]
+            for entry in fresh:
+                if entry.index != self._next:
+                    self.missed += entry.index - self._next
+                self.entries.append(compact(entry))
+                self._next = entry.index + 1
+
+    def take(self) -> tuple[list[Sent], int]:
+        """Return the entries and the missed count so far, and start both afresh (a leg's)."""
+        self.collect()
+        with self._lock:
+            entries, self.entries = self.entries, []
+            missed, self.missed = self.missed, 0
+        return entries, missed
+
+    def run(self) -> None:
+        """Collect twice a second until stopped."""
+        while not self._halt.wait(0.5):
+            self.collect()
+
+    def stop(self) -> None:
+        """Stop and take the rest."""
+        self._halt.set()
+        self.join(5.0)
+        self.collect()
+
+
+# -- what the node published, as a subscriber of another process received it ------------------
+
+class Subscriber(Listener):
+    """
+    The harness's rclpy listener, keeping what the checks need of each Imu message.
+
+    Its exact values (packed as the truth's keys are), its stamp, its
+    orientation and its arrival time.
+    """
+
+    def __init__(self, depth: int = 10000, topics: tuple[str, ...] = ('imu/raw_data',)) -> None:
+        self.rows: list[tuple[bytes, int, bytes, float]] = []
+        super().__init__(dict.fromkeys(topics, Imu), depth=depth)
+
+    def _store(self, topic: str, msg: Imu) -> None:
+        o = msg.orientation
+        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        self.rows.append((message_key(msg), stamp, QUATERNION.pack(o.x, o.y, o.z, o.w),
+                          time.time()))
+
+    @property
+    def count(self) -> int:
+        """Messages received so far."""
+        return len(self.rows)
+
+    def take(self) -> list[tuple[bytes, int, bytes, float]]:
+        """Return the messages received so far, and start afresh (a leg's)."""
+        rows, self.rows = self.rows, []
+        return rows
+
+    def wait_count(self, count: int, timeout: float) -> bool:
+        """Wait until ``count`` messages have come; return whether they did."""
+        deadline = time.monotonic() + timeout
+        while self.count < count and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return self.count >= count
+
+    def wait_publisher(self, node: NodeProcess, topic: str, timeout: float = 60.0) -> None:
+        """Wait until this subscriber's node knows the node's publisher of ``topic``."""
+        deadline = time.monotonic() + timeout
+        while self.node.count_publishers(topic) < 1:
+            if node.proc.poll() is not None:
+                raise RuntimeError(f'the node exited:\n{node.output()[-3000:]}')
+            if time.monotonic() > deadline:
+                raise RuntimeError(f'no publisher of {topic} within {timeout:g} s')
+            time.sleep(0.1)
+
+
+# -- the node process and its counters ---------------------------------------------------------
+
+def node_params(cfg: FaultedNodeConfig, port: str, stream: str, data_rate: float,
+                topic: str = '/imu/raw_data') -> dict[str, object]:
+    """
+    Return the node's parameters for a faulted run.
+
+    The run's timeouts, and a reliable, deep history on its Imu topic: a
+    message lost on the way to the subscriber would read as one the node
+    never published.
+    """
+    qos = f'qos_overrides.{topic}.publisher'
+    return {'port': port, 'address': cfg.address, 'read_timeout': cfg.read_timeout,
+            'reconnect_interval': cfg.reconnect_interval, f'{qos}.depth': 1000,
+            f'{qos}.reliability': 'reliable', 'temperature_period': cfg.temperature_period,
+            'stream': stream, 'data_rate': float(data_rate)}
+
+
+def start_node(params: dict[str, object], stats_path: str, lifecycle: bool = False,
+               extra_args: tuple[str, ...] = ()) -> NodeProcess:
+    """Start the instrumented node (the managed one with ``lifecycle``), its counters to a file."""
+    return NodeProcess(params, extra_args, env=ros_env({STATS_ENV: stats_path}),
+                       command=NODE_COMMAND + (('--lifecycle',) if lifecycle else ()))
+
+
+def read_counters(path: str, done: Callable[[dict], bool], timeout: float) -> dict:
+    """
+    Return the node's counters once ``done`` takes them; the last read after ``timeout`` s.
+
+    The file is missing until the node first writes it, and is replaced
+    whole at each write; a read that fails counts as empty.
+    """
+    deadline = time.monotonic() + timeout
+    got: dict = {}
+    while time.monotonic() < deadline:
+        try:
+            with open(path) as handle:
+                got = json.load(handle)
+        except (OSError, ValueError):
+            got = {}
+        if done(got):
+            break
+        time.sleep(0.1)
+    return got
+
+
+def run_data(cfg: CampaignConfig, sim: PtySimulator, driver: FaultDriver, **rest) -> RunData:
+    """Return a run's data: what the simulator and the fault driver recorded, and ``rest``."""
+    with sim.lock:
+        divider = sim.sensor.eeprom.get(RATE_DIVIDER_ADDRESS, 512)
+    return RunData(cfg=cfg, events=list(driver.events), sim_stats=sim.stats.as_dict(),
+                   host_log=sim.host_log, unsafe_garbage_bytes=driver.unsafe_garbage_bytes,
+                   unsafe_garbage_bursts=driver.unsafe_garbage_bursts, divider=divider,
+                   power_ups=list(driver.power_ups), **rest)
+
+
+def close_all(steps: Iterable[Callable[[], object]], what: str) -> None:
+    """Run every step, each on its own: a failure in one must not leave a process behind."""
+    for step in steps:
+        try:
+            step()
+        except Exception as exc:  # keep cleaning up; say what went wrong
+            print(f'{what} cleanup: {type(exc).__name__}: {exc}', file=sys.stderr)
+
+
+# -- the run -----------------------------------------------------------------------------------
 
 class Rig(NamedTuple):
     """What a campaign runs on: the simulator and its truth, the listener, the node, the faults."""
@@ -135,40 +346,28 @@ def set_up(cfg: CampaignConfig) -> Rig:
     collector = TruthCollector(sim)
     collector.start()
     subscriber = Subscriber()
-    params = {'port': sim.port, 'address': cfg.address, 'read_timeout': cfg.read_timeout,
-              'reconnect_interval': cfg.reconnect_interval,
-              'qos_overrides./imu/raw_data.publisher.depth': 1000,
-              'qos_overrides./imu/raw_data.publisher.reliability': 'reliable',
-              'temperature_period': cfg.temperature_period,
-              'stream': cfg.stream, 'data_rate': float(cfg.data_rate)}
-    node = NodeProcess(params, command=NODE_COMMAND, env=ros_env({STATS_ENV: stats_path}))
-    driver = FaultDriver(sim, cfg, random.Random(cfg.seed * 7919 + 1))
+    node = start_node(node_params(cfg, sim.port, cfg.stream, cfg.data_rate), stats_path)
+    driver = FaultDriver(sim, random.Random(cfg.seed * 7919 + 1), cfg.event_gap,
+                         cfg.long_stalls)
     return Rig(sim, collector, subscriber, node, driver, workdir, stats_path)
 
 
 def wait_for_stream(rig: Rig) -> None:
     """Plug the port in once the subscriber sees the node; wait for the first message."""
-    subscriber, node = rig.subscriber, rig.node
-    deadline = time.monotonic() + 60.0
-    while subscriber.publishers() < 1 and time.monotonic() < deadline:
-        if node.proc.poll() is not None:
-            raise RuntimeError(f'the node exited at start:\n{node.output()}')
-        time.sleep(0.1)
+    rig.subscriber.wait_publisher(rig.node, '/imu/raw_data')
     time.sleep(1.0)
     rig.sim.replug()
-    deadline = time.monotonic() + 60.0
-    while subscriber.count == 0 and time.monotonic() < deadline:
-        time.sleep(0.1)
-    if subscriber.count == 0:
-        raise RuntimeError(f'no message within 60 s:\n{node.output()}')
+    if not rig.subscriber.wait_count(1, 60.0):
+        raise RuntimeError(f'no message within 60 s:\n{rig.node.output()}')
 
 
 def sample_rss(pid: int, rss: list[tuple[float, int]]) -> int | None:
     """Add the node's RSS now to ``rss``; return it (None if the process is gone)."""
-    sample = read_rss_kib(pid)
-    if sample is not None:
-        rss.append((time.time(), sample))
-    return sample
+    sample = process_sample(pid)
+    if sample is None:
+        return None
+    rss.append((time.time(), sample[0]))
+    return sample[0]
 
 
 def fault_phase(rig: Rig, cfg: CampaignConfig, log: Callable[[str], None],
@@ -207,48 +406,25 @@ def quiet_phase(rig: Rig, cfg: CampaignConfig, rss: list[tuple[float, int]]) -> 
 def collect(rig: Rig, cfg: CampaignConfig, timeline: Timeline,
             rss: list[tuple[float, int]], recovered: int) -> RunData:
     """Stop the node; wait for its final counters and its last messages; gather the run."""
-    sim, node, driver, subscriber = rig.sim, rig.node, rig.driver, rig.subscriber
+    node, subscriber = rig.node, rig.subscriber
     alive = node.proc.poll() is None
     exit_code, exit_seconds = node.stop(timeout=15.0)
-    final = final_counters(rig.stats_path)
+    final = read_counters(rig.stats_path, lambda counters: counters.get('final'), 5.0)
     published = final.get('stats', {}).get('published')
-    deadline = time.monotonic() + 15.0
-    while published is not None and subscriber.count < published \
-            and time.monotonic() < deadline:
-        time.sleep(0.1)
+    if published is not None:
+        subscriber.wait_count(published, 15.0)
     rig.collector.stop()
-    return RunData(
-        cfg=cfg, truth=rig.collector.entries, truth_missed=rig.collector.missed,
-        messages=list(subscriber.rows), events=list(driver.events), node_stats=final,
-        sim_stats=sim.stats.as_dict(), host_log=sim.host_log, rss=rss,
-        warmup_end=timeline.warmup_end, fault_end=timeline.fault_end, alive_at_end=alive,
-        exit_code=exit_code, exit_seconds=exit_seconds, recovered=recovered,
-        unsafe_garbage_bytes=driver.unsafe_garbage_bytes,
-        unsafe_garbage_bursts=driver.unsafe_garbage_bursts,
-        divider=sim.sensor.eeprom.get(0xFCA2, 512), power_ups=list(driver.power_ups),
-        node_output=node.output(),
-        started=timeline.started)
-
-
-def final_counters(stats_path: str) -> dict:
-    """Return the node's counters as it wrote them at its exit (waiting up to 5 s for them)."""
-    final = None
-    deadline = time.monotonic() + 5.0
-    while time.monotonic() < deadline:
-        final = read_json(stats_path)
-        if final and final.get('final'):
-            break
-        time.sleep(0.1)
-    return final or {}
+    return run_data(
+        cfg, rig.sim, rig.driver, truth=rig.collector.entries,
+        truth_missed=rig.collector.missed, messages=list(subscriber.rows), node_stats=final,
+        rss=rss, warmup_end=timeline.warmup_end, fault_end=timeline.fault_end,
+        alive_at_end=alive, exit_code=exit_code, exit_seconds=exit_seconds,
+        recovered=recovered, node_output=node.output(), started=timeline.started)
 
 
 def clean_up(rig: Rig) -> None:
     """Stop everything, each step on its own: a failure in one must not leave the node behind."""
     driver, collector = rig.driver, rig.collector
-    for step in (lambda: driver.is_alive() and driver.stop(), rig.node.close,
-                 rig.subscriber.close, lambda: collector.is_alive() and collector.stop(),
-                 rig.sim.stop, lambda: shutil.rmtree(rig.workdir, ignore_errors=True)):
-        try:
-            step()
-        except Exception as exc:  # keep cleaning up; say what went wrong
-            print(f'soak cleanup: {type(exc).__name__}: {exc}', file=sys.stderr)
+    close_all((lambda: driver.is_alive() and driver.stop(), rig.node.close,
+               rig.subscriber.close, lambda: collector.is_alive() and collector.stop(),
+               rig.sim.stop, lambda: shutil.rmtree(rig.workdir, ignore_errors=True)), 'soak')

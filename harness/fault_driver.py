@@ -15,8 +15,9 @@
 """
 The faults the campaign injects into the simulator, drawn at random all through a run.
 
-Its own room: the campaign and the long soak's legs both run it, and adding
-a fault is one change here (the checks then judge what it did).
+Its own room: the campaign (``campaign.py``) and the long soak's legs
+(``long_soak.py``) both run it, and adding a fault is one change here (the
+checks of ``campaign_verdict.py`` then judge what it did).
 """
 
 import random
@@ -24,7 +25,6 @@ import threading
 import time
 from typing import NamedTuple
 
-from harness.campaign_config import CampaignConfig
 from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator
@@ -40,16 +40,23 @@ class FaultEvent(NamedTuple):
 
 
 class FaultDriver(threading.Thread):
-    """Inject random faults into the simulator until told to stop."""
+    """
+    Inject random faults into the simulator until told to stop.
+
+    ``event_gap``: the seconds between two faults, drawn uniformly from that
+    range; ``long_stalls``: include stalls longer than the node's stall
+    recovery (it reopens the port).
+    """
 
     WEIGHTS = (('unplug', 2.0), ('stall_short', 1.5), ('stall', 2.0), ('stall_long', 0.4),
                ('noise', 3.0), ('quirks', 1.0), ('power_cycle', 1.0))
 
-    def __init__(self, sim: PtySimulator, cfg: CampaignConfig, rng: random.Random) -> None:
+    def __init__(self, sim: PtySimulator, rng: random.Random, event_gap: tuple[float, float],
+                 long_stalls: bool = True) -> None:
         super().__init__(name='soak-faults', daemon=True)
         self.sim = sim
-        self.cfg = cfg
         self.rng = rng
+        self.event_gap = event_gap
         self.events: list[FaultEvent] = []
         #: Power-up times of the sensor's power cycles (simulator wall clock).
         self.power_ups: list[float] = []
@@ -58,13 +65,13 @@ class FaultDriver(threading.Thread):
         self._unsafe = False
         self._garbage_mark = (0, 0)
         self._halt = threading.Event()
-        kinds = [k for k, _ in self.WEIGHTS if cfg.long_stalls or k != 'stall_long']
+        kinds = [k for k, _ in self.WEIGHTS if long_stalls or k != 'stall_long']
         self._kinds = kinds
         self._weights = [w for k, w in self.WEIGHTS if k in kinds]
 
     def run(self) -> None:
         """Draw and inject events until stopped."""
-        low, high = self.cfg.event_gap
+        low, high = self.event_gap
         # Every kind once first, in random order, so that a short run meets them all.
         first = list(self._kinds)
         self.rng.shuffle(first)

@@ -24,19 +24,21 @@ or ping answer is awaited, replies from other addresses or with the wrong
 echo byte, replies to commands never sent, stops mid-packet for seconds, or
 sends nothing but noise. The phase is read from what the host sends (a
 stop is *quiet*, 0xEA/0xE9 *identity*, 0xE5/0xE4 *data rate*, 0xC4
-*continuous*, then *streaming* once a record was forwarded).
+*continuous*, then *streaming* once a record was forwarded). Every draw
+comes from the station's own seeded generator, so that a seed replays the
+same attacks; a new way to lie is one method of :class:`PacketMutator`.
 
-What may be published is decided by the bytes the node was given: every
-data packet a fresh codec parser finds in them (reset whenever the node
-opens the port) is allowed; every real packet of the node's stream forwarded
-whole while the station behaved is a packet that must be published. Not
-other records from its address: those are the replies to its own polled
-requests (the dialogue's 0xC2 polls, its identity), which the node takes as
-replies and never publishes. Not a packet the pty took only in part either
-(its buffer full after a held-back stretch is let go at once): the station
-lost that one itself (``hostile_oracle.py``; the attacks' bytes:
-``packet_mutation.py``). Used by ``benchmarks/fuzz_node.py`` and the stateful
-dialogue test.
+What may be published is decided by the bytes the node was given, not by
+what the station meant (:class:`PublishOracle`): every data packet a fresh
+codec parser finds in them (reset whenever the node opens the port) is
+allowed; every real packet of the node's stream forwarded whole while the
+station behaved is a packet that must be published. Not other records from
+its address: those are the replies to its own polled requests (the
+dialogue's 0xC2 polls, its identity), which the node takes as replies and
+never publishes. Not a packet the pty took only in part either (its buffer
+full after a held-back stretch is let go at once): the station lost that one
+itself. Used by ``benchmarks/fuzz_node.py`` (``node_fuzz.py``) and the
+stateful dialogue test.
 """
 
 import os
@@ -47,13 +49,13 @@ import time
 import tty
 from typing import NamedTuple
 
-from harness.campaign_truth import imu_values
-from harness.hostile_oracle import PublishOracle
-from harness.packet_mutation import PacketMutator
+from harness.campaign import imu_values
 from i3dmgx2_driver.codec import streams
+from i3dmgx2_driver.codec.checksum import checksum16
 from i3dmgx2_driver.codec.framing import (
-    CommandPacket, DATA_FLAGS, DATA_TRAILER_SIZE, decode_data_packet, HEADER_SIZE, SOP)
-from i3dmgx2_driver.codec.parser import CommandStreamParser, RawCommand
+    CommandPacket, DATA_FLAGS, DATA_TRAILER_SIZE, DataPacket, decode_data_packet, HEADER_SIZE,
+    SOP)
+from i3dmgx2_driver.codec.parser import CommandStreamParser, RawCommand, SensorStreamParser
 from i3dmgx2_driver.simulator.pty_port import PtyPort, TIOCPKT_DATA, TIOCPKT_FLUSHREAD
 
 #: The phases of the dialogue the station can attack in.
@@ -67,7 +69,6 @@ KEEPS_PACKET = frozenset(('stop_mid_packet', 'unsolicited', 'burst'))
 #: Phase of each command byte the host sends (others leave the phase as it is).
 _PHASE_OF = {0xFA: 'quiet', 0x02: 'quiet', 0xEA: 'identity', 0xE9: 'identity',
              0xE5: 'data_rate', 0xE4: 'data_rate', 0xC4: 'continuous'}
-_LINE_BYTES_PER_S = 11520.0
 
 
 class Attack(NamedTuple):
@@ -76,6 +77,187 @@ class Attack(NamedTuple):
     phase: str
     mode: str
     seconds: float
+
+
+#: The bytes a dialogue waits for alone: ACK/start of packet, NACK, ping answer, data flags.
+ANSWER_BYTES = bytes((0xAA, 0x21, 0x02, 0x07))
+
+
+def reseal(packet: bytearray) -> bytes:
+    """Recompute a data packet's checksum (over flags .. record), as a base station does."""
+    end = len(packet) - DATA_TRAILER_SIZE
+    packet[-2:] = checksum16(packet[1:end]).to_bytes(2, 'big')
+    return bytes(packet)
+
+
+class PacketMutator:
+    """
+    Turn a real piece (a whole data packet, or one other byte) into what an attack sends.
+
+    Holds what ``stop_mid_packet`` keeps back (let go when the attack ends)
+    and the last reply by echo byte (what ``unsolicited`` replays).
+    """
+
+    def __init__(self, rng: random.Random) -> None:
+        self.rng = rng
+        #: Bytes held back by ``stop_mid_packet``, in order.
+        self.held: list[bytes] = []
+        #: The last replies seen (by echo byte), to replay unasked.
+        self.replies: dict[int, bytes] = {}
+        self._any_piece = {'noise': self._noise, 'stop_mid_packet': self._stop_mid_packet,
+                           'answer_bytes': self._answer_bytes}
+        self._packet_only = {'bitflip': self._bitflip, 'truncate': self._truncate,
+                             'lying_length': self._lying_length,
+                             'chance_checksum': self._chance_checksum, 'burst': self._burst,
+                             'foreign': self._foreign, 'wrong_echo': self._wrong_echo,
+                             'unsolicited': self._unsolicited}
+
+    def remember_reply(self, packet: bytes) -> None:
+        """Keep a real reply of the station's address, by its echo byte."""
+        self.replies[packet[HEADER_SIZE]] = packet
+
+    def release(self) -> list[bytes]:
+        """Return (and forget) what was held back."""
+        held, self.held = self.held, []
+        return held
+
+    def mutate(self, piece: bytes, is_packet: bool, mode: str) -> bytes:
+        """Return what the hostile station sends instead of ``piece`` in attack ``mode``."""
+        any_piece = self._any_piece.get(mode)
+        if any_piece is not None:
+            return any_piece(piece, is_packet)
+        if not is_packet:
+            rng = self.rng
+            return piece if rng.random() < 0.5 else bytes((rng.choice(ANSWER_BYTES),))
+        packet_only = self._packet_only.get(mode)
+        return packet_only(bytearray(piece)) if packet_only is not None else piece
+
+    # -- any piece ---------------------------------------------------------------------------
+
+    def _noise(self, piece: bytes, is_packet: bool) -> bytes:
+        return b''  # nothing real gets through, only the station's noise between reads
+
+    def _stop_mid_packet(self, piece: bytes, is_packet: bool) -> bytes:
+        if self.held or not is_packet:
+            self.held.append(piece)
+            return b''
+        cut = self.rng.randint(1, len(piece) - 1)
+        self.held.append(piece[cut:])
+        return piece[:cut]
+
+    def _answer_bytes(self, piece: bytes, is_packet: bool) -> bytes:
+        rng = self.rng
+        out = bytearray()
+        for byte in piece:
+            if rng.random() < 0.1:
+                out += rng.choice(ANSWER_BYTES).to_bytes(1, 'big')
+            out.append(byte)
+        return bytes(out) + bytes(rng.choices(ANSWER_BYTES, k=rng.randint(0, 3)))
+
+    # -- whole data packets ------------------------------------------------------------------
+
+    def _bitflip(self, packet: bytearray) -> bytes:
+        rng = self.rng
+        for _ in range(rng.randint(1, 3)):
+            i = rng.randrange(len(packet))
+            packet[i] ^= 1 << rng.randrange(8)
+        return bytes(packet)
+
+    def _truncate(self, packet: bytearray) -> bytes:
+        return bytes(packet[:self.rng.randint(1, len(packet) - 1)])
+
+    def _lying_length(self, packet: bytearray) -> bytes:
+        rng = self.rng
+        packet[5] = rng.choice([0, 1, 2, 255, rng.randrange(256)])
+        return reseal(packet) if rng.random() < 0.5 else bytes(packet)
+
+    def _chance_checksum(self, packet: bytearray) -> bytes:
+        rng = self.rng
+        for _ in range(rng.randint(1, 4)):
+            i = rng.randrange(HEADER_SIZE + 1, len(packet) - DATA_TRAILER_SIZE)
+            packet[i] = rng.randrange(256)
+        return reseal(packet)
+
+    def _burst(self, packet: bytearray) -> bytes:
+        rng = self.rng
+        extra = bytearray()
+        for _ in range(rng.randint(2, 10)):
+            other = bytearray(packet)
+            other[3:5] = rng.randrange(1, 65535).to_bytes(2, 'big')
+            extra += reseal(other)
+        return bytes(packet) + bytes(extra) + rng.randbytes(rng.randint(0, 32))
+
+    def _foreign(self, packet: bytearray) -> bytes:
+        packet[3:5] = self.rng.randrange(1, 65535).to_bytes(2, 'big')
+        return reseal(packet)
+
+    def _wrong_echo(self, packet: bytearray) -> bytes:
+        rng = self.rng
+        echoes = (0xC2, 0xC8, 0xCC, 0xCB, 0xD1, 0xEA, 0xE5, 0xC4, rng.randrange(256))
+        packet[HEADER_SIZE] = rng.choice(echoes)
+        return reseal(packet)
+
+    def _unsolicited(self, packet: bytearray) -> bytes:
+        replies = list(self.replies.values())
+        extra = self.rng.choice(replies) if replies else b''
+        return bytes(packet) + extra
+
+
+class PublishOracle:
+    """
+    The keys (a record's values) allowed, owed and attacked, as the station forwards.
+
+    Kept apart from the forwarding so that what counts as a finding is read
+    in one place.
+    """
+
+    def __init__(self, address: int, stream: int) -> None:
+        self.address = address
+        #: The command byte of the record the node streams and publishes.
+        self.stream = stream
+        self._reference = SensorStreamParser(address=address)
+        #: Keys a fresh parser found in the bytes the node was given: allowed to be published.
+        self.allowed: set[bytes] = set()
+        #: (time, key) of real records of the node's stream from our address, forwarded
+        #: whole while behaving: each must be published.
+        self.intact: list[tuple[float, bytes]] = []
+        self.intact_keys: set[bytes] = set()
+        #: Keys of real packets from our address that were attacked (never sent intact).
+        self.attacked_keys: dict[bytes, str] = {}
+
+    def port_opened(self) -> None:
+        """Start the reference parser afresh: the node (re)opened the port, so did its parser."""
+        self._reference = SensorStreamParser(address=self.address)
+
+    def expect_ping(self) -> None:
+        """Tell the reference parser a ping went out: its one-byte answer starts no packet."""
+        self._reference.expect_ping()
+
+    def given(self, data: bytes) -> None:
+        """Note what the node was given: every record of our address in it is allowed."""
+        for event in self._reference.feed(data):
+            if isinstance(event, DataPacket) and event.address == self.address:
+                values = imu_values(event.record)
+                if values is not None:
+                    self.allowed.add(values[0])
+
+    def sent_whole(self, key: bytes) -> None:
+        """Allow a real packet of ours sent whole (now, delayed or surrounded)."""
+        self.intact_keys.add(key)
+
+    def attacked(self, key: bytes, mode: str) -> None:
+        """Note a real packet of ours that attack ``mode`` mutated: it never went out intact."""
+        self.attacked_keys[key] = mode
+
+    def owed(self, packet: bytes, key: bytes, written: int, now: float) -> None:
+        """
+        Owe a real packet of ours forwarded while behaving; ``written``: the bytes the pty took.
+
+        Only a record of the stream is a sample to the node (a polled reply is
+        not), and only one the pty took whole reached it.
+        """
+        if packet[HEADER_SIZE] == self.stream and written == len(packet):
+            self.intact.append((now, key))
 
 
 class Split:
@@ -108,11 +290,6 @@ class Split:
         del buf[:i]
         return out
 
-    def flush(self) -> bytes:
-        """Return what is buffered (a lone 0xAA after a quiet spell is an ACK)."""
-        rest, self._buf = bytes(self._buf), bytearray()
-        return rest
-
 
 class HostileStation(threading.Thread):
     """
@@ -135,7 +312,7 @@ class HostileStation(threading.Thread):
         self._up = self._open_upstream()
         self._host = CommandStreamParser(wireless=True)
         self._split = Split()
-        #: What may and what must be published (see ``hostile_oracle.py``).
+        #: What may and what must be published.
         self.oracle = PublishOracle(address, stream)
         #: The attacks' bytes; the same generator as the noise, so that a seed replays a run.
         self._mutator = PacketMutator(self.rng)
@@ -153,28 +330,6 @@ class HostileStation(threading.Thread):
         #: Recent bytes given to the node (time, bytes), for a finding's evidence.
         self.recent: list[tuple[float, bytes]] = []
         self._resume_at = 0.0
-
-    # -- the oracle, as the fuzz and the tests read it -----------------------------------------
-
-    @property
-    def allowed(self) -> set[bytes]:
-        """Keys allowed to be published (found by a fresh parser in what the node was given)."""
-        return self.oracle.allowed
-
-    @property
-    def intact(self) -> list[tuple[float, bytes]]:
-        """(time, key) of the records that must be published."""
-        return self.oracle.intact
-
-    @property
-    def intact_keys(self) -> set[bytes]:
-        """Keys of real packets of ours sent whole: they may be published."""
-        return self.oracle.intact_keys
-
-    @property
-    def attacked_keys(self) -> dict[bytes, str]:
-        """Keys of real packets of ours that were attacked, with the attack's mode."""
-        return self.oracle.attacked_keys
 
     def _open_upstream(self) -> int | None:
         try:

@@ -17,22 +17,24 @@ The long soak: every stream, every fault, both node kinds, for an hour or more.
 
 What breaks a driver in the field shows after an hour (a slow leak, a state
 never left), so this run keeps its node processes for the whole of it. One
-simulated base station (``harness/campaign.py``'s faults, its line rate
-honoured) serves, in turn, *legs* of a few minutes: each leg is one stream
-at the highest rate its line budget allows (``data_rate``: the node writes
-the divider), the faults of the campaign at seeded random times, a quiet
-phase in which the stream must come back, and the checks of the campaign on
-what was published (matched to the simulator's truth by exact values).
+simulated base station (the campaign's faults, ``fault_driver.py``, its line
+rate honoured) serves, in turn, *legs* of a few minutes: each leg is one
+stream at the highest rate its line budget allows (``data_rate``: the node
+writes the divider), the faults of the campaign at seeded random times, a
+quiet phase in which the stream must come back, and the checks of the
+campaign on what was published (``campaign_verdict.analyse``: matched to the
+simulator's truth by exact values).
 
 The legs go round the streams several times. Most legs run a managed node:
 one process per stream, started at the beginning and kept to the end, taken
 through configure / activate (the leg) / deactivate / cleanup each time its
 stream's turn comes, so that every managed process lives the whole run and
 its RSS, descriptors and threads can be fitted against time (a leak is a
-slope, not a final value). Every ``plain_every``-th leg runs the plain node
-instead, a fresh process stopped with SIGINT at the leg's end (shifted by
-one each round, so that every stream runs on both kinds). At the end
-every managed process is taken to a random state and shut down with SIGINT.
+slope, not a final value: ``process_sampler.py``). Every ``plain_every``-th
+leg runs the plain node instead, a fresh process stopped with SIGINT at the
+leg's end (shifted by one each round, so that every stream runs on both
+kinds). At the end every managed process is taken to a random state and shut
+down with SIGINT.
 
 Per leg and per stream: records sent, published, received by a subscriber
 in this process (another than the node's), missing, duplicated, corrupted,
@@ -42,33 +44,648 @@ checks, data back within ``recovery_limit`` after every fault that ends,
 and (for runs of at least ``slope_min_minutes``) RSS slope below
 ``rss_slope_limit`` MiB/h and descriptors and threads flat after the first
 ``slope_after`` seconds. ``benchmarks/soak.py --every-stream`` runs it,
-``test/test_soak_every_stream.py`` for a minute in CI.
-
-This module runs the whole; the rooms it runs on: ``soak_plan.py`` (the
-settings and the legs), ``soak_nodes.py`` (the node processes),
-``soak_leg.py`` (one leg), ``soak_recovery.py`` (the data back after a
-fault), ``process_sampler.py`` (RSS, descriptors, threads and their slopes),
-``soak_report.py`` (the tables and the checks).
+``test/test_soak_every_stream.py`` for a minute in CI; the plan of the legs
+is checked there fast, without a simulator or a node.
 """
 
+import bisect
+import collections
+from collections.abc import Callable
+import dataclasses
 import os
 import random
-import sys
+import shutil
+import tempfile
 import time
 import traceback
+from typing import NamedTuple
 
-from harness.campaign_listener import Subscriber
-from harness.campaign_result import Check
-from harness.campaign_truth import TruthCollector
-from harness.process_sampler import fit_slopes, Sampler
-from harness.processes import isolate_ros_domain
-from harness.soak_leg import LegRunner, SoakRig
-from harness.soak_nodes import leg_node_name, managed_name, SoakNodes, topic
-from harness.soak_plan import LongSoakConfig, plan_legs
-from harness.soak_report import LongSoakResult, report, SoakRecord
+from harness.campaign import (
+    close_all, node_params, read_counters, run_data, start_node, Subscriber, TruthCollector,
+)
+from harness.campaign_verdict import analyse, CampaignConfig, Check, RunData
+from harness.fault_driver import FaultDriver, FaultEvent
+from harness.process_sampler import halves_per_hour, Sampler, slope_per_hour
+from harness.processes import (
+    isolate_ros_domain, LifecycleClient, Listener, NodeProcess, process_cpu_seconds,
+)
+from harness.run_config import FaultedNodeConfig
+from i3dmgx2_driver.codec import line_budget
+from i3dmgx2_driver.codec.data_rate import divider_for_rate
 from i3dmgx2_driver.codec.streams import STREAMS
+from i3dmgx2_driver.device.timeouts import REQUEST_TIMEOUT
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from i3dmgx2_driver.simulator.eeprom import FACTORY_DIVIDER
 
+BAUD = 115200
+#: Seconds a leg takes besides its faults and quiet phase (transitions, draining), roughly.
+LEG_OVERHEAD = 15.0
+#: What one more try costs the dialogue when a command or its answer is lost: the
+#: request's timeout, then the shortest wait for the first record
+#: (``SensorDialogue.start_continuous``).
+TRY_COST = REQUEST_TIMEOUT + 0.3
+
+
+# -- the plan ----------------------------------------------------------------------------------
+
+@dataclasses.dataclass
+class LongSoakConfig(FaultedNodeConfig):
+    """
+    How long, how rough, and what counts as a pass.
+
+    The seed, address, node timeouts, fault pacing (the quiet phase: at the
+    end of each leg) and log: ``FaultedNodeConfig``.
+    """
+
+    #: Length of the whole run (min): legs follow one another until it is over.
+    minutes: float = 60.0
+    #: Length of each leg's fault phase (min); a quiet phase follows.
+    leg_minutes: float = 2.5
+    #: How many legs (None: as many as fit in ``minutes``).
+    legs: int | None = None
+    #: The streams the legs go round (names; empty: every stream).
+    streams: tuple[str, ...] = ()
+    #: Every this many legs, the plain node runs the leg instead of a managed one (0: never);
+    #: shifted by one leg each round of the streams.
+    plain_every: int = 3
+    #: Seconds from the end of a fault to the next message received, at most.
+    recovery_limit: float = 1.0
+    #: Slopes are fitted from this many seconds after the start of each process.
+    slope_after: float = 300.0
+    #: Slopes are asserted only for runs at least this long (min).
+    slope_min_minutes: float = 30.0
+    #: Most RSS slope allowed (MiB per hour), and descriptors / threads (per hour).
+    rss_slope_limit: float = 1.0
+    count_slope_limit: float = 1.0
+    #: Seconds between samples of RSS, descriptors and threads.
+    sample_period: float = 5.0
+
+
+class Leg(NamedTuple):
+    """One stream, one node kind, one stretch of faults."""
+
+    number: int
+    stream: str
+    rate_hz: float
+    kind: str
+
+
+def plan_legs(cfg: LongSoakConfig) -> list[Leg]:
+    """Return the legs: the streams in turn, each at its line-budget maximum rate."""
+    leg_seconds = cfg.leg_minutes * 60.0 + cfg.quiet + LEG_OVERHEAD
+    count = cfg.legs or max(1, round(cfg.minutes * 60.0 / leg_seconds))
+    chosen = [s for s in STREAMS if not cfg.streams or s.name in cfg.streams]
+    legs = []
+    for number in range(count):
+        stream = chosen[number % len(chosen)]
+        rate = line_budget.max_rate(stream.code, BAUD, wireless=True)
+        # Shifted by one each round of the streams, so that every stream meets both kinds.
+        turn = number + number // len(chosen)
+        plain = cfg.plain_every and (turn + 1) % cfg.plain_every == 0
+        # Rounded down to 0.1 Hz: the parameter's text must map to the same divider.
+        legs.append(Leg(number, stream.name, int(rate * 10) / 10.0,
+                        'plain' if plain else 'managed'))
+    return legs
+
+
+# -- the node processes ------------------------------------------------------------------------
+
+def topic(namespace: str) -> str:
+    """Return the Imu topic of the node in ``namespace``."""
+    return f'/{namespace}/imu/raw_data'
+
+
+def managed_name(stream: str) -> str:
+    """Return the namespace of the managed node of ``stream``."""
+    return f'soak_{stream}'
+
+
+def leg_node_name(leg: Leg) -> str:
+    """Return the namespace of the node that runs ``leg``."""
+    return managed_name(leg.stream) if leg.kind == 'managed' else f'soak_plain_{leg.number}'
+
+
+def final_stats(path: str, after: float, published: int | None = None) -> dict:
+    """Return the node's counters written after ``after`` (with ``published``, if given)."""
+    return read_counters(path, lambda got: got.get('time', 0.0) > after and (
+        published is None or got.get('stats', {}).get('published') == published), 10.0)
+
+
+class SoakNodes:
+    """
+    The node processes: the managed ones by stream, with their lifecycle clients.
+
+    The managed nodes live the whole run (one per stream), a plain node lives
+    one leg; each writes its counters to a file of its own in the run's
+    working folder.
+    """
+
+    def __init__(self, cfg: LongSoakConfig, sampler: Sampler) -> None:
+        self.cfg = cfg
+        self.sampler = sampler
+        self.workdir = tempfile.mkdtemp(prefix='i3dmgx2-long-soak-')
+        #: The simulator's port, once it runs.
+        self.port: str | None = None
+        self.managed: dict[str, NodeProcess] = {}
+        self.clients: dict[str, LifecycleClient] = {}
+
+    def stats_path(self, name: str) -> str:
+        """Return where the node ``name`` writes its counters."""
+        return os.path.join(self.workdir, f'{name}.json')
+
+    def start_node(self, name: str, stream: str, rate: float, lifecycle: bool) -> NodeProcess:
+        """Start a node process in namespace ``name``; sample it from now on."""
+        node = start_node(node_params(self.cfg, self.port, stream, rate, topic(name)),
+                          self.stats_path(name), lifecycle, ('-r', f'__ns:=/{name}'))
+        self.sampler.watch(name, node.proc.pid)
+        return node
+
+    def start_managed(self, legs: list[Leg], listener: Listener) -> None:
+        """Start a managed node for each stream a managed leg runs; wait for its services."""
+        kinds = {leg.stream for leg in legs if leg.kind == 'managed'}
+        for stream in STREAMS:
+            if stream.name not in kinds:
+                continue
+            rate = next(leg.rate_hz for leg in legs if leg.stream == stream.name)
+            name = managed_name(stream.name)
+            self.managed[stream.name] = self.start_node(name, stream.name, rate, True)
+            self.clients[stream.name] = LifecycleClient(listener, f'/{name}/i3dmgx2_driver')
+        for stream, client in self.clients.items():
+            if not client.wait_ready(60.0):
+                raise RuntimeError(f'managed node {stream}: lifecycle services not ready:\n'
+                                   f'{self.managed[stream].output()[-3000:]}')
+
+    def shut_down(self, rng: random.Random) -> tuple[list[Check], list[str]]:
+        """Take the managed nodes to random states, then SIGINT them; check their exits."""
+        checks: list[Check] = []
+        lines: list[str] = []
+        if not self.managed:
+            return checks, lines
+        names = sorted(self.managed)
+        chosen = rng.choice(names)
+        target = rng.choice(('unconfigured', 'inactive', 'active'))
+        steps = {'unconfigured': (), 'inactive': ('configure',),
+                 'active': ('configure', 'activate')}[target]
+        reached = all(self.clients[chosen].change(step) for step in steps)
+        states = {name: (target if name == chosen else 'unconfigured') for name in names}
+        lines.append(f'shutdown: {chosen} taken to {target} '
+                     f'({"reached" if reached else "NOT reached"}), the others '
+                     f'unconfigured; then SIGINT to every managed process')
+        for name in names:
+            node = self.managed[name]
+            alive = node.proc.poll() is None
+            code, seconds = node.stop(timeout=15.0)
+            self.sampler.forget(managed_name(name))
+            ok = alive and code == 0 and seconds < 5.0
+            checks.append(Check(
+                f'managed {name}: clean exit on SIGINT from {states[name]}', ok,
+                f'alive until the end: {alive}; exit code {code} after {seconds:.2f} s'
+                + ('' if ok else f'\n{node.output()[-3000:]}')))
+        return checks, lines
+
+    def slope_processes(self) -> list[tuple[str, str]]:
+        """Return (stream, sampler name) of each managed process: the ones fitted for leaks."""
+        return [(name, managed_name(name)) for name in sorted(self.managed)]
+
+    def closers(self) -> list[Callable[[], None]]:
+        """Return the steps that end every managed process still running."""
+        return [node.close for node in self.managed.values()]
+
+    def remove_workdir(self) -> None:
+        """Remove the counters' folder."""
+        shutil.rmtree(self.workdir, ignore_errors=True)
+
+
+# -- the data back after each fault ------------------------------------------------------------
+
+def recoveries(events: list[FaultEvent], rows: list, truth: list, host_log: list,
+               recovery_limit: float, log: Callable[[str], None]
+               ) -> list[tuple[str, float | None, float]]:
+    """
+    For each fault that ends: (kind, seconds to the next message received, the limit).
+
+    The limit is not one number: ``recovery_limit``, plus :data:`TRY_COST`
+    for every command the radio lost, stalled or the sensor ignored, and
+    every reply the radio dropped, from one try before the fault ended to
+    the message: each costs the dialogue one more try, by design. A fault
+    followed by the next one before the data came back is left out (the
+    recovery was cut short, not slow). Each slow one is explained to ``log``.
+    """
+    times = sorted(row[3] for row in rows)
+    misses = sorted([h.time for h in host_log
+                     if h.outcome in ('lost', 'ignored', 'stalled', 'ping failed')
+                     or h.outcome.startswith('rejected')]
+                    + [s.sample_time for s in truth
+                       if s.source == 'reply' and s.fault is not None])
+    starts = sorted(e.start for e in events)
+    out = []
+    for event in events:
+        if event.kind in {'noise', 'quirks'}:
+            continue  # they change the line's odds until the next change; all_off ends them
+        i = bisect.bisect_right(times, event.end)
+        back = times[i] if i < len(times) else None
+        j = bisect.bisect_right(starts, event.end)
+        if j < len(starts) and (back is None or starts[j] < back):
+            continue  # the next fault began before the data came back: not a recovery
+        retries = (bisect.bisect_right(misses, back)
+                   - bisect.bisect_left(misses, event.end - TRY_COST)
+                   if back is not None else 0)
+        limit = recovery_limit + retries * TRY_COST
+        gap = back - event.end if back is not None else None
+        out.append((event.kind, gap, limit))
+        if gap is None or gap > limit:
+            explain(event, back, host_log, log)
+    return out
+
+
+def explain(event: FaultEvent, back: float | None, host_log: list,
+            log: Callable[[str], None]) -> None:
+    """Log what the host sent and the sensor made of it while the data did not come."""
+    stop = back if back is not None else event.end + 10.0
+    log(f'  slow recovery after {event.kind} ({event.detail}) at {event.end:.3f}:')
+    for h in host_log:
+        if event.start - 1.0 <= h.time <= stop:
+            code = f'0x{h.raw[0]:02X}' if h.raw else '-'
+            log(f'    {h.time - event.end:+.3f} s host {h.kind} {code} {h.outcome}')
+
+
+# -- one leg -----------------------------------------------------------------------------------
+
+class LegResult(NamedTuple):
+    """What one leg came to."""
+
+    leg: Leg
+    checks: list[Check]
+    figures: dict
+    #: (fault kind, seconds from its end to the next message (None: none came), its limit).
+    recoveries: list[tuple[str, float | None, float]]
+    cpu_percent: float
+    seconds: float
+    report: str
+
+
+class SoakRig(NamedTuple):
+    """What every leg runs on: the simulator and its truth, the listener, the processes."""
+
+    sim: PtySimulator
+    collector: TruthCollector
+    subscriber: Subscriber
+    sampler: Sampler
+    nodes: SoakNodes
+
+
+class LegRunner:
+    """
+    Run the legs one at a time on one rig: bring the leg's node up, fault it, down, judge it.
+
+    A managed leg takes its stream's long-lived node through configure /
+    activate / deactivate / cleanup; a plain leg starts a fresh node and
+    stops it with SIGINT.
+    """
+
+    def __init__(self, cfg: LongSoakConfig, rig: SoakRig, log: Callable[[str], None]) -> None:
+        self.cfg = cfg
+        self.rig = rig
+        self.log = log
+
+    def _bring_up(self, leg: Leg, name: str) -> tuple[NodeProcess, LifecycleClient | None]:
+        """Configure and activate the stream's managed node, or start a plain one."""
+        rig = self.rig
+        if leg.kind == 'managed':
+            node = rig.nodes.managed[leg.stream]
+            client = rig.nodes.clients[leg.stream]
+            rig.sampler.busy.add(name)
+            if not client.change('configure'):
+                raise RuntimeError(f'leg {leg.number}: configure failed:\n'
+                                   f'{node.output()[-3000:]}')
+            rig.subscriber.wait_publisher(node, topic(name))
+            time.sleep(0.5)
+            if not client.change('activate'):
+                raise RuntimeError(f'leg {leg.number}: activate failed:\n'
+                                   f'{node.output()[-3000:]}')
+            return node, client
+        rig.sim.unplug(None)
+        node = rig.nodes.start_node(name, leg.stream, leg.rate_hz, lifecycle=False)
+        try:
+            rig.subscriber.wait_publisher(node, topic(name))
+        except BaseException:
+            node.close()
+            raise
+        time.sleep(1.0)
+        rig.sim.replug()
+        return node, None
+
+    def _bring_down(self, name: str, node: NodeProcess, client: LifecycleClient | None,
+                    stopped: float) -> tuple[int, float, dict]:
+        """Deactivate and clean up a managed node, or SIGINT a plain one; its last counters."""
+        rig = self.rig
+        path = rig.nodes.stats_path(name)
+        exit_code, exit_seconds = 0, 0.0
+        if client is not None:
+            client.change('deactivate')
+            done = time.time()
+            stats = final_stats(path, done)
+            published = stats.get('stats', {}).get('published')
+            if published is not None:
+                rig.subscriber.wait_count(published, 15.0)
+            stats = final_stats(path, done, published)
+            client.change('cleanup')
+            time.sleep(0.5)  # the port closed, the threads joined
+            rig.sampler.first_release.setdefault(name, time.time())
+            rig.sampler.busy.discard(name)
+        else:
+            exit_code, exit_seconds = node.stop(timeout=15.0)
+            rig.sampler.forget(name)
+            stats = read_counters(path, lambda got: got.get('final') and got['time'] > stopped,
+                                  15.0)
+            published = stats.get('stats', {}).get('published')
+            if published is not None:
+                rig.subscriber.wait_count(published, 15.0)
+        return exit_code, exit_seconds, stats
+
+    def _faults(self, leg: Leg, started: float) -> FaultDriver:
+        """Run the fault phase of a leg; return the driver (its events)."""
+        cfg = self.cfg
+        driver = FaultDriver(self.rig.sim, random.Random(cfg.seed * 7919 + leg.number),
+                             cfg.event_gap)
+        driver.start()
+        end = started + cfg.leg_minutes * 60.0
+        while time.time() < end:
+            time.sleep(0.5)
+        driver.stop()
+        return driver
+
+    def run(self, leg: Leg) -> LegResult:
+        """Bring the leg's node up, fault it, bring it down; analyse what it published."""
+        name = leg_node_name(leg)
+        self.rig.subscriber.take()
+        self.rig.collector.take()
+        begin = time.time()
+        node, client = self._bring_up(leg, name)
+        try:
+            return self._run_node(leg, name, node, client, begin)
+        finally:
+            if client is None:  # a plain node lives one leg: its process and its log go
+                node.close()
+
+    def _run_node(self, leg: Leg, name: str, node: NodeProcess, client: LifecycleClient | None,
+                  begin: float) -> LegResult:
+        """Fault the node brought up at ``begin``, bring it down; analyse what it published."""
+        cfg, subscriber = self.cfg, self.rig.subscriber
+        if not subscriber.wait_count(1, 60.0):
+            raise RuntimeError(f'leg {leg.number}: no message within 60 s:\n'
+                               f'{node.output()[-3000:]}')
+        started = time.time()
+        cpu_start = process_cpu_seconds(node.proc.pid)
+        self.log(f'leg {leg.number}: {leg.kind} node, stream {leg.stream} at {leg.rate_hz:g} '
+                 f'Hz, {cfg.leg_minutes:g} min of faults')
+        driver = self._faults(leg, started)
+        fault_end = time.time()
+        before = subscriber.count
+        time.sleep(cfg.quiet)
+        recovered = subscriber.count - before
+        alive = node.proc.poll() is None
+        cpu = process_cpu_seconds(node.proc.pid) - cpu_start if alive else 0.0
+        stopped = time.time()
+        exit_code, exit_seconds, stats = self._bring_down(name, node, client, stopped)
+        time.sleep(0.3)
+        rows = subscriber.take()
+        truth, missed = self.rig.collector.take()
+        events = [e for e in stats.get('port_events', []) if e[1] >= begin
+                  and (leg.kind == 'plain' or e[1] < stopped)]
+        stats = dict(stats, port_events=events)
+        rss = [(t, kib) for t, kib, _, _ in self.rig.sampler.all_samples.get(name, [])
+               if t >= started]
+        data = run_data(
+            CampaignConfig(minutes=cfg.leg_minutes, rate_hz=None, stream=leg.stream,
+                           data_rate=leg.rate_hz, seed=cfg.seed, address=cfg.address,
+                           read_timeout=cfg.read_timeout,
+                           reconnect_interval=cfg.reconnect_interval,
+                           quiet=cfg.quiet, temperature_period=cfg.temperature_period,
+                           warmup_min=10.0, log=None),
+            self.rig.sim, driver, truth=truth, truth_missed=missed, messages=rows,
+            node_stats=stats, rss=rss, warmup_end=started + 10.0, fault_end=fault_end,
+            alive_at_end=alive, exit_code=exit_code, exit_seconds=exit_seconds,
+            recovered=recovered, node_output=node.output()[-5000:], started=started,
+            end=stopped if leg.kind == 'managed' else None)
+        return self._verdict(leg, data, driver, cpu, stopped - started)
+
+    def _verdict(self, leg: Leg, data: RunData, driver: FaultDriver, cpu: float,
+                 seconds: float) -> LegResult:
+        """Judge the leg: the campaign's checks, and the data back after every fault."""
+        cfg = self.cfg
+        # A managed node does not exit at a leg's end (its exit is checked at the run's),
+        # and counts as unpublished what it reads while inactive, by design.
+        result = analyse(data, exempt=('clean exit on SIGINT', 'nothing left unpublished')
+                         if leg.kind == 'managed' else ())
+        checks = list(result.checks)
+        found = recoveries(driver.events, data.messages, data.truth, self.rig.sim.host_log,
+                           cfg.recovery_limit, self.log)
+        slow = [(k, g, lim) for k, g, lim in found if g is None or g > lim]
+        worst = max((g for _, g, _ in found if g is not None), default=0.0)
+        retried = sum(1 for _, _, lim in found if lim > cfg.recovery_limit)
+        checks.append(Check(
+            'data back after every fault that ends', not slow,
+            f'{len(found)} faults ended; longest wait for the next message '
+            f'{worst:.3f} s (limit {cfg.recovery_limit:g} s, plus {TRY_COST:g} s for '
+            f'each command or reply lost or ignored meanwhile: {retried} such)'
+            + ('; over: ' + ', '.join(f'{k} {g if g is None else round(g, 3)} (limit '
+                                      f'{lim:g})' for k, g, lim in slow[:8])
+               if slow else '')))
+        legresult = LegResult(leg, checks, result.figures, found,
+                              100.0 * cpu / seconds if seconds > 0 else 0.0, seconds,
+                              result.report)
+        failed = [c.name for c in checks if not c.ok]
+        self.log(f'leg {leg.number}: {result.figures.get("published")} published, '
+                 f'{result.figures.get("missing")} missing, {len(driver.events)} faults, '
+                 f'worst recovery {worst:.3f} s, CPU {legresult.cpu_percent:.1f} %: '
+                 + ('PASS' if not failed else 'FAIL ' + ', '.join(failed)))
+        if failed:
+            self.log(result.report)
+        return legresult
+
+
+# -- the report: the tables and every check in one list ----------------------------------------
+
+@dataclasses.dataclass
+class SoakRecord:
+    """What the run gathered for the report: the legs run and the end's checks."""
+
+    #: How many legs were planned.
+    planned: int
+    results: list[LegResult] = dataclasses.field(default_factory=list)
+    #: Writes of the rate divider the simulated sensor received (None: the run broke off).
+    eeprom_writes: int | None = None
+    end_checks: list[Check] = dataclasses.field(default_factory=list)
+    end_lines: list[str] = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass
+class LongSoakResult:
+    """The verdicts and the report of one long run."""
+
+    checks: list[Check]
+    report: str
+
+    @property
+    def ok(self) -> bool:
+        """Whether every check passed."""
+        return bool(self.checks) and all(check.ok for check in self.checks)
+
+
+def report(cfg: LongSoakConfig, run: SoakRecord, minutes: float, slope_checks: list[Check],
+           slope_lines: list[str]) -> LongSoakResult:
+    """Build the per-stream and overall tables and the list of checks."""
+    lines = ['== i3dmgx2 long soak: every stream, every fault, both node kinds ==',
+             f'{minutes:.1f} min, {len(run.results)} legs of {cfg.leg_minutes:g} min of faults '
+             f'+ {cfg.quiet:g} s quiet, seed {cfg.seed}, 115200 baud, wireless; the simulator '
+             f'honours the line rate']
+    head = ('| leg | node | stream | rate (Hz) | sent | published | received | missing | '
+            'duplicated | corrupted | faults | longest recovery (s) | node CPU (%) | result |')
+    lines += ['', head, '|' + '---|' * 14]
+    checks: list[Check] = []
+    per_stream: dict[str, dict] = {}
+    for r in run.results:
+        f = r.figures
+        worst = max((g for _, g, _ in r.recoveries if g is not None), default=0.0)
+        ok = all(c.ok for c in r.checks)
+        lines.append(f'| {r.leg.number} | {r.leg.kind} | {r.leg.stream} | {r.leg.rate_hz:g} | '
+                     f'{f.get("sent")} | {f.get("published")} | {f.get("received")} | '
+                     f'{f.get("missing")} | {f.get("duplicated")} | {f.get("corrupted")} | '
+                     f'{f.get("events")} | {worst:.3f} | {r.cpu_percent:.1f} | '
+                     f'{"PASS" if ok else "FAIL"} |')
+        for c in r.checks:
+            checks.append(Check(f'leg {r.leg.number} ({r.leg.kind} {r.leg.stream}): {c.name}',
+                                c.ok, c.detail))
+        s = per_stream.setdefault(r.leg.stream, collections.defaultdict(int))
+        for name in ('sent', 'published', 'received', 'missing', 'duplicated', 'corrupted',
+                     'events'):
+            s[name] += f.get(name) or 0
+        s['legs'] += 1
+        s['seconds'] += r.seconds
+        s['cpu'] += r.cpu_percent * r.seconds
+        s['worst'] = max(s['worst'], worst)
+        recovery_kinds = s.setdefault('by_kind', {})
+        for kind, gap, _ in r.recoveries:
+            if gap is not None:
+                recovery_kinds[kind] = max(recovery_kinds.get(kind, 0.0), gap)
+    lines += ['', '| stream | legs | sent | published | received | missing | duplicated | '
+              'corrupted | faults | longest recovery (s) | node CPU (%) |', '|' + '---|' * 11]
+    total: dict = collections.defaultdict(int)
+    for stream in STREAMS:
+        s = per_stream.get(stream.name)
+        if s is None:
+            continue
+        cpu = s['cpu'] / s['seconds'] if s['seconds'] else 0.0
+        lines.append(f'| {stream.name} | {s["legs"]} | {s["sent"]} | {s["published"]} | '
+                     f'{s["received"]} | {s["missing"]} | {s["duplicated"]} | '
+                     f'{s["corrupted"]} | {s["events"]} | {s["worst"]:.3f} | {cpu:.1f} |')
+        for name in ('legs', 'sent', 'published', 'received', 'missing', 'duplicated',
+                     'corrupted', 'events'):
+            total[name] += s[name]
+        total['worst'] = max(total['worst'], s['worst'])
+    lines.append(f'| **all** | {total["legs"]} | {total["sent"]} | {total["published"]} | '
+                 f'{total["received"]} | {total["missing"]} | {total["duplicated"]} | '
+                 f'{total["corrupted"]} | {total["events"]} | {total["worst"]:.3f} | |')
+    kinds: dict[str, float] = {}
+    for s in per_stream.values():
+        for kind, gap in s.get('by_kind', {}).items():
+            kinds[kind] = max(kinds.get(kind, 0.0), gap)
+    lines.append('')
+    lines.append('longest wait for data after the end of each kind of fault: '
+                 + ', '.join(f'{k} {v:.3f} s' for k, v in sorted(kinds.items())))
+    expected = eeprom_changes(run.results)
+    lines.append(f'EEPROM writes the simulated sensor received: {run.eeprom_writes} (one per '
+                 f'change of the divider between legs: {expected})')
+    if run.eeprom_writes is not None:
+        checks.append(Check('EEPROM written once per change of setting, never otherwise',
+                            run.eeprom_writes == expected,
+                            f'{run.eeprom_writes} writes of 0xFCA2 received, {expected} changes '
+                            f'of data_rate from leg to leg (factory divider {FACTORY_DIVIDER})'))
+    lines += ['', *slope_lines, *run.end_lines]
+    checks += slope_checks + run.end_checks
+    checks.append(Check('every leg ran', len(run.results) == run.planned,
+                        f'{len(run.results)} of {run.planned} legs'))
+    failed = [c for c in checks if not c.ok]
+    lines.append('')
+    lines.append('Checks failed:' if failed else f'All {len(checks)} checks passed.')
+    for c in failed:
+        lines.append(f'  FAIL {c.name}: {c.detail}')
+    lines.append('')
+    lines.append('RESULT: ' + ('PASS' if not failed else f'FAIL ({len(failed)} checks)'))
+    return LongSoakResult(checks, '\n'.join(lines))
+
+
+def eeprom_changes(results: list[LegResult]) -> int:
+    """Return how many legs asked for another divider than the sensor had."""
+    changes, divider = 0, FACTORY_DIVIDER
+    for r in results:
+        wanted = divider_for_rate(r.leg.rate_hz)
+        changes += wanted != divider
+        divider = wanted
+    return changes
+
+
+def fit_slopes(cfg: LongSoakConfig, sampler: Sampler, processes: list[tuple[str, str]],
+               minutes: float) -> tuple[list[Check], list[str]]:
+    """
+    Fit RSS, descriptors and threads against time for each long-lived process.
+
+    ``processes`` are (name in the report, name in the sampler) pairs.
+    """
+    checks, lines = [], []
+    asserted = minutes >= cfg.slope_min_minutes
+    lines.append(f'slopes per hour, while unconfigured, after the first {cfg.slope_after:g} s '
+                 f'and the first leg of each managed process '
+                 f'({"asserted" if asserted else "not asserted"}: run of '
+                 f'{minutes:.1f} min, asserted from {cfg.slope_min_minutes:g} min):')
+    for name, key in processes:
+        born = sampler.born.get(key, 0.0)
+        # After the first 5 minutes and after the process's first leg (its first
+        # activation loads what it keeps: a warm-up, not a leak).
+        since = max(born + cfg.slope_after, sampler.first_release.get(key, born))
+        samples = [s for s in sampler.samples.get(key, []) if s[0] >= since]
+        rss = slope_per_hour([(t, kib / 1024.0) for t, kib, _, _ in samples])
+        fds = slope_per_hour([(t, n) for t, _, n, _ in samples])
+        threads = slope_per_hour([(t, n) for t, _, _, n in samples])
+        first = samples[0][1:] if samples else None
+        last = samples[-1][1:] if samples else None
+        lines.append(f'  {name:22s} RSS {_per_hour(rss, "MiB")}, descriptors '
+                     f'{_per_hour(fds, "")}, threads {_per_hour(threads, "")}; '
+                     f'{len(samples)} samples; first {first}, last {last} '
+                     f'(RSS KiB, fds, threads)')
+        halves = halves_per_hour([(t, kib / 1024.0) for t, kib, _, _ in samples])
+        if halves is not None:
+            # Not asserted: a warm-up slows down (the second half's slope is smaller),
+            # a leak keeps its pace.
+            lines.append(f'  {"":22s} RSS by halves of the fit: first '
+                         f'{_per_hour(halves[0], "MiB")}, second {_per_hour(halves[1], "MiB")}')
+        kinds = [k for k in sampler.kinds.get(key, []) if k[0] >= since]
+        if kinds:
+            # Not asserted: which memory the slope is (a leak is anonymous).
+            per_kind = [slope_per_hour([(k[0], k[i] / 1024.0) for k in kinds])
+                        for i in (1, 2, 3)]
+            lines.append(f'  {"":22s} RSS by kind: anonymous {_per_hour(per_kind[0], "MiB")}, '
+                         f'file-backed {_per_hour(per_kind[1], "MiB")}, shared memory '
+                         f'{_per_hour(per_kind[2], "MiB")}; first {kinds[0][1:]}, last '
+                         f'{kinds[-1][1:]} (KiB)')
+        if asserted:
+            ok = (rss is not None and rss < cfg.rss_slope_limit
+                  and fds is not None and abs(fds) <= cfg.count_slope_limit
+                  and threads is not None and abs(threads) <= cfg.count_slope_limit)
+            checks.append(Check(
+                f'managed {name}: no leak', ok,
+                f'RSS {_per_hour(rss, "MiB")} (limit {cfg.rss_slope_limit:g}), descriptors '
+                f'{_per_hour(fds, "")}, threads {_per_hour(threads, "")} (limit '
+                f'\u00b1{cfg.count_slope_limit:g})'))
+    return checks, lines
+
+
+def _per_hour(value: float | None, unit: str) -> str:
+    return 'n/a' if value is None else f'{value:+.3f} {unit}/h'
+
+
+# -- the run -----------------------------------------------------------------------------------
 
 class LongSoak:
     """The run: start the simulator and the processes, run the legs, end, report."""
@@ -107,20 +724,14 @@ class LongSoak:
 
     def close(self) -> None:
         """Stop everything that still runs."""
-        steps = [self.sampler.stop]
-        steps += self.nodes.closers()
+        steps = [self.sampler.stop, *self.nodes.closers()]
         if self.subscriber is not None:
             steps.append(self.subscriber.close)
         if self.collector is not None:
             steps.append(lambda: self.collector.is_alive() and self.collector.stop())
         if self.sim is not None:
             steps.append(self.sim.stop)
-        steps.append(self.nodes.remove_workdir)
-        for step in steps:
-            try:
-                step()
-            except Exception as exc:  # keep cleaning up; say what went wrong
-                print(f'long soak cleanup: {type(exc).__name__}: {exc}', file=sys.stderr)
+        close_all([*steps, self.nodes.remove_workdir], 'long soak')
 
     def run(self) -> LongSoakResult:
         """Run every leg, then the end; return the verdict and the report."""
@@ -148,5 +759,4 @@ class LongSoak:
 
 def run_long_soak(cfg: LongSoakConfig) -> LongSoakResult:
     """Run the long soak; return its checks and report."""
-    soak = LongSoak(cfg)
-    return soak.run()
+    return LongSoak(cfg).run()

@@ -38,7 +38,7 @@ import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
-from harness.campaign_truth import _KEY
+from harness.campaign import message_key, VALUES
 from harness.hostile import Attack, HostileStation, MODES, PHASES
 from harness.processes import isolate_ros_domain, Listener, NodeProcess
 from harness.run_config import RunConfig
@@ -91,8 +91,7 @@ class Watch(Listener):
         if topic == '/diagnostics':
             self.diagnostics.append(time.time())
             return
-        la, av = msg.linear_acceleration, msg.angular_velocity
-        self.rows.append((time.time(), _KEY.pack(la.x, la.y, la.z, av.x, av.y, av.z)))
+        self.rows.append((time.time(), message_key(msg)))
 
     def ask(self, timeout: float) -> bool:
         """Ask the node for a parameter; return whether it answered within ``timeout``."""
@@ -257,7 +256,7 @@ class NodeFuzz:
         end = time.time() - 0.3
         time.sleep(0.5)
         published = {key for _, key in self.watch.rows[-20000:]}
-        missing = [t for t, key in station.intact[-20000:]
+        missing = [t for t, key in station.oracle.intact[-20000:]
                    if start + 0.2 <= t <= end and key not in published]
         if missing:
             self._find('valid not published',
@@ -269,13 +268,13 @@ class NodeFuzz:
         rows = self.watch.rows
         station = self.station
         for t, key in rows[self._checked:upto]:
-            if key not in station.allowed and key not in station.intact_keys:
-                mode = station.attacked_keys.get(key)
+            if key not in station.oracle.allowed and key not in station.oracle.intact_keys:
+                mode = station.oracle.attacked_keys.get(key)
                 self._find('false publication',
                            'a message no valid packet from our address held: '
                            + (f'the values of a real packet attacked by {mode!r}' if mode
                               else 'values the sensor never sent')
-                           + f' ({_KEY.unpack(key)})', t)
+                           + f' ({VALUES.unpack(key)})', t)
         return upto
 
     def run(self) -> FuzzResult:

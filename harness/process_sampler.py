@@ -13,46 +13,71 @@
 # limitations under the License.
 
 """
-RSS, descriptors and threads of long-lived processes, sampled, and their slopes.
+RSS, descriptors and threads of a process, sampled, and the slopes fitted to them.
 
-A leak shows as a slope against time, not as a final value: the long soak
-(``long_soak.py``) keeps its managed node processes for the whole run and
-hands them to the :class:`Sampler`; :func:`fit_slopes` turns the samples into
-lines of the report and, for a run long enough, checks.
+A leak shows as a slope against time (or against the faults met), not as a
+final value: the long soak (``long_soak.py``) hands its long-lived node
+processes to a :class:`Sampler` and fits the slopes at the end; the
+campaign samples its node's RSS, and ``benchmarks/memory_curve.py`` a node's
+anonymous RSS, descriptors and threads against the faults it met, with
+:func:`process_sample`, :func:`rss_kinds` and :func:`fit`. Read from ``/proc``: nothing in the
+process is asked or changed.
 """
 
-import itertools
-import json
 import os
 import statistics
 import threading
 import time
+from typing import TypeVar
 
-from harness.campaign import read_json
-from harness.campaign_result import Check
-from harness.soak_plan import LongSoakConfig
+#: A sample: a tuple whose first field is its time.
+Sample = TypeVar('Sample', bound=tuple)
+
+
+def fit(points: list[tuple[float, float]]) -> tuple[float, float] | None:
+    """
+    Return the least-squares slope of (x, y) points and its standard error.
+
+    None for fewer than three points, or all at one x: no line to fit.
+    """
+    if len(points) < 3:
+        return None
+    xs, ys = [x for x, _ in points], [y for _, y in points]
+    mx, my = statistics.fmean(xs), statistics.fmean(ys)
+    sxx = sum((x - mx) ** 2 for x in xs)
+    if sxx == 0:
+        return None
+    slope = sum((x - mx) * (y - my) for x, y in zip(xs, ys, strict=True)) / sxx
+    residual = sum((y - my - slope * (x - mx)) ** 2 for x, y in zip(xs, ys, strict=True))
+    return slope, (residual / (len(xs) - 2) / sxx) ** 0.5
 
 
 def slope_per_hour(samples: list[tuple[float, float]]) -> float | None:
     """Least-squares slope of (time s, value) samples, in value per hour; None if too few."""
-    if len(samples) < 3:
-        return None
-    ts = [t for t, _ in samples]
-    vs = [v for _, v in samples]
-    mt, mv = statistics.fmean(ts), statistics.fmean(vs)
-    den = sum((t - mt) ** 2 for t in ts)
-    if den == 0:
-        return None
-    return sum((t - mt) * (v - mv) for t, v in zip(ts, vs, strict=True)) / den * 3600.0
+    line = fit(samples)
+    return None if line is None else line[0] * 3600.0
+
+
+def by_time(samples: list[Sample], parts: int) -> list[list[Sample]]:
+    """
+    Split samples into ``parts`` equal spans of their time, a sample on a boundary in both.
+
+    A sample is a tuple, its time first.
+
+    A warm-up slows down from one span to the next (the slope falls off),
+    a leak keeps its pace: the spans tell them apart where one slope cannot.
+    """
+    first, last = samples[0][0], samples[-1][0]
+    span = (last - first) / parts
+    return [[s for s in samples if first + k * span <= s[0] <= first + (k + 1) * span]
+            for k in range(parts)]
 
 
 def halves_per_hour(samples: list[tuple[float, float]]) -> tuple[float, float] | None:
     """Slopes per hour of the first and the second half of the samples (by time); None if few."""
     if len(samples) < 6:
         return None
-    middle = (samples[0][0] + samples[-1][0]) / 2.0
-    first = slope_per_hour([s for s in samples if s[0] <= middle])
-    second = slope_per_hour([s for s in samples if s[0] >= middle])
+    first, second = (slope_per_hour(half) for half in by_time(samples, 2))
     if first is None or second is None:
         return None
     return first, second
@@ -101,84 +126,6 @@ def rss_kinds(pid: int) -> tuple[int, int, int] | None:
     return None if status is None else tuple(status[k] for k in RSS_KINDS)
 
 
-def anon_by_mapping(pid: int) -> dict[str, tuple[int, str, int]] | None:
-    """
-    Return a process's mappings as {start address: (size KiB, name, anonymous KiB)}.
-
-    Anonymous RSS that keeps rising after a warm-up is either a region
-    added (a new arena, a buffer mapped alone) or pages touched for the first
-    time inside regions that exist: the mappings, read from
-    ``/proc/<pid>/smaps``, tell which (a glibc thread heap keeps its start as
-    it grows into its reserve). None if the process is gone.
-    """
-    found: dict[str, tuple[int, str, int]] = {}
-    start = ''
-    try:
-        with open(f'/proc/{pid}/smaps') as handle:
-            for line in handle:
-                head = line.split(maxsplit=5)
-                if '-' in head[0] and not head[0].endswith(':'):
-                    begin, _, end = head[0].partition('-')
-                    start = begin
-                    name = head[5].strip() if len(head) > 5 else ''
-                    found[start] = ((int(end, 16) - int(begin, 16)) // 1024, name, 0)
-                elif head[0] == 'Anonymous:':
-                    size, name, _ = found[start]
-                    found[start] = (size, name, int(head[1]))
-    except OSError:
-        return None
-    return found
-
-
-def append_mappings(path: str, pid: int, seconds: float, faults: int) -> None:
-    """Append a process's mappings (:func:`anon_by_mapping`) to ``path`` as one JSON line."""
-    with open(path, 'a') as out:
-        out.write(json.dumps({'seconds': round(seconds, 1), 'faults': faults,
-                              'maps': anon_by_mapping(pid)}) + '\n')
-
-
-#: A mapping absent from a row: no size, no name, nothing resident.
-_ABSENT = (0, '', 0)
-
-
-def _anon(row: dict, start: str) -> int:
-    """Return the anonymous KiB of the mapping at ``start`` in a --mappings row (0: none)."""
-    return row['maps'].get(start, _ABSENT)[2]
-
-
-def mapping_changes(path: str, from_faults: int = 0) -> list[str]:
-    """
-    Say which mappings of an :func:`append_mappings` file gained anonymous memory.
-
-    From the first row at ``from_faults`` faults or more to the last: each
-    mapping whose anonymous KiB changed, by how much, its size and name, and
-    the faults met when it last changed, so that a region that stopped
-    growing is told from one that still grows.
-    """
-    with open(path) as source:
-        rows = [json.loads(line) for line in source if line.strip()]
-    rows = [r for r in rows if r['maps']]
-    base = next((i for i, r in enumerate(rows) if r['faults'] >= from_faults), len(rows) - 1)
-    first, last = rows[base]['maps'], rows[-1]['maps']
-    lines = [f'{len(rows)} rows; mappings from {rows[base]["faults"]} faults '
-             f'({rows[base]["seconds"] / 60:.1f} min) to {rows[-1]["faults"]} '
-             f'({rows[-1]["seconds"] / 60:.1f} min):']
-    for start in sorted(set(first) | set(last)):
-        before, after = first.get(start, _ABSENT), last.get(start, _ABSENT)
-        if before[2] == after[2]:
-            continue  # a heap's reserve moves as the heap grows into it: never touched
-        changed = rows[base]['faults']
-        for earlier, later in itertools.pairwise(rows[base:]):
-            if _anon(earlier, start) != _anon(later, start):
-                changed = later['faults']
-        lines.append(f'  {after[2] - before[2]:+6d} KiB  {start}  {before[0]}->{after[0]} KiB '
-                     f'{after[1] or before[1] or "[anonymous]"}  ({before[2]} -> {after[2]}; '
-                     f'last changed at {changed} faults)')
-    total = [sum(v[2] for v in maps.values()) for maps in (first, last)]
-    lines.append(f'  anonymous in all mappings: {total[0]} -> {total[1]} KiB')
-    return lines
-
-
 class Sampler(threading.Thread):
     """
     Sample RSS, descriptors and threads of the processes it is given, all run long.
@@ -197,25 +144,19 @@ class Sampler(threading.Thread):
         #: Processes configured now (not sampled: compared in one state, unconfigured),
         #: and when each was first released (its warm-up ends then).
         self.busy: set[str] = set()
+        self.first_release: dict[str, float] = {}
         #: Every sample, whatever the state (a leg's own RSS check).
         self.all_samples: dict[str, list[tuple[float, int, int, int]]] = {}
-        self.first_release: dict[str, float] = {}
-        self._pids: dict[str, int] = {}
-        #: Heap figures the node wrote (instrumented_node.heap_figures), sampled as
-        #: ``samples`` are: (time, Python blocks, C heap in use KiB).
-        self.heaps: dict[str, list[tuple[float, int, int | None]]] = {}
         #: RSS by kind (:func:`rss_kinds`), sampled as ``samples`` are: (time, anon, file, shmem).
         self.kinds: dict[str, list[tuple[float, int, int, int]]] = {}
-        self._stats: dict[str, str] = {}
+        self._pids: dict[str, int] = {}
         self._lock = threading.Lock()
         self._halt = threading.Event()
 
-    def watch(self, name: str, pid: int, stats_path: str | None = None) -> None:
-        """Start sampling process ``pid`` as ``name`` (its heap from ``stats_path``)."""
+    def watch(self, name: str, pid: int) -> None:
+        """Start sampling process ``pid`` as ``name``."""
         with self._lock:
             self._pids[name] = pid
-            if stats_path is not None:
-                self._stats[name] = stats_path
             self.born.setdefault(name, time.time())
             self.samples.setdefault(name, [])
 
@@ -239,84 +180,8 @@ class Sampler(threading.Thread):
                     kinds = rss_kinds(pid)
                     if kinds is not None:
                         self.kinds.setdefault(name, []).append((time.time(), *kinds))
-                    self._sample_heap(name)
-
-    def _sample_heap(self, name: str) -> None:
-        path = self._stats.get(name)
-        heap = (read_json(path) or {}).get('heap') if path is not None else None
-        if heap:
-            self.heaps.setdefault(name, []).append(
-                (time.time(), heap['python_blocks'], heap['malloc_in_use_kib']))
 
     def stop(self) -> None:
         """Stop sampling."""
         self._halt.set()
         self.join(5.0)
-
-
-def fit_slopes(cfg: LongSoakConfig, sampler: Sampler, processes: list[tuple[str, str]],
-               minutes: float) -> tuple[list[Check], list[str]]:
-    """
-    Fit RSS, descriptors and threads against time for each long-lived process.
-
-    ``processes`` are (name in the report, name in the sampler) pairs.
-    """
-    checks, lines = [], []
-    asserted = minutes >= cfg.slope_min_minutes
-    lines.append(f'slopes per hour, while unconfigured, after the first {cfg.slope_after:g} s '
-                 f'and the first leg of each managed process '
-                 f'({"asserted" if asserted else "not asserted"}: run of '
-                 f'{minutes:.1f} min, asserted from {cfg.slope_min_minutes:g} min):')
-    for name, key in processes:
-        born = sampler.born.get(key, 0.0)
-        # After the first 5 minutes and after the process's first leg (its first
-        # activation loads what it keeps: a warm-up, not a leak).
-        since = max(born + cfg.slope_after, sampler.first_release.get(key, born))
-        samples = [s for s in sampler.samples.get(key, []) if s[0] >= since]
-        rss = slope_per_hour([(t, kib / 1024.0) for t, kib, _, _ in samples])
-        fds = slope_per_hour([(t, n) for t, _, n, _ in samples])
-        threads = slope_per_hour([(t, n) for t, _, _, n in samples])
-        first = samples[0][1:] if samples else None
-        last = samples[-1][1:] if samples else None
-        heaps = [h for h in sampler.heaps.get(key, []) if h[0] >= since]
-        blocks = slope_per_hour([(t, n) for t, n, _ in heaps])
-        native = slope_per_hour([(t, kib / 1024.0) for t, _, kib in heaps if kib is not None])
-        lines.append(f'  {name:22s} RSS {_per_hour(rss, "MiB")}, descriptors '
-                     f'{_per_hour(fds, "")}, threads {_per_hour(threads, "")}; '
-                     f'{len(samples)} samples; first {first}, last {last} '
-                     f'(RSS KiB, fds, threads)')
-        halves = halves_per_hour([(t, kib / 1024.0) for t, kib, _, _ in samples])
-        if halves is not None:
-            # Not asserted: a warm-up slows down (the second half's slope is smaller),
-            # a leak keeps its pace.
-            lines.append(f'  {"":22s} RSS by halves of the fit: first '
-                         f'{_per_hour(halves[0], "MiB")}, second {_per_hour(halves[1], "MiB")}')
-        kinds = [k for k in sampler.kinds.get(key, []) if k[0] >= since]
-        if kinds:
-            # Not asserted: which memory the slope is (a leak is anonymous).
-            per_kind = [slope_per_hour([(k[0], k[i] / 1024.0) for k in kinds])
-                        for i in (1, 2, 3)]
-            lines.append(f'  {"":22s} RSS by kind: anonymous {_per_hour(per_kind[0], "MiB")}, '
-                         f'file-backed {_per_hour(per_kind[1], "MiB")}, shared memory '
-                         f'{_per_hour(per_kind[2], "MiB")}; first {kinds[0][1:]}, last '
-                         f'{kinds[-1][1:]} (KiB)')
-        if heaps:
-            # Not asserted: what tells a leak (these grow too) from an allocator
-            # that keeps freed memory (RSS alone grows).
-            lines.append(f'  {"":22s} heap in use: Python objects '
-                         f'{_per_hour(blocks, "blocks")}, C heap {_per_hour(native, "MiB")}; '
-                         f'first {heaps[0][1:]}, last {heaps[-1][1:]} (blocks, KiB)')
-        if asserted:
-            ok = (rss is not None and rss < cfg.rss_slope_limit
-                  and fds is not None and abs(fds) <= cfg.count_slope_limit
-                  and threads is not None and abs(threads) <= cfg.count_slope_limit)
-            checks.append(Check(
-                f'managed {name}: no leak', ok,
-                f'RSS {_per_hour(rss, "MiB")} (limit {cfg.rss_slope_limit:g}), descriptors '
-                f'{_per_hour(fds, "")}, threads {_per_hour(threads, "")} (limit '
-                f'\u00b1{cfg.count_slope_limit:g})'))
-    return checks, lines
-
-
-def _per_hour(value: float | None, unit: str) -> str:
-    return 'n/a' if value is None else f'{value:+.3f} {unit}/h'

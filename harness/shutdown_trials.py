@@ -296,8 +296,3 @@ def run_trials(count: int, slots: int = 3, seed: int = 1, phases: tuple[str, ...
     finally:
         server.close()
     return tally
-
-
-def machine_load() -> str:
-    """Return the load average now, for the report."""
-    return ' / '.join(f'{v:.2f}' for v in os.getloadavg())

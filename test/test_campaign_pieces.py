@@ -16,11 +16,8 @@
 
 from types import SimpleNamespace
 
-from harness.campaign_counters import bounds, expected_gaps
-from harness.campaign_health import rss_check
-from harness.campaign_match import claimed_by_polls
-from harness.campaign_truth import Sent
-from harness.read_windows import Windows
+from harness.campaign_verdict import bounds, claimed_by_polls, expected_gaps, rss_check, Sent, \
+    Windows
 from i3dmgx2_driver.codec.data_rate import ticks_per_cycle
 
 

@@ -76,8 +76,8 @@ def test_a_polled_reply_is_allowed_but_not_owed(station):
     station._piece(POLL_REPLY, 1.0)
     station._piece(WHOLE_CC, 2.0)
     assert DEFAULT.code == WHOLE_CC[HEADER_SIZE]
-    assert [t for t, _ in station.intact] == [2.0]
-    assert len(station.intact_keys) == 2  # both may be published
+    assert [t for t, _ in station.oracle.intact] == [2.0]
+    assert len(station.oracle.intact_keys) == 2  # both may be published
 
 
 @pytest.mark.slow
@@ -89,5 +89,5 @@ def test_a_packet_the_full_pty_cut_is_not_owed(station, monkeypatch):
     write = station.port.write
     monkeypatch.setattr(station.port, 'write', lambda data: write(data[:43]))
     station._piece(WHOLE_CC, 1.0)
-    assert station.intact == []
+    assert station.oracle.intact == []
     assert station.bytes_out == 43  # what it took is still given, and checked

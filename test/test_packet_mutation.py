@@ -15,18 +15,17 @@
 """
 The hostile station's pieces on their own: the attacks' bytes and the oracle's books.
 
-Fast and without a pty: what ``harness/packet_mutation.py`` sends must be
-what each mode says (a foreign packet valid but from elsewhere, a stopped
-packet given back whole), and ``harness/hostile_oracle.py`` must allow
+Fast and without a pty: what ``harness/hostile.py``'s ``PacketMutator`` sends
+must be what each mode says (a foreign packet valid but from elsewhere, a
+stopped packet given back whole), and its ``PublishOracle`` must allow
 exactly what a parser finds from the station's address and owe only whole
 records of the node's stream.
 """
 
 import random
 
-from harness.campaign_truth import imu_values
-from harness.hostile_oracle import PublishOracle
-from harness.packet_mutation import PacketMutator, reseal
+from harness.campaign import imu_values
+from harness.hostile import PacketMutator, PublishOracle, reseal
 from i3dmgx2_driver.codec import SensorStreamParser
 from i3dmgx2_driver.codec.framing import DataPacket, HEADER_SIZE
 from i3dmgx2_driver.codec.layouts import ACCEL_ANG_RATE

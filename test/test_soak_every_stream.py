@@ -26,10 +26,9 @@ managed nodes shut down from a random state. The pieces the verdict rests on
 import os
 import tempfile
 
-from harness.long_soak import run_long_soak
+from harness.long_soak import LongSoakConfig, plan_legs, run_long_soak
 from harness.process_sampler import halves_per_hour, process_sample, rss_kinds, \
     slope_per_hour
-from harness.soak_plan import LongSoakConfig, plan_legs
 from i3dmgx2_driver.codec import line_budget, streams
 import pytest
 

@@ -24,11 +24,8 @@ run. The analysis itself is checked first, on synthetic runs with known bugs.
 
 import struct
 
-from harness.campaign import run_campaign
-from harness.campaign_analysis import analyse
-from harness.campaign_config import CampaignConfig
-from harness.campaign_data import RunData
-from harness.campaign_truth import imu_key, Sent
+from harness.campaign import imu_key, run_campaign
+from harness.campaign_verdict import analyse, CampaignConfig, RunData, Sent
 import pytest
 
 
