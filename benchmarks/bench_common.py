@@ -49,8 +49,7 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from harness.processes import (  # noqa: E402 - the repository is on the path from here on
-    ADDRESS, BENCHMARK_DOMAINS, ChildProcess, NodeProcess, reserve_ros_domain, ros_env,
-    TruthEntry,
+    ADDRESS, BENCHMARK_DOMAINS, NodeProcess, reserve_ros_domain, ros_env, TruthEntry,
 )
 from i3dmgx2_driver.codec import layouts, line_budget  # noqa: E402
 from i3dmgx2_driver.device import hot_path  # noqa: E402
@@ -341,61 +340,20 @@ def write_latencies(truth: list[TruthEntry], published: list[Published]) -> list
     return [p.time - written[p.timer] for p in published if p.timer in written]
 
 
-def stage_latencies(truth: list[TruthEntry], published: list[Published]
-                    ) -> tuple[list[float], list[float]]:
-    """Split the latency: write -> read returned (kernel, wake-up), read -> publish() returned."""
-    written = written_times(truth)
-    matched = [p for p in published if p.timer in written]
-    return ([p.read_time - written[p.timer] for p in matched],
-            [p.time - p.read_time for p in matched])
-
-
-def subscriber_latencies(truth: list[TruthEntry], published: list[Published],
-                         rows: list[tuple[int, int, float]]) -> list[float]:
-    """Seconds from each packet's last byte written to a subscriber's callback."""
-    written = {e.timer: e.write_time for e in truth
-               if e.source == 'stream' and e.valid and e.write_time is not None}
-    timer_of = {stamp_key(p.stamp_sec, p.stamp_nanosec): p.timer for p in published}
-    out = []
-    for sec, nanosec, received in rows:
-        timer = timer_of.get(stamp_key(sec, nanosec))
-        if timer in written:
-            out.append(received - written[timer])
-    return out
-
-
-def standard_args(description: str, default_seconds: float, quick_seconds: float,
+def standard_args(description: str, default_seconds: float,
                   more: Callable[[Any], None] | None = None) -> Any:
-    """Parse the options every benchmark shares (--quick, --seconds); ``more`` adds its own."""
+    """Parse the options every benchmark shares (--seconds, --no-output); ``more`` adds its own."""
     import argparse
     parser = argparse.ArgumentParser(description=description)
     if more is not None:
         more(parser)
-    parser.add_argument('--quick', action='store_true', help='short runs (a smoke test)')
-    parser.add_argument('--seconds', type=float, default=None,
-                        help=f'measuring time per run (default {default_seconds:g} s, '
-                             f'{quick_seconds:g} s with --quick)')
+    parser.add_argument('--seconds', type=float, default=default_seconds,
+                        help=f'measuring time per run (default {default_seconds:g} s)')
     parser.add_argument('--no-output', action='store_true',
                         help='do not write benchmarks/output/')
     args = parser.parse_args()
     args.other_load = OtherLoad()
-    if args.seconds is None:
-        args.seconds = quick_seconds if args.quick else default_seconds
     return args
-
-
-def run_benchmark(doc: str, seconds: tuple[float, float], run: Callable[[float], list[Result]],
-                  title: str, output: str, notes: Callable[[float], list[str]]) -> None:
-    """
-    Be a benchmark's ``main``: the shared options, one run, its report.
-
-    ``seconds``: the default measuring time per run and the one with
-    ``--quick``; ``notes`` are made from the time measured, after the run.
-    """
-    args = standard_args(doc.splitlines()[1], *seconds)
-    results = run(args.seconds)
-    report(title, results, notes(args.seconds), None if args.no_output else output,
-           other_load=args.other_load)
 
 
 class TimedNodeProcess(NodeProcess):
@@ -410,22 +368,28 @@ class TimedNodeProcess(NodeProcess):
     collection (generation, start, duration), ``reader`` the reader thread's
     scheduling policy, priority and CPUs, ``opens`` the time of every open of
     the port, ``full_collection`` how long a full collection took at the end (s).
+    Not ``timed``: the node alone, nothing recorded (its CPU is all a run
+    reads), returned once it streams; ``tree``: the driver of another checkout.
     """
 
-    def __init__(self, port: str, script: str = '', **params: Any) -> None:
+    def __init__(self, port: str, script: str = '', timed: bool = True,
+                 tree: Path | None = None, **params: Any) -> None:
         from i3dmgx2_driver.device.hot_path import TIMINGS_ENV
 
         params = {'port': port, 'address': ADDRESS, **params}
         command = [sys.executable, str(BENCH_DIR / script)] if script else None
-        handle, self.out_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.json')
-        os.close(handle)
-        super().__init__(params, command=command,
-                         env={**ros_env(), TIMINGS_ENV: self.out_path})
+        self.out_path = None
+        if timed:
+            handle, self.out_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.json')
+            os.close(handle)
+        super().__init__(params, command=command, tree=tree,
+                         env=ros_env({TIMINGS_ENV: self.out_path} if timed else None))
         self.pid = self.proc.pid
-        if not self.wait_for_output('start-up heap frozen', 30.0):
+        if not self.wait_for_output('start-up heap frozen' if timed else 'streaming 0x', 30.0):
             output = self.output()
             self.close()
-            os.unlink(self.out_path)
+            if timed:
+                os.unlink(self.out_path)
             raise RuntimeError(f'{script or "the node"} did not start: {output}')
         self.rows: list[tuple] = []
         self.collections: list[tuple[int, float, float]] = []
@@ -436,6 +400,9 @@ class TimedNodeProcess(NodeProcess):
     def stop(self, timeout: float = 15.0) -> dict:
         """Stop the process as Ctrl-C does; keep the timings it saved."""
         super().stop(timeout=timeout)
+        if self.out_path is None:
+            self.close()
+            return {}
         try:
             with open(self.out_path) as handle:
                 document = json.load(handle)
@@ -450,27 +417,3 @@ class TimedNodeProcess(NodeProcess):
         self.opens = document['opens']
         self.full_collection = document['full_collection']
         return document
-
-
-class LoadProcess(ChildProcess):
-    """Parameter requests (and a slow service) against the node from another process."""
-
-    def __init__(self, slow_service: str = '', in_flight: int = 4) -> None:
-        self._argv = [sys.executable, str(BENCH_DIR / 'param_load.py'),
-                      '--in-flight', str(in_flight)]
-        if slow_service:
-            self._argv += ['--slow-service', slow_service]
-        self.counts: dict[str, int] = {}
-        self.started = False
-
-    def start(self) -> None:
-        """Start loading the node (returns once the requests flow)."""
-        super().__init__(self._argv, 'ready', timeout=30.0)
-        self.started = True
-
-    def stop(self, timeout: float = 15.0) -> dict[str, int]:
-        """Stop; return and keep how many requests of each kind were answered."""
-        if self.started:
-            self.counts = super().stop(timeout)
-            self.started = False
-        return self.counts

@@ -16,7 +16,7 @@
 How long ``discover`` takes on one port: the factory range, a stream, nothing.
 
 The simulated base station and sensor run in a process of their own, as a
-real one would. Each case probes the port ``--runs`` times in this process
+real one would. Each case probes the port five times in this process
 (``probe_port``, what the command runs per port) and reports the median and
 the worst, with the time the ping sweep alone took; one more run times the
 whole command (``python -m i3dmgx2_driver.tools.discover``, interpreter start
@@ -24,7 +24,7 @@ included). The simulator answers a ping at once, so the sweep measures the
 host side and the pseudo-terminal, not a radio: a real base station adds its
 own ping time to each of the 99.
 
-    python benchmarks/discover_speed.py [--runs 5] [--full]
+    python benchmarks/discover_speed.py [--full]
 """
 
 import argparse
@@ -39,6 +39,9 @@ from bench_common import OtherLoad, REPO, report, Result
 from harness.processes import ros_env, SimProcess
 
 from i3dmgx2_driver.tools.discover import probe_port, ProbeConfig  # noqa: I100 - after the path
+
+#: Probes of each case.
+RUNS = 5
 
 
 def _probe_times(path: str, runs: int, config: ProbeConfig) -> tuple[list[float], list[float],
@@ -64,7 +67,6 @@ def _row(name: str, totals: list[float], sweeps: list[float], pings: int,
 def main() -> int:
     """Measure and print the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument('--runs', type=int, default=5)
     parser.add_argument('--full', action='store_true', help='also sweep 1..65534 once')
     parser.add_argument('--no-output', action='store_true')
     args = parser.parse_args()
@@ -79,7 +81,7 @@ def main() -> int:
     for name, spec in cases:
         sim = SimProcess(**spec)
         try:
-            totals, sweeps, found = _probe_times(sim.port, args.runs, config)
+            totals, sweeps, found = _probe_times(sim.port, RUNS, config)
             pings = 98 if spec.get('streaming_at_start') else 99
             if spec.get('wireless') is False:
                 pings = config.silent_pings
@@ -101,7 +103,7 @@ def main() -> int:
     master, slave = os.openpty()
     tty.setraw(slave)
     try:
-        totals, sweeps, found = _probe_times(os.ttyname(slave), args.runs, config)
+        totals, sweeps, found = _probe_times(os.ttyname(slave), RUNS, config)
         results.append(_row('a port with no base station and no sensor', totals, sweeps,
                             config.silent_pings, found))
     finally:
@@ -109,7 +111,7 @@ def main() -> int:
         os.close(master)
     report('discover: time to probe one port', results,
            [f'Defaults: listen {config.listen_s} s, ping timeout {config.ping_timeout} s, '
-            f'{args.runs} runs a case.'],
+            f'{RUNS} runs a case.'],
            output=None if args.no_output else 'discover_speed.md', other_load=load)
     return 0
 

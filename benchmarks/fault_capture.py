@@ -22,7 +22,7 @@ CPU: the node at 100 Hz against the simulated device (its own process),
 with a subscriber in a third, its user + system time over a window, with
 the fault capture on (the default) and off (``fault_capture_dir: ''``),
 the two alternating round by round in one run, so that both see the same
-machine.
+machine (latency.py's ``cpu`` configuration, its parameter set each way).
 """
 
 import statistics
@@ -30,12 +30,11 @@ import time
 import tracemalloc
 
 from bench_common import report, Result, standard_args
-import cpu
 from harness.processes import isolate_ros_domain
 from i3dmgx2_driver.capture import CHUNK_COST, RecentBytes, RING_BUDGET_FACTOR
 from i3dmgx2_driver.codec.line_budget import packet_size
+from latency import CONFIGS, run_once, WARM_UP_S
 
-WARM_UP_S = 5.0
 SECONDS_KEPT = 30.0
 RATE_HZ = 100.0
 BAUD = 115200
@@ -75,9 +74,10 @@ def append_cost(reads: int = 200_000) -> float:
 
 def measure(seconds: float, on: bool, directory: str) -> float:
     """Return the node's CPU at 100 Hz (% of one core), the fault capture on or off."""
-    percent, _ = cpu.measure(RATE_HZ, seconds, WARM_UP_S,
-                             params={'fault_capture_dir': directory if on else "''"})
-    return percent
+    config = CONFIGS['cpu']
+    config = config._replace(params=(*config.params,
+                                     ('fault_capture_dir', directory if on else "''")))
+    return run_once(config, seconds, RATE_HZ).cpu_percent
 
 
 def run(seconds: float, rounds: int) -> list[Result]:
@@ -113,7 +113,7 @@ def _options(parser) -> None:
 
 def main() -> None:
     """Run from the command line."""
-    args = standard_args(__doc__.splitlines()[1], 30.0, 8.0, more=_options)
+    args = standard_args(__doc__.splitlines()[1], 30.0, more=_options)
     results = run(args.seconds, args.rounds)
     report('Fault capture cost', results,
            [f'{args.rounds} rounds, each {args.seconds:g} s per setting after {WARM_UP_S:g} s '

@@ -23,10 +23,11 @@ example budget. Every input is checked by ``harness.fuzz_checks.check_input``
 (harness/fuzz_checks.py says which parsers and decoders it goes through and
 which properties must hold), which the regression test shares.
 
-Violations are saved (deduplicated by what broke) in ``--findings``, named
-after the property, for test/fixtures/fuzz/ and test/test_fuzz_regressions.py.
+Violations are saved (deduplicated by what broke) in a temporary folder the
+run names, each after the property, for test/fixtures/fuzz/ and
+test/test_fuzz_regressions.py.
 
-    python benchmarks/fuzz_parser.py --minutes 10 [--engine atheris|hypothesis]
+    python benchmarks/fuzz_parser.py --minutes 10
 """
 
 import argparse
@@ -51,6 +52,8 @@ except ImportError:
 
 REPO = Path(__file__).resolve().parents[1]
 FIXTURE = REPO / 'test' / 'fixtures' / 'gx2_real_0xcc_records.txt'
+#: The longest input (bytes).
+MAX_LEN = 2048
 
 # -- seeds ------------------------------------------------------------------------------------
 
@@ -148,7 +151,7 @@ class Findings:
                 print(f'\nFINDING {key}: {exc} -> {path}', flush=True)
 
 
-def run_atheris(findings: Findings, seconds: float, max_len: int) -> None:
+def run_atheris(findings: Findings, seconds: float) -> None:
     """Coverage-guided fuzzing with libFuzzer through atheris."""
     with atheris.instrument_imports(include=['i3dmgx2_driver']):
         modules = load_codec()
@@ -158,14 +161,14 @@ def run_atheris(findings: Findings, seconds: float, max_len: int) -> None:
         with open(os.path.join(corpus, f'seed{index:04d}'), 'wb') as handle:
             handle.write(data)
     print(f'atheris: {len(os.listdir(corpus))} seeds in {corpus}', flush=True)
-    argv = [sys.argv[0], corpus, f'-max_total_time={int(seconds)}', f'-max_len={max_len}',
+    argv = [sys.argv[0], corpus, f'-max_total_time={int(seconds)}', f'-max_len={MAX_LEN}',
             '-print_final_stats=1', '-print_pcs=0', '-reload=0', '-timeout=10',
             '-rss_limit_mb=4096']
     atheris.Setup(argv, findings.test)
     atheris.Fuzz()
 
 
-def run_hypothesis(findings: Findings, seconds: float, max_len: int) -> None:
+def run_hypothesis(findings: Findings, seconds: float) -> None:
     """Property-based fuzzing with hypothesis until the time is up."""
     from hypothesis import given, HealthCheck, settings, strategies as st
     bind(load_codec())
@@ -174,7 +177,7 @@ def run_hypothesis(findings: Findings, seconds: float, max_len: int) -> None:
         findings.test(data)
     pieces = st.one_of(st.binary(max_size=64), st.sampled_from(seeds),
                        st.sampled_from([b'\xaa', b'\x21', b'\x02', b'\x07', b'\xaa\x07\x00']))
-    inputs = st.one_of(st.binary(max_size=max_len),
+    inputs = st.one_of(st.binary(max_size=MAX_LEN),
                        st.lists(pieces, max_size=12).map(b''.join))
     deadline = time.monotonic() + seconds
 
@@ -193,24 +196,16 @@ def main(argv: list[str] | None = None) -> int:
     """Fuzz for the given time; print statistics; return 1 if anything broke."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--minutes', type=float, default=10.0)
-    parser.add_argument('--engine', choices=('auto', 'atheris', 'hypothesis'), default='auto')
-    parser.add_argument('--findings', default=os.path.join(tempfile.gettempdir(),
-                                                           'i3dmgx2-fuzz-findings'),
-                        help='directory for inputs that break a property')
-    parser.add_argument('--max-len', type=int, default=2048)
     args = parser.parse_args(argv)
-    engine = args.engine
-    if engine == 'auto':
-        engine = 'atheris' if atheris is not None else 'hypothesis'
-    if engine == 'atheris' and atheris is None:
-        parser.error('atheris is not installed (pip install atheris)')
+    engine = 'atheris' if atheris is not None else 'hypothesis'
     seconds = args.minutes * 60.0
-    findings = Findings(args.findings, engine, seconds)
-    print(f'fuzzing with {engine} for {args.minutes:g} min; findings go to {args.findings}',
+    directory = os.path.join(tempfile.gettempdir(), 'i3dmgx2-fuzz-findings')
+    findings = Findings(directory, engine, seconds)
+    print(f'fuzzing with {engine} for {args.minutes:g} min; findings go to {directory}',
           flush=True)
     if engine == 'atheris':
-        run_atheris(findings, seconds, args.max_len)  # does not return: libFuzzer exits
-    run_hypothesis(findings, seconds, args.max_len)
+        run_atheris(findings, seconds)  # does not return: libFuzzer exits
+    run_hypothesis(findings, seconds)
     print(f'SUMMARY {findings.summary()}', flush=True)
     return 1 if findings.seen else 0
 

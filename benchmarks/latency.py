@@ -33,7 +33,13 @@ once, in an order that changes from round to round, so that the machine's
 other load falls on all of them alike; the figures pool every round and
 the ratios set side by side come from the same run. ``floor`` is
 ``floor_node.py``, a process that only reads the port and publishes fixed
-bytes: what no rclpy driver goes below on this machine.
+bytes: what no rclpy driver goes below on this machine. ``cpu`` is the
+driver with its timings off, for its CPU alone (the figure of docs/cpu.md,
+and the fault capture's on and off, ``fault_capture.py``); ``--against
+DIR`` runs every configuration chosen once more on the driver of another
+checkout (``git worktree add /tmp/before <commit>``), interleaved with
+this one's: a change's effect on CPU is a few tenths of a percent, less
+than a busy machine moves from one window to the next.
 
 Targets (issue #12), about the driver at 100 Hz: its share p99 <= 0.1 ms and
 max <= 0.5 ms; end to end p99 <= 1.5 x the kernel's own p99 in the same run.
@@ -41,19 +47,21 @@ The original C++ node: 0.99 ms mean, 1.16 ms max.
 
     python benchmarks/latency.py --configs default,fifo,floor,floor-fifo --rounds 4
     python benchmarks/latency.py --configs default,floor --rate line-max --rounds 2
+    python benchmarks/latency.py --configs cpu --against /tmp/before --rounds 4 --seconds 40
 """
 
 import argparse
 import gc
 import os
+from pathlib import Path
 import random
+import statistics
 import sys
 import time
 from typing import Any, NamedTuple
 
 from bench_common import (
-    emit, LINE_MAX_RATE_HZ, machine_table, Result, RunNote, stamp_key, TimedNodeProcess,
-    written_times,
+    emit, LINE_MAX_RATE_HZ, machine_table, RunNote, stamp_key, TimedNodeProcess, written_times,
 )
 from harness.percentiles import percentile, summarise, Summary
 from harness.processes import (
@@ -72,12 +80,19 @@ TARGET_KERNEL_RATIO = 1.5
 
 
 class Config(NamedTuple):
-    """One configuration: which process, its parameters, whether anyone subscribes."""
+    """
+    One configuration: which process, its parameters, whether anyone subscribes.
+
+    ``timed``: with the hot-path timings (off: only the CPU is measured);
+    ``tree``: the driver of another checkout.
+    """
 
     description: str
     script: str = ''
     params: tuple[tuple[str, Any], ...] = ()
     subscribed: bool = True
+    timed: bool = True
+    tree: Path | None = None
 
 
 CONFIGS = {
@@ -88,6 +103,10 @@ CONFIGS = {
                     script='floor_node.py'),
     'floor-fifo': Config('floor, SCHED_FIFO 50', script='floor_node.py',
                          params=(('realtime_priority', 50),)),
+    # qos_depth (deprecated, warned about) rather than qos_overrides: another tree
+    # (--against) may predate the standard parameters, and every tree takes this name.
+    'cpu': Config('the driver as shipped, its timings off: CPU only',
+                  params=(('qos_depth', 1000),), timed=False),
 }
 _F = {name: i for i, name in enumerate(ROW_FIELDS)}
 #: The driver's stages: name, the row's field it starts at and the field it ends at.
@@ -126,7 +145,8 @@ def run_once(config: Config, seconds: float, rate_hz: float, load: Any = None) -
     node = None
     loaded = False
     try:
-        node = TimedNodeProcess(sim.port, config.script, **dict(config.params))
+        node = TimedNodeProcess(sim.port, config.script, config.timed, config.tree,
+                                **dict(config.params))
         time.sleep(WARM_UP_S)
         if load is not None:
             load.start()
@@ -150,7 +170,7 @@ def run_once(config: Config, seconds: float, rate_hz: float, load: Any = None) -
     kernel = [r[read] - written[r[timer]] for r in rows]
     driver = [r[published] - r[read] for r in rows]
     stages: dict[str, list[float]] = {}
-    if not floor:
+    if config.timed and not floor:
         for label, start, end in STAGES:
             stages[label] = [r[_F[end]] - r[_F[start]] for r in rows]
         stages[OFF_CPU] = [(r[published] - r[read])
@@ -187,16 +207,23 @@ def _pooled(runs: list[RunResult], field: str) -> Summary:
     return summarise([v for r in runs for v in getattr(r, field)])
 
 
-def tables(results: dict[str, list[RunResult]], rate_hz: float) -> list[str]:
+def tables(configs: dict[str, Config], results: dict[str, list[RunResult]],
+           rate_hz: float) -> list[str]:
     """Return the Markdown lines: configurations, ratios, stages and targets."""
     floor_p99 = {name: _pooled(runs, 'driver').p99 for name, runs in results.items()
-                 if CONFIGS[name].script}
+                 if configs[name].script}
     lines = ['| configuration | end to end p50 / p99 / max (ms) | kernel p50 / p99 / max | '
              'driver p50 / p99 / max | driver p99 per round | to a subscriber p50 / p99 / max | '
-             'e2e p99 / kernel p99 | driver p99 / floor driver p99 | CPU % | '
+             'e2e p99 / kernel p99 | driver p99 / floor driver p99 | CPU %: mean (each round) | '
              'collections: gen 0/1/2 (longest ms) | a full collection (ms) | reader thread |',
              '|---|---|---|---|---|---|---|---|---|---|---|---|']
     for name, runs in results.items():
+        cpu = [r.cpu_percent for r in runs]
+        cpu_text = f'{statistics.fmean(cpu):.2f} ({", ".join(f"{c:.2f}" for c in cpu)})'
+        if not configs[name].timed:  # the CPU alone: nothing else was recorded
+            lines.append(f'| {name}: {configs[name].description} | - | - | - | - | - | - | - | '
+                         f'{cpu_text} | - | - | - |')
+            continue
         e2e, kernel, driver = (_pooled(runs, f) for f in ('end_to_end', 'kernel', 'driver'))
         per_round = ' '.join(f'{percentile(r.driver, 99) * 1e3:.3f}' for r in runs)
         floors = ' · '.join(f'{driver.p99 / p99:.2f} ({floor})' for floor, p99 in
@@ -206,10 +233,10 @@ def tables(results: dict[str, list[RunResult]], rate_hz: float) -> list[str]:
         by_generation = '/'.join(str(sum(1 for e in collections if e[0] == g)) for g in range(3))
         full = sorted(r.full_collection for r in runs)[len(runs) // 2]
         lines.append(
-            f'| {name}: {CONFIGS[name].description} | {_ms(e2e)} | {_ms(kernel)} | '
+            f'| {name}: {configs[name].description} | {_ms(e2e)} | {_ms(kernel)} | '
             f'{_ms(driver)} | {per_round} | {_ms(_pooled(runs, "subscriber"))} | '
             f'{e2e.p99 / kernel.p99:.2f} | {floors} | '
-            f'{sum(r.cpu_percent for r in runs) / len(runs):.2f} | '
+            f'{cpu_text} | '
             f'{by_generation} ({longest * 1e3:.2f}) | {full * 1e3:.2f} | '
             f'{_reader_policy(runs[-1].reader)} |')
     stage_rows = [(name, label, summarise([v for r in runs for v in r.stages[label]]))
@@ -222,7 +249,7 @@ def tables(results: dict[str, list[RunResult]], rate_hz: float) -> list[str]:
                   for name, label, s in stage_rows]
     lines += ['', f'Targets (issue #12, at 100 Hz; this run at {rate_hz:.1f} Hz):']
     for name, runs in results.items():
-        if CONFIGS[name].script:
+        if configs[name].script or not configs[name].timed:
             continue
         driver, e2e, kernel = (_pooled(runs, f) for f in ('driver', 'end_to_end', 'kernel'))
         share_met = driver.p99 <= TARGET_DRIVER_P99_S and driver.max_ <= TARGET_DRIVER_MAX_S
@@ -236,7 +263,7 @@ def tables(results: dict[str, list[RunResult]], rate_hz: float) -> list[str]:
     return lines
 
 
-def measure(configs: list[str], rounds: int, seconds: float, rate_hz: float,
+def measure(configs: dict[str, Config], rounds: int, seconds: float, rate_hz: float,
             seed: int = 1) -> dict[str, list[RunResult]]:
     """Run every configuration once a round, in an order that changes; return the runs."""
     order_rng = random.Random(seed)
@@ -246,48 +273,13 @@ def measure(configs: list[str], rounds: int, seconds: float, rate_hz: float,
         order_rng.shuffle(order)
         for name in order:
             print(f'-- round {round_ + 1}/{rounds}: {name}', file=sys.stderr, flush=True)
-            result = run_once(CONFIGS[name], seconds, rate_hz)
+            result = run_once(configs[name], seconds, rate_hz)
             results[name].append(result)
             print(f'   driver p50/p99/max {_ms(summarise(result.driver))} ms, '
                   f'end to end {_ms(summarise(result.end_to_end))} ms, '
                   f'CPU {result.cpu_percent:.2f} %', file=sys.stderr, flush=True)
             gc.collect()
     return results
-
-
-def run(seconds: float) -> list[Result]:
-    """For run_all.py: the driver and the floor at 100 Hz, the driver at line max; the rows."""
-    isolate_ros_domain()
-    out = []
-    line_max = f'{LINE_MAX_RATE_HZ:.0f} Hz (line max)'
-    for label, rate, configs in (('100 Hz', 100.0, ['default', 'floor']),
-                                 (line_max, LINE_MAX_RATE_HZ, ['default'])):
-        results = measure(configs, 1, seconds, rate)
-        default = results['default']
-        e2e, kernel, driver, sub = (_pooled(default, f) for f in
-                                    ('end_to_end', 'kernel', 'driver', 'subscriber'))
-        ratio = e2e.p99 / kernel.p99
-        out.append(Result(
-            f'latency write -> publish() returned, {label}: p50 / p99 / max', e2e.ms()
-            + f'; mean {e2e.mean * 1e3:.3f} ms; p99 {ratio:.2f} x the kernel p99',
-            f'p99 <= {TARGET_KERNEL_RATIO:g} x kernel p99', ratio <= TARGET_KERNEL_RATIO))
-        out.append(Result(
-            f'  of which write -> read() returned (kernel pty, wake-up), {label}', kernel.ms()))
-        at_100 = rate == 100.0
-        out.append(Result(
-            f'  of which read() returned -> publish() returned (driver), {label}', driver.ms(),
-            'p99 <= 0.100 ms, max <= 0.500 ms' if at_100 else '',
-            driver.p99 <= TARGET_DRIVER_P99_S and driver.max_ <= TARGET_DRIVER_MAX_S
-            if at_100 else None))
-        if 'floor' in results:
-            floor = _pooled(results['floor'], 'driver')
-            out.append(Result(
-                f'  the floor (read and publish fixed bytes): read() -> publish(), {label}',
-                f'{floor.ms()}; driver p99 {driver.p99 / floor.p99:.2f} x the floor p99'))
-        out.append(Result(
-            f'latency write -> subscriber callback (other process), {label}: p50 / p99 / max',
-            sub.ms()))
-    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -299,29 +291,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seconds', type=float, default=20.0, help='measured s per run')
     parser.add_argument('--rate', default='100',
                         help='data rate (Hz), or line-max: the most a 115200-baud line carries')
-    parser.add_argument('--quick', action='store_true',
-                        help='a smoke test: default and floor, one round of 8 s')
-    parser.add_argument('--seed', type=int, default=1, help='seed of the run order')
-    parser.add_argument('--output', default='latency.md')
+    parser.add_argument('--against', type=Path, metavar='DIR',
+                        help='also run every configuration on the driver of this checkout')
     parser.add_argument('--no-output', action='store_true',
                         help='do not write benchmarks/output/')
     args = parser.parse_args(argv)
-    if args.quick:
-        args.configs, args.rounds, args.seconds = 'default,floor', 1, 8.0
-    configs = [c for c in args.configs.split(',') if c]
-    unknown = [c for c in configs if c not in CONFIGS]
+    names = [c for c in args.configs.split(',') if c]
+    unknown = [c for c in names if c not in CONFIGS]
     if unknown:
         parser.error(f'unknown configs: {", ".join(unknown)}')
+    configs = {name: CONFIGS[name] for name in names}
+    if args.against is not None:
+        tree = args.against.resolve()
+        configs.update({f'{name} @ {tree}': config._replace(
+            description=f'{config.description}, the driver of {tree}', tree=tree)
+            for name, config in configs.items()})
     rate_hz = LINE_MAX_RATE_HZ if args.rate == 'line-max' else float(args.rate)
     isolate_ros_domain()
     note = RunNote('latency.py', argv)
-    results = measure(configs, args.rounds, args.seconds, rate_hz, args.seed)
+    results = measure(configs, args.rounds, args.seconds, rate_hz)
     lines = [f'## Latency, {rate_hz:.1f} Hz', '', machine_table(), '',
-             *tables(results, rate_hz), '',
+             *tables(configs, results, rate_hz), '',
              note.text(f'{args.rounds} rounds x {len(configs)} configurations, '
                        f'{args.seconds:g} s measured per run after {WARM_UP_S:g} s; '),
              '- Original C++ node (thesis): 0.99 ms mean, 1.16 ms max.']
-    emit('\n'.join(lines) + '\n', None if args.no_output else args.output)
+    emit('\n'.join(lines) + '\n', None if args.no_output else 'latency.md')
     return 0
 
 

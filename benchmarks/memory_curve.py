@@ -20,7 +20,7 @@ their memory levels off (a warm-up) or keeps its pace (a leak) needs many
 more faults than that. Here one driver node (its own process, the
 instrumented one of ``harness/instrumented_node.py``; ``--managed``: the
 managed node, configured and activated, and taken through deactivate /
-cleanup / configure / activate every ``--cycle-every`` faults, as the soak's
+cleanup / configure / activate every 45 faults, about as often as the soak's
 legs take it) reads the simulator (in this process) streaming ``full`` at
 100 Hz, and meets faults in turn: an unplug, a power cycle, a stall long
 enough for a reconnect, and a burst of garbage, corrupted and foreign
@@ -28,9 +28,10 @@ packets. Each fault ends, and the node's messages come back (received here,
 by a subscriber) before the next one, which starts ``--every`` seconds after
 the last at the soonest.
 
-Every ``--row-every`` seconds a row: faults so far, and the node's
-anonymous RSS (its heaps: what a leak grows; the file-backed rest is the
-libraries paged in, bounded by their size), open descriptors and threads
+After two minutes of streaming (the start-up's own growth), every minute a
+row: faults so far, and the node's anonymous RSS (its heaps: what a leak
+grows; the file-backed rest is the libraries paged in, bounded by their
+size), open descriptors and threads
 (read from ``/proc``: ``harness/process_sampler.py``); at the end, the slope
 of each by thirds of the run, per hour and per 100 faults, with its
 standard error. A warm-up shows as thirds that fall off to nothing; a leak
@@ -68,6 +69,11 @@ KINDS = ('unplug', 'power cycle', 'stall', 'noise')
 BACK_AFTER = 10
 #: How long a stream may take to come back before the run says so (s).
 BACK_WITHIN = 20.0
+#: Seconds of streaming before the first row (the start-up's own), and between rows.
+WARM_UP_S = 120.0
+ROW_EVERY_S = 60.0
+#: The managed node's lifecycle cycle, every this many faults.
+CYCLE_EVERY = 45
 
 
 class Row(NamedTuple):
@@ -135,10 +141,7 @@ class Run(NamedTuple):
     minutes: float
     faults: int | None
     every: float
-    warm_up: float
     managed: bool
-    cycle_every: int
-    row_every: float
 
 
 def run(plan: Run) -> list[Row]:
@@ -163,7 +166,7 @@ def run(plan: Run) -> list[Row]:
                 raise RuntimeError('the managed node did not activate: ' + node.output()[-2000:])
             if not messages.wait_past(0, timeout=60.0):
                 raise RuntimeError('the node did not stream: ' + node.output()[-2000:])
-            time.sleep(plan.warm_up)
+            time.sleep(WARM_UP_S)
             print(f'{"min":>5} {"faults":>6} {"cycles":>6} {"anon KiB":>8} {"fds":>4} '
                   f'{"threads":>7}', flush=True)
             start = time.monotonic()
@@ -181,12 +184,11 @@ def run(plan: Run) -> list[Row]:
                     rows.append(row)
                     print(f'{row.seconds / 60:5.1f} {faults:6d} {cycles:6d} {row.anon_kib:8d} '
                           f'{row.descriptors:4d} {row.threads:7d}', flush=True)
-                    next_row += plan.row_every
+                    next_row += ROW_EVERY_S
                     if done:
                         break
                 began = time.monotonic()
-                if client is not None and plan.cycle_every and faults \
-                        and faults // plan.cycle_every > cycles:
+                if client is not None and faults and faults // CYCLE_EVERY > cycles:
                     cycles += 1
                     mark = messages.count
                     if not all(client.change(step) for step in (
@@ -293,14 +295,8 @@ def main() -> None:
     parser.add_argument('--every', type=float, default=3.0,
                         help='seconds from one fault to the next at the soonest (each waits '
                              'for the stream to come back)')
-    parser.add_argument('--warm-up', type=float, default=120.0,
-                        help="seconds of streaming before the first row (the start-up's own)")
     parser.add_argument('--managed', action='store_true',
                         help='run the managed node (configured and activated) instead')
-    parser.add_argument('--cycle-every', type=int, default=45,
-                        help='managed: deactivate, clean up, configure and activate it every '
-                             'this many faults (0: never; the soak: about 45 a leg)')
-    parser.add_argument('--row-every', type=float, default=60.0, help='seconds between rows')
     parser.add_argument('--csv', metavar='PATH', help='write the rows here')
     parser.add_argument('--plot', metavar='PNG', help='draw the rows here')
     parser.add_argument('--replot', metavar='CSV', nargs='+',
@@ -314,10 +310,9 @@ def main() -> None:
         if args.plot:
             plot(runs, args.plot)
         return
-    rows = run(Run(args.minutes, args.faults, args.every, args.warm_up, args.managed,
-                   args.cycle_every if args.managed else 0, args.row_every))
+    rows = run(Run(args.minutes, args.faults, args.every, args.managed))
     print('\n'.join(slopes(rows)))
-    label = (f'managed node, a lifecycle cycle every {args.cycle_every} faults'
+    label = (f'managed node, a lifecycle cycle every {CYCLE_EVERY} faults'
              if args.managed else 'plain node')
     if args.csv:
         write_csv(args.csv, rows, label)

@@ -169,12 +169,10 @@ def main(argv: list[str] | None = None) -> int:
     """Run from the command line; print and save the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--rounds', type=int, default=3)
-    parser.add_argument('--seed', type=int, default=1)
-    parser.add_argument('--output', default='reconnect.md')
     args = parser.parse_args(argv)
     isolate_ros_domain()
     note = RunNote('reconnect.py', argv)
-    figures = measure(args.rounds, args.seed)
+    figures = measure(args.rounds, seed=1)
     lines = ['## Data back after a reconnect (100 Hz)', '', machine_table(), '',
              '| scenario | from | as shipped: median / max |', '|---|---|---|']
     for scenario in SCENARIOS:
@@ -189,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     for scenario in SCENARIOS:
         lines.append(f'| {scenario} | {_commands(figures.commands.get(scenario, ()))} |')
     lines += ['', note.text()]
-    emit('\n'.join(lines) + '\n', args.output)
+    emit('\n'.join(lines) + '\n', 'reconnect.md')
     return 0
 
 

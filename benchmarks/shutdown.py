@@ -33,25 +33,11 @@ import argparse
 import statistics
 import sys
 
-from bench_common import emit, machine_table, Result, RunNote
+from bench_common import emit, machine_table, RunNote
 from harness.processes import isolate_ros_domain
-from harness.shutdown_trials import Outcome, PHASES, run_trials, Tally
+from harness.shutdown_trials import Outcome, run_trials, Tally
 
 from i3dmgx2_driver.lifetime import SHUTDOWN_DEADLINE
-
-
-def run(runs: int, slots: int = 3) -> list[Result]:
-    """Run ``runs`` trials; return the rows of ``run_all.py``'s table."""
-    isolate_ros_domain()
-    summary = run_trials(runs, slots=slots).summary()
-    return [
-        Result(f'shutdown at random moments of every phase ({summary["runs"]} runs): hangs, '
-               'forced kills', f'{summary["hangs"]}, {summary["forced kills"]}', '0, 0',
-               summary['hangs'] == 0 and summary['forced kills'] == 0),
-        Result('shutdown: slowest exit after the signal, exits past the 3 s deadline',
-               f'{summary["slowest exit"]:.2f} s, {summary["past the deadline"]}',
-               f'<= {SHUTDOWN_DEADLINE:g} s, 0', summary['past the deadline'] == 0),
-    ]
 
 
 def _counts(outcomes: list[Outcome]) -> tuple[int, int, int]:
@@ -92,10 +78,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--runs', type=int, default=2000, help='trials in all (default 2000)')
     parser.add_argument('--slots', type=int, default=4, help='nodes side by side (default 4)')
     parser.add_argument('--seed', type=int, default=1)
-    parser.add_argument('--phase', action='append', choices=PHASES,
-                        help='only this phase (repeatable; default: every phase in turn)')
-    parser.add_argument('--output', default='shutdown.md',
-                        help='file under benchmarks/output/ for the report')
     args = parser.parse_args(argv)
     isolate_ros_domain()
     note = RunNote('shutdown.py', argv)
@@ -110,8 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         elif done % 100 == 0:
             print(f'[{done}/{args.runs}]', file=sys.stderr, flush=True)
 
-    tally = run_trials(args.runs, slots=args.slots, seed=args.seed,
-                       phases=tuple(args.phase or PHASES), progress=progress)
+    tally = run_trials(args.runs, slots=args.slots, seed=args.seed, progress=progress)
     summary = tally.summary()
     notes = [
         note.text(f'{summary["runs"]} trials ({summary["not reached"]} more did not reach '
@@ -124,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     text = '\n'.join(['## Shutdown at random moments', '', machine_table(), '',
                       _table(tally), '', notes[0], *[f'- {n}' for n in notes[1:]]]) + '\n'
-    emit(text, args.output)
+    emit(text, 'shutdown.md')
     return 0
 
 

@@ -27,8 +27,8 @@ ground truth. Prints the report with its rules; exits 1 if any check fails.
     python benchmarks/soak.py --minutes 10 --rate 500 --seed 1
 
 ``--every-stream`` runs the long soak instead (``harness/long_soak.py``):
-every stream in turn at its line-budget maximum rate, in legs of
-``--leg-minutes``, managed node processes that live the whole run
+every stream in turn at its line-budget maximum rate, in legs of 2.5
+minutes, managed node processes that live the whole run
 (configure / activate / deactivate / cleanup at every leg) and a plain
 node every third leg, the slopes of RSS, descriptors and threads; for an
 hour:
@@ -42,9 +42,8 @@ import sys
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from harness.campaign import run_campaign  # noqa: E402, RUF100 - after the path
 from harness.campaign_verdict import CampaignConfig  # noqa: E402, RUF100 - after the path
-from harness.long_soak import LongSoakConfig, run_long_soak  # noqa: E402, RUF100
+from harness.long_soak import LongSoakConfig, run_campaign, run_long_soak  # noqa: E402, RUF100
 from harness.processes import BENCHMARK_DOMAINS, reserve_ros_domain  # noqa: E402, RUF100
 
 
@@ -56,25 +55,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--rate', type=float, default=500.0,
                         help='simulated data rate in Hz (default 500, beyond the device)')
     parser.add_argument('--seed', type=int, default=1, help='seed of the faults and the data')
-    parser.add_argument('--no-long-stalls', action='store_true',
-                        help='leave out the stalls long enough to make the node reopen')
     parser.add_argument('--every-stream', action='store_true',
                         help='the long soak: every stream, both node kinds, slopes')
-    parser.add_argument('--leg-minutes', type=float, default=2.5,
-                        help='with --every-stream: minutes of faults per leg (default 2.5)')
     args = parser.parse_args(argv)
-    if args.minutes <= 0 or args.rate <= 0 or args.leg_minutes <= 0:
-        parser.error('--minutes, --rate and --leg-minutes must be positive')
+    if args.minutes <= 0 or args.rate <= 0:
+        parser.error('--minutes and --rate must be positive')
     # A domain of its own, outside the tests', so that a soak never hears (or is
     # heard by) tests running on the same machine.
     reserve_ros_domain(BENCHMARK_DOMAINS)
     if args.every_stream:
-        long_result = run_long_soak(LongSoakConfig(minutes=args.minutes, seed=args.seed,
-                                                   leg_minutes=args.leg_minutes))
+        long_result = run_long_soak(LongSoakConfig(minutes=args.minutes, seed=args.seed))
         print(long_result.report, flush=True)
         return 0 if long_result.ok else 1
-    cfg = CampaignConfig(minutes=args.minutes, rate_hz=args.rate, seed=args.seed,
-                         long_stalls=not args.no_long_stalls)
+    cfg = CampaignConfig(minutes=args.minutes, rate_hz=args.rate, seed=args.seed)
     result = run_campaign(cfg)
     print(result.report, flush=True)
     return 0 if result.ok else 1

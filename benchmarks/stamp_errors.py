@@ -49,29 +49,37 @@ start afresh for another reason, clock.md).
 The stamp's cost (``--cost``): the time ``SampleClock.stamp`` takes per
 record in the reader thread, on a made-up 100 Hz stream, the system clock's
 offset read as the node reads it: the hot path's share of the clock.
+
+Through the node (``--node``): the simulated device in a process of its own
+delays every 0xCC packet at 100 Hz by 2 ms of radio, the 7.6 ms the packet
+takes on the wire and a random 0..5 ms more (USB, kernel, scheduler), its
+timer 40 ppm fast; the node in this process stamps with ``time_source:
+device`` (the fit) and, in a second run, ``host`` (the read time), a minute
+each. The standard deviation of ``stamp - true sample time`` over all
+samples and after the first 5 s (the first stamp can only be the read time
+less the wire time, and the fit needs a few one-second windows), and the
+mean, which in device mode is the radio latency no host can see. Target:
+<= 50 us in device mode (host stamping: about 5 ms / sqrt(12) = 1.4 ms).
 """
 
 import dataclasses
-from pathlib import Path
 import pickle
 import random
 import statistics
 import sys
 import time
 
-from bench_common import report, Result, standard_args
+from bench_common import InProcessNode, report, Result, standard_args
+from harness.percentiles import percentile, std_dev
+from harness.processes import isolate_ros_domain, SimProcess
+from harness.stamp_runs import check_series, errors, GRACE, restamp, Run, run, TOLERANCE
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from harness.stamp_runs import (  # noqa: E402 - the repository root is on the path now
-    check_series, errors, GRACE, restamp, Run, run, TOLERANCE,
-)
-from i3dmgx2_driver.codec import line_budget, streams  # noqa: E402
-from i3dmgx2_driver.codec.records import TICKS_PER_SECOND  # noqa: E402
-from i3dmgx2_driver.codec.timer import TIMER_MODULUS  # noqa: E402
-from i3dmgx2_driver.device.sample_clock import SampleClock  # noqa: E402
-from i3dmgx2_driver.simulator.faults import FaultConfig  # noqa: E402
-from i3dmgx2_driver.tools.stamp_plot import write_stamp_errors  # noqa: E402
+from i3dmgx2_driver.codec import line_budget, streams
+from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS
+from i3dmgx2_driver.device.sample_clock import SampleClock
+from i3dmgx2_driver.simulator.faults import FaultConfig
+from i3dmgx2_driver.tools.stamp_plot import write_stamp_errors
 
 #: Timer at power-up for runs that cut power near the rollover: it comes 9 s in.
 NEAR_ROLLOVER_START = TIMER_MODULUS - round(9.0 * TICKS_PER_SECOND)
@@ -308,16 +316,75 @@ def cost_rows(records: int = 200_000) -> list[Result]:
     return rows
 
 
+#: Through the node: seconds per time source, the random delay's top (ms), the radio latency
+#: (s), and when the fit counts as settled (s, for the second figure); the target (s).
+NODE_SECONDS = 60.0
+NODE_JITTER_MS = 5.0
+RADIO_LATENCY_S = 0.002
+NODE_SETTLE_S = 5.0
+NODE_TARGET_STD_S = 50e-6
+
+
+def node_errors(time_source: str) -> list[tuple[float, float]]:
+    """Stream through the node; return (seconds since the first sample, stamp error)."""
+    sim = SimProcess(rate_hz=100.0, latency_s=RADIO_LATENCY_S, wire_baud=115200,
+                     faults={'jitter_ms': NODE_JITTER_MS})
+    node = None
+    try:
+        node = InProcessNode(sim.port, time_source=time_source)
+        if not node.wait_published(1, timeout=20.0):
+            raise RuntimeError('the node published nothing within 20 s')
+        time.sleep(NODE_SECONDS)
+        sim.silence()
+        node.wait_quiet()
+    finally:
+        if node is not None:
+            node.close()
+        sim.stop()
+    sample_time = {e.timer: e.sample_time for e in sim.written_stream()}
+    matched = [(sample_time[p.timer], p.stamp) for p in node.published if p.timer in sample_time]
+    start = matched[0][0] if matched else 0.0
+    return [(t - start, stamp - t) for t, stamp in matched]
+
+
+def node_rows() -> list[Result]:
+    """Stamp errors through the node, in device and in host mode: the rows."""
+    isolate_ros_domain()
+    device = node_errors('device')
+    every = [e for _, e in device]
+    settled = [e for t, e in device if t >= NODE_SETTLE_S]
+    target = f'<= {NODE_TARGET_STD_S * 1e6:.0f} us'
+    rows = [Result(f'through the node: std dev, device time, 0-{NODE_JITTER_MS:g} ms random '
+                   'read delay (all samples)', f'{std_dev(every) * 1e6:.1f} us '
+                   f'(n={len(every)})', target, std_dev(every) <= NODE_TARGET_STD_S),
+            Result(f'through the node: std dev, device time, after the first {NODE_SETTLE_S:g} s',
+                   f'{std_dev(settled) * 1e6:.1f} us (n={len(settled)})', target,
+                   std_dev(settled) <= NODE_TARGET_STD_S)]
+    mean = statistics.fmean(every) if every else float('nan')
+    spread = [abs(e - mean) for e in every]
+    rows.append(Result(
+        'through the node, device time: mean offset; p99 / max |error - mean|',
+        f'{mean * 1e3:+.3f} ms; {percentile(spread, 99) * 1e6:.0f} / '
+        f'{max(spread, default=float("nan")) * 1e6:.0f} us'))
+    host = [e for _, e in node_errors('host')]
+    rows.append(Result(
+        'through the node: std dev, host time (read time), same delays',
+        f'{std_dev(host) * 1e6:.0f} us (n={len(host)}); mean offset '
+        f'{(statistics.fmean(host) if host else float("nan")) * 1e3:+.3f} ms'))
+    return rows
+
+
 def main() -> None:
     """Run from the command line."""
     def more(parser) -> None:
         parser.add_argument('--events', action='store_true', help='the event table only')
         parser.add_argument('--streams', action='store_true', help='the stream table only')
         parser.add_argument('--cost', action='store_true', help='the stamp cost only')
+        parser.add_argument('--node', action='store_true', help='the table through the node only')
         parser.add_argument('--queues', action='store_true',
                             help='the queue after a gap table only')
         parser.add_argument('--stream-seconds', type=float, default=None,
-                            help='length of each stream run (default 130 s, 30 with --quick)')
+                            help='length of each stream run (default 130 s)')
         parser.add_argument('--record', metavar='FILE',
                             help='keep the recordings of the stream runs here (pickle)')
         parser.add_argument('--replay', metavar='FILE',
@@ -325,30 +392,35 @@ def main() -> None:
         parser.add_argument('--plot-csv', metavar='CSV',
                             help='write the near-rollover power cycle series here')
 
-    args = standard_args(__doc__.splitlines()[1], 6.0, 3.0, more)
+    args = standard_args(__doc__.splitlines()[1], 6.0, more)
     if args.replay:
         report('Stamp errors, recorded runs', replay_rows(args.replay),
                [f'Recordings of {args.replay} stamped again through the clock as it is.'],
                None, other_load=args.other_load)
         return
-    every = not (args.events or args.streams or args.cost or args.queues)
+    every = not (args.events or args.streams or args.cost or args.queues or args.node)
     results = []
     if args.events or every:
         results += event_rows(args.seconds, args.plot_csv)
     if args.streams or every:
-        seconds = args.stream_seconds or (30.0 if args.quick else 130.0)
-        results += stream_rows(seconds, args.record)
+        results += stream_rows(args.stream_seconds or 130.0, args.record)
     if args.queues or every:
         results += queue_rows()
     if args.cost or every:
         results += cost_rows()
+    if args.node or every:
+        results += node_rows()
     report('Stamp errors', results,
            [f'Events: 0xCC at 100 Hz, {args.seconds:g} s after each event; the simulated '
             f'timer runs 40 ppm fast; stamps made as the node makes them '
             f'(harness/stamp_runs.py).',
             'Columns: worst |error - steady offset| after the grace; error trend (ppm); '
             'time from the return to the last stamp over 1 ms off; worst in the grace; '
-            'why the fit started afresh.'],
+            'why the fit started afresh.',
+            f'Through the node: {NODE_SECONDS:g} s per time source at 100 Hz; simulated delay '
+            f'{RADIO_LATENCY_S * 1e3:g} ms radio + 7.64 ms on the wire + 0..{NODE_JITTER_MS:g} '
+            'ms random; device clock 40 ppm fast; the device-time mean offset is the radio '
+            'latency, which the host cannot observe.'],
            None if args.no_output else 'stamp_errors.md', other_load=args.other_load)
 
 

@@ -25,13 +25,25 @@ with ``data_rate``. Every valid record written is looked for among those
 published; the rate is measured from the records' write times; the latency
 is from a packet's last byte written to ``publish()`` returned. Target:
 within 2 % of the rate that fits, nothing lost.
+
+Several sensors on one base station (``--sensors``): N of them (1, 2 and 4)
+behind one simulated base station (its own process), every one streaming
+``--stream`` (``full``, 0xCC, by default) at the highest rate N of them fit
+on the line with the driver's margin (the line budget: 124 Hz alone, 62 Hz
+for two, 31 Hz for four), one node process serving them all (``address``
+for one, ``addresses`` for several), one subscriber in a third process on
+every sensor's topic. After a warm-up the node's CPU time is read over a
+window, and each sensor's rate is what the subscriber received of it in
+that window. ``--stream inertial`` measures the smaller record (272, 136
+and 68 Hz).
 """
 
+import math
 import time
 
 from bench_common import InProcessNode, report, Result, standard_args, write_latencies
 from harness.percentiles import summarise
-from harness.processes import isolate_ros_domain, SimProcess
+from harness.processes import isolate_ros_domain, NodeProcess, SimProcess, SubscriberProcess
 
 from i3dmgx2_driver.codec import line_budget, streams
 
@@ -40,6 +52,9 @@ BAUD = 115200
 WARM_UP_S = 2.0
 #: Measured rate within this fraction of the rate that fits meets the target.
 RATE_TOLERANCE = 0.02
+#: Several sensors: their addresses, and the warm-up before the CPU window (s).
+ADDRESSES = (17, 95, 40, 3)
+SENSORS_WARM_UP_S = 5.0
 
 
 class StreamRun:
@@ -123,9 +138,73 @@ def run(seconds: float) -> tuple[list[Result], str]:
     return results, '\n'.join([TABLE_HEAD, *rows])
 
 
+def budget_rate(stream: streams.Stream, count: int) -> float:
+    """Return the data rate N sensors of ``stream`` fit on the line (whole Hz, rounded down)."""
+    rate = line_budget.max_shared_rate([stream.code] * count, 115200, True)
+    return float(math.floor(rate))
+
+
+def measure_sensors(count: int, stream: streams.Stream,
+                    seconds: float) -> tuple[float, float, dict]:
+    """Return the rate asked, the node's CPU (% of one core) and each sensor's rate (Hz)."""
+    addresses = ADDRESSES[:count]
+    rate = budget_rate(stream, count)
+    topics = (['imu/raw_data'] if count == 1 else [f'imu_{a}/raw_data' for a in addresses])
+    sim = SimProcess(addresses=list(addresses) if count > 1 else [], address=addresses[0])
+    subscriber = SubscriberProcess(topics=topics, values=True)
+    params = {'port': sim.port, 'stream': stream.name, 'data_rate': rate, 'qos_depth': 1000}
+    params.update({'address': addresses[0]} if count == 1 else {'addresses': list(addresses)})
+    node = NodeProcess(params)
+    try:
+        for address in addresses:
+            if not node.wait_for_output(f'from node {address} on', timeout=30.0):
+                raise RuntimeError(f'node {address} did not stream:\n{node.output()}')
+        time.sleep(SENSORS_WARM_UP_S)
+        cpu0, wall0, t0 = node.cpu_seconds(), time.monotonic(), time.time()
+        time.sleep(seconds)
+        cpu1, wall1, t1 = node.cpu_seconds(), time.monotonic(), time.time()
+    finally:
+        node.stop()
+        rows = subscriber.stop()
+        sim.stop()
+        node.close()
+    rates = {topic: sum(1 for row in rows if row[3] == topic and t0 <= row[2] < t1) / (t1 - t0)
+             for topic in topics}
+    return rate, 100.0 * (cpu1 - cpu0) / (wall1 - wall0), rates
+
+
+def sensors_run(seconds: float, stream: streams.Stream) -> list[Result]:
+    """Measure 1, 2 and 4 sensors at the line budget; return the table rows."""
+    isolate_ros_domain()
+    results = []
+    for count in (1, 2, 4):
+        rate, cpu, rates = measure_sensors(count, stream, seconds)
+        each = ', '.join(f'{topic.split("/")[0]} {hz:.1f}' for topic, hz in rates.items())
+        results.append(Result(
+            f'{count} x {stream.name} at {rate:g} Hz (the line budget for {count})',
+            f'node CPU {cpu:.2f} % of one core; received per sensor (Hz): {each}'))
+    return results
+
+
 def main() -> None:
-    """Run from the command line."""
-    args = standard_args(__doc__.splitlines()[1], 20.0, 6.0)
+    """Run from the command line: every stream, or several sensors on one base station."""
+    def more(parser) -> None:
+        parser.add_argument('--sensors', action='store_true',
+                            help='1, 2 and 4 sensors on one base station instead')
+        parser.add_argument('--stream', default='full',
+                            help='--sensors: the stream every sensor sends')
+
+    args = standard_args(__doc__.splitlines()[1], 20.0, more)
+    if args.sensors:
+        stream = streams.parse(args.stream)
+        report(f'Several sensors on one base station ({stream.name})',
+               sensors_run(args.seconds, stream),
+               [f'{args.seconds:g} s window after {SENSORS_WARM_UP_S:g} s of warm-up; one node '
+                'serving every sensor; a subscriber in another process on every topic; rates '
+                'are what it received in the window.'],
+               None if args.no_output else f'several_sensors_{stream.name}.md',
+               other_load=args.other_load)
+        return
     results, table = run(args.seconds)
     report('Streams at the line limit', results,
            [f'{args.seconds:g} s per stream after {WARM_UP_S:g} s of warm-up; wireless '

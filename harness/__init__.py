@@ -27,15 +27,17 @@ imports it.
   ``sim_process``, ``subscriber`` and ``instrumented_node`` are the programs
   those processes run.
 * ``percentiles``: a sample's percentile and summary.
-* ``campaign``: the soak and fault campaign (``benchmarks/soak.py`` runs it
-  for minutes, ``test/test_soak_short.py`` for half a minute): the truth,
-  the subscriber, the node process and the run, its faults in
+* ``campaign``: the soak and fault campaign's pieces (the truth, the
+  subscriber, the node process and its counters), its faults in
   ``fault_driver``; ``campaign_verdict`` judges what a run produced (the
   checks and the report), for the campaign and the long soak alike.
 * ``run_config``: the settings the campaign, the long soak and the node fuzz share.
-* ``long_soak``: the campaign's legs over every stream for an hour, its node
-  processes sampled by ``process_sampler`` (RSS, descriptors, threads,
-  slopes; ``benchmarks/memory_curve.py`` samples with it too).
+* ``long_soak``: the campaign's run as legs over every stream for an hour
+  (``benchmarks/soak.py --every-stream``), and the campaign itself as one
+  plain leg (``run_campaign``: ``benchmarks/soak.py`` for minutes,
+  ``test/test_soak_short.py`` for half a minute); its node processes sampled
+  by ``process_sampler`` (RSS, descriptors, threads, slopes;
+  ``benchmarks/memory_curve.py`` samples with it too).
 * ``hostile``: a hostile base station, its attacks' bytes and its oracle;
   ``node_fuzz`` fuzzes the running node through it.
 * ``fuzz_checks``: the codec's properties on one input (the fuzzer in

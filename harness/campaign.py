@@ -29,32 +29,25 @@ and the node's counters are reconciled with what the simulator wrote
 (``campaign_verdict.py``: the rules, the checks and the report).
 
 Used by ``benchmarks/soak.py`` (ten minutes) and ``test/test_soak_short.py``
-(about half a minute in CI). :func:`run_campaign` does everything and returns
-the checks and a printable report. Here: the truth kept compact with the
-values the node would publish for it, the subscriber, the node process, and
-the run itself, set up, run through its fault and quiet phases, and
-collected; the long soak's legs (``long_soak.py``) run on the same pieces.
+(about half a minute in CI). Here: the pieces a faulted run stands on, the
+truth kept compact with the values the node would publish for it, the
+subscriber, the node process and its counters. The run itself is a leg of
+the long soak (``long_soak.py``): ``long_soak.run_campaign`` runs one plain
+node through one stretch of faults and a quiet phase, as the long soak runs
+each of its legs, and returns the checks and a printable report.
 """
 
 from collections.abc import Callable, Iterable
 import json
-import os
-import random
-import shutil
 import struct
 import sys
-import tempfile
 import threading
 import time
-from typing import NamedTuple
 
-from harness.campaign_verdict import (
-    analyse, CampaignConfig, CampaignResult, rate_text, RunData, Sent,
-)
+from harness.campaign_verdict import CampaignConfig, RunData, Sent
 from harness.fault_driver import FaultDriver
 from harness.instrumented_node import STATS_ENV
-from harness.process_sampler import process_sample
-from harness.processes import isolate_ros_domain, Listener, NodeProcess, ros_env
+from harness.processes import Listener, NodeProcess, ros_env
 from harness.run_config import FaultedNodeConfig
 from i3dmgx2_driver.codec.commands import decode_record
 from i3dmgx2_driver.codec.data_rate import RATE_DIVIDER_ADDRESS
@@ -64,7 +57,7 @@ from i3dmgx2_driver.codec.layouts import LAYOUTS
 from i3dmgx2_driver.codec.orientation import ENU
 from i3dmgx2_driver.codec.streams import STREAMS
 from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings, STANDARD_GRAVITY
-from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from i3dmgx2_driver.simulator import PtySimulator
 from sensor_msgs.msg import Imu
 
 #: A published message's acceleration and angular velocity, packed: how a message is
@@ -290,141 +283,3 @@ def close_all(steps: Iterable[Callable[[], object]], what: str) -> None:
             step()
         except Exception as exc:  # keep cleaning up; say what went wrong
             print(f'{what} cleanup: {type(exc).__name__}: {exc}', file=sys.stderr)
-
-
-# -- the run -----------------------------------------------------------------------------------
-
-class Rig(NamedTuple):
-    """What a campaign runs on: the simulator and its truth, the listener, the node, the faults."""
-
-    sim: PtySimulator
-    collector: TruthCollector
-    subscriber: Subscriber
-    node: NodeProcess
-    driver: FaultDriver
-    workdir: str
-    stats_path: str
-
-
-class Timeline(NamedTuple):
-    """When the stream began, the warm-up ended and the faults were to end (wall clock)."""
-
-    started: float
-    warmup_end: float
-    fault_end: float
-
-
-def run_campaign(cfg: CampaignConfig) -> CampaignResult:
-    """Run the whole campaign; return its checks and report."""
-    log = cfg.log or (lambda text: None)
-    rig = set_up(cfg)
-    rss: list[tuple[float, int]] = []
-    try:
-        wait_for_stream(rig)
-        timeline = fault_phase(rig, cfg, log, rss)
-        recovered = quiet_phase(rig, cfg, rss)
-        data = collect(rig, cfg, timeline, rss, recovered)
-    finally:
-        clean_up(rig)
-    return analyse(data)
-
-
-def set_up(cfg: CampaignConfig) -> Rig:
-    """Start the simulator (unplugged), the truth collector, the subscriber and the node."""
-    isolate_ros_domain()
-    workdir = tempfile.mkdtemp(prefix='i3dmgx2-soak-')
-    stats_path = os.path.join(workdir, 'node_stats.json')
-    sim = PtySimulator(SimulatorConfig(
-        address=cfg.address, seed=cfg.seed, rate_hz=cfg.rate_hz,
-        limit_to_line_rate=cfg.rate_hz is None,
-        truth_limit=int((cfg.rate_hz or 400.0) * 60) + 20000))
-    sim.start()
-    # The port is missing until the subscriber has matched the node's publisher:
-    # nothing published can then be lost in discovery, and the node starts by
-    # retrying to open a port that is not there.
-    sim.unplug(None)
-    collector = TruthCollector(sim)
-    collector.start()
-    subscriber = Subscriber()
-    node = start_node(node_params(cfg, sim.port, cfg.stream, cfg.data_rate), stats_path)
-    driver = FaultDriver(sim, random.Random(cfg.seed * 7919 + 1), cfg.event_gap,
-                         cfg.long_stalls)
-    return Rig(sim, collector, subscriber, node, driver, workdir, stats_path)
-
-
-def wait_for_stream(rig: Rig) -> None:
-    """Plug the port in once the subscriber sees the node; wait for the first message."""
-    rig.subscriber.wait_publisher(rig.node, '/imu/raw_data')
-    time.sleep(1.0)
-    rig.sim.replug()
-    if not rig.subscriber.wait_count(1, 60.0):
-        raise RuntimeError(f'no message within 60 s:\n{rig.node.output()}')
-
-
-def sample_rss(pid: int, rss: list[tuple[float, int]]) -> int | None:
-    """Add the node's RSS now to ``rss``; return it (None if the process is gone)."""
-    sample = process_sample(pid)
-    if sample is None:
-        return None
-    rss.append((time.time(), sample[0]))
-    return sample[0]
-
-
-def fault_phase(rig: Rig, cfg: CampaignConfig, log: Callable[[str], None],
-                rss: list[tuple[float, int]]) -> Timeline:
-    """Inject faults for the run's minutes, sampling the node's RSS every second."""
-    node, driver = rig.node, rig.driver
-    duration = cfg.minutes * 60.0
-    started = time.time()
-    log(f'streaming; domain {os.environ.get("ROS_DOMAIN_ID")}, node pid {node.proc.pid}, '
-        f'{cfg.minutes:g} min of faults at {rate_text(cfg)}, seed {cfg.seed}')
-    warmup_end = started + max(cfg.warmup_min, cfg.warmup_fraction * duration)
-    fault_end = started + duration
-    driver.start()
-    next_report = started + 60.0
-    while time.time() < fault_end and node.proc.poll() is None:
-        sample = sample_rss(node.proc.pid, rss)
-        if time.time() >= next_report:
-            next_report += 60.0
-            log(f'  {time.time() - started:5.0f} s: {rig.subscriber.count} messages, '
-                f'{len(driver.events)} fault events, RSS {sample} KiB')
-        time.sleep(1.0)
-    return Timeline(started, warmup_end, fault_end)
-
-
-def quiet_phase(rig: Rig, cfg: CampaignConfig, rss: list[tuple[float, int]]) -> int:
-    """Switch every fault off; return how many messages came in the quiet phase."""
-    rig.driver.stop()
-    before = rig.subscriber.count
-    quiet_end = time.time() + cfg.quiet
-    while time.time() < quiet_end and rig.node.proc.poll() is None:
-        sample_rss(rig.node.proc.pid, rss)
-        time.sleep(0.5)
-    return rig.subscriber.count - before
-
-
-def collect(rig: Rig, cfg: CampaignConfig, timeline: Timeline,
-            rss: list[tuple[float, int]], recovered: int) -> RunData:
-    """Stop the node; wait for its final counters and its last messages; gather the run."""
-    node, subscriber = rig.node, rig.subscriber
-    alive = node.proc.poll() is None
-    exit_code, exit_seconds = node.stop(timeout=15.0)
-    final = read_counters(rig.stats_path, lambda counters: counters.get('final'), 5.0)
-    published = final.get('stats', {}).get('published')
-    if published is not None:
-        subscriber.wait_count(published, 15.0)
-    rig.collector.stop()
-    return run_data(
-        cfg, rig.sim, rig.driver, truth=rig.collector.entries,
-        truth_missed=rig.collector.missed, messages=list(subscriber.rows), node_stats=final,
-        rss=rss, warmup_end=timeline.warmup_end, fault_end=timeline.fault_end,
-        alive_at_end=alive, exit_code=exit_code, exit_seconds=exit_seconds,
-        recovered=recovered, node_output=node.output(), started=timeline.started)
-
-
-def clean_up(rig: Rig) -> None:
-    """Stop everything, each step on its own: a failure in one must not leave the node behind."""
-    driver, collector = rig.driver, rig.collector
-    close_all((lambda: driver.is_alive() and driver.stop(), rig.node.close,
-               rig.subscriber.close, lambda: collector.is_alive() and collector.stop(),
-               rig.sim.stop, lambda: shutil.rmtree(rig.workdir, ignore_errors=True)), 'soak')

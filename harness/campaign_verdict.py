@@ -15,9 +15,9 @@
 """
 The fault campaign's verdict: what a run produced, every check on it, and the report.
 
-The run itself (processes, threads, the simulator: ``campaign.py``) and the
-long soak's legs (``long_soak.py``) each fill in a :class:`RunData`; all
-that is judged is read from it here, so the rules can be checked on
+Each leg of a run (processes, threads, the simulator: ``long_soak.py``, on
+the pieces of ``campaign.py``; the campaign is one such leg) fills in a
+:class:`RunData`; all that is judged is read from it here, so the rules can be checked on
 synthetic runs with known bugs, without a node or a simulator
 (``test/test_soak_short.py``, ``test/test_campaign_pieces.py``).
 
@@ -90,8 +90,6 @@ class CampaignConfig(FaultedNodeConfig):
     stamp_tolerance: float = 0.001
     stamp_early_tolerance: float = 0.005
     stamp_grace: float = 0.5
-    #: Include long stalls (longer than the node's stall recovery: it reopens the port).
-    long_stalls: bool = True
 
 
 def rate_text(cfg: CampaignConfig) -> str:
@@ -823,13 +821,16 @@ def check_lines(checks: list[Check]) -> list[str]:
 
 # -- all of it ---------------------------------------------------------------------------------
 
-def analyse(data: RunData, exempt: tuple[str, ...] = ()) -> CampaignResult:
+def analyse(data: RunData, exempt: tuple[str, ...] = (),
+            more: tuple[Check, ...] = ()) -> CampaignResult:
     """
     Match what was published with the truth; reconcile the counters; judge.
 
     ``exempt`` names checks that do not apply to this run (a managed node's
     leg: the node lives on, and counts what it reads while inactive as
     unpublished): they are left out of the checks and of the report.
+    ``more``: checks the caller made (the data back after each fault), judged
+    and reported with the others.
     """
     cfg = data.cfg
     nstats = (data.node_stats or {}).get('stats', {})
@@ -840,7 +841,7 @@ def analyse(data: RunData, exempt: tuple[str, ...] = ()) -> CampaignResult:
     checks = [*health_checks(data),
               *published_checks(data, matching, cover),
               verdict('stamps true through every fault', *stamp_verdict(matching.matched, cfg)),
-              *counter_checks(rows, nstats)]
+              *counter_checks(rows, nstats), *more]
     checks = [c for c in checks if c.name not in exempt]
     figures = {
         'sent': cover.sent,

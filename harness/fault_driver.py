@@ -15,9 +15,9 @@
 """
 The faults the campaign injects into the simulator, drawn at random all through a run.
 
-Its own room: the campaign (``campaign.py``) and the long soak's legs
-(``long_soak.py``) both run it, and adding a fault is one change here (the
-checks of ``campaign_verdict.py`` then judge what it did).
+Its own room: every leg of the campaign and the long soak (``long_soak.py``)
+runs it, and adding a fault is one change here (the checks of
+``campaign_verdict.py`` then judge what it did).
 """
 
 import random
@@ -44,15 +44,14 @@ class FaultDriver(threading.Thread):
     Inject random faults into the simulator until told to stop.
 
     ``event_gap``: the seconds between two faults, drawn uniformly from that
-    range; ``long_stalls``: include stalls longer than the node's stall
-    recovery (it reopens the port).
+    range. ``stall_long`` outlasts the node's stall recovery (it reopens the port).
     """
 
     WEIGHTS = (('unplug', 2.0), ('stall_short', 1.5), ('stall', 2.0), ('stall_long', 0.4),
                ('noise', 3.0), ('quirks', 1.0), ('power_cycle', 1.0))
 
-    def __init__(self, sim: PtySimulator, rng: random.Random, event_gap: tuple[float, float],
-                 long_stalls: bool = True) -> None:
+    def __init__(self, sim: PtySimulator, rng: random.Random,
+                 event_gap: tuple[float, float]) -> None:
         super().__init__(name='soak-faults', daemon=True)
         self.sim = sim
         self.rng = rng
@@ -65,9 +64,8 @@ class FaultDriver(threading.Thread):
         self._unsafe = False
         self._garbage_mark = (0, 0)
         self._halt = threading.Event()
-        kinds = [k for k, _ in self.WEIGHTS if long_stalls or k != 'stall_long']
-        self._kinds = kinds
-        self._weights = [w for k, w in self.WEIGHTS if k in kinds]
+        self._kinds = [k for k, _ in self.WEIGHTS]
+        self._weights = [w for _, w in self.WEIGHTS]
 
     def run(self) -> None:
         """Draw and inject events until stopped."""

@@ -96,7 +96,7 @@ def observe_ports() -> None:
     def flushed(port: SerialPort) -> None:
         # Noted when it began: what was written before is gone; what was written
         # from then on may wait in the queue and be read after the next anchor
-        # (read_windows.py).
+        # (campaign_verdict.Windows).
         began = time.time()
         flush_input(port)
         _note('flush', began)

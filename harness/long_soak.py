@@ -46,6 +46,11 @@ and (for runs of at least ``slope_min_minutes``) RSS slope below
 ``slope_after`` seconds. ``benchmarks/soak.py --every-stream`` runs it,
 ``test/test_soak_every_stream.py`` for a minute in CI; the plan of the legs
 is checked there fast, without a simulator or a node.
+
+The campaign (:func:`run_campaign`: ``benchmarks/soak.py`` without
+``--every-stream``, ``test/test_soak_short.py``) is this run with one plain
+leg, its simulator at the campaign's own rate and its checks with the
+campaign's settings: the same rig, the same leg, the same verdict.
 """
 
 import bisect
@@ -63,7 +68,9 @@ from typing import NamedTuple
 from harness.campaign import (
     close_all, node_params, read_counters, run_data, start_node, Subscriber, TruthCollector,
 )
-from harness.campaign_verdict import analyse, CampaignConfig, Check, RunData
+from harness.campaign_verdict import (
+    analyse, CampaignConfig, CampaignResult, Check, rate_text, RunData,
+)
 from harness.fault_driver import FaultDriver, FaultEvent
 from harness.process_sampler import halves_per_hour, Sampler, slope_per_hour
 from harness.processes import (
@@ -343,10 +350,24 @@ class LegRunner:
     stops it with SIGINT.
     """
 
-    def __init__(self, cfg: LongSoakConfig, rig: SoakRig, log: Callable[[str], None]) -> None:
+    def __init__(self, cfg: LongSoakConfig, rig: SoakRig, log: Callable[[str], None],
+                 campaign: CampaignConfig | None = None) -> None:
         self.cfg = cfg
         self.rig = rig
         self.log = log
+        self.campaign = campaign
+
+    def leg_config(self, leg: Leg) -> CampaignConfig:
+        """Return the settings the leg is judged by: the campaign's own, or the leg's."""
+        if self.campaign is not None:
+            return self.campaign
+        cfg = self.cfg
+        return CampaignConfig(
+            minutes=cfg.leg_minutes, rate_hz=None, stream=leg.stream, data_rate=leg.rate_hz,
+            seed=cfg.seed, address=cfg.address, read_timeout=cfg.read_timeout,
+            reconnect_interval=cfg.reconnect_interval, quiet=cfg.quiet,
+            temperature_period=cfg.temperature_period, warmup_min=10.0, warmup_fraction=0.0,
+            log=None)
 
     def _bring_up(self, leg: Leg, name: str) -> tuple[NodeProcess, LifecycleClient | None]:
         """Configure and activate the stream's managed node, or start a plain one."""
@@ -403,13 +424,13 @@ class LegRunner:
                 rig.subscriber.wait_count(published, 15.0)
         return exit_code, exit_seconds, stats
 
-    def _faults(self, leg: Leg, started: float) -> FaultDriver:
+    def _faults(self, leg: Leg, started: float, minutes: float) -> FaultDriver:
         """Run the fault phase of a leg; return the driver (its events)."""
         cfg = self.cfg
         driver = FaultDriver(self.rig.sim, random.Random(cfg.seed * 7919 + leg.number),
                              cfg.event_gap)
         driver.start()
-        end = started + cfg.leg_minutes * 60.0
+        end = started + minutes * 60.0
         while time.time() < end:
             time.sleep(0.5)
         driver.stop()
@@ -431,15 +452,15 @@ class LegRunner:
     def _run_node(self, leg: Leg, name: str, node: NodeProcess, client: LifecycleClient | None,
                   begin: float) -> LegResult:
         """Fault the node brought up at ``begin``, bring it down; analyse what it published."""
-        cfg, subscriber = self.cfg, self.rig.subscriber
+        cfg, subscriber, judged = self.cfg, self.rig.subscriber, self.leg_config(leg)
         if not subscriber.wait_count(1, 60.0):
             raise RuntimeError(f'leg {leg.number}: no message within 60 s:\n'
                                f'{node.output()[-3000:]}')
         started = time.time()
         cpu_start = process_cpu_seconds(node.proc.pid)
-        self.log(f'leg {leg.number}: {leg.kind} node, stream {leg.stream} at {leg.rate_hz:g} '
-                 f'Hz, {cfg.leg_minutes:g} min of faults')
-        driver = self._faults(leg, started)
+        self.log(f'leg {leg.number}: {leg.kind} node, {rate_text(judged)}, '
+                 f'{judged.minutes:g} min of faults')
+        driver = self._faults(leg, started, judged.minutes)
         fault_end = time.time()
         before = subscriber.count
         time.sleep(cfg.quiet)
@@ -456,15 +477,10 @@ class LegRunner:
         stats = dict(stats, port_events=events)
         rss = [(t, kib) for t, kib, _, _ in self.rig.sampler.all_samples.get(name, [])
                if t >= started]
+        warmup = max(judged.warmup_min, judged.warmup_fraction * judged.minutes * 60.0)
         data = run_data(
-            CampaignConfig(minutes=cfg.leg_minutes, rate_hz=None, stream=leg.stream,
-                           data_rate=leg.rate_hz, seed=cfg.seed, address=cfg.address,
-                           read_timeout=cfg.read_timeout,
-                           reconnect_interval=cfg.reconnect_interval,
-                           quiet=cfg.quiet, temperature_period=cfg.temperature_period,
-                           warmup_min=10.0, log=None),
-            self.rig.sim, driver, truth=truth, truth_missed=missed, messages=rows,
-            node_stats=stats, rss=rss, warmup_end=started + 10.0, fault_end=fault_end,
+            judged, self.rig.sim, driver, truth=truth, truth_missed=missed, messages=rows,
+            node_stats=stats, rss=rss, warmup_end=started + warmup, fault_end=fault_end,
             alive_at_end=alive, exit_code=exit_code, exit_seconds=exit_seconds,
             recovered=recovered, node_output=node.output()[-5000:], started=started,
             end=stopped if leg.kind == 'managed' else None)
@@ -474,24 +490,24 @@ class LegRunner:
                  seconds: float) -> LegResult:
         """Judge the leg: the campaign's checks, and the data back after every fault."""
         cfg = self.cfg
-        # A managed node does not exit at a leg's end (its exit is checked at the run's),
-        # and counts as unpublished what it reads while inactive, by design.
-        result = analyse(data, exempt=('clean exit on SIGINT', 'nothing left unpublished')
-                         if leg.kind == 'managed' else ())
-        checks = list(result.checks)
         found = recoveries(driver.events, data.messages, data.truth, self.rig.sim.host_log,
                            cfg.recovery_limit, self.log)
         slow = [(k, g, lim) for k, g, lim in found if g is None or g > lim]
         worst = max((g for _, g, _ in found if g is not None), default=0.0)
         retried = sum(1 for _, _, lim in found if lim > cfg.recovery_limit)
-        checks.append(Check(
+        recovery = Check(
             'data back after every fault that ends', not slow,
             f'{len(found)} faults ended; longest wait for the next message '
             f'{worst:.3f} s (limit {cfg.recovery_limit:g} s, plus {TRY_COST:g} s for '
             f'each command or reply lost or ignored meanwhile: {retried} such)'
             + ('; over: ' + ', '.join(f'{k} {g if g is None else round(g, 3)} (limit '
                                       f'{lim:g})' for k, g, lim in slow[:8])
-               if slow else '')))
+               if slow else ''))
+        # A managed node does not exit at a leg's end (its exit is checked at the run's),
+        # and counts as unpublished what it reads while inactive, by design.
+        result = analyse(data, exempt=('clean exit on SIGINT', 'nothing left unpublished')
+                         if leg.kind == 'managed' else (), more=(recovery,))
+        checks = result.checks
         legresult = LegResult(leg, checks, result.figures, found,
                               100.0 * cpu / seconds if seconds > 0 else 0.0, seconds,
                               result.report)
@@ -690,10 +706,14 @@ def _per_hour(value: float | None, unit: str) -> str:
 class LongSoak:
     """The run: start the simulator and the processes, run the legs, end, report."""
 
-    def __init__(self, cfg: LongSoakConfig) -> None:
+    def __init__(self, cfg: LongSoakConfig, campaign: CampaignConfig | None = None) -> None:
         self.cfg = cfg
+        self.campaign = campaign
         self.log = cfg.log or (lambda text: None)
-        self.legs = plan_legs(cfg)
+        # The campaign: one plain leg, its stream at its data rate (numbered 1: its faults'
+        # seed is the one the campaign always drew).
+        self.legs = ([Leg(1, campaign.stream, campaign.data_rate, 'plain')] if campaign
+                     else plan_legs(cfg))
         self.sampler = Sampler(cfg.sample_period)
         self.nodes = SoakNodes(cfg, self.sampler)
         self.sim: PtySimulator | None = None
@@ -706,9 +726,10 @@ class LongSoak:
         """Start the simulator, the subscriber and the managed node processes."""
         cfg = self.cfg
         isolate_ros_domain()
+        rate = self.campaign.rate_hz if self.campaign is not None else None
         self.sim = PtySimulator(SimulatorConfig(
-            address=cfg.address, seed=cfg.seed, rate_hz=None, limit_to_line_rate=True,
-            truth_limit=400 * 120 + 20000))
+            address=cfg.address, seed=cfg.seed, rate_hz=rate, limit_to_line_rate=rate is None,
+            truth_limit=int((rate or 400) * 120) + 20000))
         self.sim.start()
         self.nodes.port = self.sim.port
         self.collector = TruthCollector(self.sim)
@@ -720,7 +741,7 @@ class LongSoak:
         self.sampler.start()
         self.nodes.start_managed(self.legs, self.subscriber)
         return LegRunner(cfg, SoakRig(self.sim, self.collector, self.subscriber, self.sampler,
-                                      self.nodes), self.log)
+                                      self.nodes), self.log, self.campaign)
 
     def close(self) -> None:
         """Stop everything that still runs."""
@@ -760,3 +781,22 @@ class LongSoak:
 def run_long_soak(cfg: LongSoakConfig) -> LongSoakResult:
     """Run the long soak; return its checks and report."""
     return LongSoak(cfg).run()
+
+
+def run_campaign(cfg: CampaignConfig) -> CampaignResult:
+    """
+    Run the campaign: one plain node through ``cfg.minutes`` of faults and a quiet phase.
+
+    The long soak with one plain leg: the simulator streams at the
+    campaign's rate (its override, beyond the device; None: the rate the
+    node sets, the line's limit honoured), the node's RSS is sampled every
+    second, and the leg is judged with the campaign's settings (its warm-up,
+    its RSS limit). Returns its checks and printable report.
+    """
+    shared = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(FaultedNodeConfig)}
+    soak = LongSoak(LongSoakConfig(**shared, sample_period=1.0), campaign=cfg)
+    try:
+        leg = soak.start().run(soak.legs[0])
+    finally:
+        soak.close()
+    return CampaignResult(leg.checks, leg.report, leg.figures)

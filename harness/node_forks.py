@@ -191,19 +191,12 @@ class ForkedNode:
 
 
 class ForkServer:
-    """
-    The fork server in its own process, and the nodes it started.
+    """The fork server in its own process, and the nodes it started."""
 
-    ``tree``: the driver of another checkout first on the server's path (the
-    code before a change, to see a defect it fixed).
-    """
-
-    def __init__(self, env: dict[str, str] | None = None, tree: str | None = None) -> None:
+    def __init__(self) -> None:
         # Not at the top: the server itself imports only this module and the driver.
         from harness.processes import REPO, ros_env
-        env = ros_env({'OPENBLAS_NUM_THREADS': '1', **(env or {})})
-        if tree is not None:
-            env['PYTHONPATH'] = os.pathsep.join((tree, env['PYTHONPATH']))
+        env = ros_env({'OPENBLAS_NUM_THREADS': '1'})
         self.proc = subprocess.Popen(
             [sys.executable, '-m', 'harness.node_forks'], stdin=subprocess.PIPE,
             stdout=subprocess.PIPE, env=env, cwd=REPO)

@@ -17,10 +17,11 @@ RSS, descriptors and threads of a process, sampled, and the slopes fitted to the
 
 A leak shows as a slope against time (or against the faults met), not as a
 final value: the long soak (``long_soak.py``) hands its long-lived node
-processes to a :class:`Sampler` and fits the slopes at the end; the
-campaign samples its node's RSS, and ``benchmarks/memory_curve.py`` a node's
-anonymous RSS, descriptors and threads against the faults it met, with
-:func:`process_sample`, :func:`rss_kinds` and :func:`fit`. Read from ``/proc``: nothing in the
+processes to a :class:`Sampler` and fits the slopes at the end (its legs,
+the campaign's among them, read their RSS from it), and
+``benchmarks/memory_curve.py`` samples a node's anonymous RSS, descriptors
+and threads against the faults it met, with :func:`process_sample`,
+:func:`rss_kinds` and :func:`fit`. Read from ``/proc``: nothing in the
 process is asked or changed.
 """
 

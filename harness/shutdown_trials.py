@@ -247,23 +247,17 @@ class Slot:
         return ''
 
 
-def run_trials(count: int, slots: int = 3, seed: int = 1, phases: tuple[str, ...] = PHASES,
-               progress: Callable[[int, Outcome], None] | None = None,
-               base_domain: int | None = None, tree: str | None = None) -> Tally:
-    """
-    Run ``count`` trials over ``slots`` lanes side by side, the phases in turn.
-
-    ``tree``: the driver of another checkout (ForkServer), e.g. the code
-    before a fix.
-    """
+def run_trials(count: int, slots: int = 3, seed: int = 1,
+               progress: Callable[[int, Outcome], None] | None = None) -> Tally:
+    """Run ``count`` trials over ``slots`` lanes side by side, the phases in turn."""
     rng = random.Random(seed)
-    base = base_domain if base_domain is not None else rng.randrange(110, 200)
-    plan = [(phases[i % len(phases)], rng.choice(SIGNALS)) for i in range(count)]
+    base = rng.randrange(110, 200)
+    plan = [(PHASES[i % len(PHASES)], rng.choice(SIGNALS)) for i in range(count)]
     rng.shuffle(plan)
     tally = Tally()
     lock = threading.Lock()
     done = [0]
-    server = ForkServer(tree=tree)
+    server = ForkServer()
 
     def lane(index: int) -> None:
         slot = Slot(server, base + index, random.Random(rng.randrange(1 << 30) + index))

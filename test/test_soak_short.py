@@ -24,14 +24,15 @@ run. The analysis itself is checked first, on synthetic runs with known bugs.
 
 import struct
 
-from harness.campaign import imu_key, run_campaign
+from harness.campaign import imu_key
 from harness.campaign_verdict import analyse, CampaignConfig, RunData, Sent
+from harness.long_soak import run_campaign
 import pytest
 
 
 @pytest.mark.slow
 def test_soak_short():
-    cfg = CampaignConfig(minutes=0.5, rate_hz=200.0, seed=5, event_gap=(0.3, 1.0),
+    cfg = CampaignConfig(minutes=0.3, rate_hz=200.0, seed=5, event_gap=(0.3, 1.0),
                          warmup_min=6.0, quiet=4.0, log=None)
     result = run_campaign(cfg)
     assert result.ok, result.report
