@@ -74,6 +74,13 @@ def ros_env(extra: dict[str, str] | None = None) -> dict[str, str]:
     return env
 
 
+#: Prefix of a command that must meet SIGHUP as a terminal's process does, with its default
+#: disposition whatever this process inherited: under ``nohup`` SIGHUP is ignored, an ignored
+#: signal stays ignored across exec, and the driver rightly honours that (it outlives a closed
+#: terminal), so a test of the hang-up would otherwise test ``nohup`` instead.
+DEFAULT_HANGUP = ('env', '--default-signal=HUP')
+
+
 #: The ROS domains the tests draw from, and the benchmarks' (never the same: a
 #: benchmark's node left publishing on a machine must not reach a test run).
 TEST_DOMAINS = (1, 100)

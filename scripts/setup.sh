@@ -54,7 +54,7 @@ else
   if [ -n "${I3DMGX2_PYTHON:-}" ]; then
     candidates=("$I3DMGX2_PYTHON")
   else
-    candidates=(python3 python3.12 python3.13 python3.11 python3.10)
+    candidates=(python3.12 python3 python3.13 python3.11 python3.10)
   fi
   PYTHON=''
   tried=''

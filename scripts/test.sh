@@ -14,7 +14,10 @@
 # limitations under the License.
 
 # The test command: set up (scripts/setup.sh), then run the whole test suite with the venv's
-# python. Extra arguments go to pytest, e.g. `scripts/test.sh -m 'not slow' -x`.
+# python, two workers per core (pytest-xdist; each worker its own ROS domain: test/conftest.py):
+# most tests wait on a node or a simulator, so two per core keep the cores busy.
+# Extra arguments go to pytest and win over these, e.g. `scripts/test.sh -m 'not slow' -x`,
+# `scripts/test.sh -n 0` (one process), `scripts/test.sh --cov --cov-report=term` (coverage).
 # Exits with pytest's exit code.
 
 set -euo pipefail
@@ -30,7 +33,10 @@ cd "$ROOT"
 source "$ROOT/scripts/env.sh"
 
 set +e
-"$I3DMGX2_PY" -m pytest "$@"
+# loadfile: a file's tests run on one worker, one after another (a module's node is started
+# once, and the checks of one file that measure time never run beside each other).
+workers="${I3DMGX2_TEST_WORKERS:-$((2 * $(nproc) < 16 ? 2 * $(nproc) : 16))}"
+"$I3DMGX2_PY" -m pytest -n "$workers" --dist loadfile "$@"
 rc=$?
 set -e
 exit "$rc"

@@ -12,16 +12,60 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Fixtures shared by the test modules."""
+"""Fixtures shared by the test modules, and each test worker's own ROS domain."""
+
+import os
+import random
 
 from fixture_files import real_records_path
 import pytest
+
+#: Where the domains of one run start: drawn once by the first process (the controller of a
+#: parallel run), inherited by its workers, so that workers never share a domain.
+DOMAIN_BASE_ENV = 'I3DMGX2_TEST_DOMAIN_BASE'
+#: Workers of one run at the most (pytest-xdist's ``-n``); each takes base + its index.
+MOST_WORKERS = 16
+
+
+def pytest_configure(config):
+    """
+    Give this process (a test worker, or the only one) a ROS domain no other worker has.
+
+    The node tests subscribe to what the nodes they start publish; two workers
+    in one domain would see each other's ``/imu/raw_data``. harness/processes.py
+    uses ``$I3DMGX2_TEST_DOMAIN`` when a test isolates itself; it is set here
+    to the run's base plus the worker's index (gw3 -> base + 3), and put to
+    use at once: a test that starts a node without asking is isolated too.
+    """
+    from harness.processes import isolate_ros_domain, TEST_DOMAINS
+    first, last = TEST_DOMAINS
+    if DOMAIN_BASE_ENV not in os.environ:
+        os.environ[DOMAIN_BASE_ENV] = str(random.SystemRandom().randint(
+            first, last - MOST_WORKERS + 1))
+    worker = getattr(config, 'workerinput', {}).get('workerid', 'gw0')
+    index = int(worker.removeprefix('gw'))
+    if index >= MOST_WORKERS:
+        raise pytest.UsageError(f'at most {MOST_WORKERS} test workers (-n), not {index + 1}')
+    os.environ['I3DMGX2_TEST_DOMAIN'] = str(int(os.environ[DOMAIN_BASE_ENV]) + index)
+    isolate_ros_domain()
 
 
 @pytest.fixture(scope='session')
 def fixture_path():
     """Return the path of the real-records fixture."""
     return real_records_path()
+
+
+def pytest_collection_modifyitems(config, items):
+    """
+    Run the files with slow tests first, so that a parallel run does not end on one of them.
+
+    pytest-xdist (``--dist loadfile``, scripts/test.sh) hands the files to the
+    workers in this order; a long file handed out last keeps one worker busy
+    while the others have finished.
+    """
+    slow_files = {item.path for item in items if item.get_closest_marker('slow') is not None}
+    items.sort(key=lambda item: item.path not in slow_files)
 
 
 class StartsSomething(AssertionError):

@@ -40,6 +40,8 @@ from std_srvs.srv import Trigger
 TRUE_BIAS = MotionConfig().gyro_bias
 SAMPLING_MS = 400
 SERVICE = '/i3dmgx2_driver/'
+
+pytestmark = pytest.mark.slow
 VECTOR = re.compile(r'\((-?\d+\.\d+), (-?\d+\.\d+), (-?\d+\.\d+)\) rad/s')
 
 

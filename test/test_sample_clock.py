@@ -27,6 +27,7 @@ latency, which no host-side estimate can see). The same checks run against
 the real simulator and node in test_stamps_through_faults.py.
 """
 
+import itertools
 import math
 import random
 from typing import NamedTuple
@@ -238,13 +239,30 @@ def through_line(stream: list[Packet], wire: float, hold: float = 0.0, read_jitt
 #: The radio's jitter before a line at its limit: more, and the line's own queue keeps the
 #: least delay of a window above the floor (the steady offset then is not the latency).
 RADIO_JITTER = 0.001
-LINE_MAX = [pytest.param(s.code, line_budget.max_rate(s.code, 115200, True), id=s.name)
-            for s in streams.STREAMS]
+#: Each stream at its line budget's largest rate: (code, rate).
+LINE_MAX = [(s.code, line_budget.max_rate(s.code, 115200, True)) for s in streams.STREAMS]
+STREAM_NAMES = {s.code: s.name for s in streams.STREAMS}
 
 
-@pytest.mark.parametrize('gap', [0.1, 0.3, 1.0, 3.0])
-@pytest.mark.parametrize(('code', 'rate'), LINE_MAX)
-@pytest.mark.parametrize('hold', [0.006, 0.020])
+def across_streams(*axes: list) -> list:
+    """
+    Every combination of ``axes``, each on the next stream in turn (at its line maximum).
+
+    What the stamps depend on is the queue (gap, hold, reader); the stream
+    sets the rate and wire time, so each stream is met several times while
+    each combination of the queue's axes is met once, not once per stream.
+    """
+    cases = []
+    for k, combo in enumerate(itertools.product(*axes)):
+        code, rate = LINE_MAX[k % len(LINE_MAX)]
+        values = tuple(v for item in combo for v in (item if isinstance(item, tuple) else (item,)))
+        cases.append(pytest.param(code, rate, *values,
+                                  id='-'.join([STREAM_NAMES[code], *map(str, combo)])))
+    return cases
+
+
+@pytest.mark.parametrize(('code', 'rate', 'gap', 'hold'),
+                         across_streams([0.1, 0.3, 1.0, 3.0], [0.006, 0.020]))
 def test_a_queue_after_a_gap_keeps_the_fit_at_every_streams_line_max_rate(code, rate, gap,
                                                                           hold):
     """
@@ -286,11 +304,11 @@ def test_a_queue_on_a_full_line_drains_for_seconds_and_the_fit_holds(gap):
     assert clock.status().restarts == {'start': 1}
 
 
-@pytest.mark.parametrize('gap', [0.1, 1.0, 3.0])
-@pytest.mark.parametrize(('code', 'rate'), LINE_MAX)
-@pytest.mark.parametrize(('hold', 'read_jitter', 'garbage'), [
-    (0.020, 0.0003, 0.0), (0.050, 0.0003, 0.0), (0.020, 0.0003, 0.3)],
-    ids=['jittery-reads', 'long-hold', 'garbage-on-the-line'])
+@pytest.mark.parametrize(('code', 'rate', 'gap', 'hold', 'read_jitter', 'garbage'),
+                         across_streams([0.1, 1.0, 3.0], [
+                             (0.020, 0.0003, 0.0),     # jittery reads
+                             (0.050, 0.0003, 0.0),     # a long hold
+                             (0.020, 0.0003, 0.3)]))   # garbage on the line
 def test_a_queue_read_as_a_host_reads_it_is_told_from_a_step(
         code, rate, gap, hold, read_jitter, garbage):
     """
@@ -313,9 +331,8 @@ def test_a_queue_read_as_a_host_reads_it_is_told_from_a_step(
     assert clock.status().restarts == {'start': 1}
 
 
-@pytest.mark.parametrize('gap', [0.1, 0.3, 1.0])
-@pytest.mark.parametrize(('code', 'rate'), LINE_MAX)
-@pytest.mark.parametrize('tick', [0.004, 0.010])
+@pytest.mark.parametrize(('code', 'rate', 'gap', 'tick'),
+                         across_streams([0.1, 0.3, 1.0], [0.004, 0.010]))
 def test_a_queue_read_on_the_schedulers_tick_is_told_from_a_step(code, rate, gap, tick):
     """
     A queue after a gap, read by a host whose cores are busy: on the scheduler's tick.
@@ -346,10 +363,9 @@ def away(stream: list[Packet], at: float, seconds: float) -> list[Packet]:
             for k, p in enumerate(stream)]
 
 
-@pytest.mark.parametrize('away_s', [0.05, 0.1, 0.2])
-@pytest.mark.parametrize('at', [0.05, 0.1, 0.15, 0.2, 0.3])
-@pytest.mark.parametrize(('code', 'rate'), LINE_MAX)
-@pytest.mark.parametrize('tick', [0.0, 0.004, 0.010])
+@pytest.mark.parametrize(('code', 'rate', 'at', 'away_s', 'tick'),
+                         across_streams([0.05, 0.1, 0.15, 0.2, 0.3], [0.05, 0.1, 0.2],
+                                        [0.0, 0.004, 0.010]))
 def test_a_queue_read_by_a_host_away_for_a_moment_is_told_from_a_step(code, rate, at, away_s,
                                                                       tick):
     """
@@ -423,7 +439,8 @@ def test_a_record_late_behind_a_queue_as_the_timer_rolls_over_restarts_nothing()
 
 @pytest.mark.parametrize('tick', [0.0, 0.010])
 @pytest.mark.parametrize('late', [0.006, 0.030, 0.2])
-@pytest.mark.parametrize(('code', 'rate'), LINE_MAX[:3])
+@pytest.mark.parametrize(('code', 'rate'), LINE_MAX[:3],
+                         ids=[STREAM_NAMES[code] for code, _ in LINE_MAX[:3]])
 def test_a_restarted_timer_late_on_the_line_is_a_step_that_stays(code, rate, late, tick):
     """
     A power cycle whose new timer lands ``late`` s after the line, on a line at its limit.

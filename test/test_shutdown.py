@@ -187,6 +187,9 @@ def test_an_exit_held_up_after_the_run_loop_ends_at_the_deadline():
 
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_the_stop_signal_is_set_by_each_signal_and_wakes_a_waiter_at_once(signum):
+    # The default disposition, whatever this process inherited (``nohup`` ignores SIGHUP,
+    # which install() rightly honours).
+    inherited = signal.signal(signum, signal.SIG_DFL)
     stop = StopSignal().install()
     try:
         assert not stop.wait(0.01)
@@ -197,4 +200,5 @@ def test_the_stop_signal_is_set_by_each_signal_and_wakes_a_waiter_at_once(signum
         assert stop.signum == signum
     finally:
         stop.restore()
-    assert signal.getsignal(signum) is not stop._on_signal
+        restored = signal.signal(signum, inherited)
+    assert restored is signal.SIG_DFL  # what install() found, put back

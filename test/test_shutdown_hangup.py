@@ -39,7 +39,7 @@ import threading
 import time
 
 from harness.instrumented_node import STATS_ENV
-from harness.processes import ADDRESS, isolate_ros_domain, REPO as REPO_PATH
+from harness.processes import ADDRESS, DEFAULT_HANGUP, isolate_ros_domain, REPO as REPO_PATH
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
 
@@ -125,8 +125,8 @@ class Terminal:
         self._master, slave = pty.openpty()
         # setsid -c: a session of its own, the pty its controlling terminal (as a terminal
         # emulator starts a shell), without forking this threaded process by hand.
-        self.proc = subprocess.Popen(['setsid', '-c', *argv], stdin=slave, stdout=slave,
-                                     stderr=slave, env=env, cwd=REPO)
+        self.proc = subprocess.Popen(['setsid', '-c', *DEFAULT_HANGUP, *argv], stdin=slave,
+                                     stdout=slave, stderr=slave, env=env, cwd=REPO)
         os.close(slave)
         self.pid = self.proc.pid
         self._text = bytearray()
@@ -239,7 +239,8 @@ def _ends_with_its_killed_parent(name: str, argv: list[str], log: Path, env: dic
     what its output says once it runs ('' to give it 3 s).
     """
     command = ' '.join(f"'{part}'" for part in argv)
-    parent = subprocess.Popen(['bash', '-c', f'setsid {command} > {log} 2>&1 & wait'],
+    parent = subprocess.Popen([*DEFAULT_HANGUP, 'bash', '-c',
+                               f'setsid {command} > {log} 2>&1 & wait'],
                               env=env, stdin=subprocess.DEVNULL, cwd=str(REPO))
     family: set[int] = set()
     try:

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-SIGINT or SIGTERM at a random moment of every phase, 300 times: the node always ends.
+SIGINT or SIGTERM at a random moment of every phase, twice each: the node always ends.
 
 The trials of ``harness/shutdown_trials.py`` (``benchmarks/shutdown.py`` runs
 thousands): the plain node before its port exists, in the dialogue, right
@@ -21,8 +21,9 @@ after the first record, in a reconnect, in a gyro bias capture, with two
 sensors; the managed node unconfigured and in each transition. Every one
 must end by itself, with code 0, within the 3 s deadline; a hung node's
 stacks are in the failure's message. The nodes are forked from a server
-that imported the driver once, four side by side, so that the run stays
-within about two minutes on two cores (98 s, 75 s of CPU, on the machine of the benchmark).
+that imported the driver once, four side by side. This is the smoke of the
+benchmark, which draws thousands of moments (``benchmarks/shutdown.py
+--runs 2000``: docs/benchmarks.md); every phase is met here all the same.
 """
 
 from harness.processes import isolate_ros_domain
@@ -33,7 +34,7 @@ import pytest
 pytestmark = pytest.mark.slow
 
 #: Trials in all: every phase the same number of times (12 phases).
-RUNS = 12 * 25
+RUNS = 12 * 2
 
 
 def test_the_node_ends_cleanly_whenever_the_signal_comes():
@@ -49,7 +50,7 @@ def test_the_node_ends_cleanly_whenever_the_signal_comes():
     # time also holds the (loaded) machine's delays in waking and reaping the process.
     assert summary['slowest exit'] <= SHUTDOWN_DEADLINE + 2.0, summary
     # Nearly every trial reached its phase, and every phase was tried.
-    assert summary['not reached'] <= RUNS // 20, [
+    assert summary['not reached'] <= RUNS // 12, [
         o.setup_error for o in tally.outcomes if o.setup_error]
     reached = {phase.split(' (')[0] for phase in tally.by_phase()}
     assert reached == set(PHASES)
