@@ -15,7 +15,8 @@
 
 # The test command: set up (scripts/setup.sh), then run the whole test suite with the venv's
 # python, two workers per core (pytest-xdist; each worker its own ROS domain: test/conftest.py):
-# most tests wait on a node or a simulator, so two per core keep the cores busy.
+# most tests wait on a node or a simulator, so two per core keep the cores busy. The quick loop
+# (-m 'not slow': no process, all CPU) takes one worker per core.
 # Extra arguments go to pytest and win over these, e.g. `scripts/test.sh -m 'not slow' -x`,
 # `scripts/test.sh -n 0` (one process), `scripts/test.sh --cov --cov-report=term` (coverage).
 # Exits with pytest's exit code.
@@ -34,9 +35,13 @@ source "$ROOT/scripts/env.sh"
 
 set +e
 # loadfile: a file's tests run on one worker, one after another (a module's node is started
-# once, and the checks of one file that measure time never run beside each other).
-workers="${I3DMGX2_TEST_WORKERS:-$((2 * $(nproc) < 16 ? 2 * $(nproc) : 16))}"
-"$I3DMGX2_PY" -m pytest -n "$workers" --dist loadfile "$@"
+# once, and the checks of one file that measure time never run beside each other). The quick
+# loop starts nothing: its tests go wherever a worker is free.
+per_core=2
+dist=loadfile
+case " $* " in *'not slow'*) per_core=1 dist=load ;; esac
+workers="${I3DMGX2_TEST_WORKERS:-$((per_core * $(nproc) < 16 ? per_core * $(nproc) : 16))}"
+"$I3DMGX2_PY" -m pytest -n "$workers" --dist "$dist" "$@"
 rc=$?
 set -e
 exit "$rc"
