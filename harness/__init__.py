@@ -39,7 +39,7 @@ imports it.
   by ``process_sampler`` (RSS, descriptors, threads, slopes;
   ``benchmarks/memory_curve.py`` samples with it too).
 * ``hostile``: a hostile base station, its attacks' bytes and its oracle;
-  ``node_fuzz`` fuzzes the running node through it.
+  ``benchmarks/fuzz_node.py`` fuzzes the running node through it.
 * ``fuzz_checks``: the codec's properties on one input (the fuzzer in
   ``benchmarks/fuzz_parser.py`` and ``test/test_fuzz_regressions.py``).
 * ``stamp_runs``: stamps against the simulator's truth, and their check.

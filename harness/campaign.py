@@ -28,13 +28,10 @@ message is matched, by its exact values, to the simulator's ground truth,
 and the node's counters are reconciled with what the simulator wrote
 (``campaign_verdict.py``: the rules, the checks and the report).
 
-Used by ``benchmarks/soak.py`` (ten minutes) and ``test/test_soak_short.py``
-(about half a minute in CI). Here: the pieces a faulted run stands on, the
-truth kept compact with the values the node would publish for it, the
-subscriber, the node process and its counters. The run itself is a leg of
-the long soak (``long_soak.py``): ``long_soak.run_campaign`` runs one plain
-node through one stretch of faults and a quiet phase, as the long soak runs
-each of its legs, and returns the checks and a printable report.
+Here: the pieces a faulted run stands on, the truth kept compact with the
+values the node would publish for it, the subscriber, the node process and
+its counters. The run itself is a leg of the long soak (``long_soak.py``,
+``run_campaign``).
 """
 
 from collections.abc import Callable, Iterable

@@ -37,7 +37,7 @@ its address: those are the replies to its own polled requests (the
 dialogue's 0xC2 polls, its identity), which the node takes as replies and
 never publishes. Not a packet the pty took only in part either (its buffer
 full after a held-back stretch is let go at once): the station lost that one
-itself. Used by ``benchmarks/fuzz_node.py`` (``node_fuzz.py``) and the
+itself. Used by ``benchmarks/fuzz_node.py`` and the
 stateful dialogue test.
 """
 

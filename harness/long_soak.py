@@ -54,7 +54,6 @@ campaign's settings: the same rig, the same leg, the same verdict.
 """
 
 import bisect
-import collections
 from collections.abc import Callable
 import dataclasses
 import os
@@ -72,7 +71,7 @@ from harness.campaign_verdict import (
     analyse, CampaignConfig, CampaignResult, Check, rate_text, RunData,
 )
 from harness.fault_driver import FaultDriver, FaultEvent
-from harness.process_sampler import halves_per_hour, Sampler, slope_per_hour
+from harness.process_sampler import Sampler, slope_per_hour
 from harness.processes import (
     isolate_ros_domain, LifecycleClient, Listener, NodeProcess, process_cpu_seconds,
 )
@@ -250,18 +249,6 @@ class SoakNodes:
                 + ('' if ok else f'\n{node.output()[-3000:]}')))
         return checks, lines
 
-    def slope_processes(self) -> list[tuple[str, str]]:
-        """Return (stream, sampler name) of each managed process: the ones fitted for leaks."""
-        return [(name, managed_name(name)) for name in sorted(self.managed)]
-
-    def closers(self) -> list[Callable[[], None]]:
-        """Return the steps that end every managed process still running."""
-        return [node.close for node in self.managed.values()]
-
-    def remove_workdir(self) -> None:
-        """Remove the counters' folder."""
-        shutil.rmtree(self.workdir, ignore_errors=True)
-
 
 # -- the data back after each fault ------------------------------------------------------------
 
@@ -331,196 +318,6 @@ class LegResult(NamedTuple):
     report: str
 
 
-class SoakRig(NamedTuple):
-    """What every leg runs on: the simulator and its truth, the listener, the processes."""
-
-    sim: PtySimulator
-    collector: TruthCollector
-    subscriber: Subscriber
-    sampler: Sampler
-    nodes: SoakNodes
-
-
-class LegRunner:
-    """
-    Run the legs one at a time on one rig: bring the leg's node up, fault it, down, judge it.
-
-    A managed leg takes its stream's long-lived node through configure /
-    activate / deactivate / cleanup; a plain leg starts a fresh node and
-    stops it with SIGINT.
-    """
-
-    def __init__(self, cfg: LongSoakConfig, rig: SoakRig, log: Callable[[str], None],
-                 campaign: CampaignConfig | None = None) -> None:
-        self.cfg = cfg
-        self.rig = rig
-        self.log = log
-        self.campaign = campaign
-
-    def leg_config(self, leg: Leg) -> CampaignConfig:
-        """Return the settings the leg is judged by: the campaign's own, or the leg's."""
-        if self.campaign is not None:
-            return self.campaign
-        cfg = self.cfg
-        return CampaignConfig(
-            minutes=cfg.leg_minutes, rate_hz=None, stream=leg.stream, data_rate=leg.rate_hz,
-            seed=cfg.seed, address=cfg.address, read_timeout=cfg.read_timeout,
-            reconnect_interval=cfg.reconnect_interval, quiet=cfg.quiet,
-            temperature_period=cfg.temperature_period, warmup_min=10.0, warmup_fraction=0.0,
-            log=None)
-
-    def _bring_up(self, leg: Leg, name: str) -> tuple[NodeProcess, LifecycleClient | None]:
-        """Configure and activate the stream's managed node, or start a plain one."""
-        rig = self.rig
-        if leg.kind == 'managed':
-            node = rig.nodes.managed[leg.stream]
-            client = rig.nodes.clients[leg.stream]
-            rig.sampler.busy.add(name)
-            if not client.change('configure'):
-                raise RuntimeError(f'leg {leg.number}: configure failed:\n'
-                                   f'{node.output()[-3000:]}')
-            rig.subscriber.wait_publisher(node, topic(name))
-            time.sleep(0.5)
-            if not client.change('activate'):
-                raise RuntimeError(f'leg {leg.number}: activate failed:\n'
-                                   f'{node.output()[-3000:]}')
-            return node, client
-        rig.sim.unplug(None)
-        node = rig.nodes.start_node(name, leg.stream, leg.rate_hz, lifecycle=False)
-        try:
-            rig.subscriber.wait_publisher(node, topic(name))
-        except BaseException:
-            node.close()
-            raise
-        time.sleep(1.0)
-        rig.sim.replug()
-        return node, None
-
-    def _bring_down(self, name: str, node: NodeProcess, client: LifecycleClient | None,
-                    stopped: float) -> tuple[int, float, dict]:
-        """Deactivate and clean up a managed node, or SIGINT a plain one; its last counters."""
-        rig = self.rig
-        path = rig.nodes.stats_path(name)
-        exit_code, exit_seconds = 0, 0.0
-        if client is not None:
-            client.change('deactivate')
-            done = time.time()
-            stats = final_stats(path, done)
-            published = stats.get('stats', {}).get('published')
-            if published is not None:
-                rig.subscriber.wait_count(published, 15.0)
-            stats = final_stats(path, done, published)
-            client.change('cleanup')
-            time.sleep(0.5)  # the port closed, the threads joined
-            rig.sampler.first_release.setdefault(name, time.time())
-            rig.sampler.busy.discard(name)
-        else:
-            exit_code, exit_seconds = node.stop(timeout=15.0)
-            rig.sampler.forget(name)
-            stats = read_counters(path, lambda got: got.get('final') and got['time'] > stopped,
-                                  15.0)
-            published = stats.get('stats', {}).get('published')
-            if published is not None:
-                rig.subscriber.wait_count(published, 15.0)
-        return exit_code, exit_seconds, stats
-
-    def _faults(self, leg: Leg, started: float, minutes: float) -> FaultDriver:
-        """Run the fault phase of a leg; return the driver (its events)."""
-        cfg = self.cfg
-        driver = FaultDriver(self.rig.sim, random.Random(cfg.seed * 7919 + leg.number),
-                             cfg.event_gap)
-        driver.start()
-        end = started + minutes * 60.0
-        while time.time() < end:
-            time.sleep(0.5)
-        driver.stop()
-        return driver
-
-    def run(self, leg: Leg) -> LegResult:
-        """Bring the leg's node up, fault it, bring it down; analyse what it published."""
-        name = leg_node_name(leg)
-        self.rig.subscriber.take()
-        self.rig.collector.take()
-        begin = time.time()
-        node, client = self._bring_up(leg, name)
-        try:
-            return self._run_node(leg, name, node, client, begin)
-        finally:
-            if client is None:  # a plain node lives one leg: its process and its log go
-                node.close()
-
-    def _run_node(self, leg: Leg, name: str, node: NodeProcess, client: LifecycleClient | None,
-                  begin: float) -> LegResult:
-        """Fault the node brought up at ``begin``, bring it down; analyse what it published."""
-        cfg, subscriber, judged = self.cfg, self.rig.subscriber, self.leg_config(leg)
-        if not subscriber.wait_count(1, 60.0):
-            raise RuntimeError(f'leg {leg.number}: no message within 60 s:\n'
-                               f'{node.output()[-3000:]}')
-        started = time.time()
-        cpu_start = process_cpu_seconds(node.proc.pid)
-        self.log(f'leg {leg.number}: {leg.kind} node, {rate_text(judged)}, '
-                 f'{judged.minutes:g} min of faults')
-        driver = self._faults(leg, started, judged.minutes)
-        fault_end = time.time()
-        before = subscriber.count
-        time.sleep(cfg.quiet)
-        recovered = subscriber.count - before
-        alive = node.proc.poll() is None
-        cpu = process_cpu_seconds(node.proc.pid) - cpu_start if alive else 0.0
-        stopped = time.time()
-        exit_code, exit_seconds, stats = self._bring_down(name, node, client, stopped)
-        time.sleep(0.3)
-        rows = subscriber.take()
-        truth, missed = self.rig.collector.take()
-        events = [e for e in stats.get('port_events', []) if e[1] >= begin
-                  and (leg.kind == 'plain' or e[1] < stopped)]
-        stats = dict(stats, port_events=events)
-        rss = [(t, kib) for t, kib, _, _ in self.rig.sampler.all_samples.get(name, [])
-               if t >= started]
-        warmup = max(judged.warmup_min, judged.warmup_fraction * judged.minutes * 60.0)
-        data = run_data(
-            judged, self.rig.sim, driver, truth=truth, truth_missed=missed, messages=rows,
-            node_stats=stats, rss=rss, warmup_end=started + warmup, fault_end=fault_end,
-            alive_at_end=alive, exit_code=exit_code, exit_seconds=exit_seconds,
-            recovered=recovered, node_output=node.output()[-5000:], started=started,
-            end=stopped if leg.kind == 'managed' else None)
-        return self._verdict(leg, data, driver, cpu, stopped - started)
-
-    def _verdict(self, leg: Leg, data: RunData, driver: FaultDriver, cpu: float,
-                 seconds: float) -> LegResult:
-        """Judge the leg: the campaign's checks, and the data back after every fault."""
-        cfg = self.cfg
-        found = recoveries(driver.events, data.messages, data.truth, self.rig.sim.host_log,
-                           cfg.recovery_limit, self.log)
-        slow = [(k, g, lim) for k, g, lim in found if g is None or g > lim]
-        worst = max((g for _, g, _ in found if g is not None), default=0.0)
-        retried = sum(1 for _, _, lim in found if lim > cfg.recovery_limit)
-        recovery = Check(
-            'data back after every fault that ends', not slow,
-            f'{len(found)} faults ended; longest wait for the next message '
-            f'{worst:.3f} s (limit {cfg.recovery_limit:g} s, plus {TRY_COST:g} s for '
-            f'each command or reply lost or ignored meanwhile: {retried} such)'
-            + ('; over: ' + ', '.join(f'{k} {g if g is None else round(g, 3)} (limit '
-                                      f'{lim:g})' for k, g, lim in slow[:8])
-               if slow else ''))
-        # A managed node does not exit at a leg's end (its exit is checked at the run's),
-        # and counts as unpublished what it reads while inactive, by design.
-        result = analyse(data, exempt=('clean exit on SIGINT', 'nothing left unpublished')
-                         if leg.kind == 'managed' else (), more=(recovery,))
-        checks = result.checks
-        legresult = LegResult(leg, checks, result.figures, found,
-                              100.0 * cpu / seconds if seconds > 0 else 0.0, seconds,
-                              result.report)
-        failed = [c.name for c in checks if not c.ok]
-        self.log(f'leg {leg.number}: {result.figures.get("published")} published, '
-                 f'{result.figures.get("missing")} missing, {len(driver.events)} faults, '
-                 f'worst recovery {worst:.3f} s, CPU {legresult.cpu_percent:.1f} %: '
-                 + ('PASS' if not failed else 'FAIL ' + ', '.join(failed)))
-        if failed:
-            self.log(result.report)
-        return legresult
-
-
 # -- the report: the tables and every check in one list ----------------------------------------
 
 @dataclasses.dataclass
@@ -536,77 +333,40 @@ class SoakRecord:
     end_lines: list[str] = dataclasses.field(default_factory=list)
 
 
-@dataclasses.dataclass
-class LongSoakResult:
-    """The verdicts and the report of one long run."""
-
-    checks: list[Check]
-    report: str
-
-    @property
-    def ok(self) -> bool:
-        """Whether every check passed."""
-        return bool(self.checks) and all(check.ok for check in self.checks)
+#: The figures of a leg the tables sum, in their columns' order.
+COLUMNS = ('sent', 'published', 'received', 'missing', 'duplicated', 'corrupted', 'events')
 
 
 def report(cfg: LongSoakConfig, run: SoakRecord, minutes: float, slope_checks: list[Check],
-           slope_lines: list[str]) -> LongSoakResult:
-    """Build the per-stream and overall tables and the list of checks."""
+           slope_lines: list[str]) -> CampaignResult:
+    """Build the per-stream and overall table and the list of checks."""
     lines = ['== i3dmgx2 long soak: every stream, every fault, both node kinds ==',
              f'{minutes:.1f} min, {len(run.results)} legs of {cfg.leg_minutes:g} min of faults '
              f'+ {cfg.quiet:g} s quiet, seed {cfg.seed}, 115200 baud, wireless; the simulator '
-             f'honours the line rate']
-    head = ('| leg | node | stream | rate (Hz) | sent | published | received | missing | '
-            'duplicated | corrupted | faults | longest recovery (s) | node CPU (%) | result |')
-    lines += ['', head, '|' + '---|' * 14]
-    checks: list[Check] = []
-    per_stream: dict[str, dict] = {}
+             f'honours the line rate', '',
+             '| stream | legs | sent | published | received | missing | duplicated | '
+             'corrupted | faults | longest recovery (s) | node CPU (%) |', '|' + '---|' * 11]
+    checks = [Check(f'leg {r.leg.number} ({r.leg.kind} {r.leg.stream}): {c.name}', c.ok,
+                    c.detail) for r in run.results for c in r.checks]
+    # The longest wait for data after each kind of fault, over every leg.
+    kinds: dict[str, float] = {}
     for r in run.results:
-        f = r.figures
-        worst = max((g for _, g, _ in r.recoveries if g is not None), default=0.0)
-        ok = all(c.ok for c in r.checks)
-        lines.append(f'| {r.leg.number} | {r.leg.kind} | {r.leg.stream} | {r.leg.rate_hz:g} | '
-                     f'{f.get("sent")} | {f.get("published")} | {f.get("received")} | '
-                     f'{f.get("missing")} | {f.get("duplicated")} | {f.get("corrupted")} | '
-                     f'{f.get("events")} | {worst:.3f} | {r.cpu_percent:.1f} | '
-                     f'{"PASS" if ok else "FAIL"} |')
-        for c in r.checks:
-            checks.append(Check(f'leg {r.leg.number} ({r.leg.kind} {r.leg.stream}): {c.name}',
-                                c.ok, c.detail))
-        s = per_stream.setdefault(r.leg.stream, collections.defaultdict(int))
-        for name in ('sent', 'published', 'received', 'missing', 'duplicated', 'corrupted',
-                     'events'):
-            s[name] += f.get(name) or 0
-        s['legs'] += 1
-        s['seconds'] += r.seconds
-        s['cpu'] += r.cpu_percent * r.seconds
-        s['worst'] = max(s['worst'], worst)
-        recovery_kinds = s.setdefault('by_kind', {})
         for kind, gap, _ in r.recoveries:
             if gap is not None:
-                recovery_kinds[kind] = max(recovery_kinds.get(kind, 0.0), gap)
-    lines += ['', '| stream | legs | sent | published | received | missing | duplicated | '
-              'corrupted | faults | longest recovery (s) | node CPU (%) |', '|' + '---|' * 11]
-    total: dict = collections.defaultdict(int)
-    for stream in STREAMS:
-        s = per_stream.get(stream.name)
-        if s is None:
+                kinds[kind] = max(kinds.get(kind, 0.0), gap)
+    groups = [(stream.name, [r for r in run.results if r.leg.stream == stream.name])
+              for stream in STREAMS]
+    for name, legs in [*groups, ('**all**', run.results)]:
+        if not legs:
             continue
-        cpu = s['cpu'] / s['seconds'] if s['seconds'] else 0.0
-        lines.append(f'| {stream.name} | {s["legs"]} | {s["sent"]} | {s["published"]} | '
-                     f'{s["received"]} | {s["missing"]} | {s["duplicated"]} | '
-                     f'{s["corrupted"]} | {s["events"]} | {s["worst"]:.3f} | {cpu:.1f} |')
-        for name in ('legs', 'sent', 'published', 'received', 'missing', 'duplicated',
-                     'corrupted', 'events'):
-            total[name] += s[name]
-        total['worst'] = max(total['worst'], s['worst'])
-    lines.append(f'| **all** | {total["legs"]} | {total["sent"]} | {total["published"]} | '
-                 f'{total["received"]} | {total["missing"]} | {total["duplicated"]} | '
-                 f'{total["corrupted"]} | {total["events"]} | {total["worst"]:.3f} | |')
-    kinds: dict[str, float] = {}
-    for s in per_stream.values():
-        for kind, gap in s.get('by_kind', {}).items():
-            kinds[kind] = max(kinds.get(kind, 0.0), gap)
+        sums = [sum(r.figures.get(column) or 0 for r in legs) for column in COLUMNS]
+        worst = max((g for r in legs for _, g, _ in r.recoveries if g is not None),
+                    default=0.0)
+        seconds = sum(r.seconds for r in legs)
+        cpu = (f'{sum(r.cpu_percent * r.seconds for r in legs) / seconds:.1f}'
+               if seconds and legs is not run.results else '')
+        lines.append(f'| {name} | {len(legs)} | ' + ' | '.join(map(str, sums))
+                     + f' | {worst:.3f} | {cpu} |')
     lines.append('')
     lines.append('longest wait for data after the end of each kind of fault: '
                  + ', '.join(f'{k} {v:.3f} s' for k, v in sorted(kinds.items())))
@@ -629,7 +389,7 @@ def report(cfg: LongSoakConfig, run: SoakRecord, minutes: float, slope_checks: l
         lines.append(f'  FAIL {c.name}: {c.detail}')
     lines.append('')
     lines.append('RESULT: ' + ('PASS' if not failed else f'FAIL ({len(failed)} checks)'))
-    return LongSoakResult(checks, '\n'.join(lines))
+    return CampaignResult(checks, '\n'.join(lines))
 
 
 def eeprom_changes(results: list[LegResult]) -> int:
@@ -670,12 +430,6 @@ def fit_slopes(cfg: LongSoakConfig, sampler: Sampler, processes: list[tuple[str,
                      f'{_per_hour(fds, "")}, threads {_per_hour(threads, "")}; '
                      f'{len(samples)} samples; first {first}, last {last} '
                      f'(RSS KiB, fds, threads)')
-        halves = halves_per_hour([(t, kib / 1024.0) for t, kib, _, _ in samples])
-        if halves is not None:
-            # Not asserted: a warm-up slows down (the second half's slope is smaller),
-            # a leak keeps its pace.
-            lines.append(f'  {"":22s} RSS by halves of the fit: first '
-                         f'{_per_hour(halves[0], "MiB")}, second {_per_hour(halves[1], "MiB")}')
         kinds = [k for k in sampler.kinds.get(key, []) if k[0] >= since]
         if kinds:
             # Not asserted: which memory the slope is (a leak is anonymous).
@@ -704,7 +458,13 @@ def _per_hour(value: float | None, unit: str) -> str:
 # -- the run -----------------------------------------------------------------------------------
 
 class LongSoak:
-    """The run: start the simulator and the processes, run the legs, end, report."""
+    """
+    The run: start the simulator and the processes, run the legs, end, report.
+
+    The legs run one at a time: a managed leg takes its stream's long-lived
+    node through configure / activate / deactivate / cleanup; a plain leg
+    starts a fresh node and stops it with SIGINT.
+    """
 
     def __init__(self, cfg: LongSoakConfig, campaign: CampaignConfig | None = None) -> None:
         self.cfg = cfg
@@ -722,7 +482,7 @@ class LongSoak:
         self.record = SoakRecord(planned=len(self.legs))
         self.rng = random.Random(cfg.seed * 104729 + 3)
 
-    def start(self) -> LegRunner:
+    def start(self) -> None:
         """Start the simulator, the subscriber and the managed node processes."""
         cfg = self.cfg
         isolate_ros_domain()
@@ -740,30 +500,190 @@ class LongSoak:
         self.subscriber = Subscriber(topics=tuple(topics))
         self.sampler.start()
         self.nodes.start_managed(self.legs, self.subscriber)
-        return LegRunner(cfg, SoakRig(self.sim, self.collector, self.subscriber, self.sampler,
-                                      self.nodes), self.log, self.campaign)
 
     def close(self) -> None:
         """Stop everything that still runs."""
-        steps = [self.sampler.stop, *self.nodes.closers()]
+        steps = [self.sampler.stop, *(node.close for node in self.nodes.managed.values())]
         if self.subscriber is not None:
             steps.append(self.subscriber.close)
         if self.collector is not None:
             steps.append(lambda: self.collector.is_alive() and self.collector.stop())
         if self.sim is not None:
             steps.append(self.sim.stop)
-        close_all([*steps, self.nodes.remove_workdir], 'long soak')
+        close_all([*steps, lambda: shutil.rmtree(self.nodes.workdir, ignore_errors=True)],
+                  'long soak')
 
-    def run(self) -> LongSoakResult:
+    def leg_config(self, leg: Leg) -> CampaignConfig:
+        """Return the settings the leg is judged by: the campaign's own, or the leg's."""
+        if self.campaign is not None:
+            return self.campaign
+        cfg = self.cfg
+        return CampaignConfig(
+            minutes=cfg.leg_minutes, rate_hz=None, stream=leg.stream, data_rate=leg.rate_hz,
+            seed=cfg.seed, address=cfg.address, read_timeout=cfg.read_timeout,
+            reconnect_interval=cfg.reconnect_interval, quiet=cfg.quiet,
+            temperature_period=cfg.temperature_period, warmup_min=10.0, warmup_fraction=0.0,
+            log=None)
+
+    def _bring_up(self, leg: Leg, name: str) -> tuple[NodeProcess, LifecycleClient | None]:
+        """Configure and activate the stream's managed node, or start a plain one."""
+        if leg.kind == 'managed':
+            node = self.nodes.managed[leg.stream]
+            client = self.nodes.clients[leg.stream]
+            self.sampler.busy.add(name)
+            if not client.change('configure'):
+                raise RuntimeError(f'leg {leg.number}: configure failed:\n'
+                                   f'{node.output()[-3000:]}')
+            self.subscriber.wait_publisher(node, topic(name))
+            time.sleep(0.5)
+            if not client.change('activate'):
+                raise RuntimeError(f'leg {leg.number}: activate failed:\n'
+                                   f'{node.output()[-3000:]}')
+            return node, client
+        self.sim.unplug(None)
+        node = self.nodes.start_node(name, leg.stream, leg.rate_hz, lifecycle=False)
+        try:
+            self.subscriber.wait_publisher(node, topic(name))
+        except BaseException:
+            node.close()
+            raise
+        time.sleep(1.0)
+        self.sim.replug()
+        return node, None
+
+    def _bring_down(self, name: str, node: NodeProcess, client: LifecycleClient | None,
+                    stopped: float) -> tuple[int, float, dict]:
+        """Deactivate and clean up a managed node, or SIGINT a plain one; its last counters."""
+        path = self.nodes.stats_path(name)
+        exit_code, exit_seconds = 0, 0.0
+        if client is not None:
+            client.change('deactivate')
+            done = time.time()
+            stats = final_stats(path, done)
+            published = stats.get('stats', {}).get('published')
+            if published is not None:
+                self.subscriber.wait_count(published, 15.0)
+            stats = final_stats(path, done, published)
+            client.change('cleanup')
+            time.sleep(0.5)  # the port closed, the threads joined
+            self.sampler.first_release.setdefault(name, time.time())
+            self.sampler.busy.discard(name)
+        else:
+            exit_code, exit_seconds = node.stop(timeout=15.0)
+            self.sampler.forget(name)
+            stats = read_counters(path, lambda got: got.get('final') and got['time'] > stopped,
+                                  15.0)
+            published = stats.get('stats', {}).get('published')
+            if published is not None:
+                self.subscriber.wait_count(published, 15.0)
+        return exit_code, exit_seconds, stats
+
+    def _faults(self, leg: Leg, started: float, minutes: float) -> FaultDriver:
+        """Run the fault phase of a leg; return the driver (its events)."""
+        cfg = self.cfg
+        driver = FaultDriver(self.sim, random.Random(cfg.seed * 7919 + leg.number),
+                             cfg.event_gap)
+        driver.start()
+        end = started + minutes * 60.0
+        while time.time() < end:
+            time.sleep(0.5)
+        driver.stop()
+        return driver
+
+    def run_leg(self, leg: Leg) -> LegResult:
+        """Bring the leg's node up, fault it, bring it down; analyse what it published."""
+        name = leg_node_name(leg)
+        self.subscriber.take()
+        self.collector.take()
+        begin = time.time()
+        node, client = self._bring_up(leg, name)
+        try:
+            return self._run_node(leg, name, node, client, begin)
+        finally:
+            if client is None:  # a plain node lives one leg: its process and its log go
+                node.close()
+
+    def _run_node(self, leg: Leg, name: str, node: NodeProcess, client: LifecycleClient | None,
+                  begin: float) -> LegResult:
+        """Fault the node brought up at ``begin``, bring it down; analyse what it published."""
+        cfg, subscriber, judged = self.cfg, self.subscriber, self.leg_config(leg)
+        if not subscriber.wait_count(1, 60.0):
+            raise RuntimeError(f'leg {leg.number}: no message within 60 s:\n'
+                               f'{node.output()[-3000:]}')
+        started = time.time()
+        cpu_start = process_cpu_seconds(node.proc.pid)
+        self.log(f'leg {leg.number}: {leg.kind} node, {rate_text(judged)}, '
+                 f'{judged.minutes:g} min of faults')
+        driver = self._faults(leg, started, judged.minutes)
+        fault_end = time.time()
+        before = subscriber.count
+        time.sleep(cfg.quiet)
+        recovered = subscriber.count - before
+        alive = node.proc.poll() is None
+        cpu = process_cpu_seconds(node.proc.pid) - cpu_start if alive else 0.0
+        stopped = time.time()
+        exit_code, exit_seconds, stats = self._bring_down(name, node, client, stopped)
+        time.sleep(0.3)
+        rows = subscriber.take()
+        truth, missed = self.collector.take()
+        events = [e for e in stats.get('port_events', []) if e[1] >= begin
+                  and (leg.kind == 'plain' or e[1] < stopped)]
+        stats = dict(stats, port_events=events)
+        rss = [(t, kib) for t, kib, _, _ in self.sampler.all_samples.get(name, [])
+               if t >= started]
+        warmup = max(judged.warmup_min, judged.warmup_fraction * judged.minutes * 60.0)
+        data = run_data(
+            judged, self.sim, driver, truth=truth, truth_missed=missed, messages=rows,
+            node_stats=stats, rss=rss, warmup_end=started + warmup, fault_end=fault_end,
+            alive_at_end=alive, exit_code=exit_code, exit_seconds=exit_seconds,
+            recovered=recovered, node_output=node.output()[-5000:], started=started,
+            end=stopped if leg.kind == 'managed' else None)
+        return self._verdict(leg, data, driver, cpu, stopped - started)
+
+    def _verdict(self, leg: Leg, data: RunData, driver: FaultDriver, cpu: float,
+                 seconds: float) -> LegResult:
+        """Judge the leg: the campaign's checks, and the data back after every fault."""
+        cfg = self.cfg
+        found = recoveries(driver.events, data.messages, data.truth, self.sim.host_log,
+                           cfg.recovery_limit, self.log)
+        slow = [(k, g, lim) for k, g, lim in found if g is None or g > lim]
+        worst = max((g for _, g, _ in found if g is not None), default=0.0)
+        retried = sum(1 for _, _, lim in found if lim > cfg.recovery_limit)
+        recovery = Check(
+            'data back after every fault that ends', not slow,
+            f'{len(found)} faults ended; longest wait for the next message '
+            f'{worst:.3f} s (limit {cfg.recovery_limit:g} s, plus {TRY_COST:g} s for '
+            f'each command or reply lost or ignored meanwhile: {retried} such)'
+            + ('; over: ' + ', '.join(f'{k} {g if g is None else round(g, 3)} (limit '
+                                      f'{lim:g})' for k, g, lim in slow[:8])
+               if slow else ''))
+        # A managed node does not exit at a leg's end (its exit is checked at the run's),
+        # and counts as unpublished what it reads while inactive, by design.
+        result = analyse(data, exempt=('clean exit on SIGINT', 'nothing left unpublished')
+                         if leg.kind == 'managed' else (), more=(recovery,))
+        checks = result.checks
+        legresult = LegResult(leg, checks, result.figures, found,
+                              100.0 * cpu / seconds if seconds > 0 else 0.0, seconds,
+                              result.report)
+        failed = [c.name for c in checks if not c.ok]
+        self.log(f'leg {leg.number}: {result.figures.get("published")} published, '
+                 f'{result.figures.get("missing")} missing, {len(driver.events)} faults, '
+                 f'worst recovery {worst:.3f} s, CPU {legresult.cpu_percent:.1f} %: '
+                 + ('PASS' if not failed else 'FAIL ' + ', '.join(failed)))
+        if failed:
+            self.log(result.report)
+        return legresult
+
+    def run(self) -> CampaignResult:
         """Run every leg, then the end; return the verdict and the report."""
         cfg, record = self.cfg, self.record
         began = time.time()
         try:
-            runner = self.start()
+            self.start()
             self.log(f'long soak: {len(self.legs)} legs over {cfg.minutes:g} min, domain '
                      f'{os.environ.get("ROS_DOMAIN_ID")}, seed {cfg.seed}')
             for leg in self.legs:
-                record.results.append(runner.run(leg))
+                record.results.append(self.run_leg(leg))
             record.eeprom_writes = len(self.sim.eeprom_writes())
             checks, lines = self.nodes.shut_down(self.rng)
             record.end_checks += checks
@@ -772,13 +692,14 @@ class LongSoak:
             record.end_checks.append(Check('run completed', False, traceback.format_exc()))
         finally:
             minutes = (time.time() - began) / 60.0
-            slope_checks, slope_lines = fit_slopes(cfg, self.sampler,
-                                                   self.nodes.slope_processes(), minutes)
+            # The managed processes, the ones fitted for leaks: (stream, sampler name).
+            managed = [(name, managed_name(name)) for name in sorted(self.nodes.managed)]
+            slope_checks, slope_lines = fit_slopes(cfg, self.sampler, managed, minutes)
             self.close()
         return report(cfg, record, minutes, slope_checks, slope_lines)
 
 
-def run_long_soak(cfg: LongSoakConfig) -> LongSoakResult:
+def run_long_soak(cfg: LongSoakConfig) -> CampaignResult:
     """Run the long soak; return its checks and report."""
     return LongSoak(cfg).run()
 
@@ -796,7 +717,8 @@ def run_campaign(cfg: CampaignConfig) -> CampaignResult:
     shared = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(FaultedNodeConfig)}
     soak = LongSoak(LongSoakConfig(**shared, sample_period=1.0), campaign=cfg)
     try:
-        leg = soak.start().run(soak.legs[0])
+        soak.start()
+        leg = soak.run_leg(soak.legs[0])
     finally:
         soak.close()
     return CampaignResult(leg.checks, leg.report, leg.figures)

@@ -16,7 +16,7 @@
 The settings every run on a simulated sensor shares, in one place.
 
 The fault campaign (``campaign_verdict.py``), the long soak (``long_soak.py``) and
-the node fuzz (``node_fuzz.py``) each have a config of their own; what they
+the node fuzz (``benchmarks/fuzz_node.py``) each have a config of their own; what they
 share (the seed, the sensor's address, the node's timeouts, the fault
 pacing, where progress goes) is declared here once, so that a default
 changes for all of them or for none.
