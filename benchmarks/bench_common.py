@@ -31,6 +31,7 @@ Benchmarks print numbers; they never fail on speed.
 """
 
 from collections.abc import Callable
+from importlib import metadata
 import json
 import math
 import os
@@ -86,13 +87,13 @@ def machine_info() -> list[tuple[str, str]]:
                     break
     except OSError:
         pass
-    try:
-        from importlib import metadata
-        rclpy_version = next((metadata.version(name) for name in
-                              ('ros-jazzy-rclpy', 'ros-rclpy', 'rclpy')
-                              if _has_distribution(metadata, name)), 'unknown')
-    except ImportError:
-        rclpy_version = 'unknown'
+    rclpy_version = 'unknown'
+    for name in ('ros-jazzy-rclpy', 'ros-rclpy', 'rclpy'):
+        try:
+            rclpy_version = metadata.version(name)
+            break
+        except metadata.PackageNotFoundError:
+            pass
     rmw = os.environ.get('RMW_IMPLEMENTATION') or 'rmw_fastrtps_cpp (default)'
     return [
         ('CPU', cpu),
@@ -102,14 +103,6 @@ def machine_info() -> list[tuple[str, str]]:
         ('rclpy', rclpy_version),
         ('RMW', rmw),
     ]
-
-
-def _has_distribution(metadata: Any, name: str) -> bool:
-    try:
-        metadata.version(name)
-    except metadata.PackageNotFoundError:
-        return False
-    return True
 
 
 class OtherLoad:
@@ -342,15 +335,13 @@ def write_latencies(truth: list[TruthEntry], published: list[Published]) -> list
 
 def standard_args(description: str, default_seconds: float,
                   more: Callable[[Any], None] | None = None) -> Any:
-    """Parse the options every benchmark shares (--seconds, --no-output); ``more`` adds its own."""
+    """Parse the options every benchmark shares (--seconds); ``more`` adds its own."""
     import argparse
     parser = argparse.ArgumentParser(description=description)
     if more is not None:
         more(parser)
     parser.add_argument('--seconds', type=float, default=default_seconds,
                         help=f'measuring time per run (default {default_seconds:g} s)')
-    parser.add_argument('--no-output', action='store_true',
-                        help='do not write benchmarks/output/')
     args = parser.parse_args()
     args.other_load = OtherLoad()
     return args

@@ -68,7 +68,6 @@ def main() -> int:
     """Measure and print the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--full', action='store_true', help='also sweep 1..65534 once')
-    parser.add_argument('--no-output', action='store_true')
     args = parser.parse_args()
     load = OtherLoad()
     config = ProbeConfig()
@@ -112,7 +111,7 @@ def main() -> int:
     report('discover: time to probe one port', results,
            [f'Defaults: listen {config.listen_s} s, ping timeout {config.ping_timeout} s, '
             f'{RUNS} runs a case.'],
-           output=None if args.no_output else 'discover_speed.md', other_load=load)
+           output='discover_speed.md', other_load=load)
     return 0
 
 

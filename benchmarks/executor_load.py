@@ -212,7 +212,7 @@ def main() -> int:
            [f'{args.seconds:g} s per run; {IN_FLIGHT} parameter requests kept in flight; '
             f'~/{SLOW_SERVICE} pauses the stream while it talks to the device, so '
             f'fewer records are published in that run.'],
-           None if args.no_output else 'executor_load.md', other_load=args.other_load)
+           'executor_load.md', other_load=args.other_load)
     return 0
 
 

@@ -118,7 +118,7 @@ def main() -> None:
     report('Fault capture cost', results,
            [f'{args.rounds} rounds, each {args.seconds:g} s per setting after {WARM_UP_S:g} s '
             'of warm-up, on and off alternating; a subscriber in another process.'],
-           None if args.no_output else 'fault_capture.md', other_load=args.other_load)
+           'fault_capture.md', other_load=args.other_load)
 
 
 if __name__ == '__main__':

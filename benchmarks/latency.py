@@ -293,8 +293,6 @@ def main(argv: list[str] | None = None) -> int:
                         help='data rate (Hz), or line-max: the most a 115200-baud line carries')
     parser.add_argument('--against', type=Path, metavar='DIR',
                         help='also run every configuration on the driver of this checkout')
-    parser.add_argument('--no-output', action='store_true',
-                        help='do not write benchmarks/output/')
     args = parser.parse_args(argv)
     names = [c for c in args.configs.split(',') if c]
     unknown = [c for c in names if c not in CONFIGS]
@@ -315,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
              note.text(f'{args.rounds} rounds x {len(configs)} configurations, '
                        f'{args.seconds:g} s measured per run after {WARM_UP_S:g} s; '),
              '- Original C++ node (thesis): 0.99 ms mean, 1.16 ms max.']
-    emit('\n'.join(lines) + '\n', None if args.no_output else 'latency.md')
+    emit('\n'.join(lines) + '\n', 'latency.md')
     return 0
 
 

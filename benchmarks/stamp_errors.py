@@ -421,7 +421,7 @@ def main() -> None:
             f'{RADIO_LATENCY_S * 1e3:g} ms radio + 7.64 ms on the wire + 0..{NODE_JITTER_MS:g} '
             'ms random; device clock 40 ppm fast; the device-time mean offset is the radio '
             'latency, which the host cannot observe.'],
-           None if args.no_output else 'stamp_errors.md', other_load=args.other_load)
+           'stamp_errors.md', other_load=args.other_load)
 
 
 if __name__ == '__main__':

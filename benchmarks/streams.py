@@ -202,7 +202,7 @@ def main() -> None:
                [f'{args.seconds:g} s window after {SENSORS_WARM_UP_S:g} s of warm-up; one node '
                 'serving every sensor; a subscriber in another process on every topic; rates '
                 'are what it received in the window.'],
-               None if args.no_output else f'several_sensors_{stream.name}.md',
+               f'several_sensors_{stream.name}.md',
                other_load=args.other_load)
         return
     results, table = run(args.seconds)
@@ -210,7 +210,7 @@ def main() -> None:
            [f'{args.seconds:g} s per stream after {WARM_UP_S:g} s of warm-up; wireless '
             f'framing; simulated device (line-rate mode) and node in two processes.',
             'README table:\n\n' + table],
-           None if args.no_output else 'streams.md', other_load=args.other_load)
+           'streams.md', other_load=args.other_load)
 
 
 if __name__ == '__main__':

@@ -188,12 +188,12 @@ def main() -> None:
     args = standard_args(__doc__.splitlines()[1], 60.0, more)
     if args.codec:
         report('Codec throughput', codec_rows(), [f'Best of {REPEAT} runs.'],
-               None if args.no_output else 'codec_throughput.md', other_load=args.other_load)
+               'codec_throughput.md', other_load=args.other_load)
         return
     report('Sustained rate', run(args.seconds), [
         f'Rates swept: {", ".join(f"{r:.0f}" for r in RATES)} Hz, {args.seconds:g} s each; '
         f'node QoS reliable, depth 1000; subscriber reliable, depth 5000.'],
-        None if args.no_output else 'throughput.md', other_load=args.other_load)
+        'throughput.md', other_load=args.other_load)
 
 
 if __name__ == '__main__':

@@ -54,7 +54,6 @@ campaign's settings: the same rig, the same leg, the same verdict.
 """
 
 import bisect
-from collections.abc import Callable
 import dataclasses
 import os
 import random
@@ -253,8 +252,7 @@ class SoakNodes:
 # -- the data back after each fault ------------------------------------------------------------
 
 def recoveries(events: list[FaultEvent], rows: list, truth: list, host_log: list,
-               recovery_limit: float, log: Callable[[str], None]
-               ) -> list[tuple[str, float | None, float]]:
+               recovery_limit: float) -> list[tuple[str, float | None, float]]:
     """
     For each fault that ends: (kind, seconds to the next message received, the limit).
 
@@ -263,7 +261,7 @@ def recoveries(events: list[FaultEvent], rows: list, truth: list, host_log: list
     every reply the radio dropped, from one try before the fault ended to
     the message: each costs the dialogue one more try, by design. A fault
     followed by the next one before the data came back is left out (the
-    recovery was cut short, not slow). Each slow one is explained to ``log``.
+    recovery was cut short, not slow).
     """
     times = sorted(row[3] for row in rows)
     misses = sorted([h.time for h in host_log
@@ -287,20 +285,7 @@ def recoveries(events: list[FaultEvent], rows: list, truth: list, host_log: list
         limit = recovery_limit + retries * TRY_COST
         gap = back - event.end if back is not None else None
         out.append((event.kind, gap, limit))
-        if gap is None or gap > limit:
-            explain(event, back, host_log, log)
     return out
-
-
-def explain(event: FaultEvent, back: float | None, host_log: list,
-            log: Callable[[str], None]) -> None:
-    """Log what the host sent and the sensor made of it while the data did not come."""
-    stop = back if back is not None else event.end + 10.0
-    log(f'  slow recovery after {event.kind} ({event.detail}) at {event.end:.3f}:')
-    for h in host_log:
-        if event.start - 1.0 <= h.time <= stop:
-            code = f'0x{h.raw[0]:02X}' if h.raw else '-'
-            log(f'    {h.time - event.end:+.3f} s host {h.kind} {code} {h.outcome}')
 
 
 # -- one leg -----------------------------------------------------------------------------------
@@ -645,7 +630,7 @@ class LongSoak:
         """Judge the leg: the campaign's checks, and the data back after every fault."""
         cfg = self.cfg
         found = recoveries(driver.events, data.messages, data.truth, self.sim.host_log,
-                           cfg.recovery_limit, self.log)
+                           cfg.recovery_limit)
         slow = [(k, g, lim) for k, g, lim in found if g is None or g > lim]
         worst = max((g for _, g, _ in found if g is not None), default=0.0)
         retried = sum(1 for _, _, lim in found if lim > cfg.recovery_limit)

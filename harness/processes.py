@@ -29,7 +29,7 @@ Nothing here mocks ROS: the node process publishes through Fast DDS and the
 subscriber receives through it.
 """
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 import json
 import os
 from pathlib import Path
@@ -121,19 +121,6 @@ def param_args(params: dict[str, object]) -> list[str]:
     return args
 
 
-def wait_for_text(output: Callable[[], str], proc: subprocess.Popen, text: str,
-                  timeout: float) -> bool:
-    """Wait until ``text`` is in ``output()``, or ``proc`` ended; return whether it is."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if text in output():
-            return True
-        if proc.poll() is not None:
-            break
-        time.sleep(0.05)
-    return text in output()
-
-
 def process_cpu_seconds(pid: int) -> float:
     """User plus system CPU time (s) of a process and all its threads so far."""
     with open(f'/proc/{pid}/stat') as handle:
@@ -175,8 +162,15 @@ class NodeProcess:
             return handle.read()
 
     def wait_for_output(self, text: str, timeout: float = 20.0) -> bool:
-        """Wait until ``text`` appears in the node's output."""
-        return wait_for_text(self.output, self.proc, text, timeout)
+        """Wait until ``text`` appears in the node's output, or it ended; return whether it did."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.output():
+                return True
+            if self.proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        return text in self.output()
 
     def cpu_seconds(self) -> float:
         """CPU time (user + system, all threads) the node used so far."""
