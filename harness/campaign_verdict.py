@@ -738,10 +738,6 @@ def run_lines(data: RunData, cover: Coverage) -> list[str]:
                  f'reconnects), {sup.get("stalls")} stalls, published {nstats.get("published")}, '
                  f'lost {nstats.get("lost")}, device resets {nstats.get("device_resets")}, '
                  f'other records {nstats.get("other_records")}')
-    parser = node.get('parser', {})
-    lines.append('parser: ' + ', '.join(f'{k} {v}' for k, v in sorted(parser.items())))
-    sim = data.sim_stats
-    lines.append('simulator: ' + ', '.join(f'{k} {v}' for k, v in sorted(sim.items()) if v))
     lines.append(f'unsafe garbage (with 0xAA/0x21/0x02/0x07): {data.unsafe_garbage_bursts} '
                  f'bursts, {data.unsafe_garbage_bytes} bytes')
     lines.append(f'valid 0x{cover.code:02X} records from address {cfg.address}: '

@@ -105,10 +105,6 @@ class Tally:
 
     outcomes: list[Outcome] = field(default_factory=list)
 
-    def add(self, outcome: Outcome) -> None:
-        """Count one trial."""
-        self.outcomes.append(outcome)
-
     def ran(self) -> list[Outcome]:
         """Return the trials that reached their phase and were signalled."""
         return [o for o in self.outcomes if not o.setup_error]
@@ -273,7 +269,7 @@ def run_trials(count: int, slots: int = 3, seed: int = 1,
                     outcome = Outcome(phase, signal.Signals(signum).name, None, 0.0,
                                       setup_error=f'{type(exc).__name__}: {exc}')
                 with lock:
-                    tally.add(outcome)
+                    tally.outcomes.append(outcome)
                     done[0] += 1
                     if progress is not None:
                         progress(done[0], outcome)
