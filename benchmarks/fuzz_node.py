@@ -49,11 +49,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402, RUF100 - after the path
 from harness.campaign import message_key, VALUES  # noqa: E402, RUF100
+from harness.campaign_verdict import RunConfig  # noqa: E402, RUF100
 from harness.hostile import Attack, HostileStation, MODES, PHASES  # noqa: E402, RUF100
 from harness.processes import (  # noqa: E402, RUF100
     BENCHMARK_DOMAINS, isolate_ros_domain, Listener, NodeProcess, reserve_ros_domain,
 )
-from harness.run_config import RunConfig  # noqa: E402, RUF100
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig  # noqa: E402, RUF100
 from rcl_interfaces.srv import GetParameters  # noqa: E402, RUF100
 from sensor_msgs.msg import Imu  # noqa: E402, RUF100

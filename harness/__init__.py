@@ -29,9 +29,9 @@ imports it.
 * ``percentiles``: a sample's percentile and summary.
 * ``campaign``: the soak and fault campaign's pieces (the truth, the
   subscriber, the node process and its counters), its faults in
-  ``fault_driver``; ``campaign_verdict`` judges what a run produced (the
+  ``fault_driver``; ``campaign_verdict`` holds the settings the campaign,
+  the long soak and the node fuzz share, and judges what a run produced (the
   checks and the report), for the campaign and the long soak alike.
-* ``run_config``: the settings the campaign, the long soak and the node fuzz share.
 * ``long_soak``: the campaign's run as legs over every stream for an hour
   (``benchmarks/soak.py --every-stream``), and the campaign itself as one
   plain leg (``run_campaign``: ``benchmarks/soak.py`` for minutes,

@@ -41,11 +41,10 @@ import sys
 import threading
 import time
 
-from harness.campaign_verdict import CampaignConfig, RunData, Sent
+from harness.campaign_verdict import CampaignConfig, FaultedNodeConfig, RunData, Sent
 from harness.fault_driver import FaultDriver
 from harness.instrumented_node import STATS_ENV
 from harness.processes import Listener, NodeProcess, ros_env
-from harness.run_config import FaultedNodeConfig
 from i3dmgx2_driver.codec.commands import decode_record
 from i3dmgx2_driver.codec.data_rate import RATE_DIVIDER_ADDRESS
 from i3dmgx2_driver.codec.errors import CodecError

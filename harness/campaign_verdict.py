@@ -47,10 +47,9 @@ from collections.abc import Callable
 import dataclasses
 import itertools
 import statistics
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from harness.fault_driver import FaultEvent
-from harness.run_config import FaultedNodeConfig
 from i3dmgx2_driver.codec.data_rate import ticks_per_cycle
 from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
 from i3dmgx2_driver.codec.streams import parse as parse_stream
@@ -58,6 +57,36 @@ from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 
 
 # -- what a run is given and what it produced --------------------------------------------------
+
+# What every run on a simulated sensor shares (the campaign and the long soak here, the node
+# fuzz in benchmarks/fuzz_node.py) is declared once: a default changes for all or for none.
+
+@dataclasses.dataclass
+class RunConfig:
+    """What any run on a simulated sensor is given."""
+
+    #: Seed of the simulator and of the fault schedule.
+    seed: int = 1
+    #: Node address of the sensor.
+    address: int = 95
+    #: Where progress lines go (None: nowhere).
+    log: Any = print
+
+
+@dataclasses.dataclass
+class FaultedNodeConfig(RunConfig):
+    """What a run that faults the node's line is given: the node's timeouts, the pacing."""
+
+    #: The node's read_timeout (stall detection) and reconnect_interval (s).
+    read_timeout: float = 0.3
+    reconnect_interval: float = 0.2
+    #: The node's temperature_period: 0xD1 polls interleaved with the stream (0: none).
+    temperature_period: float = 1.0
+    #: Seconds between fault events, drawn uniformly from this range.
+    event_gap: tuple[float, float] = (1.0, 4.0)
+    #: Seconds without faults at the end, in which the stream must come back.
+    quiet: float = 4.0
+
 
 @dataclasses.dataclass
 class CampaignConfig(FaultedNodeConfig):

@@ -67,14 +67,13 @@ from harness.campaign import (
     close_all, node_params, read_counters, run_data, start_node, Subscriber, TruthCollector,
 )
 from harness.campaign_verdict import (
-    analyse, CampaignConfig, CampaignResult, Check, rate_text, RunData,
+    analyse, CampaignConfig, CampaignResult, Check, FaultedNodeConfig, rate_text, RunData,
 )
 from harness.fault_driver import FaultDriver, FaultEvent
 from harness.process_sampler import Sampler, slope_per_hour
 from harness.processes import (
     isolate_ros_domain, LifecycleClient, Listener, NodeProcess, process_cpu_seconds,
 )
-from harness.run_config import FaultedNodeConfig
 from i3dmgx2_driver.codec import line_budget
 from i3dmgx2_driver.codec.data_rate import divider_for_rate
 from i3dmgx2_driver.codec.streams import STREAMS
