@@ -23,9 +23,9 @@ either in the benchmark's process (:class:`InProcessNode`, to time
 ``publish()`` from inside) or as the real executable (``harness.processes.
 NodeProcess``, to measure its CPU; :class:`TimedNodeProcess`, timed from
 inside). Subscribers run in another process (``harness.processes.
-SubscriberProcess``). The processes and the statistics are ``harness/``'s,
-which the tests use too; importing this module puts the repository on the
-path for them.
+SubscriberProcess``). The processes are ``harness/``'s, which the tests
+use too; importing this module puts the repository on the path for them.
+The statistics (percentiles, summaries) are the benchmarks' alone: here.
 
 Benchmarks print numbers; they never fail on speed.
 """
@@ -72,6 +72,50 @@ class Result(NamedTuple):
     value: str
     target: str = ''
     met: bool | None = None
+
+
+# -- statistics: one percentile for everything that reports one (interpolated, q in 0..100) --
+
+def percentile(values: list[float], q: float) -> float:
+    """Return the q-th percentile of the values, q in 0..100, interpolated; NaN for none."""
+    if not values:
+        return math.nan
+    ordered = sorted(values)
+    position = (len(ordered) - 1) * q / 100.0
+    low = math.floor(position)
+    high = min(low + 1, len(ordered) - 1)
+    return ordered[low] + (ordered[high] - ordered[low]) * (position - low)
+
+
+class Summary(NamedTuple):
+    """Count, mean, p50, p99 and max of a sample."""
+
+    n: int
+    mean: float
+    p50: float
+    p99: float
+    max_: float
+
+    def ms(self) -> str:
+        """Format as milliseconds: ``p50 / p99 / max``."""
+        return (f'{self.p50 * 1e3:.3f} / {self.p99 * 1e3:.3f} / {self.max_ * 1e3:.3f} ms '
+                f'(n={self.n})')
+
+
+def summarise(values: list[float]) -> Summary:
+    """Summarise a sample (NaN everywhere when it is empty)."""
+    if not values:
+        return Summary(0, math.nan, math.nan, math.nan, math.nan)
+    return Summary(len(values), sum(values) / len(values), percentile(values, 50),
+                   percentile(values, 99), max(values))
+
+
+def std_dev(values: list[float]) -> float:
+    """Return the population standard deviation (NaN for fewer than two values)."""
+    if len(values) < 2:
+        return math.nan
+    mean = sum(values) / len(values)
+    return math.sqrt(sum((v - mean) ** 2 for v in values) / len(values))
 
 
 # -- the machine and the table ---------------------------------------------------------------

@@ -36,8 +36,7 @@ import sys
 import threading
 from typing import Any
 
-from bench_common import BENCH_DIR, report, Result, standard_args
-from harness.percentiles import summarise
+from bench_common import BENCH_DIR, report, Result, standard_args, summarise
 from harness.processes import ChildProcess, isolate_ros_domain, spin_until, start_helper_node
 from latency import CONFIGS, run_once, TARGET_DRIVER_P99_S
 

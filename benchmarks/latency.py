@@ -61,9 +61,9 @@ import time
 from typing import Any, NamedTuple
 
 from bench_common import (
-    emit, LINE_MAX_RATE_HZ, machine_table, RunNote, stamp_key, TimedNodeProcess, written_times,
+    emit, LINE_MAX_RATE_HZ, machine_table, percentile, RunNote, stamp_key, summarise, Summary,
+    TimedNodeProcess, written_times,
 )
-from harness.percentiles import percentile, summarise, Summary
 from harness.processes import (
     isolate_ros_domain, process_cpu_seconds, SimProcess, SubscriberProcess,
 )

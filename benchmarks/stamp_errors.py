@@ -69,8 +69,7 @@ import statistics
 import sys
 import time
 
-from bench_common import InProcessNode, report, Result, standard_args
-from harness.percentiles import percentile, std_dev
+from bench_common import InProcessNode, percentile, report, Result, standard_args, std_dev
 from harness.processes import isolate_ros_domain, SimProcess
 from harness.stamp_runs import check_series, errors, GRACE, restamp, Run, run, TOLERANCE
 

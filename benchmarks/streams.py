@@ -41,8 +41,9 @@ and 68 Hz).
 import math
 import time
 
-from bench_common import InProcessNode, report, Result, standard_args, write_latencies
-from harness.percentiles import summarise
+from bench_common import (
+    InProcessNode, report, Result, standard_args, summarise, write_latencies,
+)
 from harness.processes import isolate_ros_domain, NodeProcess, SimProcess, SubscriberProcess
 
 from i3dmgx2_driver.codec import line_budget, streams

@@ -26,7 +26,6 @@ imports it.
   ``LifecycleClient``), and a ROS domain of the run's own;
   ``sim_process``, ``subscriber`` and ``instrumented_node`` are the programs
   those processes run.
-* ``percentiles``: a sample's percentile and summary.
 * ``campaign``: the soak and fault campaign's pieces (the truth, the
   subscriber, the node process and its counters), its faults in
   ``fault_driver``; ``campaign_verdict`` holds the settings the campaign,
