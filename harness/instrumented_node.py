@@ -30,7 +30,7 @@ Nothing on the path of a sample is changed.
 
 With ``--lifecycle`` (before ``--ros-args``) it runs the managed node the
 same way: each configure makes a new core, and the file holds the counters
-of the last one (``configures`` says which); an activate is noted as an
+of the last one; an activate is noted as an
 anchor once it returns (records are published from then on), a deactivate
 as ``deactivate`` when it begins (they are not published from then on).
 
@@ -114,7 +114,6 @@ class ObservedLifecycleNode(LifecycleDriverNode):
     def __init__(self, **kwargs) -> None:
         #: The core of the last configure (kept after cleanup, for the counters).
         self.last_core = None
-        self.configures = 0
         super().__init__(**kwargs)
 
     def on_configure(self, state):  # noqa: ANN001, ANN201 - rclpy's signature
@@ -122,7 +121,6 @@ class ObservedLifecycleNode(LifecycleDriverNode):
         result = super().on_configure(state)
         if self.core is not None:
             self.last_core = self.core
-            self.configures += 1
         return result
 
     def on_activate(self, state):  # noqa: ANN001, ANN201
@@ -140,7 +138,7 @@ class ObservedLifecycleNode(LifecycleDriverNode):
 def _snapshot(node, final: bool) -> dict:
     core = node.core if node.core is not None else getattr(node, 'last_core', None)
     if core is None:
-        return {'time': time.time(), 'final': final, 'pid': os.getpid(), 'configures': 0}
+        return {'time': time.time(), 'final': final}
     stats = core.records.stats
     device = core.supervisor.status()
     with _events_lock:
@@ -148,15 +146,11 @@ def _snapshot(node, final: bool) -> dict:
     return {
         'time': time.time(),
         'final': final,
-        'pid': os.getpid(),
-        'configures': getattr(node, 'configures', 1),
         'stats': {name: getattr(stats, name) for name in (
-            'published', 'unpublished', 'mag_published', 'lost', 'other_records',
-            'device_resets')},
+            'published', 'unpublished', 'lost', 'other_records', 'device_resets')},
         'parser': device.parser,
         'supervisor': {'connections': device.connections, 'reconnects': device.reconnects,
-                       'stalls': device.stalls, 'state': device.state.value,
-                       'last_error': device.last_error},
+                       'stalls': device.stalls},
         'port_events': events,
     }
 
