@@ -91,22 +91,17 @@ def _commands_since(sim: PtySimulator, since: float, until: float) -> tuple[str,
 def run_scenarios(sim: PtySimulator, rng: random.Random) -> list[Trial]:
     """Run every scenario once on a streaming driver; return when each came back."""
     trials = []
-    # The base station unplugged while the sensor streams on.
-    sim.unplug()
-    time.sleep(rng.uniform(*UNPLUG_S))
-    sim.replug()
-    back = time.time()
-    time.sleep(SETTLE_S)
-    trials.append(Trial('unplug', back, _commands_since(sim, back, back + 3.0)))
-    # Unplugged, and the sensor restarts meanwhile: it comes back in polled mode.
-    sim.unplug()
-    sim.power_cycle()
-    time.sleep(rng.uniform(*UNPLUG_S))
-    sim.replug()
-    back = time.time()
-    time.sleep(SETTLE_S)
-    trials.append(Trial('unplug + power cycle', back,
-                        _commands_since(sim, back, back + 3.0)))
+    # The base station unplugged while the sensor streams on; then unplugged while the
+    # sensor restarts meanwhile (it comes back in polled mode).
+    for name in ('unplug', 'unplug + power cycle'):
+        sim.unplug()
+        if name != 'unplug':
+            sim.power_cycle()
+        time.sleep(rng.uniform(*UNPLUG_S))
+        sim.replug()
+        back = time.time()
+        time.sleep(SETTLE_S)
+        trials.append(Trial(name, back, _commands_since(sim, back, back + 3.0)))
     for name, lengths in (('long stall', LONG_STALL_S), ('short stall', SHORT_STALL_S)):
         seconds = rng.uniform(*lengths)
         start = time.time()

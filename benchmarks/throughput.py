@@ -72,7 +72,6 @@ class RateRun:
             sim.silence()
             node.wait_quiet()
             time.sleep(1.0)  # let the subscriber catch up
-            self.node_count = node.node.core.records.stats.published
         finally:
             if node is not None:
                 node.close()
