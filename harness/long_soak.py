@@ -107,8 +107,6 @@ class LongSoakConfig(FaultedNodeConfig):
     leg_minutes: float = 2.5
     #: How many legs (None: as many as fit in ``minutes``).
     legs: int | None = None
-    #: The streams the legs go round (names; empty: every stream).
-    streams: tuple[str, ...] = ()
     #: Every this many legs, the plain node runs the leg instead of a managed one (0: never);
     #: shifted by one leg each round of the streams.
     plain_every: int = 3
@@ -138,13 +136,12 @@ def plan_legs(cfg: LongSoakConfig) -> list[Leg]:
     """Return the legs: the streams in turn, each at its line-budget maximum rate."""
     leg_seconds = cfg.leg_minutes * 60.0 + cfg.quiet + LEG_OVERHEAD
     count = cfg.legs or max(1, round(cfg.minutes * 60.0 / leg_seconds))
-    chosen = [s for s in STREAMS if not cfg.streams or s.name in cfg.streams]
     legs = []
     for number in range(count):
-        stream = chosen[number % len(chosen)]
+        stream = STREAMS[number % len(STREAMS)]
         rate = line_budget.max_rate(stream.code, BAUD, wireless=True)
         # Shifted by one each round of the streams, so that every stream meets both kinds.
-        turn = number + number // len(chosen)
+        turn = number + number // len(STREAMS)
         plain = cfg.plain_every and (turn + 1) % cfg.plain_every == 0
         # Rounded down to 0.1 Hz: the parameter's text must map to the same divider.
         legs.append(Leg(number, stream.name, int(rate * 10) / 10.0,
