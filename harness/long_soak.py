@@ -172,79 +172,6 @@ def final_stats(path: str, after: float, published: int | None = None) -> dict:
         published is None or got.get('stats', {}).get('published') == published), 10.0)
 
 
-class SoakNodes:
-    """
-    The node processes: the managed ones by stream, with their lifecycle clients.
-
-    The managed nodes live the whole run (one per stream), a plain node lives
-    one leg; each writes its counters to a file of its own in the run's
-    working folder.
-    """
-
-    def __init__(self, cfg: LongSoakConfig, sampler: Sampler) -> None:
-        self.cfg = cfg
-        self.sampler = sampler
-        self.workdir = tempfile.mkdtemp(prefix='i3dmgx2-long-soak-')
-        #: The simulator's port, once it runs.
-        self.port: str | None = None
-        self.managed: dict[str, NodeProcess] = {}
-        self.clients: dict[str, LifecycleClient] = {}
-
-    def stats_path(self, name: str) -> str:
-        """Return where the node ``name`` writes its counters."""
-        return os.path.join(self.workdir, f'{name}.json')
-
-    def start_node(self, name: str, stream: str, rate: float, lifecycle: bool) -> NodeProcess:
-        """Start a node process in namespace ``name``; sample it from now on."""
-        node = start_node(node_params(self.cfg, self.port, stream, rate, topic(name)),
-                          self.stats_path(name), lifecycle, ('-r', f'__ns:=/{name}'))
-        self.sampler.watch(name, node.proc.pid)
-        return node
-
-    def start_managed(self, legs: list[Leg], listener: Listener) -> None:
-        """Start a managed node for each stream a managed leg runs; wait for its services."""
-        kinds = {leg.stream for leg in legs if leg.kind == 'managed'}
-        for stream in STREAMS:
-            if stream.name not in kinds:
-                continue
-            rate = next(leg.rate_hz for leg in legs if leg.stream == stream.name)
-            name = managed_name(stream.name)
-            self.managed[stream.name] = self.start_node(name, stream.name, rate, True)
-            self.clients[stream.name] = LifecycleClient(listener, f'/{name}/i3dmgx2_driver')
-        for stream, client in self.clients.items():
-            if not client.wait_ready(60.0):
-                raise RuntimeError(f'managed node {stream}: lifecycle services not ready:\n'
-                                   f'{self.managed[stream].output()[-3000:]}')
-
-    def shut_down(self, rng: random.Random) -> tuple[list[Check], list[str]]:
-        """Take the managed nodes to random states, then SIGINT them; check their exits."""
-        checks: list[Check] = []
-        lines: list[str] = []
-        if not self.managed:
-            return checks, lines
-        names = sorted(self.managed)
-        chosen = rng.choice(names)
-        target = rng.choice(('unconfigured', 'inactive', 'active'))
-        steps = {'unconfigured': (), 'inactive': ('configure',),
-                 'active': ('configure', 'activate')}[target]
-        reached = all(self.clients[chosen].change(step) for step in steps)
-        states = {name: (target if name == chosen else 'unconfigured') for name in names}
-        lines.append(f'shutdown: {chosen} taken to {target} '
-                     f'({"reached" if reached else "NOT reached"}), the others '
-                     f'unconfigured; then SIGINT to every managed process')
-        for name in names:
-            node = self.managed[name]
-            alive = node.proc.poll() is None
-            code, seconds = node.stop(timeout=15.0)
-            self.sampler.forget(managed_name(name))
-            ok = alive and code == 0 and seconds < 5.0
-            checks.append(Check(
-                f'managed {name}: clean exit on SIGINT from {states[name]}', ok,
-                f'alive until the end: {alive}; exit code {code} after {seconds:.2f} s'
-                + ('' if ok else f'\n{node.output()[-3000:]}')))
-        return checks, lines
-
-
 # -- the data back after each fault ------------------------------------------------------------
 
 def recoveries(events: list[FaultEvent], rows: list, truth: list, host_log: list,
@@ -456,7 +383,12 @@ class LongSoak:
         self.legs = ([Leg(1, campaign.stream, campaign.data_rate, 'plain')] if campaign
                      else plan_legs(cfg))
         self.sampler = Sampler(cfg.sample_period)
-        self.nodes = SoakNodes(cfg, self.sampler)
+        #: The node processes: the managed ones by stream (each lives the whole run, a plain
+        #: node one leg), with their lifecycle clients; each writes its counters to a file of
+        #: its own in ``workdir``.
+        self.workdir = tempfile.mkdtemp(prefix='i3dmgx2-long-soak-')
+        self.managed: dict[str, NodeProcess] = {}
+        self.clients: dict[str, LifecycleClient] = {}
         self.sim: PtySimulator | None = None
         self.collector: TruthCollector | None = None
         self.subscriber: Subscriber | None = None
@@ -472,7 +404,6 @@ class LongSoak:
             address=cfg.address, seed=cfg.seed, rate_hz=rate, limit_to_line_rate=rate is None,
             truth_limit=int((rate or 400) * 120) + 20000))
         self.sim.start()
-        self.nodes.port = self.sim.port
         self.collector = TruthCollector(self.sim)
         self.collector.start()
         kinds = {leg.stream for leg in self.legs if leg.kind == 'managed'}
@@ -480,18 +411,72 @@ class LongSoak:
         topics += [topic(leg_node_name(leg)) for leg in self.legs if leg.kind == 'plain']
         self.subscriber = Subscriber(topics=tuple(topics))
         self.sampler.start()
-        self.nodes.start_managed(self.legs, self.subscriber)
+        self.start_managed(self.legs, self.subscriber)
+
+    def stats_path(self, name: str) -> str:
+        """Return where the node ``name`` writes its counters."""
+        return os.path.join(self.workdir, f'{name}.json')
+
+    def start_node(self, name: str, stream: str, rate: float, lifecycle: bool) -> NodeProcess:
+        """Start a node process in namespace ``name``; sample it from now on."""
+        node = start_node(node_params(self.cfg, self.sim.port, stream, rate, topic(name)),
+                          self.stats_path(name), lifecycle, ('-r', f'__ns:=/{name}'))
+        self.sampler.watch(name, node.proc.pid)
+        return node
+
+    def start_managed(self, legs: list[Leg], listener: Listener) -> None:
+        """Start a managed node for each stream a managed leg runs; wait for its services."""
+        kinds = {leg.stream for leg in legs if leg.kind == 'managed'}
+        for stream in STREAMS:
+            if stream.name not in kinds:
+                continue
+            rate = next(leg.rate_hz for leg in legs if leg.stream == stream.name)
+            name = managed_name(stream.name)
+            self.managed[stream.name] = self.start_node(name, stream.name, rate, True)
+            self.clients[stream.name] = LifecycleClient(listener, f'/{name}/i3dmgx2_driver')
+        for stream, client in self.clients.items():
+            if not client.wait_ready(60.0):
+                raise RuntimeError(f'managed node {stream}: lifecycle services not ready:\n'
+                                   f'{self.managed[stream].output()[-3000:]}')
+
+    def shut_down(self, rng: random.Random) -> tuple[list[Check], list[str]]:
+        """Take the managed nodes to random states, then SIGINT them; check their exits."""
+        checks: list[Check] = []
+        lines: list[str] = []
+        if not self.managed:
+            return checks, lines
+        names = sorted(self.managed)
+        chosen = rng.choice(names)
+        target = rng.choice(('unconfigured', 'inactive', 'active'))
+        steps = {'unconfigured': (), 'inactive': ('configure',),
+                 'active': ('configure', 'activate')}[target]
+        reached = all(self.clients[chosen].change(step) for step in steps)
+        states = {name: (target if name == chosen else 'unconfigured') for name in names}
+        lines.append(f'shutdown: {chosen} taken to {target} '
+                     f'({"reached" if reached else "NOT reached"}), the others '
+                     f'unconfigured; then SIGINT to every managed process')
+        for name in names:
+            node = self.managed[name]
+            alive = node.proc.poll() is None
+            code, seconds = node.stop(timeout=15.0)
+            self.sampler.forget(managed_name(name))
+            ok = alive and code == 0 and seconds < 5.0
+            checks.append(Check(
+                f'managed {name}: clean exit on SIGINT from {states[name]}', ok,
+                f'alive until the end: {alive}; exit code {code} after {seconds:.2f} s'
+                + ('' if ok else f'\n{node.output()[-3000:]}')))
+        return checks, lines
 
     def close(self) -> None:
         """Stop everything that still runs."""
-        steps = [self.sampler.stop, *(node.close for node in self.nodes.managed.values())]
+        steps = [self.sampler.stop, *(node.close for node in self.managed.values())]
         if self.subscriber is not None:
             steps.append(self.subscriber.close)
         if self.collector is not None:
             steps.append(lambda: self.collector.is_alive() and self.collector.stop())
         if self.sim is not None:
             steps.append(self.sim.stop)
-        close_all([*steps, lambda: shutil.rmtree(self.nodes.workdir, ignore_errors=True)],
+        close_all([*steps, lambda: shutil.rmtree(self.workdir, ignore_errors=True)],
                   'long soak')
 
     def leg_config(self, leg: Leg) -> CampaignConfig:
@@ -509,8 +494,8 @@ class LongSoak:
     def _bring_up(self, leg: Leg, name: str) -> tuple[NodeProcess, LifecycleClient | None]:
         """Configure and activate the stream's managed node, or start a plain one."""
         if leg.kind == 'managed':
-            node = self.nodes.managed[leg.stream]
-            client = self.nodes.clients[leg.stream]
+            node = self.managed[leg.stream]
+            client = self.clients[leg.stream]
             self.sampler.busy.add(name)
             if not client.change('configure'):
                 raise RuntimeError(f'leg {leg.number}: configure failed:\n'
@@ -522,7 +507,7 @@ class LongSoak:
                                    f'{node.output()[-3000:]}')
             return node, client
         self.sim.unplug(None)
-        node = self.nodes.start_node(name, leg.stream, leg.rate_hz, lifecycle=False)
+        node = self.start_node(name, leg.stream, leg.rate_hz, lifecycle=False)
         try:
             self.subscriber.wait_publisher(node, topic(name))
         except BaseException:
@@ -535,7 +520,7 @@ class LongSoak:
     def _bring_down(self, name: str, node: NodeProcess, client: LifecycleClient | None,
                     stopped: float) -> tuple[int, float, dict]:
         """Deactivate and clean up a managed node, or SIGINT a plain one; its last counters."""
-        path = self.nodes.stats_path(name)
+        path = self.stats_path(name)
         exit_code, exit_seconds = 0, 0.0
         if client is not None:
             client.change('deactivate')
@@ -666,7 +651,7 @@ class LongSoak:
             for leg in self.legs:
                 record.results.append(self.run_leg(leg))
             record.eeprom_writes = len(self.sim.eeprom_writes())
-            checks, lines = self.nodes.shut_down(self.rng)
+            checks, lines = self.shut_down(self.rng)
             record.end_checks += checks
             record.end_lines += lines
         except Exception:  # the run could not go on: a failed check with the reason
@@ -674,7 +659,7 @@ class LongSoak:
         finally:
             minutes = (time.time() - began) / 60.0
             # The managed processes, the ones fitted for leaks: (stream, sampler name).
-            managed = [(name, managed_name(name)) for name in sorted(self.nodes.managed)]
+            managed = [(name, managed_name(name)) for name in sorted(self.managed)]
             slope_checks, slope_lines = fit_slopes(cfg, self.sampler, managed, minutes)
             self.close()
         return report(cfg, record, minutes, slope_checks, slope_lines)
