@@ -23,6 +23,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 GENERATED_DIRS = ('build', 'install', 'log')
 
 
+@pytest.mark.slow  # seconds over the whole tree: the full suite's, as flake8 is
 @pytest.mark.linter
 @pytest.mark.pep257
 def test_pep257(monkeypatch):

@@ -244,17 +244,19 @@ LINE_MAX = [(s.code, line_budget.max_rate(s.code, 115200, True)) for s in stream
 STREAM_NAMES = {s.code: s.name for s in streams.STREAMS}
 
 
-def across_streams(*axes: list) -> list:
+def across_streams(*axes: list, in_turn: tuple = ()) -> list:
     """
     Every combination of ``axes``, each on the next stream in turn (at its line maximum).
 
     What the stamps depend on is the queue (gap, hold, reader); the stream
     sets the rate and wire time, so each stream is met several times while
     each combination of the queue's axes is met once, not once per stream.
+    ``in_turn``, if given, is one more value taken in turn, as the streams are.
     """
     cases = []
-    for k, combo in enumerate(itertools.product(*axes)):
+    for k, product in enumerate(itertools.product(*axes)):
         code, rate = LINE_MAX[k % len(LINE_MAX)]
+        combo = (*product, in_turn[k % len(in_turn)]) if in_turn else product
         values = tuple(v for item in combo for v in (item if isinstance(item, tuple) else (item,)))
         cases.append(pytest.param(code, rate, *values,
                                   id='-'.join([STREAM_NAMES[code], *map(str, combo)])))
@@ -365,7 +367,7 @@ def away(stream: list[Packet], at: float, seconds: float) -> list[Packet]:
 
 @pytest.mark.parametrize(('code', 'rate', 'at', 'away_s', 'tick'),
                          across_streams([0.05, 0.1, 0.15, 0.2, 0.3], [0.05, 0.1, 0.2],
-                                        [0.0, 0.004, 0.010]))
+                                        in_turn=(0.0, 0.004, 0.010)))
 def test_a_queue_read_by_a_host_away_for_a_moment_is_told_from_a_step(code, rate, at, away_s,
                                                                       tick):
     """
