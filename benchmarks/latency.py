@@ -34,11 +34,10 @@ other load falls on all of them alike; the figures pool every round and
 the ratios set side by side come from the same run. ``floor`` is
 ``floor_node.py``, a process that only reads the port and publishes fixed
 bytes: what no rclpy driver goes below on this machine. ``cpu`` is the
-driver with its timings off, for its CPU alone (the figure of docs/cpu.md,
-and the fault capture's on and off, ``fault_capture.py``); ``--against
-DIR`` runs every configuration chosen once more on the driver of another
-checkout (``git worktree add /tmp/before <commit>``), interleaved with
-this one's: a change's effect on CPU is a few tenths of a percent, less
+driver with its timings off, for its CPU alone (the figure of docs/cpu.md);
+``--against DIR`` runs every configuration chosen once more on the driver
+of another checkout (``git worktree add /tmp/before <commit>``), interleaved
+with this one's: a change's effect on CPU is a few tenths of a percent, less
 than a busy machine moves from one window to the next.
 
 Targets (issue #12), about the driver at 100 Hz: its share p99 <= 0.1 ms and
@@ -132,33 +131,22 @@ class RunResult(NamedTuple):
     full_collection: float
 
 
-def run_once(config: Config, seconds: float, rate_hz: float, load: Any = None) -> RunResult:
-    """
-    Run one configuration for ``seconds`` after the warm-up; return its figures.
-
-    ``load``, if given, is started after the warm-up and stopped after the
-    measured seconds (anything with ``start()`` and ``stop()``: executor_load.py's).
-    """
+def run_once(config: Config, seconds: float, rate_hz: float) -> RunResult:
+    """Run one configuration for ``seconds`` after the warm-up; return its figures."""
     floor = bool(config.script)
     sim = SimProcess(rate_hz=rate_hz, streaming_at_start=floor)
     subscriber = SubscriberProcess() if config.subscribed else None
     node = None
-    loaded = False
     try:
         node = TimedNodeProcess(sim.port, config.script, config.timed, config.tree,
                                 **dict(config.params))
         time.sleep(WARM_UP_S)
-        if load is not None:
-            load.start()
-            loaded = True
         t0, cpu0 = time.time(), process_cpu_seconds(node.pid)
         time.sleep(seconds)
         t1, cpu1 = time.time(), process_cpu_seconds(node.pid)
         sim.silence()
         time.sleep(0.3)
     finally:
-        if loaded:
-            load.stop()
         if node is not None:
             node.stop()
         received = subscriber.stop() if subscriber is not None else []
