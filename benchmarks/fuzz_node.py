@@ -35,6 +35,7 @@ For 30 minutes and at least a million packets:
 """
 
 import argparse
+from collections import Counter
 import dataclasses
 import os
 from pathlib import Path
@@ -119,45 +120,6 @@ class Watch(Listener):
         return True
 
 
-@dataclasses.dataclass
-class FuzzResult:
-    """What the run did and found."""
-
-    seconds: float
-    rounds: int
-    packets: int
-    mutated: int
-    bytes_out: int
-    published: int
-    attacks: dict
-    findings: list[Finding]
-    restarts: int
-
-    @property
-    def ok(self) -> bool:
-        """Whether nothing was found."""
-        return not self.findings
-
-    def report(self) -> str:
-        """Say what was run and found."""
-        lines = ['== i3dmgx2 node fuzz: a hostile base station, end to end ==',
-                 f'{self.seconds / 60:.1f} min, {self.rounds} rounds ({self.restarts} node '
-                 f'restarts), {self.packets} packets through the station '
-                 f'({self.packets / max(self.seconds, 1e-9):.0f}/s), {self.mutated} of them '
-                 f'attacked, {self.bytes_out} bytes to the node, {self.published} messages '
-                 f'published',
-                 'attacks (phase/mode: count): ' + ', '.join(
-                     f'{k} {v}' for k, v in sorted(self.attacks.items()))]
-        lines.append(f'findings: {len(self.findings)}')
-        for f in self.findings[:50]:
-            lines.append(f'  {f.kind} at {f.time:.3f}: {f.detail}')
-            if f.evidence:
-                lines.append(f'    bytes before it ({len(f.evidence)}): '
-                             f'{f.evidence[-256:].hex()}')
-        lines.append('RESULT: ' + ('PASS' if self.ok else 'FAIL'))
-        return '\n'.join(lines)
-
-
 class NodeFuzz:
     """One run: the simulator, the station, the node, the rounds and the watchers."""
 
@@ -196,6 +158,13 @@ class NodeFuzz:
         node.close()
         self.node = None
 
+    def _restart_node(self, during: str) -> None:
+        """Stop the node with a SIGINT and start it again, liveness unchecked meanwhile."""
+        self._quiet_until = time.time() + 30.0
+        self._stop_node(during)
+        self._start_node()
+        self._quiet_until = time.time() + 8.0
+
     def _liveness(self) -> None:
         """Ask for a parameter every second; watch /diagnostics; note a dead process."""
         while not self._halt.wait(1.0):
@@ -230,23 +199,13 @@ class NodeFuzz:
                         rng.uniform(cfg.attack_max / 10, cfg.attack_max))
         restart = phase in ('quiet', 'data_rate', 'continuous') \
             or rng.random() < cfg.restart_share
+        station.arm(attack)
         if phase == 'shutdown':
-            station.arm(attack)
             time.sleep(rng.uniform(0.0, attack.seconds))
-            self._quiet_until = time.time() + 30.0
-            self._stop_node('during an attack')
-            self._start_node()
-            self._quiet_until = time.time() + 8.0
-        elif phase == 'streaming':
-            station.arm(attack)
-        elif restart:
-            station.arm(attack)
-            self._quiet_until = time.time() + 30.0
-            self._stop_node('while behaving')
-            self._start_node()
-            self._quiet_until = time.time() + 8.0
-        else:
-            station.arm(attack)
+            self._restart_node('during an attack')
+        elif restart and phase != 'streaming':
+            self._restart_node('while behaving')
+        elif phase != 'streaming':
             self._quiet_until = time.time() + 2.0
             station.unplug(rng.uniform(0.05, 0.5))
         # Let the attack happen (or not, if that phase never came), then behave.
@@ -259,8 +218,7 @@ class NodeFuzz:
             self._find('no stream', f'not streaming again {cfg.back_within:g} s after the '
                                     f'station behaved (attack {attack})', calm)
             if self.node is not None:
-                self._stop_node('after a failed recovery')
-                self._start_node()
+                self._restart_node('after a failed recovery')
             return
         # A stretch of good behaviour: every intact packet of it must be published.
         start = time.time()
@@ -275,9 +233,10 @@ class NodeFuzz:
                        f'{len(missing)} intact packets of a calm stretch not published after '
                        f'{attack}', missing[0])
 
-    def _check_published(self, upto: int) -> int:
-        """Check messages [checked, upto) against what the bytes allowed."""
+    def _check_published(self) -> None:
+        """Check the messages not checked yet against what the bytes allowed."""
         rows = self.watch.rows
+        upto = len(rows)
         station = self.station
         for t, key in rows[self._checked:upto]:
             if key not in station.oracle.allowed and key not in station.oracle.intact_keys:
@@ -287,10 +246,10 @@ class NodeFuzz:
                            + (f'the values of a real packet attacked by {mode!r}' if mode
                               else 'values the sensor never sent')
                            + f' ({VALUES.unpack(key)})', t)
-        return upto
+        self._checked = upto
 
-    def run(self) -> FuzzResult:
-        """Run rounds until the minutes (and packets, if asked) are done."""
+    def run(self) -> str:
+        """Run rounds until the minutes (and packets, if asked) are done; return the report."""
         cfg = self.cfg
         isolate_ros_domain()
         sim = PtySimulator(SimulatorConfig(address=cfg.address, seed=cfg.seed,
@@ -313,7 +272,7 @@ class NodeFuzz:
             while time.time() < end or (cfg.packets and self.station.packets_in < cfg.packets):
                 self._round()
                 rounds += 1
-                self._checked = self._check_published(len(self.watch.rows))
+                self._check_published()
                 if rounds % 20 == 0:
                     self.log(f'  {time.time() - began:6.0f} s: {rounds} rounds, '
                              f'{self.station.packets_in} packets, '
@@ -327,14 +286,29 @@ class NodeFuzz:
             self.watch.close()
             self.station.stop()
             sim.stop()
-        self._checked = self._check_published(len(self.watch.rows))
-        attacks: dict[str, int] = {}
-        for _, attack in self.station.attacks:
-            name = f'{attack.phase}/{attack.mode}'
-            attacks[name] = attacks.get(name, 0) + 1
-        return FuzzResult(time.time() - began, rounds, self.station.packets_in,
-                          self.station.packets_mutated, self.station.bytes_out,
-                          len(self.watch.rows), attacks, self.findings, self.restarts)
+        self._check_published()
+        return self.report(time.time() - began, rounds)
+
+    def report(self, seconds: float, rounds: int) -> str:
+        """Say what was run and found."""
+        station = self.station
+        attacks = Counter(f'{attack.phase}/{attack.mode}' for _, attack in station.attacks)
+        lines = ['== i3dmgx2 node fuzz: a hostile base station, end to end ==',
+                 f'{seconds / 60:.1f} min, {rounds} rounds ({self.restarts} node '
+                 f'restarts), {station.packets_in} packets through the station '
+                 f'({station.packets_in / max(seconds, 1e-9):.0f}/s), '
+                 f'{station.packets_mutated} of them attacked, {station.bytes_out} bytes to '
+                 f'the node, {len(self.watch.rows)} messages published',
+                 'attacks (phase/mode: count): ' + ', '.join(
+                     f'{k} {v}' for k, v in sorted(attacks.items()))]
+        lines.append(f'findings: {len(self.findings)}')
+        for f in self.findings[:50]:
+            lines.append(f'  {f.kind} at {f.time:.3f}: {f.detail}')
+            if f.evidence:
+                lines.append(f'    bytes before it ({len(f.evidence)}): '
+                             f'{f.evidence[-256:].hex()}')
+        lines.append('RESULT: ' + ('FAIL' if self.findings else 'PASS'))
+        return '\n'.join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -351,10 +325,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error('--minutes and --rate must be positive, --packets not negative')
     reserve_ros_domain(BENCHMARK_DOMAINS)
     os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '1')
-    result = NodeFuzz(FuzzConfig(minutes=args.minutes, packets=args.packets,
-                                 rate_hz=args.rate, seed=args.seed)).run()
-    print(result.report(), flush=True)
-    return 0 if result.ok else 1
+    fuzz = NodeFuzz(FuzzConfig(minutes=args.minutes, packets=args.packets,
+                               rate_hz=args.rate, seed=args.seed))
+    print(fuzz.run(), flush=True)
+    return 1 if fuzz.findings else 0
 
 
 if __name__ == '__main__':

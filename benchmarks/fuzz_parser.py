@@ -58,16 +58,6 @@ MAX_LEN = 2048
 # -- seeds ------------------------------------------------------------------------------------
 
 
-def real_records() -> list[bytes]:
-    """Return the real 0xCC records of the fixture, as record bytes."""
-    out = []
-    for raw in FIXTURE.read_text().splitlines():
-        line = raw.strip()
-        if line and not line.startswith('#'):
-            out.append(bytes.fromhex(line))
-    return out
-
-
 def seed_inputs() -> list[bytes]:
     """Return valid packets of every kind, real records, and some run together."""
     from i3dmgx2_driver.codec import layouts
@@ -84,7 +74,8 @@ def seed_inputs() -> list[bytes]:
             seeds.append(wireless_frame(ADDRESS, record, 1, 2))
         seeds.append(command_frame(ADDRESS, bytes((code,)) + layout.confirm
                                    + bytes(layout.request_size - 1 - len(layout.confirm))))
-    real = real_records()
+    lines = (line.strip() for line in FIXTURE.read_text().splitlines())
+    real = [bytes.fromhex(line) for line in lines if line and not line.startswith('#')]
     for record in real[::100]:
         seeds.append(wireless_frame(ADDRESS, record, 230, 170))
         seeds.append(wired_frame(record))
@@ -110,31 +101,25 @@ class Findings:
         self.engine = engine
         self.seen: dict[str, int] = {}
         self.inputs = 0
-        self.largest = 0
         self.start = time.monotonic()
         # libFuzzer ends the process itself at -max_total_time, without returning:
         # the summary is printed just before.
         self._summary_at = self.start + max(seconds - 1.0, 0.0)
-        self._progress_at = self.start + 60.0
         self._summarised = False
 
     def summary(self) -> str:
-        """One line: inputs, rate, largest input, violations."""
+        """One line: inputs, rate, violations."""
         elapsed = time.monotonic() - self.start
         return (f'{self.engine}: {self.inputs} inputs in {elapsed:.0f} s '
-                f'({self.inputs / max(elapsed, 1e-9):.0f}/s), largest {self.largest} bytes; '
+                f'({self.inputs / max(elapsed, 1e-9):.0f}/s); '
                 'violations: ' + (', '.join(f'{k} x{n}' for k, n in sorted(self.seen.items()))
                                   or 'none'))
 
     def test(self, data: bytes) -> None:
         """Check one input; save it if it breaks a property never broken before."""
         self.inputs += 1
-        self.largest = max(self.largest, len(data))
-        now = time.monotonic()
-        if now >= self._progress_at:
-            self._progress_at += 60.0
-            print(f'  progress: {self.summary()}', flush=True)
-        if self.engine == 'atheris' and now >= self._summary_at and not self._summarised:
+        if self.engine == 'atheris' and time.monotonic() >= self._summary_at \
+                and not self._summarised:
             self._summarised = True
             print(f'SUMMARY {self.summary()}', flush=True)
         try:
@@ -146,8 +131,6 @@ class Findings:
                 path = os.path.join(self.directory, f'{key}.bin')
                 with open(path, 'wb') as handle:
                     handle.write(data)
-                with open(path + '.txt', 'w') as handle:
-                    handle.write(f'{exc}\n')
                 print(f'\nFINDING {key}: {exc} -> {path}', flush=True)
 
 

@@ -321,26 +321,21 @@ def check_one_shot(data: bytes) -> list:
             sizes |= {layout.request_size, layout.record_size, layout.wired_size}
         for size in sorted(sizes):
             piece = tail[:size]
-            record = _one_shot('decode_record', commands.decode_record, piece)
-            if record is not None:
-                records.append(record)
-            packet = _one_shot('decode_data_packet', framing.decode_data_packet, piece)
-            if packet is not None:
-                records.append(packet.record)
-            record = _one_shot('decode_wired_record', framing.decode_wired_record, piece)
-            if record is not None:
-                records.append(record)
+            records += [
+                _one_shot('decode_record', commands.decode_record, piece),
+                getattr(_one_shot('decode_data_packet', framing.decode_data_packet, piece),
+                        'record', None),
+                _one_shot('decode_wired_record', framing.decode_wired_record, piece)]
             _one_shot('decode_command_packet', framing.decode_command_packet, piece)
             _one_shot('decode_command', commands.decode_command, piece)
         # Whatever length the frame's own length byte claims.
         if len(tail) >= 6:
             claimed = tail[:framing.HEADER_SIZE + tail[5] - 1 + framing.DATA_TRAILER_SIZE]
             packet = _one_shot('decode_data_packet', framing.decode_data_packet, claimed)
-            if packet is not None:
-                records.append(packet.record)
+            records.append(getattr(packet, 'record', None))
             claimed = tail[:framing.HEADER_SIZE + tail[5] - 1 + 2]
             _one_shot('decode_command_packet', framing.decode_command_packet, claimed)
-    return records
+    return [record for record in records if record is not None]
 
 
 def check_records(records: list) -> None:

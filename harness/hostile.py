@@ -104,13 +104,6 @@ class PacketMutator:
         self.held: list[bytes] = []
         #: The last replies seen (by echo byte), to replay unasked.
         self.replies: dict[int, bytes] = {}
-        self._any_piece = {'noise': self._noise, 'stop_mid_packet': self._stop_mid_packet,
-                           'answer_bytes': self._answer_bytes}
-        self._packet_only = {'bitflip': self._bitflip, 'truncate': self._truncate,
-                             'lying_length': self._lying_length,
-                             'chance_checksum': self._chance_checksum, 'burst': self._burst,
-                             'foreign': self._foreign, 'wrong_echo': self._wrong_echo,
-                             'unsolicited': self._unsolicited}
 
     def remember_reply(self, packet: bytes) -> None:
         """Keep a real reply of the station's address, by its echo byte."""
@@ -122,20 +115,22 @@ class PacketMutator:
         return held
 
     def mutate(self, piece: bytes, is_packet: bool, mode: str) -> bytes:
-        """Return what the hostile station sends instead of ``piece`` in attack ``mode``."""
-        any_piece = self._any_piece.get(mode)
-        if any_piece is not None:
-            return any_piece(piece, is_packet)
+        """
+        Return what the hostile station sends instead of ``piece`` in attack ``mode``.
+
+        A mode of :data:`MODES` is the method of its name; an unknown one passes the piece.
+        """
+        if mode == 'noise':
+            return b''  # nothing real gets through, only the station's noise between reads
+        if mode in ('stop_mid_packet', 'answer_bytes'):
+            return getattr(self, '_' + mode)(piece, is_packet)
         if not is_packet:
             rng = self.rng
             return piece if rng.random() < 0.5 else bytes((rng.choice(ANSWER_BYTES),))
-        packet_only = self._packet_only.get(mode)
+        packet_only = getattr(self, '_' + mode, None) if mode in MODES else None
         return packet_only(bytearray(piece)) if packet_only is not None else piece
 
     # -- any piece ---------------------------------------------------------------------------
-
-    def _noise(self, piece: bytes, is_packet: bool) -> bytes:
-        return b''  # nothing real gets through, only the station's noise between reads
 
     def _stop_mid_packet(self, piece: bytes, is_packet: bool) -> bytes:
         if self.held or not is_packet:
@@ -215,35 +210,26 @@ class PublishOracle:
         self.address = address
         #: The command byte of the record the node streams and publishes.
         self.stream = stream
-        self._reference = SensorStreamParser(address=address)
+        #: Finds the packets in what the node is given; afresh whenever the node (re)opens the
+        #: port, as the node's own parser; told of its pings (their answer starts no packet).
+        self.reference = SensorStreamParser(address=address)
         #: Keys a fresh parser found in the bytes the node was given: allowed to be published.
         self.allowed: set[bytes] = set()
         #: (time, key) of real records of the node's stream from our address, forwarded
         #: whole while behaving: each must be published.
         self.intact: list[tuple[float, bytes]] = []
+        #: Keys of real packets of ours sent whole (now, delayed or surrounded).
         self.intact_keys: set[bytes] = set()
         #: Keys of real packets from our address that were attacked (never sent intact).
         self.attacked_keys: dict[bytes, str] = {}
 
-    def port_opened(self) -> None:
-        """Start the reference parser afresh: the node (re)opened the port, so did its parser."""
-        self._reference = SensorStreamParser(address=self.address)
-
-    def expect_ping(self) -> None:
-        """Tell the reference parser a ping went out: its one-byte answer starts no packet."""
-        self._reference.expect_ping()
-
     def given(self, data: bytes) -> None:
         """Note what the node was given: every record of our address in it is allowed."""
-        for event in self._reference.feed(data):
+        for event in self.reference.feed(data):
             if isinstance(event, DataPacket) and event.address == self.address:
                 values = imu_values(event.record)
                 if values is not None:
                     self.allowed.add(values[0])
-
-    def sent_whole(self, key: bytes) -> None:
-        """Allow a real packet of ours sent whole (now, delayed or surrounded)."""
-        self.intact_keys.add(key)
 
     def attacked(self, key: bytes, mode: str) -> None:
         """Note a real packet of ours that attack ``mode`` mutated: it never went out intact."""
@@ -326,7 +312,6 @@ class HostileStation(threading.Thread):
         self.packets_in = 0
         self.packets_mutated = 0
         self.bytes_out = 0
-        self.opens = 0
         #: Recent bytes given to the node (time, bytes), for a finding's evidence.
         self.recent: list[tuple[float, bytes]] = []
         self._resume_at = 0.0
@@ -398,8 +383,8 @@ class HostileStation(threading.Thread):
                     data = os.read(self._up, 4096)
                 except OSError:
                     data = b''
-                if data:
-                    self._from_device(data, now)
+                for piece in self._split.feed(data):
+                    self._piece(piece, now)
             self._tick(now)
 
     def _from_host(self, master: int) -> None:
@@ -412,8 +397,7 @@ class HostileStation(threading.Thread):
         if data[0] != TIOCPKT_DATA:
             if data[0] & TIOCPKT_FLUSHREAD:
                 # The node (re)opened the port: its parser starts afresh, so does ours.
-                self.oracle.port_opened()
-                self.opens += 1
+                self.oracle.reference = SensorStreamParser(address=self.address)
             return
         payload = data[1:]
         for event in self._host.feed(payload):
@@ -421,7 +405,7 @@ class HostileStation(threading.Thread):
             if isinstance(event, (CommandPacket, RawCommand)) and event.command:
                 code = event.command[0]
             if code == 0x02:
-                self.oracle.expect_ping()
+                self.oracle.reference.expect_ping()
             phase = _PHASE_OF.get(code)
             if phase is not None:
                 self._enter(phase)
@@ -436,10 +420,6 @@ class HostileStation(threading.Thread):
             self.phase = phase
             if self.armed is not None and self.armed.phase == phase:
                 self._start(self.armed)
-
-    def _from_device(self, data: bytes, now: float) -> None:
-        for piece in self._split.feed(data):
-            self._piece(piece, now)
 
     def _tick(self, now: float) -> None:
         """Between reads: noise while that attack lasts, the held bytes once it ends."""
@@ -471,20 +451,17 @@ class HostileStation(threading.Thread):
             except Exception:  # noqa: B902 - the simulator's own faults: a damaged packet
                 record = None
             if ours and self.phase == 'continuous' and key is not None:
-                with self._lock:
-                    self.phase = 'streaming'
-                    if self.armed is not None and self.armed.phase == 'streaming':
-                        self._start(self.armed)
+                self._enter('streaming')
         if not self.hostile:
             if key is not None and ours:
-                self.oracle.sent_whole(key)
+                self.oracle.intact_keys.add(key)
             written = self._give(piece, now)
             if key is not None and ours:
                 self.oracle.owed(piece, key, written, now)
             return
         if key is not None and ours:
             if self.attack.mode in KEEPS_PACKET:
-                self.oracle.sent_whole(key)  # delayed or surrounded, but sent whole
+                self.oracle.intact_keys.add(key)  # delayed or surrounded, but sent whole
             else:
                 self.oracle.attacked(key, self.attack.mode)
         self.packets_mutated += is_packet
