@@ -42,13 +42,11 @@ import threading
 import time
 from typing import Any, ClassVar, NamedTuple
 
-from i3dmgx2_driver.lifetime import StopSignal
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: How ``NodeProcess`` starts the node from the source tree, as ``ros2 run`` does.
@@ -220,50 +218,6 @@ class NodeProcess:
 
 # -- helper processes that save JSON: the simulator, a subscriber ----------------------------
 
-def stop_on_signal_or_eof() -> StopSignal:
-    """
-    Return an event set by SIGINT, SIGTERM or the end of standard input.
-
-    The helper processes stop on any of them, so a run that dies (and closes
-    their stdin) never leaves them running. A :class:`StopSignal`, not a
-    ``threading.Event``, whose ``set()`` in a signal handler can wait for
-    good on the lock of the ``wait()`` it interrupted (lifetime.py).
-    """
-    stop = StopSignal().install((signal.SIGINT, signal.SIGTERM))
-
-    def watch_stdin() -> None:
-        sys.stdin.read()
-        stop.set()
-
-    threading.Thread(target=watch_stdin, daemon=True).start()
-    return stop
-
-
-def start_helper_node(name: str) -> tuple[StopSignal, Any]:
-    """
-    Start ROS in a helper process and make its node; return (stop event, node).
-
-    rclpy's own signal handlers stay off: SIGINT, SIGTERM or the end of
-    standard input set the event instead (:func:`stop_on_signal_or_eof`), so
-    that the helper saves what it gathered before it exits (:func:`spin_until`).
-    """
-    stop = stop_on_signal_or_eof()
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    return stop, rclpy.create_node(name)
-
-
-def spin_until(stop: StopSignal, executor: Any, node: Any, save: Any) -> None:
-    """Spin ``executor`` until ``stop`` is set; then ``save()`` and tear ROS down."""
-    try:
-        while not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
-    finally:
-        save()
-        executor.shutdown(timeout_sec=0.5)
-        node.destroy_node()
-        rclpy.try_shutdown()
-
-
 class ChildProcess:
     """A helper process that prints a line when ready and saves JSON when stopped."""
 
@@ -382,10 +336,9 @@ class SubscriberProcess(ChildProcess):
     ``values``: each row also holds the topic, frame_id and angular velocity.
     """
 
-    def __init__(self, topic: str = 'imu/raw_data', values: bool = False,
-                 topics: Sequence[str] = ()) -> None:
+    def __init__(self, values: bool = False, topics: Sequence[str] = ()) -> None:
         argv = [sys.executable, '-m', 'harness.subscriber']
-        for name in topics or (topic,):
+        for name in topics:
             argv += ['--topic', name]
         super().__init__(argv + (['--values'] if values else []), 'ready')
         self.rows: list[tuple[int, int, float]] = []

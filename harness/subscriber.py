@@ -27,12 +27,16 @@ Usage: ``python -m harness.subscriber --out ROWS.json``; started by
 
 import argparse
 import json
+import signal
 import sys
+import threading
 import time
 
-from harness.processes import spin_until, start_helper_node
+from i3dmgx2_driver.lifetime import StopSignal
+import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
 
 
@@ -42,11 +46,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', required=True, help='where to write the rows (JSON)')
     parser.add_argument('--topic', action='append',
                         help='a topic to subscribe to (again: several; default imu/raw_data)')
-    parser.add_argument('--depth', type=int, default=5000)
     parser.add_argument('--values', action='store_true',
                         help="also save each message's topic, frame_id and angular velocity")
     args = parser.parse_args(argv)
-    stop, node = start_helper_node('i3dmgx2_benchmark_subscriber')
+    # SIGINT, SIGTERM or the end of standard input (a run that dies closes it) stop it, so
+    # that it never outlives the run and saves what it gathered: rclpy's own handlers stay
+    # off. A StopSignal, not a threading.Event, whose set() in a signal handler can wait for
+    # good on the lock of the wait() it interrupted (lifetime.py).
+    stop = StopSignal().install((signal.SIGINT, signal.SIGTERM))
+
+    def watch_stdin() -> None:
+        sys.stdin.read()
+        stop.set()
+
+    threading.Thread(target=watch_stdin, daemon=True).start()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node('i3dmgx2_benchmark_subscriber')
     rows: list[tuple[int, int, float]] = []
     clock = time.time
 
@@ -60,19 +75,22 @@ def main(argv: list[str] | None = None) -> int:
         else:
             rows.append((stamp.sec, stamp.nanosec, now))
 
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=args.depth,
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                      reliability=ReliabilityPolicy.RELIABLE)
     for topic in args.topic or ['imu/raw_data']:
         node.create_subscription(Imu, topic, lambda msg, t=topic: on_message(msg, t), qos)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     print('ready', flush=True)
-
-    def save() -> None:
+    try:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+    finally:
         with open(args.out, 'w') as handle:
             json.dump(rows, handle)
-
-    spin_until(stop, executor, node, save)
+        executor.shutdown(timeout_sec=0.5)
+        node.destroy_node()
+        rclpy.try_shutdown()
     return 0
 
 
