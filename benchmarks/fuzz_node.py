@@ -125,7 +125,6 @@ class NodeFuzz:
 
     def __init__(self, cfg: FuzzConfig) -> None:
         self.cfg = cfg
-        self.log = cfg.log or (lambda text: None)
         self.rng = random.Random(cfg.seed)
         self.findings: list[Finding] = []
         self.node: NodeProcess | None = None
@@ -134,9 +133,7 @@ class NodeFuzz:
 
     def _find(self, kind: str, detail: str, t: float | None = None) -> None:
         t = time.time() if t is None else t
-        finding = Finding(kind, t, detail, self.station.evidence(t))
-        self.findings.append(finding)
-        self.log(f'FINDING {kind}: {detail}')
+        self.findings.append(Finding(kind, t, detail, self.station.evidence(t)))
 
     def _start_node(self) -> None:
         self.node = NodeProcess({'port': self.station.path, 'address': self.cfg.address,
@@ -273,11 +270,6 @@ class NodeFuzz:
                 self._round()
                 rounds += 1
                 self._check_published()
-                if rounds % 20 == 0:
-                    self.log(f'  {time.time() - began:6.0f} s: {rounds} rounds, '
-                             f'{self.station.packets_in} packets, '
-                             f'{len(self.watch.rows)} published, '
-                             f'{len(self.findings)} findings')
         finally:
             self._halt.set()
             if self.node is not None:
@@ -292,7 +284,7 @@ class NodeFuzz:
     def report(self, seconds: float, rounds: int) -> str:
         """Say what was run and found."""
         station = self.station
-        attacks = Counter(f'{attack.phase}/{attack.mode}' for _, attack in station.attacks)
+        attacks = Counter(f'{attack.phase}/{attack.mode}' for attack in station.attacks)
         lines = ['== i3dmgx2 node fuzz: a hostile base station, end to end ==',
                  f'{seconds / 60:.1f} min, {rounds} rounds ({self.restarts} node '
                  f'restarts), {station.packets_in} packets through the station '

@@ -50,8 +50,7 @@ try:  # atheris is optional
 except ImportError:
     atheris = None
 
-REPO = Path(__file__).resolve().parents[1]
-FIXTURE = REPO / 'test' / 'fixtures' / 'gx2_real_0xcc_records.txt'
+FIXTURE = Path(__file__).resolve().parents[1] / 'test' / 'fixtures' / 'gx2_real_0xcc_records.txt'
 #: The longest input (bytes).
 MAX_LEN = 2048
 

@@ -289,7 +289,6 @@ class HostileStation(threading.Thread):
                  stream: int = streams.DEFAULT.code) -> None:
         super().__init__(name='hostile-station', daemon=True)
         self.address = address
-        self.stream = stream
         self.rng = random.Random(seed)
         self.port = PtyPort()
         self.path = self.port.create()
@@ -308,13 +307,12 @@ class HostileStation(threading.Thread):
         self.armed: Attack | None = None
         self.hostile_until = 0.0
         self.attack: Attack | None = None
-        self.attacks: list[tuple[float, Attack]] = []
+        self.attacks: list[Attack] = []
         self.packets_in = 0
         self.packets_mutated = 0
         self.bytes_out = 0
         #: Recent bytes given to the node (time, bytes), for a finding's evidence.
         self.recent: list[tuple[float, bytes]] = []
-        self._resume_at = 0.0
 
     def _open_upstream(self) -> int | None:
         try:
@@ -337,9 +335,7 @@ class HostileStation(threading.Thread):
         self.attack = attack
         self.armed = None
         self.hostile_until = time.time() + attack.seconds
-        self.attacks.append((time.time(), attack))
-        if attack.mode == 'stop_mid_packet':
-            self._resume_at = self.hostile_until
+        self.attacks.append(attack)
 
     @property
     def hostile(self) -> bool:
@@ -436,34 +432,30 @@ class HostileStation(threading.Thread):
 
     def _piece(self, piece: bytes, now: float) -> None:
         is_packet = len(piece) > 1
-        ours = False
-        key = None
+        mine = None  # the key of a real record from our address
         if is_packet:
             self.packets_in += 1
-            address = (piece[3] << 8) | piece[4]
-            ours = address == self.address
+            ours = (piece[3] << 8) | piece[4] == self.address
             try:
-                record = decode_data_packet(piece).record
-                values = imu_values(record)
-                key = values[0] if values is not None else None
-                if ours and record is not None:
+                values = imu_values(decode_data_packet(piece).record)
+                if ours:
                     self._mutator.remember_reply(piece)
             except Exception:  # noqa: B902 - the simulator's own faults: a damaged packet
-                record = None
-            if ours and self.phase == 'continuous' and key is not None:
+                values = None
+            mine = values[0] if ours and values is not None else None
+            if mine is not None and self.phase == 'continuous':
                 self._enter('streaming')
         if not self.hostile:
-            if key is not None and ours:
-                self.oracle.intact_keys.add(key)
+            if mine is not None:
+                self.oracle.intact_keys.add(mine)
             written = self._give(piece, now)
-            if key is not None and ours:
-                self.oracle.owed(piece, key, written, now)
+            if mine is not None:
+                self.oracle.owed(piece, mine, written, now)
             return
-        if key is not None and ours:
-            if self.attack.mode in KEEPS_PACKET:
-                self.oracle.intact_keys.add(key)  # delayed or surrounded, but sent whole
-            else:
-                self.oracle.attacked(key, self.attack.mode)
+        if mine is not None and self.attack.mode in KEEPS_PACKET:
+            self.oracle.intact_keys.add(mine)  # delayed or surrounded, but sent whole
+        elif mine is not None:
+            self.oracle.attacked(mine, self.attack.mode)
         self.packets_mutated += is_packet
         self._give(self._mutator.mutate(piece, is_packet, self.attack.mode), now)
 
@@ -486,6 +478,6 @@ class HostileStation(threading.Thread):
             del self.recent[:2000]
         return written
 
-    def evidence(self, t: float, before: float = 0.5) -> bytes:
-        """Return the bytes given to the node in the ``before`` s up to ``t``."""
-        return b''.join(d for when, d in list(self.recent) if t - before <= when <= t)
+    def evidence(self, t: float) -> bytes:
+        """Return the bytes given to the node in the half second up to ``t``."""
+        return b''.join(d for when, d in list(self.recent) if t - 0.5 <= when <= t)
