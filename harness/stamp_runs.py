@@ -211,14 +211,17 @@ def run(event: Event | None, before: float = 3.0, after: float = 4.0,
     return Run(rows, truth, event_time, clock, log.lines, reads, wire)
 
 
+def _known(result: Run):
+    """Yield (true sample time, row, read) of every record the simulator sampled."""
+    for row, read in zip(result.rows, result.reads, strict=True):
+        sample_time = result.truth.get(row[0])
+        if sample_time is not None:
+            yield sample_time, row, read
+
+
 def errors(result: Run) -> list[tuple[float, float]]:
     """Return (true sample time, stamp error on the stepped system clock) in stamping order."""
-    out = []
-    for record, stamp, step in result.rows:
-        sample_time = result.truth.get(record)
-        if sample_time is not None:
-            out.append((sample_time, stamp - step - sample_time))
-    return out
+    return [(t, stamp - step - t) for t, (_, stamp, step), _ in _known(result)]
 
 
 def read_errors(result: Run) -> list[float]:
@@ -227,13 +230,8 @@ def read_errors(result: Run) -> list[float]:
 
     How late the host read it: the most a fresh fit's first stamps may be off.
     """
-    out = []
-    rows_and_reads = zip(result.rows, result.reads, strict=True)
-    for (record, _, step), (_, read_mono, offset) in rows_and_reads:
-        sample_time = result.truth.get(record)
-        if sample_time is not None:
-            out.append(read_mono + offset - step - sample_time)
-    return out
+    return [read_mono + offset - step - t
+            for t, (_, _, step), (_, read_mono, offset) in _known(result)]
 
 
 def restamp(result: Run) -> Run:
