@@ -279,8 +279,9 @@ def node_rows() -> list[Result]:
         settled = [e for t, e in node_errors(source) if t >= first]
         mean = statistics.fmean(settled) if settled else float('nan')
         rows.append(Result(
-            f'through the node: std dev, {source} time, 0-5 ms random read delay, after the '
-            f'first {first:g} s', f'{std_dev(settled) * 1e6:.1f} us (n={len(settled)}); '
+            f'through the node: std dev, {source} time, 0-5 ms random read delay, '
+            + (f'after the first {first:g} s' if first else 'all samples'),
+            f'{std_dev(settled) * 1e6:.1f} us (n={len(settled)}); '
             f'mean offset {mean * 1e3:+.3f} ms', '<= 50 us' if source == 'device' else '',
             std_dev(settled) <= 50e-6 if source == 'device' else None))
     return rows
