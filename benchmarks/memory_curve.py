@@ -87,8 +87,6 @@ class Row(NamedTuple):
     threads: int
 
 
-#: The CSV's columns.
-COLUMNS = Row._fields
 #: The figures a row samples: (field, name, scale, unit) as the slopes and the plot say them.
 FIGURES = (('anon_kib', 'anonymous RSS', 1 / 1024, 'MiB'),
            ('descriptors', 'descriptors', 1.0, ''),
@@ -113,18 +111,17 @@ def inflict(sim: PtySimulator, kind: str) -> None:
         sim.set_faults(FaultConfig())
 
 
-class Messages:
-    """Counts the node's Imu messages, received by a subscriber in this process."""
+class Messages(Listener):
+    """Counts the node's Imu messages, received (best effort, as sensor data) in this process."""
 
-    def __init__(self, listener: Listener, topic: str = 'imu/raw_data') -> None:
-        from rclpy.qos import qos_profile_sensor_data
+    def __init__(self) -> None:
         from sensor_msgs.msg import Imu
 
         self.count = 0
         self._changed = threading.Condition()
-        listener.node.create_subscription(Imu, topic, self._on_message, qos_profile_sensor_data)
+        super().__init__({'imu/raw_data': Imu}, reliable=False, depth=5)
 
-    def _on_message(self, _msg: object) -> None:
+    def _store(self, topic: str, msg: object) -> None:
         with self._changed:
             self.count += 1
             self._changed.notify_all()
@@ -135,31 +132,21 @@ class Messages:
             return self._changed.wait_for(lambda: self.count >= count + BACK_AFTER, timeout)
 
 
-class Run(NamedTuple):
-    """What a run is asked to do."""
-
-    minutes: float
-    faults: int | None
-    every: float
-    managed: bool
-
-
-def run(plan: Run) -> list[Row]:
-    """Stream ``warm_up`` s, then fault after fault until the end; return the rows."""
+def run(minutes: float, most: int | None, every: float, managed: bool) -> list[Row]:
+    """Stream ``WARM_UP_S``, then fault after fault (``most`` at most) until the end."""
     isolate_ros_domain()
     kinds = itertools.cycle(KINDS)
     rows: list[Row] = []
     command = (sys.executable, '-m', 'harness.instrumented_node') + (
-        ('--lifecycle',) if plan.managed else ())
+        ('--lifecycle',) if managed else ())
     with tempfile.TemporaryDirectory(prefix='i3dmgx2-memory-') as workdir, \
             PtySimulator(SimulatorConfig(address=ADDRESS, seed=3, rate_hz=100)) as sim, \
-            Listener({}) as listener:
+            Messages() as messages:
         # rclpy.init took SIGINT for its contexts: Ctrl-C stops the run again.
         signal.signal(signal.SIGINT, signal.default_int_handler)
-        messages = Messages(listener)
         env = ros_env({STATS_ENV: os.path.join(workdir, 'stats.json'), EVENTS_ENV: '0'})
         node = NodeProcess({'port': sim.port, 'address': ADDRESS}, command=command, env=env)
-        client = LifecycleClient(listener) if plan.managed else None
+        client = LifecycleClient(messages) if managed else None
         try:
             if client is not None and not (client.wait_ready(60.0) and client.change('configure')
                                            and client.change('activate')):
@@ -174,8 +161,7 @@ def run(plan: Run) -> list[Row]:
             next_row = start
             while True:
                 now = time.monotonic()
-                done = (plan.faults is not None and faults >= plan.faults) \
-                    or now - start >= plan.minutes * 60.0
+                done = (most is not None and faults >= most) or now - start >= minutes * 60.0
                 if now >= next_row or done:
                     sample, memory = process_sample(node.proc.pid), rss_kinds(node.proc.pid)
                     if sample is None or memory is None:
@@ -203,7 +189,7 @@ def run(plan: Run) -> list[Row]:
                     late += 1
                     print(f'fault {faults} ({kind}): the stream was not back within '
                           f'{BACK_WITHIN:g} s', flush=True)
-                time.sleep(max(0.0, plan.every - (time.monotonic() - began)))
+                time.sleep(max(0.0, every - (time.monotonic() - began)))
         finally:
             node.stop()
             node.close()
@@ -240,30 +226,24 @@ def slopes(rows: list[Row]) -> list[str]:
 def write_csv(path: str, rows: list[Row], label: str) -> None:
     """Write the rows, the run's label as a comment line first."""
     with open(path, 'w') as out:
-        out.write(f'# {label}\n{",".join(COLUMNS)}\n')
+        out.write(f'# {label}\n{",".join(Row._fields)}\n')
         for row in rows:
             out.write(f'{row.seconds:.1f},' + ','.join(str(v) for v in row[1:]) + '\n')
 
 
 def read_csv(path: str) -> tuple[str, list[Row]]:
     """Read what :func:`write_csv` wrote: (label, rows)."""
-    label, rows = os.path.basename(path), []
     with open(path) as source:
-        for line in source:
-            if line.startswith('#'):
-                label = line[1:].strip()
-            elif line.strip() and not line.startswith(COLUMNS[0]):
-                seconds, *counts = line.strip().split(',')
-                rows.append(Row(float(seconds), *(int(c) for c in counts)))
-    return label, rows
+        lines = [line.strip() for line in source if line.strip()]
+    label = lines[0][1:].strip() if lines[0].startswith('#') else os.path.basename(path)
+    return label, [Row(float(seconds), *map(int, counts)) for seconds, *counts in
+                   (line.split(',') for line in lines if line[0].isdigit())]
 
 
 def plot(runs: list[tuple[str, list[Row]]], output: str) -> None:
     """Draw the node's memory, descriptors and threads against the faults met, a line per run."""
     fig = agg_figure(figsize=(8, 7), dpi=90)
-    panels = [fig.add_subplot(len(FIGURES), 1, 1)]
-    panels += [fig.add_subplot(len(FIGURES), 1, k + 1, sharex=panels[0])
-               for k in range(1, len(FIGURES))]
+    panels = fig.subplots(len(FIGURES), 1, sharex=True)
     for label, rows in runs:
         faults = [r.faults for r in rows]
         colour = None
@@ -310,7 +290,7 @@ def main() -> None:
         if args.plot:
             plot(runs, args.plot)
         return
-    rows = run(Run(args.minutes, args.faults, args.every, args.managed))
+    rows = run(args.minutes, args.faults, args.every, args.managed)
     print('\n'.join(slopes(rows)))
     label = (f'managed node, a lifecycle cycle every {CYCLE_EVERY} faults'
              if args.managed else 'plain node')

@@ -43,7 +43,7 @@ import sys
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from harness.campaign_verdict import CampaignConfig  # noqa: E402, RUF100 - after the path
-from harness.long_soak import LongSoakConfig, run_campaign, run_long_soak  # noqa: E402, RUF100
+from harness.long_soak import LongSoak, LongSoakConfig, run_campaign  # noqa: E402, RUF100
 from harness.processes import BENCHMARK_DOMAINS, reserve_ros_domain  # noqa: E402, RUF100
 
 
@@ -64,11 +64,10 @@ def main(argv: list[str] | None = None) -> int:
     # heard by) tests running on the same machine.
     reserve_ros_domain(BENCHMARK_DOMAINS)
     if args.every_stream:
-        long_result = run_long_soak(LongSoakConfig(minutes=args.minutes, seed=args.seed))
-        print(long_result.report, flush=True)
-        return 0 if long_result.ok else 1
-    cfg = CampaignConfig(minutes=args.minutes, rate_hz=args.rate, seed=args.seed)
-    result = run_campaign(cfg)
+        result = LongSoak(LongSoakConfig(minutes=args.minutes, seed=args.seed)).run()
+    else:
+        result = run_campaign(CampaignConfig(minutes=args.minutes, rate_hz=args.rate,
+                                             seed=args.seed))
     print(result.report, flush=True)
     return 0 if result.ok else 1
 

@@ -29,30 +29,26 @@ and the node's counters are reconciled with what the simulator wrote
 (``campaign_verdict.py``: the rules, the checks and the report).
 
 Here: the pieces a faulted run stands on, the truth kept compact with the
-values the node would publish for it, the subscriber, the node process and
-its counters. The run itself is a leg of the long soak (``long_soak.py``,
-``run_campaign``).
+values the node would publish for it, the subscriber, the node's counters.
+The node processes and the run itself are the long soak's (``long_soak.py``;
+the campaign is one of its legs, ``run_campaign``).
 """
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 import json
 import struct
-import sys
 import threading
 import time
 
-from harness.campaign_verdict import CampaignConfig, FaultedNodeConfig, RunData, Sent
-from harness.fault_driver import FaultDriver
-from harness.instrumented_node import STATS_ENV
-from harness.processes import Listener, NodeProcess, ros_env
+from harness.campaign_verdict import Sent
+from harness.processes import Listener, NodeProcess
 from i3dmgx2_driver.codec.commands import decode_record
-from i3dmgx2_driver.codec.data_rate import RATE_DIVIDER_ADDRESS
 from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.framing import HEADER_SIZE
 from i3dmgx2_driver.codec.layouts import LAYOUTS
 from i3dmgx2_driver.codec.orientation import ENU
 from i3dmgx2_driver.codec.streams import STREAMS
-from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings, STANDARD_GRAVITY
+from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings
 from i3dmgx2_driver.simulator import PtySimulator
 from sensor_msgs.msg import Imu
 
@@ -63,18 +59,9 @@ VALUES = struct.Struct('<6d')
 QUATERNION = struct.Struct('<4d')
 #: The bytes that can each become a spurious parser event (ACK/start of packet, NACK).
 _MARKS = (0xAA, 0x21)
-#: The node as the campaign runs it, its counters written to a file.
-NODE_COMMAND = (sys.executable, '-m', 'harness.instrumented_node')
 
 
 # -- the truth, and the values the node publishes for it ---------------------------------------
-
-def imu_key(accel, rate) -> bytes:
-    """Pack what the node publishes for a 0xCC record, computed exactly as the node does."""
-    g = STANDARD_GRAVITY
-    return VALUES.pack(accel[0] * g, -accel[1] * g, -accel[2] * g,
-                       rate[0], -rate[1], -rate[2])
-
 
 def message_key(msg: Imu) -> bytes:
     """Pack a received message's acceleration and angular velocity, as the truth's keys are."""
@@ -188,11 +175,6 @@ class Subscriber(Listener):
         self.rows.append((message_key(msg), stamp, QUATERNION.pack(o.x, o.y, o.z, o.w),
                           time.time()))
 
-    @property
-    def count(self) -> int:
-        """Messages received so far."""
-        return len(self.rows)
-
     def take(self) -> list[tuple[bytes, int, bytes, float]]:
         """Return the messages received so far, and start afresh (a leg's)."""
         rows, self.rows = self.rows, []
@@ -201,9 +183,9 @@ class Subscriber(Listener):
     def wait_count(self, count: int, timeout: float) -> bool:
         """Wait until ``count`` messages have come; return whether they did."""
         deadline = time.monotonic() + timeout
-        while self.count < count and time.monotonic() < deadline:
+        while len(self.rows) < count and time.monotonic() < deadline:
             time.sleep(0.05)
-        return self.count >= count
+        return len(self.rows) >= count
 
     def wait_publisher(self, node: NodeProcess, topic: str, timeout: float = 60.0) -> None:
         """Wait until this subscriber's node knows the node's publisher of ``topic``."""
@@ -216,30 +198,7 @@ class Subscriber(Listener):
             time.sleep(0.1)
 
 
-# -- the node process and its counters ---------------------------------------------------------
-
-def node_params(cfg: FaultedNodeConfig, port: str, stream: str, data_rate: float,
-                topic: str = '/imu/raw_data') -> dict[str, object]:
-    """
-    Return the node's parameters for a faulted run.
-
-    The run's timeouts, and a reliable, deep history on its Imu topic: a
-    message lost on the way to the subscriber would read as one the node
-    never published.
-    """
-    qos = f'qos_overrides.{topic}.publisher'
-    return {'port': port, 'address': cfg.address, 'read_timeout': cfg.read_timeout,
-            'reconnect_interval': cfg.reconnect_interval, f'{qos}.depth': 1000,
-            f'{qos}.reliability': 'reliable', 'temperature_period': cfg.temperature_period,
-            'stream': stream, 'data_rate': float(data_rate)}
-
-
-def start_node(params: dict[str, object], stats_path: str, lifecycle: bool = False,
-               extra_args: tuple[str, ...] = ()) -> NodeProcess:
-    """Start the instrumented node (the managed one with ``lifecycle``), its counters to a file."""
-    return NodeProcess(params, extra_args, env=ros_env({STATS_ENV: stats_path}),
-                       command=NODE_COMMAND + (('--lifecycle',) if lifecycle else ()))
-
+# -- the node's counters ---------------------------------------------------------------------
 
 def read_counters(path: str, done: Callable[[dict], bool], timeout: float) -> dict:
     """
@@ -260,22 +219,3 @@ def read_counters(path: str, done: Callable[[dict], bool], timeout: float) -> di
             break
         time.sleep(0.1)
     return got
-
-
-def run_data(cfg: CampaignConfig, sim: PtySimulator, driver: FaultDriver, **rest) -> RunData:
-    """Return a run's data: what the simulator and the fault driver recorded, and ``rest``."""
-    with sim.lock:
-        divider = sim.sensor.eeprom.get(RATE_DIVIDER_ADDRESS, 512)
-    return RunData(cfg=cfg, events=list(driver.events), sim_stats=sim.stats.as_dict(),
-                   host_log=sim.host_log, unsafe_garbage_bytes=driver.unsafe_garbage_bytes,
-                   unsafe_garbage_bursts=driver.unsafe_garbage_bursts, divider=divider,
-                   power_ups=list(driver.power_ups), **rest)
-
-
-def close_all(steps: Iterable[Callable[[], object]], what: str) -> None:
-    """Run every step, each on its own: a failure in one must not leave a process behind."""
-    for step in steps:
-        try:
-            step()
-        except Exception as exc:  # keep cleaning up; say what went wrong
-            print(f'{what} cleanup: {type(exc).__name__}: {exc}', file=sys.stderr)

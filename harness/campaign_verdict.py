@@ -298,15 +298,6 @@ def _fresh_from(entry: dict) -> list[float]:
     return starts
 
 
-def windows_of(data: RunData) -> Windows:
-    """Return when the node read the port, until its deactivate, last port event or faults' end."""
-    node = data.node_stats or {}
-    end = data.end if data.end is not None else max(
-        [e[1] for e in node.get('port_events', [])] + [data.fault_end])
-    unplugs = [e.start for e in data.events if e.kind == 'unplug']
-    return Windows(node.get('port_events', []), unplugs, end, data.cfg.unread_margin)
-
-
 # -- the node's health -------------------------------------------------------------------------
 
 def health_checks(data: RunData) -> list[Check]:
@@ -406,17 +397,6 @@ class Coverage:
     code: int
 
 
-def is_ours(sent: Sent, address: int, code: int) -> bool:
-    """
-    Whether the node publishes this record when it reads it.
-
-    Records of another stream (a sensor power-cycled into its EEPROM
-    auto-start) are the node's to count, not to publish.
-    """
-    return sent.key is not None and sent.valid and sent.address == address \
-        and sent.code in (None, code)
-
-
 def claimed_by_polls(ours: list[Sent], host_log: list, code: int) -> set[int]:
     """
     Return the indices of the records taken as replies to polled requests.
@@ -440,7 +420,10 @@ def claimed_by_polls(ours: list[Sent], host_log: list, code: int) -> set[int]:
 def coverage(data: RunData, windows: Windows, seen: collections.Counter,
              code: int) -> Coverage:
     """Sort our records into must and may be published, and find the missing ones."""
-    ours = [s for s in data.truth if is_ours(s, data.cfg.address, code)]
+    # Records of another stream (a sensor power-cycled into its EEPROM auto-start) are
+    # the node's to count, not to publish.
+    ours = [s for s in data.truth if s.key is not None and s.valid
+            and s.address == data.cfg.address and s.code in (None, code)]
     claimed = claimed_by_polls(ours, data.host_log, code)
     must = [s for s in ours if windows.read(s.write_time) and s.index not in claimed]
     missing = [s for s in must if s.index not in seen]
@@ -449,12 +432,16 @@ def coverage(data: RunData, windows: Windows, seen: collections.Counter,
 
 
 def published_checks(data: RunData, matching: Matching, cover: Coverage) -> list[Check]:
-    """Judge what was published: every message once, each a valid record we had to send."""
+    """Judge what was published: every message once, in order, each a record we had to send."""
     address = data.cfg.address
     published = (data.node_stats or {}).get('stats', {}).get('published')
     unknown, invalid = matching.unknown, matching.invalid
     examples, duplicates = matching.invalid_examples, matching.duplicates
     must, missing = cover.must, cover.missing
+    matched = matching.matched
+    order = [sent.index for sent, _ in matched]
+    out_of_order = sum(1 for a, b in itertools.pairwise(order) if b <= a)
+    wrong_quat = sum(1 for sent, row in matched if row[2] != sent.quat)
     return [
         verdict('every message reached the subscriber', published == len(data.messages),
                 f'node published {published}, subscriber received {len(data.messages)}'),
@@ -472,15 +459,6 @@ def published_checks(data: RunData, matching: Matching, cover: Coverage) -> list
                 f'{len(must) - len(missing)} published, {len(missing)} missing'
                 + (f', e.g. #{", #".join(str(s.index) for s in missing[:5])}'
                    if missing else '')),
-        *order_checks(matching.matched)]
-
-
-def order_checks(matched: list[tuple[Sent, tuple]]) -> list[Check]:
-    """Judge the order the records arrived in, and their orientations."""
-    order = [sent.index for sent, _ in matched]
-    out_of_order = sum(1 for a, b in itertools.pairwise(order) if b <= a)
-    wrong_quat = sum(1 for sent, row in matched if row[2] != sent.quat)
-    return [
         verdict('published in the order sent', out_of_order == 0,
                 f'{out_of_order} messages arrived before one sent earlier'),
         verdict('orientation exact', wrong_quat == 0,
@@ -564,40 +542,10 @@ def stamp_verdict(matched: list[tuple[Sent, tuple]], cfg: CampaignConfig) -> tup
 
 # -- the node's counters against the truth -----------------------------------------------------
 
-class CounterRow(NamedTuple):
-    """One counter, its bounds, whether it lies within them, and the rule they come from."""
-
-    name: str
-    value: int | None
-    low: int
-    high: int
-    ok: bool
-    rule: str
-
-
-def bounds(name: str, value: int | None, low: int, high: int, rule: str) -> CounterRow:
-    """Put a counter against its bounds."""
-    ok = value is not None and low <= value <= high
-    return CounterRow(name, value, low, high, ok, rule)
-
-
-class Tally:
-    """Count truth records over those the node surely read, or over all it could have."""
-
-    def __init__(self, truth: list[Sent], windows: Windows, started: float) -> None:
-        self.truth = truth
-        self.windows = windows
-        #: Just before the node first opened the port: nothing written earlier can count.
-        self.first_open = windows.opens[0] - 0.1 if windows.opens else started
-
-    def written(self, s: Sent) -> bool:
-        """Whether the record was written after the node first opened the port."""
-        return s.write_time is not None and s.write_time >= self.first_open
-
-    def count(self, pred: Callable[[Sent], bool], only_read: bool) -> int:
-        """Count the records pred takes, read by the node, or written at all."""
-        return sum(1 for s in self.truth if pred(s)
-                   and (self.windows.read(s.write_time) if only_read else self.written(s)))
+def bounds(name: str, value: int | None, low: int, high: int, rule: str) -> Check:
+    """Put a counter against its bounds; a counter missing is out of them."""
+    return verdict(f'counter {name} reconciles', value is not None and low <= value <= high,
+                   f'{value} in [{low}, {high}]: {rule}')
 
 
 def fault_is(name: str) -> Callable[[Sent], bool]:
@@ -605,31 +553,46 @@ def fault_is(name: str) -> Callable[[Sent], bool]:
     return lambda s: s.fault == name
 
 
-def counter_rows(data: RunData, windows: Windows, matching: Matching) -> list[CounterRow]:
+def counter_rows(data: RunData, windows: Windows, matching: Matching) -> list[Check]:
     """Reconcile every counter the node keeps with the truth, in the report's order."""
-    tally = Tally(data.truth, windows, data.started)
+    address, sim = data.cfg.address, data.sim_stats
+    # Just before the node first opened the port: nothing written earlier can count.
+    first_open = windows.opens[0] - 0.1 if windows.opens else data.started
+
+    def written(s: Sent) -> bool:
+        return s.write_time is not None and s.write_time >= first_open
+
+    def count(pred: Callable[[Sent], bool], only_read: bool) -> int:
+        # The records pred takes, surely read by the node, or written at all.
+        return sum(1 for s in data.truth
+                   if pred(s) and (windows.read(s.write_time) if only_read else written(s)))
+
     parser = (data.node_stats or {}).get('parser', {})
+    nstats = (data.node_stats or {}).get('stats', {})
     corrupted = [s for s in data.truth
-                 if s.fault in ('checksum', 'length') and tally.written(s)]
-    marks_corrupt = sum(s.marks - 1 for s in corrupted)
+                 if s.fault in ('checksum', 'length') and written(s)]
     tail_marks = sum(s.marks for s in data.truth
                      if s.write_time is not None and windows.near_flush(s.write_time))
     # Bytes that may start a spurious ACK/NACK (the parser reports no answers from
     # inside a packet that failed its checksum or length): 0xAA/0x21 garbage, and
-    # the tail of a packet cut by a flush, whose start is gone.
+    # the tail of a packet cut by a flush, whose start is gone. Inside a corrupted
+    # packet, each may still fake a length failure.
     stray = data.unsafe_garbage_bytes + tail_marks
-    return [*frame_rows(parser, tally, data.cfg.address, stray + marks_corrupt),
-            *line_rows(data, tally, stray),
-            *node_rows(data, windows, matching)]
-
-
-def frame_rows(parser: dict, tally: Tally, address: int, stray_marks: int) -> list[CounterRow]:
-    """Reconcile the parser's frame counters; stray_marks may each fake a length failure."""
-    count = tally.count
-    c_read = count(fault_is('checksum'), True)
+    stray_marks = stray + sum(s.marks - 1 for s in corrupted)
+    pings_failed = sum(1 for h in data.host_log if h.outcome == 'ping failed')
+    acks_sent = [h for h in data.host_log if h.kind == 'packet']
+    acks_read = sum(1 for h in acks_sent if windows.read(h.time))
+    acks_all = sum(1 for h in acks_sent if h.time >= first_open)
+    bytes_read = sum(s.size for s in data.truth if windows.read(s.write_time))
+    skipped_low = sum(s.size - s.marks for s in data.truth
+                      if s.fault in ('checksum', 'length') and windows.read(s.write_time))
+    published_sorted = sorted((s for s, _ in matching.matched
+                               if s.index not in matching.duplicates),
+                              key=lambda s: s.index)
+    lost, resets, _ = expected_gaps(published_sorted, windows, data.divider, data.power_ups)
     return [
-        bounds('checksum_failures', parser.get('checksum_failures'), c_read,
-               count(fault_is('checksum'), False),
+        bounds('checksum_failures', parser.get('checksum_failures'),
+               count(fault_is('checksum'), True), count(fault_is('checksum'), False),
                'each checksum-corrupted packet the node read is one failure, no other'),
         bounds('length_failures', parser.get('length_failures'),
                count(fault_is('length'), True),
@@ -642,22 +605,7 @@ def frame_rows(parser: dict, tally: Tally, address: int, stray_marks: int) -> li
         bounds('good_frames', parser.get('good_frames'),
                count(lambda s: s.valid and s.address == address, True),
                count(lambda s: s.valid and s.address == address, False),
-               'each valid packet from our address read (stream and replies) is one, no other')]
-
-
-def line_rows(data: RunData, tally: Tally, stray: int) -> list[CounterRow]:
-    """Reconcile the parser's answer and byte counters with what the line carried."""
-    parser = (data.node_stats or {}).get('parser', {})
-    sim = data.sim_stats
-    windows = tally.windows
-    pings_failed = sum(1 for h in data.host_log if h.outcome == 'ping failed')
-    acks_sent = [h for h in data.host_log if h.kind == 'packet']
-    acks_read = sum(1 for h in acks_sent if windows.read(h.time))
-    acks_all = sum(1 for h in acks_sent if h.time >= tally.first_open)
-    bytes_read = sum(s.size for s in data.truth if windows.read(s.write_time))
-    skipped_low = sum(s.size - s.marks for s in data.truth
-                      if s.fault in ('checksum', 'length') and windows.read(s.write_time))
-    return [
+               'each valid packet from our address read (stream and replies) is one, no other'),
         bounds('acks', parser.get('acks'), max(0, acks_read - data.unsafe_garbage_bursts),
                acks_all + stray,
                'each ACK the base station wrote while the node read is one (less one per 0xAA-'
@@ -671,30 +619,12 @@ def line_rows(data: RunData, tally: Tally, stray: int) -> list[CounterRow]:
                'at least every packet written while the node read, at most all bytes written'),
         bounds('bytes_skipped', parser.get('bytes_skipped'), skipped_low,
                parser.get('bytes_in', 0),
-               'at least the bytes of the corrupted packets read, less their 0xAA/0x21 bytes')]
-
-
-def node_rows(data: RunData, windows: Windows, matching: Matching) -> list[CounterRow]:
-    """Reconcile the node's lost records and device resets with the published records."""
-    nstats = (data.node_stats or {}).get('stats', {})
-    published_sorted = sorted((s for s, _ in matching.matched
-                               if s.index not in matching.duplicates),
-                              key=lambda s: s.index)
-    lost, resets, _ = expected_gaps(published_sorted, windows, data.divider, data.power_ups)
-    return [
+               'at least the bytes of the corrupted packets read, less their 0xAA/0x21 bytes'),
         bounds('lost', nstats.get('lost'), lost, lost,
                f'timer steps between published records of one connection and one power-up, '
                f'as cycles of the divider ({data.divider}) less one: exact'),
         bounds('device_resets', nstats.get('device_resets'), resets, resets,
                'published records of one connection on either side of a sensor power-up: exact')]
-
-
-def counter_checks(rows: list[CounterRow], nstats: dict) -> list[Check]:
-    """Turn the rows into checks, and check that no record was dropped by a failed publish."""
-    return [*(verdict(f'counter {r.name} reconciles', r.ok,
-                      f'{r.value} in [{r.low}, {r.high}]: {r.rule}') for r in rows),
-            verdict('nothing left unpublished', nstats.get('unpublished', 0) == 0,
-                    f'{nstats.get("unpublished")} records dropped by a failed publish')]
 
 
 def expected_gaps(published: list[Sent], windows: Windows, divider: int,
@@ -739,44 +669,23 @@ def expected_gaps(published: list[Sent], windows: Windows, divider: int,
 
 # -- the report --------------------------------------------------------------------------------
 
-def report(data: RunData, cover: Coverage, windows: Windows, rows: list[CounterRow],
-           checks: list[Check]) -> str:
-    """Return the whole report, ending in its RESULT line."""
-    lines = run_lines(data, cover)
-    lines.append('')
-    lines += rule_lines(data, windows, rows)
-    lines.append('')
-    lines += check_lines(checks)
-    return '\n'.join(lines)
-
-
 def run_lines(data: RunData, cover: Coverage) -> list[str]:
-    """Say what ran, the faults, and what the node, its parser and the simulator counted."""
+    """Say what ran, the faults, and how many of our records the node had to publish."""
     cfg = data.cfg
-    node = data.node_stats or {}
-    nstats = node.get('stats', {})
-    sup = node.get('supervisor', {})
     kinds = collections.Counter(e.kind for e in data.events)
-    lines = ['== i3dmgx2 soak and fault campaign ==']
-    lines.append(f'fault phase {cfg.minutes:g} min at {rate_text(cfg)}, seed {cfg.seed}, '
-                 f'node read_timeout {cfg.read_timeout:g} s, reconnect_interval '
-                 f'{cfg.reconnect_interval:g} s, temperature_period '
-                 f'{cfg.temperature_period:g} s, then {cfg.quiet:g} s quiet')
-    lines.append('fault events: ' + ', '.join(f'{k} {n}' for k, n in sorted(kinds.items())))
-    lines.append(f'node: {sup.get("connections")} connections ({sup.get("reconnects")} '
-                 f'reconnects), {sup.get("stalls")} stalls, published {nstats.get("published")}, '
-                 f'lost {nstats.get("lost")}, device resets {nstats.get("device_resets")}, '
-                 f'other records {nstats.get("other_records")}')
-    lines.append(f'unsafe garbage (with 0xAA/0x21/0x02/0x07): {data.unsafe_garbage_bursts} '
-                 f'bursts, {data.unsafe_garbage_bytes} bytes')
-    lines.append(f'valid 0x{cover.code:02X} records from address {cfg.address}: '
-                 f'{cover.sent} written, {len(cover.must)} of them while the node read (must be '
-                 f'published once; the others may be lost: unplugged, flushed at a (re)open, '
-                 f'just before a close)')
-    return lines
+    return ['== i3dmgx2 soak and fault campaign ==',
+            f'fault phase {cfg.minutes:g} min at {rate_text(cfg)}, seed {cfg.seed}, '
+            f'node read_timeout {cfg.read_timeout:g} s, reconnect_interval '
+            f'{cfg.reconnect_interval:g} s, temperature_period '
+            f'{cfg.temperature_period:g} s, then {cfg.quiet:g} s quiet',
+            'fault events: ' + ', '.join(f'{k} {n}' for k, n in sorted(kinds.items())),
+            f'valid 0x{cover.code:02X} records from address {cfg.address}: '
+            f'{cover.sent} written, {len(cover.must)} of them while the node read (must be '
+            f'published once; the others may be lost: unplugged, flushed at a (re)open, '
+            f'just before a close)']
 
 
-def rule_lines(data: RunData, windows: Windows, rows: list[CounterRow]) -> list[str]:
+def rule_lines(data: RunData, windows: Windows, checks: list[Check]) -> list[str]:
     """State what "read" and "written" mean, then each counter against its bounds and rule."""
     lines = ['Reconciliation rules. "Read" means written whole at least '
              f'{windows.settle * 1e3:.0f} ms after the node last started its reader afresh '
@@ -787,24 +696,24 @@ def rule_lines(data: RunData, windows: Windows, rows: list[CounterRow]) -> list[
              f'first opened the port. A record written at any other time may be lost '
              f'legitimately (unplugged, flushed by the stop-and-flush at a (re)open, '
              f'unread at a close); stalls and drops are never written.']
-    for name, value, low, high, ok, rule in rows:
-        lines.append(f'  {"ok  " if ok else "FAIL"} {name:18s} {value!s:>9s} in '
-                     f'[{low}, {high}]  -- {rule}')
+    for c in checks:
+        if c.name.startswith('counter '):
+            name = c.name.removeprefix('counter ').removesuffix(' reconciles')
+            lines.append(f'  {"ok  " if c.ok else "FAIL"} {name}: {c.detail}')
     return lines
 
 
-def check_lines(checks: list[Check]) -> list[str]:
-    """List the checks (the counters' are in the rules already) and the result."""
-    lines = ['Checks:']
-    for item in checks:
-        if not item.name.startswith('counter '):
-            lines.append(f'  {"PASS" if item.ok else "FAIL"} {item.name}: {item.detail}')
+def check_lines(checks: list[Check], failed_only: bool = False) -> list[str]:
+    """
+    List the checks, then the result: every one but the counters' (in the rules already).
+
+    ``failed_only``: the failed ones only (the long soak's run to hundreds).
+    """
     failed = [c for c in checks if not c.ok]
-    lines.append('')
-    lines.append('RESULT: ' + ('PASS' if not failed else
-                               f'FAIL ({len(failed)} checks: '
-                               + ', '.join(c.name for c in failed) + ')'))
-    return lines
+    listed = failed if failed_only else [c for c in checks if not c.name.startswith('counter ')]
+    return [f'Checks ({len(checks) - len(failed)} of {len(checks)} passed):',
+            *(f'  {"PASS" if c.ok else "FAIL"} {c.name}: {c.detail}' for c in listed), '',
+            'RESULT: ' + ('PASS' if not failed else f'FAIL ({len(failed)} checks)')]
 
 
 # -- all of it ---------------------------------------------------------------------------------
@@ -821,15 +730,22 @@ def analyse(data: RunData, exempt: tuple[str, ...] = (),
     and reported with the others.
     """
     cfg = data.cfg
-    nstats = (data.node_stats or {}).get('stats', {})
-    windows = windows_of(data)
+    node = data.node_stats or {}
+    nstats = node.get('stats', {})
+    # Until the node's deactivate, its last port event, or the end of the faults.
+    end = data.end if data.end is not None else max(
+        [e[1] for e in node.get('port_events', [])] + [data.fault_end])
+    unplugs = [e.start for e in data.events if e.kind == 'unplug']
+    windows = Windows(node.get('port_events', []), unplugs, end, cfg.unread_margin)
     matching = match(data.truth, data.messages, cfg.address)
     cover = coverage(data, windows, matching.seen, parse_stream(cfg.stream).code)
-    rows = counter_rows(data, windows, matching)
     checks = [*health_checks(data),
               *published_checks(data, matching, cover),
               verdict('stamps true through every fault', *stamp_verdict(matching.matched, cfg)),
-              *counter_checks(rows, nstats), *more]
+              *counter_rows(data, windows, matching),
+              verdict('nothing left unpublished', nstats.get('unpublished', 0) == 0,
+                      f'{nstats.get("unpublished")} records dropped by a failed publish'),
+              *more]
     checks = [c for c in checks if c.name not in exempt]
     figures = {
         'sent': cover.sent,
@@ -837,4 +753,6 @@ def analyse(data: RunData, exempt: tuple[str, ...] = (),
         'received': len(data.messages), 'missing': len(cover.missing),
         'duplicated': len(matching.duplicates),
         'corrupted': matching.invalid + matching.unknown, 'events': len(data.events)}
-    return CampaignResult(checks, report(data, cover, windows, rows, checks), figures)
+    report = [*run_lines(data, cover), '', *rule_lines(data, windows, checks), '',
+              *check_lines(checks)]
+    return CampaignResult(checks, '\n'.join(report), figures)

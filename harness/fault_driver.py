@@ -30,6 +30,10 @@ from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator
 
 
+#: The stalls' lengths (s), each drawn uniformly from its range.
+STALLS = {'stall_short': (0.05, 0.25), 'stall': (0.4, 3.0), 'stall_long': (4.5, 7.0)}
+
+
 class FaultEvent(NamedTuple):
     """One fault the campaign injected."""
 
@@ -74,7 +78,10 @@ class FaultDriver(threading.Thread):
         self.rng.shuffle(first)
         while not self._halt.wait(self.rng.uniform(low, high)):
             kind = first.pop() if first else self.rng.choices(self._kinds, self._weights)[0]
-            getattr(self, '_' + kind)()
+            if kind in STALLS:
+                self._stall(kind, *STALLS[kind])
+            else:
+                getattr(self, '_' + kind)()
 
     def stop(self) -> None:
         """Stop injecting, then switch every fault off and plug the port back."""
@@ -110,21 +117,12 @@ class FaultDriver(threading.Thread):
         self.sim.replug()
         self.events.append(FaultEvent('unplug', start, time.time()))
 
-    def _stall_for(self, kind: str, low: float, high: float) -> None:
+    def _stall(self, kind: str, low: float, high: float) -> None:
         seconds = self.rng.uniform(low, high)
         start = time.time()
         self.sim.stall(seconds)
         self._sleep(seconds)
         self.events.append(FaultEvent(kind, start, start + seconds))
-
-    def _stall_short(self) -> None:
-        self._stall_for('stall_short', 0.05, 0.25)
-
-    def _stall(self) -> None:
-        self._stall_for('stall', 0.4, 3.0)
-
-    def _stall_long(self) -> None:
-        self._stall_for('stall_long', 4.5, 7.0)
 
     def _noise(self) -> None:
         rng = self.rng

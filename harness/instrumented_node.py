@@ -18,7 +18,7 @@ The real driver node, with its counters written to a JSON file for the soak camp
 Runs the driver node as ``ros2 run`` does (``i3dmgx2_driver.ros.main.run``),
 observed from outside, nothing of it replaced: a ROS timer that writes the
 node's ``stats``, the parser counters summed over every connection
-(``supervisor.status().parser``) and the supervisor's counters to the file
+(``supervisor.status().parser``) to the file
 named by ``$I3DMGX2_SOAK_STATS`` twice a second and once more after
 shutdown; the serial port's class, wrapped in this process only
 (:func:`observe_ports`), notes the time of every open, input flush and
@@ -140,17 +140,14 @@ def _snapshot(node, final: bool) -> dict:
     if core is None:
         return {'time': time.time(), 'final': final}
     stats = core.records.stats
-    device = core.supervisor.status()
     with _events_lock:
         events = list(_events)
     return {
         'time': time.time(),
         'final': final,
         'stats': {name: getattr(stats, name) for name in (
-            'published', 'unpublished', 'lost', 'other_records', 'device_resets')},
-        'parser': device.parser,
-        'supervisor': {'connections': device.connections, 'reconnects': device.reconnects,
-                       'stalls': device.stalls},
+            'published', 'unpublished', 'lost', 'device_resets')},
+        'parser': core.supervisor.status().parser,
         'port_events': events,
     }
 

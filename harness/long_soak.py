@@ -36,16 +36,9 @@ leg's end (shifted by one each round, so that every stream runs on both
 kinds). At the end every managed process is taken to a random state and shut
 down with SIGINT.
 
-Per leg and per stream: records sent, published, received by a subscriber
-in this process (another than the node's), missing, duplicated, corrupted,
-the longest time from the end of each fault to the next message received,
-the node's CPU; overall: the slopes. Targets: everything the campaign
-checks, data back within ``recovery_limit`` after every fault that ends,
-and (for runs of at least ``slope_min_minutes``) RSS slope below
-``rss_slope_limit`` MiB/h and descriptors and threads flat after the first
-``slope_after`` seconds. ``benchmarks/soak.py --every-stream`` runs it,
-``test/test_soak_every_stream.py`` for a minute in CI; the plan of the legs
-is checked there fast, without a simulator or a node.
+What it counts per leg and stream, and its targets (their limits in
+:class:`LongSoakConfig`): ``docs/soak.md``. ``benchmarks/soak.py
+--every-stream`` runs it, ``test/test_soak_every_stream.py`` for a minute in CI.
 
 The campaign (:func:`run_campaign`: ``benchmarks/soak.py`` without
 ``--every-stream``, ``test/test_soak_short.py``) is this run with one plain
@@ -55,27 +48,29 @@ campaign's settings: the same rig, the same leg, the same verdict.
 
 import bisect
 import dataclasses
+import itertools
 import os
 import random
 import shutil
+import sys
 import tempfile
 import time
 import traceback
 from typing import NamedTuple
 
-from harness.campaign import (
-    close_all, node_params, read_counters, run_data, start_node, Subscriber, TruthCollector,
-)
+from harness.campaign import read_counters, Subscriber, TruthCollector
 from harness.campaign_verdict import (
-    analyse, CampaignConfig, CampaignResult, Check, FaultedNodeConfig, rate_text, RunData,
+    analyse, CampaignConfig, CampaignResult, Check, check_lines, FaultedNodeConfig, rate_text,
+    RunData,
 )
 from harness.fault_driver import FaultDriver, FaultEvent
+from harness.instrumented_node import STATS_ENV
 from harness.process_sampler import Sampler, slope_per_hour
 from harness.processes import (
-    isolate_ros_domain, LifecycleClient, Listener, NodeProcess, process_cpu_seconds,
+    isolate_ros_domain, LifecycleClient, NodeProcess, process_cpu_seconds, ros_env,
 )
 from i3dmgx2_driver.codec import line_budget
-from i3dmgx2_driver.codec.data_rate import divider_for_rate
+from i3dmgx2_driver.codec.data_rate import divider_for_rate, RATE_DIVIDER_ADDRESS
 from i3dmgx2_driver.codec.streams import STREAMS
 from i3dmgx2_driver.device.timeouts import REQUEST_TIMEOUT
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
@@ -147,6 +142,11 @@ def plan_legs(cfg: LongSoakConfig) -> list[Leg]:
         legs.append(Leg(number, stream.name, int(rate * 10) / 10.0,
                         'plain' if plain else 'managed'))
     return legs
+
+
+def shared_fields(cfg: FaultedNodeConfig) -> dict:
+    """Return what every faulted run shares: ``FaultedNodeConfig``'s fields."""
+    return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(FaultedNodeConfig)}
 
 
 # -- the node processes ------------------------------------------------------------------------
@@ -228,43 +228,31 @@ class LegResult(NamedTuple):
 
 # -- the report: the tables and every check in one list ----------------------------------------
 
-@dataclasses.dataclass
-class SoakRecord:
-    """What the run gathered for the report: the legs run and the end's checks."""
-
-    #: How many legs were planned.
-    planned: int
-    results: list[LegResult] = dataclasses.field(default_factory=list)
-    #: Writes of the rate divider the simulated sensor received (None: the run broke off).
-    eeprom_writes: int | None = None
-    end_checks: list[Check] = dataclasses.field(default_factory=list)
-    end_lines: list[str] = dataclasses.field(default_factory=list)
-
-
 #: The figures of a leg the tables sum, in their columns' order.
 COLUMNS = ('sent', 'published', 'received', 'missing', 'duplicated', 'corrupted', 'events')
 
 
-def report(cfg: LongSoakConfig, run: SoakRecord, minutes: float, slope_checks: list[Check],
+def report(soak: 'LongSoak', minutes: float, slope_checks: list[Check],
            slope_lines: list[str]) -> CampaignResult:
     """Build the per-stream and overall table and the list of checks."""
+    cfg, results = soak.cfg, soak.results
     lines = ['== i3dmgx2 long soak: every stream, every fault, both node kinds ==',
-             f'{minutes:.1f} min, {len(run.results)} legs of {cfg.leg_minutes:g} min of faults '
+             f'{minutes:.1f} min, {len(results)} legs of {cfg.leg_minutes:g} min of faults '
              f'+ {cfg.quiet:g} s quiet, seed {cfg.seed}, 115200 baud, wireless; the simulator '
              f'honours the line rate', '',
              '| stream | legs | sent | published | received | missing | duplicated | '
              'corrupted | faults | longest recovery (s) | node CPU (%) |', '|' + '---|' * 11]
     checks = [Check(f'leg {r.leg.number} ({r.leg.kind} {r.leg.stream}): {c.name}', c.ok,
-                    c.detail) for r in run.results for c in r.checks]
+                    c.detail) for r in results for c in r.checks]
     # The longest wait for data after each kind of fault, over every leg.
     kinds: dict[str, float] = {}
-    for r in run.results:
+    for r in results:
         for kind, gap, _ in r.recoveries:
             if gap is not None:
                 kinds[kind] = max(kinds.get(kind, 0.0), gap)
-    groups = [(stream.name, [r for r in run.results if r.leg.stream == stream.name])
+    groups = [(stream.name, [r for r in results if r.leg.stream == stream.name])
               for stream in STREAMS]
-    for name, legs in [*groups, ('**all**', run.results)]:
+    for name, legs in [*groups, ('**all**', results)]:
         if not legs:
             continue
         sums = [sum(r.figures.get(column) or 0 for r in legs) for column in COLUMNS]
@@ -272,42 +260,27 @@ def report(cfg: LongSoakConfig, run: SoakRecord, minutes: float, slope_checks: l
                     default=0.0)
         seconds = sum(r.seconds for r in legs)
         cpu = (f'{sum(r.cpu_percent * r.seconds for r in legs) / seconds:.1f}'
-               if seconds and legs is not run.results else '')
+               if seconds and legs is not results else '')
         lines.append(f'| {name} | {len(legs)} | ' + ' | '.join(map(str, sums))
                      + f' | {worst:.3f} | {cpu} |')
     lines.append('')
     lines.append('longest wait for data after the end of each kind of fault: '
                  + ', '.join(f'{k} {v:.3f} s' for k, v in sorted(kinds.items())))
-    expected = eeprom_changes(run.results)
-    lines.append(f'EEPROM writes the simulated sensor received: {run.eeprom_writes} (one per '
+    # How many legs asked for another divider than the sensor had.
+    dividers = [FACTORY_DIVIDER, *(divider_for_rate(r.leg.rate_hz) for r in results)]
+    expected = sum(a != b for a, b in itertools.pairwise(dividers))
+    lines.append(f'EEPROM writes the simulated sensor received: {soak.eeprom_writes} (one per '
                  f'change of the divider between legs: {expected})')
-    if run.eeprom_writes is not None:
+    if soak.eeprom_writes is not None:
         checks.append(Check('EEPROM written once per change of setting, never otherwise',
-                            run.eeprom_writes == expected,
-                            f'{run.eeprom_writes} writes of 0xFCA2 received, {expected} changes '
+                            soak.eeprom_writes == expected,
+                            f'{soak.eeprom_writes} writes of 0xFCA2 received, {expected} changes '
                             f'of data_rate from leg to leg (factory divider {FACTORY_DIVIDER})'))
-    lines += ['', *slope_lines, *run.end_lines]
-    checks += slope_checks + run.end_checks
-    checks.append(Check('every leg ran', len(run.results) == run.planned,
-                        f'{len(run.results)} of {run.planned} legs'))
-    failed = [c for c in checks if not c.ok]
-    lines.append('')
-    lines.append('Checks failed:' if failed else f'All {len(checks)} checks passed.')
-    for c in failed:
-        lines.append(f'  FAIL {c.name}: {c.detail}')
-    lines.append('')
-    lines.append('RESULT: ' + ('PASS' if not failed else f'FAIL ({len(failed)} checks)'))
+    checks += slope_checks + soak.end_checks
+    checks.append(Check('every leg ran', len(results) == len(soak.legs),
+                        f'{len(results)} of {len(soak.legs)} legs'))
+    lines += ['', *slope_lines, *soak.end_lines, '', *check_lines(checks, failed_only=True)]
     return CampaignResult(checks, '\n'.join(lines))
-
-
-def eeprom_changes(results: list[LegResult]) -> int:
-    """Return how many legs asked for another divider than the sensor had."""
-    changes, divider = 0, FACTORY_DIVIDER
-    for r in results:
-        wanted = divider_for_rate(r.leg.rate_hz)
-        changes += wanted != divider
-        divider = wanted
-    return changes
 
 
 def fit_slopes(cfg: LongSoakConfig, sampler: Sampler, processes: list[tuple[str, str]],
@@ -392,7 +365,12 @@ class LongSoak:
         self.sim: PtySimulator | None = None
         self.collector: TruthCollector | None = None
         self.subscriber: Subscriber | None = None
-        self.record = SoakRecord(planned=len(self.legs))
+        self.results: list[LegResult] = []
+        #: Writes of the rate divider the simulated sensor received (None: the run broke off).
+        self.eeprom_writes: int | None = None
+        #: The checks and lines of the end: the managed nodes' shutdown, the run broken off.
+        self.end_checks: list[Check] = []
+        self.end_lines: list[str] = []
         self.rng = random.Random(cfg.seed * 104729 + 3)
 
     def start(self) -> None:
@@ -406,66 +384,70 @@ class LongSoak:
         self.sim.start()
         self.collector = TruthCollector(self.sim)
         self.collector.start()
-        kinds = {leg.stream for leg in self.legs if leg.kind == 'managed'}
-        topics = [topic(managed_name(s.name)) for s in STREAMS if s.name in kinds]
+        # A managed node for each stream a managed leg runs (at the rate of its stream).
+        managed = {leg.stream: leg.rate_hz for leg in self.legs if leg.kind == 'managed'}
+        topics = [topic(managed_name(stream)) for stream in managed]
         topics += [topic(leg_node_name(leg)) for leg in self.legs if leg.kind == 'plain']
         self.subscriber = Subscriber(topics=tuple(topics))
         self.sampler.start()
-        self.start_managed(self.legs, self.subscriber)
+        for stream, rate in managed.items():
+            name = managed_name(stream)
+            self.managed[stream] = self.start_node(name, stream, rate, True)
+            self.clients[stream] = LifecycleClient(self.subscriber, f'/{name}/i3dmgx2_driver')
+        for stream, client in self.clients.items():
+            if not client.wait_ready(60.0):
+                raise RuntimeError(f'managed node {stream}: lifecycle services not ready:\n'
+                                   f'{self.managed[stream].output()[-3000:]}')
 
     def stats_path(self, name: str) -> str:
         """Return where the node ``name`` writes its counters."""
         return os.path.join(self.workdir, f'{name}.json')
 
     def start_node(self, name: str, stream: str, rate: float, lifecycle: bool) -> NodeProcess:
-        """Start a node process in namespace ``name``; sample it from now on."""
-        node = start_node(node_params(self.cfg, self.sim.port, stream, rate, topic(name)),
-                          self.stats_path(name), lifecycle, ('-r', f'__ns:=/{name}'))
+        """
+        Start the instrumented node (managed with ``lifecycle``) in namespace ``name``.
+
+        Its counters go to a file; it is sampled from now on. Its Imu topic
+        is reliable, with a deep history: a message lost on the way to the
+        subscriber would read as one the node never published.
+        """
+        cfg, qos = self.cfg, f'qos_overrides.{topic(name)}.publisher'
+        params = {'port': self.sim.port, 'address': cfg.address,
+                  'read_timeout': cfg.read_timeout, 'reconnect_interval': cfg.reconnect_interval,
+                  f'{qos}.depth': 1000, f'{qos}.reliability': 'reliable',
+                  'temperature_period': cfg.temperature_period, 'stream': stream,
+                  'data_rate': float(rate)}
+        command = (sys.executable, '-m', 'harness.instrumented_node') + (
+            ('--lifecycle',) if lifecycle else ())
+        node = NodeProcess(params, ('-r', f'__ns:=/{name}'), command=command,
+                           env=ros_env({STATS_ENV: self.stats_path(name)}))
         self.sampler.watch(name, node.proc.pid)
         return node
 
-    def start_managed(self, legs: list[Leg], listener: Listener) -> None:
-        """Start a managed node for each stream a managed leg runs; wait for its services."""
-        kinds = {leg.stream for leg in legs if leg.kind == 'managed'}
-        for stream in STREAMS:
-            if stream.name not in kinds:
-                continue
-            rate = next(leg.rate_hz for leg in legs if leg.stream == stream.name)
-            name = managed_name(stream.name)
-            self.managed[stream.name] = self.start_node(name, stream.name, rate, True)
-            self.clients[stream.name] = LifecycleClient(listener, f'/{name}/i3dmgx2_driver')
-        for stream, client in self.clients.items():
-            if not client.wait_ready(60.0):
-                raise RuntimeError(f'managed node {stream}: lifecycle services not ready:\n'
-                                   f'{self.managed[stream].output()[-3000:]}')
-
-    def shut_down(self, rng: random.Random) -> tuple[list[Check], list[str]]:
+    def shut_down(self) -> None:
         """Take the managed nodes to random states, then SIGINT them; check their exits."""
-        checks: list[Check] = []
-        lines: list[str] = []
         if not self.managed:
-            return checks, lines
+            return
         names = sorted(self.managed)
-        chosen = rng.choice(names)
-        target = rng.choice(('unconfigured', 'inactive', 'active'))
+        chosen = self.rng.choice(names)
+        target = self.rng.choice(('unconfigured', 'inactive', 'active'))
         steps = {'unconfigured': (), 'inactive': ('configure',),
                  'active': ('configure', 'activate')}[target]
         reached = all(self.clients[chosen].change(step) for step in steps)
         states = {name: (target if name == chosen else 'unconfigured') for name in names}
-        lines.append(f'shutdown: {chosen} taken to {target} '
-                     f'({"reached" if reached else "NOT reached"}), the others '
-                     f'unconfigured; then SIGINT to every managed process')
+        self.end_lines.append(f'shutdown: {chosen} taken to {target} '
+                              f'({"reached" if reached else "NOT reached"}), the others '
+                              f'unconfigured; then SIGINT to every managed process')
         for name in names:
             node = self.managed[name]
             alive = node.proc.poll() is None
             code, seconds = node.stop(timeout=15.0)
             self.sampler.forget(managed_name(name))
             ok = alive and code == 0 and seconds < 5.0
-            checks.append(Check(
+            self.end_checks.append(Check(
                 f'managed {name}: clean exit on SIGINT from {states[name]}', ok,
                 f'alive until the end: {alive}; exit code {code} after {seconds:.2f} s'
                 + ('' if ok else f'\n{node.output()[-3000:]}')))
-        return checks, lines
 
     def close(self) -> None:
         """Stop everything that still runs."""
@@ -476,20 +458,20 @@ class LongSoak:
             steps.append(lambda: self.collector.is_alive() and self.collector.stop())
         if self.sim is not None:
             steps.append(self.sim.stop)
-        close_all([*steps, lambda: shutil.rmtree(self.workdir, ignore_errors=True)],
-                  'long soak')
+        # Each step on its own: a failure in one must not leave a process behind.
+        for step in [*steps, lambda: shutil.rmtree(self.workdir, ignore_errors=True)]:
+            try:
+                step()
+            except Exception as exc:  # keep cleaning up; say what went wrong
+                print(f'long soak cleanup: {type(exc).__name__}: {exc}', file=sys.stderr)
 
     def leg_config(self, leg: Leg) -> CampaignConfig:
         """Return the settings the leg is judged by: the campaign's own, or the leg's."""
         if self.campaign is not None:
             return self.campaign
-        cfg = self.cfg
-        return CampaignConfig(
-            minutes=cfg.leg_minutes, rate_hz=None, stream=leg.stream, data_rate=leg.rate_hz,
-            seed=cfg.seed, address=cfg.address, read_timeout=cfg.read_timeout,
-            reconnect_interval=cfg.reconnect_interval, quiet=cfg.quiet,
-            temperature_period=cfg.temperature_period, warmup_min=10.0, warmup_fraction=0.0,
-            log=None)
+        return CampaignConfig(**dict(shared_fields(self.cfg), log=None),
+                              minutes=self.cfg.leg_minutes, rate_hz=None, stream=leg.stream,
+                              data_rate=leg.rate_hz, warmup_fraction=0.0)
 
     def _bring_up(self, leg: Leg, name: str) -> tuple[NodeProcess, LifecycleClient | None]:
         """Configure and activate the stream's managed node, or start a plain one."""
@@ -544,18 +526,6 @@ class LongSoak:
                 self.subscriber.wait_count(published, 15.0)
         return exit_code, exit_seconds, stats
 
-    def _faults(self, leg: Leg, started: float, minutes: float) -> FaultDriver:
-        """Run the fault phase of a leg; return the driver (its events)."""
-        cfg = self.cfg
-        driver = FaultDriver(self.sim, random.Random(cfg.seed * 7919 + leg.number),
-                             cfg.event_gap)
-        driver.start()
-        end = started + minutes * 60.0
-        while time.time() < end:
-            time.sleep(0.5)
-        driver.stop()
-        return driver
-
     def run_leg(self, leg: Leg) -> LegResult:
         """Bring the leg's node up, fault it, bring it down; analyse what it published."""
         name = leg_node_name(leg)
@@ -571,7 +541,7 @@ class LongSoak:
 
     def _run_node(self, leg: Leg, name: str, node: NodeProcess, client: LifecycleClient | None,
                   begin: float) -> LegResult:
-        """Fault the node brought up at ``begin``, bring it down; analyse what it published."""
+        """Fault the node brought up at ``begin``, bring it down; judge what it published."""
         cfg, subscriber, judged = self.cfg, self.subscriber, self.leg_config(leg)
         if not subscriber.wait_count(1, 60.0):
             raise RuntimeError(f'leg {leg.number}: no message within 60 s:\n'
@@ -580,11 +550,16 @@ class LongSoak:
         cpu_start = process_cpu_seconds(node.proc.pid)
         self.log(f'leg {leg.number}: {leg.kind} node, {rate_text(judged)}, '
                  f'{judged.minutes:g} min of faults')
-        driver = self._faults(leg, started, judged.minutes)
+        driver = FaultDriver(self.sim, random.Random(cfg.seed * 7919 + leg.number),
+                             cfg.event_gap)
+        driver.start()
+        while time.time() < started + judged.minutes * 60.0:
+            time.sleep(0.5)
+        driver.stop()
         fault_end = time.time()
-        before = subscriber.count
+        before = len(subscriber.rows)
         time.sleep(cfg.quiet)
-        recovered = subscriber.count - before
+        recovered = len(subscriber.rows) - before
         alive = node.proc.poll() is None
         cpu = process_cpu_seconds(node.proc.pid) - cpu_start if alive else 0.0
         stopped = time.time()
@@ -598,20 +573,21 @@ class LongSoak:
         rss = [(t, kib) for t, kib, _, _ in self.sampler.all_samples.get(name, [])
                if t >= started]
         warmup = max(judged.warmup_min, judged.warmup_fraction * judged.minutes * 60.0)
-        data = run_data(
-            judged, self.sim, driver, truth=truth, truth_missed=missed, messages=rows,
-            node_stats=stats, rss=rss, warmup_end=started + warmup, fault_end=fault_end,
-            alive_at_end=alive, exit_code=exit_code, exit_seconds=exit_seconds,
-            recovered=recovered, node_output=node.output()[-5000:], started=started,
-            end=stopped if leg.kind == 'managed' else None)
-        return self._verdict(leg, data, driver, cpu, stopped - started)
-
-    def _verdict(self, leg: Leg, data: RunData, driver: FaultDriver, cpu: float,
-                 seconds: float) -> LegResult:
-        """Judge the leg: the campaign's checks, and the data back after every fault."""
-        cfg = self.cfg
-        found = recoveries(driver.events, data.messages, data.truth, self.sim.host_log,
-                           cfg.recovery_limit)
+        with self.sim.lock:
+            divider = self.sim.sensor.eeprom.get(RATE_DIVIDER_ADDRESS, 512)
+        data = RunData(
+            cfg=judged, truth=truth, truth_missed=missed, messages=rows,
+            events=list(driver.events), node_stats=stats, sim_stats=self.sim.stats.as_dict(),
+            host_log=self.sim.host_log, rss=rss, warmup_end=started + warmup,
+            fault_end=fault_end, alive_at_end=alive, exit_code=exit_code,
+            exit_seconds=exit_seconds, recovered=recovered,
+            unsafe_garbage_bytes=driver.unsafe_garbage_bytes,
+            unsafe_garbage_bursts=driver.unsafe_garbage_bursts, divider=divider,
+            power_ups=list(driver.power_ups), node_output=node.output()[-5000:],
+            started=started, end=stopped if leg.kind == 'managed' else None)
+        # Judged: the campaign's checks, and the data back after every fault.
+        seconds = stopped - started
+        found = recoveries(driver.events, rows, truth, self.sim.host_log, cfg.recovery_limit)
         slow = [(k, g, lim) for k, g, lim in found if g is None or g > lim]
         worst = max((g for _, g, _ in found if g is not None), default=0.0)
         retried = sum(1 for _, _, lim in found if lim > cfg.recovery_limit)
@@ -627,11 +603,10 @@ class LongSoak:
         # and counts as unpublished what it reads while inactive, by design.
         result = analyse(data, exempt=('clean exit on SIGINT', 'nothing left unpublished')
                          if leg.kind == 'managed' else (), more=(recovery,))
-        checks = result.checks
-        legresult = LegResult(leg, checks, result.figures, found,
+        legresult = LegResult(leg, result.checks, result.figures, found,
                               100.0 * cpu / seconds if seconds > 0 else 0.0, seconds,
                               result.report)
-        failed = [c.name for c in checks if not c.ok]
+        failed = [c.name for c in result.failures()]
         self.log(f'leg {leg.number}: {result.figures.get("published")} published, '
                  f'{result.figures.get("missing")} missing, {len(driver.events)} faults, '
                  f'worst recovery {worst:.3f} s, CPU {legresult.cpu_percent:.1f} %: '
@@ -642,32 +617,25 @@ class LongSoak:
 
     def run(self) -> CampaignResult:
         """Run every leg, then the end; return the verdict and the report."""
-        cfg, record = self.cfg, self.record
+        cfg = self.cfg
         began = time.time()
         try:
             self.start()
             self.log(f'long soak: {len(self.legs)} legs over {cfg.minutes:g} min, domain '
                      f'{os.environ.get("ROS_DOMAIN_ID")}, seed {cfg.seed}')
             for leg in self.legs:
-                record.results.append(self.run_leg(leg))
-            record.eeprom_writes = len(self.sim.eeprom_writes())
-            checks, lines = self.shut_down(self.rng)
-            record.end_checks += checks
-            record.end_lines += lines
+                self.results.append(self.run_leg(leg))
+            self.eeprom_writes = len(self.sim.eeprom_writes())
+            self.shut_down()
         except Exception:  # the run could not go on: a failed check with the reason
-            record.end_checks.append(Check('run completed', False, traceback.format_exc()))
+            self.end_checks.append(Check('run completed', False, traceback.format_exc()))
         finally:
             minutes = (time.time() - began) / 60.0
             # The managed processes, the ones fitted for leaks: (stream, sampler name).
             managed = [(name, managed_name(name)) for name in sorted(self.managed)]
             slope_checks, slope_lines = fit_slopes(cfg, self.sampler, managed, minutes)
             self.close()
-        return report(cfg, record, minutes, slope_checks, slope_lines)
-
-
-def run_long_soak(cfg: LongSoakConfig) -> CampaignResult:
-    """Run the long soak; return its checks and report."""
-    return LongSoak(cfg).run()
+        return report(self, minutes, slope_checks, slope_lines)
 
 
 def run_campaign(cfg: CampaignConfig) -> CampaignResult:
@@ -680,8 +648,7 @@ def run_campaign(cfg: CampaignConfig) -> CampaignResult:
     second, and the leg is judged with the campaign's settings (its warm-up,
     its RSS limit). Returns its checks and printable report.
     """
-    shared = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(FaultedNodeConfig)}
-    soak = LongSoak(LongSoakConfig(**shared, sample_period=1.0), campaign=cfg)
+    soak = LongSoak(LongSoakConfig(**shared_fields(cfg), sample_period=1.0), campaign=cfg)
     try:
         soak.start()
         leg = soak.run_leg(soak.legs[0])

@@ -26,7 +26,7 @@ managed nodes shut down from a random state. The pieces the verdict rests on
 import os
 import tempfile
 
-from harness.long_soak import LongSoakConfig, plan_legs, run_long_soak
+from harness.long_soak import LongSoak, LongSoakConfig, plan_legs
 from harness.process_sampler import halves_per_hour, process_sample, rss_kinds, \
     slope_per_hour
 from i3dmgx2_driver.codec import line_budget, streams
@@ -89,7 +89,7 @@ def test_soak_every_stream_short(tmp_path, monkeypatch):
     monkeypatch.setattr(tempfile, 'tempdir', str(tmp_path))
     cfg = LongSoakConfig(minutes=1.0, legs=3, leg_minutes=0.2, quiet=3.0,
                          event_gap=(0.3, 1.0), seed=7, log=None)
-    result = run_long_soak(cfg)
+    result = LongSoak(cfg).run()
     assert result.ok, result.report
     assert not list(tmp_path.iterdir()), sorted(p.name for p in tmp_path.iterdir())
     # A managed node lives on after its leg and counts what it reads while inactive: those

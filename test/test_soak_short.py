@@ -24,7 +24,7 @@ run. The analysis itself is checked first, on synthetic runs with known bugs.
 
 import struct
 
-from harness.campaign import imu_key
+from harness.campaign import VALUES
 from harness.campaign_verdict import analyse, CampaignConfig, RunData, Sent
 from harness.long_soak import run_campaign
 import pytest
@@ -44,7 +44,7 @@ def _synthetic_run(published_indices: list[int], extra: list[bytes] = ()) -> Run
     truth = []
     for i in range(100):
         t = 10.0 + i / rate
-        key = imu_key((0.001 * i, 0.0, -1.0), (0.0, 0.002 * i, 0.0))
+        key = VALUES.pack(0.001 * i, 0.0, -1.0, 0.0, 0.002 * i, 0.0)
         truth.append(Sent(i, t + 0.002, True, None, 95, 'stream', key, None,
                           struct.pack('<4d', 0.0, 0.0, 0.0, 1.0), 196608 * i, t, 1, 88))
     messages = [(truth[i].key, round(truth[i].sample_time * 1e9), truth[i].quat, 0.0)
@@ -87,7 +87,7 @@ def test_campaign_analysis_catches_a_record_lost():
 
 
 def test_campaign_analysis_catches_a_record_never_sent():
-    bogus = imu_key((1.0, 2.0, 3.0), (4.0, 5.0, 6.0))
+    bogus = VALUES.pack(1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
     assert 'every message is a record the sensor sent' in _failed(
         _synthetic_run(list(range(100)), [bogus]))
 
