@@ -81,7 +81,10 @@ def test_power_cycle_keeps_every_stamp_true(before_rollover):
         series = [(entry.sample_time, stamp_seconds(msg) - entry.sample_time)
                   for msg, entry in pairs]
         assert len(series) > 300
-        figures = check_series(series, event, node.output())
+        # In the graces a stamp may be as late as the node's read of it, which a busy
+        # neighbour delays by milliseconds and this process cannot see (the exact rule, no
+        # further off than its own read, is checked in-process: test_stamps_through_faults).
+        figures = check_series(series, event, node.output(), early_tolerance=0.05)
         assert figures['back'] is not None
         assert node.wait_for_output('timer restarted', timeout=5.0), node.output()
         status = time_status(listener)
