@@ -16,7 +16,8 @@
 # The test command: set up (scripts/setup.sh), then run the whole test suite with the venv's
 # python, two workers per core (pytest-xdist; each worker its own ROS domain: test/conftest.py):
 # most tests wait on a node or a simulator, so two per core keep the cores busy. The quick loop
-# (-m 'not slow': no process, all CPU) takes one worker per core.
+# (-m 'not slow': no process, all CPU) takes one worker per core. The few tests marked `alone`
+# run afterwards, in one process.
 # Extra arguments go to pytest and win over these, e.g. `scripts/test.sh -m 'not slow' -x`,
 # `scripts/test.sh -n 0` (one process), `scripts/test.sh --cov --cov-report=term` (coverage).
 # Exits with pytest's exit code.
@@ -34,14 +35,33 @@ cd "$ROOT"
 source "$ROOT/scripts/env.sh"
 
 set +e
-# loadfile: a file's tests run on one worker, one after another (a module's node is started
-# once, and the checks of one file that measure time never run beside each other). The quick
-# loop starts nothing: its tests go wherever a worker is free.
+# Two phases. First every test but those marked `alone`, in parallel. loadfile: a file's tests run
+# on one worker, one after another (a module's node is started once, and the checks of one file
+# that measure time never run beside each other); the quick loop starts nothing, so its tests go
+# wherever a worker is free. Then the `alone` tests (minutes of faults with every stamp held to
+# 1 ms), in one process with no neighbour (test/conftest.py keeps each phase's tests).
 per_core=2
 dist=loadfile
-case " $* " in *'not slow'*) per_core=1 dist=load ;; esac
+quick=''
+case " $* " in *'not slow'*) per_core=1 dist=load quick=yes ;; esac
 workers="${I3DMGX2_TEST_WORKERS:-$((per_core * $(nproc) < 16 ? per_core * $(nproc) : 16))}"
-"$I3DMGX2_PY" -m pytest -n "$workers" --dist "$dist" "$@"
+I3DMGX2_TEST_PHASE=parallel "$I3DMGX2_PY" -m pytest -n "$workers" --dist "$dist" "$@"
 rc=$?
+if [ -n "$quick" ]; then
+  exit "$rc"
+fi
+echo "== the tests that run alone (marked 'alone'), after the others"
+append=()
+case " $* " in *' --cov'*) append=(--cov-append) ;; esac  # add to the first phase's coverage
+I3DMGX2_TEST_PHASE=alone "$I3DMGX2_PY" -m pytest -n 0 "${append[@]}" "$@"
+rc_alone=$?
 set -e
-exit "$rc"
+# 5 is pytest's "no test ran": a phase may select none (-k, -m), the two together must not.
+if [ "$rc" -ne 0 ] && [ "$rc" -ne 5 ]; then
+  exit "$rc"
+elif [ "$rc_alone" -ne 0 ] && [ "$rc_alone" -ne 5 ]; then
+  exit "$rc_alone"
+elif [ "$rc" -eq 5 ] && [ "$rc_alone" -eq 5 ]; then
+  exit 5
+fi
+exit 0

@@ -56,14 +56,28 @@ def fixture_path():
     return real_records_path()
 
 
+#: scripts/test.sh runs the suite in two phases: ``parallel`` (all but the tests marked
+#: ``alone``, on several workers), then ``alone`` (those, in one process); unset: everything.
+PHASE_ENV = 'I3DMGX2_TEST_PHASE'
+
+
 def pytest_collection_modifyitems(config, items):
     """
-    Run the files with slow tests first, so that a parallel run does not end on one of them.
+    Keep this phase's tests; run the files with slow tests first.
 
     pytest-xdist (``--dist loadfile``, scripts/test.sh) hands the files to the
     workers in this order; a long file handed out last keeps one worker busy
     while the others have finished.
     """
+    phase = os.environ.get(PHASE_ENV)
+    if phase in ('parallel', 'alone'):
+        wanted = phase == 'alone'
+        deselected = [item for item in items
+                      if (item.get_closest_marker('alone') is not None) != wanted]
+        if deselected:
+            config.hook.pytest_deselected(items=deselected)
+            gone = set(deselected)
+            items[:] = [item for item in items if item not in gone]
     slow_files = {item.path for item in items if item.get_closest_marker('slow') is not None}
     items.sort(key=lambda item: item.path not in slow_files)
 

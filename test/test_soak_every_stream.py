@@ -83,6 +83,7 @@ def test_rss_kinds_add_up_to_rss_and_a_gone_process_gives_none():
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 def test_soak_every_stream_short(tmp_path, monkeypatch):
     # Every temporary file of the run (node logs, counters, the simulator's link) under
     # tmp_path: each plain node's log was left behind (one a run, until 2026-11-27).

@@ -31,6 +31,7 @@ import pytest
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 def test_soak_short():
     cfg = CampaignConfig(minutes=0.3, rate_hz=200.0, seed=5, event_gap=(0.3, 1.0),
                          warmup_min=6.0, quiet=4.0, log=None)
