@@ -38,7 +38,10 @@ import pytest
 from sensor_msgs.msg import Imu
 from test_node_messages import match, stream_truth
 
-pytestmark = pytest.mark.slow
+# alone: the stamps of a node process held to 5 ms in the graces and its fit's trend to 300
+# ppm 4 s after a power cycle; beside three busy workers its reads come late by milliseconds
+# (6.6 ms and -314 ppm seen), which this process cannot see.
+pytestmark = [pytest.mark.slow, pytest.mark.alone]
 
 
 def time_status(listener: Listener) -> DiagnosticStatus | None:
@@ -81,10 +84,7 @@ def test_power_cycle_keeps_every_stamp_true(before_rollover):
         series = [(entry.sample_time, stamp_seconds(msg) - entry.sample_time)
                   for msg, entry in pairs]
         assert len(series) > 300
-        # In the graces a stamp may be as late as the node's read of it, which a busy
-        # neighbour delays by milliseconds and this process cannot see (the exact rule, no
-        # further off than its own read, is checked in-process: test_stamps_through_faults).
-        figures = check_series(series, event, node.output(), early_tolerance=0.05)
+        figures = check_series(series, event, node.output())
         assert figures['back'] is not None
         assert node.wait_for_output('timer restarted', timeout=5.0), node.output()
         status = time_status(listener)
