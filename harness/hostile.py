@@ -223,6 +223,10 @@ class PublishOracle:
         #: Keys of real packets from our address that were attacked (never sent intact).
         self.attacked_keys: dict[bytes, str] = {}
 
+    def port_opened(self) -> None:
+        """Start the reference parser afresh: the node (re)opened the port, so did its parser."""
+        self.reference = SensorStreamParser(address=self.address)
+
     def given(self, data: bytes) -> None:
         """Note what the node was given: every record of our address in it is allowed."""
         for event in self.reference.feed(data):
@@ -393,7 +397,7 @@ class HostileStation(threading.Thread):
         if data[0] != TIOCPKT_DATA:
             if data[0] & TIOCPKT_FLUSHREAD:
                 # The node (re)opened the port: its parser starts afresh, so does ours.
-                self.oracle.reference = SensorStreamParser(address=self.address)
+                self.oracle.port_opened()
             return
         payload = data[1:]
         for event in self._host.feed(payload):
