@@ -28,7 +28,7 @@ import os
 import time
 
 from harness.processes import isolate_ros_domain, Listener, NodeProcess
-from i3dmgx2_driver.capture import read_capture
+from i3dmgx2_driver.capture.file_format import read_capture
 from i3dmgx2_driver.codec import layouts, streams
 from i3dmgx2_driver.codec.data_rate import RATE_DIVIDER_ADDRESS, ticks_per_cycle
 from i3dmgx2_driver.codec.framing import DataPacket

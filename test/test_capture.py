@@ -26,11 +26,11 @@ import threading
 import time
 import warnings
 
-from i3dmgx2_driver.capture import (
-    CaptureFormatError, CaptureWriter, CHUNK_HEADER, fixture_chunks, FIXTURE_GAP,
-    fixture_to_capture, load_fixture, MAGIC, RawCapture, read_capture, record_timer,
-    TruncatedCaptureWarning,
+from i3dmgx2_driver.capture.file_format import (
+    CaptureFormatError, CaptureWriter, CHUNK_HEADER, MAGIC, read_capture, TruncatedCaptureWarning,
 )
+from i3dmgx2_driver.capture.fixtures import fixture_chunks, FIXTURE_GAP, load_fixture, record_timer
+from i3dmgx2_driver.capture.raw_capture import RawCapture
 from i3dmgx2_driver.codec import DataPacket, SensorStreamParser
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation, TICKS_PER_SECOND
 import pytest
@@ -88,7 +88,6 @@ def test_empty_reads_are_not_stored_and_closed_writer_refuses(tmp_path):
     writer.write(b'x', 2.0)
     writer.close()
     writer.close()  # idempotent
-    assert writer.closed
     with pytest.raises(ValueError):
         writer.write(b'y', 3.0)
     assert _read_all(path)[1] == [(2.0, b'x')]
@@ -191,17 +190,11 @@ def test_writer_flushes_within_the_interval_without_close(tmp_path):
         writer.close()
 
 
-def test_fixture_capture_holds_every_record_as_a_data_packet(tmp_path, fixture_path):
-    path = tmp_path / 'fixture.gx2cap'
-    header = fixture_to_capture(fixture_path, path, address=42, start_time=1000.0)
-    read_header, chunks = read_capture(path)
-    assert read_header == json.loads(json.dumps(header))
-    assert read_header['address'] == 42 and read_header['wireless'] is True
-    assert len(read_header['segments']) == 4
+def test_fixture_chunks_hold_every_record_as_a_data_packet(fixture_path):
     records = [r for s in load_fixture(fixture_path) for r in s.records]
     parser = SensorStreamParser(address=42)
     got = []
-    for _, data in chunks:
+    for _, data in fixture_chunks(fixture_path, address=42, start_time=1000.0):
         events = parser.feed(data)
         assert len(events) == 1 and isinstance(events[0], DataPacket)
         got.append(events[0])
@@ -239,11 +232,8 @@ def test_fixture_receive_times_follow_the_timer_across_rollover_and_pauses(fixtu
         168.513, abs=0.01)
 
 
-def test_fixture_capture_is_reproducible(tmp_path, fixture_path):
-    a = fixture_to_capture(fixture_path, tmp_path / 'a.gx2cap')
-    b = fixture_to_capture(fixture_path, tmp_path / 'b.gx2cap')
-    assert a == b
-    assert (tmp_path / 'a.gx2cap').read_bytes() == (tmp_path / 'b.gx2cap').read_bytes()
+def test_fixture_chunks_are_reproducible(fixture_path):
+    assert list(fixture_chunks(fixture_path)) == list(fixture_chunks(fixture_path))
 
 
 # -- the node's raw capture ---------------------------------------------------

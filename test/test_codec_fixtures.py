@@ -33,7 +33,7 @@ import math
 import re
 
 from fixture_files import real_records_path
-from i3dmgx2_driver.capture import FixtureSet, timeline
+from i3dmgx2_driver.capture.fixtures import FixtureSet, timeline
 from i3dmgx2_driver.codec import (
     DataPacket, decode_data_packet, encode_data_packet, encode_record, SensorStreamParser,
 )

@@ -27,8 +27,9 @@ import dataclasses
 import logging
 import os
 
-from i3dmgx2_driver.capture import (bytes_sink, CHUNK_COST, FaultCapture, read_capture,
-                                    RecentBytes)
+from i3dmgx2_driver.capture.fault_capture import CHUNK_COST, FaultCapture, RecentBytes
+from i3dmgx2_driver.capture.file_format import read_capture
+from i3dmgx2_driver.capture.raw_capture import bytes_sink
 from i3dmgx2_driver.device.status import DeviceStatus, State
 from i3dmgx2_driver.ros.diagnostics import connection_status
 from i3dmgx2_driver.ros.fault_watch import CORRUPT_BURST, FaultWatch

@@ -26,7 +26,7 @@ import warnings
 
 from harness.processes import isolate_ros_domain, Listener, NodeProcess
 from i3dmgx2_driver import __version__
-from i3dmgx2_driver.capture import read_capture, TruncatedCaptureWarning
+from i3dmgx2_driver.capture.file_format import read_capture, TruncatedCaptureWarning
 from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.parser import SensorStreamParser
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation

@@ -35,7 +35,7 @@ import time
 from typing import NamedTuple
 
 from harness.processes import isolate_ros_domain, Listener, NodeProcess
-from i3dmgx2_driver.capture import read_capture
+from i3dmgx2_driver.capture.file_format import read_capture
 from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.parser import SensorStreamParser

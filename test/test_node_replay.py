@@ -24,7 +24,7 @@ message published carries exactly the values of a real record.
 from collections import Counter
 
 from harness.processes import isolate_ros_domain, Listener, NodeProcess
-from i3dmgx2_driver.capture import fixture_chunks, load_fixture
+from i3dmgx2_driver.capture.fixtures import fixture_chunks, load_fixture
 from i3dmgx2_driver.codec.commands import decode_record
 from i3dmgx2_driver.tools.replay import Replayer, schedule
 import pytest

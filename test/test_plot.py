@@ -19,8 +19,9 @@ import math
 from pathlib import Path
 import struct
 
-from i3dmgx2_driver.capture import (
-    CaptureWriter, FIXTURE_GAP, fixture_to_capture, load_fixture, record_timer,
+from i3dmgx2_driver.capture.file_format import CaptureWriter
+from i3dmgx2_driver.capture.fixtures import (
+    fixture_chunks, FIXTURE_GAP, load_fixture, record_timer, timeline,
 )
 from i3dmgx2_driver.codec import decode_record, encode_data_packet, encode_record
 from i3dmgx2_driver.codec.orientation import euler_from_matrix
@@ -123,9 +124,23 @@ def test_euler_of_an_unknown_orientation_is_nan():
         == pytest.approx((0.0, 0.0, 30.0))
 
 
+def write_fixture_capture(fixture_path, path, start_time):
+    """Write the fixture as a capture whose header's ``segments`` name its sets, as plot reads."""
+    sets = load_fixture(fixture_path)
+    segments, seen = [], set()
+    for seconds, index, _ in timeline(sets):
+        if index not in seen:
+            seen.add(index)
+            segments.append({'label': f'{sets[index].name}: {sets[index].description}',
+                             'start_time': start_time + seconds})
+    with CaptureWriter(path, {'port': 'fixture', 'segments': segments}) as writer:
+        for receive_time, packet in fixture_chunks(fixture_path, start_time=start_time):
+            writer.write(packet, receive_time)
+
+
 def test_capture_series_equal_fixture_series(tmp_path, fixture_path, enu):
     capture = tmp_path / 'fixture.gx2cap'
-    fixture_to_capture(fixture_path, capture, start_time=1.7e9)
+    write_fixture_capture(fixture_path, capture, start_time=1.7e9)
     series = plot.series_from_capture(str(capture))
     np.testing.assert_allclose(series.time, enu.time, atol=1e-6)
     np.testing.assert_array_equal(series.accel, enu.accel)

@@ -28,7 +28,8 @@ import logging
 import threading
 import weakref
 
-from i3dmgx2_driver.capture import FaultCapture, read_capture
+from i3dmgx2_driver.capture.fault_capture import FaultCapture
+from i3dmgx2_driver.capture.file_format import read_capture
 from i3dmgx2_driver.device.link import PortReader
 from i3dmgx2_driver.device.port import PortDisconnected
 from i3dmgx2_driver.device.reader_threads import ReaderThreads

@@ -27,7 +27,7 @@ import sys
 import time
 import tty
 
-from i3dmgx2_driver.capture import CaptureWriter
+from i3dmgx2_driver.capture.file_format import CaptureWriter
 from i3dmgx2_driver.codec import (
     Ack, DataPacket, encode_command, encode_command_packet, encode_data_packet,
     encode_record, Nack, SensorStreamParser,

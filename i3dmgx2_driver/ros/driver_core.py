@@ -68,7 +68,8 @@ from .record_publisher import RecordPublisher, Stamping
 from .sensor_set import SensorSetting
 from .services import DeviceServices, SaveCaptureService
 from .temperature import TemperaturePoller
-from ..capture import bytes_sink, FaultCapture, RawCapture
+from ..capture.fault_capture import FaultCapture
+from ..capture.raw_capture import bytes_sink, RawCapture
 from ..codec.data_rate import ticks_per_cycle
 from ..device.port import check_port_path, PortError
 from ..device.shared_port import SharedPort

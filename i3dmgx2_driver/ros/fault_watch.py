@@ -15,7 +15,7 @@
 """
 What went wrong with one sensor since the last look: the fault capture's triggers.
 
-The fault capture (capture.py :class:`~..capture.FaultCapture`) writes the
+The fault capture (:class:`~..capture.fault_capture.FaultCapture`) writes the
 last seconds of the port when a fault is seen. The faults are those the
 driver already counts where it detects them: the supervisor's stalls and
 reconnects and its state (device/status.py), the parser's corrupted packets

@@ -255,7 +255,7 @@ SPECS: list[Spec] = [
          '(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '
          "'': off.",
          empty_ok=True),
-    # The fault capture (capture.py FaultCapture): the last seconds, kept always.
+    # The fault capture (capture/fault_capture.py FaultCapture): the last seconds, kept always.
     Spec('fault_capture_dir', Parameter.Type.STRING, '~/.ros/i3dmgx2_captures',
          'Keep the last fault_capture_seconds of bytes read from the port in memory, and '
          'write them to a capture file in this directory (named by UTC time and cause) on a '

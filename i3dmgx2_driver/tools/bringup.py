@@ -28,7 +28,7 @@ sensor for about a minute and writes, in one folder it names:
   factor 2 of (``device/timeouts.py``); and the state the sensor was left in;
 - ``report.json``, the same for a program;
 - ``session.gx2cap``, every byte read, with its receive time, in the
-  capture format (``capture.py``): ``replay`` plays it to the driver.
+  capture format (``capture/file_format.py``): ``replay`` plays it to the driver.
 
 The sensor is left exactly as found: the stream it was streaming (or none),
 its rate divider in EEPROM (written for the streams, written back at the
@@ -51,7 +51,7 @@ from .bringup_sensor import HeardRecords, SensorControl
 from .port_listing import latency_timer_ms
 from .. import lifetime
 from ..arguments import seconds, whole_number
-from ..capture import CaptureWriter, default_header
+from ..capture.file_format import CaptureWriter, default_header
 from ..codec import line_budget, streams
 from ..codec.data_rate import (
     divider_for_rate, RATE_BASE_HZ, ticks_per_cycle,

@@ -22,7 +22,7 @@ between separate captures cannot pass for smooth data.
 
 Inputs:
 
-- a capture (``GX2CAP``, see :mod:`i3dmgx2_driver.capture`): parsed with the
+- a capture (``GX2CAP``, see :mod:`i3dmgx2_driver.capture.file_format`): parsed with the
   codec's ``SensorStreamParser``; records that carry acceleration, angular
   rate and orientation matrix (0xCC, also 0xC8) are plotted, in REP-103 axes
   (ENU world, FLU body) or, with ``--convention ned``, the device's own (NED
@@ -56,9 +56,8 @@ import numpy as np
 from .figures import agg_figure, have_matplotlib, MATPLOTLIB_HINT, patch
 from .stamp_plot import read_stamp_errors, render_stamp_errors
 from .. import lifetime
-from ..capture import (
-    FIXTURE_ADDRESS, fixture_chunks, is_capture, load_fixture, read_capture, timeline,
-)
+from ..capture.file_format import is_capture, read_capture
+from ..capture.fixtures import FIXTURE_ADDRESS, fixture_chunks, load_fixture, timeline
 from ..codec.framing import DataPacket
 from ..codec.orientation import (
     body_vector, CONVENTIONS, ENU, matrix_from_quaternion, orientation, Quaternion,

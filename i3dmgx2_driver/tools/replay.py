@@ -48,7 +48,8 @@ from .replay_answers import ACK_HOLD, BaseStationAnswers
 from .replay_pty import POLL, ReplayPty
 from .replay_stats import ReplayStats
 from .. import lifetime
-from ..capture import FIXTURE_ADDRESS, fixture_chunks, read_capture
+from ..capture.file_format import read_capture
+from ..capture.fixtures import FIXTURE_ADDRESS, fixture_chunks
 
 Chunk = tuple[float, bytes]
 
