@@ -142,9 +142,7 @@ def test_a_device_reset_re_anchors_the_estimate():
     after = stream(30.0, -90.0, seed=12, start=before[-1].true_time + 0.5, ticks0=5_000)
     clock = DeviceClock()
     stamps_before = run(clock, before)
-    anchors = clock.anchors
     clock.reset()  # what the node does when the timer jumps back
-    assert clock.anchors == anchors + 1
     stamps_after = run(clock, after)
     assert stamps_after[0] == pytest.approx(after[0].read_time - WIRE, abs=1e-9)
     check_guarantees(before + after, stamps_before + stamps_after)

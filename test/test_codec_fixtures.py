@@ -41,7 +41,7 @@ from i3dmgx2_driver.codec.orientation import (
     attitude_enu, attitude_ned, body_vector, euler_from_matrix, orientation, shepperd,
 )
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation, TICKS_PER_SECOND
-from i3dmgx2_driver.codec.timer import ticks_to_seconds, TIMER_MODULUS
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 from i3dmgx2_driver.device.sample_clock import SampleClock
 import numpy as np
 import pytest
@@ -279,10 +279,10 @@ def test_timer_rollover_is_unwrapped():
         assert out[index] > out[index - 1], index
         assert out[index] % TIMER_MODULUS == timers[index]
     assert out[617] - out[616] == 6_554_112
-    assert ticks_to_seconds(out[617] - out[616]) == pytest.approx(1 / 3, abs=1e-4)
+    assert (out[617] - out[616]) / TICKS_PER_SECOND == pytest.approx(1 / 3, abs=1e-4)
     assert out[616] < TIMER_MODULUS * 2 < out[617]
     assert out[751] - out[750] == timers[751] - timers[750]
-    assert ticks_to_seconds(out[751] - out[750]) == pytest.approx(168.5, abs=0.1)
+    assert (out[751] - out[750]) / TICKS_PER_SECOND == pytest.approx(168.5, abs=0.1)
     assert out[-1] == 3 * TIMER_MODULUS + timers[-1]
 
 

@@ -144,7 +144,7 @@ def test_the_node_records_ordered_stage_times_for_every_message(tmp_path):
         with node:
             assert node.wait_for_output('start-up heap frozen', 30), node.output()
             # A second of records after start-up (100 Hz), then the node stops.
-            _wait_count(sim, sim.truth_count + 100)
+            _wait_count(sim, sim.stats.records_sent + 100)
             assert node.stop()[0] == 0, node.output()
         written = {t.timer: t.write_time for t in sim.truth
                    if t.valid and t.write_time is not None and t.timer is not None}
@@ -168,7 +168,7 @@ def test_the_node_records_ordered_stage_times_for_every_message(tmp_path):
 
 def _wait_count(sim: PtySimulator, count: int, timeout: float = 30.0) -> None:
     deadline = time.monotonic() + timeout
-    while sim.truth_count < count and time.monotonic() < deadline:
+    while sim.stats.records_sent < count and time.monotonic() < deadline:
         time.sleep(0.05)
 
 

@@ -116,7 +116,7 @@ def test_start_up_quirks(faults):
 
 def test_stall_is_recovered_by_rerequesting_continuous():
     with streaming(seed=23, count=50) as (sim, listener, node):
-        requests_before = len(sim.wait_for_commands(lambda c: c.code == 0xC4, timeout=0.1))
+        requests_before = len(sim.commands_of(0xC4))
         # The sensor stops streaming without a word (a brown-out, a lost
         # radio link that came back with the sensor in polled mode).
         with sim.lock:
@@ -124,8 +124,7 @@ def test_stall_is_recovered_by_rerequesting_continuous():
         listener.clear()
         got = listener.wait_for('imu/raw_data', 50, timeout=30)
         assert len(got) >= 50, node.output()
-        assert len(sim.wait_for_commands(lambda c: c.code == 0xC4, timeout=0.1)) \
-            > requests_before
+        assert len(sim.commands_of(0xC4)) > requests_before
         assert 'no data for' in node.output()
         assert node.stop()[0] == 0
 

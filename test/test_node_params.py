@@ -142,7 +142,7 @@ def test_data_rate_written_verified_and_persisted():
         with listener, node:
             assert len(listener.wait_for('imu/raw_data', 20, timeout=30)) >= 20
             writes = eeprom_writes(sim)
-            assert [c.arguments() for c in writes] == [{'address': 0xFCA2, 'value': 1024}]
+            assert [c.args for c in writes] == [(0xFCA2, 1024)]
             reads = [c for _, c in sim.commands if c.code == 0xE5]
             assert len(reads) >= 2  # before and after the write
             assert 'persists across power cycles' in node.output()

@@ -35,7 +35,7 @@ from typing import NamedTuple
 from hypothesis import given, settings, strategies as st
 from i3dmgx2_driver.codec import line_budget, streams
 from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
-from i3dmgx2_driver.codec.timer import ticks_to_seconds, TIMER_MODULUS
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 from i3dmgx2_driver.device.sample_clock import Restart, SampleClock
 import pytest
 
@@ -780,7 +780,7 @@ def test_host_time_unwraps_a_long_pause():
     short = unwrapping()
     read(short, start, host=100.0)
     step = pause - TIMER_MODULUS
-    assert read(short, start + pause, host=100.0 + ticks_to_seconds(step)) == start + step
+    assert read(short, start + pause, host=100.0 + step / TICKS_PER_SECOND) == start + step
 
 
 def test_records_read_late_in_a_burst_count_the_time_that_passed():
@@ -820,9 +820,9 @@ def test_host_time_resolves_the_fixture_gap():
     before, after = 858_295_945, 4_171_399_561
     clock = unwrapping()
     read(clock, before, host=0.0)
-    assert read(clock, after, host=ticks_to_seconds(after - before)) == after
+    assert read(clock, after, host=(after - before) / TICKS_PER_SECOND) == after
     assert not clock.restarted and clock.status().restarts.get('reset', 0) == 0
-    assert ticks_to_seconds(after - before) == pytest.approx(168.5, abs=0.1)
+    assert (after - before) / TICKS_PER_SECOND == pytest.approx(168.5, abs=0.1)
     soon = unwrapping()
     read(soon, before, host=0.0)
     read(soon, after, host=1.0)

@@ -484,7 +484,7 @@ def test_built_in_test_and_temperatures(sim, host):
     assert host.request(cmd.built_in_test(0x14)) == rec.BuiltInTest(0x14)
     temps = host.request(cmd.encode_command(lay.TEMPERATURES))
     assert 22.0 < temps.accel_celsius < 30.0
-    assert all(22.0 < c < 31.0 for c in temps.gyro_celsius)
+    assert all(22.0 < rec.code_to_celsius(code) < 31.0 for code in temps.gyro_codes)
 
 
 @pytest.mark.slow

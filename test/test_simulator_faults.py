@@ -244,9 +244,9 @@ def test_the_first_request_to_stream_is_ignored():
 
 def test_streaming_needs_a_polled_request_first_after_each_open():
     with simulator(needs_polled_first=True) as sim:
-        for _ in range(2):
+        for opened in range(2):
             with Host(sim) as host:
-                assert sim.wait_until(lambda: sim.host_reader.last_port_open is not None, 2.0)
+                assert sim.wait_until(lambda opened=opened: sim.stats.port_opens > opened, 2.0)
                 host.send(cmd.set_continuous(CC))
                 host.pump(0.3)
                 assert host.packets == [], 'streaming as the very first command must fail'

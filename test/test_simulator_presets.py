@@ -143,7 +143,7 @@ def test_the_record_shows_no_eeprom_write_and_a_restarted_stream():
         stop_stream(host)
         (_, write), = sim.eeprom_writes()
         assert write == cmd.decode_command(cmd.write_eeprom(0xFCA2, 1024))
-        assert write.arguments() == {'address': 0xFCA2, 'value': 1024}
+        assert write.args == (0xFCA2, 1024)
         assert sim.eeprom[0xFCA2] == 1024
 
 

@@ -52,11 +52,6 @@ class Command(NamedTuple):
         """Name of the command in the layout table."""
         return LAYOUTS[self.code].name
 
-    def arguments(self) -> dict[str, Any]:
-        """Return the arguments by field name."""
-        fields = LAYOUTS[self.code].request
-        return {field.name: value for field, value in zip(fields, self.args, strict=False)}
-
 
 def layout_of(code: int) -> Layout:
     """Return the layout of a command byte, or raise UnknownCommandError."""

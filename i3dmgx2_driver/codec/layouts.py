@@ -34,6 +34,10 @@ class Field(NamedTuple):
     name: str
     code: str
     count: int = 1
+    #: What the field holds where its name, shared with other records, does not say it
+    #: (0xC6's matrix is the last cycle's update, 0xD2's accel and mag are
+    #: gyro-stabilised); empty: the name says it. The simulator makes each field from this.
+    quantity: str = ''
 
 
 class Layout(NamedTuple):
@@ -142,8 +146,8 @@ LAYOUTS: dict[int, Layout] = {layout.code: layout for layout in (
     _layout(SET_CONTINUOUS, 'set_continuous_mode', (Field('command', 'B'), _TIMER),
             r.ContinuousModeReply, _CONFIRM, (Field('command', 'B'),)),
     _layout(ORIENTATION_MATRIX, 'orientation_matrix', (_MATRIX, _TIMER), r.OrientationMatrix),
-    _layout(ORIENTATION_UPDATE_MATRIX, 'orientation_update_matrix', (_MATRIX, _TIMER),
-            r.OrientationUpdateMatrix),
+    _layout(ORIENTATION_UPDATE_MATRIX, 'orientation_update_matrix',
+            (Field('matrix', 'f', _M9, 'update_matrix'), _TIMER), r.OrientationUpdateMatrix),
     _layout(MAGNETOMETER, 'magnetometer', (_MAG, _TIMER), r.Magnetometer),
     _layout(ACCEL_ANG_RATE_ORIENTATION, 'accel_ang_rate_orientation',
             (_ACCEL, _RATE, _MATRIX, _TIMER), r.AccelAngRateOrientation),
@@ -169,7 +173,8 @@ LAYOUTS: dict[int, Layout] = {layout.code: layout for layout in (
     _layout(TEMPERATURES, 'temperatures',
             (Field('accel_code', 'H'), Field('gyro_codes', 'H', _V3), _TIMER), r.Temperatures),
     _layout(STABILISED_ACCEL_ANG_RATE_MAG, 'stabilised_accel_ang_rate_mag',
-            (_ACCEL, _RATE, _MAG, _TIMER), r.StabilisedAccelAngRateMag),
+            (Field('accel', 'f', _V3, 'stabilised_accel'), _RATE,
+             Field('mag', 'f', _V3, 'stabilised_mag'), _TIMER), r.StabilisedAccelAngRateMag),
     _layout(DELTA_ANGLE_VELOCITY_MAG, 'delta_angle_velocity_mag',
             (Field('delta_angle', 'f', _V3), Field('delta_velocity', 'f', _V3), _MAG, _TIMER),
             r.DeltaAngleVelocityMag),

@@ -183,12 +183,6 @@ class Temperatures(NamedTuple):
         """Accelerometer temperature, by the formula of docs/protocol.md §7."""
         return code_to_celsius(self.accel_code)
 
-    @property
-    def gyro_celsius(self) -> tuple[float, float, float]:
-        """Gyro temperatures, by the same conversion as the accelerometer."""
-        x, y, z = self.gyro_codes
-        return (code_to_celsius(x), code_to_celsius(y), code_to_celsius(z))
-
 
 class StabilisedAccelAngRateMag(NamedTuple):
     """0xD2: gyro-stabilised acceleration and magnetic field, angular rate."""

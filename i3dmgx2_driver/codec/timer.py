@@ -13,28 +13,16 @@
 # limitations under the License.
 
 """
-The device timer: ticks to seconds and back, and its 32-bit rollover.
+The device timer's 32-bit rollover.
 
-The timer counts 19,660,800 ticks a second from power-up and wraps every
-2^32 ticks (about 218.45 s), so a driver that runs longer than that must
-unwrap it to get a clock that only moves forward. Which device time a raw
-value stands for (across wraps, or after a reset) takes the host time
-elapsed, which the codec never reads: that is the driver's sample clock
-(``device/sample_clock.py``).
+The timer counts ``records.TICKS_PER_SECOND`` (19,660,800) ticks a second
+from power-up and wraps every 2^32 ticks (about 218.45 s), so a driver that
+runs longer than that must unwrap it to get a clock that only moves forward.
+Which device time a raw value stands for (across wraps, or after a reset)
+takes the host time elapsed, which the codec never reads: that is the
+driver's sample clock (``device/sample_clock.py``). Ticks become seconds by
+dividing by ``TICKS_PER_SECOND`` where they are used.
 """
-
-
-from .records import TICKS_PER_SECOND
 
 #: The timer wraps after this many ticks.
 TIMER_MODULUS = 1 << 32
-
-
-def ticks_to_seconds(ticks: int) -> float:
-    """Convert timer ticks (raw or unwrapped) to seconds."""
-    return ticks / TICKS_PER_SECOND
-
-
-def seconds_to_ticks(seconds: float) -> int:
-    """Convert seconds to whole timer ticks (rounded to nearest)."""
-    return round(seconds * TICKS_PER_SECOND)

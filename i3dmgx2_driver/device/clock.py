@@ -136,7 +136,6 @@ class DeviceClock:
     def __init__(self, window: float = 1.0, history: int = HISTORY) -> None:
         self.window = window
         self.history = history
-        self.anchors = 0
         self._points: deque[tuple[float, float]] = deque(maxlen=history)
         self.reset()
 
@@ -160,7 +159,6 @@ class DeviceClock:
         self._near_block: int | None = None
         self._near_least = 0.0
         self.samples = 0
-        self.anchors += 1
 
     @property
     def offset(self) -> float:

@@ -16,11 +16,14 @@
 The data records of one calculation cycle: the motion measured, less the bias corrections.
 
 ``BiasCorrections`` keeps the corrections the host wrote or captured and
-their copies in non-volatile memory; ``RecordMaker`` builds each data
-record of the codec's table from the motion model, the corrections and
-the sensor's noise.
+their copies in non-volatile memory. A record is read off the codec's layout
+table: ``RecordMaker`` builds a ``Cycle`` and takes from it each field of the
+record's layout, by the quantity the field holds (``Field.quantity``, else its
+name), in the layout's order. A record type added to the table is made from
+the quantities a cycle already has; only a new quantity needs a line here.
 """
 
+import functools
 import math
 import random
 import struct
@@ -30,16 +33,15 @@ from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec import records as rec
 from i3dmgx2_driver.codec.orientation import euler_from_matrix
 
-from .motion import Motion, Vector3
-
-#: 0xD0 answer for a quantity it does not know.
-INVALID_QUANTITY = 0xFFFF
+from .motion import Matrix3, Measurement, Motion, Vector3
 
 _ACCEL_COUNTS_PER_G = 32768 / 5.0           # +-5 g over the 16-bit A/D range
 _GYRO_COUNTS_PER_RAD_S = 32768 / 5.235988   # +-300 deg/s
 _A2D_ZERO = 32768.0
 _FLOAT3 = struct.Struct('>3f')
 _ZERO: Vector3 = (0.0, 0.0, 0.0)
+#: Quantities the inertial sensors do not give: a record of only these reads none of them.
+_NOT_INERTIAL = frozenset({'timer', 'accel_code', 'gyro_codes'})
 
 
 def float32(v: Vector3) -> Vector3:
@@ -96,78 +98,155 @@ class BiasCorrections:
             self._pending_gyro = None
 
     def store(self, quantity: int, rel: float) -> int:
-        """Copy a correction to non-volatile memory (1: accel, 2: gyro); return the quantity."""
-        if quantity == 1:
+        """Copy a correction to non-volatile memory; return the quantity (0xFFFF: unknown)."""
+        if quantity == rec.ACCEL_BIAS_QUANTITY:
             self._nv_accel = self.accel
-        elif quantity == 2:
+        elif quantity == rec.GYRO_BIAS_QUANTITY:
             self.apply_capture(rel)
             self._nv_gyro = self.gyro
         else:
-            quantity = INVALID_QUANTITY
+            quantity = rec.INVALID_QUANTITY
         return quantity
 
 
+class Cycle:
+    """
+    One calculation cycle's quantities, each named as the layout table names a field.
+
+    The inertial sensors are read once, noise and all, when ``inertial`` says
+    the record carries something they give (the device samples them every
+    cycle); the temperature codes are read when a field asks for them. Each
+    quantity is worked out when a record first asks for it.
+    """
+
+    def __init__(self, maker: 'RecordMaker', rel: float, timer: int, dt: float,
+                 inertial: bool) -> None:
+        self._maker = maker
+        self._rel = rel
+        self._dt = dt
+        self.timer = timer
+        self._meas: Measurement | None = (
+            maker.motion.measure(rel, maker.rng) if inertial else None)
+
+    @property
+    def _measured(self) -> Measurement:
+        if self._meas is None:  # pragma: no cover - _NOT_INERTIAL names an inertial quantity
+            raise ValueError('the inertial sensors were not read this cycle')
+        return self._meas
+
+    @functools.cached_property
+    def accel(self) -> Vector3:
+        """Acceleration (g) less the host's accelerometer bias correction."""
+        return _sub(self._measured.accel, self._maker.biases.accel)
+
+    @functools.cached_property
+    def angular_rate(self) -> Vector3:
+        """Angular rate (rad/s) less the host's gyro bias correction."""
+        return _sub(self._measured.angular_rate, self._maker.biases.gyro)
+
+    @property
+    def mag(self) -> Vector3:
+        """Magnetic field (Gauss), NaN when the magnetometer has no new reading."""
+        return self._measured.mag
+
+    @property
+    def matrix(self) -> Matrix3:
+        """Orientation matrix M: the true attitude (the device's filter is not modelled)."""
+        return self._measured.truth.matrix
+
+    @property
+    def update_matrix(self) -> Matrix3:
+        """Rotation over this cycle, M(t) * M(t - dt)^T (0xC6)."""
+        return self._maker.motion.update_matrix(self._rel, self._dt)
+
+    @property
+    def accel_raw(self) -> Vector3:
+        """Accelerometer A/D codes, from the corrected acceleration."""
+        return tuple(_A2D_ZERO + a * _ACCEL_COUNTS_PER_G for a in self.accel)
+
+    @property
+    def angular_rate_raw(self) -> Vector3:
+        """Gyro A/D codes, from the corrected angular rate."""
+        return tuple(_A2D_ZERO + w * _GYRO_COUNTS_PER_RAD_S for w in self.angular_rate)
+
+    @property
+    def delta_angle(self) -> Vector3:
+        """Angle turned over the cycle (rad)."""
+        return _scale(self.angular_rate, self._dt)
+
+    @property
+    def delta_velocity(self) -> Vector3:
+        """Velocity gained over the cycle (g*s)."""
+        return _scale(self.accel, self._dt)
+
+    @functools.cached_property
+    def _euler(self) -> Vector3:
+        return euler_from_matrix(self.matrix)
+
+    @property
+    def roll(self) -> float:
+        """Roll (rad) of M."""
+        return self._euler[0]
+
+    @property
+    def pitch(self) -> float:
+        """Pitch (rad) of M."""
+        return self._euler[1]
+
+    @property
+    def yaw(self) -> float:
+        """Yaw (rad) of M."""
+        return self._euler[2]
+
+    @functools.cached_property
+    def stabilised_accel(self) -> Vector3:
+        """Gyro-stabilised acceleration: the filter's estimate, smooth, biased alike."""
+        bias = self._maker.motion.config.accel_bias
+        truth = self._measured.truth.accel
+        return _sub(tuple(truth[i] + bias[i] for i in range(3)), self._maker.biases.accel)
+
+    @property
+    def stabilised_mag(self) -> Vector3:
+        """Gyro-stabilised field: smooth, NaN as the magnetometer is."""
+        mag = self.mag
+        return mag if math.isnan(mag[0]) else self._measured.truth.mag
+
+    def _temperature_code(self, above: float) -> int:
+        """A/D code of a temperature sensor ``above`` C over ~25 C, warming up slowly."""
+        warm = self._maker.temperature_c + 2.0 * (1.0 - math.exp(-self._rel / 600.0))
+        value = ((warm + above) / 100.0 + 0.5) * 4096.0 / 3.3 + self._maker.rng.gauss(0.0, 0.4)
+        return max(0, min(4095, round(value)))
+
+    @property
+    def accel_code(self) -> int:
+        """A/D code of the accelerometer's temperature sensor."""
+        return self._temperature_code(0.0)
+
+    @property
+    def gyro_codes(self) -> tuple[int, int, int]:
+        """A/D codes of the three gyros' temperature sensors, a little warmer."""
+        return (self._temperature_code(1.0), self._temperature_code(1.5),
+                self._temperature_code(0.5))
+
+
 class RecordMaker:
-    """Builds the data records of a cycle; draws its noise from the sensor's ``rng``."""
+    """
+    Builds the data records of a cycle; draws its noise from the sensor's ``rng``.
+
+    It holds what outlives a cycle: the motion, the noise source, the
+    temperature the sensor powers up at and the host's bias corrections.
+    """
 
     def __init__(self, motion: Motion, rng: random.Random, temperature_c: float,
                  biases: BiasCorrections) -> None:
         self.motion = motion
-        self._rng = rng
-        self._temperature_c = temperature_c
-        self._biases = biases
-
-    def temperature_codes(self, rel: float) -> tuple[int, tuple[int, int, int]]:
-        """A/D codes of the four temperature sensors: ~25 C, warming up slowly."""
-        warm = self._temperature_c + 2.0 * (1.0 - math.exp(-rel / 600.0))
-
-        def code(celsius: float) -> int:
-            value = (celsius / 100.0 + 0.5) * 4096.0 / 3.3 + self._rng.gauss(0.0, 0.4)
-            return max(0, min(4095, round(value)))
-
-        return code(warm), (code(warm + 1.0), code(warm + 1.5), code(warm + 0.5))
+        self.rng = rng
+        self.temperature_c = temperature_c
+        self.biases = biases
 
     def record(self, code: int, rel: float, timer: int, dt: float) -> Any:
         """Build the record ``code`` of the cycle at ``rel`` (timer ``timer``, ``dt`` s long)."""
-        if code == lay.TEMPERATURES:
-            accel_code, gyro_codes = self.temperature_codes(rel)
-            return rec.Temperatures(accel_code, gyro_codes, timer)
-        meas = self.motion.measure(rel, self._rng)
-        m = meas.truth.matrix
-        accel = _sub(meas.accel, self._biases.accel)
-        rate = _sub(meas.angular_rate, self._biases.gyro)
-        mag = meas.mag
-        if code == lay.ACCEL_ANG_RATE_MAG_ORIENTATION:
-            return rec.AccelAngRateMagOrientation(accel, rate, mag, m, timer)
-        if code == lay.ACCEL_ANG_RATE_MAG:
-            return rec.AccelAngRateMag(accel, rate, mag, timer)
-        if code == lay.ACCEL_ANG_RATE:
-            return rec.AccelAngRate(accel, rate, timer)
-        if code == lay.ACCEL_ANG_RATE_ORIENTATION:
-            return rec.AccelAngRateOrientation(accel, rate, m, timer)
-        if code == lay.RAW_ACCEL_ANG_RATE:
-            return rec.RawAccelAngRate(
-                tuple(_A2D_ZERO + a * _ACCEL_COUNTS_PER_G for a in accel),
-                tuple(_A2D_ZERO + w * _GYRO_COUNTS_PER_RAD_S for w in rate), timer)
-        if code == lay.DELTA_ANGLE_VELOCITY:
-            return rec.DeltaAngleVelocity(_scale(rate, dt), _scale(accel, dt), timer)
-        if code == lay.DELTA_ANGLE_VELOCITY_MAG:
-            return rec.DeltaAngleVelocityMag(_scale(rate, dt), _scale(accel, dt), mag, timer)
-        if code == lay.ORIENTATION_MATRIX:
-            return rec.OrientationMatrix(m, timer)
-        if code == lay.ORIENTATION_UPDATE_MATRIX:
-            return rec.OrientationUpdateMatrix(self.motion.update_matrix(rel, dt), timer)
-        if code == lay.MAGNETOMETER:
-            return rec.Magnetometer(mag, timer)
-        if code == lay.EULER_ANGLES:
-            return rec.EulerAngles(*euler_from_matrix(m), timer)
-        if code == lay.EULER_ANGLES_ANG_RATE:
-            return rec.EulerAnglesAngRate(*euler_from_matrix(m), rate, timer)
-        if code == lay.STABILISED_ACCEL_ANG_RATE_MAG:
-            # Gyro-stabilised vectors are the filter's estimates: smooth, biased alike.
-            bias = self.motion.config.accel_bias
-            stab_accel = _sub(tuple(meas.truth.accel[i] + bias[i] for i in range(3)),
-                              self._biases.accel)
-            stab_mag = mag if math.isnan(mag[0]) else meas.truth.mag
-            return rec.StabilisedAccelAngRateMag(stab_accel, rate, stab_mag, timer)
-        raise ValueError(f'0x{code:02X} is not a data record')  # pragma: no cover
+        layout = lay.LAYOUTS[code]
+        quantities = [field.quantity or field.name for field in layout.reply]
+        cycle = Cycle(self, rel, timer, dt, not _NOT_INERTIAL.issuperset(quantities))
+        return layout.record_type(*(getattr(cycle, quantity) for quantity in quantities))

@@ -62,15 +62,6 @@ class SensorEeprom:
         self.rate_override = rate_override
         #: Refuse every 0xD0 transfer (answer 0xFFFF, store nothing).
         self.refuse_bias_store = False
-        #: 0xD0 transfers stored (each one an EEPROM write).
-        self.bias_stores = 0
-
-    def take_bias_store(self) -> bool:
-        """Return whether a 0xD0 transfer may be stored now, counting it when it may."""
-        if self.refuse_bias_store:
-            return False
-        self.bias_stores += 1
-        return True
 
     @property
     def rate_hz(self) -> float:

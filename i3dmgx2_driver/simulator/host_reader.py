@@ -61,8 +61,6 @@ class HostReader:
         self._actions: list[tuple[float, int, collections.abc.Callable[[], None]]] = []
         self._seq = 0
         self._wake_r, self._wake_w = -1, -1
-        #: Wall-clock time the host last opened the port (or flushed its input).
-        self.last_port_open: float | None = None
 
     def open_pipe(self) -> None:
         """Make the wake-up pipe (before the thread starts)."""
@@ -137,7 +135,6 @@ class HostReader:
                 with self._changed:
                     self._inbox.port_opened()
                     self._record.count(port_opens=1)
-                    self.last_port_open = now
                     self._changed.notify_all()
             return
         with self._changed:

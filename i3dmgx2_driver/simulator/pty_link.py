@@ -99,6 +99,12 @@ class PtySimulator(TruthQueries):
     sensor differs. The parts are built by ``SimulatorParts`` (``wiring``);
     this class starts and stops them and changes their faults: it is the
     face that tests, the harness and the benchmarks use.
+
+    The run-time control (``unplug``, ``replug``, ``stall``, ``set_faults``,
+    ``set_moving``, ``set_rate``, ``power_cycle``) is the simulator's control
+    surface for them: the package never calls it (the command line schedules
+    its faults through the configuration instead), and a fault no test,
+    harness or benchmark asks for has no method here.
     """
 
     def __init__(self, config: SimulatorConfig | None = None, **overrides: Any) -> None:
@@ -123,8 +129,7 @@ class PtySimulator(TruthQueries):
         #: unplugged), ``link_target`` (what the symlink points to now) and
         #: ``plugged`` (an event, set while the port exists).
         self.pty: PtyPort = parts.pty
-        #: Reads the host's bytes and runs the scheduled actions; ``last_port_open``
-        #: is the wall-clock time the host last opened the port (or flushed its input).
+        #: Reads the host's bytes and runs the scheduled actions.
         self.host_reader: HostReader = parts.reader
         self._cable = parts.cable
         self._transmitters = parts.transmitters()

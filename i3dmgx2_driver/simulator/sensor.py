@@ -337,7 +337,7 @@ class SimulatedSensor:
     def _transfer(self, args, now, timer):
         # The RAM corrections go to non-volatile memory, which a power-up loads;
         # unless the memory refuses (then nothing is stored, and 0xFFFF says so).
-        if not self.settings.take_bias_store():
+        if self.settings.refuse_bias_store:
             return rec.TransferToNonVolatile(rec.INVALID_QUANTITY, timer), now, now
         quantity = self.biases.store(args[0], self.clock.rel(now))
         return rec.TransferToNonVolatile(quantity, timer), now, now

@@ -34,7 +34,11 @@ class TruthQueries:
     """
     The ground truth as copies, and waits until it shows something; thread-safe.
 
-    ``changed`` is a condition on the simulator's lock, notified on every new entry.
+    The simulator's observation surface: its users are the tests, the harness and
+    the benchmarks (the package itself reads only ``stats``, for the command
+    line), so that they all ask the ground truth one way and none reads it
+    unlocked. ``changed`` is a condition on the simulator's lock, notified on
+    every new entry.
     """
 
     def __init__(self, record: GroundTruth, changed: threading.Condition) -> None:
@@ -47,12 +51,6 @@ class TruthQueries:
         with self._changed:
             truth = self._record.truth
             return list(truth) if truth is not None else []
-
-    @property
-    def truth_count(self) -> int:
-        """How many truth entries were produced (cheap; counts dropped ones too)."""
-        with self._changed:
-            return self._record.truth_index
 
     @property
     def commands(self) -> list[tuple[float, Command]]:
@@ -111,19 +109,3 @@ class TruthQueries:
                 if remaining <= 0:
                     return False
                 self._changed.wait(min(remaining, 0.05))
-
-    def wait_for_commands(self, predicate: collections.abc.Callable[[Command], bool] | None = None,
-                          timeout: float = 5.0, count: int = 1) -> list[tuple[float, Command]]:
-        """
-        Wait until the sensor received ``count`` commands matching ``predicate``.
-
-        Returns the matching (time, command) pairs; fewer than ``count`` means
-        the timeout passed.
-        """
-        def matches() -> list[tuple[float, Command]]:
-            return [entry for entry in self._record.commands
-                    if predicate is None or predicate(entry[1])]
-
-        self.wait_until(lambda: len(matches()) >= count, timeout)
-        with self._changed:
-            return matches()
