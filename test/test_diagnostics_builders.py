@@ -21,12 +21,13 @@ simulator run cannot reach cheaply (a weak radio, an implausible drift).
 """
 
 from diagnostic_msgs.msg import DiagnosticStatus
+from i3dmgx2_driver.device.gyro_bias import Calibration
 from i3dmgx2_driver.device.identity import DeviceInfo
 from i3dmgx2_driver.device.link import RadioStats
+from i3dmgx2_driver.device.record_rate import RateMeter
 from i3dmgx2_driver.device.sample_clock import ClockStatus
 from i3dmgx2_driver.device.status import DeviceStatus, State
-from i3dmgx2_driver.ros import diagnostics as d
-from i3dmgx2_driver.ros.calibration import Calibration
+from i3dmgx2_driver.ros import diagnostic_statuses as d
 import pytest
 
 INFO = DeviceInfo('3DM-GX2', '3095', '3DM-GX2 Wireless', '5g 300deg/s', '2.1.03')
@@ -206,7 +207,7 @@ def test_calibration_status():
 
 
 def test_rate_meter_measures_between_last_records_and_restarts():
-    meter = d.RateMeter()
+    meter = RateMeter()
     assert meter.update(10, 100.0, running=True) is None
     assert meter.update(110, 101.0, running=True) == pytest.approx(100.0)
     assert meter.update(110, 101.0, running=True) is None   # nothing new

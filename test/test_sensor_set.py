@@ -109,7 +109,7 @@ def test_the_readme_table_of_shared_rates_is_the_codes():
 
 
 def test_packets_of_unlisted_addresses_are_named_on_diagnostics():
-    from i3dmgx2_driver.ros.diagnostics import parser_status
+    from i3dmgx2_driver.ros.diagnostic_statuses import parser_status
     status = parser_status({'foreign_frames': 12}, {'foreign_frames': 2}, {40: 10, 3: 2})
     assert status.message == '10 frames from other sensors ignored (node 3: 2, node 40: 10)'
     assert status.value('packets of unlisted addresses') == 'node 3: 2, node 40: 10'

@@ -19,9 +19,8 @@ Whether a gyro bias capture is trusted, and whether gravity and the rate
 pass the self test.
 """
 
-from i3dmgx2_driver.ros.services import (
-    format_report, gravity_step, judge_capture, MAX_GYRO_BIAS, rate_step, Step,
-)
+from i3dmgx2_driver.device.gyro_bias import judge_capture, MAX_GYRO_BIAS
+from i3dmgx2_driver.device.self_test import format_report, gravity_step, rate_step, Step
 
 BIAS = (-0.0033, -0.0217, -0.0052)
 DOWN = (0.0, 0.0, -1.0)
