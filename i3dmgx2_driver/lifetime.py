@@ -37,7 +37,7 @@ starts a process:
 - **A deadline**: :func:`arm_deadline`, armed when a stop begins. If the
   process has not exited :data:`SHUTDOWN_DEADLINE` seconds later, the
   interpreter's fault handler writes every thread's stack to standard error
-  (the log) and the process exits with :data:`EXIT_PAST_DEADLINE` (1). The
+  (the log) and the process exits 1 (the handler's own ``_exit(1)``). The
   handler runs in a C thread of its own, without the interpreter's lock, so
   a thread stuck in C code cannot hold it up either.
 """
@@ -54,8 +54,6 @@ from typing import Any
 
 #: Seconds from the start of a stop to the end of the process, at most.
 SHUTDOWN_DEADLINE = 3.0
-#: The exit code of a process that did not end within the deadline (faulthandler's).
-EXIT_PAST_DEADLINE = 1
 #: The signals that stop a process of the package cleanly.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 #: prctl(2) option: the signal the process gets when its parent ends.

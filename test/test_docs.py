@@ -33,7 +33,7 @@ import os
 import re
 import runpy
 
-from i3dmgx2_driver.ros.parameters import _REQUIRED, SPECS
+from i3dmgx2_driver.ros.parameter_table import REQUIRED, SPECS
 import pytest
 import yaml
 
@@ -72,7 +72,7 @@ def params_file():
 def test_params_file_names_every_parameter(params_file):
     text, values = params_file
     for spec in SPECS:
-        if spec.default is _REQUIRED or spec.replaced_by or spec.default == []:
+        if spec.default is REQUIRED or spec.replaced_by or spec.default == []:
             # Documented, deliberately left unset: there is no silent default, a
             # deprecated name set here would warn at every start, and an empty array
             # has no type a params file could give it.

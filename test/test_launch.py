@@ -245,7 +245,7 @@ def test_several_sensors_calibration_and_capture_reach_either_node_only_when_giv
     assert 'optional_overrides(context)' in ast.get_source_segment(
         source, assigned(tree, 'common'))
     # Every one names a parameter the node declares.
-    from i3dmgx2_driver.ros.parameters import SPECS
+    from i3dmgx2_driver.ros.parameter_table import SPECS
     names = {spec.name for spec in SPECS}
     functions = _launch_functions({})
     assert set(functions['OPTIONAL_PARAMETERS']) <= names

@@ -28,9 +28,12 @@ import re
 from i3dmgx2_driver.device.realtime import ThreadPolicy
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.ros.conversions import MessageSettings
+from i3dmgx2_driver.ros.parameter_table import (
+    ANGULAR_VELOCITY_STDDEV, DEVICE_DEFAULTS, LINEAR_ACCELERATION_STDDEV, ORIENTATION_STDDEV,
+    SPECS,
+)
 from i3dmgx2_driver.ros.parameters import (
-    ANGULAR_VELOCITY_STDDEV, declare_parameters, DEVICE_DEFAULTS, driver_config, DriverConfig,
-    LINEAR_ACCELERATION_STDDEV, ORIENTATION_STDDEV, ParameterError, SPECS, unknown_message,
+    declare_parameters, driver_config, DriverConfig, ParameterError, unknown_message,
     unknown_names, warn_unknown_parameters,
 )
 from i3dmgx2_driver.ros.publishers import (

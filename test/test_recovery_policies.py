@@ -81,15 +81,9 @@ def test_a_short_timeout_is_looked_at_four_times():
 # -- ReopenWait ---------------------------------------------------------------------------
 
 
-def test_without_prompt_reopen_the_whole_interval_is_waited():
-    clock = FakeClock()
-    ReopenWait('/dev/x', 1.0, False, clock.wait, exists=lambda path: False, clock=clock)()
-    assert clock.waits == [1.0]
-
-
 def test_a_port_that_stays_is_tried_again_after_the_interval():
     clock = FakeClock()
-    ReopenWait('/dev/x', 1.0, True, clock.wait, exists=lambda path: True, clock=clock)()
+    ReopenWait('/dev/x', 1.0, clock.wait, exists=lambda path: True, clock=clock)()
     assert 1.0 <= sum(clock.waits) <= 1.0 + 1.5 * PORT_WATCH_S  # within one look
     assert set(clock.waits) == {PORT_WATCH_S}
 
@@ -98,7 +92,7 @@ def test_a_port_seen_missing_is_reopened_once_it_is_back():
     clock = FakeClock()
     start = clock.now
     present = iter([False] * 5 + [True])
-    ReopenWait('/dev/x', 1.0, True, clock.wait, exists=lambda path: next(present),
+    ReopenWait('/dev/x', 1.0, clock.wait, exists=lambda path: next(present),
                clock=clock)()
     assert clock.waits[-1] == PORT_SETTLE_S
     assert clock.now - start == pytest.approx(6 * PORT_WATCH_S + PORT_SETTLE_S)
@@ -106,22 +100,15 @@ def test_a_port_seen_missing_is_reopened_once_it_is_back():
 
 def test_a_port_closed_for_a_stall_is_reopened_at_once():
     clock = FakeClock()
-    ReopenWait('/dev/x', 1.0, True, clock.wait, exists=lambda path: True,
+    ReopenWait('/dev/x', 1.0, clock.wait, exists=lambda path: True,
                clock=clock)(after_stall=True)
     assert clock.waits == []
-
-
-def test_without_prompt_reopen_a_stall_waits_the_whole_interval_too():
-    clock = FakeClock()
-    ReopenWait('/dev/x', 1.0, False, clock.wait, exists=lambda path: True,
-               clock=clock)(after_stall=True)
-    assert clock.waits == [1.0]
 
 
 def test_a_stop_ends_the_wait_at_once():
     clock = FakeClock()
     clock.cancelled = True
-    ReopenWait('/dev/x', 1.0, True, clock.wait, exists=lambda path: True, clock=clock)()
+    ReopenWait('/dev/x', 1.0, clock.wait, exists=lambda path: True, clock=clock)()
     assert clock.waits == []
 
 
@@ -198,7 +185,7 @@ def test_a_port_that_can_never_work_ends_the_loop_once(monkeypatch):
 
 def test_a_missing_port_is_retried_and_said_once(monkeypatch):
     port = FailingPort(monkeypatch, PortMissing('/dev/x: no such port'))
-    sup, fatal, log = supervisor_on(reconnect_interval=0.01, prompt_reopen=False)
+    sup, fatal, log = supervisor_on(reconnect_interval=0.01)
     sup.start()
     try:
         assert wait_until(lambda: port.opened >= 5

@@ -19,7 +19,7 @@ How to reach one device and how patient to be with it.
 One frozen settings object for the supervisor (the port, the retry and
 recovery timing) and the dialogue (the address, the stream, the request
 timeouts). The node fills it from its parameter table, where each parameter
-names the field it sets (``Spec.feeds`` in ros/parameters.py); a field no
+names the field it sets (``Spec.feeds`` in ros/parameter_table.py); a field no
 parameter sets keeps its default here.
 """
 
@@ -53,9 +53,6 @@ class DeviceConfig:
     thread_policy: ThreadPolicy = NORMAL_SCHEDULING
     #: Reconnect to a known sensor with one serial-number read (False: the full dialogue).
     fast_reconnect: bool = True
-    #: Reopen a port the moment it reappears, and a port closed for a stall at once
-    #: (False: always wait ``reconnect_interval``).
-    prompt_reopen: bool = True
     #: Per try and tries of that read: short, so that a reply lost in a stall is asked
     #: again soon after the radio is back.
     resume_timeout: float = timeouts.RESUME_TIMEOUT

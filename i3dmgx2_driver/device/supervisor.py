@@ -157,8 +157,7 @@ class DeviceSupervisor:
         self._on_connect = on_connect
         self._on_fatal = on_fatal or (lambda error: log.error(str(error)))
         self._opener = PortOpener(config, log, on_bytes)
-        self._reopen_wait = ReopenWait(config.port, config.reconnect_interval,
-                                       config.prompt_reopen, self._cancel.wait)
+        self._reopen_wait = ReopenWait(config.port, config.reconnect_interval, self._cancel.wait)
         self._thread: threading.Thread | None = None
         self._link: DeviceLink | None = None
         #: Guards who owns ``_link``: the thread opening one, or a caller releasing it.

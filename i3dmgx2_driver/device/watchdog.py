@@ -62,16 +62,14 @@ class ReopenWait:
     Wait before the port at ``path`` is tried again: ``interval`` s, or until it is back.
 
     ``wait(seconds)`` waits and returns True when the driver stops meanwhile
-    (an Event's ``wait``); ``prompt=False`` always waits the whole interval
-    (``prompt_reopen`` false).
+    (an Event's ``wait``).
     """
 
-    def __init__(self, path: str, interval: float, prompt: bool,
-                 wait: Callable[[float], bool], exists: Callable[[str], bool] = os.path.exists,
+    def __init__(self, path: str, interval: float, wait: Callable[[float], bool],
+                 exists: Callable[[str], bool] = os.path.exists,
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.path = path
         self.interval = interval
-        self.prompt = prompt
         self._wait = wait
         self._exists = exists
         self._clock = clock
@@ -81,12 +79,9 @@ class ReopenWait:
         Return when the port may be tried again, or the driver stops.
 
         ``after_stall``: the port was closed because its stream stalled, not
-        lost; it is still there, and tried again at once (unless not prompt).
+        lost; it is still there, and tried again at once.
         """
-        if after_stall and self.prompt:
-            return
-        if not self.prompt:
-            self._wait(self.interval)
+        if after_stall:
             return
         deadline = self._clock() + self.interval
         seen_missing = False

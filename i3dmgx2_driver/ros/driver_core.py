@@ -61,8 +61,8 @@ import time
 from rclpy.node import Node
 
 from .fault_watch import FaultWatch
-from .parameters import (declare_parameters, driver_config, DriverConfig, SPECS,
-                         warn_unknown_parameters)
+from .parameter_table import SPECS
+from .parameters import declare_parameters, driver_config, DriverConfig, warn_unknown_parameters
 from .publishers import ALONE_TOPICS, create_publishers, override_names, Publishers, SensorTopics
 from .record_publisher import RecordPublisher, Stamping
 from .sensor_set import SensorSetting
