@@ -164,17 +164,19 @@ def test_the_biases_are_written_to_ram_and_checked_against_the_echo():
     sensor = SimulatedSensor(seed=1)
     talk, log = dialogue(gyro_bias=BIAS, accel_bias=(0.001, 0.0, -0.002))
     link = Link(sensor)
+    eeprom = dict(sensor.eeprom)
     talk.write_biases(link)
     assert [c.code for c in link.sent] == [layouts.WRITE_GYRO_BIAS, layouts.WRITE_ACCEL_BIAS]
     assert sensor.biases.gyro == float32_vector(BIAS)
     assert sensor.biases.accel == float32_vector((0.001, 0.0, -0.002))
-    assert talk.biases_written and talk.eeprom_writes == 0  # RAM: no EEPROM worn
+    # RAM: no EEPROM worn, by the dialogue's count and in the sensor.
+    assert talk.eeprom_writes == 0 and sensor.eeprom == eeprom
     assert any('gyro_bias (-0.0033, -0.0217, -0.0052) rad/s written' in m for _, m in log.said)
     # None configured: nothing said to the sensor.
     talk, _ = dialogue()
     link = Link(sensor)
     talk.write_biases(link)
-    assert link.sent == [] and not talk.biases_written
+    assert link.sent == [] and sensor.biases.gyro == float32_vector(BIAS)
 
 
 def test_an_accepted_capture_is_the_bias_written_back_and_said_each_time():
@@ -195,11 +197,14 @@ def test_an_accepted_capture_is_the_bias_written_back_and_said_each_time():
 
 
 def test_an_echo_that_differs_or_none_is_a_clear_error():
-    talk, _ = dialogue(gyro_bias=BIAS)
+    told: list[bool] = []
+    talk = SensorDialogue(DeviceConfig(port='/dev/null', address=95, gyro_bias=BIAS), Log(),
+                          lambda *args: None, threading.Event(),
+                          on_gyro_bias=lambda: told.append(True))
     with pytest.raises(DeviceTimeout, match=r'gyro_bias: wrote \(-0.0033, -0.0217, -0.0052\) '
                                             r'rad/s, the sensor echoed \(0, 0, 0\) rad/s'):
         talk.write_biases(Link(SimulatedSensor(seed=1), wrong=(0.0, 0.0, 0.0)))
-    assert not talk.biases_written
+    assert told == [], 'a bias the sensor does not echo is not said to be in use'
     with pytest.raises(DeviceTimeout, match='gyro_bias: the sensor did not echo'):
         talk.write_biases(Link(SimulatedSensor(seed=1), silent=True))
 

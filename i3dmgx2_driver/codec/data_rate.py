@@ -32,6 +32,9 @@ MAX_DIVIDER = 51200
 #: Lowest and highest data rate the divider can give.
 MIN_RATE_HZ = RATE_BASE_HZ / MAX_DIVIDER
 MAX_RATE_HZ = RATE_BASE_HZ / MIN_DIVIDER
+#: The time between records assumed while the divider is unknown (s): the factory
+#: divider's (512, 100 Hz).
+UNKNOWN_PERIOD_S = 0.01
 #: Device timer ticks in one calculation cycle of divider 1 (19,660,800 / 51,200).
 TICKS_PER_DIVIDER = round(TICKS_PER_SECOND / RATE_BASE_HZ)
 
@@ -44,6 +47,17 @@ def divider_for_rate(rate_hz: float) -> int:
 def rate_of_divider(divider: int) -> float:
     """Return the data rate (Hz) a divider gives."""
     return RATE_BASE_HZ / divider
+
+
+def period_of_divider(divider: int | None) -> float:
+    """
+    Return the time between two records at ``divider`` (s).
+
+    While the divider is unknown (None: not read yet, or not answered) the
+    factory rate's period stands in, so that a wait for records is never
+    left without a length.
+    """
+    return divider / RATE_BASE_HZ if divider else UNKNOWN_PERIOD_S
 
 
 def ticks_per_cycle(divider: int) -> int:

@@ -19,23 +19,26 @@ Quiet any stream, ping, make a couple of polled requests, read the identity,
 set the data rate (the one EEPROM write the driver makes), start continuous
 mode until records actually arrive, resume a known sensor after a reconnect
 with one serial-number read, and lend the sensor to a service for an
-exclusive operation. Each request is retried a few times because the radio
-loses commands both ways; that is part of speaking to this device. What to
-do when the dialogue fails (reopen, back off, give up) is not: the
-supervisor's thread and its lifecycle phases (supervisor.py) decide that,
-and drive this object through their start-up steps. It has no thread and
-starts none; it can be tested with a link and a simulator alone.
+exclusive operation. How each step goes (its request, its retries, how long
+it waits for records or for silence) is sensor_steps.py's, the same for
+``discover`` and ``bringup``; which steps the node takes, in which order,
+and what it keeps of their answers is here. What to do when the dialogue
+fails (reopen, back off, give up) is not: the supervisor's thread and its
+lifecycle phases (supervisor.py) decide that, and drive this object through
+their start-up steps. It has no thread and starts none; it can be tested
+with a link and a simulator alone.
 
 What it learns (identity, divider, whether the ping was answered, the line's
 use) it keeps as attributes for the supervisor's status snapshot. The
 phases share what they learn: continuous mode waits as long as the rate
 says, the resume compares the serial number the identification read.
 
-The data rate's divider cell wears with every write, so what was written and
-how often is kept here, with the one rule that guards it: one change of
-setting writes the cell once, however rough the radio, and never again from
-this driver's run. A bias is stored in non-volatile memory (0xD0) only when a
-service asks, once per call, and counted with the same writes.
+The data rate's divider cell wears with every write, so which dividers were
+written is kept here, with the one rule that guards it: one change of
+setting writes the cell once, however rough the radio (the write step's
+rule), and never again from this driver's run (this dialogue's). A bias is
+stored in non-volatile memory (0xD0) only when a service asks, once per
+call; the steps count it with the divider's writes.
 
 Known biases (the ``gyro_bias`` and ``accel_bias`` parameters) go to the
 sensor's RAM at every start and every resume (0xCA, 0xC9: RAM only, so a
@@ -59,11 +62,11 @@ from typing import Any
 from . import timeouts
 from .identity import DeviceInfo, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR
 from .link import DeviceLink, DeviceTimeout
-from .port import PortDisconnected
+from .sensor_steps import SensorSteps
 from .settings import DeviceConfig
 from .throttle import EVENT_PERIOD, Throttle
 from ..codec import commands, layouts, streams
-from ..codec.data_rate import divider_for_rate, RATE_BASE_HZ, RATE_DIVIDER_ADDRESS
+from ..codec.data_rate import divider_for_rate, period_of_divider, rate_of_divider
 
 #: ``warn(key, message, period)``: say a problem (throttled per key), keep it as the last error.
 Warn = Callable[[str, str, float | None], None]
@@ -93,10 +96,11 @@ def _vector(values: tuple[float, ...]) -> str:
     return '(' + ', '.join(f'{v:.6g}' for v in values) + ')'
 
 
-class SensorDialogue:
+class SensorDialogue(SensorSteps):
     """
     Speak to the sensor at ``config.address`` through whatever link is open.
 
+    The steps, with the request patience of ``config``, in the node's order.
     ``log`` has ``debug/info/warning/error``; ``warn`` says a problem once
     per key and period; ``cancel`` set makes the waits give up (the driver
     is stopping or pausing the stream; a failed read is then no reason to
@@ -106,10 +110,10 @@ class SensorDialogue:
     def __init__(self, config: DeviceConfig, log: Any, warn: Warn,
                  cancel: threading.Event,
                  on_gyro_bias: Callable[[], None] | None = None) -> None:
+        super().__init__(config.request_timeout, config.request_retries, cancel)
         self.config = config
         self._log = log
         self._warn = warn
-        self._cancel = cancel
         self._throttle = Throttle()
         #: The device's identity, once read.
         self.info: DeviceInfo | None = None
@@ -118,16 +122,12 @@ class SensorDialogue:
         self.ping_ok: bool | None = None
         #: The data-rate divider, once known.
         self.divider: int | None = None
-        #: EEPROM write commands sent (the divider's cell; each may wear it).
-        self.eeprom_writes = 0
         #: Dividers written (or tried): never written again by this dialogue.
         self._divider_written: set[int] = set()
         #: The stream's use of the line at the device's rate (once the rate is known),
         #: and, when it does not fit, what to do about it ('' when it fits).
         self.line_use = ''
         self.line_warning = ''
-        #: Whether the kept biases are in the sensor's RAM (echoed as written).
-        self.biases_written = False
         #: The biases written at every start, resume and stall recovery: the
         #: parameters' at first; an accepted capture replaces the gyro bias.
         self.gyro_bias: tuple[float, float, float] | None = config.gyro_bias
@@ -138,27 +138,16 @@ class SensorDialogue:
     @property
     def expected_rate_hz(self) -> float | None:
         """Return the rate the divider gives, once known."""
-        return RATE_BASE_HZ / self.divider if self.divider else None
+        return rate_of_divider(self.divider) if self.divider else None
 
     @property
     def period(self) -> float:
-        """Return the time between samples (s), or 10 ms while the rate is unknown."""
-        return 1.0 / self.expected_rate_hz if self.divider else 0.01
+        """Return the time between samples (s), or the factory rate's while it is unknown."""
+        return period_of_divider(self.divider)
 
     def _serial_number(self) -> str:
         """Return the known sensor's serial number ('' while none is known)."""
         return self.info.serial_number if self.info is not None else ''
-
-    # -- quiet --------------------------------------------------------------------------
-
-    def quiet(self, link: DeviceLink) -> None:
-        """Stop the device's stream and drop what is in flight (raises PortError)."""
-        if not link.running.is_set():
-            link.flush_input()
-        link.stop_streaming()
-        link.set_streamed(None)  # a polled record is a reply only now
-        time.sleep(0.05)
-        link.flush_input()
 
     # -- bring-up: who answers, what it is, its data rate -------------------------------
 
@@ -218,7 +207,7 @@ class SensorDialogue:
 
     def _identify(self, link: DeviceLink) -> None:
         cfg = self.config
-        info = read_identity(link, cfg.request_timeout, cfg.request_retries)
+        info = read_identity(link, self.timeout, self.retries)
         if self._cancel.is_set():
             return
         if not any(info):
@@ -237,9 +226,7 @@ class SensorDialogue:
         """Read the divider; write the one ``config.data_rate_hz`` asks for, if it differs."""
         cfg = self.config
         try:
-            current = link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
-                                   layouts.READ_EEPROM, cfg.request_timeout,
-                                   cfg.request_retries).value
+            current = self.read_divider(link)
         except DeviceTimeout:
             if cfg.data_rate_hz is not None or self._cancel.is_set():
                 raise
@@ -268,39 +255,10 @@ class SensorDialogue:
         # whatever the replies say (found by the stateful dialogue test: a forged
         # read-back made the next initialise write again).
         self._divider_written.add(wanted)
-        self.divider = self._write_divider(link, current, wanted)
+        self.divider = self.write_divider(link, current, wanted)
         self._log.warning(
-            f'data rate of node {cfg.address} set to {RATE_BASE_HZ / wanted:.2f} Hz (EEPROM '
+            f'data rate of node {cfg.address} set to {rate_of_divider(wanted):.2f} Hz (EEPROM '
             f'0xFCA2: {current} -> {wanted}); this persists across power cycles')
-
-    def _write_divider(self, link: DeviceLink, current: int, wanted: int) -> int:
-        """
-        Write the divider once; return it as read back.
-
-        An EEPROM cell wears with every write, so a write is never resent
-        blindly: when its reply does not come, the write may have reached
-        the sensor and only the reply been lost. The divider is read back
-        instead, and written again only if the sensor still has the old one
-        (the command itself was lost). So one change of setting writes the
-        cell once, however rough the radio.
-        """
-        cfg = self.config
-        readback = current
-        for _ in range(cfg.request_retries):
-            self.eeprom_writes += 1
-            try:
-                link.request(commands.write_eeprom(RATE_DIVIDER_ADDRESS, wanted),
-                             layouts.WRITE_EEPROM, cfg.request_timeout, 1)
-            except DeviceTimeout:
-                pass  # written or not: the read below tells
-            readback = link.request(commands.read_eeprom(RATE_DIVIDER_ADDRESS),
-                                    layouts.READ_EEPROM, cfg.request_timeout,
-                                    cfg.request_retries).value
-            if readback != current:
-                break
-        if readback != wanted:
-            raise DeviceTimeout(f'data rate: wrote divider {wanted}, read back {readback}')
-        return readback
 
     # -- biases -------------------------------------------------------------------------
 
@@ -329,8 +287,7 @@ class SensorDialogue:
             if bias is None:
                 continue
             try:
-                echo = link.request(request(bias), code, cfg.request_timeout,
-                                    cfg.request_retries).bias
+                echo = link.request(request(bias), code, self.timeout, self.retries).bias
             except DeviceTimeout as exc:
                 raise DeviceTimeout(f'{name}: the sensor did not echo the bias written '
                                     f'(0x{code:02X}): {exc}') from None
@@ -342,22 +299,8 @@ class SensorDialogue:
             self._log.info(f'{name} {_vector(bias)} {unit} written to node {cfg.address} '
                            f'(RAM, echoed; lost at a power cycle, written again at start '
                            f'and after a stall)')
-        self.biases_written = self.gyro_bias is not None or self.accel_bias is not None
         if self.gyro_bias is not None:
             self._on_gyro_bias()
-
-    def transfer_to_non_volatile(self, link: DeviceLink, quantity: int) -> int:
-        """
-        Store a bias in the sensor's EEPROM (0xD0: 1 accel, 2 gyro); return the reply.
-
-        Asked for once and counted as an EEPROM write: never resent blindly
-        (it wears the memory); :data:`codec.records.INVALID_QUANTITY` back: refused.
-        Raises DeviceTimeout when no reply comes (stored or not: unknown).
-        """
-        cfg = self.config
-        self.eeprom_writes += 1
-        return link.request(commands.transfer_to_non_volatile(quantity),
-                            layouts.TRANSFER_TO_NON_VOLATILE, cfg.request_timeout, 1).quantity
 
     def _check_line(self) -> None:
         """
@@ -383,40 +326,18 @@ class SensorDialogue:
 
     # -- continuous mode ----------------------------------------------------------------
     #
-    # The stream counts as started only once a record has arrived (a lost reply
-    # may hide a stream that runs, a reply may come with no stream after it).
     # After a reconnect, a sensor already identified is confirmed with one
     # serial-number read and kept streaming; anything else gets the full dialogue.
 
     def start_continuous(self, link: DeviceLink) -> bool:
         """
-        Ask for continuous mode of the configured record until records actually arrive.
+        Start the configured stream, at the rate the divider gives, until its records arrive.
 
         Returns True once a record has arrived, False if cancelled first;
         raises DeviceTimeout when none comes, PortDisconnected if the port goes.
         """
         cfg = self.config
-        # From now on a record of the streamed code is a sample, even one that also
-        # answers a polled request.
-        link.set_streamed(cfg.stream)
-        for _ in range(cfg.continuous_retries):
-            before = link.records
-            try:
-                link.request(commands.set_continuous(cfg.stream), layouts.SET_CONTINUOUS,
-                             cfg.request_timeout, 1)
-            except DeviceTimeout:
-                pass  # the reply may be lost while the stream started: look for records
-            deadline = time.monotonic() + max(0.3, 5 * self.period)
-            while time.monotonic() < deadline and not self._cancel.is_set():
-                if link.records > before:
-                    return True
-                if link.disconnected.is_set():
-                    raise PortDisconnected(link.error or 'device disconnected')
-                time.sleep(0.01)
-            if self._cancel.is_set():
-                return False
-        raise DeviceTimeout(f'continuous mode: no records after {cfg.continuous_retries} '
-                            f'requests')
+        return self.start_stream(link, cfg.stream, self.period, cfg.continuous_retries)
 
     def announce_streaming(self) -> None:
         """Say that records flow: called only once one has arrived on this link."""
@@ -452,14 +373,16 @@ class SensorDialogue:
                               f'{serial or "?"}, not {known}; identifying it in full')
             self.info = None
             return False
+        # The link counts only records of the stream (expect_stream said which): a
+        # sensor power-cycled meanwhile streams nothing, or the record its EEPROM says.
         deadline = time.monotonic() + min(2 * self.period, 0.1)
-        while link.last_code != cfg.stream and time.monotonic() < deadline \
+        while not link.records and time.monotonic() < deadline \
                 and not self._cancel.is_set():
             time.sleep(0.002)
         # Not streaming (power-cycled meanwhile), or streaming another record: ask for it.
         # A power cycle meanwhile lost the biases in the sensor's RAM: write them again.
         self.write_biases(link)
-        if link.last_code != cfg.stream and not self.start_continuous(link):
+        if not link.records and not self.start_continuous(link):
             return True  # cancelled: nothing more to do here
         self._log.info(f'streaming {streams.BY_CODE[cfg.stream].label} again from node '
                        f'{cfg.address} on {cfg.port}: same sensor (serial {serial}), identity '
@@ -482,11 +405,9 @@ class SensorDialogue:
         Stop the stream and run ``operation(link)``; the caller starts the stream again.
 
         For services that need the device's full attention (gyro bias
-        capture, built-in test). Raises PortError or DeviceTimeout.
+        capture, built-in test). Paused, a polled record of the streamed code
+        (a self test's 0xC2, with the built-in test skewing it) is a reply
+        only, never a sample. Raises PortError or DeviceTimeout.
         """
-        link.stop_streaming()
-        # Paused, a polled record of the streamed code (a self test's 0xC2, with
-        # the built-in test skewing it) is a reply only, never a sample.
-        link.set_streamed(None)
-        time.sleep(0.05)
+        self.stop(link)
         return operation(link)

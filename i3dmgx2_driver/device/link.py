@@ -413,7 +413,13 @@ class DeviceLink:
 
         While one streams, a polled reply of its code is both the reply and
         a record of the stream, and only its records keep the stream alive;
-        while none does, a polled record is a reply only.
+        while none does, a polled record is a reply only. This and
+        :meth:`on_data` are the one place that tells a reply from a record of
+        the stream: whoever waits for the stream (the steps that start and
+        stop it, the stall watch) reads :attr:`records` and
+        :attr:`last_data_mono` instead of comparing codes. A poll of the
+        streamed code while the stream may still run (its stop lost) cannot
+        be told from it: the dialogue's first polls never ask for it.
         """
         self._streamed = code
 
@@ -519,8 +525,9 @@ class DeviceLink:
         data = encode_command_packet(self.address, command) if self.wireless else command
         self.reader.write(data)
 
-    def request(self, command: bytes, reply_code: int | None, timeout: float = 0.5,
-                retries: int = 3) -> Any:
+    def request(self, command: bytes, reply_code: int | None,
+                timeout: float = timeouts.REQUEST_TIMEOUT,
+                retries: int = timeouts.REQUEST_RETRIES) -> Any:
         """
         Send ``command`` until its reply (a record of ``reply_code``) arrives.
 
@@ -594,7 +601,8 @@ class DeviceLink:
         if self._cancel.is_set():
             raise DeviceTimeout('cancelled: the stream is being stopped')
 
-    def ping(self, timeout: float = 0.5, retries: int = 3) -> bool:
+    def ping(self, timeout: float = timeouts.PING_TIMEOUT,
+             retries: int = timeouts.PING_RETRIES) -> bool:
         """Ask the base station whether the sensor answers over the radio."""
         for _ in range(retries):
             answer = self.ping_once(self.address, timeout)

@@ -16,11 +16,13 @@
 How long the driver and ``discover`` wait for the radio: the one place.
 
 Every wait for an answer that crosses the radio (a ping, a command's reply,
-the first record after continuous mode is asked for, the next record of a
-stream) is named here, with the setting that changes it, so that the node
-(``settings.DeviceConfig``, the dialogue), ``discover`` (``tools.discover.ProbeConfig``)
-and ``bringup``, which measures the real round trips and warns when one comes
-within a factor 2 of a timeout, cannot disagree about them.
+the first record after continuous mode is asked for, the silence after it
+is stopped, the next record of a stream) is named here, with the setting
+that changes it, so that the node (``settings.DeviceConfig``, the dialogue),
+``discover`` (``tools.discover_probe.ProbeConfig``) and ``bringup``, which
+measures the real round trips and warns when one comes within a factor 2 of
+a timeout, cannot disagree about them. The steps that wait
+(``sensor_steps.py``) are the same for all three.
 """
 
 from typing import NamedTuple
@@ -37,6 +39,24 @@ ACK_TIMEOUT = 0.1
 #: The serial-number read that resumes a known sensor after a reconnect (s per try).
 RESUME_TIMEOUT = 0.1
 RESUME_RETRIES = 5
+#: Continuous mode asked, in tries of one request each (the node's ``continuous_retries``).
+CONTINUOUS_TRIES = 5
+#: Continuous mode asked: its first record is looked for this long (s), or for
+#: RECORD_PERIODS sample periods when they are longer.
+FIRST_RECORD_S = 0.3
+#: A stream told to stop counts as stopped after this much silence (s), plus
+#: RECORD_PERIODS sample periods (a slow stream is silent between its records).
+QUIET_S = 0.3
+#: Sample periods a record may come late by (the radio's queue, jitter) before its
+#: absence says something.
+RECORD_PERIODS = 5
+#: Told to stop (0xFA, which has no reply): how long (s) beyond the silence above to
+#: wait for it, and how many times to say it before giving up.
+STOP_PATIENCE_S = 0.7
+STOP_TRIES = 3
+#: After 0xFA: how long (s) the records already on their way are given to arrive
+#: before they are dropped (the line quieted without waiting for silence).
+STOP_SETTLE_S = 0.05
 #: No record for this long (s): the stream has stalled (the node's ``read_timeout``).
 STALL_TIMEOUT = 1.0
 #: discover: the first pings, until a base station has answered one (s per ping).

@@ -187,6 +187,10 @@ class RecordPublisher:
     def on_record(self, packet: DataPacket, read_time: float, read_mono: float) -> None:
         """Stamp and publish one record (runs in the reader thread)."""
         record = packet.record
+        # A reply to a waiting request does not come here: the link keeps it back
+        # (device/link.py tells a reply from a record of the stream). A record of
+        # another kind (a sensor power-cycled into its EEPROM's auto-start, a reply
+        # come after its request gave up) makes no message of this stream: counted.
         if type(record) is not self._record_type:
             self.stats.other_records += 1
             return

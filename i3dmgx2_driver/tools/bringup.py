@@ -43,20 +43,21 @@ import itertools
 import json
 import os
 import sys
+import threading
 import time
 from typing import Any, TextIO
 
 from .bringup_round_trips import MEASURE_TIMEOUT, note_longest, RoundTrips, spread
-from .bringup_sensor import HeardRecords, SensorControl
 from .port_listing import latency_timer_ms
 from .. import lifetime
 from ..arguments import seconds, whole_number
 from ..capture.file_format import CaptureWriter, default_header
 from ..codec import line_budget, streams
+from ..codec.commands import LAYOUT_BY_TYPE
 from ..codec.data_rate import (
-    divider_for_rate, RATE_BASE_HZ, ticks_per_cycle,
+    divider_for_rate, period_of_divider, rate_of_divider, ticks_per_cycle,
 )
-from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
+from ..codec.framing import DataPacket, MAX_ADDRESS, MIN_ADDRESS
 from ..codec.records import TICKS_PER_SECOND
 from ..codec.timer import TIMER_MODULUS
 from ..device import timeouts
@@ -64,6 +65,10 @@ from ..device.clock import DeviceClock
 from ..device.identity import read_identity
 from ..device.link import DeviceLink, DeviceTimeout, LinkOptions
 from ..device.port import port_group, PortError, SerialPort
+from ..device.sensor_steps import SensorSteps
+
+#: One record of a stream measured: (monotonic read time, code, timer, LQI, RSSI).
+Entry = tuple[float, int, int, int | None, int | None]
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -113,29 +118,59 @@ def _streams(text: str) -> list[streams.Stream]:
     return [streams.parse(item.strip()) for item in text.split(',') if item.strip()]
 
 
+class RecordLog:
+    """The records a stream's figures are made of, as the link's reader thread hands them."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._entries: list[Entry] | None = None
+
+    def __call__(self, packet: DataPacket, now: float, mono: float) -> None:
+        with self._lock:
+            if self._entries is not None:
+                record = packet.record
+                layout = LAYOUT_BY_TYPE.get(type(record))
+                self._entries.append((mono, layout.code if layout is not None else 0,
+                                      getattr(record, 'timer', 0), packet.lqi, packet.rssi))
+
+    def start(self) -> None:
+        """Keep every record from now on."""
+        with self._lock:
+            self._entries = []
+
+    def stop(self) -> list[Entry]:
+        """Return the records kept since :meth:`start`; keep none from now on."""
+        with self._lock:
+            entries, self._entries = self._entries or [], None
+        return entries
+
+
 class Bringup:
     """
     One bring-up session over an open link; each step fills part of :attr:`report`.
 
-    The sensor's stream and divider are :attr:`control`'s
-    (bringup_sensor.py), the round trips :attr:`round_trips`'
-    (bringup_round_trips.py); here: the sensor as found, every stream, and
-    the sensor as found again.
+    What is said to the sensor, and when a stream counts as started or
+    stopped, are the steps every tool and the node take (:attr:`steps`,
+    device/sensor_steps.py); the round trips are :attr:`round_trips`'
+    (bringup_round_trips.py); here: the sensor as found, every stream
+    measured, and the sensor as found again.
     """
 
-    def __init__(self, link: DeviceLink, heard: HeardRecords, args: argparse.Namespace,
+    def __init__(self, link: DeviceLink, log: RecordLog, args: argparse.Namespace,
                  say: Callable[[str], None]) -> None:
         self.link = link
-        self.heard = heard
+        self.log = log
         self.args = args
         self.say = say
         self.report: dict[str, Any] = {}
         self.found_stream = 0
         self.found_divider: int | None = None
+        #: The rate divider as last written or found (None: unknown).
+        self.divider: int | None = None
         #: Longest round trip of each kind (s), for the timeouts' check.
         self.longest: dict[str, float] = {}
-        self.control = SensorControl(link, heard)
-        self.round_trips = RoundTrips(self.control, args, say, self.longest)
+        self.steps = SensorSteps()
+        self.round_trips = RoundTrips(link, self.steps, args, say, self.longest)
 
     # -- the sensor as found --------------------------------------------------------
 
@@ -146,17 +181,18 @@ class Bringup:
         Returns False, with the reason in the report, when the sensor is not
         there: no stream heard and no answer to a ping through the base station.
         """
+        link = self.link
         self.say(f'listening {self.args.listen:g} s for a stream already running')
         deadline = time.monotonic() + self.args.listen
-        while time.monotonic() < deadline and not self.heard.snapshot()[0]:
+        while time.monotonic() < deadline and not link.records:
             time.sleep(0.02)
         time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
-        if self.heard.snapshot()[0]:
-            self.found_stream = self.link.last_code or 0
+        if link.records:
+            self.found_stream = link.last_code or 0
         if self.found_stream:
             self.say(f'the sensor streams 0x{self.found_stream:02X}: stopping it (restarted '
                      f'at the end)')
-        self.control.stop_stream()
+        self.steps.stop_until_quiet(link, period_of_divider(None))
         if not self.found_stream:
             answer = None
             for _ in range(3):
@@ -172,20 +208,29 @@ class Bringup:
                     + '; ros2 run i3dmgx2_driver discover finds the port and address')
                 return False
         self.say('reading identity and data rate')
-        info = read_identity(self.link, timeouts.REQUEST_TIMEOUT, timeouts.REQUEST_RETRIES)
+        info = read_identity(link, self.steps.timeout, self.steps.retries)
         self.report['identity'] = info._asdict()
         self.report['identity']['answered'] = any(info)
         try:
-            self.found_divider = self.control.read_divider()
+            self.found_divider = self.steps.read_divider(link)
         except DeviceTimeout:
             self.found_divider = None
-        self.control.divider = self.found_divider
+        self.divider = self.found_divider
         self.report['as_found'] = {
             'streaming': f'0x{self.found_stream:02X}' if self.found_stream else None,
             'rate_divider': self.found_divider,
-            'rate_hz': round(RATE_BASE_HZ / self.found_divider, 3)
+            'rate_hz': round(rate_of_divider(self.found_divider), 3)
             if self.found_divider else None,
         }
+        return True
+
+    def _write_divider(self, divider: int) -> bool:
+        """Write the rate divider to EEPROM (once, read back); True if it holds."""
+        try:
+            self.divider = self.steps.write_divider(self.link, self.divider, divider)
+        except DeviceTimeout:
+            self.divider = None  # written or not: unknown
+            return False
         return True
 
     # -- every stream --------------------------------------------------------------------
@@ -198,21 +243,22 @@ class Bringup:
             return out
         divider = divider_for_rate(rate)
         out['divider'] = divider
-        out['rate_asked_hz'] = round(RATE_BASE_HZ / divider, 2)
-        self.say(f'streaming {stream.label} at {RATE_BASE_HZ / divider:.1f} Hz for '
+        out['rate_asked_hz'] = round(rate_of_divider(divider), 2)
+        self.say(f'streaming {stream.label} at {rate_of_divider(divider):.1f} Hz for '
                  f'{self.args.stream_seconds:g} s')
-        if divider != self.control.divider and not self.control.write_divider(divider):
+        if divider != self.divider and not self._write_divider(divider):
             out['error'] = f'could not set the rate divider to {divider}'
             return out
-        with self.heard.lock:
-            self.heard.log = []
-        if self.control.start_stream(stream.code) is None:
-            out['error'] = 'no records after 5 continuous-mode requests'
-        else:
+        period = period_of_divider(divider)
+        self.log.start()
+        try:
+            self.steps.start_stream(self.link, stream.code, period)
             time.sleep(self.args.stream_seconds)
-        with self.heard.lock:
-            log, self.heard.log = self.heard.log, None
-        self.control.stop_stream()
+        except DeviceTimeout:
+            out['error'] = (f'no records after {timeouts.CONTINUOUS_TRIES} continuous-mode '
+                            f'requests')
+        log = self.log.stop()
+        self.steps.stop_until_quiet(self.link, period)
         out.update(stream_figures([e for e in log if e[1] == stream.code], divider,
                                   line_budget.wire_time(stream.code, self.args.baud, True)))
         note_longest(self.longest, timeouts.RECORD_GAP, [out['longest_gap_ms'] / 1e3]
@@ -224,33 +270,36 @@ class Bringup:
     def restore(self) -> dict[str, Any]:
         """Put divider and stream back as found; say how it went."""
         out: dict[str, Any] = {}
-        self.control.stop_stream()
+        link, steps = self.link, self.steps
+        steps.stop_until_quiet(link, period_of_divider(self.divider))
         if self.found_divider is not None:
-            ok = (self.control.divider == self.found_divider
-                  or self.control.write_divider(self.found_divider))
+            ok = self.divider == self.found_divider or self._write_divider(self.found_divider)
             try:
-                readback = self.control.read_divider()
+                readback = steps.read_divider(link)
             except DeviceTimeout:
                 readback = None
             out['rate_divider'] = readback
             out['rate_divider_restored'] = bool(ok and readback == self.found_divider)
         else:
             out['rate_divider'] = None
-            out['rate_divider_restored'] = self.control.divider is None
+            out['rate_divider_restored'] = self.divider is None
         if self.found_stream:
-            restarted = self.control.start_stream(self.found_stream) is not None
+            try:
+                restarted = steps.start_stream(link, self.found_stream,
+                                               period_of_divider(self.divider))
+            except DeviceTimeout:
+                restarted = False
             out['streaming'] = f'0x{self.found_stream:02X}' if restarted else None
             out['stream_restored'] = restarted
         else:
             out['streaming'] = None
             out['stream_restored'] = True
         out['as_found'] = out['rate_divider_restored'] and out['stream_restored']
-        out['eeprom_writes'] = self.control.eeprom_writes
+        out['eeprom_writes'] = steps.eeprom_writes
         return out
 
 
-def stream_figures(log: Sequence[tuple[float, int, int, int | None, int | None]],
-                   divider: int, wire_time: float) -> dict[str, Any]:
+def stream_figures(log: Sequence[Entry], divider: int, wire_time: float) -> dict[str, Any]:
     """Rate, records lost by the timer, LQI/RSSI and clock drift of one stream's records."""
     out: dict[str, Any] = {'records': len(log)}
     if len(log) < 2:
@@ -422,10 +471,10 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
     capture = CaptureWriter(os.path.join(folder, 'session.gx2cap'), default_header(
         port=args.port, address=args.address, baud=args.baud, wireless=True,
         notes='bringup session'))
-    heard = HeardRecords()
-    link = DeviceLink(port, args.address, heard,
+    log = RecordLog()
+    link = DeviceLink(port, args.address, log,
                       LinkOptions(read_timeout=0.05, on_bytes=capture.write))
-    session = Bringup(link, heard, args, say)
+    session = Bringup(link, log, args, say)
     session.report = report
     trips = session.round_trips
     restored = False
@@ -439,8 +488,8 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         else:
             report['round_trips'].update(trips.ping())
             report['round_trips'].update(trips.command())
-            report['round_trips'].update(
-                trips.continuous(session.found_stream or streams.DEFAULT.code))
+            report['round_trips'].update(trips.continuous(
+                session.found_stream or streams.DEFAULT.code, period_of_divider(session.divider)))
             for stream in chosen:
                 report['streams'].append(session.run_stream(stream))
         say('putting the sensor back as found')

@@ -18,7 +18,8 @@ The round trips a bring-up measures: ping, a short command, continuous mode's st
 Each is timed with :data:`MEASURE_TIMEOUT`, far beyond the driver's own
 timeouts, so that a slow round trip is measured rather than counted lost;
 the longest of each kind is noted for the check of the driver's timeouts
-(``device/timeouts.py``: ``close_calls``).
+(``device/timeouts.py``: ``close_calls``). When a stream is stopped is told
+as every tool and the node tell it (``device/sensor_steps.py``).
 """
 
 import argparse
@@ -27,10 +28,10 @@ import statistics
 import time
 from typing import Any
 
-from .bringup_sensor import SensorControl
 from ..codec import commands, layouts
 from ..device import timeouts
-from ..device.link import DeviceNack, DeviceTimeout
+from ..device.link import DeviceLink, DeviceNack, DeviceTimeout
+from ..device.sensor_steps import SensorSteps
 
 #: How long a single measured exchange may take (s): far beyond every timeout the
 #: driver uses, so that a slow round trip is measured rather than counted lost.
@@ -59,17 +60,17 @@ def note_longest(longest: dict[str, float], kind: str, values: Sequence[float]) 
 
 class RoundTrips:
     """
-    Time the round trips over ``control``'s link as many times as ``args`` say.
+    Time the round trips over ``link`` as many times as ``args`` say.
 
     Each method returns its entries of the report's ``round_trips`` and
-    notes the longest round trip of its kind in ``longest``.
+    notes the longest round trip of its kind in ``longest``. ``steps`` tell
+    when a stream has stopped, and stop one for sure.
     """
 
-    def __init__(self, control: SensorControl, args: argparse.Namespace,
+    def __init__(self, link: DeviceLink, steps: SensorSteps, args: argparse.Namespace,
                  say: Callable[[str], None], longest: dict[str, float]) -> None:
-        self.control = control
-        self.link = control.link
-        self.heard = control.heard
+        self.link = link
+        self.steps = steps
         self.args = args
         self.say = say
         self.longest = longest
@@ -111,14 +112,19 @@ class RoundTrips:
         return {'command': {
             **spread(times, 1e3), 'lost': lost, 'nacked': nacked}}
 
-    def continuous(self, code: int) -> dict[str, Any]:
-        """Time continuous mode ``code``: reply and first record, then the stop's last record."""
+    def continuous(self, code: int, period: float) -> dict[str, Any]:
+        """
+        Time continuous mode ``code``: reply and first record, then the stop's last record.
+
+        ``period`` is the time between records at the sensor's rate.
+        """
         self.say(f'timing {self.args.cycles} continuous-mode starts and stops '
                  f'(0x{code:02X})')
+        link, steps = self.link, self.steps
         starts, stops, replies = [], [], []
         lost = nacked = failed = 0
         for _ in range(self.args.cycles):
-            before, _ = self.heard.snapshot()
+            before = link.records
             start = time.monotonic()
             try:
                 self.link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
@@ -128,12 +134,11 @@ class RoundTrips:
                 nacked += 1
             except DeviceTimeout:
                 lost += 1
-            deadline = start + MEASURE_TIMEOUT + 5 * self.control.period()
+            deadline = start + MEASURE_TIMEOUT + timeouts.RECORD_PERIODS * period
             first = None
             while time.monotonic() < deadline:
-                count, last = self.heard.snapshot()
-                if count > before:
-                    first = last
+                if link.records > before:
+                    first = link.last_data_mono
                     break
                 time.sleep(0.002)
             if first is None:
@@ -141,11 +146,13 @@ class RoundTrips:
                 continue
             starts.append(first - start)
             time.sleep(0.2)
-            stop_sent = self.control.send_stop()
-            last = self.control.wait_quiet(MEASURE_TIMEOUT)
+            # Once, no retry: the stop's round trip is measured.
+            stop_sent = time.monotonic()
+            link.send(commands.stop_continuous())
+            last = steps.wait_quiet(link, stop_sent, period, MEASURE_TIMEOUT)
             if last is None:
                 lost += 1  # the stop was lost: stop it the sure way
-                self.control.stop_stream()
+                steps.stop_until_quiet(link, period)
                 continue
             stops.append(max(0.0, last - stop_sent))
         note_longest(self.longest, timeouts.CONTINUOUS_START, starts)
