@@ -38,9 +38,8 @@ from i3dmgx2_driver.device.identity import DeviceInfo
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 from i3dmgx2_driver.tools import discover
-from i3dmgx2_driver.tools.discover import (
-    node_command, parse_addresses, port_command, probe_port, ProbeConfig, SensorFound,
-)
+from i3dmgx2_driver.tools.discover import node_command, parse_addresses, port_command
+from i3dmgx2_driver.tools.discover_probe import probe_port, ProbeConfig, SensorFound
 import pytest
 
 #: Commands that only read: what discovery may send a sensor it does not stop.
