@@ -13,24 +13,21 @@
 # limitations under the License.
 
 """
-What only the benchmarks share: the node in-process, latencies, their options, the table.
+What only the benchmarks share: the node timed from inside, latencies, the machine, the note.
 
-Every benchmark runs the simulated device in a process of its own
-(``harness.processes.SimProcess``), as a real device is, and reads its
+The timed benchmarks run the simulated device in a process of its own
+(``harness.processes.SimProcess``), as a real device is, and read its
 ground truth when it stops: the time each packet's last byte was written and
-the time its sample was taken, keyed by the device timer. The node runs
-either in the benchmark's process (:class:`InProcessNode`, to time
-``publish()`` from inside) or as the real executable (``harness.processes.
-NodeProcess``, to measure its CPU; :class:`TimedNodeProcess`, timed from
-inside). Subscribers run in another process (``harness.processes.
-SubscriberProcess``). The processes are ``harness/``'s, which the tests
-use too; importing this module puts the repository on the path for them.
-The statistics (percentiles, summaries) are the benchmarks' alone: here.
+the time its sample was taken, keyed by the device timer. The node runs as
+the real executable with its hot-path timings on (:class:`TimedNodeProcess`),
+subscribers in another process (``harness.processes.SubscriberProcess``).
+The processes are ``harness/``'s, which the tests use too; importing this
+module puts the repository on the path for them. The statistics
+(percentiles, summaries) are the benchmarks' alone: here.
 
 Benchmarks print numbers; they never fail on speed.
 """
 
-from collections.abc import Callable
 from importlib import metadata
 import json
 import math
@@ -39,7 +36,6 @@ from pathlib import Path
 import platform
 import sys
 import tempfile
-import threading
 import time
 from typing import Any, NamedTuple
 
@@ -50,11 +46,9 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from harness.processes import (  # noqa: E402 - the repository is on the path from here on
-    ADDRESS, BENCHMARK_DOMAINS, NodeProcess, reserve_ros_domain, ros_env, TruthEntry,
+    ADDRESS, BENCHMARK_DOMAINS, NodeProcess, reserve_ros_domain, ros_env,
 )
 from i3dmgx2_driver.codec import layouts, line_budget  # noqa: E402
-from i3dmgx2_driver.device import hot_path  # noqa: E402
-from i3dmgx2_driver.device.hot_path import QuietObserver  # noqa: E402
 # A benchmark's ROS domain is never one a test run draws (harness.processes.TEST_DOMAINS):
 # a benchmark's node still publishing must not reach the tests running beside it.
 reserve_ros_domain(BENCHMARK_DOMAINS)
@@ -63,15 +57,6 @@ reserve_ros_domain(BENCHMARK_DOMAINS)
 #: carries (11,520 bytes/s), from the codec's layout table.
 LINE_MAX_RATE_HZ = (line_budget.line_bytes_per_second(115200)
                     / line_budget.packet_size(layouts.ACCEL_ANG_RATE_MAG_ORIENTATION, True))
-
-
-class Result(NamedTuple):
-    """One row of the results table; ``met`` is None for a figure with no target."""
-
-    metric: str
-    value: str
-    target: str = ''
-    met: bool | None = None
 
 
 # -- statistics: one percentile for everything that reports one (interpolated, q in 0..100) --
@@ -95,11 +80,6 @@ class Summary(NamedTuple):
     p50: float
     p99: float
     max_: float
-
-    def ms(self) -> str:
-        """Format as milliseconds: ``p50 / p99 / max``."""
-        return (f'{self.p50 * 1e3:.3f} / {self.p99 * 1e3:.3f} / {self.max_ * 1e3:.3f} ms '
-                f'(n={self.n})')
 
 
 def summarise(values: list[float]) -> Summary:
@@ -149,48 +129,21 @@ def machine_info() -> list[tuple[str, str]]:
     ]
 
 
-class OtherLoad:
-    """
-    How much CPU everything but this process and its children used meanwhile.
-
-    Benchmarks share the machine: this tells whether other work was running.
-    The whole machine's busy time comes from /proc/stat; this process's and
-    its waited-for children's from os.times().
-    """
-
-    def __init__(self) -> None:
-        self._start = (self._machine_busy(), self._own(), time.monotonic())
-
-    @staticmethod
-    def _machine_busy() -> float:
-        try:
-            with open('/proc/stat') as handle:
-                fields = [int(v) for v in handle.readline().split()[1:]]
-        except (OSError, ValueError):
-            return math.nan
-        idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
-        return (sum(fields[:8]) - idle) / os.sysconf('SC_CLK_TCK')
-
-    @staticmethod
-    def _own() -> float:
-        times = os.times()
-        return times.user + times.system + times.children_user + times.children_system
-
-    def cores(self) -> float:
-        """Average number of cores other processes kept busy since construction."""
-        busy0, own0, wall0 = self._start
-        wall = time.monotonic() - wall0
-        other = (self._machine_busy() - busy0) - (self._own() - own0)
-        return max(other, 0.0) / wall if wall > 0 else math.nan
+def _machine_busy() -> float:
+    """Return the whole machine's busy CPU seconds so far (/proc/stat); NaN if unreadable."""
+    try:
+        with open('/proc/stat') as handle:
+            fields = [int(v) for v in handle.readline().split()[1:]]
+    except (OSError, ValueError):
+        return math.nan
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
+    return (sum(fields[:8]) - idle) / os.sysconf('SC_CLK_TCK')
 
 
-def markdown_table(results: list[Result]) -> str:
-    """Return the results as a Markdown table: metric, value, target, met?."""
-    lines = ['| metric | value | target | met? |', '|---|---|---|---|']
-    for result in results:
-        met = {True: 'yes', False: '**no**', None: '-'}[result.met]
-        lines.append(f'| {result.metric} | {result.value} | {result.target or "-"} | {met} |')
-    return '\n'.join(lines)
+def _own() -> float:
+    """Return the CPU seconds of this process and its waited-for children so far."""
+    times = os.times()
+    return times.user + times.system + times.children_user + times.children_system
 
 
 def machine_table() -> str:
@@ -202,37 +155,27 @@ def machine_table() -> str:
 
 class RunNote:
     """
-    What a long benchmark run says under its table: its command, its length, its load.
+    What a benchmark run says under its table: its command, its length, its load.
 
-    Made when the run starts (the load average and the other processes'
-    CPU are measured from then); ``text()`` once it is over.
+    Benchmarks share the machine: the note tells whether other work was
+    running. Made when the run starts (the load average and the CPU the rest
+    of the machine used, its busy time less this process's and its
+    children's, are measured from then); ``text()`` once it is over.
     """
 
     def __init__(self, script: str, argv: list[str] | None) -> None:
         self._command = f'python benchmarks/{script} {" ".join(argv or sys.argv[1:])}'.rstrip()
-        self._other = OtherLoad()
         self._load_before = os.getloadavg()[0]
-        self._started = time.monotonic()
+        self._start = (_machine_busy(), _own(), time.monotonic())
 
     def text(self, detail: str = '') -> str:
         """Return the note's line, ``detail`` (what was run, how long each) after the command."""
-        minutes = (time.monotonic() - self._started) / 60.0
-        return (f'- `{self._command}`: {detail}{minutes:.1f} min; load average (1 min) '
+        busy0, own0, wall0 = self._start
+        wall = time.monotonic() - wall0
+        other = max((_machine_busy() - busy0) - (_own() - own0), 0.0) / wall if wall else 0.0
+        return (f'- `{self._command}`: {detail}{wall / 60.0:.1f} min; load average (1 min) '
                 f'{self._load_before:.2f} before, {os.getloadavg()[0]:.2f} after; other '
-                f'processes kept {self._other.cores():.2f} of {os.cpu_count()} cores busy on '
-                f'average.')
-
-
-def report(title: str, results: list[Result], notes: list[str] = (),
-           output: str | None = None, other_load: OtherLoad | None = None) -> str:
-    """Print the results (and machine) as Markdown; also write them to ``output``."""
-    notes = list(notes)
-    if other_load is not None:
-        notes.append(f'Other processes kept {other_load.cores():.2f} of {os.cpu_count()} '
-                     f'cores busy on average during the run.')
-    text = '\n'.join([f'## {title}', '', machine_table(), '', markdown_table(results), '',
-                      *[f'- {note}' for note in notes]]).rstrip() + '\n'
-    return emit(text, output)
+                f'processes kept {other:.2f} of {os.cpu_count()} cores busy on average.')
 
 
 def emit(text: str, output: str | None) -> str:
@@ -247,148 +190,9 @@ def emit(text: str, output: str | None) -> str:
     return text
 
 
-# -- the node in this process ----------------------------------------------------------------
-
-class Published(NamedTuple):
-    """One Imu message as the node published it, and when publish() returned."""
-
-    timer: int
-    read_time: float
-    stamp: float
-    stamp_sec: int
-    stamp_nanosec: int
-    time: float
-
-
-class _PublishedObserver(QuietObserver):
-    """Hand (record, read time, stamp) of every published message to ``on_published``."""
-
-    def __init__(self, on_published: Callable[[Any, float, float], None]) -> None:
-        self._on_published = on_published
-        self._read_time = 0.0
-
-    def read(self, nbytes: int, read_time: float) -> None:
-        """Keep the read's time: the records it completes are published next."""
-        self._read_time = read_time
-
-    def published(self, record: Any, stamp: float) -> None:
-        """Hand the message on with the time of the read that completed it."""
-        self._on_published(record, self._read_time, stamp)
-
-
-class InProcessNode:
-    """
-    The driver node in this process, spinning as ``ros2 run`` would spin it.
-
-    The executor runs in a thread of its own, the node's reader thread
-    publishes, and ``published`` gets one entry per Imu message from the
-    hot path's observer (device/hot_path.py, this process's until
-    :meth:`close`), told right after ``publish()`` returned: the record's
-    timer (to match the ground truth), the time the reader got its last
-    byte, the stamp, and ``time.time()`` at that moment, the clock the
-    simulator stamps its writes with.
-    """
-
-    def __init__(self, port: str, **params: Any) -> None:
-        import rclpy
-        from rclpy.executors import MultiThreadedExecutor
-        from rclpy.parameter import Parameter
-        from rclpy.signals import SignalHandlerOptions
-
-        from i3dmgx2_driver.device import realtime
-        from i3dmgx2_driver.ros.conversions import stamp_parts
-        from i3dmgx2_driver.ros.imu_node import ImuDriverNode
-
-        self._rclpy = rclpy
-        self._stamp_parts = stamp_parts
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
-        params = {'port': port, 'address': ADDRESS, **params}
-        self.published: list[Published] = []
-        hot_path.observe(_PublishedObserver(self._on_published))
-        self.node = ImuDriverNode(
-            context=self.context,
-            parameter_overrides=[Parameter(name, value=value) for name, value in params.items()])
-        # As main.py spins it: several threads, so that a long service call holds only its own,
-        # and the start-up heap frozen as main.py freezes it.
-        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
-        self.executor.add_node(self.node)
-        realtime.freeze_startup_heap()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._spin, name='bench-executor', daemon=True)
-        self._thread.start()
-
-    def _on_published(self, record: Any, read_time: float, stamp: float,
-                      clock: Any = time.time) -> None:
-        now = clock()
-        sec, nanosec = self._stamp_parts(stamp)
-        self.published.append(Published(record.timer, read_time, stamp, sec, nanosec, now))
-
-    def _spin(self) -> None:
-        while not self._stop.is_set() and self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.1)
-            except Exception:  # the context is shut down under us at close()
-                break
-
-    def wait_published(self, count: int, timeout: float = 20.0) -> bool:
-        """Wait until ``count`` messages were published."""
-        deadline = time.monotonic() + timeout
-        while len(self.published) < count and time.monotonic() < deadline:
-            time.sleep(0.02)
-        return len(self.published) >= count
-
-    def wait_quiet(self, quiet: float = 0.5, timeout: float = 10.0) -> None:
-        """Wait until nothing has been published for ``quiet`` seconds."""
-        deadline = time.monotonic() + timeout
-        last = -1
-        while time.monotonic() < deadline:
-            count = len(self.published)
-            if count == last:
-                return
-            last = count
-            time.sleep(quiet)
-
-    def close(self) -> None:
-        """Stop the device stream, the executor and the context."""
-        self.node.shutdown()
-        self._stop.set()
-        self._thread.join(timeout=2.0)
-        self.executor.shutdown(timeout_sec=0.5)
-        self.node.destroy_node()
-        self._rclpy.try_shutdown(context=self.context)
-        hot_path.observe(None)
-
-
 def stamp_key(sec: int, nanosec: int) -> int:
     """Return a stamp as integer nanoseconds, for matching."""
     return sec * 1_000_000_000 + nanosec
-
-
-def written_times(truth: list[TruthEntry]) -> dict[int, float]:
-    """Timer -> time the packet's last byte was written, for the valid streamed packets."""
-    return {e.timer: e.write_time for e in truth
-            if e.source == 'stream' and e.valid and e.write_time is not None}
-
-
-def write_latencies(truth: list[TruthEntry], published: list[Published]) -> list[float]:
-    """Seconds from each packet's last byte written to its publish() returned."""
-    written = written_times(truth)
-    return [p.time - written[p.timer] for p in published if p.timer in written]
-
-
-def standard_args(description: str, default_seconds: float,
-                  more: Callable[[Any], None] | None = None) -> Any:
-    """Parse the options every benchmark shares (--seconds); ``more`` adds its own."""
-    import argparse
-    parser = argparse.ArgumentParser(description=description)
-    if more is not None:
-        more(parser)
-    parser.add_argument('--seconds', type=float, default=default_seconds,
-                        help=f'measuring time per run (default {default_seconds:g} s)')
-    args = parser.parse_args()
-    args.other_load = OtherLoad()
-    return args
 
 
 class TimedNodeProcess(NodeProcess):

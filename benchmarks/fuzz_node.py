@@ -53,7 +53,7 @@ from harness.campaign import message_key, VALUES  # noqa: E402, RUF100
 from harness.campaign_verdict import RunConfig  # noqa: E402, RUF100
 from harness.hostile import Attack, HostileStation, MODES, PHASES  # noqa: E402, RUF100
 from harness.processes import (  # noqa: E402, RUF100
-    BENCHMARK_DOMAINS, isolate_ros_domain, Listener, NodeProcess, reserve_ros_domain,
+    BENCHMARK_DOMAINS, isolate_ros_domain, Listener, NodeProcess, reserve_ros_domain, wait_done,
 )
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig  # noqa: E402, RUF100
 from rcl_interfaces.srv import GetParameters  # noqa: E402, RUF100
@@ -111,10 +111,7 @@ class Watch(Listener):
         if not self.params.service_is_ready():
             return False
         future = self.params.call_async(GetParameters.Request(names=['address']))
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        if not future.done():
+        if not wait_done(future, timeout):
             self.params.remove_pending_request(future)
             return False
         return True

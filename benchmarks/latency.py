@@ -61,7 +61,7 @@ from typing import Any, NamedTuple
 
 from bench_common import (
     emit, LINE_MAX_RATE_HZ, machine_table, percentile, RunNote, stamp_key, summarise, Summary,
-    TimedNodeProcess, written_times,
+    TimedNodeProcess,
 )
 from harness.processes import (
     isolate_ros_domain, process_cpu_seconds, SimProcess, SubscriberProcess,
@@ -151,7 +151,7 @@ def run_once(config: Config, seconds: float, rate_hz: float) -> RunResult:
             node.stop()
         received = subscriber.stop() if subscriber is not None else []
         sim.stop()
-    written = written_times(sim.truth)
+    written = {e.timer: e.write_time for e in sim.written_stream()}  # by the device timer
     published, timer, read = _F['published'], _F['timer'], _F['read']
     rows = [r for r in node.rows if t0 <= r[published] <= t1 and r[timer] in written]
     end_to_end = [r[published] - written[r[timer]] for r in rows]

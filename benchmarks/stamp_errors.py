@@ -35,27 +35,38 @@ link and parser, stamped as the node stamps (harness/stamp_runs.py).
   one-second windows). Target: <= 50 us in device mode.
 """
 
+import argparse
 import dataclasses
 import pickle
 import random
 import statistics
 import sys
 import time
+from typing import NamedTuple
 
-from bench_common import InProcessNode, report, Result, standard_args, std_dev
+from bench_common import emit, machine_table, RunNote, std_dev, TimedNodeProcess
 from harness.processes import isolate_ros_domain, SimProcess
 from harness.stamp_runs import (check_series, EARLY_TOLERANCE, errors, GRACE, restamp, Run,
-                                run, TOLERANCE)
+                                run, TOLERANCE, write_stamp_errors)
 
 from i3dmgx2_driver.codec import line_budget, streams
 from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
+from i3dmgx2_driver.device.hot_path import ROW_FIELDS
 from i3dmgx2_driver.device.sample_clock import SampleClock
 from i3dmgx2_driver.simulator.faults import FaultConfig
-from i3dmgx2_driver.tools.stamp_plot import write_stamp_errors
 
 #: Timer at power-up for runs that cut power near the rollover: it comes 9 s in.
 NEAR_ROLLOVER_START = TIMER_MODULUS - round(9.0 * TICKS_PER_SECOND)
+
+
+class Result(NamedTuple):
+    """One row of the results table; ``met`` is None for a figure with no target."""
+
+    metric: str
+    value: str
+    target: str = ''
+    met: bool | None = None
 
 
 def _power_cycle_near_rollover(sim, sup, system) -> float:
@@ -255,18 +266,17 @@ def node_errors(time_source: str) -> list[tuple[float, float]]:
                      faults={'jitter_ms': 5.0})
     node = None
     try:
-        node = InProcessNode(sim.port, time_source=time_source)
-        if not node.wait_published(1, timeout=20.0):
-            raise RuntimeError('the node published nothing within 20 s')
+        node = TimedNodeProcess(sim.port, time_source=time_source)
         time.sleep(NODE_SECONDS)
         sim.silence()
-        node.wait_quiet()
+        time.sleep(0.5)  # what was written is read and published
     finally:
         if node is not None:
-            node.close()
+            node.stop()
         sim.stop()
     sample_time = {e.timer: e.sample_time for e in sim.written_stream()}
-    matched = [(sample_time[p.timer], p.stamp) for p in node.published if p.timer in sample_time]
+    timer, stamp = ROW_FIELDS.index('timer'), ROW_FIELDS.index('stamp')
+    matched = [(sample_time[r[timer]], r[stamp]) for r in node.rows if r[timer] in sample_time]
     start = matched[0][0] if matched else 0.0
     return [(t - start, stamp - t) for t, stamp in matched]
 
@@ -289,42 +299,53 @@ def node_rows() -> list[Result]:
     return rows
 
 
-def main() -> None:
-    """Run from the command line."""
-    def more(parser) -> None:
-        for mode in ('events', 'streams', 'queues', 'cost', 'node'):
-            parser.add_argument(f'--{mode}', action='store_true', help=f'the {mode} table only')
-        parser.add_argument('--stream-seconds', type=float, default=40.0,
-                            help='length of each stream run (default 40 s)')
-        parser.add_argument('--record', metavar='FILE',
-                            help='keep the recordings of the stream runs here (pickle)')
-        parser.add_argument('--replay', metavar='FILE',
-                            help='stamp recorded stream runs again through the clock as it is')
-        parser.add_argument('--plot-csv', metavar='CSV',
-                            help='write the near-rollover power cycle series here')
+def text(title: str, results: list[Result], notes: list[str]) -> str:
+    """Return the report: the machine, a row per result, the notes."""
+    lines = [f'## {title}', '', machine_table(), '', '| metric | value | target | met? |',
+             '|---|---|---|---|']
+    for r in results:
+        met = {True: 'yes', False: '**no**', None: '-'}[r.met]
+        lines.append(f'| {r.metric} | {r.value} | {r.target or "-"} | {met} |')
+    return '\n'.join([*lines, '', *notes]) + '\n'
 
-    args = standard_args(__doc__.splitlines()[1], 6.0, more)
+
+def main(argv: list[str] | None = None) -> int:
+    """Run from the command line."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    for mode in ('events', 'streams', 'queues', 'cost', 'node'):
+        parser.add_argument(f'--{mode}', action='store_true', help=f'the {mode} table only')
+    parser.add_argument('--seconds', type=float, default=6.0,
+                        help='measuring time per run (default 6 s)')
+    parser.add_argument('--stream-seconds', type=float, default=40.0,
+                        help='length of each stream run (default 40 s)')
+    parser.add_argument('--record', metavar='FILE',
+                        help='keep the recordings of the stream runs here (pickle)')
+    parser.add_argument('--replay', metavar='FILE',
+                        help='stamp recorded stream runs again through the clock as it is')
+    parser.add_argument('--plot-csv', metavar='CSV',
+                        help='write the near-rollover power cycle series here')
+    args = parser.parse_args(argv)
+    note = RunNote('stamp_errors.py', argv)
     tables = {'events': lambda: event_rows(args.seconds, args.plot_csv),
               'streams': lambda: stream_rows(args.stream_seconds, args.record),
               'queues': queue_rows, 'cost': cost_rows, 'node': node_rows}
     if args.replay:
-        report('Stamp errors, recorded runs', replay_rows(args.replay),
-               other_load=args.other_load)
-        return
+        emit(text('Stamp errors, recorded runs', replay_rows(args.replay), [note.text()]), None)
+        return 0
     chosen = [mode for mode in tables if getattr(args, mode)]
     results = [row for mode in chosen or tables for row in tables[mode]()]
-    report('Stamp errors', results,
-           [f'Events: 0xCC at 100 Hz, {args.seconds:g} s after each event; the simulated '
-            f'timer runs 40 ppm fast; stamps made as the node makes them '
-            f'(harness/stamp_runs.py).',
-            'Events: worst |error - steady offset| after the grace; error trend (ppm); '
-            'time from the return to the last stamp over 1 ms off; worst in the grace; '
-            'why the fit started afresh.',
-            f'Through the node: {NODE_SECONDS:g} s per time source at 100 Hz; simulated delay '
-            '2 ms radio + 7.64 ms on the wire + 0..5 ms random; device clock 40 ppm fast; the '
-            'device-time mean offset is the radio latency, which the host cannot observe.'],
-           'stamp_errors.md', other_load=args.other_load)
+    emit(text('Stamp errors', results, [
+        f'- Events: 0xCC at 100 Hz, {args.seconds:g} s after each event; the simulated timer '
+        f'runs 40 ppm fast; stamps made as the node makes them (harness/stamp_runs.py).',
+        '- Events: worst |error - steady offset| after the grace; error trend (ppm); time from '
+        'the return to the last stamp over 1 ms off; worst in the grace; why the fit started '
+        'afresh.',
+        f'- Through the node: {NODE_SECONDS:g} s per time source at 100 Hz; simulated delay 2 '
+        'ms radio + 7.64 ms on the wire + 0..5 ms random; device clock 40 ppm fast; the '
+        'device-time mean offset is the radio latency, which the host cannot observe.',
+        note.text()]), 'stamp_errors.md')
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -18,29 +18,19 @@ What the tests and the benchmarks share; not installed with the driver.
 ``test/`` and ``benchmarks/`` never import each other: what both need is
 here, one module per concern, and they import it and the driver package.
 This package may import ``i3dmgx2_driver``; nothing in ``i3dmgx2_driver``
-imports it.
+imports it. Each module's docstring says more.
 
 * ``processes``: the node, the simulated device and a subscriber, each in a
-  process of its own (``NodeProcess``, ``SimProcess``, ``SubscriberProcess``),
-  a subscriber and a lifecycle client in this process (``Listener``,
-  ``LifecycleClient``), and a ROS domain of the run's own;
-  ``sim_process``, ``subscriber`` and ``instrumented_node`` are the programs
-  those processes run.
-* ``campaign``: the soak and fault campaign's pieces (the truth, the
-  subscriber, the node process and its counters), its faults in
-  ``fault_driver``; ``campaign_verdict`` holds the settings the campaign,
-  the long soak and the node fuzz share, and judges what a run produced (the
-  checks and the report), for the campaign and the long soak alike.
-* ``long_soak``: the campaign's run as legs over every stream for an hour
-  (``benchmarks/soak.py --every-stream``), and the campaign itself as one
-  plain leg (``run_campaign``: ``benchmarks/soak.py`` for minutes,
-  ``test/test_soak_short.py`` for half a minute); its node processes sampled
-  by ``process_sampler`` (RSS, descriptors, threads, slopes;
-  ``benchmarks/memory_curve.py`` samples with it too).
-* ``hostile``: a hostile base station, its attacks' bytes and its oracle;
-  ``benchmarks/fuzz_node.py`` fuzzes the running node through it.
-* ``fuzz_checks``: the codec's properties on one input (the fuzzer in
-  ``benchmarks/fuzz_parser.py`` and ``test/test_fuzz_regressions.py``).
+  process of its own, an rclpy subscriber and lifecycle client in this one,
+  and a ROS domain of the run's own; ``sim_process``, ``subscriber`` and
+  ``instrumented_node`` are the programs those processes run.
+* ``campaign``, ``fault_driver``, ``campaign_verdict``, ``long_soak``: the
+  fault campaign and the long soak (its pieces, its faults, its verdict, its
+  run, one leg or an hour of them); ``process_sampler`` samples the node
+  processes' RSS, descriptors and threads for it and for
+  ``benchmarks/memory_curve.py``.
+* ``hostile``: a hostile base station, its attacks' bytes and its oracle.
+* ``fuzz_checks``: the codec's properties on one input.
 * ``stamp_runs``: stamps against the simulator's truth, and their check.
 * ``shutdown_trials``: a signal at a random moment of every phase, on nodes
   forked by ``node_forks``.

@@ -48,7 +48,6 @@ from typing import Any
 
 from i3dmgx2_driver import lifetime
 from i3dmgx2_driver.device import hot_path
-from i3dmgx2_driver.device.hot_path import QuietObserver
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.ros import main as node_main
 from i3dmgx2_driver.ros.imu_node import ImuDriverNode
@@ -169,8 +168,8 @@ def _write(path: str, document: dict) -> None:
     os.replace(temporary, path)
 
 
-class LinkEvents(QuietObserver):
-    """A hot-path observer that notes every link up ('anchor'); it times nothing."""
+class LinkEvents(hot_path.HotPathObserver):
+    """Note every link up ('anchor'); the protocol's other methods, inherited, do nothing."""
 
     def connected(self) -> None:
         """Note the re-anchoring: every record is published from now on."""

@@ -115,7 +115,7 @@ def serve() -> int:
                 if pid == 0:
                     _child(request, entries, list(children))
                 children[os.pidfd_open(pid)] = (request['id'], pid)
-                _send({'id': request['id'], 'pid': pid, 'started': time.monotonic()})
+                _send({'id': request['id'], 'pid': pid})
 
 
 # -- the client (the benchmark's or the test's process) ---------------------------------------
@@ -127,7 +127,6 @@ class ForkedNode:
         self.ident = ident
         self.log = log
         self.pid: int | None = None
-        self.started = 0.0
         #: The exit code (negative: the signal that ended it) and when, once it ended.
         self.code: int | None = None
         self.ended: float | None = None
@@ -218,7 +217,7 @@ class ForkServer:
             if node is None:
                 continue
             if 'pid' in message:
-                node.pid, node.started = message['pid'], message['started']
+                node.pid = message['pid']
                 node._have_pid.set()
             else:
                 node.code, node.ended = message['code'], message['ended']
@@ -252,12 +251,6 @@ class ForkServer:
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.proc.wait()
-
-    def __enter__(self) -> 'ForkServer':
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
 
 if __name__ == '__main__':

@@ -119,6 +119,14 @@ def param_args(params: dict[str, object]) -> list[str]:
     return args
 
 
+def wait_done(future: Any, timeout: float) -> bool:
+    """Wait up to ``timeout`` s for a future its node's executor completes; say if it did."""
+    deadline = time.monotonic() + timeout
+    while not future.done() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return future.done()
+
+
 def process_cpu_seconds(pid: int) -> float:
     """User plus system CPU time (s) of a process and all its threads so far."""
     with open(f'/proc/{pid}/stat') as handle:
@@ -169,10 +177,6 @@ class NodeProcess:
                 break
             time.sleep(0.05)
         return text in self.output()
-
-    def cpu_seconds(self) -> float:
-        """CPU time (user + system, all threads) the node used so far."""
-        return process_cpu_seconds(self.proc.pid)
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> tuple[int, float]:
         """Send ``sig`` (SIGINT: as Ctrl-C); return the exit code and how long the exit took."""
@@ -359,11 +363,10 @@ class Listener:
     """
 
     def __init__(self, topics: dict[str, type], reliable: bool = True, depth: int = 1000,
-                 namespace: str = '', domain: int | None = None) -> None:
+                 domain: int | None = None) -> None:
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node('i3dmgx2_test_listener', namespace=namespace,
-                                      context=self.context)
+        self.node = rclpy.create_node('i3dmgx2_test_listener', context=self.context)
         qos = QoSProfile(
             history=HistoryPolicy.KEEP_LAST, depth=depth,
             reliability=ReliabilityPolicy.RELIABLE if reliable
@@ -409,10 +412,7 @@ class Listener:
         try:
             assert client.wait_for_service(timeout_sec=timeout), f'no service {name}'
             future = client.call_async(kind.Request())
-            deadline = time.monotonic() + timeout
-            while not future.done() and time.monotonic() < deadline:
-                time.sleep(0.02)
-            assert future.done(), f'{name} did not answer in {timeout} s'
+            assert wait_done(future, timeout), f'{name} did not answer in {timeout} s'
             return future.result()
         finally:
             self.node.destroy_client(client)
@@ -484,23 +484,12 @@ class LifecycleClient:
         for client, request in probes:
             while True:
                 future = client.call_async(request)
-                answer_by = min(deadline, time.monotonic() + 2.0)
-                while not future.done() and time.monotonic() < answer_by:
-                    time.sleep(0.01)
-                if future.done():
+                if wait_done(future, min(deadline - time.monotonic(), 2.0)):
                     break
                 client.remove_pending_request(future)
                 if time.monotonic() >= deadline:
                     return False
         return True
-
-    @staticmethod
-    def _result(future: object, timeout: float) -> object:
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert future.done(), f'no answer within {timeout} s'
-        return future.result()
 
     def change_async(self, transition: str) -> object:
         """
@@ -523,15 +512,13 @@ class LifecycleClient:
         assertion shows the node's output: why it did not answer.
         """
         future = self.change_async(transition)
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        if not future.done():
+        if not wait_done(future, timeout):
             print(f'no answer to {transition!r} within {timeout} s')
             return False
         return future.result().success
 
     def state(self, timeout: float = 10.0) -> str:
         """Return the label of the node's current state."""
-        return self._result(self._get.call_async(GetState.Request()),
-                            timeout).current_state.label
+        future = self._get.call_async(GetState.Request())
+        assert wait_done(future, timeout), f'no answer within {timeout} s'
+        return future.result().current_state.label

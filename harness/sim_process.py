@@ -25,8 +25,7 @@ standard input it stops and writes, as JSON, every data packet it produced
 
 Usage: ``python -m harness.sim_process --config '{"rate_hz": 1000}' --truth
 OUT.json``; started by ``harness.processes.SimProcess``. The config keys are
-SimulatorConfig fields, plus ``faults`` (a dict of FaultConfig fields) and
-``motion`` (a dict of MotionConfig fields).
+SimulatorConfig fields, plus ``faults`` (a dict of FaultConfig fields).
 """
 
 import argparse
@@ -41,23 +40,17 @@ from i3dmgx2_driver.lifetime import StopSignal
 
 def build_config(spec: dict) -> Any:
     """Turn a JSON dict into a SimulatorConfig."""
-    from i3dmgx2_driver.simulator import FaultConfig, MotionConfig, SimulatorConfig
+    from i3dmgx2_driver.simulator import FaultConfig, SimulatorConfig
 
     spec = dict(spec)
-    faults = FaultConfig(**spec.pop('faults', {}))
-    motion = MotionConfig(**spec.pop('motion', {}))
-    if 'chunks' in spec:
-        spec['chunks'] = tuple(spec['chunks'])
-    return SimulatorConfig(faults=faults, motion=motion, **spec)
+    return SimulatorConfig(faults=FaultConfig(**spec.pop('faults', {})), **spec)
 
 
 def dump_truth(sim: Any, path: str) -> None:
     """Write the ground truth and the counters as one JSON document."""
     rows = [[entry.timer, entry.sample_time, entry.write_time, entry.valid, entry.source]
             for entry in sim.truth]
-    document = {'fields': ['timer', 'sample_time', 'write_time', 'valid', 'source'],
-                'truth': rows, 'stats': sim.stats.as_dict(),
-                'start_time': sim.start_time}
+    document = {'truth': rows, 'stats': sim.stats.as_dict()}
     with open(path, 'w') as handle:
         json.dump(document, handle)
 

@@ -22,7 +22,8 @@ applies an event while the sensor streams, and returns the stamped records
 with the simulator's truth. The system clock the stamps follow is the real
 one plus a step the caller may set (:class:`SteppedSystemClock`, the seam
 the node's clock reads). :func:`check_series` is the check every stamp test
-makes of an error series, and the stamp benchmark reports the same figures.
+makes of an error series, and the stamp benchmark reports the same figures;
+:func:`write_stamp_errors` writes a series as ``plot --stamp-errors`` reads it.
 
 A series is (true sample time, stamp - true sample time) in stamping order.
 The steady offset is its median between the start's grace and the event
@@ -36,6 +37,7 @@ error has no trend (a rate error would show as one).
 """
 
 from collections.abc import Callable
+import csv
 import dataclasses
 import itertools
 import statistics
@@ -257,3 +259,15 @@ def check(result: Run, early_tolerance: float = EARLY_TOLERANCE) -> dict:
     assert len(series) > 200, result.log
     return check_series(series, result.event_time, result.log, early_tolerance,
                         read_errors(result))
+
+
+def write_stamp_errors(path: str, rows: list[tuple[float, float]],
+                       events: list[tuple[float, str]] = ()) -> None:
+    """Write (sample time, stamp error) rows and events as ``plot --stamp-errors`` reads them."""
+    with open(path, 'w', newline='') as out:
+        for at, label in events:
+            out.write(f'# event,{at:.6f},{label}\n')
+        writer = csv.writer(out)
+        writer.writerow(('time', 'error'))
+        for t, e in rows:
+            writer.writerow((f'{t:.6f}', f'{e:.9f}'))

@@ -18,8 +18,8 @@ A link on its own, without a port or a thread; the pieces of a connection.
 Which data packet is a reply, a record of the stream or both, and the
 radio's quality sums (``DeviceLink``, fed as its reader would feed it), what
 the reader tells a link that joins it late, how a port is opened for a
-connection and a shared port alike (``PortOpener``), and the hot-path
-observer that notes nothing (``QuietObserver``).
+connection and a shared port alike (``PortOpener``), and a hot-path
+observer that inherits the protocol's methods, which note nothing.
 """
 
 from collections.abc import Callable
@@ -32,7 +32,6 @@ from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.records import AccelAngRate, Magnetometer
 from i3dmgx2_driver.device import hot_path
-from i3dmgx2_driver.device.hot_path import QuietObserver
 from i3dmgx2_driver.device.link import DeviceLink, PortReader, RadioStats
 from i3dmgx2_driver.device.port import PortDisconnected, SerialPort
 from i3dmgx2_driver.device.port_opener import PortOpener
@@ -206,7 +205,7 @@ class _Log:
         self.lines.append(text)
 
 
-class _Opens(QuietObserver):
+class _Opens(hot_path.HotPathObserver):
     def __init__(self) -> None:
         self.opens = 0
 
@@ -247,7 +246,7 @@ def test_port_opener_gives_every_reader_the_same_parts() -> None:
     assert options.observer is None and options.thread_policy == config.thread_policy
 
 
-def test_quiet_observer_notes_nothing() -> None:
-    quiet = QuietObserver()
-    assert quiet.opened() is None and quiet.read(3, 1.0) is None
+def test_an_observer_inherits_methods_that_note_nothing() -> None:
+    quiet = _Opens()
+    assert quiet.connected() is None and quiet.read(3, 1.0) is None
     assert quiet.published(object(), 2.0) is None

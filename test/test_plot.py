@@ -248,7 +248,8 @@ def test_main_plots_the_fixture_a_capture_and_a_csv(tmp_path, fixture_path):
 
 def test_stamp_errors_round_trip_and_plot(tmp_path, capsys):
     """The stamp benchmark's CSV reads back exactly and plots with its events."""
-    from i3dmgx2_driver.tools.stamp_plot import read_stamp_errors, write_stamp_errors
+    from harness.stamp_runs import write_stamp_errors
+    from i3dmgx2_driver.tools.stamp_plot import read_stamp_errors
     rows = [(100.0 + k / 100, (-7.3 if k < 50 else -7.1) * 1e-3) for k in range(100)]
     path = tmp_path / 'errors.csv'
     write_stamp_errors(str(path), rows, [(100.5, 'power cycle')])

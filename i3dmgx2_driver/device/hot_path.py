@@ -75,16 +75,6 @@ class HotPathObserver(Protocol):
         """Note that ``publish()`` returned for ``record``'s Imu message, stamped ``stamp``."""
 
 
-class QuietObserver(HotPathObserver):
-    """
-    A :class:`HotPathObserver` that notes nothing: subclass it and override what you watch.
-
-    For observers that want one or two stages (a benchmark's published
-    messages, a campaign's link-ups) without writing out every method: it
-    inherits the protocol's methods, each of which does nothing.
-    """
-
-
 #: The fields of :attr:`TimingsRecorder.rows`, in order.
 ROW_FIELDS = ('timer', 'stamp', 'read', 'parsed', 'stamped', 'packed', 'published',
               'cpu_read', 'cpu_published')

@@ -24,7 +24,6 @@ event as a vertical line, so that a stamp that runs slow after an event (a
 slope) or jumps (a step) is plain to see.
 """
 
-import csv
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -38,18 +37,6 @@ class StampErrors(NamedTuple):
     time: np.ndarray
     error: np.ndarray
     events: list[tuple[float, str]]
-
-
-def write_stamp_errors(path: str, rows: list[tuple[float, float]],
-                       events: list[tuple[float, str]] = ()) -> None:
-    """Write (sample time, stamp error) rows and events as the plot reads them."""
-    with open(path, 'w', newline='') as out:
-        for at, label in events:
-            out.write(f'# event,{at:.6f},{label}\n')
-        writer = csv.writer(out)
-        writer.writerow(('time', 'error'))
-        for t, e in rows:
-            writer.writerow((f'{t:.6f}', f'{e:.9f}'))
 
 
 def read_stamp_errors(path: str) -> StampErrors:
