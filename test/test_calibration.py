@@ -30,11 +30,11 @@ from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.commands import decode_command
 from i3dmgx2_driver.codec.records import GyroBias, INVALID_QUANTITY
 from i3dmgx2_driver.device.dialogue import float32_vector, SensorDialogue
+from i3dmgx2_driver.device.gyro_bias import Calibration, GyroBiasCapture
 from i3dmgx2_driver.device.link import DeviceTimeout
 from i3dmgx2_driver.device.settings import DeviceConfig
-from i3dmgx2_driver.ros.calibration import Calibration
+from i3dmgx2_driver.ros.calibration_file import calibration_yaml
 from i3dmgx2_driver.ros.parameters import declare_parameters, driver_config, ParameterError
-from i3dmgx2_driver.ros.services import calibration_yaml, GyroBiasCapture
 from i3dmgx2_driver.simulator import SimulatedSensor
 import pytest
 import rclpy

@@ -31,7 +31,7 @@ from i3dmgx2_driver.capture.fault_capture import CHUNK_COST, FaultCapture, Recen
 from i3dmgx2_driver.capture.file_format import read_capture
 from i3dmgx2_driver.capture.raw_capture import bytes_sink
 from i3dmgx2_driver.device.status import DeviceStatus, State
-from i3dmgx2_driver.ros.diagnostics import connection_status
+from i3dmgx2_driver.ros.diagnostic_statuses import connection_status
 from i3dmgx2_driver.ros.fault_watch import CORRUPT_BURST, FaultWatch
 import pytest
 
