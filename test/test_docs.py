@@ -95,7 +95,7 @@ _LINK = re.compile(r'!?\[(?:[^\[\]]|\[[^\]]*\])*\]\(\s*<?([^)\s>]+)>?(?:\s+"[^"]
 _TOP = ('i3dmgx2_driver', 'benchmarks', 'harness', 'scripts', 'test', 'config', 'launch',
         'docs')
 #: Module paths relative to the package, as the pages name them (``device/link.py``).
-_PACKAGE = ('codec', 'device', 'ros', 'simulator', 'tools')
+_PACKAGE = ('capture', 'codec', 'device', 'ros', 'simulator', 'tools')
 _REPO_PATH = re.compile(
     r'(?<![\w./-])((?:' + '|'.join(_TOP + _PACKAGE) + r')/[\w./-]*\w'
     r'\.(?:py|sh|yaml|md|txt|png|xml|json|bin))\b')

@@ -17,15 +17,18 @@ The device layer: the serial port and the protocol dialogue, no ROS.
 
 ``port`` opens the serial port and reads what is there as soon as it is
 there; ``link`` is one sensor's connection (the reader thread, the
-request/reply exchanges, what its packets say), read in one of
-``reader_threads``, kept for the process's life and handed port after port;
-``shared_port`` lets
-several sensors' links share one port and its reader; ``port_opener``
-opens a port the same way for ``supervisor`` and ``shared_port``;
-``dialogue`` says what the sensor needs to hear (quiet, identity, data
-rate, continuous mode); ``identity`` reads what a sensor says it is, for
-the dialogue and discovery alike; ``supervisor`` keeps a
-link alive through stalls and unplugs (its policies in ``watchdog``, its
-state and counters in ``status``);
+request/reply exchanges, and the one rule that tells a reply from a record
+of the stream), read in one of ``reader_threads``, kept for the process's
+life and handed port after port; ``shared_port`` lets several sensors'
+links share one port and its reader; ``port_opener`` opens a port the same
+way for ``supervisor`` and ``shared_port``. ``sensor_steps`` holds the steps
+every conversation with a sensor is made of (quiet, stop, start a stream
+and see its records, the divider, a bias stored), with the waits of
+``timeouts``: the node's ``dialogue`` puts them in its order, and
+``discover`` and ``bringup`` use them directly; ``identity`` reads what a
+sensor says it is. ``supervisor`` keeps a link alive through stalls and
+unplugs (its policies in ``watchdog``, its state and counters in
+``status``). The operations that borrow the sensor from the stream
+(``operation``): ``gyro_bias`` and ``self_test``, with ``record_rate``.
 ``clock`` and ``sample_clock`` turn device timer ticks into host timestamps.
 """

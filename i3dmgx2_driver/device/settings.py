@@ -48,7 +48,7 @@ class DeviceConfig:
     stream: int = streams.DEFAULT.code
     request_timeout: float = timeouts.REQUEST_TIMEOUT
     request_retries: int = timeouts.REQUEST_RETRIES
-    continuous_retries: int = 5
+    continuous_retries: int = timeouts.CONTINUOUS_TRIES
     #: Scheduling of the reader thread (its SCHED_FIFO priority).
     thread_policy: ThreadPolicy = NORMAL_SCHEDULING
     #: Reconnect to a known sensor with one serial-number read (False: the full dialogue).

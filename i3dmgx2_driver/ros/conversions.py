@@ -115,7 +115,7 @@ class MessageSettings:
     """
     How one sensor's records become messages: its frame, the axes, the covariances.
 
-    The fields are named as the parameters that set them (ros/parameters.py);
+    The fields are named as the parameters that set them (ros/parameter_table.py);
     a standard deviation of 0 is unknown (all-zero covariance).
     """
 
