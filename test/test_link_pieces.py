@@ -32,7 +32,7 @@ from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.records import AccelAngRate, Magnetometer
 from i3dmgx2_driver.device import hot_path
-from i3dmgx2_driver.device.link import DeviceLink, PortReader, RadioStats
+from i3dmgx2_driver.device.link import DeviceLink, LinkOptions, PortReader, RadioStats
 from i3dmgx2_driver.device.port import PortDisconnected, SerialPort
 from i3dmgx2_driver.device.port_opener import PortOpener
 from i3dmgx2_driver.device.settings import DeviceConfig
@@ -60,9 +60,10 @@ class _Line:
         raise PortDisconnected('unplugged')
 
 
-def _link() -> tuple[DeviceLink, _Line, list]:
+def _link(records_of: int | None = None) -> tuple[DeviceLink, _Line, list]:
     line, seen = _Line(), []
-    link = DeviceLink(line, 95, lambda event, now, mono: seen.append((event.record, now, mono)))
+    link = DeviceLink(line, 95, lambda event, now, mono: seen.append((event.record, now, mono)),
+                      LinkOptions(records_of=records_of))
     return link, line, seen
 
 
@@ -80,7 +81,18 @@ def test_any_record_counts_while_nothing_is_streamed() -> None:
     link.on_data(_packet(Magnetometer(ZERO, 7)), 10.0, 1.0)
     assert (link.records, link.last_code, link.last_data_mono) == (1, layouts.MAGNETOMETER, 1.0)
     assert seen == [(Magnetometer(ZERO, 7), 10.0, 1.0)]
+    assert link.other_records == 0
     assert link.heard and link.radio is not None and link.radio.lqi == 200
+
+
+def test_a_record_the_consumer_does_not_take_is_counted_not_handed_on() -> None:
+    link, _, seen = _link(records_of=layouts.ACCEL_ANG_RATE)
+    link.on_data(_packet(Magnetometer(ZERO, 7)), 10.0, 1.0)
+    # Still the sensor streaming (for the wait for silence), but no sample of the stream.
+    assert (link.records, link.last_data_mono) == (1, 1.0)
+    assert (seen, link.other_records) == ([], 1)
+    link.on_data(_packet(AccelAngRate(ZERO, ZERO, 9)), 11.0, 2.0)
+    assert (seen, link.other_records) == ([(AccelAngRate(ZERO, ZERO, 9), 11.0, 2.0)], 1)
 
 
 def test_a_polled_reply_of_another_code_is_a_reply_only() -> None:
@@ -89,7 +101,7 @@ def test_a_polled_reply_of_another_code_is_a_reply_only() -> None:
     line.answer = lambda: link.on_data(_packet(Magnetometer(ZERO, 7)), 10.0, 1.0)
     reply = link.request(bytes((layouts.MAGNETOMETER,)), layouts.MAGNETOMETER, 0.2, 1)
     assert reply == Magnetometer(ZERO, 7)
-    assert (link.records, seen, link.heard) == (0, [], True)
+    assert (link.records, seen, link.heard, link.other_records) == (0, [], True, 0)
     # Not the stream's record: the stall watch must not take it for one.
     assert link.last_data_mono == 0.0
 
@@ -105,13 +117,14 @@ def test_a_polled_reply_of_the_streamed_code_is_both() -> None:
     assert seen == [(record, 11.0, 2.0)]
 
 
-def test_another_record_while_streaming_is_handed_on_but_keeps_no_stream_alive() -> None:
-    link, _, seen = _link()
+def test_another_record_while_streaming_is_counted_apart_and_keeps_no_stream_alive() -> None:
+    link, _, seen = _link(records_of=layouts.ACCEL_ANG_RATE)
     link.set_streamed(layouts.ACCEL_ANG_RATE)
     link.on_data(_packet(Magnetometer(ZERO, 7), None, None), 12.0, 3.0)
     assert (link.records, link.last_code) == (0, layouts.MAGNETOMETER)
     assert link.last_data_mono == 0.0
-    assert len(seen) == 1 and link.radio is None
+    # Not handed on as a sample of the stream: counted (diagnostics' "other records").
+    assert (seen, link.other_records) == ([], 1) and link.radio is None
 
 
 def test_a_port_lost_wakes_the_waiting_request_with_why() -> None:

@@ -24,7 +24,7 @@ that diagnostics and the self test read.
 from i3dmgx2_driver.codec import streams
 from i3dmgx2_driver.codec.data_rate import ticks_per_cycle
 from i3dmgx2_driver.codec.framing import DataPacket
-from i3dmgx2_driver.codec.records import AccelAngRate, Magnetometer, TICKS_PER_SECOND
+from i3dmgx2_driver.codec.records import AccelAngRate, TICKS_PER_SECOND
 from i3dmgx2_driver.ros.conversions import MessageSettings
 from i3dmgx2_driver.ros.publishers import calibrated_qos, Publishers
 from i3dmgx2_driver.ros.record_publisher import RecordPublisher, Stamping
@@ -70,12 +70,6 @@ def test_records_are_counted_not_published_until_publishing_is_on(records):
     feed(records, [3, 4])
     assert (records.stats.published, records.stats.unpublished) == (2, 3)
     assert records.published() == (2, records.stats.last_time)
-
-
-def test_records_of_another_stream_are_counted_apart(records):
-    records.set_publishing(True)
-    records.on_record(DataPacket(95, Magnetometer((0.1, 0.2, 0.3), 5), 0, 0), 1.7e9, 100.0)
-    assert (records.stats.other_records, records.stats.published) == (1, 0)
 
 
 def test_a_timer_step_counts_the_records_in_between_as_lost(records):

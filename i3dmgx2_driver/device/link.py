@@ -78,7 +78,10 @@ class LinkOptions:
     set, makes requests give up within tens of milliseconds while the reader
     goes on (the stream is being stopped, the port kept: nobody waits for
     the answers any more). ``thread_policy`` is applied by the reader thread
-    to itself before its first read.
+    to itself before its first read. ``records_of`` is the record the
+    consumer takes: the node's stream, so that no other record reaches its
+    publishers; None (a tool listening to whatever a sensor streams): every
+    record that is no reply.
     """
 
     wireless: bool = True
@@ -87,6 +90,7 @@ class LinkOptions:
     observer: LineObserver | None = None
     cancel: threading.Event | None = None
     thread_policy: ThreadPolicy = NORMAL_SCHEDULING
+    records_of: int | None = None
 
 
 class DeviceTimeout(Exception):
@@ -335,7 +339,7 @@ class DeviceLink:
     The exchanges with one sensor over an open port, and its records.
 
     ``address`` selects the sensor behind a base station; ``on_record``
-    receives every data packet not claimed by a pending request; ``options``
+    receives the records of the stream (:meth:`set_streamed`); ``options``
     say how to read and whom else to tell (:class:`LinkOptions`).
     ``policy_outcome`` says what the scheduler granted the reader thread.
 
@@ -370,6 +374,7 @@ class DeviceLink:
         #: address is routed on a shared one that runs).
         self.running = threading.Event()
         self._on_record = on_record
+        self._records_of = options.records_of
         self._cancel = options.cancel if options.cancel is not None else threading.Event()
         #: One exchange at a time with this sensor.
         self._lock = threading.Lock()
@@ -383,6 +388,8 @@ class DeviceLink:
         self._streamed: int | None = None
         #: Records of the stream (of any code while none is streamed) received so far.
         self.records = 0
+        #: Records neither a reply nor handed to the consumer (not of ``records_of``).
+        self.other_records = 0
         #: The command byte of the last record handed on (None before one).
         self.last_code: int | None = None
         #: The monotonic time the stream was last heard, for stall detection.
@@ -411,13 +418,19 @@ class DeviceLink:
         """
         Say which record the device streams from now on (None: none).
 
-        While one streams, a polled reply of its code is both the reply and
-        a record of the stream, and only its records keep the stream alive;
-        while none does, a polled record is a reply only. This and
-        :meth:`on_data` are the one place that tells a reply from a record of
-        the stream: whoever waits for the stream (the steps that start and
-        stop it, the stall watch) reads :attr:`records` and
-        :attr:`last_data_mono` instead of comparing codes. A poll of the
+        This and :meth:`on_data` are the one place that tells a reply from a
+        record of the stream, and the stream from any other record. While one
+        streams, only its records keep the stream alive, and a polled reply
+        of its code is both the reply and a record of the stream; while none
+        does, a polled record is a reply only, and any other record says the
+        sensor still streams. What is no reply goes to the consumer if it is
+        of the record the consumer takes (``LinkOptions.records_of``: the
+        node's stream; every record for a tool), and is otherwise counted in
+        :attr:`other_records` (a sensor power-cycled into its EEPROM's
+        auto-start, a reply come after its request gave up). Whoever waits
+        for the stream (the steps that start and stop it, the stall watch)
+        reads :attr:`records` and :attr:`last_data_mono`, and the consumer
+        takes what it is given, instead of comparing codes. A poll of the
         streamed code while the stream may still run (its stop lost) cannot
         be told from it: the dialogue's first polls never ask for it.
         """
@@ -429,8 +442,8 @@ class DeviceLink:
         """
         Take one data packet of this sensor (reader thread, for every sample).
 
-        A reply to the request waiting for it, a record of the stream, or
-        both; this allocates nothing and takes no lock.
+        A reply to the request waiting for it, a record of the stream, both,
+        or another record (counted); this allocates nothing and takes no lock.
         """
         code = LAYOUT_BY_TYPE[type(event.record)].code
         streamed = self._streamed
@@ -460,7 +473,11 @@ class DeviceLink:
         if ours:
             self.records += 1
         self.last_code = code
-        self._on_record(event, now, mono)
+        records_of = self._records_of
+        if records_of is None or code == records_of:
+            self._on_record(event, now, mono)
+        else:
+            self.other_records += 1
 
     def answer(self, event: Any) -> None:
         """Take the base station's answer to this link's request (ACK, NACK, ping)."""

@@ -61,9 +61,10 @@ class PortOpener:
         return port
 
     def reader_options(self, observer: LineObserver | None = None,
-                       cancel: threading.Event | None = None) -> LinkOptions:
-        """Return how the port's reader reads and whom it tells (``observer``, ``cancel``)."""
+                       cancel: threading.Event | None = None,
+                       records_of: int | None = None) -> LinkOptions:
+        """Return how the port's reader reads, whom it tells, what its link's consumer takes."""
         cfg = self.config
         return LinkOptions(wireless=cfg.wireless, on_bytes=self._on_bytes,
                            observer=observer, cancel=cancel,
-                           thread_policy=cfg.thread_policy)
+                           thread_policy=cfg.thread_policy, records_of=records_of)

@@ -69,9 +69,11 @@ class SharedPort:
         return self._reader
 
     def attach(self, address: int, on_record: RecordCallback,
-               cancel: threading.Event) -> DeviceLink:
+               cancel: threading.Event, records_of: int | None = None) -> DeviceLink:
         """
         Return a new link to the sensor at ``address``, opening the port if need be.
+
+        ``on_record`` takes the records of ``records_of`` (the sensor's stream).
 
         The link receives nothing until it is started (its address routed).
         Raises PortError when the port cannot be opened.
@@ -87,7 +89,8 @@ class SharedPort:
                 reader = self._reader = PortReader(port, None, self._opener.reader_options())
                 self.opens += 1
             link = DeviceLink(reader.port, address, on_record,
-                              LinkOptions(wireless=cfg.wireless, cancel=cancel), reader=reader)
+                              LinkOptions(wireless=cfg.wireless, cancel=cancel,
+                                          records_of=records_of), reader=reader)
             self._links.add(link)
             return link
 

@@ -106,6 +106,9 @@ class DeviceStatus:
     connected: bool = False
     #: On a port several sensors share: packets of addresses none of them has, by address.
     strays: dict[int, int] = dataclasses.field(default_factory=dict)
+    #: Records of this sensor that were neither a reply nor of the stream, over every
+    #: connection so far (the link decides which: link.py's ``set_streamed``).
+    other_records: int = 0
 
 
 class DeviceReport:

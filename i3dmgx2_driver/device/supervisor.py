@@ -36,7 +36,8 @@ at any moment, even while a new one is being opened. A lock decides who owns
 the link, and a link opened after the driver was told to stop is closed at
 once. Every link is made the same way (its line observer, the cancel event,
 the reader thread's scheduling); what outlives a link is kept here: how many
-were opened, the parser counters summed over all of them, what the port
+were opened, the parser counters and the records that were not the
+stream's (each link's ``other_records``) summed over all of them, what the port
 granted of low-latency mode and the reader of its scheduling (each logged
 when it changes, not at every reconnect).
 
@@ -169,6 +170,8 @@ class DeviceSupervisor:
         self._reconnects = 0
         self._low_latency_state = ''
         self._parser_totals: dict[str, int] = {}
+        #: Records of closed links that were neither a reply nor of the stream.
+        self._other_records = 0
 
     # -- what others read ---------------------------------------------------------------
 
@@ -187,7 +190,8 @@ class DeviceSupervisor:
             connected=link is not None, ping_ok=dialogue.ping_ok, info=dialogue.info,
             divider=dialogue.divider, expected_rate_hz=dialogue.expected_rate_hz,
             eeprom_writes=dialogue.eeprom_writes, line_use=dialogue.line_use,
-            line_warning=line_warning, strays=self._strays())
+            line_warning=line_warning, strays=self._strays(),
+            other_records=self._other_records + (link.other_records if link is not None else 0))
 
     @property
     def link(self) -> DeviceLink | None:
@@ -510,7 +514,7 @@ class DeviceSupervisor:
         """Open the port and make it the current link (reader not started); raise PortError."""
         cfg = self.config
         if self._shared is not None:
-            link = self._shared.attach(cfg.address, self._on_record, self._cancel)
+            link = self._shared.attach(cfg.address, self._on_record, self._cancel, cfg.stream)
             self._low_latency_state = self._shared.low_latency_state
             return self._own(link)
         port = self._opener.open_port()
@@ -518,7 +522,7 @@ class DeviceSupervisor:
         observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
                                                  cfg.baud, self._report.finding)
         link = DeviceLink(port, cfg.address, self._on_record,
-                          self._opener.reader_options(observer, self._cancel))
+                          self._opener.reader_options(observer, self._cancel, cfg.stream))
         return self._own(link)
 
     def _own(self, link: DeviceLink) -> DeviceLink:
@@ -548,6 +552,7 @@ class DeviceSupervisor:
             except PortError:
                 pass
         self._close(link)
+        self._other_records += link.other_records
         if self._shared is None:
             for key, value in link.parser.stats.as_dict().items():
                 self._parser_totals[key] = self._parser_totals.get(key, 0) + value

@@ -120,7 +120,7 @@ class DiagnosticsPublisher:
             received=published - self._last_published, period=period,
             silent_for=time.time() - stats.last_time if stats.last_time else None,
             published=published, lost=stats.lost, lost_in_period=stats.lost - self._last_lost,
-            device_resets=stats.device_resets, other_records=stats.other_records,
+            device_resets=stats.device_resets, other_records=device.other_records,
             mag_published=stats.mag_published, operation=core.device_services.operation)
         self._last_published = published
         self._last_lost = stats.lost

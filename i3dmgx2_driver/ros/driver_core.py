@@ -31,8 +31,9 @@ a core's parts themselves (``core.records``, ``core.supervisor``,
 ``core.device_services``): the core forwards nothing.
 
 The supervisor's reader thread calls the core's
-:meth:`~.record_publisher.RecordPublisher.on_record` for every valid
-record, which stamps it, packs its messages and publishes at once. The
+:meth:`~.record_publisher.RecordPublisher.on_record` for every record of
+the stream (the link tells which), which stamps it, packs its messages and
+publishes at once. The
 executor is left free for parameters, services and diagnostics, and nothing
 it does can delay a sample.
 

@@ -55,7 +55,6 @@ class StreamStats:
     unpublished: int = 0
     mag_published: int = 0
     lost: int = 0
-    other_records: int = 0
     device_resets: int = 0
     first_time: float = 0.0
     last_time: float = 0.0
@@ -82,7 +81,7 @@ class Stamping:
 
 class RecordPublisher:
     """
-    Stamp and publish each record of the stream ``messages`` names; count the rest.
+    Stamp and publish each record of the stream the link hands on; count those lost.
 
     ``messages`` says how the records become messages on ``publishers``
     (frame, axes, covariances, stream); ``stamping`` how they are stamped.
@@ -114,7 +113,6 @@ class RecordPublisher:
             self._imu_message, self._mag_message = factory.imu_cdr, factory.mag_cdr
         else:
             self._imu_message, self._mag_message = factory.fill_imu, factory.fill_mag
-        self._record_type = messages.stream.record_type
         self.stats = StreamStats()
         #: Device timer -> system-clock stamps, through resets, rollovers and gaps.
         self.sample_clock = SampleClock()
@@ -185,15 +183,13 @@ class RecordPublisher:
             self.stats.counting = False
 
     def on_record(self, packet: DataPacket, read_time: float, read_mono: float) -> None:
-        """Stamp and publish one record (runs in the reader thread)."""
+        """
+        Stamp and publish one record of the stream (runs in the reader thread).
+
+        Only records of the stream come here: the link keeps back replies and
+        counts any other record (device/link.py, ``set_streamed``).
+        """
         record = packet.record
-        # A reply to a waiting request does not come here: the link keeps it back
-        # (device/link.py tells a reply from a record of the stream). A record of
-        # another kind (a sensor power-cycled into its EEPROM's auto-start, a reply
-        # come after its request gave up) makes no message of this stream: counted.
-        if type(record) is not self._record_type:
-            self.stats.other_records += 1
-            return
         with self._publish_lock:
             stats = self.stats
             if not self.publishing:
