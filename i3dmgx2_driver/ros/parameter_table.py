@@ -157,11 +157,11 @@ class Spec(NamedTuple):
 
 
 def _names_a_stream(text: str) -> bool:
+    """Whether ``text`` is a stream's name or command byte (codec/streams.py decides)."""
     try:
-        streams.parse(text)
+        return isinstance(streams.parse(text), streams.Stream)
     except ValueError:
         return False
-    return True
 
 
 def _off_or_a_rate(rate: float) -> bool:
