@@ -113,6 +113,11 @@ def field(tmp_path_factory) -> FieldRun:
             assert len(listener.wait_for('imu/raw_data', 100, timeout=30)) >= 100, \
                 node.output()
             assert not files(directory), 'a start is no fault'
+            # The capture asked for holds the last SECONDS: let them all be seconds this
+            # listener heard. Its subscription may match the node's publisher a second or two
+            # after the stream starts on a busy machine, and a record the node published
+            # before then would count as one the replay published and the field did not.
+            time.sleep(SECONDS + 0.5)
             reply = listener.call(Trigger, '/i3dmgx2_driver/save_capture')
             assert reply.success, reply.message
             names['request'] = os.path.basename(reply.message)
