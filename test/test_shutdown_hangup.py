@@ -40,6 +40,7 @@ import time
 
 from harness.instrumented_node import STATS_ENV
 from harness.processes import ADDRESS, DEFAULT_HANGUP, isolate_ros_domain, REPO as REPO_PATH
+from i3dmgx2_driver.lifetime import SHUTDOWN_DEADLINE
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
 
@@ -48,8 +49,11 @@ pytestmark = pytest.mark.slow
 REPO = Path(REPO_PATH)
 LIB = Path(os.environ.get('I3DMGX2_LIB')
            or REPO / 'install' / 'i3dmgx2_driver' / 'lib' / 'i3dmgx2_driver')
-#: How long after the hang-up (or the kill) every process must be gone (s).
-GONE_WITHIN = 2.0
+#: How long after the hang-up (or the kill) every process must be gone (s): what a stop is
+#: promised (lifetime.SHUTDOWN_DEADLINE, then every thread's stack and exit), and a second for
+#: the last exit to be seen on a machine whose cores other tests keep busy (2 s alone, seen
+#: missed once beside three workers).
+GONE_WITHIN = SHUTDOWN_DEADLINE + 1.0
 FIXTURE = REPO / 'test' / 'fixtures' / 'gx2_real_0xcc_records.txt'
 
 
