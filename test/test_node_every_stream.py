@@ -48,6 +48,8 @@ MISSING = [-1.0] + [0.0] * 8
 STDDEV = {'orientation_stddev': 0.01, 'angular_velocity_stddev': 0.002,
           'linear_acceleration_stddev': 0.05, 'magnetic_field_stddev': 1e-6}
 COUNT = 150
+#: How long after the first Imu message heard the first magnetic field may come (s).
+MAG_MATCHED_WITHIN_S = 1.0
 
 pytestmark = pytest.mark.slow
 
@@ -104,6 +106,8 @@ def run(request):
         assert node.wait_for_output(f'streaming 0x{stream.code:02X} ({stream.name})',
                                     timeout=30), node.output()
         listener.wait_for('imu/raw_data', COUNT, timeout=30)
+        if stream.mag:  # its subscription may have matched later (see the mag test)
+            listener.wait_for('imu/mag', COUNT // 2, timeout=30)
         mag_publishers = listener.node.count_publishers('/imu/mag')
         code, _ = node.stop()
         yield {'stream': stream, 'convention': convention, 'sim': sim, 'code': code,
@@ -172,12 +176,14 @@ def test_mag_topic_exactly_when_the_record_has_a_field(run):
     assert run['mag_publishers'] == 1
     pairs = match(run['imu'], stream_truth(run['sim'], stream), convention)
     # The two subscriptions match the node's publishers one after the other (DDS
-    # discovery): the listener may hear imu/raw_data a message or two before imu/mag.
+    # discovery): the listener may hear imu/raw_data before imu/mag, a message or two on a
+    # quiet machine, a third of a second beside busy test workers (seen), so a node whose
+    # field came seconds late would show here, a discovery never.
     # From the first magnetic field heard on, every record's reading is there, in order.
     assert run['mag'], 'no magnetic field message'
     first = stamp_seconds(run['mag'][0])
     heard = [(m, entry) for m, entry in pairs if stamp_seconds(m) >= first]
-    assert len(pairs) - len(heard) < 10
+    assert first - stamp_seconds(pairs[0][0]) < MAG_MATCHED_WITHIN_S
     expected = [tuple(flip(convention) @ (np.array(entry.record.mag) * 1e-4))
                 for _, entry in heard if not math.isnan(entry.record.mag[0])]
     assert 0 < len(expected) < len(heard)  # some cycles had no new reading
