@@ -25,7 +25,10 @@ and docs/*.md every relative link leads to a file that exists, every
 ``#anchor`` to a heading (GitHub's slugs), every repository path named in
 code (``benchmarks/latency.py``, ``device/link.py``) to a file, and every
 page of docs/ is linked from the README, so that moving a file or renaming
-a heading fails here rather than in a reader's browser.
+a heading fails here rather than in a reader's browser. The names that
+docs/architecture.md's "Making a change" tells a maintainer to read and edit
+(``DeviceLink.on_data``, ``ReopenWait``, a test's name) exist in the code, so
+that the map is walked again whenever a name it gives is renamed.
 """
 
 import glob
@@ -198,6 +201,38 @@ def test_repository_paths_named_exist(page):
     assert not missing, f'{_name(page)} names files that do not exist: {missing}'
 
 
+#: Where the names a page cites live: the code, the tests, the harness and benchmarks.
+_CODE_FOLDERS = ('i3dmgx2_driver', 'test', 'harness', 'benchmarks', 'scripts', 'launch')
+_CITED_NAME = re.compile(r'`([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)(?:\(\))?`')
+
+
+def section(text: str, heading: str) -> str:
+    """Return the part of ``text`` from ``heading`` to the next heading of its level."""
+    level = heading.split(' ')[0]
+    start = text.index(heading + '\n')
+    end = text.find('\n' + level + ' ', start + len(heading))
+    return text[start:] if end < 0 else text[start:end]
+
+
+def uncited_names(text: str, root: str = REPO) -> list[str]:
+    """Return the names in code spans of ``text`` that some part of is in no source file."""
+    words: set[str] = set()
+    for folder in _CODE_FOLDERS:
+        for path in glob.glob(os.path.join(root, folder, '**', '*.py'), recursive=True):
+            with open(path) as handle:
+                words.update(re.findall(r'\w+', handle.read()))
+    names = {m.group(1) for m in _CITED_NAME.finditer(text)
+             if not re.search(r'\.(py|md|yaml|sh)$', m.group(1))}
+    return sorted(n for n in names if not words.issuperset(n.split('.')))
+
+
+def test_the_names_making_a_change_cites_exist():
+    with open(os.path.join(REPO, 'docs', 'architecture.md')) as handle:
+        text = section(handle.read(), '## Making a change')
+    assert not uncited_names(text), \
+        f'docs/architecture.md "Making a change" cites names the code lacks: {uncited_names(text)}'
+
+
 def test_every_page_of_docs_is_linked_from_the_readme():
     with open(README) as handle:
         targets = {os.path.normpath(os.path.join(REPO, target.partition('#')[0]))
@@ -258,3 +293,8 @@ def test_the_checks_find_what_is_broken(tmp_path):
     text = ('`scripts/there.sh`, `scripts/gone.sh`, `device/link.py`, '
             '/opt/ros/jazzy/setup.bash, `benchmarks/output/`\n')
     assert missing_paths(text, str(tmp_path)) == ['device/link.py', 'scripts/gone.sh']
+    (tmp_path / 'i3dmgx2_driver').mkdir()
+    (tmp_path / 'i3dmgx2_driver' / 'link.py').write_text('class DeviceLink:\n    on_data = 1\n')
+    cited = '# Page\n\n## Making a change\n`DeviceLink.on_data`, `DeviceLink.gone()`, `x.py`\n'
+    assert uncited_names(section(cited, '## Making a change'), str(tmp_path)) == \
+        ['DeviceLink.gone']
