@@ -375,7 +375,7 @@ class SensorDialogue(SensorSteps):
             return False
         # The link counts only records of the stream (expect_stream said which): a
         # sensor power-cycled meanwhile streams nothing, or the record its EEPROM says.
-        deadline = time.monotonic() + min(2 * self.period, 0.1)
+        deadline = time.monotonic() + min(2 * self.period, timeouts.RESUME_LOOK_S)
         while not link.records and time.monotonic() < deadline \
                 and not self._cancel.is_set():
             time.sleep(0.002)

@@ -39,6 +39,10 @@ ACK_TIMEOUT = 0.1
 #: The serial-number read that resumes a known sensor after a reconnect (s per try).
 RESUME_TIMEOUT = 0.1
 RESUME_RETRIES = 5
+#: How long a resume looks for records of a stream still running (s; two periods if shorter).
+RESUME_LOOK_S = 0.1
+#: How long a tool's reader waits in one read (s): a listening tool reacts within it.
+TOOL_READ_TIMEOUT = 0.05
 #: Continuous mode asked, in tries of one request each (the node's ``continuous_retries``).
 CONTINUOUS_TRIES = 5
 #: Continuous mode asked: its first record is looked for this long (s), or for

@@ -473,7 +473,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         notes='bringup session'))
     log = RecordLog()
     link = DeviceLink(port, args.address, log,
-                      LinkOptions(read_timeout=0.05, on_bytes=capture.write))
+                      LinkOptions(read_timeout=timeouts.TOOL_READ_TIMEOUT, on_bytes=capture.write))
     session = Bringup(link, log, args, say)
     session.report = report
     trips = session.round_trips

@@ -204,7 +204,7 @@ class _Prober:
             self.link.stop()
         # No address yet: a listening link takes packets from every node.
         self.link = DeviceLink(self.port, None, self._on_record, LinkOptions(
-            wireless=wireless, read_timeout=0.05, on_bytes=self._on_bytes))
+            wireless=wireless, read_timeout=timeouts.TOOL_READ_TIMEOUT, on_bytes=self._on_bytes))
         self.link.start()
         return self.link
 
