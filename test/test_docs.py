@@ -208,7 +208,7 @@ _CITED_NAME = re.compile(r'`([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*
 
 def section(text: str, heading: str) -> str:
     """Return the part of ``text`` from ``heading`` to the next heading of its level."""
-    level = heading.split(' ')[0]
+    level = heading.partition(' ')[0]
     start = text.index(heading + '\n')
     end = text.find('\n' + level + ' ', start + len(heading))
     return text[start:] if end < 0 else text[start:end]
