@@ -30,6 +30,7 @@ from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.commands import decode_command
 from i3dmgx2_driver.codec.records import GyroBias, INVALID_QUANTITY
 from i3dmgx2_driver.device.dialogue import float32_vector, SensorDialogue
+from i3dmgx2_driver.device.firmware import SensorFirmware
 from i3dmgx2_driver.device.gyro_bias import Calibration, GyroBiasCapture
 from i3dmgx2_driver.device.link import DeviceTimeout
 from i3dmgx2_driver.device.settings import DeviceConfig
@@ -57,10 +58,12 @@ class Log:
 class FakeDialogue:
     """Answers 0xD0 with ``answer`` (or times out), counting the writes as the real one."""
 
-    def __init__(self, answer: int | None) -> None:
+    def __init__(self, answer: int | None, firmware: str = '') -> None:
         self.answer = answer
         self.eeprom_writes = 0
         self.asked: list[int] = []
+        self.firmware = SensorFirmware()
+        self.firmware.learn(firmware)
 
     def transfer_to_non_volatile(self, link: object, quantity: int) -> int:
         self.eeprom_writes += 1
@@ -73,8 +76,8 @@ class FakeDialogue:
 class FakeDevice:
     """Runs an operation on no link; the dialogue is a fake."""
 
-    def __init__(self, answer: int | None = 0) -> None:
-        self.dialogue = FakeDialogue(answer)
+    def __init__(self, answer: int | None = 0, firmware: str = '') -> None:
+        self.dialogue = FakeDialogue(answer, firmware)
 
     def run_paused(self, operation: Any) -> Any:
         return operation(None)
@@ -101,6 +104,20 @@ def test_an_accepted_capture_is_stored_once_and_said():
     assert "stored in the sensor's non-volatile memory" in message
     assert '(-0.00330, -0.02170, -0.00520)' in message
     assert made._log.said[-1][1] == message
+
+
+@pytest.mark.parametrize('firmware, stored', [('2.1.11', False), ('2.1.12', True), ('', True)])
+def test_the_store_needs_firmware_2_1_12_and_is_refused_before_it_at_once(firmware, stored):
+    device = FakeDevice(firmware=firmware)
+    made = capture(device, True)
+    ok, message = made.store()
+    assert ok is stored, message
+    if stored:  # '': the firmware was not read, so the store is asked as before
+        assert device.dialogue.asked == [2]
+        return
+    assert message.startswith('refused: the gyro bias store (0xD0) needs firmware 2.1.12; '
+                              'this sensor has 2.1.11. Nothing sent'), message
+    assert device.dialogue.asked == [] and device.dialogue.eeprom_writes == 0
 
 
 def test_nothing_is_stored_without_a_capture_or_after_a_refused_one():

@@ -63,7 +63,7 @@ def left_as_found(sim: PtySimulator, restarted: bool = False) -> None:
 
 def info(serial: str) -> DeviceInfo:
     """Return the identity a simulated wireless sensor gives."""
-    return DeviceInfo('3DM-GX2', serial, '3DM-GX2 Wireless', '5g 300deg/s', '2.1.03')
+    return DeviceInfo('3DM-GX2', serial, '3DM-GX2 Wireless', '5g 300deg/s', '2.1.13')
 
 
 def sensor_2017(seed: int, streaming: int) -> PtySimulator:
@@ -336,7 +336,8 @@ def test_discover_says_nothing_of_the_rule_where_all_is_well(tmp_path, monkeypat
 
 @pytest.mark.slow
 def test_command_line_reports_every_port_as_json():
-    with PtySimulator(SimulatorConfig(address=42, serial_number='2042', seed=81)) as a, \
+    with PtySimulator(SimulatorConfig(address=42, serial_number='2042', seed=81,
+                                      firmware_version=2103)) as a, \
             PtySimulator(SimulatorConfig(address=17, serial_number='2017', seed=82,
                                          streaming_at_start=0xCC)) as b, \
             PtySimulator(SimulatorConfig(address=4242, seed=83)) as none, \
@@ -368,6 +369,8 @@ def test_command_line_reports_every_port_as_json():
             'address': 42, 'link': 'wireless', 'found_by': 'ping',
             'model_number': '3DM-GX2', 'serial_number': '2042',
             'model_name': '3DM-GX2 Wireless', 'options': '5g 300deg/s', 'firmware': '2.1.03',
+            'firmware_lacks': ['euler', 'stabilised', 'temperatures', 'bias store'],
+            'firmware_note': 'firmware 2.1.03: no euler, stabilised, temperatures, bias store',
             'rate_divider': 512, 'rate_hz': 100.0, 'streaming': None,
             'stream_restarted': False, 'lqi': None, 'rssi': None, 'note': None,
             'command': f'ros2 run i3dmgx2_driver node --ros-args -p port:={a.port} '
@@ -375,6 +378,9 @@ def test_command_line_reports_every_port_as_json():
         [second] = ports[b.port]['sensors']
         assert (second['address'], second['found_by'], second['streaming'],
                 second['stream_restarted']) == (17, 'stream', '0xCC', False)
+        # A firmware that has everything the driver offers: nothing lacks, no note.
+        assert (second['firmware'], second['firmware_lacks'], second['firmware_note']) == \
+            ('2.1.13', [], None)
         for sim in (a, b, none, busy, wired):
             left_as_found(sim)
         assert busy.host_log == []

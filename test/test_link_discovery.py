@@ -123,7 +123,7 @@ def test_retarget_moves_requests_to_another_node():
                 link.request(bytes((lay.FIRMWARE_VERSION,)), lay.FIRMWARE_VERSION, 0.2, 1)
             link.retarget(42)
             assert link.request(bytes((lay.FIRMWARE_VERSION,)), lay.FIRMWARE_VERSION,
-                                0.5, 3).version == 2103
+                                0.5, 3).version == 2113
             assert link.ping() is True
         finally:
             close_link(link)

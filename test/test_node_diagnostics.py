@@ -88,7 +88,7 @@ def test_every_status_ok_while_streaming_with_serial_as_hardware_id(rig):
     assert values(statuses['connection'])['state'] == 'streaming'
     device = values(statuses['device'])
     assert (device['serial number'], device['firmware'], device['model']) == \
-        ('3095', '2.1.03', '3DM-GX2 Wireless')
+        ('3095', '2.1.13', '3DM-GX2 Wireless')
     radio = values(statuses['radio link'])
     assert 0 < int(radio['LQI']) <= 255 and 0 < int(radio['RSSI']) <= 255
     assert int(radio['LQI min']) <= float(radio['LQI mean'])

@@ -242,8 +242,8 @@ def test_a_killed_simulator_leaves_no_usable_port(tmp_path):
 @pytest.mark.slow
 def test_every_good_command_packet_is_acked_and_a_bad_one_nacked(sim, host):
     version = host.request(cmd.encode_command(lay.FIRMWARE_VERSION))
-    assert version == rec.FirmwareVersion(2103)
-    assert version.text == '2.1.03'
+    assert version == rec.FirmwareVersion(2113)
+    assert version.text == '2.1.13'
     assert host.count(Ack) == 1
     bad = bytearray(encode_command_packet(ADDRESS, cmd.encode_command(lay.FIRMWARE_VERSION)))
     bad[-1] ^= 0x01
@@ -428,7 +428,7 @@ def test_rate_override_at_run_time(sim, host):
 def test_polled_commands_interleave_with_the_stream(sim, host):
     start_stream(host, lay.ACCEL_ANG_RATE)
     assert host.request(cmd.read_eeprom(0xFCA2)) == rec.EepromWord(512)
-    assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
+    assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2113
     stop_stream(host)
     assert_host_saw_exactly_valid_truth(host, sim)
 
@@ -524,7 +524,7 @@ def test_packets_are_written_in_chunks():
 def test_reopening_the_port_keeps_the_line_settings(sim):
     for _ in range(2):
         with Host(sim) as host:
-            assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
+            assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2113
     assert sim.wait_until(lambda: sim.stats.port_opens >= 2, 2.0)
 
 
@@ -543,7 +543,7 @@ def test_symlink_option_and_cleanup(tmp_path):
     with PtySimulator(SimulatorConfig(symlink=str(path), seed=1)) as sim:
         assert sim.port == str(path) and path.is_symlink()
         with Host(sim) as host:
-            assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
+            assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2113
     assert not os.path.lexists(path)
 
 

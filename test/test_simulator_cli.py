@@ -68,7 +68,7 @@ def test_cli_prints_the_port_serves_it_and_exits_cleanly(signum):
         port = first[len('port: '):]
         assert os.path.islink(port)
         with Host(_Port(port)) as host:
-            assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
+            assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2113
         status = read_line(process)
         assert 'records=' in status and 'commands=' in status
         process.send_signal(signum)

@@ -148,7 +148,7 @@ def test_a_scheduled_stall_from_the_fault_config():
         host.pump(0.2)
         assert host.count(Ack) == 1 and host.packets == []
         assert sim.wait_until(lambda: time.time() > sim.start_time + 0.35, 2.0)
-        assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
+        assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2113
 
 
 def test_a_power_cycle_goes_dark_then_restarts_the_timer_where_asked():
@@ -227,7 +227,7 @@ def test_command_loss_acks_but_never_answers():
         assert host.count(Ack) == 1 and host.packets == []
         assert sim.host_log[-1].outcome == 'lost' and sim.commands == []
         sim.set_faults(command_loss_probability=0.0)
-        assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
+        assert host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2113
 
 
 def test_the_first_request_to_stream_is_ignored():

@@ -174,7 +174,7 @@ def test_every_command_gets_its_reply_through_the_codec():
     [bit] = s.handle(cmd.built_in_test(0x3C), now)
     assert bit.record == rec.BuiltInTest(0x3C)
     [fw] = s.handle(cmd.encode_command(lay.FIRMWARE_VERSION), now)
-    assert fw.record == rec.FirmwareVersion(2103)
+    assert fw.record == rec.FirmwareVersion(2113)
 
 
 def test_continuous_mode_requests():

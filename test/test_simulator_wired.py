@@ -96,7 +96,7 @@ def test_wired_polled_replies_are_byte_exact():
         # Worked out by hand from docs/protocol.md §2: echo, data, then the sum of all of them.
         host.send(cmd.encode_command(lay.FIRMWARE_VERSION))
         assert host.pump_until(lambda: len(host.raw) >= 7)
-        assert bytes(host.raw) == bytes.fromhex('E9 00000837 0128')   # 2103, 0xE9+0x08+0x37
+        assert bytes(host.raw) == bytes.fromhex('E9 00000841 0132')   # 2113, 0xE9+0x08+0x41
         host.send(cmd.read_eeprom(0xFCA2))
         assert host.pump_until(lambda: len(host.raw) >= 12)
         assert bytes(host.raw[7:]) == bytes.fromhex('E5 0200 00E7')    # divider 512
@@ -362,8 +362,8 @@ def test_two_simulators_side_by_side_one_wired():
     with radio, cable, Host(radio, address=95) as wireless_host, \
             Host(cable, address=42) as wired_host:
         assert radio.port != cable.port
-        assert wireless_host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
-        assert wired_host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2103
+        assert wireless_host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2113
+        assert wired_host.request(cmd.encode_command(lay.FIRMWARE_VERSION)).version == 2113
         wireless_host.pump(0.3)
         wired_host.pump(0.3)
         for host in (wireless_host, wired_host):

@@ -28,7 +28,7 @@ from typing import Any, NamedTuple
 from .errors import DecodeError, EncodeError, LengthError, UnknownCommandError
 from .layouts import (
     BUILT_IN_TEST, CAPTURE_GYRO_BIAS, DEVICE_IDENTIFIER, Field, Layout, LAYOUTS, PING,
-    READ_EEPROM, SET_CONTINUOUS, STOP_CONTINUOUS, TRANSFER_TO_NON_VOLATILE,
+    READ_EEPROM, SET_CONTINUOUS, STOP_CONTINUOUS, STREAMABLE, TRANSFER_TO_NON_VOLATILE,
     WRITE_ACCEL_BIAS, WRITE_EEPROM, WRITE_GYRO_BIAS,
 )
 from .records import DeviceIdentifier
@@ -175,9 +175,16 @@ def ping(address: int) -> bytes:
 
 
 def set_continuous(command: int) -> bytes:
-    """Return the 0xC4 request to stream ``command`` (0 stops streaming)."""
-    if command and LAYOUTS.get(command) is None:
-        raise EncodeError(f'0x{command:02X} is not a command that can stream')
+    """
+    Return the 0xC4 request to stream ``command`` (0 stops streaming).
+
+    Only a data record streams (layouts.STREAMABLE): asking for another
+    command (an EEPROM write, 0xFA) would be sent, and never answered.
+    """
+    if command and command not in STREAMABLE:
+        valid = ', '.join(f'0x{code:02X}' for code in sorted(STREAMABLE))
+        raise EncodeError(f'0x{command:02X} is not a record the sensor can stream; '
+                          f'streamable records: {valid} (0 stops streaming)')
     return encode_command(SET_CONTINUOUS, command)
 
 

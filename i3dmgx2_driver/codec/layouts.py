@@ -20,6 +20,14 @@ directions: the driver encodes requests and decodes replies with it, the
 simulated sensor decodes requests and encodes replies with it, so the two
 cannot disagree about a single byte. Sizes in docs/protocol.md §6 are checked
 against the table when the module loads.
+
+Each command also carries the least firmware that answers it (``firmware``,
+as 0xE9 reports it: 2105 for 2.1.05), from the 3DM-GX2 Data Communications
+Protocol manual v1.19, which gives it in each command's own section: 0xCF
+needs 2.1.05; 0xD0, 0xD1 and 0xD2 need 2.1.12; 0xD3 needs 2.1.13; every
+other command 2.1.00. A sensor answers nothing to a command newer than its
+firmware, which looks like a lost packet: so every user of a command asks
+this table (through codec/firmware.py) before sending it.
 """
 
 import struct
@@ -59,11 +67,15 @@ class Layout(NamedTuple):
     wired_size: int
     #: Where each record field sits in the unpacked tuple (index or slice).
     plan: tuple[object, ...]
+    #: The least firmware that answers the command, as 0xE9 reports it (2105: 2.1.05).
+    firmware: int
 
 
 _V3 = 3
 _M9 = 9
 _TIMER = Field('timer', 'I')
+#: Least firmware of the commands the manual gives no other one for: 2.1.00.
+FIRMWARE_BASE = 2100
 
 
 def _struct(fields: tuple[Field, ...]) -> struct.Struct:
@@ -81,7 +93,7 @@ def _plan(fields: tuple[Field, ...]) -> tuple[object, ...]:
 
 def _layout(code: int, name: str, reply: tuple[Field, ...] | None,
             record_type: type | None, confirm: bytes = b'',
-            request: tuple[Field, ...] = ()) -> Layout:
+            request: tuple[Field, ...] = (), firmware: int = FIRMWARE_BASE) -> Layout:
     request_struct = _struct(request)
     reply_struct = _struct(reply) if reply is not None else None
     record_size = 1 + reply_struct.size if reply_struct is not None else 0
@@ -93,6 +105,7 @@ def _layout(code: int, name: str, reply: tuple[Field, ...] | None,
         record_size=record_size,
         wired_size=record_size + 2 if record_size else 0,
         plan=_plan(reply) if reply is not None else (),
+        firmware=firmware,
     )
 
 
@@ -166,18 +179,20 @@ LAYOUTS: dict[int, Layout] = {layout.code: layout for layout in (
             r.EulerAngles),
     _layout(EULER_ANGLES_ANG_RATE, 'euler_angles_ang_rate',
             (Field('roll', 'f'), Field('pitch', 'f'), Field('yaw', 'f'), _RATE, _TIMER),
-            r.EulerAnglesAngRate),
+            r.EulerAnglesAngRate, firmware=2105),
     _layout(TRANSFER_TO_NON_VOLATILE, 'transfer_to_non_volatile',
             (Field('quantity', 'H'), _TIMER), r.TransferToNonVolatile,
-            _CONFIRM, (Field('quantity', 'H'),)),
+            _CONFIRM, (Field('quantity', 'H'),), firmware=2112),
     _layout(TEMPERATURES, 'temperatures',
-            (Field('accel_code', 'H'), Field('gyro_codes', 'H', _V3), _TIMER), r.Temperatures),
+            (Field('accel_code', 'H'), Field('gyro_codes', 'H', _V3), _TIMER), r.Temperatures,
+            firmware=2112),
     _layout(STABILISED_ACCEL_ANG_RATE_MAG, 'stabilised_accel_ang_rate_mag',
             (Field('accel', 'f', _V3, 'stabilised_accel'), _RATE,
-             Field('mag', 'f', _V3, 'stabilised_mag'), _TIMER), r.StabilisedAccelAngRateMag),
+             Field('mag', 'f', _V3, 'stabilised_mag'), _TIMER), r.StabilisedAccelAngRateMag,
+            firmware=2112),
     _layout(DELTA_ANGLE_VELOCITY_MAG, 'delta_angle_velocity_mag',
             (Field('delta_angle', 'f', _V3), Field('delta_velocity', 'f', _V3), _MAG, _TIMER),
-            r.DeltaAngleVelocityMag),
+            r.DeltaAngleVelocityMag, firmware=2113),
     _layout(WRITE_EEPROM, 'write_eeprom_word', (Field('value', 'H'),), r.EepromWritten,
             _CONFIRM + b'\x00', (Field('address', 'H'), Field('value', 'H'))),
     _layout(READ_EEPROM, 'read_eeprom_word', (Field('value', 'H'),), r.EepromWord,
@@ -209,3 +224,9 @@ RECORD_SIZES: dict[int, int] = {
 }
 #: Largest record, which bounds every wireless data packet.
 MAX_RECORD_SIZE = max(RECORD_SIZES.values())
+#: Data records: no request arguments, a timer in the reply. These can be polled
+#: and streamed (0xC4); derived from the table, not listed by hand.
+STREAMABLE = frozenset(
+    code for code, layout in LAYOUTS.items()
+    if layout.reply and layout.reply[-1].name == 'timer'
+    and not layout.request and not layout.confirm)

@@ -51,6 +51,11 @@ What is written is the gyro bias this dialogue keeps: the parameter's at
 first, then each capture the driver accepted (:meth:`keep_gyro_bias`), so a
 rewrite never undoes a calibration made while running, and after a refused
 (moved) capture a power cycle brings back the last good bias, not the moved one.
+
+The firmware (0xE9) is read with the identity, before anything that depends
+on it is asked (firmware.py): a stream it lacks ends the initialisation at
+once (FirmwareLacksStream), and :attr:`SensorDialogue.firmware` tells the
+temperature poller and the bias store what this sensor answers.
 """
 
 from collections.abc import Callable
@@ -60,6 +65,7 @@ import time
 from typing import Any
 
 from . import timeouts
+from .firmware import check_stream, SensorFirmware
 from .identity import DeviceInfo, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR
 from .link import DeviceLink, DeviceTimeout
 from .sensor_steps import SensorSteps
@@ -117,6 +123,8 @@ class SensorDialogue(SensorSteps):
         self._throttle = Throttle()
         #: The device's identity, once read.
         self.info: DeviceInfo | None = None
+        #: Its firmware (0xE9), read with the identity: what it answers.
+        self.firmware = SensorFirmware()
         self._info_logged: DeviceInfo | None = None
         #: Whether the base station's ping was answered (None: wired, or not asked).
         self.ping_ok: bool | None = None
@@ -163,6 +171,7 @@ class SensorDialogue(SensorSteps):
         says what the line carried meanwhile, for that message.
         """
         self._introduce(link, require_answer, observed)
+        check_stream(self.firmware.version, self.config.stream, self.config.address)
         self._configure_rate(link)
         self.write_biases(link)
         self._check_line()
@@ -212,9 +221,15 @@ class SensorDialogue(SensorSteps):
             return
         if not any(info):
             self._warn('identity', 'the device did not tell its identity (0xEA, 0xE9): right '
-                                   'port? ros2 run i3dmgx2_driver discover finds sensors', None)
+                                   'port? ros2 run i3dmgx2_driver discover finds sensors; its '
+                                   'firmware could not be checked', None)
             return
         self.info = info
+        self.firmware.learn(info.firmware)
+        if not info.firmware:
+            self._warn('firmware', f'node {cfg.address} did not tell its firmware (0xE9): '
+                                   f'could not check that it has the stream, the temperatures '
+                                   f'and the bias store; asking for them as asked', None)
         if info != self._info_logged:
             self._info_logged = info
             self._log.info(f'device: model {info.model_name or "?"} '

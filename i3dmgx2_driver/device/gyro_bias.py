@@ -145,9 +145,12 @@ class GyroBiasCapture:
             self._log.warning(message)
             return False, message
         self._reached_device(Calibration(started, True, bias, sampling_ms, f'bias {text} rad/s'))
+        lacking = self._device.dialogue.firmware.refusal('the gyro bias store',
+                                                         layouts.TRANSFER_TO_NON_VOLATILE)
+        keep = (f'{lacking}: the gyro_bias parameter applies it at every start' if lacking
+                else '~/store_gyro_bias stores it')
         message = (f'gyro bias captured over {sampling_ms} ms: {text} rad/s; the device uses '
-                   f'it until power-off (not stored in non-volatile memory: '
-                   f'~/store_gyro_bias stores it)')
+                   f'it until power-off (not stored in non-volatile memory: {keep})')
         self._log.info(message)
         return True, message
 
@@ -174,7 +177,18 @@ class GyroBiasCapture:
     # device holds the moved bias, and storing would keep that.
 
     def store(self) -> tuple[bool, str]:
-        """Store the last capture in the sensor's non-volatile memory: (success, message)."""
+        """
+        Store the last capture in the sensor's non-volatile memory: (success, message).
+
+        Refused at once, nothing sent, on a firmware without 0xD0 (before
+        2.1.12): it would answer nothing, and the store would look lost.
+        """
+        lacking = self._device.dialogue.firmware.refusal('the gyro bias store',
+                                                         layouts.TRANSFER_TO_NON_VOLATILE)
+        if lacking:
+            return False, (f'refused: {lacking}. Nothing sent: the capture stays in use until '
+                           f'power-off; the gyro_bias parameter (or calibration_file) applies '
+                           f'it at every start')
         good = self.good_capture
         if good is None or self.last_capture is not good:
             why = ('no gyro bias was captured in this session' if self.last_capture is None

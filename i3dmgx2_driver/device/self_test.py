@@ -15,9 +15,11 @@
 """
 The self test: the sensor's data polled, its built-in tests, the data rate.
 
-The sensor's data polled (accel and rate, magnetometer), gravity judged at
-rest, each built-in test (0xFB) switched on and echoed, then off again, and
-the data rate measured once the stream resumed. Each judgement is a pure
+The sensor's data polled (accel and rate, magnetometer, temperatures),
+gravity judged at rest, each built-in test (0xFB) switched on and echoed,
+then off again, and the data rate measured once the stream resumed. A step
+whose command the sensor's firmware lacks is skipped with the reason
+(:func:`firmware_skip`), not failed: the sensor is not at fault. Each judgement is a pure
 function of the numbers, tested without a device. The report is one line
 per step for std_srvs/Trigger (:func:`format_report`) and one
 DiagnosticStatus per step for diagnostic_msgs/SelfTest (ros/services.py),
@@ -29,10 +31,12 @@ import math
 import threading
 from typing import Any, NamedTuple
 
+from .firmware import SensorFirmware
 from .link import DeviceLink, DeviceTimeout
 from .operation import Device, format_vector, norm, OPERATION_ERRORS, poll_inertial, POLLS
 from .record_rate import RATE_TOLERANCE, RateMeter
 from ..codec import commands, layouts
+from ..codec import firmware as fw
 from ..codec.records import Vector3
 
 #: The self test expects |accel| = 1 g within this (g), the sensor at rest.
@@ -54,15 +58,46 @@ class Step(NamedTuple):
     name: str
     passed: bool
     detail: str
+    #: Not run: the sensor's firmware lacks its command (``passed`` stays True).
+    skipped: bool = False
+
+    @property
+    def verdict(self) -> str:
+        """Return ``PASS``, ``FAIL`` or ``SKIP``, as the report writes it."""
+        return 'SKIP' if self.skipped else 'PASS' if self.passed else 'FAIL'
 
 
 def format_report(steps: Sequence[Step]) -> str:
-    """One line per step, ``PASS``/``FAIL``, then a summary line."""
-    lines = [f'{"PASS" if s.passed else "FAIL"} {s.name}: {s.detail}' for s in steps]
+    """One line per step, ``PASS``/``FAIL``/``SKIP``, then a summary line."""
+    lines = [f'{s.verdict} {s.name}: {s.detail}' for s in steps]
     failed = sum(1 for s in steps if not s.passed)
+    skipped = sum(1 for s in steps if s.skipped)
+    ran = len(steps) - skipped
     lines.append(f'self test {"passed" if not failed else "FAILED"}: '
-                 f'{len(steps) - failed}/{len(steps)} steps passed')
+                 f'{ran - failed}/{ran} steps passed'
+                 + (f', {skipped} skipped (the firmware lacks them)' if skipped else ''))
     return '\n'.join(lines)
+
+
+def firmware_skip(name: str, code: int, firmware: SensorFirmware) -> Step | None:
+    """Return step ``name`` skipped when ``firmware`` lacks its command ``code``, else None."""
+    if fw.has(firmware.version, code):
+        return None
+    return Step(name, True, f'skipped: 0x{code:02X} needs firmware {fw.text(fw.needs(code))}; '
+                            f'this sensor has {fw.text(firmware.version)}', skipped=True)
+
+
+def temperature_step(link: DeviceLink, firmware: SensorFirmware) -> Step:
+    """Poll the temperatures (0xD1) once; skipped on a firmware without them."""
+    name = 'temperatures respond (0xD1)'
+    skipped = firmware_skip(name, layouts.TEMPERATURES, firmware)
+    if skipped is not None:
+        return skipped
+    try:
+        reply = link.request(bytes((layouts.TEMPERATURES,)), layouts.TEMPERATURES)
+    except DeviceTimeout as exc:
+        return Step(name, False, str(exc))
+    return Step(name, True, f'accelerometer {reply.accel_celsius:.1f} C')
 
 
 def gravity_step(accel: Vector3, tolerance: float = GRAVITY_TOLERANCE) -> Step:
@@ -140,6 +175,7 @@ class SelfTestRun:
             steps.append(Step('magnetometer responds (0xC7)', True, detail))
         except DeviceTimeout as exc:
             steps.append(Step('magnetometer responds (0xC7)', False, str(exc)))
+        steps.append(temperature_step(link, self._device.dialogue.firmware))
         if accel is not None:
             steps.append(gravity_step(accel))
         else:

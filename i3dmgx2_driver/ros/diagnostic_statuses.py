@@ -282,11 +282,14 @@ def parser_status(totals: Mapping[str, int], previous: Mapping[str, int] | None,
     return Status(OK, 'parser', 'no damaged frames in the last period', values)
 
 
-def device_status(device: DeviceStatus, address: int, temperature_c: float | None) -> Status:
+def device_status(device: DeviceStatus, address: int, temperature_c: float | None,
+                  temperature_unavailable: str = '') -> Status:
     """
     Show what the device said it is; WARN when it did not say.
 
-    STALE before the first connection (nothing asked yet).
+    STALE before the first connection (nothing asked yet). A temperature
+    its firmware does not give (``temperature_unavailable``, why) is said,
+    and is no fault.
     """
     info, divider, connected_once = device.info, device.divider, device.connections > 0
     values = [('node address', str(address)),
@@ -295,6 +298,9 @@ def device_status(device: DeviceStatus, address: int, temperature_c: float | Non
               ('configured rate (Hz)', _fmt(device.expected_rate_hz, 2))]
     if temperature_c is not None:
         values.append(('accel temperature (C)', _fmt(temperature_c, 1)))
+    elif temperature_unavailable:
+        values.append(('accel temperature (C)',
+                       f'unavailable on this firmware: {temperature_unavailable}'))
     if info is None:
         level = WARN if connected_once else STALE
         text = ('the device did not tell its identity (0xEA, 0xE9)' if connected_once

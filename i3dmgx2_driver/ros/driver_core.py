@@ -167,7 +167,8 @@ class DriverCore:
         frame_id = self.records.messages.frame_id
         self.temperature = TemperaturePoller(
             node, self.supervisor.streaming_link, frame_id,
-            cfg.temperature_period, self.publishers.temperature, cfg.time_offset)
+            cfg.temperature_period, self.publishers.temperature, cfg.time_offset,
+            firmware=self.supervisor.dialogue.firmware)
         convention = cfg.messages.frame_convention
         node.get_logger().info(
             f'i3dmgx2_driver: port {cfg.device.port}, node address {sensor.address}, '

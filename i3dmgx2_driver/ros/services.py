@@ -170,7 +170,7 @@ class DeviceServices:
         response.passed = bytes((all(step.passed for step in steps),))
         response.status = to_message(
             [Status(OK if step.passed else ERROR, step.name, step.detail,
-                    (('result', 'PASS' if step.passed else 'FAIL'),)) for step in steps],
+                    (('result', step.verdict),)) for step in steps],
             response.id, f'{self.node.get_name()}: ')
         return response
 

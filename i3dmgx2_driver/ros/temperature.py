@@ -22,7 +22,9 @@ round trips over a lossy radio, so it runs in a worker thread of its own
 that sleeps for the period between polls: neither the executor (parameters,
 services, diagnostics) nor the reader thread (the IMU stream) ever waits
 for it. Polls are skipped while the stream is not running (connecting, or
-paused for a capture or the self test).
+paused for a capture or the self test), and never sent to a sensor whose
+firmware lacks 0xD1 (before 2.1.12): one warning names both versions, and
+diagnostics say the temperature is unavailable on this firmware.
 """
 
 from collections.abc import Callable
@@ -36,6 +38,7 @@ from sensor_msgs.msg import Temperature
 
 from .conversions import set_stamp
 from ..codec import layouts
+from ..device.firmware import SensorFirmware
 from ..device.link import DeviceLink, DeviceTimeout
 from ..device.port import PortError
 from ..device.throttle import Throttle
@@ -56,13 +59,17 @@ class TemperaturePoller:
     device link while the device streams (None otherwise: no poll then);
     ``frame_id`` is the IMU frame. ``period`` 0 disables it: no thread (and
     no publisher is needed). ``time_offset`` (s) is added to every stamp, as
-    to the IMU's.
+    to the IMU's. ``firmware``, if given, is the sensor's (read at each
+    connection): a firmware without 0xD1 is never polled.
     """
 
     def __init__(self, node: Node, streaming_link: Callable[[], DeviceLink | None],
                  frame_id: str, period: float, publisher: Publisher | None,
-                 time_offset: float = 0.0) -> None:
+                 time_offset: float = 0.0, firmware: SensorFirmware | None = None) -> None:
         self.node = node
+        self._firmware = firmware or SensorFirmware()
+        #: Why the temperature is not polled on this sensor's firmware ('' while it is).
+        self.unavailable = ''
         self._time_offset = time_offset
         self._streaming_link = streaming_link
         self.period = period
@@ -99,6 +106,15 @@ class TemperaturePoller:
         """Read the temperatures once and publish; False if skipped or failed."""
         link = self._streaming_link()
         if link is None:
+            return False
+        why = self._firmware.refusal('the temperature poll', layouts.TEMPERATURES)
+        if why != self.unavailable:
+            self.unavailable = why
+            if why:
+                self.node.get_logger().warning(
+                    f'temperature_period {self.period:g} s: {why}: the temperature is not '
+                    f'polled (imu/temperature stays silent)')
+        if why:
             return False
         try:
             reply = link.request(bytes((layouts.TEMPERATURES,)), layouts.TEMPERATURES,

@@ -28,14 +28,14 @@ import argparse
 import math
 import time
 
-from i3dmgx2_driver.codec import framing
+from i3dmgx2_driver.codec import firmware, framing
 from i3dmgx2_driver.codec.data_rate import MAX_DIVIDER, MIN_DIVIDER
 
 from .config import SimulatorConfig
 from .faults import FaultConfig
 from .motion import MotionConfig
 from .pty_link import PtySimulator
-from .sensor import STREAMABLE
+from .sensor import DEFAULT_FIRMWARE, STREAMABLE
 from .. import lifetime
 from ..arguments import in_range
 
@@ -70,6 +70,15 @@ def _streamable(text: str) -> int:
         raise argparse.ArgumentTypeError(
             f'{text} is not a record the sensor can stream; streamable: {valid}')
     return value
+
+
+def _firmware(text: str) -> tuple[int | None, int]:
+    """Parse ``2.1.03`` (every sensor) or ``17=2.1.03`` (the sensor at address 17)."""
+    address, _, version = text.rpartition('=')
+    try:
+        return (_address(address) if address else None), firmware.parse(version)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 #: The faults drawn by chance, in the order of ``--help``: flag, the ``FaultConfig``
@@ -115,6 +124,11 @@ def build_parser() -> argparse.ArgumentParser:
     device.add_argument('--stream', type=_streamable, metavar='CODE',
                         help='stream this record from power-up (EEPROM auto-start), e.g. '
                              '0xC2; one of ' + ', '.join(f'0x{c:02X}' for c in sorted(STREAMABLE)))
+    device.add_argument('--firmware', type=_firmware, action='append', metavar='VERSION',
+                        help='firmware the sensor reports (0xE9), e.g. 2.1.03: commands newer '
+                             'than it go unanswered (default '
+                             f'{firmware.text(DEFAULT_FIRMWARE)}, which has them all); '
+                             'N=VERSION for the sensor at address N alone')
     device.add_argument('--serial', default='3095', help='serial number (default: 3095)')
     device.add_argument('--rate', type=_positive, metavar='HZ',
                         help='calculation rate overriding the EEPROM divider (benchmarks)')
@@ -198,7 +212,9 @@ def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
         power_cycle_at=args.power_cycle_at, power_off_seconds=args.power_off_for,
         unplug_at=args.unplug_at, unplug_seconds=args.unplug_for)
     addresses = tuple(args.address or (95,))
+    versions = dict(args.firmware or ())
     return SimulatorConfig(
+        firmware_version=versions.pop(None, DEFAULT_FIRMWARE), firmware_versions=versions,
         address=addresses[0], addresses=addresses if len(addresses) > 1 else (),
         fault_address=args.fault_address, wireless=not args.wired, divider=args.divider,
         streaming_at_start=args.stream or False,

@@ -77,7 +77,11 @@ class SimulatorConfig:
     clock_ppm: float = 40.0
     #: Timer at power-up (None: 5 s before the 32-bit rollover).
     timer_start: int | None = None
-    firmware_version: int = 2103
+    #: Firmware as 0xE9 reports it (2103: 2.1.03): commands newer than it go unanswered.
+    #: The default answers every command.
+    firmware_version: int = sns.DEFAULT_FIRMWARE
+    #: Firmware of single sensors among several (address -> version), over ``firmware_version``.
+    firmware_versions: dict[int, int] = dataclasses.field(default_factory=dict)
     #: Radio latency (s) between the sensor sending a packet and the host getting it.
     latency_s: float = 0.002
     #: Baud rate of the serial line between the base station and the host: a
@@ -123,6 +127,13 @@ class SimulatorConfig:
             raise ValueError(f'addresses must differ, got {self.addresses}')
         if len(self.all_addresses) > 1 and not self.wireless:
             raise ValueError('several sensors need a base station (wireless), not a wired line')
+        for address, version in {0: self.firmware_version, **self.firmware_versions}.items():
+            if address and address not in self.all_addresses:
+                raise ValueError(f'firmware_versions: {address} is none of the sensors '
+                                 f'{self.all_addresses}')
+            if not 0 < version <= 0xFFFFFFFF:
+                raise ValueError(f'firmware_version must be a positive uint32 (2103 for '
+                                 f'2.1.03), got {version}')
         if self.fault_address is not None and self.fault_address not in self.all_addresses:
             raise ValueError(f'fault_address {self.fault_address} is none of the sensors '
                              f'{self.all_addresses}')
@@ -156,6 +167,10 @@ class SimulatorConfig:
         """Return the address of every sensor, the first one's first."""
         return self.addresses or (self.address,)
 
+    def firmware_of(self, address: int) -> int:
+        """Return the firmware of the sensor at ``address``."""
+        return self.firmware_versions.get(address, self.firmware_version)
+
     @property
     def start_stream(self) -> int:
         """Command byte streamed from power-up, 0 for none."""
@@ -179,7 +194,7 @@ class SimulatorConfig:
     def sensor_spec(self) -> sns.SensorSpec:
         """Return the sensor this configuration describes."""
         return sns.SensorSpec(self.address, self.serial_number, self.clock_ppm,
-                              self.timer_start, self.rate_hz, self.firmware_version,
+                              self.timer_start, self.rate_hz, self.firmware_of(self.address),
                               eeprom=self.power_up_eeprom)
 
     @property

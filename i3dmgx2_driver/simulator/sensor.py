@@ -36,7 +36,7 @@ import math
 import random
 from typing import Any, ClassVar, NamedTuple
 
-from i3dmgx2_driver.codec import framing
+from i3dmgx2_driver.codec import firmware, framing
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec import records as rec
 from i3dmgx2_driver.codec.commands import (
@@ -59,12 +59,10 @@ from .motion import Motion
 TICKS_PER_SECOND = rec.TICKS_PER_SECOND
 #: Default timer at power-up: five seconds before the rollover.
 DEFAULT_TIMER_START = TIMER_MODULUS - 5 * TICKS_PER_SECOND
-#: Data records: no request arguments, a timer in the reply. These can be
-#: polled and streamed; derived from the codec's table, not listed by hand.
-STREAMABLE = frozenset(
-    code for code, layout in lay.LAYOUTS.items()
-    if layout.reply and layout.reply[-1].name == 'timer'
-    and not layout.request and not layout.confirm)
+#: Data records: these can be polled and streamed (the codec's table says which).
+STREAMABLE = lay.STREAMABLE
+#: Firmware of a simulated sensor unless told: one that answers every command.
+DEFAULT_FIRMWARE = firmware.NEWEST
 
 #: Commands a wired sensor recognises in its byte stream: every command of the
 #: table but the wireless ping, which only a base station answers.
@@ -110,7 +108,9 @@ class SensorSpec:
     timer_start: int | None = None
     #: Calculation rate (Hz) overriding the EEPROM divider (None: the divider's).
     rate_hz: float | None = None
-    firmware_version: int = 2103
+    #: Firmware as 0xE9 reports it (2113: 2.1.13); a command newer than it goes
+    #: unanswered, as on a real sensor (codec/firmware.py says which).
+    firmware_version: int = DEFAULT_FIRMWARE
     model_number: str = '3DM-GX2'
     model_name: str = '3DM-GX2 Wireless'
     options: str = '5g 300deg/s'
@@ -270,9 +270,10 @@ class SimulatedSensor:
         """
         Act on one command received at ``now``; return the replies it causes.
 
-        Commands that do not decode (wrong confirmation bytes) or that the
-        device would refuse are ignored and counted in :attr:`ignored`: the
-        real sensor answers nothing, and the host must time out and retry.
+        Commands that do not decode (wrong confirmation bytes), that the
+        device would refuse, or that are newer than its firmware (a stream of
+        such a record included) are ignored and counted in :attr:`ignored`:
+        the real sensor answers nothing, and the host must time out and retry.
         """
         if not isinstance(command, Command):
             try:
@@ -281,6 +282,12 @@ class SimulatedSensor:
                 self.ignored += 1
                 return []
         code, args = command.code, command.args
+        version = self.firmware_version
+        if not firmware.has(version, code) or (
+                code == lay.SET_CONTINUOUS and args[0] in lay.LAYOUTS
+                and not firmware.has(version, args[0])):
+            self.ignored += 1
+            return []
         rel = self.clock.rel(now)
         cycle = self.clock.latest_cycle_rel(rel)
         cycle_time = self.clock.power_up_time + cycle

@@ -65,7 +65,7 @@ def unit_specs(config: SimulatorConfig,
         spec = dataclasses.replace(
             first, address=address, serial_number=f'{(3 + i) % 10}{address % 1000:03d}',
             clock_ppm=config.clock_ppm - CLOCK_STEP_PPM * i,
-            timer_start=seeds.getrandbits(32))
+            timer_start=seeds.getrandbits(32), firmware_version=config.firmware_of(address))
         motion = config.sensor_motion
         roll, pitch, yaw = motion.initial_attitude_deg
         periods = motion.sway_period_s

@@ -18,11 +18,13 @@ Bring-up: one command a first-time hardware user runs, and sends us.
 ``ros2 run i3dmgx2_driver bringup --port PATH --address N`` talks to a real
 sensor for about a minute and writes, in one folder it names:
 
-- ``report.txt``, the table it also prints: the sensor's identity, its data
-  rate divider, the port's low-latency mode and FTDI latency timer as found;
+- ``report.txt``, the table it also prints: the sensor's identity (with
+  what its firmware lacks of what the driver offers), its data rate
+  divider, the port's low-latency mode and FTDI latency timer as found;
   the round trips of a ping, a short command (0xE9) and continuous mode's
   start and stop (min / median / max, and how many were lost or NACKed);
-  every stream at the highest rate the line allows, for a few seconds each
+  every stream its firmware has (the others are skipped, with the firmware
+  they need) at the highest rate the line allows, for a few seconds each
   (rate achieved, records lost by the sensor's timer, LQI and RSSI, the
   device clock's drift); the timeouts a measured round trip comes within a
   factor 2 of (``device/timeouts.py``); and the state the sensor was left in;
@@ -52,6 +54,7 @@ from .port_listing import latency_timer_ms
 from .. import lifetime
 from ..arguments import seconds, whole_number
 from ..capture.file_format import CaptureWriter, default_header
+from ..codec import firmware as fw
 from ..codec import line_budget, streams
 from ..codec.commands import LAYOUT_BY_TYPE
 from ..codec.data_rate import (
@@ -165,6 +168,8 @@ class Bringup:
         self.report: dict[str, Any] = {}
         self.found_stream = 0
         self.found_divider: int | None = None
+        #: The sensor's firmware (0xE9; None: not answered, nothing skipped for it).
+        self.firmware: int | None = None
         #: The rate divider as last written or found (None: unknown).
         self.divider: int | None = None
         #: Longest round trip of each kind (s), for the timeouts' check.
@@ -211,6 +216,9 @@ class Bringup:
         info = read_identity(link, self.steps.timeout, self.steps.retries)
         self.report['identity'] = info._asdict()
         self.report['identity']['answered'] = any(info)
+        self.firmware = fw.version_of(info.firmware)
+        self.report['identity']['firmware_lacks'] = fw.lacks(self.firmware)
+        self.say(fw.summary(self.firmware))
         try:
             self.found_divider = self.steps.read_divider(link)
         except DeviceTimeout:
@@ -238,6 +246,11 @@ class Bringup:
     def run_stream(self, stream: streams.Stream) -> dict[str, Any]:
         rate = line_budget.max_rate(stream.code, self.args.baud, True)
         out: dict[str, Any] = {'stream': stream.label, 'code': f'0x{stream.code:02X}'}
+        lacking = fw.stream_refusal(stream, self.firmware)
+        if lacking:
+            out['skipped'] = lacking
+            self.say(f'skipping {stream.label}: {lacking}')
+            return out
         if rate is None:
             out['error'] = 'no rate fits the line'
             return out
@@ -364,7 +377,8 @@ def format_report(report: dict[str, Any]) -> str:
         ['address', str(report['address'])],
         ['model', f'{_cell(ident.get("model_name"))} ({_cell(ident.get("model_number"))})'],
         ['serial', _cell(ident.get('serial_number'))],
-        ['firmware', _cell(ident.get('firmware'))],
+        ['firmware', _cell(ident.get('firmware'))
+         + (': no ' + ', '.join(ident['firmware_lacks']) if ident.get('firmware_lacks') else '')],
         ['options', _cell(ident.get('options'))],
         ['rate divider', f'{_cell(found.get("rate_divider"))} '
                          f'({_cell(found.get("rate_hz"))} Hz)'],
@@ -396,6 +410,10 @@ def format_report(report: dict[str, Any]) -> str:
         rows = [['stream', 'asked Hz', 'got Hz', 'records', 'lost', 'LQI min/med',
                  'RSSI min/med', 'drift ppm', 'longest gap ms']]
         for s in report['streams']:
+            if 'skipped' in s:
+                rows.append([s['stream'], '-', f'skipped: {s["skipped"]}', '', '', '', '', '',
+                             ''])
+                continue
             if 'error' in s and not s.get('records'):
                 rows.append([s['stream'], _cell(s.get('rate_asked_hz')), s['error'], '', '',
                              '', '', '', ''])

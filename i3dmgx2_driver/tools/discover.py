@@ -43,6 +43,7 @@ from .port_listing import (
 )
 from .. import lifetime
 from ..arguments import seconds
+from ..codec import firmware as fw
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..device.port import port_group, serial_group, UDEV_RULE_INSTALL
 
@@ -175,6 +176,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 # -- output --------------------------------------------------------------------
 
+def _firmware_note(sensor: SensorFound) -> str:
+    """Say what the sensor's firmware lacks of what the driver offers ('' if nothing, or unknown)."""
+    version = fw.version_of(sensor.info.firmware) if sensor.info else None
+    return fw.summary(version) if fw.lacks(version) else ''
+
+
 def _sensor_dict(sensor: SensorFound, command: str | None) -> dict[str, Any]:
     info = sensor.info
     return {
@@ -186,6 +193,8 @@ def _sensor_dict(sensor: SensorFound, command: str | None) -> dict[str, Any]:
         'model_name': info.model_name if info else None,
         'options': info.options if info else None,
         'firmware': info.firmware if info else None,
+        'firmware_lacks': fw.lacks(fw.version_of(info.firmware)) if info else None,
+        'firmware_note': _firmware_note(sensor) or None,
         'rate_divider': sensor.divider,
         'rate_hz': round(sensor.rate_hz, 3) if sensor.rate_hz else None,
         'streaming': f'0x{sensor.streaming:02X}' if sensor.streaming else None,
@@ -295,6 +304,9 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
         for sensor in sensors:
             if sensor.note:
                 out.write(f'    note: {sensor.note}\n')
+            if _firmware_note(sensor):
+                who = f'node {sensor.address}' if sensor.wireless else 'the wired sensor'
+                out.write(f'    {who}: {_firmware_note(sensor)}\n')
 
 
 def print_hints(results: Sequence[tuple[PortInfo, PortProbe]], config: ProbeConfig,
