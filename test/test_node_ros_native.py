@@ -159,7 +159,8 @@ def test_self_test_is_served_as_diagnostic_msgs_self_test(rig):
     names = [s.name for s in response.status]
     assert names == [
         'i3dmgx2_driver: accel & angular rate respond (0xC2)',
-        'i3dmgx2_driver: magnetometer responds (0xC7)', 'i3dmgx2_driver: gravity at rest',
+        'i3dmgx2_driver: magnetometer responds (0xC7)',
+        'i3dmgx2_driver: temperatures respond (0xD1)', 'i3dmgx2_driver: gravity at rest',
         'i3dmgx2_driver: magnetometer BIT (0xFB config 0x04)',
         'i3dmgx2_driver: reverse magnetometer BIT (0xFB config 0x08)',
         'i3dmgx2_driver: +accel & rate BIT (0xFB config 0x10)',
@@ -170,7 +171,7 @@ def test_self_test_is_served_as_diagnostic_msgs_self_test(rig):
         assert status.hardware_id == '3095' and status.message
     # The Trigger form stays, from the same steps.
     trigger = call(listener, Trigger, 'self_test')
-    assert trigger.success and trigger.message.endswith('9/9 steps passed')
+    assert trigger.success and trigger.message.endswith('10/10 steps passed')
 
 
 def test_is_calibrated_stays_true_through_a_power_cycle_the_bias_written_back(rig):

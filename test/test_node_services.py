@@ -178,12 +178,12 @@ def test_self_test_passes_and_reports_each_step(rig):
     assert response.success, response.message
     lines = response.message.splitlines()
     for step in ('accel & angular rate respond (0xC2)', 'magnetometer responds (0xC7)',
-                 'gravity at rest', 'magnetometer BIT (0xFB config 0x04)',
+                 'temperatures respond (0xD1)', 'gravity at rest', 'magnetometer BIT (0xFB config 0x04)',
                  'reverse magnetometer BIT (0xFB config 0x08)',
                  '+accel & rate BIT (0xFB config 0x10)', '-rate BIT (0xFB config 0x20)',
                  'built-in test off (0xFB config 0x00)', 'data rate'):
         assert any(line.startswith(f'PASS {step}:') for line in lines), (step, lines)
-    assert lines[-1] == 'self test passed: 9/9 steps passed'
+    assert lines[-1] == 'self test passed: 10/10 steps passed'
     bits = [c.args[0] for _, c in sim.commands if c.code == layouts.BUILT_IN_TEST]
     assert bits[-5:] == [0x04, 0x08, 0x10, 0x20, 0x00]
     assert_streaming(listener)

@@ -244,13 +244,13 @@ class Bringup:
     # -- every stream --------------------------------------------------------------------
 
     def run_stream(self, stream: streams.Stream) -> dict[str, Any]:
-        rate = line_budget.max_rate(stream.code, self.args.baud, True)
         out: dict[str, Any] = {'stream': stream.label, 'code': f'0x{stream.code:02X}'}
         lacking = fw.stream_refusal(stream, self.firmware)
         if lacking:
             out['skipped'] = lacking
             self.say(f'skipping {stream.label}: {lacking}')
             return out
+        rate = line_budget.max_rate(stream.code, self.args.baud, True)
         if rate is None:
             out['error'] = 'no rate fits the line'
             return out
