@@ -37,7 +37,7 @@ from std_srvs.srv import Trigger
 
 pytestmark = pytest.mark.slow
 
-EULER_WORDS = ('node 95: stream euler (0xCF) needs firmware 2.1.05; this sensor has 2.1.03; '
+EULER_WORDS = ('node 17: stream euler (0xCF) needs firmware 2.1.05; this sensor has 2.1.03; '
                'it offers full, inertial_orientation, inertial_mag, inertial')
 
 
@@ -55,14 +55,17 @@ def asked(sim: PtySimulator, address: int, code: int) -> list:
 
 
 def test_a_stream_the_firmware_lacks_exits_2_and_fails_configure_with_the_same_words():
-    with PtySimulator(SimulatorConfig(seed=91, firmware_version=2103)) as sim:
-        params = {'port': sim.port, 'address': 95, 'stream': 'euler'}
-        with NodeProcess(params) as plain:
+    # Sensor 17 has 2.1.03, sensor 95 everything: the plain node serves 17 alone, the
+    # managed node both, and 17's firmware fails its configure whatever 95 answers.
+    config = SimulatorConfig(addresses=(17, 95), seed=91, firmware_versions={17: 2103})
+    with PtySimulator(config) as sim:
+        with NodeProcess({'port': sim.port, 'address': 17, 'stream': 'euler'}) as plain:
             assert plain.wait(timeout=30) == 2, plain.output()
             output = plain.output()
         fatal = [line for line in output.splitlines() if '[FATAL]' in line]
         assert len(fatal) == 1 and EULER_WORDS in fatal[0], output
         assert 'retrying' not in output and 'streaming' not in output
+        params = {'port': sim.port, 'addresses': [17, 95], 'stream': 'euler'}
         with Listener({}) as listener, NodeProcess(params, command=LIFECYCLE_COMMAND) as node:
             client = LifecycleClient(listener)
             assert client.wait_ready(), node.output()
@@ -70,7 +73,7 @@ def test_a_stream_the_firmware_lacks_exits_2_and_fails_configure_with_the_same_w
             assert client.state() == 'unconfigured'
             assert f'configure failed: {EULER_WORDS}' in node.output(), node.output()
             assert node.stop()[0] == 0
-        assert asked(sim, 95, lay.EULER_ANGLES_ANG_RATE) == [], 'never asked for'
+        assert asked(sim, 17, lay.EULER_ANGLES_ANG_RATE) == [], 'never asked for'
 
 
 def test_several_sensors_each_by_its_own_firmware():

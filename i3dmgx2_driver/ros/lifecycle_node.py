@@ -203,6 +203,13 @@ class LifecycleDriverNode(LifecycleNode):
             self._release()
             return FAILURE
         failed = _each(drivers.cores, lambda core: core.supervisor.connect())
+        never = [exc for _, exc in failed if isinstance(exc, PortUnusable)]
+        if never:
+            # A sensor that can never give what is asked (its firmware lacks the stream):
+            # the words of the plain node's exit 2, whatever the other sensors answered.
+            self._release()
+            log.error(f'configure failed: {never[0]}')
+            return FAILURE
         if len(failed) == len(drivers.cores):
             self._release()
             if not drivers.several:
