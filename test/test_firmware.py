@@ -229,8 +229,8 @@ def test_the_self_test_skips_a_step_the_firmware_lacks_and_does_not_fail():
 
 def test_discover_prints_what_the_firmware_lacks():
     def sensor(address: int, version: str) -> SensorFound:
-        return SensorFound(address, 'ping', DeviceInfo('3DM-GX2', str(address), 'GX2', '',
-                                                      version), 512, 0, False, None, None)
+        info = DeviceInfo('3DM-GX2', str(address), 'GX2', '', version)
+        return SensorFound(address, 'ping', info, 512, 0, False, None, None)
 
     port = PortInfo('/dev/i3dmgx2-test', None, None, None, '', None)
     probe = PortProbe(port.device, 'probed', '', True,

@@ -48,10 +48,10 @@ def _domain():
 
 def asked(sim: PtySimulator, address: int, code: int) -> list:
     """Return the commands ``code`` sent to ``address`` (0xC4 counts for the record it asks)."""
-    return [entry.command for entry in sim.host_log
-            if entry.address == address and entry.command is not None
-            and (entry.command.code == code or entry.command.code == lay.SET_CONTINUOUS
-                 and entry.command.args[0] == code)]
+    commands = [entry.command for entry in sim.host_log
+                if entry.address == address and entry.command is not None]
+    return [c for c in commands
+            if c.code == code or (c.code == lay.SET_CONTINUOUS and c.args[0] == code)]
 
 
 def test_a_stream_the_firmware_lacks_exits_2_and_fails_configure_with_the_same_words():

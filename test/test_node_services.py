@@ -178,7 +178,8 @@ def test_self_test_passes_and_reports_each_step(rig):
     assert response.success, response.message
     lines = response.message.splitlines()
     for step in ('accel & angular rate respond (0xC2)', 'magnetometer responds (0xC7)',
-                 'temperatures respond (0xD1)', 'gravity at rest', 'magnetometer BIT (0xFB config 0x04)',
+                 'temperatures respond (0xD1)', 'gravity at rest',
+                 'magnetometer BIT (0xFB config 0x04)',
                  'reverse magnetometer BIT (0xFB config 0x08)',
                  '+accel & rate BIT (0xFB config 0x10)', '-rate BIT (0xFB config 0x20)',
                  'built-in test off (0xFB config 0x00)', 'data rate'):

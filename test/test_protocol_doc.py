@@ -25,7 +25,7 @@ codec's ticks per second: a document that drifts from the code fails here.
 from pathlib import Path
 import re
 
-from i3dmgx2_driver.codec import layouts
+from i3dmgx2_driver.codec import firmware, layouts
 from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
 
 REPO = Path(__file__).resolve().parents[1]
@@ -59,23 +59,25 @@ def test_every_citation_names_a_section_that_exists():
     assert not bad, '\n'.join(bad)
 
 
-def _command_table() -> dict[int, int]:
-    """Command byte -> wired reply bytes, from the document's §6 table."""
+def _command_table() -> dict[int, tuple[int, str]]:
+    """Command byte -> (wired reply bytes, least firmware), from the document's §6 table."""
     section = DOC.split('## §6 ', 1)[1].split('\n## ', 1)[0]
     table = {}
     for row in section.splitlines():
         cells = [cell.strip() for cell in row.strip('|').split('|')]
-        if len(cells) == 5 and re.fullmatch(r'0x[0-9A-F]{2}', cells[0]):
-            table[int(cells[0], 16)] = int(re.match(r'\d+', cells[4]).group())
+        if len(cells) == 6 and re.fullmatch(r'0x[0-9A-F]{2}', cells[0]):
+            table[int(cells[0], 16)] = (int(re.match(r'\d+', cells[4]).group()), cells[5])
     return table
 
 
 def test_the_command_table_is_the_codecs():
     table = _command_table()
     assert set(table) == set(layouts.LAYOUTS)
+    for code, (_, least) in table.items():
+        assert least == firmware.text(layouts.LAYOUTS[code].firmware), f'0x{code:02X}'
     # The ping's answer is one bare byte, which the parser takes apart from records.
-    assert table.pop(layouts.PING) == 1
-    for code, size in table.items():
+    assert table.pop(layouts.PING)[0] == 1
+    for code, (size, _) in table.items():
         assert layouts.LAYOUTS[code].wired_size == size, f'0x{code:02X}'
 
 

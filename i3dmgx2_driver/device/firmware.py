@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-The sensor's firmware, as the node holds it: read once with the identity, asked before each gated command.
+One sensor's firmware as the node holds it: read with the identity, asked before a gated command.
 
 Which firmware answers which command is the codec's (codec/firmware.py
 reads the layout table). The dialogue reads the firmware (0xE9) with the
@@ -24,9 +24,9 @@ before they send. Where 0xE9 goes unanswered the driver goes on as it did
 before it read the firmware at all, and says once that it could not check.
 """
 
+from .port import PortUnusable
 from ..codec import firmware as fw
 from ..codec import streams
-from .port import PortUnusable
 
 
 class FirmwareLacksStream(PortUnusable):

@@ -177,7 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
 # -- output --------------------------------------------------------------------
 
 def _firmware_note(sensor: SensorFound) -> str:
-    """Say what the sensor's firmware lacks of what the driver offers ('' if nothing, or unknown)."""
+    """Say what the sensor's firmware lacks of what the driver offers ('' if nothing, unknown)."""
     version = fw.version_of(sensor.info.firmware) if sensor.info else None
     return fw.summary(version) if fw.lacks(version) else ''
 
