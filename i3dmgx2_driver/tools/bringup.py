@@ -410,9 +410,10 @@ def format_report(report: dict[str, Any]) -> str:
         rows = [['stream', 'asked Hz', 'got Hz', 'records', 'lost', 'LQI min/med',
                  'RSSI min/med', 'drift ppm', 'longest gap ms']]
         for s in report['streams']:
-            if 'skipped' in s:
-                rows.append([s['stream'], '-', f'skipped: {s["skipped"]}', '', '', '', '', '',
-                             ''])
+            if 'skipped' in s:  # the whole reason was said, and is in report.json
+                least = fw.text(fw.needs(int(s['code'], 16)))
+                rows.append([s['stream'], '-', f'skipped: needs firmware {least}', '', '', '',
+                             '', '', ''])
                 continue
             if 'error' in s and not s.get('records'):
                 rows.append([s['stream'], _cell(s.get('rate_asked_hz')), s['error'], '', '',
