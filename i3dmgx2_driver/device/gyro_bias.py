@@ -186,9 +186,9 @@ class GyroBiasCapture:
         lacking = self._device.dialogue.firmware.refusal('the gyro bias store',
                                                          layouts.TRANSFER_TO_NON_VOLATILE)
         if lacking:
-            return False, (f'refused: {lacking}. Nothing sent: the capture stays in use until '
+            return False, (f'refused: {lacking}. Nothing sent. A captured bias is used until '
                            f'power-off; the gyro_bias parameter (or calibration_file) applies '
-                           f'it at every start')
+                           f'one at every start')
         good = self.good_capture
         if good is None or self.last_capture is not good:
             why = ('no gyro bias was captured in this session' if self.last_capture is None
