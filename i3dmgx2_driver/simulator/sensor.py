@@ -20,7 +20,8 @@ the simulator can never disagree with the driver about a byte without the
 codec being wrong for both. Time is passed in by the caller (wall-clock
 seconds, as ``time.time()`` gives), which keeps the model deterministic for a
 seed and lets tests run it faster than real time. What a sensor is
-(address, identifiers, clock error, EEPROM presets) is a ``SensorSpec``.
+(address, identifiers, firmware, clock error, EEPROM presets) is a ``SensorSpec``;
+its firmware leaves every command newer than it unanswered, as a real sensor does.
 
 Its calculation cycles and timer are a ``CycleClock`` (``cycle_clock``):
 an exact grid from power-up. The timer starts close to its 32-bit rollover
