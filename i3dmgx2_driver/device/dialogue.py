@@ -229,7 +229,7 @@ class SensorDialogue(SensorSteps):
         if not info.firmware:
             self._warn('firmware', f'node {cfg.address} did not tell its firmware (0xE9): '
                                    f'could not check that it has the stream, the temperatures '
-                                   f'and the bias store; asking for them as asked', None)
+                                   f'and the bias store; they are asked for all the same', None)
         if info != self._info_logged:
             self._info_logged = info
             self._log.info(f'device: model {info.model_name or "?"} '
