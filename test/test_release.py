@@ -67,7 +67,11 @@ def rosdep_env(tmp_path_factory) -> dict[str, str]:
     sources.mkdir()
     (sources / '20-default.list').write_text(
         ''.join(f'yaml file://{ROSDISTRO}/rosdep/{name}.yaml\n' for name in ('base', 'python')))
-    env = dict(os.environ, ROSDEP_SOURCE_PATH=str(sources),
+    # As on a fresh machine: with --ignore-src, rosdep takes the packages on these paths (the
+    # venv's ROS wheels, under scripts/env.sh or colcon) as built from source, and skips them.
+    env = {key: value for key, value in os.environ.items()
+           if key not in ('AMENT_PREFIX_PATH', 'ROS_PACKAGE_PATH', 'CMAKE_PREFIX_PATH')}
+    env.update(ROSDEP_SOURCE_PATH=str(sources),
                ROSDISTRO_INDEX_URL=f'file://{ROSDISTRO}/index-v4.yaml',
                ROS_HOME=str(base / 'ros_home'),
                PATH=os.pathsep.join((os.path.dirname(sys.executable), os.environ['PATH'])))
