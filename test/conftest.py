@@ -72,14 +72,16 @@ def pytest_cmdline_main(config):
 
     colcon starts one pytest, in the source folder, with what it installed on
     the paths; in one process the suite takes 18 minutes. Unless the command
-    line chose its workers (``--pytest-args -n 0``), this process runs the
+    line chose its workers (``--pytest-args -n 0``) or coverage, this process runs the
     ``parallel`` phase on pytest-xdist's workers as scripts/test.sh does (two
     per core, ``--dist loadfile``), and :func:`pytest_sessionfinish` the
     ``alone`` tests afterwards, in one process.
     """
     from harness.processes import run_by_colcon
+    # pytest-cov chose its one-process set-up before this hook (--pytest-with-coverage).
     if (not run_by_colcon() or PHASE_ENV in os.environ
-            or getattr(config.option, 'numprocesses', 0) is not None):
+            or getattr(config.option, 'numprocesses', 0) is not None
+            or getattr(config.option, 'cov_source', None)):
         return
     config.option.numprocesses = min(2 * len(os.sched_getaffinity(0)), MOST_WORKERS)
     config.option.dist = 'loadfile'
