@@ -21,7 +21,7 @@ package_name = 'i3dmgx2_driver'
 
 setup(
     name=package_name,
-    version='0.1.0',
+    version='1.0.0',
     packages=find_packages(include=['i3dmgx2_driver', 'i3dmgx2_driver.*']),
     data_files=[
         ('share/ament_index/resource_index/packages',

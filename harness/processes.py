@@ -42,6 +42,7 @@ import threading
 import time
 from typing import Any, ClassVar, NamedTuple
 
+from ament_index_python.packages import get_package_prefix, PackageNotFoundError
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 import rclpy
@@ -57,6 +58,27 @@ LIFECYCLE_COMMAND = (sys.executable, '-m', 'i3dmgx2_driver.ros.lifecycle_node')
 ABORT_GRACE = 3.0
 #: Node address the simulator and the node agree on.
 ADDRESS = 95
+
+
+def installed_executables() -> Path:
+    """
+    Return the folder of the installed executables: where ``ros2 run`` finds them.
+
+    The environment says which install that is: ``colcon test``, a sourced
+    workspace and scripts/env.sh each put the package's prefix on
+    ``AMENT_PREFIX_PATH``. Without one (pytest by hand in a checkout), the
+    checkout's own ``install/``, which scripts/setup.sh builds.
+    """
+    try:
+        prefix = get_package_prefix('i3dmgx2_driver')
+    except (PackageNotFoundError, OSError):  # OSError: no AMENT_PREFIX_PATH at all
+        prefix = os.path.join(REPO, 'install', 'i3dmgx2_driver')
+    return Path(prefix) / 'lib' / 'i3dmgx2_driver'
+
+
+def run_by_colcon() -> bool:
+    """Whether ``colcon`` started this process (it sets ``COLCON=1`` for what it runs)."""
+    return os.environ.get('COLCON') == '1'
 
 
 def ros_env(extra: dict[str, str] | None = None) -> dict[str, str]:

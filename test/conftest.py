@@ -16,6 +16,8 @@
 
 import os
 import random
+import subprocess
+import sys
 
 from fixture_files import real_records_path
 import pytest
@@ -59,6 +61,63 @@ def fixture_path():
 #: scripts/test.sh runs the suite in two phases: ``parallel`` (all but the tests marked
 #: ``alone``, on several workers), then ``alone`` (those, in one process); unset: everything.
 PHASE_ENV = 'I3DMGX2_TEST_PHASE'
+#: Set on a ``colcon test`` run given no ``-n``: its ``alone`` phase comes after the other.
+_ALONE_AFTER = pytest.StashKey[bool]()
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config):
+    """
+    Under ``colcon test``, run the two phases of scripts/test.sh (docs/testing.md).
+
+    colcon starts one pytest, in the source folder, with what it installed on
+    the paths; in one process the suite takes 18 minutes. Unless the command
+    line chose its workers (``--pytest-args -n 0``) or coverage, this process runs the
+    ``parallel`` phase on pytest-xdist's workers as scripts/test.sh does (two
+    per core, ``--dist loadfile``), and :func:`pytest_sessionfinish` the
+    ``alone`` tests afterwards, in one process.
+    """
+    from harness.processes import run_by_colcon
+    # pytest-cov chose its one-process set-up before this hook (--pytest-with-coverage).
+    if (not run_by_colcon() or PHASE_ENV in os.environ
+            or getattr(config.option, 'numprocesses', 0) is not None
+            or getattr(config.option, 'cov_source', None)):
+        return
+    config.option.numprocesses = min(2 * len(os.sched_getaffinity(0)), MOST_WORKERS)
+    config.option.dist = 'loadfile'
+    os.environ[PHASE_ENV] = 'parallel'  # the workers inherit it
+    config.stash[_ALONE_AFTER] = True
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_sessionfinish(session, exitstatus):
+    """
+    After a ``colcon test`` run's parallel phase (and its summary), run the ``alone`` tests.
+
+    In a pytest of their own, with colcon's options (``PYTEST_ADDOPTS``) and
+    their JUnit file beside colcon's, which ``colcon test-result`` reads too.
+    The exit status is scripts/test.sh's: the first phase's failure, else the
+    second's; 5 (nothing ran) only when neither ran a test.
+    """
+    result = yield
+    if not session.config.stash.get(_ALONE_AFTER, False):
+        return result
+    command = [sys.executable, '-m', 'pytest', '-n', '0', *session.config.invocation_params.args]
+    xml = session.config.option.xmlpath
+    if xml:
+        command.append(f'--junit-xml={os.path.splitext(xml)[0]}-alone.xml')
+    print('\n== the tests that run alone (marked alone), after the others', flush=True)
+    alone = subprocess.run(command,
+                           env=dict(os.environ, **{PHASE_ENV: 'alone'}),
+                           cwd=session.config.invocation_params.dir).returncode
+    first = int(session.exitstatus)
+    if first not in (0, 5):
+        session.exitstatus = first
+    elif alone not in (0, 5):
+        session.exitstatus = alone
+    else:
+        session.exitstatus = 5 if first == alone == 5 else 0
+    return result
 
 
 def pytest_collection_modifyitems(config, items):

@@ -29,6 +29,8 @@ import os
 import sys
 from xml.etree import ElementTree
 
+import pytest
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: rosdep keys of the Python libraries imported under another name.
 ROSDEP_KEYS = {'serial': 'python3-serial', 'numpy': 'python3-numpy',
@@ -113,7 +115,8 @@ def test_optional_extras_are_no_exec_depend_and_load_with_no_module():
         'import an optional extra inside the function that uses it (tools/figures.py)'
 
 
-def test_setup_offers_the_optional_extras(monkeypatch):
+def setup_arguments(monkeypatch) -> dict:
+    """Return what setup.py passes to ``setup()``."""
     import runpy
 
     import setuptools
@@ -121,6 +124,40 @@ def test_setup_offers_the_optional_extras(monkeypatch):
     monkeypatch.setattr(setuptools, 'setup', lambda **kwargs: captured.update(kwargs))
     monkeypatch.chdir(REPO)
     runpy.run_path(os.path.join(REPO, 'setup.py'))
-    extras = captured.get('extras_require', {})
+    return captured
+
+
+def test_setup_offers_the_optional_extras(monkeypatch):
+    extras = setup_arguments(monkeypatch).get('extras_require', {})
     for root, extra in OPTIONAL.items():
         assert root in extras.get(extra, []), f'setup.py: extras_require[{extra!r}]'
+
+
+# catkin_pkg's parser still calls docutils' traverse(), which docutils 0.22 deprecates.
+@pytest.mark.filterwarnings('ignore:nodes.Node.traverse:DeprecationWarning')
+def test_package_xml_setup_py_and_the_changelog_name_one_version(monkeypatch):
+    """
+    A release takes its version from package.xml, its Debian changelog from CHANGELOG.rst.
+
+    bloom warns when the changelog has no section for that version, and stops
+    when its newest section is another; setup.py's version is what pip and the
+    installed metadata say. The file is in the
+    form ``catkin_generate_changelog`` writes and ``catkin_prepare_release``
+    stamps (the headlines below are catkin_pkg's own), which bloom parses.
+    """
+    from catkin_pkg.changelog import get_changelog_from_path
+    from catkin_pkg.changelog_generator import generate_package_headline, \
+        generate_version_headline
+
+    root = ElementTree.parse(os.path.join(REPO, 'package.xml')).getroot()
+    version = root.findtext('version')
+    assert setup_arguments(monkeypatch)['version'] == version, 'setup.py and package.xml'
+    path = os.path.join(REPO, 'CHANGELOG.rst')
+    changelog = get_changelog_from_path(path, root.findtext('name'))
+    newest, date, _ = next(iter(changelog.foreach_version()))
+    assert newest == version, f'CHANGELOG.rst starts at {newest}, package.xml says {version}'
+    with open(path) as handle:
+        text = handle.read()
+    top = generate_package_headline(root.findtext('name')) + '\n' + generate_version_headline(
+        version, date.strftime('%Y-%m-%d'))
+    assert text.startswith(top), f'CHANGELOG.rst does not start with:\n{top}'

@@ -19,7 +19,7 @@ As a user meets it: ``bash scripts/demo.sh`` typed into an interactive shell
 on a terminal, and the terminal closed (the shell gets SIGHUP, and hands it
 to its jobs; the simulator runs in a session of its own, which no SIGHUP
 reaches); or the script killed outright. And each installed executable
-(``install/i3dmgx2_driver/lib/i3dmgx2_driver/``, what ``ros2 run`` runs) on
+(``lib/i3dmgx2_driver/`` of the install the environment names, what ``ros2 run`` runs) on
 a terminal that hangs up, and started in a session of its own by a parent
 that is then killed (only the parent-death signal, ``lifetime.die_with_parent``,
 reaches it). Every time, no process of the ones started is left 2 s later.
@@ -39,7 +39,8 @@ import threading
 import time
 
 from harness.instrumented_node import STATS_ENV
-from harness.processes import ADDRESS, DEFAULT_HANGUP, isolate_ros_domain, REPO as REPO_PATH
+from harness.processes import ADDRESS, DEFAULT_HANGUP, installed_executables, \
+    isolate_ros_domain, REPO as REPO_PATH, run_by_colcon
 from i3dmgx2_driver.lifetime import SHUTDOWN_DEADLINE
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
@@ -47,8 +48,7 @@ import pytest
 pytestmark = pytest.mark.slow
 
 REPO = Path(REPO_PATH)
-LIB = Path(os.environ.get('I3DMGX2_LIB')
-           or REPO / 'install' / 'i3dmgx2_driver' / 'lib' / 'i3dmgx2_driver')
+LIB = installed_executables()
 #: How long after the hang-up (or the kill) every process must be gone (s): what a stop is
 #: promised (lifetime.SHUTDOWN_DEADLINE, then every thread's stack and exit), and a second for
 #: the last exit to be seen on a machine whose cores other tests keep busy (2 s alone, seen
@@ -219,7 +219,7 @@ def _started(terminal_or_text, marker: str, pid: int) -> None:
 @pytest.mark.parametrize('tool', TOOLS)
 def test_each_tool_ends_when_its_terminal_hangs_up(tool, sim, tmp_path):
     if not (LIB / tool).exists():
-        pytest.fail(f'{LIB / tool} is missing: run scripts/setup.sh')
+        pytest.fail(f'{LIB / tool} is missing: run scripts/setup.sh (or colcon build)')
     args, marker = _tool_argv(tool, sim, tmp_path)
     terminal = Terminal([str(LIB / tool), *args], _env())
     family: set[int] = set()
@@ -301,6 +301,13 @@ def _demo_env(tmp_path: Path) -> dict[str, str]:
     return dict(_env(), TMPDIR=str(tmp_path))
 
 
+#: scripts/demo.sh sets up the checkout it is in (.venv, pip, colcon build into its install/):
+#: ``colcon test`` tests what colcon installed, and leaves the source folder as it is.
+demo_of_the_checkout = pytest.mark.skipif(
+    run_by_colcon(), reason='scripts/demo.sh sets up the source folder: scripts/test.sh runs it')
+
+
+@demo_of_the_checkout
 def test_the_demo_leaves_nothing_when_its_terminal_is_closed(tmp_path):
     terminal = Terminal(['bash', '--norc', '--noprofile', '-i'], _demo_env(tmp_path))
     family: set[int] = set()
@@ -317,6 +324,7 @@ def test_the_demo_leaves_nothing_when_its_terminal_is_closed(tmp_path):
         _kill_all(family | {terminal.pid})
 
 
+@demo_of_the_checkout
 def test_the_demo_leaves_nothing_when_the_script_is_killed(tmp_path):
     # SIGKILL leaves the script's folder (no trap runs): under tmp_path, not /tmp.
     terminal = Terminal(['bash', '--norc', '--noprofile', '-i'], _demo_env(tmp_path))

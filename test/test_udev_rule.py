@@ -189,3 +189,11 @@ def test_setup_installs_the_rule_under_share(monkeypatch):
     installed = {os.path.join(folder, os.path.basename(f))
                  for folder, files in captured['data_files'] for f in files}
     assert os.path.join('share', 'i3dmgx2_driver', 'udev', UDEV_RULE_NAME) in installed
+
+
+def test_the_debian_package_installs_the_same_rule():
+    # bloom's .deb installs debian/udev beside package.xml to /lib/udev/rules.d/
+    # (dh_installudev), where udev reads it; share/ is for a copy by hand.
+    with open(os.path.join(REPO, 'debian', 'udev'), 'rb') as deb, open(RULE, 'rb') as rule:
+        assert deb.read() == rule.read(), \
+            f'debian/udev differs from udev/{UDEV_RULE_NAME}: copy one onto the other'
