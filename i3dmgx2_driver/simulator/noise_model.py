@@ -77,13 +77,13 @@ class NoiseConfig:
     #: Gyro bias instability (rad/s): the records' deviation over white at 85 s, 0.1 mrad/s.
     gyro_bias_instability: Vector3 = (1.5e-4, 1.0e-4, 0.75e-4)
     #: Gyro rate random walk (rad/s^2/sqrt(Hz)): below the records' bound (no rise by 85 s).
-    gyro_random_walk: Vector3 = (2.7e-5, 1.8e-5, 1.4e-5)
+    gyro_random_walk: Vector3 = (4.3e-5, 2.9e-5, 2.2e-5)
     #: Accelerometer white noise density (g/sqrt(Hz)): records' 0.23, 0.22, 0.25 mg a sample.
     accel_white: Vector3 = (2.3e-5, 2.2e-5, 2.5e-5)
     #: Accelerometer bias instability (g): the records' floor, 50, 24 and 60 ug at 10-40 s.
     accel_bias_instability: Vector3 = (3.0e-5, 2.5e-5, 3.0e-5)
     #: Accelerometer random walk (g/s/sqrt(Hz)): the records' bound on x and y (3 ug/s).
-    accel_random_walk: Vector3 = (5.5e-6, 4.5e-6, 5.5e-6)
+    accel_random_walk: Vector3 = (8.8e-6, 7.2e-6, 8.8e-6)
 
     def __post_init__(self) -> None:
         """Reject a term that is no noise, naming it."""
