@@ -24,11 +24,16 @@ codec's, record for record.
 
 import json
 import math
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
 import yaml
 
+from harness.processes import isolate_ros_domain, NodeProcess, REPO, ros_env
 from i3dmgx2_driver.capture.file_format import CaptureWriter, default_header
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
@@ -36,9 +41,12 @@ from i3dmgx2_driver.codec.commands import decode_record, encode_record
 from i3dmgx2_driver.codec.parser import SensorStreamParser
 from i3dmgx2_driver.ros.conversions import STANDARD_GRAVITY
 from i3dmgx2_driver.ros.parameter_table import SPECS
+from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
+from i3dmgx2_driver.simulator.motion import MotionConfig
 from i3dmgx2_driver.simulator.noise_model import NoiseConfig, NoiseModel
 from i3dmgx2_driver.simulator.still_capture import record_dtype, still_chunks
 from i3dmgx2_driver.tools import allan, noise
+from i3dmgx2_driver.tools import noise_live as live
 from i3dmgx2_driver.tools.imu_samples import Samples, unwrap_timer
 
 RATE = 250.0
@@ -213,3 +221,29 @@ def test_noise_names_a_file_that_is_no_capture(tmp_path, capsys):
 def test_the_uncertainty_of_a_term_falls_with_its_clusters():
     assert allan.uncertainty(1) == math.inf
     assert allan.uncertainty(51) == pytest.approx(0.1)
+
+
+@pytest.mark.slow
+def test_noise_listens_to_the_running_node_and_ctrl_c_keeps_what_came():
+    isolate_ros_domain()
+    config = SimulatorConfig(seed=50, motion=MotionConfig(static=True))
+    with PtySimulator(config) as sim, NodeProcess({'port': sim.port, 'address': 95}) as node:
+        assert node.wait_for_output('streaming 0xCC'), node.output()
+        tool = subprocess.Popen(
+            [sys.executable, '-m', 'i3dmgx2_driver.tools.noise', '--minutes', '10'],
+            env=ros_env(), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(4.0)
+        tool.send_signal(signal.SIGINT)
+        out, err = tool.communicate(timeout=30)
+        assert tool.returncode == 0, out + err
+        assert 'Traceback' not in err, err
+        assert ' left, ' in err                        # the progress bar, with the time left
+        assert '/imu/raw_data (live):' in out and 'gyroscope: N rad/s/√Hz' in out, out
+        samples = int(out.split('(live): ')[1].split(' samples')[0])
+        assert samples > 50                             # 100 Hz for a few seconds
+        assert node.stop()[0] == 0
+
+
+def test_the_progress_bar_says_the_time_left_and_the_estimate():
+    line = live.progress(90.0, 600.0, 9000, ', gyro N 1.0e-04')
+    assert line == '\r[####--------------------------]   8:30 left, 9000 samples, gyro N 1.0e-04'
