@@ -29,10 +29,6 @@ import subprocess
 import sys
 import time
 
-import numpy as np
-import pytest
-import yaml
-
 from harness.processes import isolate_ros_domain, NodeProcess, REPO, ros_env
 from i3dmgx2_driver.capture.file_format import CaptureWriter, default_header
 from i3dmgx2_driver.codec import framing
@@ -42,12 +38,16 @@ from i3dmgx2_driver.codec.parser import SensorStreamParser
 from i3dmgx2_driver.ros.conversions import STANDARD_GRAVITY
 from i3dmgx2_driver.ros.parameter_table import SPECS
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
-from i3dmgx2_driver.simulator.motion import MotionConfig
+from i3dmgx2_driver.simulator.motion import Motion, MotionConfig
 from i3dmgx2_driver.simulator.noise_model import NoiseConfig, NoiseModel
+from i3dmgx2_driver.simulator.sensor import SensorSpec, SimulatedSensor
 from i3dmgx2_driver.simulator.still_capture import record_dtype, still_chunks
 from i3dmgx2_driver.tools import allan, noise
 from i3dmgx2_driver.tools import noise_live as live
 from i3dmgx2_driver.tools.imu_samples import Samples, unwrap_timer
+import numpy as np
+import pytest
+import yaml
 
 RATE = 250.0
 HOUR = 3600.0
@@ -67,13 +67,13 @@ def model_samples(seconds: float, seed: int) -> Samples:
 
 @pytest.fixture(scope='module')
 def hour():
-    """An hour of the default noise at 250 Hz (900,000 samples: about 3 s to make)."""
+    """Make an hour of the default noise at 250 Hz (900,000 samples: about 3 s)."""
     return model_samples(HOUR, SEED)
 
 
 @pytest.fixture(scope='module')
 def minute():
-    """A minute of it."""
+    """Make a minute of it."""
     return model_samples(60.0, SEED)
 
 
@@ -179,7 +179,7 @@ def test_noise_from_a_capture_writes_the_files_fusion_and_calibration_tools_read
     result = json.loads((tmp_path / 'noise.json').read_text())
     assert result['samples'] == 12000 and result['rate_hz'] == pytest.approx(100.0)
     assert result['duration_s'] == pytest.approx(120.0)
-    for name, unit_scale in (('gyroscope', 1.0), ('accelerometer', STANDARD_GRAVITY)):
+    for name in ('gyroscope', 'accelerometer'):
         assert set(result[name]) >= {'noise_density', 'random_walk', 'bias_instability',
                                      'bias_instability_tau_s'}
         assert len(result[name]['noise_density']) == 3
@@ -247,3 +247,22 @@ def test_noise_listens_to_the_running_node_and_ctrl_c_keeps_what_came():
 def test_the_progress_bar_says_the_time_left_and_the_estimate():
     line = live.progress(90.0, 600.0, 9000, ', gyro N 1.0e-04')
     assert line == '\r[####--------------------------]   8:30 left, 9000 samples, gyro N 1.0e-04'
+
+
+def test_the_running_simulator_makes_the_models_noise_when_asked():
+    motion = Motion(MotionConfig(static=True, noise=NoiseConfig()))
+    sensor = SimulatedSensor(SensorSpec(rate_hz=100.0), motion, seed=9)
+    sensor.start_streaming(lay.ACCEL_ANG_RATE, 0.0)
+    records = [sensor.stream_sample().record for _ in range(6000)]
+    gyro = np.array([r.angular_rate for r in records])
+    dev = allan.overlapping_adev(gyro, 0.01)
+    terms = allan.read_terms(dev, 60.0)
+    assert np.allclose([axis.white.value for axis in terms], NoiseConfig().gyro_white, rtol=0.1)
+    # Its bias is the configured one, plus the slow terms.
+    assert np.allclose(gyro.mean(axis=0), MotionConfig().gyro_bias, atol=5e-4)
+    # Without a NoiseConfig, the white noise alone, as always: gyro_noise a sample.
+    plain = SimulatedSensor(SensorSpec(rate_hz=100.0), Motion(MotionConfig(static=True)),
+                            seed=9)
+    plain.start_streaming(lay.ACCEL_ANG_RATE, 0.0)
+    rates = np.array([plain.stream_sample().record.angular_rate for _ in range(2000)])
+    assert np.allclose(rates.std(axis=0), MotionConfig().gyro_noise, rtol=0.1)

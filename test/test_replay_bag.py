@@ -25,12 +25,6 @@ tesla, the temperature. ``noise --bag`` reads it back, and a sqlite3 bag too.
 
 from pathlib import Path
 
-import numpy as np
-import pytest
-from rosbags.highlevel import AnyReader
-from rosbags.rosbag2 import Writer
-from rosbags.typesys import get_typestore, Stores
-
 from i3dmgx2_driver.capture.file_format import CaptureWriter, default_header
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
@@ -39,6 +33,11 @@ from i3dmgx2_driver.codec.commands import encode_record
 from i3dmgx2_driver.codec.parser import SensorStreamParser
 from i3dmgx2_driver.simulator.still_capture import still_chunks
 from i3dmgx2_driver.tools import noise, replay
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import Writer
+from rosbags.typesys import get_typestore, Stores
 
 RECORDS = 500
 GRAVITY = 9.80665
@@ -119,7 +118,7 @@ def test_each_imu_message_is_its_record_in_rep103_si_stamped_by_the_sensor_timer
 
 def test_the_temperature_is_the_accelerometers_stamped_at_its_read(capture, bag):
     _, records, chunks = capture
-    (time_ns, temperature), = read_back(bag)['messages']['/imu/temperature']
+    (_, temperature), = read_back(bag)['messages']['/imu/temperature']
     expected = next(r for r in records if isinstance(r, rec.Temperatures)).accel_celsius
     assert temperature.temperature == pytest.approx(expected)
     assert temperature.header.stamp.sec + temperature.header.stamp.nanosec * 1e-9 == \

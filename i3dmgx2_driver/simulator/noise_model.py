@@ -175,3 +175,34 @@ class NoiseModel:
         self._gm = gm[-1].reshape(self._tc.size, 6)
         noise += gm.reshape(count, self._tc.size, 6).sum(axis=1)
         return noise
+
+
+class NoiseStream:
+    """
+    The model's samples one at a time, for a simulator that makes one record a cycle.
+
+    Blocks of ``BUFFER`` samples are drawn at once (numpy per sample would cost
+    more than the record); their spacing is the step between the two calls
+    that asked last, the sensor's cycle.
+    """
+
+    BUFFER = 256
+
+    def __init__(self, config: NoiseConfig, seed: int | None = None) -> None:
+        self.model = NoiseModel(config, seed)
+        self._block = np.zeros((0, 6))
+        self._next = 0
+        self._last: float | None = None
+        self._dt = 0.01
+
+    def sample(self, t: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """Return the (gyro, accel) errors of the sample at ``t`` (s), device units."""
+        if self._last is not None and 1e-5 < t - self._last < 1.0:
+            self._dt = t - self._last
+        self._last = t
+        if self._next >= self._block.shape[0]:
+            self._block = self.model.draw(self.BUFFER, self._dt)
+            self._next = 0
+        row = self._block[self._next].tolist()
+        self._next += 1
+        return (row[0], row[1], row[2]), (row[3], row[4], row[5])

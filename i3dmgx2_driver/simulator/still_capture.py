@@ -34,12 +34,11 @@ from collections.abc import Iterator
 import math
 from typing import NamedTuple
 
-import numpy as np
-
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
+import numpy as np
 
 from .motion import Motion, MotionConfig
 from .noise_model import NoiseConfig, NoiseModel

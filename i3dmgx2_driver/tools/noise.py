@@ -100,7 +100,7 @@ def _axes(terms: list[allan.AxisNoise], part: str) -> list[float]:
 
 
 def parameters(report: Report) -> dict[str, float]:
-    """Return the node's covariance parameters: the white noise a sample, N sqrt(rate), worst axis."""
+    """Return the covariance parameters: N sqrt(rate), a sample's white noise, worst axis."""
     root = math.sqrt(report.rate_hz)
     out = {
         'angular_velocity_stddev': max(_axes(report.terms['gyroscope'], 'white')) * root,
@@ -141,7 +141,7 @@ def params_yaml(report: Report) -> str:
         '# Measured by `ros2 run i3dmgx2_driver noise` at rest from',
         f'# {report.samples.source}: {report.duration_s / 60:.1f} min at {report.rate_hz:.4g} Hz.',
         '# The white noise of one sample (N * sqrt(rate)), the worst axis. Load it after the',
-        '# driver\'s own file: --params-file config/i3dmgx2.yaml --params-file noise.yaml',
+        "# driver's own file: --params-file config/i3dmgx2.yaml --params-file noise.yaml",
         '/**:',
         '  ros__parameters:',
     ]

@@ -68,7 +68,7 @@ class Listener(Node):
             self.mag.append((f.x, f.y, f.z))
 
     def samples(self, source: str) -> Samples | None:
-        """Return what came so far as samples (None before two messages)."""
+        """Return the messages that came so far, or None before the second one."""
         with self._lock:
             rows, mag = np.array(self.rows), np.array(self.mag)
         if rows.shape[0] < 2:
