@@ -24,6 +24,7 @@ tesla, the temperature. ``noise --bag`` reads it back, and a sqlite3 bag too.
 """
 
 from pathlib import Path
+import sys
 
 from i3dmgx2_driver.capture.file_format import CaptureWriter, default_header
 from i3dmgx2_driver.codec import framing
@@ -148,3 +149,13 @@ def test_noise_reads_an_mcap_bag_and_a_sqlite3_bag(bag, tmp_path, capsys):
     assert strip == [line for line in mcap_out.splitlines() if line.startswith('  ')]
     assert noise.main(['--bag', str(sqlite), '--topic', '/nothing']) == 1
     assert "no topic '/nothing'; its Imu topics: /imu/raw_data" in capsys.readouterr().err
+
+
+def test_without_rosbags_both_tools_say_how_to_install_it(capture, tmp_path, monkeypatch,
+                                                          capsys):
+    for name in ('rosbags', 'rosbags.highlevel', 'rosbags.rosbag2', 'rosbags.typesys'):
+        monkeypatch.setitem(sys.modules, name, None)
+    assert replay.main([str(capture[0]), '--bag', str(tmp_path / 'out')]) == 1
+    assert 'pip install rosbags' in capsys.readouterr().err
+    assert noise.main(['--bag', str(tmp_path / 'any')]) == 1
+    assert 'pip install rosbags' in capsys.readouterr().err
