@@ -211,6 +211,13 @@ def test_noise_from_a_capture_writes_the_files_fusion_and_calibration_tools_read
     assert (tmp_path / 'allan.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
+@pytest.mark.parametrize(('value', 'text'), [(2e-07, '2.0e-07'), (0.00276573, '0.00276573'),
+                                             (250.0, '250.0'), (1.5e-05, '1.5e-05')])
+def test_yaml_floats_keep_a_dot_so_that_pyyaml_reads_a_float(value, text):
+    assert noise.yaml_float(value) == text
+    assert yaml.safe_load(f'x: {text}')['x'] == pytest.approx(value)
+
+
 def test_noise_names_a_file_that_is_no_capture(tmp_path, capsys):
     bad = tmp_path / 'bad.gx2cap'
     bad.write_text('hello\n')

@@ -87,12 +87,24 @@ def analyse(samples: Samples) -> Report:
                             'stretches')
         deviation[name] = allan.overlapping_adev(values, dt)
         terms[name] = allan.read_terms(deviation[name], duration)
+        if any(math.isnan(axis.white.value) for axis in terms[name]):
+            raise ValueError(f'{samples.source}: {n} samples over {duration:.3g} s are too '
+                             'few for even the white noise: record at least a minute')
     mag = None
     if samples.mag is not None and samples.mag.shape[0] > 2:
         # The field's white noise a reading: the scatter of steps over sqrt(2) (a slow
         # drift or an offset does not enter it).
         mag = float(np.max(np.std(np.diff(samples.mag, axis=0), axis=0)) / math.sqrt(2.0))
     return Report(samples, rate, duration, deviation, terms, warnings, mag)
+
+
+def yaml_float(value: float) -> str:
+    """Return ``value`` as YAML 1.1 reads a float (PyYAML, kalibr): always with a dot."""
+    text = f'{value:.6g}'
+    mantissa, e, exponent = text.partition('e')
+    if '.' not in mantissa and mantissa.lstrip('-').isdigit():
+        mantissa += '.0'
+    return mantissa + e + exponent
 
 
 def _axes(terms: list[allan.AxisNoise], part: str) -> list[float]:
@@ -145,7 +157,7 @@ def params_yaml(report: Report) -> str:
         '/**:',
         '  ros__parameters:',
     ]
-    lines += [f'    {name}: {value:.6g}' for name, value in parameters(report).items()]
+    lines += [f'    {name}: {yaml_float(value)}' for name, value in parameters(report).items()]
     return '\n'.join(lines) + '\n'
 
 
@@ -156,11 +168,14 @@ def kalibr_yaml(report: Report, topic: str) -> str:
         '# kalibr IMU file, measured by `ros2 run i3dmgx2_driver noise` (worst axis of each).',
         f'# From {report.samples.source}: {report.duration_s / 60:.1f} min.',
         f'rostopic: {topic}',
-        f'update_rate: {report.rate_hz:.6g}',
-        f'accelerometer_noise_density: {max(_axes(accel, "white")):.6g}  # m/s^2/sqrt(Hz)',
-        f'accelerometer_random_walk: {max(_axes(accel, "random_walk")):.6g}  # m/s^3/sqrt(Hz)',
-        f'gyroscope_noise_density: {max(_axes(gyro, "white")):.6g}  # rad/s/sqrt(Hz)',
-        f'gyroscope_random_walk: {max(_axes(gyro, "random_walk")):.6g}  # rad/s^2/sqrt(Hz)',
+        f'update_rate: {yaml_float(report.rate_hz)}',
+        f'accelerometer_noise_density: {yaml_float(max(_axes(accel, "white")))}'
+        '  # m/s^2/sqrt(Hz)',
+        f'accelerometer_random_walk: {yaml_float(max(_axes(accel, "random_walk")))}'
+        '  # m/s^3/sqrt(Hz)',
+        f'gyroscope_noise_density: {yaml_float(max(_axes(gyro, "white")))}  # rad/s/sqrt(Hz)',
+        f'gyroscope_random_walk: {yaml_float(max(_axes(gyro, "random_walk")))}'
+        '  # rad/s^2/sqrt(Hz)',
     ]) + '\n'
 
 
