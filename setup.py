@@ -32,8 +32,9 @@ setup(
         (os.path.join('share', package_name, 'udev'), glob('udev/*.rules')),
     ],
     install_requires=['setuptools'],
-    # Only the plot tool draws; on a robot matplotlib would pull in a GUI stack.
-    extras_require={'plot': ['matplotlib']},
+    # Only the plot tool (and noise's allan.png) draws; on a robot matplotlib would pull in a
+    # GUI stack. Only replay --bag and noise --bag read or write bags (rosbags, pure Python).
+    extras_require={'plot': ['matplotlib'], 'bag': ['rosbags']},
     zip_safe=True,
     maintainer='The i3dmgx2_driver Authors',
     maintainer_email='maintainers@i3dmgx2-driver.invalid',
@@ -50,6 +51,7 @@ setup(
             'monitor = i3dmgx2_driver.tools.monitor:main',
             'discover = i3dmgx2_driver.tools.discover:main',
             'bringup = i3dmgx2_driver.tools.bringup:main',
+            'noise = i3dmgx2_driver.tools.noise:main',
         ],
     },
 )

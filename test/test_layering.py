@@ -178,7 +178,9 @@ LAYERS = {
     'simulator': ('codec', 'arguments', 'lifetime'),
     'capture': ('codec', ''),
     'ros': ('codec', 'device', 'capture', 'lifetime', ''),
-    'tools': ('codec', 'device', 'simulator', 'capture', 'arguments', 'lifetime', ''),
+    # A tool that writes what the node publishes (replay --bag) or measures it in the node's
+    # units (noise) takes the node's own conversions: ros never imports tools.
+    'tools': ('codec', 'device', 'simulator', 'capture', 'ros', 'arguments', 'lifetime', ''),
 }
 
 

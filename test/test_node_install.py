@@ -77,7 +77,7 @@ def installed_env(prefix) -> dict:
 def test_layout_is_what_ros2_expects(prefix):
     lib = prefix / 'lib' / 'i3dmgx2_driver'
     for exe in ('node', 'lifecycle_node', 'simulator', 'replay', 'plot', 'monitor',
-                'discover', 'bringup'):
+                'discover', 'bringup', 'noise'):
         assert os.access(lib / exe, os.X_OK), f'{exe} is not an executable in {lib}'
     share = prefix / 'share'
     assert (share / 'ament_index' / 'resource_index' / 'packages' / 'i3dmgx2_driver').exists()

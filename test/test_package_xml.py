@@ -38,7 +38,7 @@ ROSDEP_KEYS = {'serial': 'python3-serial', 'numpy': 'python3-numpy',
 #: Needed at run time without an import of our own: rclpy.lifecycle loads it.
 RUNTIME_ONLY = {'lifecycle_msgs'}
 #: Optional extras (setup.py's extras_require): imported only where they are used.
-OPTIONAL = {'matplotlib': 'plot'}
+OPTIONAL = {'matplotlib': 'plot', 'rosbags': 'bag'}
 
 
 def installed_sources() -> list[str]:

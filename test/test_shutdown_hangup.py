@@ -199,13 +199,15 @@ def _tool_argv(tool: str, sim: PtySimulator, tmp_path: Path) -> tuple[list[str],
         'lifecycle_node': (ros, 'start-up heap frozen'),
         'replay': (['--fixture', str(FIXTURE), '--loop'], 'port: '),
         'monitor': (['--duration', '0'], 'waiting for'),
+        'noise': (['--minutes', '5'], ' left, '),
         'discover': (['--port', sim.port, '--listen', '30'], ''),
         'bringup': (['--port', sim.port, '--address', str(ADDRESS), '--output-dir',
                      str(tmp_path)], ''),
     }[tool]
 
 
-TOOLS = ('simulator', 'node', 'lifecycle_node', 'replay', 'monitor', 'discover', 'bringup')
+TOOLS = ('simulator', 'node', 'lifecycle_node', 'replay', 'monitor', 'noise', 'discover',
+         'bringup')
 
 
 def _started(terminal_or_text, marker: str, pid: int) -> None:

@@ -34,6 +34,7 @@ from i3dmgx2_driver.codec.data_rate import MAX_DIVIDER, MIN_DIVIDER
 from .config import SimulatorConfig
 from .faults import FaultConfig
 from .motion import MotionConfig
+from .noise_model import NoiseConfig
 from .pty_link import PtySimulator
 from .sensor import DEFAULT_FIRMWARE, STREAMABLE
 from .. import lifetime
@@ -133,6 +134,10 @@ def build_parser() -> argparse.ArgumentParser:
     device.add_argument('--rate', type=_positive, metavar='HZ',
                         help='calculation rate overriding the EEPROM divider (benchmarks)')
     device.add_argument('--static', action='store_true', help='sensor at rest')
+    device.add_argument('--honest-noise', action='store_true',
+                        help='gyro and accelerometer noise term by term (white noise, bias '
+                             'instability, rate random walk per axis, from the real records: '
+                             'simulator/noise_model.py) instead of white noise alone')
     device.add_argument('--nan-mag', action='store_true',
                         help='no magnetometer: every field reading is NaN (Inertia-Link)')
     device.add_argument('--mag-nan-probability', type=_probability, default=0.0, metavar='P',
@@ -219,7 +224,9 @@ def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
         fault_address=args.fault_address, wireless=not args.wired, divider=args.divider,
         streaming_at_start=args.stream or False,
         serial_number=args.serial, rate_hz=args.rate, seed=args.seed,
-        motion=MotionConfig(static=args.static), faults=faults, nan_mag=args.nan_mag,
+        motion=MotionConfig(static=args.static,
+                            noise=NoiseConfig() if args.honest_noise else None),
+        faults=faults, nan_mag=args.nan_mag,
         mag_nan_probability=args.mag_nan_probability, clock_ppm=args.ppm,
         timer_start=args.timer_start, latency_s=args.latency_ms / 1000.0,
         wire_baud=args.wire_baud or None,

@@ -38,6 +38,8 @@ from typing import NamedTuple
 
 from i3dmgx2_driver.codec.orientation import matrix_from_euler
 
+from .noise_model import NoiseConfig, NoiseStream
+
 Vector3 = tuple[float, float, float]
 Matrix3 = tuple[float, float, float, float, float, float, float, float, float]
 
@@ -85,6 +87,10 @@ class MotionConfig:
     nan_mag: bool = False
     #: Chance that a cycle has no new magnetometer reading (NaN), as it updates slower.
     mag_nan_probability: float = 0.0
+    #: The inertial sensors' noise term by term (noise_model.py: white noise, bias
+    #: instability, random walk per axis) instead of ``gyro_noise`` and ``accel_noise``
+    #: alone; None: those alone, white, as the simulator always made it.
+    noise: NoiseConfig | None = None
 
 
 class TrueState(NamedTuple):
@@ -151,6 +157,7 @@ class Motion:
         # static, so that freezing and releasing never makes the attitude jump.
         self._frozen_tau: float | None = 0.0 if c.static else None
         self._offset = 0.0
+        self._noise: NoiseStream | None = None
 
     @property
     def static(self) -> bool:
@@ -217,10 +224,18 @@ class Motion:
         c = self.config
         truth = self.state(t)
         gauss = rng.gauss
-        accel = tuple(truth.accel[i] + c.accel_bias[i] + gauss(0.0, c.accel_noise)
-                      for i in range(3))
-        rate = tuple(truth.angular_rate[i] + c.gyro_bias[i] + gauss(0.0, c.gyro_noise)
-                     for i in range(3))
+        if c.noise is None:
+            accel = tuple(truth.accel[i] + c.accel_bias[i] + gauss(0.0, c.accel_noise)
+                          for i in range(3))
+            rate = tuple(truth.angular_rate[i] + c.gyro_bias[i] + gauss(0.0, c.gyro_noise)
+                         for i in range(3))
+        else:
+            if self._noise is None:  # seeded from the sensor's noise source: a seed repeats
+                self._noise = NoiseStream(c.noise, rng.getrandbits(63))
+            gyro_error, accel_error = self._noise.sample(t)
+            accel = tuple(truth.accel[i] + c.accel_bias[i] + accel_error[i] for i in range(3))
+            rate = tuple(truth.angular_rate[i] + c.gyro_bias[i] + gyro_error[i]
+                         for i in range(3))
         if c.nan_mag or (c.mag_nan_probability > 0.0
                          and rng.random() < c.mag_nan_probability):
             mag = (_NAN, _NAN, _NAN)

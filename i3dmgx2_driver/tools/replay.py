@@ -281,6 +281,11 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument('--linger', type=float, default=2.0, metavar='S',
                         help='at the end, wait up to S seconds for the driver to read '
                              'what was played (default %(default)s)')
+    parser.add_argument('--bag', metavar='OUT',
+                        help='instead of playing, write the messages the node would publish '
+                             '(Imu, MagneticField, Temperature; its topics and stamps) as a '
+                             'rosbag2 bag with MCAP storage in the new directory OUT (needs '
+                             'rosbags: pip install rosbags)')
     parser.add_argument('-v', '--verbose', action='count', default=0,
                         help="log the host's commands (-v) and bytes (-vv) to stderr")
     return parser
@@ -291,6 +296,22 @@ def _load(args: argparse.Namespace) -> tuple[list[Chunk], bool, str]:
         return list(fixture_chunks(args.fixture, address=args.address)), True, args.fixture
     header, chunks = read_capture(args.capture)
     return list(chunks), bool(header.get('wireless', True)), args.capture
+
+
+def _to_bag(args: argparse.Namespace, chunks: list[Chunk], wireless: bool) -> int:
+    """Write the capture as the node's messages in a bag (bag_io.py); return the exit status."""
+    from .bag_io import capture_messages, write_bag
+    header = {'wireless': wireless,
+              'address': args.address if args.fixture else None}
+    if args.capture:
+        header, _ = read_capture(args.capture)
+    try:
+        count = write_bag(args.bag, capture_messages(chunks, header))
+    except (ImportError, OSError, ValueError) as exc:
+        print(f'replay: {exc}', file=sys.stderr)
+        return 1
+    print(f'wrote {count} messages to {args.bag}', flush=True)
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -307,6 +328,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, ValueError) as exc:
         print(f'replay: {exc}', file=sys.stderr)
         return 1
+    if args.bag:
+        return _to_bag(args, chunks, wireless)
     replayer = Replayer(chunks, speed=args.speed, loop=args.loop, link=args.link,
                         wireless=wireless, max_gap=args.max_gap,
                         wait_for_host=args.wait_for_host,

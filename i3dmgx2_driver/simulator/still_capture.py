@@ -1,0 +1,158 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+A sensor at rest for an hour, as the reads a host makes of it, in seconds of wall time.
+
+The running simulator makes one record a cycle through the codec, as the
+device does: right for a driver, far too slow for an hour of samples to
+measure noise on (900,000 records at 250 Hz). Here the records of a still
+sensor are made all at once with numpy: the truth (gravity's reaction and
+the Earth's field at the resting pose of ``MotionConfig``, the gyro and
+accelerometer biases), plus the noise of a ``NoiseModel``, packed into the
+layout the codec's table gives for the stream (big-endian float32 fields,
+the timer) and framed as wireless data packets or wired records, with the
+checksums summed in numpy. The codec itself stays free of numpy; the tests
+check these bytes against its encoder, record for record.
+
+What comes out are ``(receive_time, bytes)`` chunks, as a capture holds
+them: a tool or a test writes them with ``capture.file_format``.
+"""
+
+from collections.abc import Iterator
+import math
+from typing import NamedTuple
+
+from i3dmgx2_driver.codec import framing
+from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS
+import numpy as np
+
+from .motion import Motion, MotionConfig
+from .noise_model import NoiseConfig, NoiseModel
+from .sensor import DEFAULT_TIMER_START
+
+#: Quantities of a still sensor that the fields of a record may ask for.
+_STILL_FIELDS = ('accel', 'angular_rate', 'mag', 'matrix', 'timer')
+#: Records made at once; a block's chunks are yielded before the next is made.
+BLOCK = 1 << 15
+
+
+class StillTruth(NamedTuple):
+    """What the still sensor reads without noise, in the device's units."""
+
+    accel: tuple[float, float, float]
+    angular_rate: tuple[float, float, float]
+    mag: tuple[float, float, float]
+    matrix: tuple[float, ...]
+
+
+def still_truth(motion: MotionConfig) -> StillTruth:
+    """Return the readings of a sensor at rest in ``motion``'s resting pose, biases included."""
+    state = Motion(MotionConfig(**{**motion.__dict__, 'static': True})).state(0.0)
+    accel = tuple(state.accel[i] + motion.accel_bias[i] for i in range(3))
+    rate = tuple(motion.gyro_bias)
+    return StillTruth(accel, rate, state.mag, state.matrix)
+
+
+def record_dtype(code: int) -> np.dtype:
+    """Return the numpy layout of record ``code`` (echo byte first), from the codec's table."""
+    layout = lay.LAYOUTS[code]
+    names = [field.name for field in layout.reply or ()]
+    if not layout.reply or names[-1] != 'timer' or not set(names) <= set(_STILL_FIELDS):
+        usable = sorted(f'0x{c:02X}' for c, lo in lay.LAYOUTS.items() if lo.reply
+                        and lo.reply[-1].name == 'timer'
+                        and {f.name for f in lo.reply} <= set(_STILL_FIELDS))
+        raise ValueError(f'stream 0x{code:02X} has fields a still capture does not make; '
+                         f'one of {", ".join(usable)}')
+    kinds = {'f': '>f4', 'I': '>u4'}
+    fields = [('echo', 'u1')]
+    for field in layout.reply:
+        shape = (field.count,) if field.count > 1 else ()
+        fields.append((field.name, kinds[field.code], shape))
+    dtype = np.dtype(fields)
+    if dtype.itemsize != layout.record_size:  # pragma: no cover - the table's own check
+        raise ValueError(f'0x{code:02X}: {dtype.itemsize} bytes, the table says '
+                         f'{layout.record_size}')
+    return dtype
+
+
+def _checksums(data: np.ndarray) -> np.ndarray:
+    """Return the 16-bit sum of each row of bytes (codec.checksum.checksum16), big-endian."""
+    total = data.astype(np.uint32).sum(axis=1) & 0xFFFF
+    return np.stack([total >> 8, total & 0xFF], axis=1).astype(np.uint8)
+
+
+def frame(records: np.ndarray, wireless: bool, address: int, lqi: int = 230,
+          rssi: int = 170) -> np.ndarray:
+    """Frame rows of record bytes as wireless data packets or wired records: rows of bytes."""
+    n, size = records.shape
+    if not wireless:
+        return np.concatenate([records, _checksums(records)], axis=1)
+    header = np.frombuffer(bytes((framing.SOP, framing.DATA_FLAGS, 0, address >> 8,
+                                  address & 0xFF, size + 1, 0)), np.uint8)
+    body = np.concatenate([np.broadcast_to(header, (n, header.size)), records], axis=1)
+    link = np.broadcast_to(np.array([lqi, rssi], np.uint8), (n, 2))
+    return np.concatenate([body, link, _checksums(body[:, 1:])], axis=1)
+
+
+def still_chunks(seconds: float, rate_hz: float, code: int = lay.ACCEL_ANG_RATE,
+                 wireless: bool = True, address: int = 95,
+                 noise: NoiseConfig | None = None, motion: MotionConfig | None = None,
+                 seed: int | None = None, start_time: float = 1_700_000_000.0,
+                 per_read: int = 8, timer_start: int = DEFAULT_TIMER_START
+                 ) -> Iterator[tuple[float, bytes]]:
+    """
+    Yield the reads of a sensor at rest streaming ``code`` at ``rate_hz`` for ``seconds``.
+
+    Each read holds ``per_read`` records and arrives when its last one is
+    sampled (plus nothing: the line's delays do not matter to noise). The
+    timer advances by the whole number of ticks nearest a period, from
+    ``timer_start`` (by default near its rollover, which the reader must unwrap).
+    """
+    if not rate_hz > 0 or not seconds > 0 or per_read < 1:
+        raise ValueError(f'rate_hz and seconds must be positive and per_read >= 1, got '
+                         f'{rate_hz!r}, {seconds!r}, {per_read!r}')
+    dtype = record_dtype(code)
+    truth = still_truth(motion if motion is not None else MotionConfig())
+    model = NoiseModel(noise, seed)
+    ticks = round(TICKS_PER_SECOND / rate_hz)
+    dt = ticks / TICKS_PER_SECOND
+    total = math.floor(seconds / dt)
+    mag_noise = (motion or MotionConfig()).mag_noise
+    rng = np.random.default_rng(None if seed is None else seed + 1)
+    for begin in range(0, total, BLOCK):
+        n = min(BLOCK, total - begin)
+        index = np.arange(begin, begin + n)
+        records = np.zeros(n, dtype)
+        records['echo'] = code
+        errors = model.draw(n, dt)
+        names = dtype.names
+        if 'angular_rate' in names:
+            records['angular_rate'] = np.asarray(truth.angular_rate) + errors[:, :3]
+        if 'accel' in names:
+            records['accel'] = np.asarray(truth.accel) + errors[:, 3:]
+        if 'mag' in names:
+            records['mag'] = np.asarray(truth.mag) + rng.normal(0.0, mag_noise, (n, 3))
+        if 'matrix' in names:
+            records['matrix'] = np.asarray(truth.matrix)
+        records['timer'] = (timer_start + index * ticks) % TIMER_MODULUS
+        rows = frame(records.view(np.uint8).reshape(n, dtype.itemsize), wireless, address)
+        times = start_time + (index + 1) * dt
+        width = rows.shape[1]
+        flat = rows.tobytes()
+        for first in range(0, n, per_read):
+            last = min(first + per_read, n)
+            yield float(times[last - 1]), flat[first * width:last * width]

@@ -1,0 +1,180 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+rosbag2 bags, in and out: a capture as the messages the node would have published.
+
+rosbags, not mcap with mcap-ros2-support: one pure-Python library reads
+both storages rosbag2 writes (sqlite3 and MCAP, for ``noise --bag``) and
+writes MCAP with the rosbag2 metadata that ``ros2 bag info`` and ``play``
+expect (for ``replay --bag``); mcap's packages read and write MCAP only,
+and leave the rosbag2 directory and its metadata.yaml to the caller. Like
+matplotlib for ``plot`` it is an optional extra (``pip install
+"i3dmgx2_driver[bag]"``): the robot's image needs neither, and nothing
+imports it until a bag is read or written.
+
+A capture becomes messages through the node's own path: the codec's
+parser, the device's ``SampleClock`` for the stamps (the receive times
+standing for the host clock) and the node's ``MessageFactory`` for the
+bytes, ready-serialized as the node publishes them; the temperatures
+(replies to 0xD1 polls) as the node's poller stamps them, at their read.
+"""
+
+from collections import Counter
+from collections.abc import Iterable, Iterator
+import contextlib
+from pathlib import Path
+from typing import Any, NamedTuple
+
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import Temperature
+
+from ..codec import layouts, line_budget, streams
+from ..codec.parser import SensorStreamParser
+from ..device.sample_clock import SampleClock
+from ..ros.conversions import mag_is_valid, MessageFactory, MessageSettings, set_stamp
+from ..ros.parameter_table import SPECS
+from ..ros.publishers import SensorTopics
+from ..ros.sensor_set import SINGLE_NAME
+
+#: What to do when rosbags is missing.
+ROSBAGS_HINT = (
+    'reading and writing bags needs rosbags, an optional extra the driver does not install: '
+    'pip install rosbags (pip install "i3dmgx2_driver[bag]" from a source checkout)')
+#: The message types, as rosbag2 names them.
+IMU_TYPE = 'sensor_msgs/msg/Imu'
+MAG_TYPE = 'sensor_msgs/msg/MagneticField'
+TEMPERATURE_TYPE = 'sensor_msgs/msg/Temperature'
+
+
+class RosbagsMissing(ImportError):
+    """rosbags is not installed; the message says how to install it."""
+
+
+def _rosbags() -> Any:
+    try:
+        import rosbags.highlevel
+        import rosbags.rosbag2
+        import rosbags.typesys
+    except ImportError as exc:
+        raise RosbagsMissing(ROSBAGS_HINT) from exc
+    return rosbags
+
+
+def typestore() -> Any:
+    """Return rosbags' message definitions of ROS 2 Jazzy, the driver's distribution."""
+    typesys = _rosbags().typesys
+    return typesys.get_typestore(typesys.Stores.ROS2_JAZZY)
+
+
+@contextlib.contextmanager
+def bag_reader(path: Path) -> Iterator[Any]:
+    """Open a rosbag2 bag, sqlite3 or MCAP (a directory, or its one storage file)."""
+    highlevel = _rosbags().highlevel
+    with highlevel.AnyReader([path], default_typestore=typestore()) as reader:
+        yield reader
+
+
+def deserializer(reader: Any) -> Any:
+    """Return ``decode(raw, msgtype)`` for the messages of ``reader``."""
+    return reader.deserialize
+
+
+class BagMessage(NamedTuple):
+    """One message as a bag holds it: topic, type, receive time (ns) and CDR bytes."""
+
+    topic: str
+    msgtype: str
+    time_ns: int
+    data: bytes
+
+
+def _default(name: str) -> Any:
+    return next(spec.default for spec in SPECS if spec.name == name)
+
+
+def node_settings(stream: streams.Stream) -> MessageSettings:
+    """Return the message settings of a node left at its parameters' defaults."""
+    return MessageSettings(
+        _default('frame_id'), _default('frame_convention'), _default('orientation_stddev'),
+        _default('angular_velocity_stddev'), _default('linear_acceleration_stddev'),
+        _default('magnetic_field_stddev'), stream)
+
+
+def stream_of(records: Iterable[Any]) -> streams.Stream:
+    """Return the stream most of a capture's data records belong to."""
+    counts = Counter(type(record) for record in records)
+    for kind, _ in counts.most_common():
+        for stream in streams.STREAMS:
+            if stream.record_type is kind:
+                return stream
+    raise ValueError('no record of a stream the driver publishes '
+                     f'({", ".join(s.label for s in streams.STREAMS)})')
+
+
+def capture_messages(chunks: Iterable[tuple[float, bytes]], header: dict,
+                     baud: int | None = None) -> list[BagMessage]:
+    """
+    Return the messages the node (default parameters) would have published for a capture.
+
+    The stream is the one most records are of; its records are stamped by a
+    ``SampleClock`` from their timers and their reads' receive times (the
+    node's ``time_source`` device), and packed by the node's factory.
+    """
+    address = header.get('address')
+    wireless = bool(header.get('wireless', True))
+    parser = SensorStreamParser(address if isinstance(address, int) else None, wireless)
+    events = [(t, record) for t, data in chunks for event in parser.feed(data)
+              if (record := getattr(event, 'record', None)) is not None]
+    stream = stream_of(record for _, record in events)
+    factory = MessageFactory(node_settings(stream))
+    topics = SensorTopics.of(SINGLE_NAME, several=False)
+    clock = SampleClock(offset=lambda: 0.0)
+    wire = line_budget.wire_time(stream.code, baud or int(header.get('baud') or 115200),
+                                 wireless)
+    temperature = Temperature()
+    temperature.header.frame_id = factory.frame_id
+    out = []
+    for receive_time, record in events:
+        time_ns = round(receive_time * 1e9)
+        if type(record) is stream.record_type:
+            stamp = clock.stamp(record.timer, receive_time, wire)
+            out.append(BagMessage('/' + topics.imu, IMU_TYPE, time_ns,
+                                  factory.imu_cdr(record, stamp)))
+            if stream.mag and mag_is_valid(record.mag):
+                out.append(BagMessage('/' + topics.mag, MAG_TYPE, time_ns,
+                                      factory.mag_cdr(record.mag, stamp)))
+        elif type(record) is layouts.LAYOUTS[layouts.TEMPERATURES].record_type:
+            temperature.temperature = record.accel_celsius
+            set_stamp(temperature.header, receive_time)
+            out.append(BagMessage('/' + topics.temperature, TEMPERATURE_TYPE, time_ns,
+                                  serialize_message(temperature)))
+    return out
+
+
+def write_bag(path: Path, messages: Iterable[BagMessage]) -> int:
+    """Write ``messages`` as a rosbag2 bag with MCAP storage at ``path``; return how many."""
+    rosbag2 = _rosbags().rosbag2
+    store = typestore()
+    count = 0
+    with rosbag2.Writer(path, version=9, storage_plugin=rosbag2.StoragePlugin.MCAP) as writer:
+        connections: dict[str, Any] = {}
+        for message in messages:
+            connection = connections.get(message.topic)
+            if connection is None:
+                connection = connections[message.topic] = writer.add_connection(
+                    message.topic, message.msgtype, typestore=store)
+            writer.write(connection, message.time_ns, message.data)
+            count += 1
+    return count

@@ -1,0 +1,142 @@
+# Copyright 2026 The i3dmgx2_driver Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The noise tool listening to a running node: its Imu topic for some minutes.
+
+A progress bar on stderr says the time left and the white noise so far
+(N of each gyro axis, from what came); Ctrl-C (or SIGTERM) ends the
+listening early and the tool analyses what came. The subscription is best
+effort (``qos_profile_sensor_data``), which matches the driver's reliable
+publisher and never slows it; the field comes from the sibling ``mag``.
+"""
+
+import math
+import sys
+import threading
+import time
+
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import Imu, MagneticField
+
+from . import allan
+from .imu_samples import Samples
+from .. import lifetime
+
+#: Seconds between two updates of the progress bar, and of its estimate.
+PROGRESS_S = 1.0
+ESTIMATE_S = 10.0
+BAR = 30
+
+
+class Listener(Node):
+    """Keep every Imu message's stamp, rate and acceleration, and the field's readings."""
+
+    def __init__(self, topic: str) -> None:
+        super().__init__('i3dmgx2_noise')
+        self.rows: list[tuple[float, ...]] = []
+        self.mag: list[tuple[float, float, float]] = []
+        self._lock = threading.Lock()
+        self.create_subscription(Imu, topic, self._imu, qos_profile_sensor_data)
+        self.create_subscription(MagneticField, topic.rsplit('/', 1)[0] + '/mag', self._mag,
+                                 qos_profile_sensor_data)
+
+    def _imu(self, msg: Imu) -> None:
+        w, a, s = msg.angular_velocity, msg.linear_acceleration, msg.header.stamp
+        with self._lock:
+            self.rows.append((s.sec + s.nanosec * 1e-9, w.x, w.y, w.z, a.x, a.y, a.z))
+
+    def _mag(self, msg: MagneticField) -> None:
+        f = msg.magnetic_field
+        with self._lock:
+            self.mag.append((f.x, f.y, f.z))
+
+    def samples(self, source: str) -> Samples | None:
+        """Return the messages that came so far, or None before the second one."""
+        with self._lock:
+            rows, mag = np.array(self.rows), np.array(self.mag)
+        if rows.shape[0] < 2:
+            return None
+        order = np.argsort(rows[:, 0], kind='stable')
+        rows = rows[order]
+        return Samples(rows[:, 0] - rows[0, 0], rows[:, 1:4], rows[:, 4:7],
+                       mag if mag.shape[0] > 2 else None, source)
+
+
+def progress(elapsed: float, total: float, count: int, estimate: str) -> str:
+    """Return one line of the progress bar: the bar, the time left, the estimate so far."""
+    done = min(1.0, elapsed / total) if total > 0 else 1.0
+    left = max(0.0, total - elapsed)
+    bar = '#' * round(done * BAR) + '-' * (BAR - round(done * BAR))
+    return (f'\r[{bar}] {int(left // 60):3d}:{int(left % 60):02d} left, {count} samples'
+            f'{estimate}')
+
+
+def _estimate(samples: Samples | None) -> str:
+    """Return the gyro's white noise so far, for the progress bar."""
+    if samples is None or samples.time.size < 64:
+        return ''
+    dev = allan.overlapping_adev(samples.gyro, 1.0 / samples.rate_hz)
+    terms = allan.read_terms(dev, samples.time.size / samples.rate_hz)
+    values = ' '.join(f'{axis.white.value:.2e}' for axis in terms
+                      if math.isfinite(axis.white.value))
+    return f', gyro N {values} rad/s/√Hz' if values else ''
+
+
+def listen(topic: str, seconds: float) -> Samples:
+    """Listen to ``topic`` for ``seconds`` (or until Ctrl-C); return what came."""
+    lifetime.die_with_parent()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    node = Listener(topic)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).
+    stopped = lifetime.StopSignal().install()
+    spinner = threading.Thread(target=_spin, args=(executor,), daemon=True)
+    spinner.start()
+    source = f'{node.resolve_topic_name(topic)} (live)'
+    start = time.monotonic()
+    estimate, next_estimate = '', start + ESTIMATE_S
+    try:
+        while (elapsed := time.monotonic() - start) < seconds:
+            if stopped.wait(PROGRESS_S):
+                break
+            if time.monotonic() >= next_estimate:
+                estimate = _estimate(node.samples(source))
+                next_estimate += ESTIMATE_S
+            print(progress(elapsed, seconds, len(node.rows), estimate), end='',
+                  file=sys.stderr, flush=True)
+    finally:
+        print(file=sys.stderr)
+        stopped.restore()
+        executor.shutdown(timeout_sec=1.0)
+        spinner.join(timeout=5.0)
+        samples = node.samples(source)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    if samples is None:
+        raise ValueError(f'no message on {source}: is the driver running?')
+    return samples
+
+
+def _spin(executor: SingleThreadedExecutor) -> None:
+    try:
+        executor.spin()
+    except ExternalShutdownException:
+        pass
