@@ -81,7 +81,9 @@ class LinkOptions:
     to itself before its first read. ``records_of`` is the record the
     consumer takes: the node's stream, so that no other record reaches its
     publishers; None (a tool listening to whatever a sensor streams): every
-    record that is no reply.
+    record that is no reply. ``on_lost``, if given, is called in the reader
+    thread once the port is lost (the link's ``error`` said), so that whoever
+    watches the link blocks until then rather than looking again and again.
     """
 
     wireless: bool = True
@@ -91,6 +93,7 @@ class LinkOptions:
     cancel: threading.Event | None = None
     thread_policy: ThreadPolicy = NORMAL_SCHEDULING
     records_of: int | None = None
+    on_lost: Callable[[], None] | None = None
 
 
 class DeviceTimeout(Exception):
@@ -375,6 +378,7 @@ class DeviceLink:
         self.running = threading.Event()
         self._on_record = on_record
         self._records_of = options.records_of
+        self._on_lost = options.on_lost
         self._cancel = options.cancel if options.cancel is not None else threading.Event()
         #: One exchange at a time with this sensor.
         self._lock = threading.Lock()
@@ -500,6 +504,8 @@ class DeviceLink:
         """Take the news that the port is gone (``error`` says why): wake a waiting request."""
         self.error = error
         self._wake()
+        if self._on_lost is not None:
+            self._on_lost()
 
     def _wake(self) -> None:
         pending = self._pending

@@ -22,6 +22,7 @@ mode logged when it changes, and the reader made with the same raw capture
 and scheduling. :class:`PortOpener` does it, once for both.
 """
 
+from collections.abc import Callable
 import threading
 from typing import Any
 
@@ -62,9 +63,11 @@ class PortOpener:
 
     def reader_options(self, observer: LineObserver | None = None,
                        cancel: threading.Event | None = None,
-                       records_of: int | None = None) -> LinkOptions:
+                       records_of: int | None = None,
+                       on_lost: Callable[[], None] | None = None) -> LinkOptions:
         """Return how the port's reader reads, whom it tells, what its link's consumer takes."""
         cfg = self.config
         return LinkOptions(wireless=cfg.wireless, on_bytes=self._on_bytes,
                            observer=observer, cancel=cancel,
-                           thread_policy=cfg.thread_policy, records_of=records_of)
+                           thread_policy=cfg.thread_policy, records_of=records_of,
+                           on_lost=on_lost)

@@ -150,6 +150,9 @@ class DeviceSupervisor:
         self._cancel = threading.Event()
         #: Set while a service's operation has the sensor: the stream is quiet on purpose.
         self._paused = threading.Event()
+        #: Set when the watch must look before its stall deadline: a cancel, a lost port,
+        #: the end of a pause. Between them it sleeps (idle costs nothing, docs/cpu.md).
+        self._attention = threading.Event()
         self._report = DeviceReport(log)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
         self.dialogue = SensorDialogue(config, log, self._report.warn, self._cancel,
@@ -212,7 +215,7 @@ class DeviceSupervisor:
 
     def stop(self, timeout: float = 1.5) -> None:
         """Stop streaming (0xFA), stop the threads, close the port."""
-        self._cancel.set()
+        self._cancel_now()
         link = self._link
         if link is not None:
             link.abort()  # its reader and any waiting request give up
@@ -308,7 +311,7 @@ class DeviceSupervisor:
         The deactivate phase of a managed node. If the port was lost while
         streaming it stays closed (DISCONNECTED) until the next start.
         """
-        self._cancel.set()
+        self._cancel_now()
         self.join(timeout)
         link = self._link
         if link is not None and not link.disconnected.is_set():
@@ -341,6 +344,7 @@ class DeviceSupervisor:
                     self._restart_stream(link)
             finally:
                 self._paused.clear()
+                self._attention.set()
 
     # -- the supervisor thread: stream and recover ---------------------------------------
 
@@ -395,14 +399,26 @@ class DeviceSupervisor:
     def _fail(self, exc: PortUnusable) -> None:
         """Give up for good: keep why, stop, and let the entry point say it and exit."""
         self._report.failed(exc)
-        self._cancel.set()
+        self._cancel_now()
         self._on_fatal(exc)
+
+    def _cancel_now(self) -> None:
+        """Set the cancel, and wake the watch to see it."""
+        self._cancel.set()
+        self._attention.set()
 
     def _watch(self, link: DeviceLink) -> None:
         """Return when the link is lost or cannot be revived; recover stalls."""
         report = self._report
         watch = StallWatch(self.config.stall_timeout, self.dialogue.period)
-        while not self._cancel.wait(watch.tick):
+        while True:
+            # Asleep until the stream would have stalled, or until told (a paused
+            # stream is quiet on purpose: until the pause ends).
+            self._attention.wait(None if self._paused.is_set()
+                                 else watch.next_look(link.last_data_mono))
+            self._attention.clear()  # what set it is looked at below
+            if self._cancel.is_set():
+                return
             if link.disconnected.is_set():
                 raise PortDisconnected(link.error or 'device disconnected')
             if self._paused.is_set():
@@ -514,7 +530,8 @@ class DeviceSupervisor:
         """Open the port and make it the current link (reader not started); raise PortError."""
         cfg = self.config
         if self._shared is not None:
-            link = self._shared.attach(cfg.address, self._on_record, self._cancel, cfg.stream)
+            link = self._shared.attach(cfg.address, self._on_record, self._cancel, cfg.stream,
+                                       self._attention.set)
             self._low_latency_state = self._shared.low_latency_state
             return self._own(link)
         port = self._opener.open_port()
@@ -522,7 +539,8 @@ class DeviceSupervisor:
         observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
                                                  cfg.baud, self._report.finding)
         link = DeviceLink(port, cfg.address, self._on_record,
-                          self._opener.reader_options(observer, self._cancel, cfg.stream))
+                          self._opener.reader_options(observer, self._cancel, cfg.stream,
+                                                      self._attention.set))
         return self._own(link)
 
     def _own(self, link: DeviceLink) -> DeviceLink:

@@ -111,7 +111,8 @@ class DriverCore:
     owner turns publishing on (``records.set_publishing``); ``refusal``
     tells the services why they must refuse now ('' to serve). ``shared``:
     the port the sensors behind one base station share (None: the core
-    opens its own).
+    opens its own). ``on_fatal`` is called once the port can never work
+    (after :attr:`fatal_error` is set), so the run loop wakes for it.
 
     The core starts nothing: its owner drives :attr:`supervisor`. The records
     themselves go through :attr:`records` (record_publisher.py), which the
@@ -123,8 +124,10 @@ class DriverCore:
                  publishers: Publishers, raw_capture: RawCapture, *,
                  publishing: bool = True, refusal: Callable[[], str] | None = None,
                  shared: SharedPort | None = None,
-                 fault_capture: FaultCapture | None = None) -> None:
+                 fault_capture: FaultCapture | None = None,
+                 on_fatal: Callable[[], None] | None = None) -> None:
         self.node = node
+        self._told_fatal = on_fatal
         self.config = cfg = config
         #: The sensor this core serves: address, name (topic prefix), frame, stream.
         self.sensor = sensor
@@ -186,6 +189,8 @@ class DriverCore:
         """
         self.fatal_error = error
         self.node.get_logger().fatal(str(error))
+        if self._told_fatal is not None:
+            self._told_fatal()
 
     def _bias_kept(self) -> bool:
         return self.supervisor.dialogue.gyro_bias is not None
@@ -226,7 +231,8 @@ class DriverSet:
 
     def __init__(self, node: Node, config: DriverConfig,
                  publishers: list[Publishers] | None = None, publishing: bool = True,
-                 refusal: Callable[[], str] | None = None) -> None:
+                 refusal: Callable[[], str] | None = None,
+                 on_fatal: Callable[[], None] | None = None) -> None:
         device = config.device
         check_port_path(device.port)
         sensors = config.sensors
@@ -251,7 +257,7 @@ class DriverSet:
         self.cores = [
             DriverCore(node, config, sensor, sensor_publishers, capture,
                        publishing=publishing, refusal=refusal, shared=self.shared,
-                       fault_capture=faults)
+                       fault_capture=faults, on_fatal=on_fatal)
             for sensor, sensor_publishers in zip(sensors, publishers, strict=True)]
         self.save_capture = SaveCaptureService(node, faults)
         if faults.active:
