@@ -191,7 +191,8 @@ class SensorDialogue(SensorSteps):
         code = first_poll_code(cfg.stream)
         for _ in range(2):
             try:
-                link.request(bytes((code,)), code, timeout=cfg.request_timeout, retries=2)
+                link.request(bytes((code,)), code, cfg.request_timeout,
+                             timeouts.FIRST_POLL_RETRIES)
             except DeviceTimeout:
                 pass
         if require_answer and not self.ping_ok and not link.heard:

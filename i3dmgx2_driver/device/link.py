@@ -254,7 +254,7 @@ class PortReader:
         if not self._started:
             self._drop_links()  # never started: no thread will
         elif self._thread is not threading.current_thread():
-            self._finished.wait(timeout=2.0)
+            self._finished.wait(timeouts.READER_STOP_WAIT_S)
 
     def abort(self) -> None:
         """Make the reader give up (driver shutdown)."""
@@ -663,7 +663,8 @@ class DeviceLink:
                     break
             return None if pending.reply is None else bool(pending.reply.ok)
 
-    def stop_streaming(self, repeats: int = 3, gap: float = 0.02) -> None:
+    def stop_streaming(self, repeats: int = timeouts.STOP_REPEATS,
+                       gap: float = timeouts.STOP_GAP_S) -> None:
         """Send 0xFA several times: it has no reply and the radio may drop it."""
         for _ in range(repeats):
             self.send(commands.stop_continuous())

@@ -93,7 +93,7 @@ import logging
 import threading
 from typing import Any
 
-from . import hot_path
+from . import hot_path, timeouts
 from .dialogue import SensorDialogue
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .observer import LineObserver
@@ -514,7 +514,7 @@ class DeviceSupervisor:
         """Anchor the consumer, start the reader thread; log its scheduling when it changes."""
         self._anchor()
         link.start()
-        if not link.running.wait(1.0):
+        if not link.running.wait(timeouts.READER_START_WAIT_S):
             return
         outcome = link.policy_outcome
         if outcome != self._policy_logged:
@@ -566,7 +566,7 @@ class DeviceSupervisor:
         link.stop()
         if send_stop:
             try:
-                link.stop_streaming(repeats=2, gap=0.01)
+                link.stop_streaming(timeouts.STOP_REPEATS_AT_EXIT, timeouts.STOP_GAP_AT_EXIT_S)
             except PortError:
                 pass
         self._close(link)
