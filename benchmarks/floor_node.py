@@ -107,7 +107,6 @@ def main() -> int:
     executor.add_node(node)
     policy = realtime.ThreadPolicy(int(params.get('realtime_priority', '0')))
     fd = os.open(params['port'], os.O_RDWR | os.O_NOCTTY)
-    timings.opened()
 
     def reader() -> None:
         realtime.apply_to_current_thread(policy)

@@ -93,7 +93,7 @@ import logging
 import threading
 from typing import Any
 
-from . import hot_path, timeouts
+from . import timeouts
 from .dialogue import SensorDialogue
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
 from .observer import LineObserver
@@ -120,9 +120,7 @@ class DeviceSupervisor:
     work (``status().fatal_error`` then says why; without it the error is
     logged); the supervisor has stopped by then. ``on_bytes``, if given,
     runs in the reader thread with every read's raw bytes and read time (a
-    raw capture). The hot path's observer (hot_path.py), when on, is told
-    every port open and every link up (right after ``on_connect``), and by
-    every link the read and the parse of each sample. ``shared``, if given,
+    raw capture). ``shared``, if given,
     is the port this sensor shares with others behind the same base station
     (shared_port.py): the links come from it and go back to it, the port is
     its to open and close, no line observer watches it, and this supervisor
@@ -506,9 +504,6 @@ class DeviceSupervisor:
         """Let the consumer re-anchor before the first record of a new link reaches it."""
         if self._on_connect is not None:
             self._on_connect()
-        timings = hot_path.timings
-        if timings is not None:
-            timings.connected()
 
     def _start_reader(self, link: DeviceLink) -> None:
         """Anchor the consumer, start the reader thread; log its scheduling when it changes."""
