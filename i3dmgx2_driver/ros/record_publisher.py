@@ -25,14 +25,14 @@ driver core (driver_core.py), which builds it and hands its
 """
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import threading
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.impl.rcutils_logger import RcutilsLogger
 from std_msgs.msg import Bool
 
-from .conversions import mag_is_valid, MessageFactory, MessageSettings
+from .conversions import MessageFactory, MessageSettings
 from .parameters import DriverConfig
 from .publishers import Publishers
 from ..codec import line_budget
@@ -53,7 +53,8 @@ class StreamStats:
 
     published: int = 0
     unpublished: int = 0
-    mag_published: int = 0
+    #: Messages published on each record topic after the first (publishers.RECORD_TOPICS).
+    published_on: dict[str, int] = field(default_factory=dict)
     lost: int = 0
     device_resets: int = 0
     first_time: float = 0.0
@@ -61,6 +62,11 @@ class StreamStats:
     #: Whether the next record's timer step counts packet loss: not across a
     #: reconnect or a deliberate pause (deactivate, a capture).
     counting: bool = False
+
+    @property
+    def mag_published(self) -> int:
+        """Magnetic field messages published (diagnostics)."""
+        return self.published_on.get('mag', 0)
 
 
 @dataclass(frozen=True)
@@ -101,19 +107,21 @@ class RecordPublisher:
                  log: RcutilsLogger, publishing: bool = True,
                  bias_kept: Callable[[], bool] | None = None) -> None:
         self.publishers = publishers
-        self.imu_pub = publishers.imu
-        self.mag_pub = publishers.mag
         #: The message factory (its ``frame_id`` is the one published, _ned and all).
         self.messages = factory = MessageFactory(messages)
         # Published ready-serialized (conversions.py says why) when the bytes read
         # back right with this middleware; otherwise as message objects.
         if messages not in _SERIALIZED_MATCHES:
             _SERIALIZED_MATCHES[messages] = factory.serialized_matches()
-        if _SERIALIZED_MATCHES[messages]:
-            self._imu_message, self._mag_message = factory.imu_cdr, factory.mag_cdr
-        else:
-            self._imu_message, self._mag_message = factory.fill_imu, factory.fill_mag
+        serialized = _SERIALIZED_MATCHES[messages]
+        (first, self.imu_pub), *others = publishers.records
+        self._imu_message = factory.packer(first.packer, serialized)
         self.stats = StreamStats()
+        #: The other topics of each record: publisher, packer, the count it adds to.
+        self._also = tuple((publisher, factory.packer(row.packer, serialized), row.suffix)
+                           for row, publisher in others)
+        for _, _, suffix in self._also:
+            self.stats.published_on[suffix] = 0
         #: Device timer -> system-clock stamps, through resets, rollovers and gaps.
         self.sample_clock = SampleClock()
         #: Whether records are published: always for the plain node; while
@@ -234,7 +242,8 @@ class RecordPublisher:
             if not stats.first_time:
                 stats.first_time = read_time
             stats.last_time = read_time
-            # mag_pub exists only for streams with a field (named 'mag' in each layout).
-            if self.mag_pub is not None and mag_is_valid(record.mag):
-                self.mag_pub.publish(self._mag_message(record.mag, stamp))
-                stats.mag_published += 1
+            for publisher, pack, suffix in self._also:
+                message = pack(record, stamp)
+                if message is not None:
+                    publisher.publish(message)
+                    stats.published_on[suffix] += 1
