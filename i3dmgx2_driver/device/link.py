@@ -419,25 +419,7 @@ class DeviceLink:
         return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
 
     def set_streamed(self, code: int | None) -> None:
-        """
-        Say which record the device streams from now on (None: none).
-
-        This and :meth:`on_data` are the one place that tells a reply from a
-        record of the stream, and the stream from any other record. While one
-        streams, only its records keep the stream alive, and a polled reply
-        of its code is both the reply and a record of the stream; while none
-        does, a polled record is a reply only, and any other record says the
-        sensor still streams. What is no reply goes to the consumer if it is
-        of the record the consumer takes (``LinkOptions.records_of``: the
-        node's stream; every record for a tool), and is otherwise counted in
-        :attr:`other_records` (a sensor power-cycled into its EEPROM's
-        auto-start, a reply come after its request gave up). Whoever waits
-        for the stream (the steps that start and stop it, the stall watch)
-        reads :attr:`records` and :attr:`last_data_mono`, and the consumer
-        takes what it is given, instead of comparing codes. A poll of the
-        streamed code while the stream may still run (its stop lost) cannot
-        be told from it: the dialogue's first polls never ask for it.
-        """
+        """Say which record the device streams from now on (None: none), for :meth:`on_data`."""
         self._streamed = code
 
     # -- the reader thread's side --------------------------------------------
@@ -446,8 +428,15 @@ class DeviceLink:
         """
         Take one data packet of this sensor (reader thread, for every sample).
 
-        A reply to the request waiting for it, a record of the stream, both,
-        or another record (counted); this allocates nothing and takes no lock.
+        The one rule that tells them apart (docs/architecture.md, change 3):
+        a packet of the waiting request's code is its reply; while a stream
+        runs, a packet of its code is a record of it (a polled reply of that
+        code is both), and only those keep it alive; while none runs, any
+        record that is no reply says the sensor still streams. What is no
+        reply reaches the consumer if it is of ``LinkOptions.records_of``,
+        else it is counted in :attr:`other_records`. Those who wait for the
+        stream read :attr:`records` and :attr:`last_data_mono` instead of
+        comparing codes. Allocates nothing, takes no lock.
         """
         code = LAYOUT_BY_TYPE[type(event.record)].code
         streamed = self._streamed

@@ -111,23 +111,14 @@ class DeviceSupervisor:
     """
     Own the connection to one device for the life of the driver.
 
-    ``on_record`` runs in the reader thread for every streamed record;
-    ``on_connect`` runs in the supervisor thread each time a link is made,
-    before its first record reaches the consumer (the node checks its clock
-    there). ``log`` is any object with ``debug/info/warning/error`` methods
-    (a ``logging.Logger`` by default; the node passes its rclpy logger).
-    ``on_fatal`` runs in the supervisor thread, once, when the port can never
-    work (``status().fatal_error`` then says why; without it the error is
-    logged); the supervisor has stopped by then. ``on_bytes``, if given,
-    runs in the reader thread with every read's raw bytes and read time (a
-    raw capture). ``shared``, if given,
-    is the port this sensor shares with others behind the same base station
-    (shared_port.py): the links come from it and go back to it, the port is
-    its to open and close, no line observer watches it, and this supervisor
-    keeps only its sensor streaming (a supervisor per sensor, each with its
-    own thread).
-    ``on_gyro_bias`` runs each time the dialogue wrote its kept gyro bias
-    and the sensor echoed it (at start, resume and after a stall).
+    The callbacks: ``on_record`` (reader thread, every record of the
+    stream), ``on_connect`` (before a new link's first record: the node
+    re-anchors its clock), ``on_fatal`` (once, the port can never work;
+    default: logged), ``on_bytes`` (reader thread, every read: a raw
+    capture), ``on_gyro_bias`` (the kept bias written and echoed). ``log``
+    has ``debug/info/warning/error``. ``shared``: the port this sensor
+    shares behind one base station (shared_port.py), which opens and closes
+    it; no line observer watches it.
     """
 
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
