@@ -206,7 +206,7 @@ class PortReader:
     def listen_to(self, address: int | None) -> None:
         """Take the data packets of ``address`` alone from now on (None: every node's)."""
         if self.wireless:
-            self.parser.address = address
+            self.parser.listen_to(address)
 
     def unroute(self, address: int | None, link: 'DeviceLink') -> None:
         """Stop handing ``address``'s packets to ``link`` (if they still go to it)."""
@@ -332,9 +332,7 @@ class PortReader:
     def _stray(self, address: int) -> None:
         """Count a packet of an address no link routes (a foreign frame, as the parser would)."""
         self.strays[address] = self.strays.get(address, 0) + 1
-        stats = self.parser.stats
-        stats.good_frames -= 1
-        stats.foreign_frames += 1
+        self.parser.recount_as_foreign()
 
 
 class DeviceLink:
