@@ -69,10 +69,10 @@ def _link(records_of: int | None = None) -> tuple[DeviceLink, _Line, list]:
 
 def test_radio_quality_keeps_latest_lowest_and_mean() -> None:
     link, _, _ = _link()
-    assert link.radio is None
+    assert link.radio.stats is None
     for lqi, rssi in ((200, 150), (180, 160), (220, 140)):
         link.on_data(_packet(Magnetometer(ZERO, 7), lqi, rssi), 10.0, 1.0)
-    assert link.radio == RadioStats(220, 140, 180, 140, 200.0, 150.0)
+    assert link.radio.stats == RadioStats(220, 140, 180, 140, 200.0, 150.0)
 
 
 def test_any_record_counts_while_nothing_is_streamed() -> None:
@@ -82,7 +82,7 @@ def test_any_record_counts_while_nothing_is_streamed() -> None:
     assert (link.records, link.last_code, link.last_data_mono) == (1, layouts.MAGNETOMETER, 1.0)
     assert seen == [(Magnetometer(ZERO, 7), 10.0, 1.0)]
     assert link.other_records == 0
-    assert link.heard and link.radio is not None and link.radio.lqi == 200
+    assert link.heard and link.radio.stats is not None and link.radio.stats.lqi == 200
 
 
 def test_a_record_the_consumer_does_not_take_is_counted_not_handed_on() -> None:
@@ -124,7 +124,7 @@ def test_another_record_while_streaming_is_counted_apart_and_keeps_no_stream_ali
     assert (link.records, link.last_code) == (0, layouts.MAGNETOMETER)
     assert link.last_data_mono == 0.0
     # Not handed on as a sample of the stream: counted (diagnostics' "other records").
-    assert (seen, link.other_records) == ([], 1) and link.radio is None
+    assert (seen, link.other_records) == ([], 1) and link.radio.stats is None
 
 
 def test_a_port_lost_wakes_the_waiting_request_with_why() -> None:

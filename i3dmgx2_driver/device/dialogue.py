@@ -62,7 +62,7 @@ from typing import Any
 from . import timeouts
 from .identity import DeviceInfo, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR
 from .link import DeviceLink, DeviceTimeout
-from .sensor_steps import SensorSteps
+from .sensor_steps import ping, SensorSteps
 from .settings import DeviceConfig
 from .throttle import EVENT_PERIOD, Throttle
 from ..codec import commands, layouts, streams
@@ -179,8 +179,7 @@ class SensorDialogue(SensorSteps):
         """
         cfg = self.config
         if link.wireless:
-            self.ping_ok = link.ping(timeout=timeouts.PING_TIMEOUT,
-                                     retries=timeouts.PING_RETRIES)
+            self.ping_ok = ping(link, timeouts.PING_TIMEOUT, timeouts.PING_RETRIES)
             if not self.ping_ok:
                 self._warn('ping', f'node {cfg.address} does not answer the base station '
                                    f'ping: check it is powered, its address (ros2 run '

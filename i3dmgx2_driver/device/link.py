@@ -115,6 +115,32 @@ class RadioStats(NamedTuple):
     rssi_mean: float
 
 
+class RadioMeter:
+    """The radio's link quality so far: latest, lowest and mean LQI and RSSI."""
+
+    def __init__(self) -> None:
+        #: Latest LQI and RSSI, their lowest, their sums and the packets counted.
+        self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
+
+    def note(self, lqi: int, rssi: int) -> None:
+        """Count one packet's LQI and RSSI (reader thread; allocates nothing)."""
+        radio = self._radio
+        radio[0], radio[1] = lqi, rssi
+        radio[2] = min(radio[2], lqi)
+        radio[3] = min(radio[3], rssi)
+        radio[4] += lqi
+        radio[5] += rssi
+        radio[6] += 1
+
+    @property
+    def stats(self) -> RadioStats | None:
+        """Return the quality so far, or None before the first packet."""
+        r = self._radio
+        if not r[6]:
+            return None
+        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
+
+
 class Pending:
     """A request waiting for its reply, filled in by the reader thread."""
 
@@ -398,8 +424,8 @@ class DeviceLink:
         self.last_data_mono = 0.0
         #: Whether a reply to one of this link's requests arrived.
         self._replied = False
-        #: Latest LQI and RSSI, their lowest, their sums and the packets counted.
-        self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
+        #: The radio's link quality, from the packets received.
+        self.radio = RadioMeter()
 
     # -- what the link knows -------------------------------------------------
 
@@ -407,14 +433,6 @@ class DeviceLink:
     def heard(self) -> bool:
         """Whether any packet of this sensor arrived on this link (a record or a reply)."""
         return self._replied or self.records > 0
-
-    @property
-    def radio(self) -> RadioStats | None:
-        """Radio link quality so far, or None before the first packet."""
-        r = self._radio
-        if not r[6]:
-            return None
-        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
 
     def set_streamed(self, code: int | None) -> None:
         """Say which record the device streams from now on (None: none), for :meth:`on_data`."""
@@ -447,14 +465,7 @@ class DeviceLink:
             self.last_data_mono = mono
         lqi = event.lqi
         if lqi is not None:
-            radio = self._radio
-            rssi = event.rssi
-            radio[0], radio[1] = lqi, rssi
-            radio[2] = min(radio[2], lqi)
-            radio[3] = min(radio[3], rssi)
-            radio[4] += lqi
-            radio[5] += rssi
-            radio[6] += 1
+            self.radio.note(lqi, event.rssi)
         pending = self._pending
         if pending is not None and pending.code == code:
             pending.fulfil(event.record)
@@ -611,15 +622,6 @@ class DeviceLink:
         if self._cancel.is_set():
             raise DeviceTimeout('cancelled: the stream is being stopped')
 
-    def ping(self, timeout: float = timeouts.PING_TIMEOUT,
-             retries: int = timeouts.PING_RETRIES) -> bool:
-        """Ask the base station whether the sensor answers over the radio."""
-        for _ in range(retries):
-            answer = self.ping_once(self.address, timeout)
-            if answer is not None:
-                return answer
-        return False
-
     def ping_once(self, address: int, timeout: float) -> bool | None:
         """
         Ping ``address`` once: True (link OK), False (0x21: no such node).
@@ -649,13 +651,6 @@ class DeviceLink:
                 if pending.reply is None or parser.stats.bytes_skipped == skipped:
                     break
             return None if pending.reply is None else bool(pending.reply.ok)
-
-    def stop_streaming(self, repeats: int = timeouts.STOP_REPEATS,
-                       gap: float = timeouts.STOP_GAP_S) -> None:
-        """Send 0xFA several times: it has no reply and the radio may drop it."""
-        for _ in range(repeats):
-            self.send(commands.stop_continuous())
-            time.sleep(gap)
 
     def retarget(self, address: int | None) -> None:
         """
