@@ -48,9 +48,11 @@ def records():
     stream = streams.parse('inertial')
     publishers = Publishers(((RECORD_TOPICS[0], node.create_publisher(Imu, 'imu/raw_data', 10)),),
                             None, node.create_publisher(Bool, '~/is_calibrated', calibrated_qos()))
-    yield RecordPublisher(publishers, MessageSettings('imu_link', 'enu', stream=stream),
-                          Stamping(device_time=True, offset=0.0, wire_time=0.0),
-                          lambda: TICKS, node.get_logger(), publishing=False)
+    records = RecordPublisher(publishers, MessageSettings('imu_link', 'enu', stream=stream),
+                              Stamping(device_time=True, offset=0.0, wire_time=0.0),
+                              node.get_logger(), publishing=False)
+    records.stream_known(TICKS, bias_kept=False)  # what the device side hands it
+    yield records
     node.destroy_node()
     rclpy.shutdown(context=context)
 

@@ -35,6 +35,7 @@ from .link import DeviceLink
 from .port import PortError
 from .realtime import PolicyOutcome
 from .status import DeviceReport, State
+from ..codec.data_rate import ticks_per_cycle
 
 
 class BringUp:
@@ -42,18 +43,24 @@ class BringUp:
     Take one step on a link, saying what it is in the report.
 
     ``on_connect`` runs before a new link's first record reaches the
-    consumer (the node re-anchors its clock there). ``cancel`` is the
-    supervisor's, read only: a resume cut short by it is not announced.
+    consumer (the node re-anchors its clock there). ``on_stream_known`` is
+    handed what the record path needs of what the dialogue learned, before
+    the stream's records come: the timer ticks between two records (None
+    while the divider is unknown) and whether a gyro bias is kept and
+    written back after a power cycle. ``cancel`` is the supervisor's, read
+    only: a resume cut short by it is not announced.
     """
 
     def __init__(self, dialogue: SensorDialogue, report: DeviceReport, current: CurrentLink,
                  cancel: threading.Event, on_connect: Callable[[], None] | None,
-                 log: Any) -> None:
+                 log: Any,
+                 on_stream_known: Callable[[int | None, bool], None] | None = None) -> None:
         self._dialogue = dialogue
         self._report = report
         self._current = current
         self._cancel = cancel
         self._on_connect = on_connect
+        self._on_stream_known = on_stream_known
         self._log = log
         self._policy_logged = PolicyOutcome()
 
@@ -67,6 +74,7 @@ class BringUp:
         else:
             self._start_reader(link)
         self._dialogue.initialise(link, require_answer, self._current.observed)
+        self._hand_on()
 
     def resume(self, link: DeviceLink) -> bool:
         """
@@ -81,6 +89,7 @@ class BringUp:
             return False
         self._report.enter(State.INITIALISING)
         dialogue.expect_stream(link)
+        self._hand_on()
         self._start_reader(link)
         if not dialogue.resume(link):
             return False
@@ -101,6 +110,7 @@ class BringUp:
         True once records arrive again, False if cancelled first; raises
         DeviceTimeout when none comes, PortDisconnected if the port goes.
         """
+        self._hand_on()  # a capture in the pause may have given a bias to keep
         if not self._dialogue.start_continuous(link):
             return False
         self._report.streaming()
@@ -116,6 +126,13 @@ class BringUp:
             self._report.warn(type(exc).__name__, str(exc))
             self._current.release()
             self._report.enter(State.DISCONNECTED)
+
+    def _hand_on(self) -> None:
+        """Hand the record path the tick step and the bias flag the dialogue knows now."""
+        if self._on_stream_known is not None:
+            divider = self._dialogue.divider
+            self._on_stream_known(ticks_per_cycle(divider) if divider else None,
+                                  self._dialogue.gyro_bias is not None)
 
     def _anchor(self) -> None:
         """Let the consumer re-anchor before the first record of a new link reaches it."""

@@ -99,7 +99,8 @@ class DeviceSupervisor:
     stream), ``on_connect`` (before a new link's first record: the node
     re-anchors its clock), ``on_fatal`` (once, the port can never work;
     default: logged), ``on_bytes`` (reader thread, every read: a raw
-    capture), ``on_gyro_bias`` (the kept bias written and echoed). ``log``
+    capture), ``on_gyro_bias`` (the kept bias written and echoed),
+    ``on_stream_known`` (the tick step and the bias flag, bring_up.py). ``log``
     has ``debug/info/warning/error``. ``shared``: the port this sensor
     shares behind one base station (shared_port.py), which opens and closes
     it; no line observer watches it.
@@ -110,7 +111,8 @@ class DeviceSupervisor:
                  on_fatal: Callable[[PortError], None] | None = None,
                  on_bytes: BytesCallback | None = None,
                  shared: SharedPort | None = None,
-                 on_gyro_bias: Callable[[], None] | None = None) -> None:
+                 on_gyro_bias: Callable[[], None] | None = None,
+                 on_stream_known: Callable[[int | None, bool], None] | None = None) -> None:
         self.config = config
         self._shared = shared
         log = log or logging.getLogger('i3dmgx2_driver')
@@ -137,7 +139,7 @@ class DeviceSupervisor:
                                     shared)
         #: The steps from an open port to a stream.
         self._steps = BringUp(self.dialogue, self._report, self._current, self._cancel,
-                              on_connect, log)
+                              on_connect, log, on_stream_known)
         self._reopen_wait = ReopenWait(config.port, config.reconnect_interval, self._cancel.wait)
         self._thread: threading.Thread | None = None
 

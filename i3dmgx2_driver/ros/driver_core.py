@@ -71,7 +71,6 @@ from .services import DeviceServices, SaveCaptureService
 from .temperature import TemperaturePoller
 from ..capture.fault_capture import FaultCapture
 from ..capture.raw_capture import bytes_sink, RawCapture
-from ..codec.data_rate import ticks_per_cycle
 from ..device.port import check_port_path, PortError
 from ..device.shared_port import SharedPort
 from ..device.supervisor import DeviceSupervisor
@@ -138,7 +137,7 @@ class DriverCore:
         #: Stamping, counting and publishing of each record, in the reader thread.
         self.records = RecordPublisher(
             self.publishers, cfg.messages_for(sensor), Stamping.of(cfg, self.stream),
-            self._expected_ticks, node.get_logger(), publishing, bias_kept=self._bias_kept)
+            node.get_logger(), publishing)
         #: Whether this core's sensor shares its port with others.
         self._shared = shared is not None
         #: The port's raw capture (shown on diagnostics).
@@ -154,7 +153,8 @@ class DriverCore:
         self.supervisor = DeviceSupervisor(
             self.device_config,
             on_record=self.records.on_record, log=node.get_logger(),
-            on_connect=self.records.link_changed, on_fatal=self._on_fatal,
+            on_connect=self.records.link_changed, on_stream_known=self.records.stream_known,
+            on_fatal=self._on_fatal,
             on_bytes=capture, shared=shared,
             on_gyro_bias=lambda: self.records.announce_calibrated(True))
         self.records.announce_calibrated(False)
@@ -191,13 +191,6 @@ class DriverCore:
         self.node.get_logger().fatal(str(error))
         if self._told_fatal is not None:
             self._told_fatal()
-
-    def _bias_kept(self) -> bool:
-        return self.supervisor.dialogue.gyro_bias is not None
-
-    def _expected_ticks(self) -> int | None:
-        divider = self.supervisor.dialogue.divider
-        return ticks_per_cycle(divider) if divider else None
 
     def shutdown(self, report: bool = True) -> None:
         """Stop the device stream (bounded in time); log it if ``report``."""

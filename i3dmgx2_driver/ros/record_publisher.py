@@ -24,7 +24,6 @@ driver core (driver_core.py), which builds it and hands its
 :meth:`RecordPublisher.on_record` to the supervisor's reader.
 """
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 import threading
 
@@ -91,21 +90,19 @@ class RecordPublisher:
 
     ``messages`` says how the records become messages on ``publishers``
     (frame, axes, covariances, stream); ``stamping`` how they are stamped.
-    ``expected_ticks()`` returns the timer ticks between two records once
-    the rate divider is known (else None): a larger step counts the records
-    in between as lost. ``publishing`` False: records are counted, not
-    published, until :meth:`set_publishing`. The hot path's observer
-    (device/hot_path.py), when on, is told the stamp, the pack and the
-    publish of every sample; off, it costs one test each. ``bias_kept()``
-    says whether the device side keeps a gyro bias it writes back after a
-    power cycle (before the stream restarts), so that a power cycle seen in
-    the timer leaves ``~/is_calibrated`` true.
+    The device side hands it what it learns (:meth:`stream_known`): the
+    timer ticks between two records once the rate divider is known (a
+    larger step counts the records in between as lost), and whether it
+    keeps a gyro bias it writes back after a power cycle (so that a power
+    cycle seen in the timer leaves ``~/is_calibrated`` true). ``publishing``
+    False: records are counted, not published, until :meth:`set_publishing`.
+    The hot path's observer (device/hot_path.py), when on, is told the
+    stamp, the pack and the publish of every sample; off, it costs one test
+    each.
     """
 
     def __init__(self, publishers: Publishers, messages: MessageSettings,
-                 stamping: Stamping, expected_ticks: Callable[[], int | None],
-                 log: RcutilsLogger, publishing: bool = True,
-                 bias_kept: Callable[[], bool] | None = None) -> None:
+                 stamping: Stamping, log: RcutilsLogger, publishing: bool = True) -> None:
         self.publishers = publishers
         #: The message factory (its ``frame_id`` is the one published, _ned and all).
         self.messages = factory = MessageFactory(messages)
@@ -131,8 +128,10 @@ class RecordPublisher:
         self._use_device_time = stamping.device_time
         self._time_offset = stamping.offset
         self._wire_time = stamping.wire_time
-        self._expected_ticks = expected_ticks
-        self._bias_kept = bias_kept or (lambda: False)
+        #: Timer ticks between two records (None: the divider not known yet).
+        self._expected_ticks: int | None = None
+        #: Whether the device side writes a kept gyro bias back after a power cycle.
+        self._bias_kept = False
         self._log = log
         self._publish_lock = threading.Lock()
 
@@ -151,6 +150,12 @@ class RecordPublisher:
             self.publishers.is_calibrated.publish(Bool(data=calibrated))
         except RCLError:
             pass  # ROS is shutting down: nobody is left to tell
+
+    def stream_known(self, expected_ticks: int | None, bias_kept: bool) -> None:
+        """Take what the device side learned: the ticks between records, whether a bias is kept."""
+        with self._publish_lock:
+            self._expected_ticks = expected_ticks
+            self._bias_kept = bias_kept
 
     def link_changed(self) -> None:
         """
@@ -210,7 +215,7 @@ class RecordPublisher:
                 timings.stamped()
             if clock.restarted and clock.last_restart == Restart.RESET.value:
                 stats.device_resets += 1
-                self.announce_calibrated(self._bias_kept())
+                self.announce_calibrated(self._bias_kept)
                 self._log.warning(
                     "the sensor's timer restarted (a power cycle or brown-out): "
                     'timestamps start afresh from its new clock')
@@ -218,7 +223,7 @@ class RecordPublisher:
             # of the fit too): the records in between were lost.
             since = clock.ticks_since_last
             if since is not None and stats.counting:
-                expected = self._expected_ticks()
+                expected = self._expected_ticks
                 if expected:
                     gap = round(since / expected) - 1
                     if gap > 0:
