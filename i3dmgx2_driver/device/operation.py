@@ -28,7 +28,6 @@ import math
 from typing import Any, Protocol
 
 from . import timeouts
-from .dialogue import SensorDialogue
 from .link import DeviceLink, DeviceTimeout
 from .port import PortError
 from .status import DeviceStatus
@@ -68,13 +67,16 @@ def poll_inertial(link: DeviceLink, count: int = POLLS,
 
 
 class Device(Protocol):
-    """What an operation needs of the device side (the supervisor is one)."""
-
-    #: What is said to the sensor (the EEPROM writes it counts, for diagnostics).
-    dialogue: SensorDialogue
+    """What an operation needs of the device side (the supervisor is one): operations only."""
 
     def status(self) -> DeviceStatus:
         """Return the device side's snapshot."""
 
     def run_paused(self, operation: Callable[[DeviceLink], Any]) -> Any:
         """Stop the stream, run ``operation(link)``, start the stream again."""
+
+    def keep_gyro_bias(self, bias: Vector3) -> None:
+        """Write ``bias`` back from now on (at every start, resume and stall recovery)."""
+
+    def store_in_eeprom(self, link: DeviceLink, quantity: int) -> int:
+        """Store a bias (0xD0) on the lent ``link``; return the reply, an EEPROM write counted."""

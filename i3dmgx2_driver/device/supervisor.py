@@ -178,7 +178,8 @@ class DeviceSupervisor:
 
     def stop(self, timeout: float = 1.5) -> None:
         """Stop streaming (0xFA), stop the threads, close the port."""
-        self._cancel_now()
+        self._cancel.set()
+        self._attention.set()  # the watch sees it at once
         link = self._current.link
         if link is not None:
             link.abort()  # its reader and any waiting request give up
@@ -275,7 +276,8 @@ class DeviceSupervisor:
         The deactivate phase of a managed node. If the port was lost while
         streaming it stays closed (DISCONNECTED) until the next start.
         """
-        self._cancel_now()
+        self._cancel.set()
+        self._attention.set()  # the watch sees it at once
         self.join(timeout)
         link = self._current.link
         if link is not None and not link.disconnected.is_set():
@@ -309,6 +311,14 @@ class DeviceSupervisor:
             finally:
                 self._paused.clear()
                 self._attention.set()
+
+    def keep_gyro_bias(self, bias: tuple[float, float, float]) -> None:
+        """Have the dialogue write ``bias`` back from now on (an accepted capture's)."""
+        self.dialogue.keep_gyro_bias(bias)
+
+    def store_in_eeprom(self, link: DeviceLink, quantity: int) -> int:
+        """Store a bias in the sensor's EEPROM on the lent ``link`` (the dialogue counts it)."""
+        return self.dialogue.transfer_to_non_volatile(link, quantity)
 
     # -- the supervisor thread: stream and recover ---------------------------------------
 
@@ -363,13 +373,9 @@ class DeviceSupervisor:
     def _fail(self, exc: PortUnusable) -> None:
         """Give up for good: keep why, stop, and let the entry point say it and exit."""
         self._report.failed(exc)
-        self._cancel_now()
-        self._on_fatal(exc)
-
-    def _cancel_now(self) -> None:
-        """Set the cancel, and wake the watch to see it."""
         self._cancel.set()
-        self._attention.set()
+        self._attention.set()  # the watch sees it at once
+        self._on_fatal(exc)
 
     def _watch(self, link: DeviceLink) -> None:
         """Return when the link is lost or cannot be revived; recover stalls."""
