@@ -191,6 +191,13 @@ def _bias_vector(value: Sequence[float]) -> Vector3 | None:
     return float(x), float(y), float(z)
 
 
+def _device_setting(name: str, kind: Kind, description: str,
+                    limits: tuple[float, float] | None = None) -> Spec:
+    """Return the row of a parameter that sets the ``DeviceConfig`` field of its name."""
+    return Spec(name, kind, DEVICE_DEFAULTS[name], description, limits,
+                feeds=f'device.{name}')
+
+
 def _one_for_all(single: str) -> str:
     return f"[] (then '{single}' for all), one for all, or one per address"
 
@@ -289,27 +296,23 @@ SPECS: list[Spec] = [
          'Seconds between attempts to reopen a lost port.', (0.1, 60.0),
          feeds='device.reconnect_interval'),
     # How patient the dialogue is (device/timeouts.py has each default and why).
-    Spec('request_timeout', DOUBLE, DEVICE_DEFAULTS['request_timeout'],
-         "Seconds to wait for a command's reply, per try (a slow radio link may need more; "
-         'bringup measures the round trips).', (0.05, 10.0),
-         feeds='device.request_timeout'),
-    Spec('request_retries', INTEGER, DEVICE_DEFAULTS['request_retries'],
-         'Tries of a command before the sensor counts as not answering.', (1, 20),
-         feeds='device.request_retries'),
-    Spec('continuous_retries', INTEGER, DEVICE_DEFAULTS['continuous_retries'],
-         'Tries of the continuous-mode request before the stream counts as not started.',
-         (1, 20), feeds='device.continuous_retries'),
-    Spec('fast_reconnect', BOOL, DEVICE_DEFAULTS['fast_reconnect'],
-         'After a reconnect, confirm the sensor already identified with one serial-number '
-         'read; false: the full start-up dialogue every time.',
-         feeds='device.fast_reconnect'),
-    Spec('resume_timeout', DOUBLE, DEVICE_DEFAULTS['resume_timeout'],
-         "Seconds per try of a fast reconnect's serial-number read (short: a reply lost in "
-         'a stall is asked again soon after the radio is back).', (0.02, 5.0),
-         feeds='device.resume_timeout'),
-    Spec('resume_retries', INTEGER, DEVICE_DEFAULTS['resume_retries'],
-         "Tries of a fast reconnect's serial-number read before the full dialogue.",
-         (1, 20), feeds='device.resume_retries'),
+    _device_setting('request_timeout', DOUBLE,
+                    "Seconds to wait for a command's reply, per try (a slow radio link may "
+                    'need more; bringup measures the round trips).', (0.05, 10.0)),
+    _device_setting('request_retries', INTEGER,
+                    'Tries of a command before the sensor counts as not answering.', (1, 20)),
+    _device_setting('continuous_retries', INTEGER,
+                    'Tries of the continuous-mode request before the stream counts as not '
+                    'started.', (1, 20)),
+    _device_setting('fast_reconnect', BOOL,
+                    'After a reconnect, confirm the sensor already identified with one '
+                    'serial-number read; false: the full start-up dialogue every time.'),
+    _device_setting('resume_timeout', DOUBLE,
+                    "Seconds per try of a fast reconnect's serial-number read (short: a reply "
+                    'lost in a stall is asked again soon after the radio is back).', (0.02, 5.0)),
+    _device_setting('resume_retries', INTEGER,
+                    "Tries of a fast reconnect's serial-number read before the full dialogue.",
+                    (1, 20)),
     Spec('publish_mag', BOOL, True,
          'Publish sensor_msgs/MagneticField on imu/mag (NaN readings are skipped).'),
     Spec('data_rate', DOUBLE, 0.0,
