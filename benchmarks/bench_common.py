@@ -205,24 +205,33 @@ class TimedNodeProcess(NodeProcess):
     frozen its start-up heap. After :meth:`stop`, ``rows`` holds one tuple
     per Imu message (hot_path.ROW_FIELDS), ``collections`` every garbage
     collection (generation, start, duration), ``reader`` the reader thread's
-    scheduling policy, priority and CPUs, ``opens`` the time of every open of
-    the port, ``full_collection`` how long a full collection took at the end (s).
+    scheduling policy, priority and CPUs, ``full_collection`` how long a full
+    collection took at the end (s). ``observed``: the node runs as
+    ``harness/instrumented_node.py`` runs it, and ``opens`` holds the time of
+    every open of the port, as that observer of the rig's noted it.
     Not ``timed``: the node alone, nothing recorded (its CPU is all a run
     reads), returned once it streams; ``tree``: the driver of another checkout.
     """
 
     def __init__(self, port: str, script: str = '', timed: bool = True,
-                 tree: Path | None = None, **params: Any) -> None:
+                 tree: Path | None = None, observed: bool = False, **params: Any) -> None:
+        from harness.instrumented_node import STATS_ENV
         from i3dmgx2_driver.device.hot_path import TIMINGS_ENV
 
         params = {'port': port, 'address': ADDRESS, **params}
         command = [sys.executable, str(BENCH_DIR / script)] if script else None
-        self.out_path = None
+        env: dict[str, str] = {}
+        self.out_path = self.stats_path = None
         if timed:
             handle, self.out_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.json')
             os.close(handle)
-        super().__init__(params, command=command, tree=tree,
-                         env=ros_env({TIMINGS_ENV: self.out_path} if timed else None))
+            env[TIMINGS_ENV] = self.out_path
+        if observed:
+            command = [sys.executable, '-m', 'harness.instrumented_node']
+            handle, self.stats_path = tempfile.mkstemp(prefix='i3dmgx2-stats-', suffix='.json')
+            os.close(handle)
+            env[STATS_ENV] = self.stats_path
+        super().__init__(params, command=command, tree=tree, env=ros_env(env or None))
         self.pid = self.proc.pid
         if not self.wait_for_output('start-up heap frozen' if timed else 'streaming 0x', 30.0):
             output = self.output()
@@ -253,6 +262,10 @@ class TimedNodeProcess(NodeProcess):
         self.rows = [tuple(row) for row in document['rows']]
         self.collections = [tuple(event) for event in document['collections']]
         self.reader = document['reader']
-        self.opens = document['opens']
         self.full_collection = document['full_collection']
+        if self.stats_path is not None:
+            with open(self.stats_path) as handle:
+                events = json.load(handle).get('port_events', [])
+            os.unlink(self.stats_path)
+            self.opens = [at for kind, at, _ in events if kind == 'open']
         return document

@@ -92,6 +92,7 @@ def main() -> int:
     if timings is None:
         raise SystemExit('floor_node.py: I3DMGX2_TIMINGS must name the file for the timings')
     stop = threading.Event()
+    realtime.name_os_threads()  # the wakes per thread are told apart by name
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
     rclpy.init(args=sys.argv, signal_handler_options=SignalHandlerOptions.NO)
@@ -106,7 +107,6 @@ def main() -> int:
     executor.add_node(node)
     policy = realtime.ThreadPolicy(int(params.get('realtime_priority', '0')))
     fd = os.open(params['port'], os.O_RDWR | os.O_NOCTTY)
-    timings.opened()
 
     def reader() -> None:
         realtime.apply_to_current_thread(policy)

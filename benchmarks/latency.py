@@ -64,7 +64,8 @@ from bench_common import (
     TimedNodeProcess,
 )
 from harness.processes import (
-    isolate_ros_domain, process_cpu_seconds, SimProcess, SubscriberProcess,
+    isolate_ros_domain, process_cpu_seconds, SimProcess, SubscriberProcess, thread_switches,
+    wakes_per_second,
 )
 
 from i3dmgx2_driver.device.hot_path import ROW_FIELDS
@@ -76,6 +77,10 @@ WARM_UP_S = 3.0
 TARGET_DRIVER_P99_S = 0.1e-3
 TARGET_DRIVER_MAX_S = 0.5e-3
 TARGET_KERNEL_RATIO = 1.5
+#: The thread that reads the port: it wakes for every sample, and no other thread should.
+READER_THREAD = 'gx2-reader'
+#: How the DDS library (Fast DDS) names its own threads.
+DDS_THREADS = 'dds.'
 
 
 class Config(NamedTuple):
@@ -129,6 +134,7 @@ class RunResult(NamedTuple):
     collections: list[tuple]
     reader: dict[str, Any]
     full_collection: float
+    wakes: dict[str, float]
 
 
 def run_once(config: Config, seconds: float, rate_hz: float) -> RunResult:
@@ -141,9 +147,11 @@ def run_once(config: Config, seconds: float, rate_hz: float) -> RunResult:
         node = TimedNodeProcess(sim.port, config.script, config.timed, config.tree,
                                 **dict(config.params))
         time.sleep(WARM_UP_S)
+        switches0 = thread_switches(node.pid)
         t0, cpu0 = time.time(), process_cpu_seconds(node.pid)
         time.sleep(seconds)
         t1, cpu1 = time.time(), process_cpu_seconds(node.pid)
+        switches1 = thread_switches(node.pid)
         sim.silence()
         time.sleep(0.3)
     finally:
@@ -174,7 +182,7 @@ def run_once(config: Config, seconds: float, rate_hz: float) -> RunResult:
     collections = [e for e in node.collections if t0 <= e[1] <= t1]
     return RunResult(end_to_end, kernel, driver, to_subscriber, stages,
                      100.0 * (cpu1 - cpu0) / (t1 - t0), collections, node.reader,
-                     node.full_collection)
+                     node.full_collection, wakes_per_second(switches0, switches1, t1 - t0))
 
 
 def _ms(summary: Summary) -> str:
@@ -235,6 +243,7 @@ def tables(configs: dict[str, Config], results: dict[str, list[RunResult]],
                   '|---|---|---|']
         lines += [f'| {name}: {label} | {_ms(s)} | {s.mean * 1e3:.4f} |'
                   for name, label, s in stage_rows]
+    lines += ['', *wake_table(results)]
     lines += ['', f'Targets (issue #12, at 100 Hz; this run at {rate_hz:.1f} Hz):']
     for name, runs in results.items():
         if configs[name].script or not configs[name].timed:
@@ -248,6 +257,33 @@ def tables(configs: dict[str, Config], results: dict[str, list[RunResult]],
             f'{TARGET_DRIVER_MAX_S * 1e3:g} ms: {"met" if share_met else "not met"}); '
             f'end to end p99 {ratio:.2f} x the kernel p99 (target <= {TARGET_KERNEL_RATIO:g}: '
             f'{"met" if ratio <= TARGET_KERNEL_RATIO else "not met"})')
+    return lines
+
+
+def wake_table(results: dict[str, list[RunResult]]) -> list[str]:
+    """
+    Return the Markdown lines: how often each of the process's threads wakes (per s).
+
+    Threads of one name are added up (the executor's workers); the mean of
+    the rounds. Idle costs nothing when every thread of the node but the
+    reader blocks until it has work: issue #51's target is at most 5 wakes a
+    second for them all together at 100 Hz. The DDS library's own threads
+    (``dds.*``: its event thread wakes for every message sent) are shown
+    apart: the floor has them too.
+    """
+    lines = ['| configuration | wakes per second: thread (mean of the rounds) | '
+             "the node's threads but the reader | DDS's threads |", '|---|---|---|---|']
+    for name, runs in results.items():
+        by_thread: dict[str, float] = {}
+        for run in runs:
+            for key, rate in run.wakes.items():
+                thread = key.rsplit('#', 1)[0]
+                by_thread[thread] = by_thread.get(thread, 0.0) + rate / len(runs)
+        dds = sum(rate for thread, rate in by_thread.items() if thread.startswith(DDS_THREADS))
+        others = sum(by_thread.values()) - dds - by_thread.get(READER_THREAD, 0.0)
+        shown = ', '.join(f'{thread} {rate:.1f}' for thread, rate in
+                          sorted(by_thread.items(), key=lambda item: -item[1]))
+        lines.append(f'| {name} | {shown} | {others:.1f} | {dds:.1f} |')
     return lines
 
 

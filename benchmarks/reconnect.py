@@ -17,7 +17,8 @@ Data back after a reconnect: the port (or the radio) answering again -> a messag
 
 The real driver process (its defaults: ``read_timeout`` and
 ``reconnect_interval`` 1 s; its hot-path timings on, device/hot_path.py, for
-the time of every message and port open) streams from the simulated sensor
+the time of every message, and each port open noted by the rig's observer,
+harness/instrumented_node.py) streams from the simulated sensor
 at 100 Hz, which runs in this process; the scenarios, repeated every round:
 
 - unplug: the base station is unplugged for 1.5 to 2.5 s (at random, so that
@@ -127,7 +128,7 @@ def measure(rounds: int, seed: int) -> Figures:
     for round_ in range(rounds):
         print(f'-- round {round_ + 1}/{rounds}', file=sys.stderr, flush=True)
         with PtySimulator(SimulatorConfig(seed=seed + round_)) as sim:
-            node = TimedNodeProcess(sim.port)
+            node = TimedNodeProcess(sim.port, observed=True)
             try:
                 time.sleep(3.0)
                 trials = run_scenarios(sim, rng)

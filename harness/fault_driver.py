@@ -159,16 +159,15 @@ class FaultDriver(threading.Thread):
         the sensor had run for more than half the timer's range (about 109 s)
         since it last wrapped: then zero is *ahead* of it modulo 2^32, and only
         the host's clock can tell a restart from a jump forward. The simulated
-        timer restarts at ``clock.timer_start``: set here to 1..100 s behind or
+        timer restarts at the ``timer_start`` given: here 1..100 s behind or
         ahead of the timer now, half the time each, so that short runs meet
         both cases.
         """
         ahead = self.rng.random() < 0.5
         offset = self.rng.uniform(1.0, 100.0) * TICKS_PER_SECOND * (1 if ahead else -1)
         with self.sim.lock:
-            clock = self.sim.sensor.clock
-            clock.timer_start = (clock.timer_at(time.time()) + round(offset)) % TIMER_MODULUS
-        self.sim.power_cycle()
+            start = (self.sim.sensor.clock.timer_at(time.time()) + round(offset)) % TIMER_MODULUS
+        self.sim.power_cycle(timer_start=start)
         with self.sim.lock:
             self.power_ups.append(self.sim.sensor.clock.power_up_time)
         if streaming:

@@ -22,10 +22,13 @@ node's ``stats``, the parser counters summed over every connection
 named by ``$I3DMGX2_SOAK_STATS`` twice a second and once more after
 shutdown; the serial port's class, wrapped in this process only
 (:func:`observe_ports`), notes the time of every open, input flush and
-close; and the hot path's observer (device/hot_path.py, :class:`LinkEvents`)
-notes every link up, when the node re-anchors (its reader publishes every
-record from then on). They tell the campaign when the node could read the
-port (records written outside those windows may be lost legitimately).
+close; and the record publisher's class, wrapped the same way
+(:func:`observe_anchors`), notes every link up, when the node re-anchors
+(its reader publishes every record from then on). They tell the campaign
+when the node could read the port (records written outside those windows
+may be lost legitimately). With ``$I3DMGX2_TIMINGS`` set it also records
+the hot path's timings, as the node's own main does
+(benchmarks/reconnect.py reads both files).
 Nothing on the path of a sample is changed.
 
 With ``--lifecycle`` (before ``--ros-args``) it runs the managed node the
@@ -52,6 +55,7 @@ from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.ros import main as node_main
 from i3dmgx2_driver.ros.imu_node import ImuDriverNode
 from i3dmgx2_driver.ros.lifecycle_node import LifecycleDriverNode
+from i3dmgx2_driver.ros.record_publisher import RecordPublisher
 
 #: Environment variable naming the JSON file the counters go to.
 STATS_ENV = 'I3DMGX2_SOAK_STATS'
@@ -168,12 +172,21 @@ def _write(path: str, document: dict) -> None:
     os.replace(temporary, path)
 
 
-class LinkEvents(hot_path.HotPathObserver):
-    """Note every link up ('anchor'); the protocol's other methods, inherited, do nothing."""
+def observe_anchors() -> None:
+    """
+    Note every link up ('anchor'), in this process: the node re-anchors its clock there.
 
-    def connected(self) -> None:
-        """Note the re-anchoring: every record is published from now on."""
+    Wraps the record publisher's class's ``link_changed``, which every
+    supervisor calls before a new link's first record reaches it: every
+    record is published from then on.
+    """
+    link_changed = RecordPublisher.link_changed
+
+    def anchored(publisher: RecordPublisher) -> None:
+        link_changed(publisher)
         _note('anchor')
+
+    RecordPublisher.link_changed = anchored
 
 
 def main() -> int:
@@ -191,7 +204,8 @@ def main() -> int:
     kind = ObservedLifecycleNode if '--lifecycle' in arguments else ImuDriverNode
 
     observe_ports()
-    hot_path.observe(LinkEvents())
+    observe_anchors()
+    recorder, timings_path = hot_path.recorder_from_environment()
 
     def make_node() -> ImuDriverNode:
         node = kind()
@@ -202,6 +216,9 @@ def main() -> int:
     code = node_main.run(make_node)
     if made:
         _write(path, _snapshot(made[0], True))
+    if recorder is not None:
+        lifetime.cancel_deadline()  # writing the timings is no part of the stop
+        recorder.save(timings_path)
     return code
 
 

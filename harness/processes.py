@@ -158,6 +158,39 @@ def process_cpu_seconds(pid: int) -> float:
     return (utime + stime) / os.sysconf('SC_CLK_TCK')
 
 
+#: The lines of /proc/PID/task/TID/status that count a thread's context switches.
+_SWITCHES = ('voluntary_ctxt_switches:', 'nonvoluntary_ctxt_switches:')
+
+
+def thread_switches(pid: int) -> dict[int, tuple[str, int]]:
+    """
+    Each thread of a process: its id → (name, context switches so far).
+
+    Voluntary plus involuntary switches (``/proc/PID/task/TID/status``): a
+    thread that blocks until it has work switches once per wake, so their rate
+    is how often it wakes. Threads that end while being read are left out.
+    """
+    threads = {}
+    for tid in os.listdir(f'/proc/{pid}/task'):
+        try:
+            with open(f'/proc/{pid}/task/{tid}/comm') as handle:
+                name = handle.read().strip()
+            with open(f'/proc/{pid}/task/{tid}/status') as handle:
+                switches = sum(int(line.split()[1]) for line in handle
+                               if line.startswith(_SWITCHES))
+        except (FileNotFoundError, ProcessLookupError):
+            continue
+        threads[int(tid)] = (name, switches)
+    return threads
+
+
+def wakes_per_second(before: dict[int, tuple[str, int]], after: dict[int, tuple[str, int]],
+                     seconds: float) -> dict[str, float]:
+    """Each thread's wakes per second between two :func:`thread_switches` (name#tid)."""
+    return {f'{name}#{tid}': (switches - before[tid][1]) / seconds
+            for tid, (name, switches) in after.items() if tid in before}
+
+
 # -- the node --------------------------------------------------------------------------------
 
 class NodeProcess:

@@ -74,13 +74,20 @@ class FakeDialogue:
 
 
 class FakeDevice:
-    """Runs an operation on no link; the dialogue is a fake."""
+    """Runs an operation on no link; its EEPROM is the fake dialogue's."""
 
     def __init__(self, answer: int | None = 0, firmware: str = '') -> None:
         self.dialogue = FakeDialogue(answer, firmware)
+        self.firmware = self.dialogue.firmware
 
     def run_paused(self, operation: Any) -> Any:
         return operation(None)
+
+    def keep_gyro_bias(self, bias: Any) -> None:
+        """Nothing to write back to: no stream restarts here."""
+
+    def store_in_eeprom(self, link: Any, quantity: int) -> int:
+        return self.dialogue.transfer_to_non_volatile(link, quantity)
 
 
 def capture(device: FakeDevice, *outcomes: bool) -> GyroBiasCapture:

@@ -19,7 +19,7 @@ The garbage collector runs when the objects it tracks (tuples, lists,
 instances) grow by hundreds; a path that leaves none behind never triggers
 it, and with the start-up heap frozen a collection that other work triggers
 has next to nothing to walk. The real node runs (real rclpy, not spinning:
-the executor's own work is not the sample's path) in a process of its own,
+the executor's and the diagnostics' work is not the sample's path) in a process of its own,
 so that nothing else allocates there, against the simulator in this one;
 with the collector switched off for the window, that process counts the
 objects it tracks before and after hundreds of published samples.
@@ -56,6 +56,8 @@ node = ImuDriverNode(parameter_overrides=[
     Parameter('port', value=port), Parameter('address', value=95),
     Parameter('publish_mag', value=False)])
 stats = node.core.records.stats
+for diagnostics in node.diagnostics:
+    diagnostics.stop()  # a thread of its own once a second: not the sample's path
 deadline = time.monotonic() + 60.0
 while stats.published < 100 and time.monotonic() < deadline:
     time.sleep(0.05)

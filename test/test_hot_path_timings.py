@@ -38,8 +38,6 @@ from i3dmgx2_driver.device.hot_path import (
 )
 from i3dmgx2_driver.device.link import DeviceLink, PortReader
 from i3dmgx2_driver.device.port import PortDisconnected
-from i3dmgx2_driver.device.port_opener import PortOpener
-from i3dmgx2_driver.device.supervisor import DeviceSupervisor
 from i3dmgx2_driver.ros.record_publisher import RecordPublisher
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
@@ -75,8 +73,6 @@ def _guarded_uses(function) -> tuple[int, list[str]]:
 @pytest.mark.parametrize(('function', 'stages'), [
     (PortReader._read, 2),  # read, parsed (the loop _run runs)
     (RecordPublisher.on_record, 3),  # stamped, packed, published
-    (PortOpener.open_port, 1),  # opened
-    (DeviceSupervisor._anchor, 1),  # connected
 ])
 def test_off_costs_one_test_per_stage(function, stages):
     guarded, stray = _guarded_uses(function)
@@ -91,7 +87,7 @@ class _Calls:
         self.calls: list[str] = []
 
     def __getattr__(self, name: str):
-        if name not in (*STAGES, 'opened', 'connected'):
+        if name not in STAGES:
             raise AttributeError(name)
         return lambda *args: self.calls.append(name)
 
@@ -152,9 +148,6 @@ def test_the_node_records_ordered_stage_times_for_every_message(tmp_path):
     assert document['fields'] == list(ROW_FIELDS)
     rows = [dict(zip(ROW_FIELDS, row, strict=True)) for row in document['rows']]
     assert len(rows) >= 50, len(rows)
-    # One port open, then the link up, then the first record read.
-    assert len(document['opens']) == len(document['connections']) == 1
-    assert document['opens'][0] <= document['connections'][0] <= rows[0]['read']
     assert document['reader']['cpus']
     for row in rows:
         assert row['timer'] in written
@@ -191,8 +184,6 @@ def test_the_recorder_keeps_one_row_per_published_message(tmp_path):
     times = iter(float(t) for t in range(100))
     recorder = TimingsRecorder(clock=lambda: next(times), cpu_clock=lambda: 0.5)
     try:
-        recorder.opened()
-        recorder.connected()
         recorder.read(88, 10.5)
         recorder.parsed()
         for timer in (7, 8):
@@ -201,8 +192,7 @@ def test_the_recorder_keeps_one_row_per_published_message(tmp_path):
             recorder.published(type('Record', (), {'timer': timer})(), timer / 10)
     finally:
         recorder.save(str(tmp_path / 'timings.json'))
-    assert (recorder.opens, recorder.connections) == ([0.0], [1.0])
-    assert recorder.rows == [(7, 0.7, 10.5, 2.0, 3.0, 4.0, 5.0, 0.5, 0.5),
-                             (8, 0.8, 10.5, 2.0, 6.0, 7.0, 8.0, 0.5, 0.5)]
+    assert recorder.rows == [(7, 0.7, 10.5, 0.0, 1.0, 2.0, 3.0, 0.5, 0.5),
+                             (8, 0.8, 10.5, 0.0, 4.0, 5.0, 6.0, 0.5, 0.5)]
     saved = json.loads((tmp_path / 'timings.json').read_text())
     assert saved['rows'] == [list(row) for row in recorder.rows]

@@ -69,10 +69,10 @@ def _link(records_of: int | None = None) -> tuple[DeviceLink, _Line, list]:
 
 def test_radio_quality_keeps_latest_lowest_and_mean() -> None:
     link, _, _ = _link()
-    assert link.radio is None
+    assert link.radio.stats is None
     for lqi, rssi in ((200, 150), (180, 160), (220, 140)):
         link.on_data(_packet(Magnetometer(ZERO, 7), lqi, rssi), 10.0, 1.0)
-    assert link.radio == RadioStats(220, 140, 180, 140, 200.0, 150.0)
+    assert link.radio.stats == RadioStats(220, 140, 180, 140, 200.0, 150.0)
 
 
 def test_any_record_counts_while_nothing_is_streamed() -> None:
@@ -82,7 +82,7 @@ def test_any_record_counts_while_nothing_is_streamed() -> None:
     assert (link.records, link.last_code, link.last_data_mono) == (1, layouts.MAGNETOMETER, 1.0)
     assert seen == [(Magnetometer(ZERO, 7), 10.0, 1.0)]
     assert link.other_records == 0
-    assert link.heard and link.radio is not None and link.radio.lqi == 200
+    assert link.heard and link.radio.stats is not None and link.radio.stats.lqi == 200
 
 
 def test_a_record_the_consumer_does_not_take_is_counted_not_handed_on() -> None:
@@ -124,7 +124,7 @@ def test_another_record_while_streaming_is_counted_apart_and_keeps_no_stream_ali
     assert (link.records, link.last_code) == (0, layouts.MAGNETOMETER)
     assert link.last_data_mono == 0.0
     # Not handed on as a sample of the stream: counted (diagnostics' "other records").
-    assert (seen, link.other_records) == ([], 1) and link.radio is None
+    assert (seen, link.other_records) == ([], 1) and link.radio.stats is None
 
 
 def test_a_port_lost_wakes_the_waiting_request_with_why() -> None:
@@ -218,12 +218,12 @@ class _Log:
         self.lines.append(text)
 
 
-class _Opens(hot_path.HotPathObserver):
+class _Reads(hot_path.HotPathObserver):
     def __init__(self) -> None:
-        self.opens = 0
+        self.reads = 0
 
-    def opened(self) -> None:
-        self.opens += 1
+    def read(self, nbytes: int, read_time: float) -> None:
+        self.reads += 1
 
 
 def test_port_opener_opens_as_configured_and_logs_only_a_change(monkeypatch) -> None:
@@ -236,14 +236,12 @@ def test_port_opener_opens_as_configured_and_logs_only_a_change(monkeypatch) -> 
 
     # The opener opens SerialPort itself: its opening is replaced, the class kept.
     monkeypatch.setattr(SerialPort, '__init__', opened)
-    timings, log = _Opens(), _Log()
-    monkeypatch.setattr(hot_path, 'timings', timings)
+    log = _Log()
     config = DeviceConfig(port='/dev/gx2', address=95, baud=115200, low_latency=False)
     opener = PortOpener(config, log)
     for _ in range(3):
         assert type(opener.open_port()) is SerialPort
     assert calls == [('/dev/gx2', 115200, False)] * 3
-    assert timings.opens == 3
     assert log.lines == ['/dev/gx2: low-latency mode on', '/dev/gx2: low-latency mode refused']
     assert opener.low_latency_state == 'refused'
 
@@ -260,6 +258,6 @@ def test_port_opener_gives_every_reader_the_same_parts() -> None:
 
 
 def test_an_observer_inherits_methods_that_note_nothing() -> None:
-    quiet = _Opens()
-    assert quiet.connected() is None and quiet.read(3, 1.0) is None
+    quiet = _Reads()
+    assert quiet.parsed() is None and quiet.stamped() is None
     assert quiet.published(object(), 2.0) is None

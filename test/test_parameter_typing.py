@@ -249,7 +249,8 @@ def test_each_parameter_feeds_a_field_that_exists_and_the_drivers_own_are_all_fe
         assert config in {'device', 'messages', 'driver', 'sensors', 'node'}, spec.name
         if config in fed:
             fed[config].add(field or spec.name)
-    assert fed['device'] <= device
+    # Every device setting is a user's: the address, stream and rate each sensor's.
+    assert fed['device'] == device - {'address', 'stream', 'data_rate_hz'}
     # The frame and the stream are each sensor's (sensor_set.py).
     assert fed['messages'] == messages - {'frame_id', 'stream'}
     assert fed['driver'] == own
@@ -282,3 +283,13 @@ def test_the_parameters_reach_the_device_and_message_settings_of_each_sensor(mak
         ('imu_95_link', 'ned', 'inertial')
     assert messages.orientation_stddev == ORIENTATION_STDDEV
     assert config.messages == config.messages_for(left)
+
+
+def test_how_patient_the_dialogue_is_is_the_users_to_set(make_node):
+    device = driver_config(declare_parameters(make_node(
+        '-p', 'address:=5', '-p', 'request_timeout:=1', '-p', 'request_retries:=4',
+        '-p', 'continuous_retries:=2', '-p', 'fast_reconnect:=false',
+        '-p', 'resume_timeout:=0.25', '-p', 'resume_retries:=7'))).device
+    assert (device.request_timeout, device.request_retries, device.continuous_retries,
+            device.fast_reconnect, device.resume_timeout, device.resume_retries) == \
+        (1.0, 4, 2, False, 0.25, 7)

@@ -29,7 +29,9 @@ import sys
 import threading
 
 from harness.processes import isolate_ros_domain, Listener, NodeProcess, REPO, ros_env
-from i3dmgx2_driver.device.realtime import apply_to_current_thread, PolicyOutcome, ThreadPolicy
+from i3dmgx2_driver.device.realtime import (
+    apply_to_current_thread, name_os_threads, PolicyOutcome, ThreadPolicy,
+)
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 import pytest
 from sensor_msgs.msg import Imu
@@ -172,3 +174,22 @@ def test_the_node_freezes_its_start_up_heap():
         frozen = int(node.output().split('start-up heap frozen (', 1)[1].split()[0])
         assert frozen > 10000
         assert node.stop()[0] == 0
+
+
+@pytest.mark.skipif(not sys.platform.startswith('linux'), reason='thread names in /proc')
+def test_threads_started_afterwards_have_their_name_in_the_os_too():
+    names = []
+
+    def run() -> None:
+        with open(f'/proc/self/task/{threading.get_native_id()}/comm') as handle:
+            names.append(handle.read().strip())
+        names.append(sys.getprofile())  # the hook took itself off
+
+    name_os_threads()
+    try:
+        thread = threading.Thread(target=run, name='gx2-a-long-thread-name')
+        thread.start()
+        thread.join()
+    finally:
+        threading.setprofile(None)
+    assert names == ['gx2-a-long-thre', None]  # 15 bytes: what the kernel keeps

@@ -26,7 +26,7 @@ from i3dmgx2_driver.codec.data_rate import ticks_per_cycle
 from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.records import AccelAngRate, TICKS_PER_SECOND
 from i3dmgx2_driver.ros.conversions import MessageSettings
-from i3dmgx2_driver.ros.publishers import calibrated_qos, Publishers
+from i3dmgx2_driver.ros.publishers import calibrated_qos, Publishers, RECORD_TOPICS
 from i3dmgx2_driver.ros.record_publisher import RecordPublisher, Stamping
 import pytest
 import rclpy
@@ -46,11 +46,13 @@ def records():
     rclpy.init(context=context)
     node = Node('record_publisher_test', context=context)
     stream = streams.parse('inertial')
-    publishers = Publishers(node.create_publisher(Imu, 'imu/raw_data', 10), None, None,
-                            node.create_publisher(Bool, '~/is_calibrated', calibrated_qos()))
-    yield RecordPublisher(publishers, MessageSettings('imu_link', 'enu', stream=stream),
-                          Stamping(device_time=True, offset=0.0, wire_time=0.0),
-                          lambda: TICKS, node.get_logger(), publishing=False)
+    publishers = Publishers(((RECORD_TOPICS[0], node.create_publisher(Imu, 'imu/raw_data', 10)),),
+                            None, node.create_publisher(Bool, '~/is_calibrated', calibrated_qos()))
+    records = RecordPublisher(publishers, MessageSettings('imu_link', 'enu', stream=stream),
+                              Stamping(device_time=True, offset=0.0, wire_time=0.0),
+                              node.get_logger(), publishing=False)
+    records.stream_known(TICKS, bias_kept=False)  # what the device side hands it
+    yield records
     node.destroy_node()
     rclpy.shutdown(context=context)
 

@@ -31,7 +31,9 @@ from i3dmgx2_driver.device.port import PortMissing, PortNotSerial, SerialPort
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.device.status import DeviceReport, State
 from i3dmgx2_driver.device.supervisor import DeviceSupervisor
-from i3dmgx2_driver.device.watchdog import PORT_SETTLE_S, PORT_WATCH_S, ReopenWait, StallWatch
+from i3dmgx2_driver.device.watchdog import (
+    LOOK_MARGIN_S, PORT_SETTLE_S, PORT_WATCH_S, ReopenWait, StallWatch,
+)
 from log_lines import Log
 import pytest
 
@@ -62,7 +64,7 @@ class FakeClock:
 def test_a_stall_is_silence_beyond_the_timeout():
     clock = FakeClock()
     watch = StallWatch(stall_timeout=1.0, period=0.01, clock=clock)
-    assert watch.stall_after == 1.0 and watch.tick == 0.05
+    assert watch.stall_after == 1.0
     assert not watch.stalled(clock.now - 1.0)
     assert watch.stalled(clock.now - 1.001)
 
@@ -74,8 +76,14 @@ def test_a_slow_rate_is_no_stall():
     assert not watch.stalled(clock.now - 1.0)
 
 
-def test_a_short_timeout_is_looked_at_four_times():
-    assert StallWatch(stall_timeout=0.1, period=0.001).tick == pytest.approx(0.025)
+def test_the_watch_sleeps_until_the_stream_would_have_stalled():
+    clock = FakeClock()
+    watch = StallWatch(stall_timeout=1.0, period=0.01, clock=clock)
+    assert watch.next_look(clock.now - 0.25) == pytest.approx(0.75 + LOOK_MARGIN_S)
+    assert watch.next_look(clock.now - 5.0) == pytest.approx(LOOK_MARGIN_S)  # at once
+    last = clock.now
+    clock.wait(watch.next_look(last))  # nothing came meanwhile: stalled when it looks
+    assert watch.stalled(last)
 
 
 # -- ReopenWait ---------------------------------------------------------------------------

@@ -49,7 +49,7 @@ node.create_timer(0.01, ran.set)
 executor = MultiThreadedExecutor(num_threads=2)
 executor.add_node(node)
 stop = StopSignal()  # what run() hands it
-spinner = _Spinner(executor, stop)
+spinner = _Spinner(executor, node, stop)
 spinner.start()
 print('callbacks ran', ran.wait(10.0))
 print('stopped before halt', stop.is_set())
@@ -61,20 +61,20 @@ def fail():
 
 node.create_timer(0.01, fail)
 stop = StopSignal()  # what run() hands it
-spinner = _Spinner(executor, stop)
+spinner = _Spinner(executor, node, stop)
 spinner.start()
 print('stopped by the error', stop.wait(10.0), repr(spinner.error))
 spinner.halt()
 executor.shutdown()
 node.destroy_node()
 
-# Nothing due: no timer, no request. A wake alone only rebuilds the executor's wait; the
-# thread must end all the same, and at once, or it is in rclpy's wait when the
-# interpreter exits (the process aborts).
+# Nothing due: no timer, no request, and the executor's wait has no timeout (idle costs
+# nothing). A wake alone only rebuilds that wait; the thread must end all the same, and at
+# once, or it is in rclpy's wait when the interpreter exits (the process aborts).
 idle = Node('spinner_idle')
 executor = MultiThreadedExecutor(num_threads=2)
 executor.add_node(idle)
-spinner = _Spinner(executor, StopSignal())
+spinner = _Spinner(executor, idle, StopSignal())
 spinner.start()
 time.sleep(0.3)
 start = time.monotonic()
@@ -92,7 +92,7 @@ busy = Node('spinner_busy')
 busy.create_timer(0.001, lambda: None)
 executor = MultiThreadedExecutor(num_threads=2)
 executor.add_node(busy)
-spinner = _Spinner(executor, StopSignal())
+spinner = _Spinner(executor, busy, StopSignal())
 spinner.start()
 time.sleep(1.0)
 gc.collect()

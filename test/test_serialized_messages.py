@@ -24,6 +24,7 @@ second.
 
 import math
 import random
+from types import SimpleNamespace
 
 from i3dmgx2_driver.codec.orientation import matrix_from_quaternion, Quaternion
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
@@ -92,11 +93,19 @@ def test_mag_bytes_read_back_as_the_filled_message(convention, frame):
     rng = random.Random(7)
     factory = _factory(frame, convention)
     for stamp in STAMPS:
-        field = tuple(rng.uniform(-0.6, 0.6) for _ in range(3))
-        data = factory.mag_cdr(field, stamp)
-        expected = factory.fill_mag(field, stamp)
+        record = SimpleNamespace(mag=tuple(rng.uniform(-0.6, 0.6) for _ in range(3)))
+        data = factory.mag_cdr(record, stamp)
+        expected = factory.fill_mag(record, stamp)
         assert deserialize_message(data, MagneticField) == expected
         assert len(data) == len(serialize_message(expected))
+
+
+def test_a_field_of_nan_is_no_reading_and_no_magnetic_field_message():
+    factory = _factory('imu_link', 'enu')
+    nothing = SimpleNamespace(mag=(math.nan, math.nan, math.nan))
+    assert factory.mag_cdr(nothing, 1.0) is None and factory.fill_mag(nothing, 1.0) is None
+    assert factory.packer('mag', True) == factory.mag_cdr
+    assert factory.packer('mag', False) == factory.fill_mag
 
 
 def test_the_start_up_check_passes_with_this_middleware_and_catches_a_mistake():

@@ -28,6 +28,7 @@ import time
 from i3dmgx2_driver.codec import commands, layouts
 from i3dmgx2_driver.device.link import DeviceLink, LinkOptions, PortReader
 from i3dmgx2_driver.device.port import SerialPort
+from i3dmgx2_driver.device.sensor_steps import ping
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.device.shared_port import SharedPort
 from i3dmgx2_driver.device.status import State
@@ -174,7 +175,7 @@ def test_a_reply_is_taken_only_from_its_own_sensor():
                                   timeout=0.3, retries=2)
             assert len(got[17]) > before + 30
             assert not links[95].heard and not got[95]
-            assert links[95].ping(timeout=0.3, retries=1) is False
+            assert ping(links[95], timeout=0.3, retries=1) is False
         finally:
             for link in links.values():
                 link.stop()

@@ -45,8 +45,9 @@ CHUNK_COST = 120
 RING_BUDGET_FACTOR = 4
 #: Seconds of the stream after a fault kept in its file: the recovery, or not.
 FAULT_AFTER = 2.0
-#: How often the writer thread asks what went wrong (s).
-FAULT_POLL = 0.25
+#: How often the writer thread asks what went wrong (s): once a second wakes it seldom, and
+#: the file is written FAULT_AFTER s after the fault is seen, with the seconds before it.
+FAULT_POLL = 1.0
 #: Name of every fault capture file: prefix, UTC time to the millisecond, cause.
 FAULT_PREFIX = 'i3dmgx2_'
 FAULT_SUFFIX = '.gx2cap'

@@ -146,6 +146,15 @@ class SensorStreamParser:
         """Take the next lone 0x02 or 0x21 as the answer to a ping."""
         self._ping_pending = True
 
+    def listen_to(self, address: int | None) -> None:
+        """Keep the data packets of ``address`` alone from now on (None: every node's)."""
+        self.address = address
+
+    def recount_as_foreign(self) -> None:
+        """Count a frame already returned as good as foreign: its reader has no one for it."""
+        self.stats.good_frames -= 1
+        self.stats.foreign_frames += 1
+
     @property
     def pending(self) -> int:
         """Bytes held back waiting for the rest of a frame."""

@@ -68,7 +68,7 @@ from . import timeouts
 from .firmware import check_stream, SensorFirmware
 from .identity import DeviceInfo, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR
 from .link import DeviceLink, DeviceTimeout
-from .sensor_steps import SensorSteps
+from .sensor_steps import ping, SensorSteps
 from .settings import DeviceConfig
 from .throttle import EVENT_PERIOD, Throttle
 from ..codec import commands, layouts, streams
@@ -188,8 +188,7 @@ class SensorDialogue(SensorSteps):
         """
         cfg = self.config
         if link.wireless:
-            self.ping_ok = link.ping(timeout=timeouts.PING_TIMEOUT,
-                                     retries=timeouts.PING_RETRIES)
+            self.ping_ok = ping(link, timeouts.PING_TIMEOUT, timeouts.PING_RETRIES)
             if not self.ping_ok:
                 self._warn('ping', f'node {cfg.address} does not answer the base station '
                                    f'ping: check it is powered, its address (ros2 run '
@@ -200,7 +199,8 @@ class SensorDialogue(SensorSteps):
         code = first_poll_code(cfg.stream)
         for _ in range(2):
             try:
-                link.request(bytes((code,)), code, timeout=cfg.request_timeout, retries=2)
+                link.request(bytes((code,)), code, cfg.request_timeout,
+                             timeouts.FIRST_POLL_RETRIES)
             except DeviceTimeout:
                 pass
         if require_answer and not self.ping_ok and not link.heard:

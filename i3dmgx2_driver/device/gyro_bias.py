@@ -145,7 +145,7 @@ class GyroBiasCapture:
             self._log.warning(message)
             return False, message
         self._reached_device(Calibration(started, True, bias, sampling_ms, f'bias {text} rad/s'))
-        lacking = self._device.dialogue.firmware.refusal('the gyro bias store',
+        lacking = self._device.firmware.refusal('the gyro bias store',
                                                          layouts.TRANSFER_TO_NON_VOLATILE)
         keep = (f'{lacking}: the gyro_bias parameter applies it at every start' if lacking
                 else '~/store_gyro_bias stores it')
@@ -164,7 +164,7 @@ class GyroBiasCapture:
         self.last_capture = calibration
         if calibration.accepted:
             self.good_capture = calibration
-            self._device.dialogue.keep_gyro_bias(calibration.bias)
+            self._device.keep_gyro_bias(calibration.bias)
         self._calibrated(calibration.accepted)
 
     # -- keeping it ----------------------------------------------------------
@@ -183,7 +183,7 @@ class GyroBiasCapture:
         Refused at once, nothing sent, on a firmware without 0xD0 (before
         2.1.12): it would answer nothing, and the store would look lost.
         """
-        lacking = self._device.dialogue.firmware.refusal('the gyro bias store',
+        lacking = self._device.firmware.refusal('the gyro bias store',
                                                          layouts.TRANSFER_TO_NON_VOLATILE)
         if lacking:
             return False, (f'refused: {lacking}. Nothing sent. A captured bias is used until '
@@ -199,7 +199,7 @@ class GyroBiasCapture:
         text = format_vector(good.bias)
 
         def operation(link: DeviceLink) -> int:
-            quantity = self._device.dialogue.transfer_to_non_volatile(link, GYRO_BIAS_QUANTITY)
+            quantity = self._device.store_in_eeprom(link, GYRO_BIAS_QUANTITY)
             self._forget()  # the pause is the operation's, not the radio's
             return quantity
 

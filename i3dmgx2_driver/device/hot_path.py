@@ -53,12 +53,6 @@ class HotPathObserver(Protocol):
     the parse; each then gets its own stamp, pack and publish.
     """
 
-    def opened(self) -> None:
-        """Note that a port was opened: a connection starts, the next read is its first."""
-
-    def connected(self) -> None:
-        """Note that the link is up: every record of ours is published from now on."""
-
     def read(self, nbytes: int, read_time: float) -> None:
         """Note that a read returned ``nbytes`` bytes, at ``read_time`` (system clock)."""
 
@@ -88,9 +82,8 @@ class TimingsRecorder:
     timer and its message's stamp, the system-clock time of its read, of its parse, stamp, pack and
     ``publish()`` returned, and the reader thread's CPU time at the read and
     after the publish (their difference against the wall clock's is the time
-    the thread did not run). It also notes every garbage collection, every
-    port open and link up, and the reader thread's scheduling; :meth:`save` writes it all
-    as JSON.
+    the thread did not run). It also notes every garbage collection and the
+    reader thread's scheduling; :meth:`save` writes it all as JSON.
     """
 
     def __init__(self, clock: Any = time.time, cpu_clock: Any = time.thread_time) -> None:
@@ -100,9 +93,6 @@ class TimingsRecorder:
         self.rows: list[tuple] = []
         #: Every garbage collection: (generation, start, duration).
         self.collections: list[tuple[int, float, float]] = []
-        #: The time of every port open, and of every link up after it.
-        self.opens: list[float] = []
-        self.connections: list[float] = []
         #: The reader thread's scheduling, noted at its first read: policy, priority, CPUs.
         self.reader: dict[str, Any] = {}
         self._marks = [0.0] * 5
@@ -110,14 +100,6 @@ class TimingsRecorder:
         gc.callbacks.append(self._on_gc)
 
     # -- the observer ------------------------------------------------------------------
-
-    def opened(self) -> None:
-        """Note when the port was opened."""
-        self.opens.append(self._clock())
-
-    def connected(self) -> None:
-        """Note when the link was up."""
-        self.connections.append(self._clock())
 
     def read(self, nbytes: int, read_time: float) -> None:
         """Note the read's time and the thread's CPU time."""
@@ -167,9 +149,8 @@ class TimingsRecorder:
         gc.collect()
         full_collection = time.perf_counter() - start
         document = {'fields': list(ROW_FIELDS), 'rows': self.rows,
-                    'collections': self.collections, 'opens': self.opens,
-                    'connections': self.connections,
-                    'reader': self.reader, 'gc_frozen': gc.get_freeze_count(),
+                    'collections': self.collections, 'reader': self.reader,
+                    'gc_frozen': gc.get_freeze_count(),
                     'full_collection': full_collection, 'pid': os.getpid()}
         with open(path, 'w') as handle:
             json.dump(document, handle)

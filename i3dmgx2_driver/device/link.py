@@ -81,7 +81,9 @@ class LinkOptions:
     to itself before its first read. ``records_of`` is the record the
     consumer takes: the node's stream, so that no other record reaches its
     publishers; None (a tool listening to whatever a sensor streams): every
-    record that is no reply.
+    record that is no reply. ``on_lost``, if given, is called in the reader
+    thread once the port is lost (the link's ``error`` said), so that whoever
+    watches the link blocks until then rather than looking again and again.
     """
 
     wireless: bool = True
@@ -91,6 +93,7 @@ class LinkOptions:
     cancel: threading.Event | None = None
     thread_policy: ThreadPolicy = NORMAL_SCHEDULING
     records_of: int | None = None
+    on_lost: Callable[[], None] | None = None
 
 
 class DeviceTimeout(Exception):
@@ -110,6 +113,32 @@ class RadioStats(NamedTuple):
     rssi_min: int
     lqi_mean: float
     rssi_mean: float
+
+
+class RadioMeter:
+    """The radio's link quality so far: latest, lowest and mean LQI and RSSI."""
+
+    def __init__(self) -> None:
+        #: Latest LQI and RSSI, their lowest, their sums and the packets counted.
+        self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
+
+    def note(self, lqi: int, rssi: int) -> None:
+        """Count one packet's LQI and RSSI (reader thread; allocates nothing)."""
+        radio = self._radio
+        radio[0], radio[1] = lqi, rssi
+        radio[2] = min(radio[2], lqi)
+        radio[3] = min(radio[3], rssi)
+        radio[4] += lqi
+        radio[5] += rssi
+        radio[6] += 1
+
+    @property
+    def stats(self) -> RadioStats | None:
+        """Return the quality so far, or None before the first packet."""
+        r = self._radio
+        if not r[6]:
+            return None
+        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
 
 
 class Pending:
@@ -203,7 +232,7 @@ class PortReader:
     def listen_to(self, address: int | None) -> None:
         """Take the data packets of ``address`` alone from now on (None: every node's)."""
         if self.wireless:
-            self.parser.address = address
+            self.parser.listen_to(address)
 
     def unroute(self, address: int | None, link: 'DeviceLink') -> None:
         """Stop handing ``address``'s packets to ``link`` (if they still go to it)."""
@@ -251,7 +280,7 @@ class PortReader:
         if not self._started:
             self._drop_links()  # never started: no thread will
         elif self._thread is not threading.current_thread():
-            self._finished.wait(timeout=2.0)
+            self._finished.wait(timeouts.READER_STOP_WAIT_S)
 
     def abort(self) -> None:
         """Make the reader give up (driver shutdown)."""
@@ -329,9 +358,7 @@ class PortReader:
     def _stray(self, address: int) -> None:
         """Count a packet of an address no link routes (a foreign frame, as the parser would)."""
         self.strays[address] = self.strays.get(address, 0) + 1
-        stats = self.parser.stats
-        stats.good_frames -= 1
-        stats.foreign_frames += 1
+        self.parser.recount_as_foreign()
 
 
 class DeviceLink:
@@ -375,6 +402,7 @@ class DeviceLink:
         self.running = threading.Event()
         self._on_record = on_record
         self._records_of = options.records_of
+        self._on_lost = options.on_lost
         self._cancel = options.cancel if options.cancel is not None else threading.Event()
         #: One exchange at a time with this sensor.
         self._lock = threading.Lock()
@@ -396,8 +424,8 @@ class DeviceLink:
         self.last_data_mono = 0.0
         #: Whether a reply to one of this link's requests arrived.
         self._replied = False
-        #: Latest LQI and RSSI, their lowest, their sums and the packets counted.
-        self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
+        #: The radio's link quality, from the packets received.
+        self.radio = RadioMeter()
 
     # -- what the link knows -------------------------------------------------
 
@@ -406,34 +434,8 @@ class DeviceLink:
         """Whether any packet of this sensor arrived on this link (a record or a reply)."""
         return self._replied or self.records > 0
 
-    @property
-    def radio(self) -> RadioStats | None:
-        """Radio link quality so far, or None before the first packet."""
-        r = self._radio
-        if not r[6]:
-            return None
-        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
-
     def set_streamed(self, code: int | None) -> None:
-        """
-        Say which record the device streams from now on (None: none).
-
-        This and :meth:`on_data` are the one place that tells a reply from a
-        record of the stream, and the stream from any other record. While one
-        streams, only its records keep the stream alive, and a polled reply
-        of its code is both the reply and a record of the stream; while none
-        does, a polled record is a reply only, and any other record says the
-        sensor still streams. What is no reply goes to the consumer if it is
-        of the record the consumer takes (``LinkOptions.records_of``: the
-        node's stream; every record for a tool), and is otherwise counted in
-        :attr:`other_records` (a sensor power-cycled into its EEPROM's
-        auto-start, a reply come after its request gave up). Whoever waits
-        for the stream (the steps that start and stop it, the stall watch)
-        reads :attr:`records` and :attr:`last_data_mono`, and the consumer
-        takes what it is given, instead of comparing codes. A poll of the
-        streamed code while the stream may still run (its stop lost) cannot
-        be told from it: the dialogue's first polls never ask for it.
-        """
+        """Say which record the device streams from now on (None: none), for :meth:`on_data`."""
         self._streamed = code
 
     # -- the reader thread's side --------------------------------------------
@@ -442,8 +444,15 @@ class DeviceLink:
         """
         Take one data packet of this sensor (reader thread, for every sample).
 
-        A reply to the request waiting for it, a record of the stream, both,
-        or another record (counted); this allocates nothing and takes no lock.
+        The one rule that tells them apart (docs/architecture.md, change 3):
+        a packet of the waiting request's code is its reply; while a stream
+        runs, a packet of its code is a record of it (a polled reply of that
+        code is both), and only those keep it alive; while none runs, any
+        record that is no reply says the sensor still streams. What is no
+        reply reaches the consumer if it is of ``LinkOptions.records_of``,
+        else it is counted in :attr:`other_records`. Those who wait for the
+        stream read :attr:`records` and :attr:`last_data_mono` instead of
+        comparing codes. Allocates nothing, takes no lock.
         """
         code = LAYOUT_BY_TYPE[type(event.record)].code
         streamed = self._streamed
@@ -456,14 +465,7 @@ class DeviceLink:
             self.last_data_mono = mono
         lqi = event.lqi
         if lqi is not None:
-            radio = self._radio
-            rssi = event.rssi
-            radio[0], radio[1] = lqi, rssi
-            radio[2] = min(radio[2], lqi)
-            radio[3] = min(radio[3], rssi)
-            radio[4] += lqi
-            radio[5] += rssi
-            radio[6] += 1
+            self.radio.note(lqi, event.rssi)
         pending = self._pending
         if pending is not None and pending.code == code:
             pending.fulfil(event.record)
@@ -500,6 +502,8 @@ class DeviceLink:
         """Take the news that the port is gone (``error`` says why): wake a waiting request."""
         self.error = error
         self._wake()
+        if self._on_lost is not None:
+            self._on_lost()
 
     def _wake(self) -> None:
         pending = self._pending
@@ -618,15 +622,6 @@ class DeviceLink:
         if self._cancel.is_set():
             raise DeviceTimeout('cancelled: the stream is being stopped')
 
-    def ping(self, timeout: float = timeouts.PING_TIMEOUT,
-             retries: int = timeouts.PING_RETRIES) -> bool:
-        """Ask the base station whether the sensor answers over the radio."""
-        for _ in range(retries):
-            answer = self.ping_once(self.address, timeout)
-            if answer is not None:
-                return answer
-        return False
-
     def ping_once(self, address: int, timeout: float) -> bool | None:
         """
         Ping ``address`` once: True (link OK), False (0x21: no such node).
@@ -656,12 +651,6 @@ class DeviceLink:
                 if pending.reply is None or parser.stats.bytes_skipped == skipped:
                     break
             return None if pending.reply is None else bool(pending.reply.ok)
-
-    def stop_streaming(self, repeats: int = 3, gap: float = 0.02) -> None:
-        """Send 0xFA several times: it has no reply and the radio may drop it."""
-        for _ in range(repeats):
-            self.send(commands.stop_continuous())
-            time.sleep(gap)
 
     def retarget(self, address: int | None) -> None:
         """

@@ -27,7 +27,8 @@ from collections.abc import Callable, Sequence
 import math
 from typing import Any, Protocol
 
-from .dialogue import SensorDialogue
+from . import timeouts
+from .firmware import SensorFirmware
 from .link import DeviceLink, DeviceTimeout
 from .port import PortError
 from .status import DeviceStatus
@@ -57,8 +58,9 @@ def format_vector(v: Sequence[float], digits: int = 5) -> str:
     return '(' + ', '.join(f'{x:.{digits}f}' for x in v) + ')'
 
 
-def poll_inertial(link: DeviceLink, count: int = POLLS, timeout: float = 0.5,
-                  retries: int = 3) -> tuple[Vector3, Vector3]:
+def poll_inertial(link: DeviceLink, count: int = POLLS,
+                  timeout: float = timeouts.REQUEST_TIMEOUT,
+                  retries: int = timeouts.REQUEST_RETRIES) -> tuple[Vector3, Vector3]:
     """Poll 0xC2 ``count`` times; return the mean acceleration (g) and rate (rad/s)."""
     replies = [link.request(bytes((layouts.ACCEL_ANG_RATE,)), layouts.ACCEL_ANG_RATE,
                             timeout, retries) for _ in range(count)]
@@ -66,13 +68,19 @@ def poll_inertial(link: DeviceLink, count: int = POLLS, timeout: float = 0.5,
 
 
 class Device(Protocol):
-    """What an operation needs of the device side (the supervisor is one)."""
+    """What an operation needs of the device side (the supervisor is one): operations only."""
 
-    #: What is said to the sensor (the EEPROM writes it counts, for diagnostics).
-    dialogue: SensorDialogue
+    #: The sensor's firmware (0xE9), asked before a gated command is sent.
+    firmware: SensorFirmware
 
     def status(self) -> DeviceStatus:
         """Return the device side's snapshot."""
 
     def run_paused(self, operation: Callable[[DeviceLink], Any]) -> Any:
         """Stop the stream, run ``operation(link)``, start the stream again."""
+
+    def keep_gyro_bias(self, bias: Vector3) -> None:
+        """Write ``bias`` back from now on (at every start, resume and stall recovery)."""
+
+    def store_in_eeprom(self, link: DeviceLink, quantity: int) -> int:
+        """Store a bias (0xD0) on the lent ``link``; return the reply, an EEPROM write counted."""

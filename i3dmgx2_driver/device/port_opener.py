@@ -17,15 +17,14 @@ How a sensor's port is opened, the same for a port of its own and a shared one.
 
 A connection that opens its own port and the port several sensors share
 (shared_port.py) open it the same way: the configured path, baud rate and
-low-latency mode, the hot-path observer told (hot_path.py), the low-latency
-mode logged when it changes, and the reader made with the same raw capture
-and scheduling. :class:`PortOpener` does it, once for both.
+low-latency mode, the low-latency mode logged when it changes, and the
+reader made with the same raw capture and scheduling. :class:`PortOpener` does it, once for both.
 """
 
+from collections.abc import Callable
 import threading
 from typing import Any
 
-from . import hot_path
 from .link import BytesCallback, LinkOptions
 from .observer import LineObserver
 from .port import SerialPort
@@ -52,9 +51,6 @@ class PortOpener:
         """Open the port (raises PortError); tell the observer; log a new low-latency mode."""
         cfg = self.config
         port = SerialPort(cfg.port, cfg.baud, low_latency=cfg.low_latency)
-        timings = hot_path.timings
-        if timings is not None:
-            timings.opened()
         if port.low_latency_state != self.low_latency_state:
             self.low_latency_state = port.low_latency_state
             self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
@@ -62,9 +58,11 @@ class PortOpener:
 
     def reader_options(self, observer: LineObserver | None = None,
                        cancel: threading.Event | None = None,
-                       records_of: int | None = None) -> LinkOptions:
+                       records_of: int | None = None,
+                       on_lost: Callable[[], None] | None = None) -> LinkOptions:
         """Return how the port's reader reads, whom it tells, what its link's consumer takes."""
         cfg = self.config
         return LinkOptions(wireless=cfg.wireless, on_bytes=self._on_bytes,
                            observer=observer, cancel=cancel,
-                           thread_policy=cfg.thread_policy, records_of=records_of)
+                           thread_policy=cfg.thread_policy, records_of=records_of,
+                           on_lost=on_lost)

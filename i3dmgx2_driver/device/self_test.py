@@ -175,7 +175,7 @@ class SelfTestRun:
             steps.append(Step('magnetometer responds (0xC7)', True, detail))
         except DeviceTimeout as exc:
             steps.append(Step('magnetometer responds (0xC7)', False, str(exc)))
-        steps.append(temperature_step(link, self._device.dialogue.firmware))
+        steps.append(temperature_step(link, self._device.firmware))
         if accel is not None:
             steps.append(gravity_step(accel))
         else:

@@ -42,6 +42,24 @@ from ..codec import commands, layouts
 from ..codec.data_rate import RATE_DIVIDER_ADDRESS
 
 
+def ping(link: DeviceLink, timeout: float = timeouts.PING_TIMEOUT,
+         retries: int = timeouts.PING_RETRIES) -> bool:
+    """Ask the base station whether the sensor answers over the radio (``retries`` pings)."""
+    for _ in range(retries):
+        answer = link.ping_once(link.address, timeout)
+        if answer is not None:
+            return answer
+    return False
+
+
+def say_stop(link: DeviceLink, repeats: int = timeouts.STOP_REPEATS,
+             gap: float = timeouts.STOP_GAP_S) -> None:
+    """Send 0xFA ``repeats`` times, ``gap`` s apart: it has no reply and the radio may drop it."""
+    for _ in range(repeats):
+        link.send(commands.stop_continuous())
+        time.sleep(gap)
+
+
 class SensorSteps:
     """
     Speak to a sensor over whichever link each step is given.
@@ -75,7 +93,7 @@ class SensorSteps:
 
     def stop(self, link: DeviceLink) -> None:
         """Send 0xFA (repeated: it has no reply); from now on a polled record is a reply only."""
-        link.stop_streaming()
+        say_stop(link)
         link.set_streamed(None)
         time.sleep(timeouts.STOP_SETTLE_S)
 
@@ -90,7 +108,7 @@ class SensorSteps:
         link.set_streamed(None)
         for _ in range(timeouts.STOP_TRIES):
             since = time.monotonic()
-            link.stop_streaming()
+            say_stop(link)
             if self.wait_quiet(link, since, period) is not None:
                 return True
         return False

@@ -32,6 +32,7 @@ recovery stops all sensors and brings all back, and a sensor switched off
 costs the others nothing but the time its requests hold the port.
 """
 
+from collections.abc import Callable
 import threading
 from typing import Any
 
@@ -69,11 +70,13 @@ class SharedPort:
         return self._reader
 
     def attach(self, address: int, on_record: RecordCallback,
-               cancel: threading.Event, records_of: int | None = None) -> DeviceLink:
+               cancel: threading.Event, records_of: int | None = None,
+               on_lost: Callable[[], None] | None = None) -> DeviceLink:
         """
         Return a new link to the sensor at ``address``, opening the port if need be.
 
-        ``on_record`` takes the records of ``records_of`` (the sensor's stream).
+        ``on_record`` takes the records of ``records_of`` (the sensor's stream);
+        ``on_lost`` is told when the port is lost (LinkOptions).
 
         The link receives nothing until it is started (its address routed).
         Raises PortError when the port cannot be opened.
@@ -90,7 +93,8 @@ class SharedPort:
                 self.opens += 1
             link = DeviceLink(reader.port, address, on_record,
                               LinkOptions(wireless=cfg.wireless, cancel=cancel,
-                                          records_of=records_of), reader=reader)
+                                          records_of=records_of, on_lost=on_lost),
+                              reader=reader)
             self._links.add(link)
             return link
 

@@ -17,37 +17,22 @@
 Keep the device streaming for the life of the driver, plain or managed.
 
 :class:`DeviceSupervisor` is what the node holds, and it is the one place
-that decides about the connection: it holds the one open link, takes the
-start-up steps on it, runs the thread that keeps the stream going and lends
-the sensor to a service. What it builds on, each read and tested alone:
+that decides about the connection: when a link is wanted, what is done when
+one fails, and when the sensor is lent to a service. What it decides with,
+each read and tested alone:
 
 - ``dialogue.py``: :class:`~.dialogue.SensorDialogue`, what to say to the
   sensor (quiet, identity, rate, continuous mode, resume); no thread.
-- ``link.py``: :class:`~.link.DeviceLink`, one open port and its reader.
+- ``current_link.py``: :class:`~.current_link.CurrentLink`, the one open
+  link (who owns it, under a lock) and what outlives each link.
+- ``bring_up.py``: :class:`~.bring_up.BringUp`, the steps from an open port
+  to a stream, each moving the report's state, the same for the thread and
+  the phases.
 - ``watchdog.py``: when a stream has stalled and when to try the port again
   (the reconnect back-off), decided on a clock passed in.
 - ``status.py``: :class:`~.status.DeviceReport`, the state and counters,
   changed in one place each; :meth:`DeviceSupervisor.status` makes the one
   immutable :class:`~.status.DeviceStatus` that diagnostics and services read.
-
-**The link.** The supervisor thread opens links; a lifecycle phase or
-:meth:`~DeviceSupervisor.stop` on another thread may close the current one
-at any moment, even while a new one is being opened. A lock decides who owns
-the link, and a link opened after the driver was told to stop is closed at
-once. Every link is made the same way (its line observer, the cancel event,
-the reader thread's scheduling); what outlives a link is kept here: how many
-were opened, the parser counters and the records that were not the
-stream's (each link's ``other_records``) summed over all of them, what the port
-granted of low-latency mode and the reader of its scheduling (each logged
-when it changes, not at every reconnect).
-
-**The start-up steps.** The thread and the lifecycle phases take the same
-steps in different orders and with different answers to failure: the thread
-retries forever, a phase fails with the reason. Each step (initialise,
-resume, begin the stream, take it up again, quiet it) has the dialogue say
-what to say, starts the reader when needed (letting the consumer re-anchor
-before a new link's first record) and moves the report's state, so that the
-thread and the phases cannot tell a different story about the same step.
 
 **The thread.** The plain node's :meth:`~DeviceSupervisor.start` runs the
 whole bring-up in the ``gx2-supervisor`` thread, retrying forever instead of
@@ -93,13 +78,12 @@ import logging
 import threading
 from typing import Any
 
-from . import hot_path
+from .bring_up import BringUp
+from .current_link import CurrentLink
 from .dialogue import SensorDialogue
 from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
-from .observer import LineObserver
 from .port import PortDisconnected, PortError, PortUnusable
 from .port_opener import PortOpener
-from .realtime import PolicyOutcome
 from .settings import DeviceConfig
 from .shared_port import SharedPort
 from .status import DeviceReport, DeviceStatus, State
@@ -111,25 +95,15 @@ class DeviceSupervisor:
     """
     Own the connection to one device for the life of the driver.
 
-    ``on_record`` runs in the reader thread for every streamed record;
-    ``on_connect`` runs in the supervisor thread each time a link is made,
-    before its first record reaches the consumer (the node checks its clock
-    there). ``log`` is any object with ``debug/info/warning/error`` methods
-    (a ``logging.Logger`` by default; the node passes its rclpy logger).
-    ``on_fatal`` runs in the supervisor thread, once, when the port can never
-    work (``status().fatal_error`` then says why; without it the error is
-    logged); the supervisor has stopped by then. ``on_bytes``, if given,
-    runs in the reader thread with every read's raw bytes and read time (a
-    raw capture). The hot path's observer (hot_path.py), when on, is told
-    every port open and every link up (right after ``on_connect``), and by
-    every link the read and the parse of each sample. ``shared``, if given,
-    is the port this sensor shares with others behind the same base station
-    (shared_port.py): the links come from it and go back to it, the port is
-    its to open and close, no line observer watches it, and this supervisor
-    keeps only its sensor streaming (a supervisor per sensor, each with its
-    own thread).
-    ``on_gyro_bias`` runs each time the dialogue wrote its kept gyro bias
-    and the sensor echoed it (at start, resume and after a stall).
+    The callbacks: ``on_record`` (reader thread, every record of the
+    stream), ``on_connect`` (before a new link's first record: the node
+    re-anchors its clock), ``on_fatal`` (once, the port can never work;
+    default: logged), ``on_bytes`` (reader thread, every read: a raw
+    capture), ``on_gyro_bias`` (the kept bias written and echoed),
+    ``on_stream_known`` (the tick step and the bias flag, bring_up.py). ``log``
+    has ``debug/info/warning/error``. ``shared``: the port this sensor
+    shares behind one base station (shared_port.py), which opens and closes
+    it; no line observer watches it.
     """
 
     def __init__(self, config: DeviceConfig, on_record: RecordCallback,
@@ -137,7 +111,8 @@ class DeviceSupervisor:
                  on_fatal: Callable[[PortError], None] | None = None,
                  on_bytes: BytesCallback | None = None,
                  shared: SharedPort | None = None,
-                 on_gyro_bias: Callable[[], None] | None = None) -> None:
+                 on_gyro_bias: Callable[[], None] | None = None,
+                 on_stream_known: Callable[[int | None, bool], None] | None = None) -> None:
         self.config = config
         self._shared = shared
         log = log or logging.getLogger('i3dmgx2_driver')
@@ -150,57 +125,50 @@ class DeviceSupervisor:
         self._cancel = threading.Event()
         #: Set while a service's operation has the sensor: the stream is quiet on purpose.
         self._paused = threading.Event()
+        #: Set when the watch must look before its stall deadline: a cancel, a lost port,
+        #: the end of a pause. Between them it sleeps (idle costs nothing, docs/cpu.md).
+        self._attention = threading.Event()
         self._report = DeviceReport(log)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
         self.dialogue = SensorDialogue(config, log, self._report.warn, self._cancel,
                                        on_gyro_bias)
-        self._on_record = on_record
-        self._on_connect = on_connect
+        #: Its firmware, as the dialogue reads it: what a service may ask of the sensor.
+        self.firmware = self.dialogue.firmware
         self._on_fatal = on_fatal or (lambda error: log.error(str(error)))
-        self._opener = PortOpener(config, log, on_bytes)
+        #: The one open link, and what outlives each.
+        self._current = CurrentLink(config, PortOpener(config, log, on_bytes), on_record,
+                                    self._cancel, self._attention.set, self._report.finding,
+                                    shared)
+        #: The steps from an open port to a stream.
+        self._steps = BringUp(self.dialogue, self._report, self._current, self._cancel,
+                              on_connect, log, on_stream_known)
         self._reopen_wait = ReopenWait(config.port, config.reconnect_interval, self._cancel.wait)
         self._thread: threading.Thread | None = None
-        self._link: DeviceLink | None = None
-        #: Guards who owns ``_link``: the thread opening one, or a caller releasing it.
-        self._lock = threading.Lock()
-        self._observer: LineObserver | None = None
-        self._policy_logged = PolicyOutcome()
-        #: Links opened so far, and how many of them were reconnections.
-        self._connections = 0
-        self._reconnects = 0
-        self._low_latency_state = ''
-        self._parser_totals: dict[str, int] = {}
-        #: Records of closed links that were neither a reply nor of the stream.
-        self._other_records = 0
 
     # -- what others read ---------------------------------------------------------------
 
     def status(self) -> DeviceStatus:
         """Return the device side as one snapshot (from any thread)."""
-        dialogue, cfg, link = self.dialogue, self.config, self._link
+        dialogue, cfg = self.dialogue, self.config
         line_warning = dialogue.line_warning
         if self._shared is not None and dialogue.divider and not line_warning:
             line_warning = self._shared.line_warning(cfg.address, cfg.stream,
                                                      dialogue.expected_rate_hz)
         return DeviceStatus(
-            **self._report.fields(), port=cfg.port, address=cfg.address,
-            wireless=cfg.wireless, connections=self._connections,
-            reconnects=self._reconnects, low_latency_state=self._low_latency_state,
-            parser=self._parser_stats(), radio=link.radio if link is not None else None,
-            connected=link is not None, ping_ok=dialogue.ping_ok, info=dialogue.info,
-            divider=dialogue.divider, expected_rate_hz=dialogue.expected_rate_hz,
-            eeprom_writes=dialogue.eeprom_writes, line_use=dialogue.line_use,
-            line_warning=line_warning, strays=self._strays(),
-            other_records=self._other_records + (link.other_records if link is not None else 0))
+            **self._report.fields(), **self._current.totals(), port=cfg.port,
+            address=cfg.address, wireless=cfg.wireless, ping_ok=dialogue.ping_ok,
+            info=dialogue.info, divider=dialogue.divider,
+            expected_rate_hz=dialogue.expected_rate_hz, eeprom_writes=dialogue.eeprom_writes,
+            line_use=dialogue.line_use, line_warning=line_warning)
 
     @property
     def link(self) -> DeviceLink | None:
         """Return the current link, or None while disconnected."""
-        return self._link
+        return self._current.link
 
     def streaming_link(self) -> DeviceLink | None:
         """Return the link while the device streams (a poll may share it), else None."""
-        link = self._link
+        link = self._current.link
         return link if link is not None and self._report.state is State.STREAMING else None
 
     # -- the plain node: one thread for everything ----------------------------------------
@@ -208,16 +176,17 @@ class DeviceSupervisor:
     def start(self) -> None:
         """Start the supervisor thread: open, initialise, stream, recover, forever."""
         self._cancel.clear()
-        self._start_thread(self._link)
+        self._start_thread(self._current.link)
 
     def stop(self, timeout: float = 1.5) -> None:
         """Stop streaming (0xFA), stop the threads, close the port."""
         self._cancel.set()
-        link = self._link
+        self._attention.set()  # the watch sees it at once
+        link = self._current.link
         if link is not None:
             link.abort()  # its reader and any waiting request give up
         self.join(timeout)
-        self._release(send_stop=True)
+        self._current.release(send_stop=True)
         self._report.enter(State.STOPPED)
 
     def join(self, timeout: float) -> bool:
@@ -245,15 +214,15 @@ class DeviceSupervisor:
         a second.
         """
         self._cancel.clear()
-        link = self._open_link()
+        link = self._current.open_link()
         try:
-            self._initialise(link, require_answer=True)
+            self._steps.initialise(link, require_answer=True)
         except BaseException:
-            self._release()
+            self._current.release()
             self._report.enter(State.STOPPED)
             raise
         self._report.enter(State.READY)
-        self._observe(False)
+        self._current.observe(False)
 
     def start_streaming(self) -> None:
         """
@@ -268,21 +237,22 @@ class DeviceSupervisor:
         if self._running():
             raise DeviceTimeout('the supervisor is still stopping: try again')
         self._cancel.clear()
-        self._observe(True)
-        link = self._link
+        self._current.observe(True)
+        link = self._current.link
         try:
             if link is None or link.disconnected.is_set():
-                self._release()
-                link = self._open_link()
-                self._initialise(link)
-            self._begin_stream(link)
+                self._current.release()
+                link = self._current.open_link()
+                self._steps.initialise(link)
+            self._steps.begin_stream(link)
         except PortError:
-            self._release()
+            self._current.release()
             self._report.enter(State.DISCONNECTED)
             raise
         except DeviceTimeout:
-            if self._link is not None:
-                self._quiet(self._link)
+            current = self._current.link
+            if current is not None:
+                self._steps.quiet(current)
             raise
         if self._cancel.is_set():
             # stop() came while the stream was starting: it has the port; no thread.
@@ -297,7 +267,7 @@ class DeviceSupervisor:
         configure or activate is retried in the background (it may be
         switched on later) while the others stream.
         """
-        self._release()
+        self._current.release()
         self._report.enter(State.DISCONNECTED)
         self.start()
 
@@ -309,10 +279,11 @@ class DeviceSupervisor:
         streaming it stays closed (DISCONNECTED) until the next start.
         """
         self._cancel.set()
+        self._attention.set()  # the watch sees it at once
         self.join(timeout)
-        link = self._link
+        link = self._current.link
         if link is not None and not link.disconnected.is_set():
-            self._quiet(link)
+            self._steps.quiet(link)
 
     # -- for services: the sensor lent for an operation -----------------------------------
 
@@ -325,22 +296,31 @@ class DeviceSupervisor:
         unless the device streams (or has stalled); PortError or
         DeviceTimeout from the operation or the restart.
         """
-        link = self._link
+        link = self._current.link
         state = self._report.state
         if link is None or state not in (State.STREAMING, State.STALLED):
             raise DeviceTimeout(f'device not streaming (state: {state.value})')
         self._paused.set()
         self._report.enter(State.PAUSED)
-        self._observe(False)  # a long operation (a 30 s bias capture) is quiet
+        self._current.observe(False)  # a long operation (a 30 s bias capture) is quiet
         try:
             return self.dialogue.run_exclusive(link, operation)
         finally:
             try:
-                self._observe(True)
+                self._current.observe(True)
                 if not self._cancel.is_set():
-                    self._restart_stream(link)
+                    self._steps.restart_stream(link)
             finally:
                 self._paused.clear()
+                self._attention.set()
+
+    def keep_gyro_bias(self, bias: tuple[float, float, float]) -> None:
+        """Have the dialogue write ``bias`` back from now on (an accepted capture's)."""
+        self.dialogue.keep_gyro_bias(bias)
+
+    def store_in_eeprom(self, link: DeviceLink, quantity: int) -> int:
+        """Store a bias in the sensor's EEPROM on the lent ``link`` (the dialogue counts it)."""
+        return self.dialogue.transfer_to_non_volatile(link, quantity)
 
     # -- the supervisor thread: stream and recover ---------------------------------------
 
@@ -362,10 +342,10 @@ class DeviceSupervisor:
             try:
                 if link is None:
                     report.enter(State.CONNECTING)
-                    link = self._open_link()
-                    if not self._resume(link):
-                        self._initialise(link)
-                        self._begin_stream(link)
+                    link = self._current.open_link()
+                    if not self._steps.resume(link):
+                        self._steps.initialise(link)
+                        self._steps.begin_stream(link)
                 self._watch(link)
                 stalled = True
             except PortUnusable as exc:
@@ -375,7 +355,7 @@ class DeviceSupervisor:
                     self._say(exc)
             if self._cancel.is_set():
                 break  # whoever stopped us decides about the port
-            self._release()
+            self._current.release()
             link = None
             report.enter(State.DISCONNECTED)
             self._reopen_wait(after_stall=stalled)
@@ -396,13 +376,21 @@ class DeviceSupervisor:
         """Give up for good: keep why, stop, and let the entry point say it and exit."""
         self._report.failed(exc)
         self._cancel.set()
+        self._attention.set()  # the watch sees it at once
         self._on_fatal(exc)
 
     def _watch(self, link: DeviceLink) -> None:
         """Return when the link is lost or cannot be revived; recover stalls."""
         report = self._report
         watch = StallWatch(self.config.stall_timeout, self.dialogue.period)
-        while not self._cancel.wait(watch.tick):
+        while True:
+            # Asleep until the stream would have stalled, or until told (a paused
+            # stream is quiet on purpose: until the pause ends).
+            self._attention.wait(None if self._paused.is_set()
+                                 else watch.next_look(link.last_data_mono))
+            self._attention.clear()  # what set it is looked at below
+            if self._cancel.is_set():
+                return
             if link.disconnected.is_set():
                 raise PortDisconnected(link.error or 'device disconnected')
             if self._paused.is_set():
@@ -417,178 +405,9 @@ class DeviceSupervisor:
                 # A sensor power-cycled meanwhile (a battery swap) lost the biases
                 # in its RAM: the kept ones go back before its stream does.
                 self.dialogue.write_biases(link)
-                resumed = self._restart_stream(link)
+                resumed = self._steps.restart_stream(link)
             except DeviceTimeout:
                 report.warn('stall', 'stream did not resume: reopening the port', EVENT_PERIOD)
                 return
             if resumed:
                 report.log.info('stream resumed')
-
-    # -- the steps from an open port to a stream ----------------------------------------
-
-    def _initialise(self, link: DeviceLink, require_answer: bool = False) -> None:
-        """Quiet the device, start reading, and have the dialogue learn what it is."""
-        self._report.enter(State.INITIALISING)
-        self.dialogue.quiet(link)
-        if link.running.is_set():
-            # The reader runs already (a resume that was not confirmed): anchor afresh.
-            self._anchor()
-        else:
-            self._start_reader(link)
-        self.dialogue.initialise(link, require_answer, self._observed)
-
-    def _resume(self, link: DeviceLink) -> bool:
-        """
-        Resume a known sensor after a reconnect, or return False for the full dialogue.
-
-        Returns False, with nothing done or the reader running, when the
-        driver knows no sensor yet (or must not resume), or when the sensor
-        does not answer or another serial number does.
-        """
-        dialogue = self.dialogue
-        if not dialogue.can_resume():
-            return False
-        self._report.enter(State.INITIALISING)
-        dialogue.expect_stream(link)
-        self._start_reader(link)
-        if not dialogue.resume(link):
-            return False
-        if not self._cancel.is_set():
-            self._report.streaming('resumed')
-        return True
-
-    def _begin_stream(self, link: DeviceLink) -> None:
-        """Start continuous mode on an initialised link; announce it once records arrive."""
-        if self.dialogue.start_continuous(link):
-            self._report.streaming('full')
-            self.dialogue.announce_streaming()
-
-    def _restart_stream(self, link: DeviceLink) -> bool:
-        """
-        Ask for the stream again on the same link (after a stall or a pause).
-
-        True once records arrive again, False if cancelled first; raises
-        DeviceTimeout when none comes, PortDisconnected if the port goes.
-        """
-        if not self.dialogue.start_continuous(link):
-            return False
-        self._report.streaming()
-        return True
-
-    def _quiet(self, link: DeviceLink) -> None:
-        """Stop the device's stream and drop what is in flight: READY, or DISCONNECTED."""
-        try:
-            self.dialogue.quiet(link)
-            self._report.enter(State.READY)
-            self._observe(False)
-        except PortError as exc:
-            self._report.warn(type(exc).__name__, str(exc))
-            self._release()
-            self._report.enter(State.DISCONNECTED)
-
-    def _anchor(self) -> None:
-        """Let the consumer re-anchor before the first record of a new link reaches it."""
-        if self._on_connect is not None:
-            self._on_connect()
-        timings = hot_path.timings
-        if timings is not None:
-            timings.connected()
-
-    def _start_reader(self, link: DeviceLink) -> None:
-        """Anchor the consumer, start the reader thread; log its scheduling when it changes."""
-        self._anchor()
-        link.start()
-        if not link.running.wait(1.0):
-            return
-        outcome = link.policy_outcome
-        if outcome != self._policy_logged:
-            self._policy_logged = outcome
-            if outcome.applied:
-                self._log.info(f'reader thread: {", ".join(outcome.applied)}')
-            for refusal in outcome.refused:
-                self._log.warning(refusal)
-
-    # -- the one open link ---------------------------------------------------------------
-
-    def _open_link(self) -> DeviceLink:
-        """Open the port and make it the current link (reader not started); raise PortError."""
-        cfg = self.config
-        if self._shared is not None:
-            link = self._shared.attach(cfg.address, self._on_record, self._cancel, cfg.stream)
-            self._low_latency_state = self._shared.low_latency_state
-            return self._own(link)
-        port = self._opener.open_port()
-        self._low_latency_state = self._opener.low_latency_state
-        observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
-                                                 cfg.baud, self._report.finding)
-        link = DeviceLink(port, cfg.address, self._on_record,
-                          self._opener.reader_options(observer, self._cancel, cfg.stream))
-        return self._own(link)
-
-    def _own(self, link: DeviceLink) -> DeviceLink:
-        """Make ``link`` the current one, unless the driver was told to stop meanwhile."""
-        cfg = self.config
-        with self._lock:
-            if self._cancel.is_set():
-                # Stopped while opening: the caller has released the link already.
-                self._close(link)
-                raise PortDisconnected(f'{cfg.port}: closed, the driver is stopping')
-            self._link = link
-        self._connections += 1
-        if self._connections > 1:
-            self._reconnects += 1
-        return link
-
-    def _release(self, send_stop: bool = False) -> None:
-        """Close the current link, if any (once, whichever thread gets here first)."""
-        with self._lock:
-            link, self._link = self._link, None
-        if link is None:
-            return
-        link.stop()
-        if send_stop:
-            try:
-                link.stop_streaming(repeats=2, gap=0.01)
-            except PortError:
-                pass
-        self._close(link)
-        self._other_records += link.other_records
-        if self._shared is None:
-            for key, value in link.parser.stats.as_dict().items():
-                self._parser_totals[key] = self._parser_totals.get(key, 0) + value
-
-    def _close(self, link: DeviceLink) -> None:
-        """Close the link's port, or hand the link back to the shared one."""
-        if self._shared is not None:
-            self._shared.detach(link)
-        else:
-            link.port.close()
-
-    def _parser_stats(self) -> dict[str, int]:
-        """Parser counters summed over every connection so far (shared: the open port's)."""
-        if self._shared is not None:
-            return self._shared.parser_stats()
-        totals = dict(self._parser_totals)
-        link = self._link
-        if link is not None:
-            for key, value in link.parser.stats.as_dict().items():
-                totals[key] = totals.get(key, 0) + value
-        return totals
-
-    def _strays(self) -> dict[int, int]:
-        """Packets of addresses no sensor on a shared port has, by address (else empty)."""
-        return self._shared.strays() if self._shared is not None else {}
-
-    def _observe(self, on: bool) -> None:
-        """Resume or pause the line observer: silence is a symptom only while we ask."""
-        observer = self._observer
-        if observer is not None:
-            if on:
-                observer.resume()
-            else:
-                observer.pause()
-
-    def _observed(self) -> str:
-        """Say what the line observer last found on this link ('' if nothing)."""
-        seen = self._observer.last_finding if self._observer is not None else None
-        return seen.message if seen is not None else ''

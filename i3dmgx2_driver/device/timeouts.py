@@ -63,6 +63,23 @@ STOP_TRIES = 3
 STOP_SETTLE_S = 0.05
 #: No record for this long (s): the stream has stalled (the node's ``read_timeout``).
 STALL_TIMEOUT = 1.0
+#: The first polls before continuous mode (dialogue.py): tries of each, short of the
+#: usual, since the sensor may still be waking and continuous mode is asked after anyway.
+FIRST_POLL_RETRIES = 2
+#: 0xFA has no reply: said this many times, this far apart (s), the radio may drop one.
+STOP_REPEATS = 3
+STOP_GAP_S = 0.02
+#: The same when the driver stops and closes the port: its stop has a deadline.
+STOP_REPEATS_AT_EXIT = 2
+STOP_GAP_AT_EXIT_S = 0.01
+#: The temperature poll while streaming (s per try, and tries): short, the next poll
+#: tries again.
+TEMPERATURE_TIMEOUT = 0.3
+TEMPERATURE_RETRIES = 2
+#: How long a port's reader is waited for to start (s), and to end once told to stop
+#: (a read returns within its read timeout, far less).
+READER_START_WAIT_S = 1.0
+READER_STOP_WAIT_S = 2.0
 #: discover: the first pings, until a base station has answered one (s per ping).
 PROBE_PING_TIMEOUT = 0.5
 #: discover: a ping once a base station is known to be there (s).
@@ -70,6 +87,10 @@ PROBE_ANSWER_TIMEOUT = 1.0
 #: discover: a command's reply, per try (s), and the tries.
 PROBE_REQUEST_TIMEOUT = 0.3
 PROBE_REQUEST_RETRIES = 3
+#: discover: how long it listens for sensors that stream already (s; one packet is enough).
+PROBE_LISTEN_S = 0.5
+#: discover: this many unanswered pings first mean no base station on the port.
+PROBE_SILENT_PINGS = 2
 
 #: What bringup measures, by the names of its round trips.
 PING = 'ping'
@@ -104,15 +125,16 @@ def radio_timeouts() -> tuple[RadioTimeout, ...]:
                      "discover's pings through a known base station",
                      f'PROBE_ANSWER_TIMEOUT in {here}'),
         RadioTimeout('REQUEST_TIMEOUT', REQUEST_TIMEOUT, COMMAND,
-                     "the node's commands (per try)", f'REQUEST_TIMEOUT in {here}'),
+                     "the node's commands (per try)", 'the node parameter request_timeout'),
         RadioTimeout('RESUME_TIMEOUT', RESUME_TIMEOUT, COMMAND,
-                     "the node's serial-number read on a reconnect (per try; "
-                     'fast_reconnect false avoids it)', f'RESUME_TIMEOUT in {here}'),
+                     "the node's serial-number read on a reconnect (per try; the node "
+                     'parameter fast_reconnect false avoids it)',
+                     'the node parameter resume_timeout'),
         RadioTimeout('PROBE_REQUEST_TIMEOUT', PROBE_REQUEST_TIMEOUT, COMMAND,
                      "discover's commands (per try)", f'PROBE_REQUEST_TIMEOUT in {here}'),
         RadioTimeout('REQUEST_TIMEOUT', REQUEST_TIMEOUT, CONTINUOUS_START,
                      "the node's continuous-mode request (per try)",
-                     f'REQUEST_TIMEOUT in {here}'),
+                     'the node parameter request_timeout'),
         RadioTimeout('STALL_TIMEOUT', STALL_TIMEOUT, RECORD_GAP,
                      "the node's stall watch", 'the node parameter read_timeout'),
     )

@@ -22,7 +22,9 @@ one place and tested with a fake clock, without a thread, a port or a wait:
 
 - :class:`StallWatch`: the stream has stalled when no record came for the
   stall timeout, or three sample periods if those are longer (a slow rate
-  is no stall); it is looked at four times per timeout, at most every 50 ms.
+  is no stall). It says when to look next (the moment the stream would have
+  stalled), so that the supervisor thread sleeps until then: while records
+  flow, it wakes about once per stall timeout.
 - :class:`ReopenWait`: the reconnect back-off. After a failure the port is
   tried again ``reconnect_interval`` later, or sooner: an unplugged
   adapter's device node goes and comes back when it is plugged in again, so
@@ -37,6 +39,8 @@ import time
 
 #: How often a missing port is looked for (s), so that it is reopened as soon as it is back.
 PORT_WATCH_S = 0.02
+#: How long after the stall deadline the watch looks (s), so that it is past when looked at.
+LOOK_MARGIN_S = 0.005
 #: Pause between a port reappearing and opening it (s): udev sets its permissions meanwhile.
 PORT_SETTLE_S = 0.02
 
@@ -48,9 +52,11 @@ class StallWatch:
                  clock: Callable[[], float] = time.monotonic) -> None:
         #: Silence (s) after which the stream has stalled.
         self.stall_after = max(stall_timeout, 3 * period)
-        #: How often to look (s).
-        self.tick = min(0.05, self.stall_after / 4)
         self._clock = clock
+
+    def next_look(self, last_data: float) -> float:
+        """Seconds until the stream has stalled if nothing comes after ``last_data``."""
+        return max(last_data + self.stall_after - self._clock(), 0.0) + LOOK_MARGIN_S
 
     def stalled(self, last_data: float) -> bool:
         """Whether no record came for longer than ``stall_after`` (``last_data``: monotonic)."""

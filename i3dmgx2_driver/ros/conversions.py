@@ -36,11 +36,11 @@ start-up (:meth:`MessageFactory.serialized_matches`), and the tests check them
 on many records of every stream.
 """
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 import math
 from operator import attrgetter
-from typing import Any
+from typing import Any, NamedTuple
 
 from sensor_msgs.msg import Imu, MagneticField
 
@@ -228,8 +228,11 @@ class MessageFactory:
             *q, *q_cov, *self.angular_velocity(record), *self._angular_velocity_cov,
             *self.linear_acceleration(record), *self._linear_acceleration_cov)
 
-    def mag_cdr(self, mag_gauss: Sequence[float], stamp: float) -> bytes:
+    def mag_cdr(self, record: Any, stamp: float) -> bytes | None:
         """Return the MagneticField message of :meth:`fill_mag`, serialized (CDR bytes)."""
+        mag_gauss = record.mag
+        if not mag_is_valid(mag_gauss):
+            return None
         sec, nanosec = stamp_parts(stamp)
         m = body_vector(mag_gauss, self.convention)
         t = TESLA_PER_GAUSS
@@ -237,19 +240,32 @@ class MessageFactory:
             CDR_LE, sec, nanosec, len(self._frame_cdr), self._frame_cdr,
             m[0] * t, m[1] * t, m[2] * t, *self._magnetic_field_cov)
 
+    def packer(self, name: str, serialized: bool) -> Callable[[Any, float], Any]:
+        """
+        Return the packer ``name`` of a record topic (publishers.RECORD_TOPICS).
+
+        ``<name>_cdr`` when ``serialized`` (CDR bytes), else ``fill_<name>``
+        (the message object); either returns None for a record with nothing
+        to publish on that topic (a field of NaN: no new reading).
+        """
+        return getattr(self, f'{name}_cdr' if serialized else f'fill_{name}')
+
     def serialized_matches(self) -> bool:
         """Tell whether :meth:`imu_cdr` and :meth:`mag_cdr` read back as the messages (cdr.py)."""
         stamp = 1_700_000_000.123456789
         probes = probe_records(self.stream)
-        field = _PROBE_FIELDS['mag']
+        with_field = _FieldRecord(_PROBE_FIELDS['mag'])
         # A generator: fill_imu refills one message, compared before the next fill.
         pairs = ((self.imu_cdr(record, stamp), self.fill_imu(record, stamp))
                  for record in (*probes, probes[0]))
         return reads_back(pairs) and reads_back(
-            [(self.mag_cdr(field, stamp), self.fill_mag(field, stamp))])
+            [(self.mag_cdr(with_field, stamp), self.fill_mag(with_field, stamp))])
 
-    def fill_mag(self, mag_gauss: Sequence[float], stamp: float) -> MagneticField:
-        """Refill and return the MagneticField message (caller skips NaN)."""
+    def fill_mag(self, record: Any, stamp: float) -> MagneticField | None:
+        """Refill and return the MagneticField message of ``record``; None: no new reading."""
+        mag_gauss = record.mag
+        if not mag_is_valid(mag_gauss):
+            return None
         msg = self.mag
         set_stamp(msg.header, stamp)
         m = body_vector(mag_gauss, self.convention)
@@ -258,6 +274,12 @@ class MessageFactory:
         f.y = m[1] * TESLA_PER_GAUSS
         f.z = m[2] * TESLA_PER_GAUSS
         return msg
+
+
+class _FieldRecord(NamedTuple):
+    """A record with a field alone: what the MagneticField packers read of one."""
+
+    mag: tuple[float, float, float]
 
 
 def mag_is_valid(mag_gauss: Sequence[float]) -> bool:

@@ -15,21 +15,28 @@
 """
 The driver's health on ``/diagnostics``, once a second.
 
-:class:`DiagnosticsPublisher` is a 1 Hz timer that reads the node's
+:class:`DiagnosticsPublisher` ticks once a second: it reads the node's
 counters, keeps what the previous tick saw (to measure rates and growth
 over the last period), builds the statuses (diagnostic_statuses.py) and
 publishes one ``DiagnosticArray``. ``diagnostic_updater`` is not used: it is
 not available as a wheel, and the few lines it would save are these.
+
+The tick runs in a thread of its own (``gx2-diagnostics``), not as an
+executor timer: a timer's callback wakes the multi-threaded executor three
+times (ready, taken, done) and a worker besides, which was most of what the
+idle node woke for beside the reader (docs/cpu.md). The thread sleeps
+between ticks and keeps ticking during a long service call.
 """
 
 from collections.abc import Callable
+import threading
 import time
+import traceback
 from typing import Any
 import weakref
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from .diagnostic_statuses import (
@@ -42,6 +49,8 @@ from ..device.status import DeviceStatus, RadioStats, State
 
 #: Period of the diagnostics (s).
 PERIOD = 1.0
+#: How long a stop waits for a tick under way (s).
+STOP_WAIT = 0.5
 
 
 class DiagnosticsPublisher:
@@ -53,8 +62,8 @@ class DiagnosticsPublisher:
     clock status, services, temperature and capture too, never changed), or
     None while there is none (a managed node before configure).
     ``lifecycle``, for a managed node, returns its lifecycle state's label,
-    reported first. The timer runs in its own callback group, so a
-    multi-threaded executor keeps it ticking during a long service call.
+    reported first. :meth:`stop` ends its thread (before the node is
+    destroyed).
     ``sensor``, one of several sensors' names, goes into every status name
     (``i3dmgx2_driver: left_arm: stream``, the node's name first): one
     publisher per sensor.
@@ -74,8 +83,28 @@ class DiagnosticsPublisher:
         self._last_tick = time.monotonic()
         self._forget()
         self.publisher = create_publisher(node, DiagnosticArray, '/diagnostics', 10)
-        self.timer = node.create_timer(period, self.tick,
-                                       callback_group=MutuallyExclusiveCallbackGroup())
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name='gx2-diagnostics', daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """End the ticks; a tick under way finishes first (it takes milliseconds)."""
+        self._stop.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join(STOP_WAIT)
+
+    def _run(self) -> None:
+        due = time.monotonic() + self.period
+        failed = False
+        while not self._stop.wait(max(due - time.monotonic(), 0.0)):
+            due = max(due + self.period, time.monotonic())
+            try:
+                self.tick()
+            except Exception:  # noqa: BLE001 - said once; the stream goes on without it
+                if not failed:
+                    failed = True
+                    self.node.get_logger().error(
+                        f'diagnostics failed:\n{traceback.format_exc()}')
 
     def _forget(self) -> None:
         """Start the per-period comparisons afresh (a new core counts from zero)."""

@@ -71,7 +71,6 @@ from .services import DeviceServices, SaveCaptureService
 from .temperature import TemperaturePoller
 from ..capture.fault_capture import FaultCapture
 from ..capture.raw_capture import bytes_sink, RawCapture
-from ..codec.data_rate import ticks_per_cycle
 from ..device.port import check_port_path, PortError
 from ..device.shared_port import SharedPort
 from ..device.supervisor import DeviceSupervisor
@@ -111,7 +110,8 @@ class DriverCore:
     owner turns publishing on (``records.set_publishing``); ``refusal``
     tells the services why they must refuse now ('' to serve). ``shared``:
     the port the sensors behind one base station share (None: the core
-    opens its own).
+    opens its own). ``on_fatal`` is called once the port can never work
+    (after :attr:`fatal_error` is set), so the run loop wakes for it.
 
     The core starts nothing: its owner drives :attr:`supervisor`. The records
     themselves go through :attr:`records` (record_publisher.py), which the
@@ -123,8 +123,10 @@ class DriverCore:
                  publishers: Publishers, raw_capture: RawCapture, *,
                  publishing: bool = True, refusal: Callable[[], str] | None = None,
                  shared: SharedPort | None = None,
-                 fault_capture: FaultCapture | None = None) -> None:
+                 fault_capture: FaultCapture | None = None,
+                 on_fatal: Callable[[], None] | None = None) -> None:
         self.node = node
+        self._told_fatal = on_fatal
         self.config = cfg = config
         #: The sensor this core serves: address, name (topic prefix), frame, stream.
         self.sensor = sensor
@@ -135,7 +137,7 @@ class DriverCore:
         #: Stamping, counting and publishing of each record, in the reader thread.
         self.records = RecordPublisher(
             self.publishers, cfg.messages_for(sensor), Stamping.of(cfg, self.stream),
-            self._expected_ticks, node.get_logger(), publishing, bias_kept=self._bias_kept)
+            node.get_logger(), publishing)
         #: Whether this core's sensor shares its port with others.
         self._shared = shared is not None
         #: The port's raw capture (shown on diagnostics).
@@ -151,7 +153,8 @@ class DriverCore:
         self.supervisor = DeviceSupervisor(
             self.device_config,
             on_record=self.records.on_record, log=node.get_logger(),
-            on_connect=self.records.link_changed, on_fatal=self._on_fatal,
+            on_connect=self.records.link_changed, on_stream_known=self.records.stream_known,
+            on_fatal=self._on_fatal,
             on_bytes=capture, shared=shared,
             on_gyro_bias=lambda: self.records.announce_calibrated(True))
         self.records.announce_calibrated(False)
@@ -168,7 +171,7 @@ class DriverCore:
         self.temperature = TemperaturePoller(
             node, self.supervisor.streaming_link, frame_id,
             cfg.temperature_period, self.publishers.temperature, cfg.time_offset,
-            firmware=self.supervisor.dialogue.firmware)
+            firmware=self.supervisor.firmware)
         convention = cfg.messages.frame_convention
         node.get_logger().info(
             f'i3dmgx2_driver: port {cfg.device.port}, node address {sensor.address}, '
@@ -187,13 +190,8 @@ class DriverCore:
         """
         self.fatal_error = error
         self.node.get_logger().fatal(str(error))
-
-    def _bias_kept(self) -> bool:
-        return self.supervisor.dialogue.gyro_bias is not None
-
-    def _expected_ticks(self) -> int | None:
-        divider = self.supervisor.dialogue.divider
-        return ticks_per_cycle(divider) if divider else None
+        if self._told_fatal is not None:
+            self._told_fatal()
 
     def shutdown(self, report: bool = True) -> None:
         """Stop the device stream (bounded in time); log it if ``report``."""
@@ -227,7 +225,8 @@ class DriverSet:
 
     def __init__(self, node: Node, config: DriverConfig,
                  publishers: list[Publishers] | None = None, publishing: bool = True,
-                 refusal: Callable[[], str] | None = None) -> None:
+                 refusal: Callable[[], str] | None = None,
+                 on_fatal: Callable[[], None] | None = None) -> None:
         device = config.device
         check_port_path(device.port)
         sensors = config.sensors
@@ -252,7 +251,7 @@ class DriverSet:
         self.cores = [
             DriverCore(node, config, sensor, sensor_publishers, capture,
                        publishing=publishing, refusal=refusal, shared=self.shared,
-                       fault_capture=faults)
+                       fault_capture=faults, on_fatal=on_fatal)
             for sensor, sensor_publishers in zip(sensors, publishers, strict=True)]
         self.save_capture = SaveCaptureService(node, faults)
         if faults.active:

@@ -23,6 +23,8 @@ and starts the supervisor, which opens the port, and keeps the stream going,
 retrying forever.
 """
 
+from collections.abc import Callable
+
 from rclpy.node import Node
 
 from .diagnostics import DiagnosticsPublisher
@@ -36,15 +38,20 @@ class ImuDriverNode(Node):
 
     def __init__(self, node_name: str = 'i3dmgx2_driver', **kwargs) -> None:
         super().__init__(node_name, **kwargs)
+        #: Called when the port can never work (main.run wakes its thread with it).
+        self.on_done: Callable[[], None] = lambda: None
         self.config: DriverConfig = load_config(self)
         #: Every sensor's core (one, unless ``addresses`` lists several: DriverSet).
-        self.drivers = DriverSet(self, self.config)
+        self.drivers = DriverSet(self, self.config, on_fatal=self._fatal)
         self.core: DriverCore = self.drivers.cores[0]
         self.diagnostics = [
             DiagnosticsPublisher(self, lambda core=core: core,
                                  sensor=core.sensor.name if self.drivers.several else '')
             for core in self.drivers.cores]
         self.drivers.start()
+
+    def _fatal(self) -> None:
+        self.on_done()  # whatever run() set it to since
 
     @property
     def finished(self) -> bool:
@@ -57,5 +64,7 @@ class ImuDriverNode(Node):
         return self.drivers.fatal_error
 
     def shutdown(self) -> None:
-        """Stop the device streams and close the port (bounded in time)."""
+        """Stop the diagnostics and the device streams, and close the port (bounded in time)."""
+        for diagnostics in self.diagnostics:
+            diagnostics.stop()
         self.drivers.shutdown()

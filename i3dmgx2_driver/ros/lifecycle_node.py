@@ -123,6 +123,8 @@ class LifecycleDriverNode(LifecycleNode):
         self._data_publishers: list[Publishers] | None = None
         self._transition_lock = threading.RLock()
         self._finished = threading.Event()
+        #: Called once finished (main.run wakes its thread with it).
+        self.on_done: Callable[[], None] = lambda: None
         #: Set by a signal's shutdown(): a transition under way does not start the device again.
         self._stopping = threading.Event()
         config: DriverConfig | None = None
@@ -289,6 +291,7 @@ class LifecycleDriverNode(LifecycleNode):
         """Stop the stream and close the port, whatever the state; then the process exits."""
         self._release(f'shutdown (from {state.label})')
         self._finished.set()
+        self.on_done()
         return SUCCESS
 
     @transition('error processing')
@@ -330,8 +333,10 @@ class LifecycleDriverNode(LifecycleNode):
         configure or activate under way then fails within milliseconds
         instead of finishing its retries. The shutdown transition follows
         (so that ``transition_event`` tells a bringup manager), unless it
-        has run already.
+        has run already. The diagnostics end first, whatever the state.
         """
+        for diagnostics in self.diagnostics:
+            diagnostics.stop()
         if self._finished.is_set():
             return
         self._stopping.set()
@@ -353,6 +358,7 @@ class LifecycleDriverNode(LifecycleNode):
         if not self._finished.is_set():
             self._release('shutdown')
             self._finished.set()
+            self.on_done()
 
 
 def _each(cores: list[DriverCore], step: Callable[[DriverCore], None],

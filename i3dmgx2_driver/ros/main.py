@@ -17,38 +17,35 @@ Entry point of ``ros2 run i3dmgx2_driver node``, and the run loop of both execut
 
 SIGINT, SIGTERM and SIGHUP (a closed terminal) are handled here rather than
 by rclpy, so that the driver can stop the device's stream (0xFA) and close
-the port while ROS is still up, then shut ROS down: a clean exit (code 0)
-well within 2 s. The handler only sets a flag (``lifetime.StopSignal``: a
-``threading.Event`` set from a handler hung the node once in about a hundred
-stops). From the moment the stop begins, the process has
-``lifetime.SHUTDOWN_DEADLINE`` (3 s) to end: past it, every thread's stack
-goes to the log and the exit code is 1, rather than a hang. The node also
-ends (SIGTERM) when the process that started it ends
-(``lifetime.die_with_parent``). An invalid parameter exits with code 2 and a
-message that names it and its valid range; so does a port that can never
-work (a path that is no serial port), with one FATAL line that says what
-the path is and how to find the right one: at once when the node is made,
-or later when the node reports it as ``fatal_error``. :func:`run` does all
-of it for any driver node class (the plain node here, the managed node in
-``lifecycle_node.py``): the class is made with no arguments and provides
-``shutdown()`` and ``finished`` (True once it is done by itself, as a
-managed node after its shutdown transition).
-Once the node is made, the start-up heap is frozen (device/realtime.py says
-why). With ``I3DMGX2_TIMINGS`` naming a file, the plain node records every
-sample's hot-path stage times and writes them there as it exits
-(device/hot_path.py; for benchmarks/latency.py).
+the port while ROS is still up, then shut ROS down: a clean exit (code 0).
+From the moment the stop begins the process has
+``lifetime.SHUTDOWN_DEADLINE`` to end, else every thread's stack goes to the
+log and the exit code is 1 (lifetime.py says why, and why the handler only
+sets a flag). An invalid parameter exits with code 2 and a message that
+names it and its valid range; so does a port that can never work, at once
+when the node is made or later, when the node reports it as
+``fatal_error``. :func:`run` does it for any driver node class (the plain
+node here, the managed node in ``lifecycle_node.py``): the class is made
+with no arguments and provides ``shutdown()``, ``finished`` (True once it is
+done by itself, as a managed node after its shutdown transition) and
+``on_done``, which it calls when finished or fatal. Once the node is made,
+the start-up heap is frozen (device/realtime.py says why). With
+``I3DMGX2_TIMINGS`` naming a file, the plain node records every sample's
+hot-path stage times and writes them there as it exits (device/hot_path.py).
 
-The executor spins in a thread of its own, blocked until it has work; the
-main thread only waits for a signal or for the node to finish. Spinning in
-the main thread, a signal is seen only when the executor's wait returns, so
-that wait had to end ten times a second, and each end rebuilds the executor's
-wait set: 0.45 % of a core at 100 Hz, more than the rest of the node's
-threads save the reader.
+Idle costs nothing: at 100 Hz only the reader thread should wake for each
+sample (docs/cpu.md). The executor spins in a thread of its own and its
+wait has no timeout: it wakes for a timer, a request, or the guard
+condition :meth:`_Spinner.halt` triggers. The main thread blocks on the stop
+signal, which a signal, the node's ``on_done`` and the executor's end set.
+A bounded wait would have woken each thread ten times a second, and each
+wake of the executor rebuilds its wait set.
 """
 
 from collections.abc import Callable
 import sys
 import threading
+import time
 from typing import Any
 
 import rclpy
@@ -66,8 +63,6 @@ from ..device.port import PortUnusable
 EXIT_BAD_PARAMETER = 2
 #: What rcl says of a transition the current state does not have.
 NOT_A_TRANSITION = 'Transition is not registered'
-#: How often the main thread looks whether the node is finished (s); signals wake it at once.
-_POLL_PERIOD = 0.1
 #: Once a node is finished by itself, how long the executor goes on spinning (s), so
 #: that the reply to the request that finished it still goes out.
 _FINISH_GRACE = 0.3
@@ -76,25 +71,22 @@ _FINISH_GRACE = 0.3
 EXECUTOR_THREADS = 4
 
 
-#: Longest wait (s) of the executor's thread: how soon it sees a halt.
-HALT_WITHIN = 0.1
-
-
 class _Spinner:
     """Spins an executor in a thread of its own until halted; keeps what it raised."""
 
-    def __init__(self, executor: MultiThreadedExecutor, stop: lifetime.StopSignal) -> None:
+    def __init__(self, executor: MultiThreadedExecutor, node: Any,
+                 stop: lifetime.StopSignal) -> None:
         self._executor = executor
         self._stop = stop
-        #: Set once halted. Each wait of the executor is bounded (HALT_WITHIN), so the
-        #: thread sees it soon whatever is due: a wake alone only has the wait set
-        #: rebuilt and the wait go on, and a thread still in rclpy's wait when the
-        #: interpreter exits aborts the process ("terminate called without an active
-        #: exception", exit -6), as a node with no timer due did. (Not a Future the wait
-        #: ends on: rclpy's spin_once_until_future_complete adds a callback to the
-        #: future at every call, which a future done only at the end keeps: 25 objects
-        #: a fault, the memory curve's leak.)
+        #: Set once halted; the guard condition then ends the executor's wait. Not the
+        #: executor's own wake(): that only has the wait set rebuilt and the wait go on,
+        #: and a thread still in rclpy's wait when the interpreter exits aborts the
+        #: process ("terminate called without an active exception", exit -6). Not a
+        #: Future the wait ends on: rclpy's spin_once_until_future_complete adds a
+        #: callback to the future at every call, which a future done only at the end
+        #: keeps (the memory curve's leak).
         self._halt = threading.Event()
+        self._guard = node.create_guard_condition(lambda: None)
         self.error: BaseException | None = None
         self._thread = threading.Thread(target=self._spin, name='gx2-executor', daemon=True)
 
@@ -105,7 +97,7 @@ class _Spinner:
         try:
             while not self._halt.is_set() and rclpy.ok():
                 try:
-                    self._executor.spin_once(timeout_sec=HALT_WITHIN)
+                    self._executor.spin_once()
                 except RCLError as exc:
                     if NOT_A_TRANSITION not in str(exc):
                         raise
@@ -125,7 +117,7 @@ class _Spinner:
     def halt(self, timeout: float = 1.0) -> None:
         """Stop spinning: end the executor's wait and let the thread end."""
         self._halt.set()
-        self._executor.wake()
+        self._guard.trigger()
         self._thread.join(timeout)
 
 
@@ -143,6 +135,7 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
     """
     # Before anything else: a signal during start-up is a stop once the node is made.
     stop = lifetime.StopSignal().install()
+    realtime.name_os_threads()
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:
@@ -166,14 +159,16 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
         # Start-up is over: out of the collector's sight with its heap (realtime.py says why).
         frozen = realtime.freeze_startup_heap()
         node.get_logger().info(f'start-up heap frozen ({frozen} objects)')
-        spinner = _Spinner(executor, stop)
+        spinner = _Spinner(executor, node, stop)
         spinner.start()
-        while not stop.wait(_POLL_PERIOD) and rclpy.ok() and not node.finished:
-            if getattr(node, 'fatal_error', None) is not None:
-                code = EXIT_BAD_PARAMETER  # said once, as the node found it
-                break
-        if node.finished:
-            stop.wait(_FINISH_GRACE)  # the reply to the request that finished it goes out
+        node.on_done = stop.set
+        if node.finished or getattr(node, 'fatal_error', None) is not None:
+            stop.set()  # it happened before on_done was there to say so
+        stop.wait()
+        if getattr(node, 'fatal_error', None) is not None:
+            code = EXIT_BAD_PARAMETER  # said once, as the node found it
+        elif node.finished:
+            time.sleep(_FINISH_GRACE)  # the reply to the request that finished it goes out
         if spinner.error is not None:
             raise spinner.error
     finally:

@@ -72,6 +72,12 @@ TIME_OFFSET_LIMIT = 10.0
 RELIABILITIES = ('reliable', 'best_effort')
 #: The default of a parameter that has none: it must be given.
 REQUIRED = object()
+#: The names of the parameters read where they are used (``feeds='node'``, and the
+#: bias the services look at), so that a rename is one edit and a typo an ImportError.
+GYRO_BIAS_SAMPLING_MS = 'gyro_bias_sampling_ms'
+CALIBRATION_FILE = 'calibration_file'
+GYRO_BIAS = 'gyro_bias'
+ACCEL_BIAS = 'accel_bias'
 
 #: The device side's own defaults, which a parameter that feeds ``DeviceConfig`` takes
 #: rather than typing them a second time.
@@ -185,6 +191,13 @@ def _bias_vector(value: Sequence[float]) -> Vector3 | None:
     return float(x), float(y), float(z)
 
 
+def _device_setting(name: str, kind: Kind, description: str,
+                    limits: tuple[float, float] | None = None) -> Spec:
+    """Return the row of a parameter that sets the ``DeviceConfig`` field of its name."""
+    return Spec(name, kind, DEVICE_DEFAULTS[name], description, limits,
+                feeds=f'device.{name}')
+
+
 def _one_for_all(single: str) -> str:
     return f"[] (then '{single}' for all), one for all, or one per address"
 
@@ -282,6 +295,24 @@ SPECS: list[Spec] = [
     Spec('reconnect_interval', DOUBLE, DEVICE_DEFAULTS['reconnect_interval'],
          'Seconds between attempts to reopen a lost port.', (0.1, 60.0),
          feeds='device.reconnect_interval'),
+    # How patient the dialogue is (device/timeouts.py has each default and why).
+    _device_setting('request_timeout', DOUBLE,
+                    "Seconds to wait for a command's reply, per try (a slow radio link may "
+                    'need more; bringup measures the round trips).', (0.05, 10.0)),
+    _device_setting('request_retries', INTEGER,
+                    'Tries of a command before the sensor counts as not answering.', (1, 20)),
+    _device_setting('continuous_retries', INTEGER,
+                    'Tries of the continuous-mode request before the stream counts as not '
+                    'started.', (1, 20)),
+    _device_setting('fast_reconnect', BOOL,
+                    'After a reconnect, confirm the sensor already identified with one '
+                    'serial-number read; false: the full start-up dialogue every time.'),
+    _device_setting('resume_timeout', DOUBLE,
+                    "Seconds per try of a fast reconnect's serial-number read (short: a reply "
+                    'lost in a stall is asked again soon after the radio is back).', (0.02, 5.0)),
+    _device_setting('resume_retries', INTEGER,
+                    "Tries of a fast reconnect's serial-number read before the full dialogue.",
+                    (1, 20)),
     Spec('publish_mag', BOOL, True,
          'Publish sensor_msgs/MagneticField on imu/mag (NaN readings are skipped).'),
     Spec('data_rate', DOUBLE, 0.0,
@@ -294,7 +325,7 @@ SPECS: list[Spec] = [
     Spec('low_latency', BOOL, DEVICE_DEFAULTS['low_latency'],
          'Put the serial port in Linux low-latency mode (USB adapters) when it supports it.',
          feeds='device.low_latency'),
-    Spec('gyro_bias_sampling_ms', INTEGER, 10000,
+    Spec(GYRO_BIAS_SAMPLING_MS, INTEGER, 10000,
          'Sampling time (ms) of ~/capture_gyro_bias (0xCD); the sensor must stay still that '
          'long. The protocol advises 10000..30000; down to 100 is accepted for tests and the '
          'simulator, at the cost of a noisier bias.',
@@ -304,17 +335,17 @@ SPECS: list[Spec] = [
          'be still then).'),
     # A calibration that lasts (README, Calibration): known biases written at every
     # start, and where a capture writes its result for the next start.
-    Spec('gyro_bias', DOUBLES, [],
+    Spec(GYRO_BIAS, DOUBLES, [],
          "Gyro bias [x, y, z] (rad/s, the sensor's axes and units) written to the sensor "
          "at every start (0xCA) and checked against its echo; []: leave the sensor's own. "
          'One sensor only (not with addresses).', valid=_bias_valid('rad/s'), accepts=_is_bias,
          feeds='device.gyro_bias', convert=_bias_vector),
-    Spec('accel_bias', DOUBLES, [],
+    Spec(ACCEL_BIAS, DOUBLES, [],
          "Accelerometer bias [x, y, z] (g, the sensor's axes and units) written to the "
          "sensor at every start (0xC9) and checked against its echo; []: leave the sensor's "
          'own. One sensor only (not with addresses).', valid=_bias_valid('g'), accepts=_is_bias,
          feeds='device.accel_bias', convert=_bias_vector),
-    Spec('calibration_file', TEXT, '',
+    Spec(CALIBRATION_FILE, TEXT, '',
          'An accepted ~/capture_gyro_bias writes its bias to this YAML parameter file '
          "(gyro_bias under the node's name, overwritten), to load at the next start; "
          "'': off.", empty_ok=True, feeds='node'),

@@ -53,7 +53,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .conversions import MessageSettings
-from .parameter_table import REQUIRED, Spec, SPECS
+from .parameter_table import ACCEL_BIAS, GYRO_BIAS, REQUIRED, Spec, SPECS
 from .sensor_set import check_shared_budget, sensor_settings, SensorSetting
 from ..codec import streams
 from ..device.settings import DeviceConfig
@@ -288,8 +288,8 @@ def _one_sensors_bias(config: DriverConfig) -> str | None:
     """Refuse a bias given with several sensors: it is one sensor's, and whose is a guess."""
     if len(config.sensors) == 1:
         return None
-    for name, bias in (('gyro_bias', config.device.gyro_bias),
-                       ('accel_bias', config.device.accel_bias)):
+    for name, bias in ((GYRO_BIAS, config.device.gyro_bias),
+                       (ACCEL_BIAS, config.device.accel_bias)):
         if bias is not None:
             return (f"parameter {name!r} is one sensor's bias: it cannot be given with "
                     f'addresses (several sensors)')

@@ -34,7 +34,8 @@ one with a traceback; :func:`create_publisher` turns that into the
 ``ParameterError`` every other bad parameter gives.
 """
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 from rclpy.node import Node
@@ -130,19 +131,53 @@ def bad_override(node: Node, topic: str) -> str | None:
     return None
 
 
-class SensorTopics(NamedTuple):
+class RecordTopic(NamedTuple):
+    """
+    A topic the stream's records are published on: one row of :data:`RECORD_TOPICS`.
+
+    ``suffix`` is the topic under the sensor's name (``imu/<suffix>``);
+    ``packer`` names the message factory's packers of a record
+    (``<packer>_cdr`` and ``fill_<packer>``, conversions.py), which return
+    None for a record with nothing for this topic; ``wanted(config, sensor)``
+    says whether the sensor publishes it (its stream carries it, a parameter
+    asks for it). The first row is the stream's own message: it is stamped,
+    timed and counted as the record published.
+    """
+
+    suffix: str
+    msg_type: type
+    packer: str
+    wanted: Callable[[DriverConfig, SensorSetting], bool]
+
+
+#: Every topic a record goes to. A new one is a row here and its packer in conversions.py.
+RECORD_TOPICS = (
+    RecordTopic('raw_data', Imu, 'imu', lambda config, sensor: True),
+    # Only streams with a field (named 'mag' in each layout) have a magnetometer topic.
+    RecordTopic('mag', MagneticField, 'mag',
+                lambda config, sensor: config.publish_mag and bool(sensor.stream_choice.mag)),
+)
+
+
+@dataclass(frozen=True)
+class SensorTopics:
     """The topics one sensor's publishers use, named once for the node and its QoS names."""
 
-    imu: str
-    mag: str
+    #: One per row of RECORD_TOPICS, in its order.
+    records: tuple[str, ...]
     temperature: str
     is_calibrated: str
 
     @classmethod
     def of(cls, name: str, several: bool) -> 'SensorTopics':
         """Return the topics of the sensor called ``name`` (sensor_set.py: ``imu`` alone)."""
-        return cls(f'{name}/raw_data', f'{name}/mag', f'{name}/temperature',
+        return cls(tuple(f'{name}/{row.suffix}' for row in RECORD_TOPICS),
+                   f'{name}/temperature',
                    f'~/{name}/is_calibrated' if several else '~/is_calibrated')
+
+    def __iter__(self) -> Iterator[str]:
+        """Every topic, the records' first."""
+        return iter((*self.records, self.temperature, self.is_calibrated))
 
     @staticmethod
     def of_every_sensor(config: DriverConfig) -> list[str]:
@@ -159,8 +194,8 @@ ALONE_TOPICS = [*SensorTopics.of(SINGLE_NAME, several=False), '/diagnostics']
 class Publishers(NamedTuple):
     """The publishers; None where the parameters turn a topic off."""
 
-    imu: Publisher
-    mag: Publisher | None
+    #: Each row of RECORD_TOPICS the sensor publishes, with its publisher, in order.
+    records: tuple[tuple[RecordTopic, Publisher], ...]
     temperature: Publisher | None
     #: ``~/is_calibrated``: a plain publisher even on a managed node, so that
     #: its latched value holds in every state.
@@ -212,10 +247,9 @@ def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False,
         return create_publisher(node, kind, topic, publisher_qos(config), make)
 
     return Publishers(
-        create(Imu, topics.imu),
-        # Only streams with a field (named 'mag' in each layout) have a magnetometer topic.
-        create(MagneticField, topics.mag)
-        if config.publish_mag and sensor.stream_choice.mag else None,
+        tuple((row, create(row.msg_type, topic))
+              for row, topic in zip(RECORD_TOPICS, topics.records, strict=True)
+              if row.wanted(config, sensor)),
         create(Temperature, topics.temperature) if config.temperature_period > 0
         else None,
         create_publisher(node, Bool, topics.is_calibrated, calibrated_qos()))

@@ -24,15 +24,14 @@ driver core (driver_core.py), which builds it and hands its
 :meth:`RecordPublisher.on_record` to the supervisor's reader.
 """
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import threading
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.impl.rcutils_logger import RcutilsLogger
 from std_msgs.msg import Bool
 
-from .conversions import mag_is_valid, MessageFactory, MessageSettings
+from .conversions import MessageFactory, MessageSettings
 from .parameters import DriverConfig
 from .publishers import Publishers
 from ..codec import line_budget
@@ -53,7 +52,8 @@ class StreamStats:
 
     published: int = 0
     unpublished: int = 0
-    mag_published: int = 0
+    #: Messages published on each record topic after the first (publishers.RECORD_TOPICS).
+    published_on: dict[str, int] = field(default_factory=dict)
     lost: int = 0
     device_resets: int = 0
     first_time: float = 0.0
@@ -61,6 +61,11 @@ class StreamStats:
     #: Whether the next record's timer step counts packet loss: not across a
     #: reconnect or a deliberate pause (deactivate, a capture).
     counting: bool = False
+
+    @property
+    def mag_published(self) -> int:
+        """Magnetic field messages published (diagnostics)."""
+        return self.published_on.get('mag', 0)
 
 
 @dataclass(frozen=True)
@@ -85,35 +90,35 @@ class RecordPublisher:
 
     ``messages`` says how the records become messages on ``publishers``
     (frame, axes, covariances, stream); ``stamping`` how they are stamped.
-    ``expected_ticks()`` returns the timer ticks between two records once
-    the rate divider is known (else None): a larger step counts the records
-    in between as lost. ``publishing`` False: records are counted, not
-    published, until :meth:`set_publishing`. The hot path's observer
-    (device/hot_path.py), when on, is told the stamp, the pack and the
-    publish of every sample; off, it costs one test each. ``bias_kept()``
-    says whether the device side keeps a gyro bias it writes back after a
-    power cycle (before the stream restarts), so that a power cycle seen in
-    the timer leaves ``~/is_calibrated`` true.
+    The device side hands it what it learns (:meth:`stream_known`): the
+    timer ticks between two records once the rate divider is known (a
+    larger step counts the records in between as lost), and whether it
+    keeps a gyro bias it writes back after a power cycle (so that a power
+    cycle seen in the timer leaves ``~/is_calibrated`` true). ``publishing``
+    False: records are counted, not published, until :meth:`set_publishing`.
+    The hot path's observer (device/hot_path.py), when on, is told the
+    stamp, the pack and the publish of every sample; off, it costs one test
+    each.
     """
 
     def __init__(self, publishers: Publishers, messages: MessageSettings,
-                 stamping: Stamping, expected_ticks: Callable[[], int | None],
-                 log: RcutilsLogger, publishing: bool = True,
-                 bias_kept: Callable[[], bool] | None = None) -> None:
+                 stamping: Stamping, log: RcutilsLogger, publishing: bool = True) -> None:
         self.publishers = publishers
-        self.imu_pub = publishers.imu
-        self.mag_pub = publishers.mag
         #: The message factory (its ``frame_id`` is the one published, _ned and all).
         self.messages = factory = MessageFactory(messages)
         # Published ready-serialized (conversions.py says why) when the bytes read
         # back right with this middleware; otherwise as message objects.
         if messages not in _SERIALIZED_MATCHES:
             _SERIALIZED_MATCHES[messages] = factory.serialized_matches()
-        if _SERIALIZED_MATCHES[messages]:
-            self._imu_message, self._mag_message = factory.imu_cdr, factory.mag_cdr
-        else:
-            self._imu_message, self._mag_message = factory.fill_imu, factory.fill_mag
+        serialized = _SERIALIZED_MATCHES[messages]
+        (first, self.imu_pub), *others = publishers.records
+        self._imu_message = factory.packer(first.packer, serialized)
         self.stats = StreamStats()
+        #: The other topics of each record: publisher, packer, the count it adds to.
+        self._also = tuple((publisher, factory.packer(row.packer, serialized), row.suffix)
+                           for row, publisher in others)
+        for _, _, suffix in self._also:
+            self.stats.published_on[suffix] = 0
         #: Device timer -> system-clock stamps, through resets, rollovers and gaps.
         self.sample_clock = SampleClock()
         #: Whether records are published: always for the plain node; while
@@ -123,8 +128,10 @@ class RecordPublisher:
         self._use_device_time = stamping.device_time
         self._time_offset = stamping.offset
         self._wire_time = stamping.wire_time
-        self._expected_ticks = expected_ticks
-        self._bias_kept = bias_kept or (lambda: False)
+        #: Timer ticks between two records (None: the divider not known yet).
+        self._expected_ticks: int | None = None
+        #: Whether the device side writes a kept gyro bias back after a power cycle.
+        self._bias_kept = False
         self._log = log
         self._publish_lock = threading.Lock()
 
@@ -143,6 +150,12 @@ class RecordPublisher:
             self.publishers.is_calibrated.publish(Bool(data=calibrated))
         except RCLError:
             pass  # ROS is shutting down: nobody is left to tell
+
+    def stream_known(self, expected_ticks: int | None, bias_kept: bool) -> None:
+        """Take what the device side learned: the ticks between records, whether a bias is kept."""
+        with self._publish_lock:
+            self._expected_ticks = expected_ticks
+            self._bias_kept = bias_kept
 
     def link_changed(self) -> None:
         """
@@ -202,7 +215,7 @@ class RecordPublisher:
                 timings.stamped()
             if clock.restarted and clock.last_restart == Restart.RESET.value:
                 stats.device_resets += 1
-                self.announce_calibrated(self._bias_kept())
+                self.announce_calibrated(self._bias_kept)
                 self._log.warning(
                     "the sensor's timer restarted (a power cycle or brown-out): "
                     'timestamps start afresh from its new clock')
@@ -210,7 +223,7 @@ class RecordPublisher:
             # of the fit too): the records in between were lost.
             since = clock.ticks_since_last
             if since is not None and stats.counting:
-                expected = self._expected_ticks()
+                expected = self._expected_ticks
                 if expected:
                     gap = round(since / expected) - 1
                     if gap > 0:
@@ -234,7 +247,8 @@ class RecordPublisher:
             if not stats.first_time:
                 stats.first_time = read_time
             stats.last_time = read_time
-            # mag_pub exists only for streams with a field (named 'mag' in each layout).
-            if self.mag_pub is not None and mag_is_valid(record.mag):
-                self.mag_pub.publish(self._mag_message(record.mag, stamp))
-                stats.mag_published += 1
+            for publisher, pack, suffix in self._also:
+                message = pack(record, stamp)
+                if message is not None:
+                    publisher.publish(message)
+                    stats.published_on[suffix] += 1

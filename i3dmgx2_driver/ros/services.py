@@ -48,6 +48,7 @@ from std_srvs.srv import Trigger
 
 from .calibration_file import write_calibration_file
 from .diagnostic_statuses import ERROR, OK, Status, to_message
+from .parameter_table import CALIBRATION_FILE, GYRO_BIAS, GYRO_BIAS_SAMPLING_MS
 from ..capture.fault_capture import FaultCapture
 from ..device.gyro_bias import Calibration, GyroBiasCapture
 from ..device.operation import Device
@@ -98,19 +99,18 @@ class DeviceServices:
         self.self_test_run = SelfTestRun(device, published, forget_last_sample, self._stop,
                                          self._log)
         group = MutuallyExclusiveCallbackGroup()
-        self.capture_service = node.create_service(
-            Trigger, f'{prefix}capture_gyro_bias', self._on_capture, callback_group=group)
-        self.store_service = node.create_service(
-            Trigger, f'{prefix}store_gyro_bias', self._on_store, callback_group=group)
+        #: Every service made, so that destroy() removes what was made, whatever it is.
+        self.services = [
+            node.create_service(kind, f'{prefix}{name}', callback, callback_group=group)
+            for name, kind, callback in (
+                ('capture_gyro_bias', Trigger, self._on_capture),
+                ('store_gyro_bias', Trigger, self._on_store),
+                ('self_test', Trigger, self._on_self_test),
+                ('diagnostic_self_test', SelfTest, self._on_diagnostic_self_test))]
         #: One sensor's node: the calibration file and a known bias are its (parameters.py).
         self._single = prefix == '~/'
-        if self._single and self._parameter('gyro_bias'):
+        if self._single and self._parameter(GYRO_BIAS):
             self._calibrated(True)
-        self.self_test_service = node.create_service(
-            Trigger, f'{prefix}self_test', self._on_self_test, callback_group=group)
-        self.diagnostic_self_test_service = node.create_service(
-            SelfTest, f'{prefix}diagnostic_self_test', self._on_diagnostic_self_test,
-            callback_group=group)
         self._start_thread: threading.Thread | None = None
         if capture_on_start:
             self._start_thread = threading.Thread(
@@ -124,10 +124,8 @@ class DeviceServices:
     def destroy(self) -> None:
         """Stop, and remove the services from the node (the managed node's cleanup)."""
         self.stop()
-        self.node.destroy_service(self.capture_service)
-        self.node.destroy_service(self.store_service)
-        self.node.destroy_service(self.self_test_service)
-        self.node.destroy_service(self.diagnostic_self_test_service)
+        for service in self.services:
+            self.node.destroy_service(service)
 
     def wait_idle(self, timeout: float) -> bool:
         """
@@ -204,8 +202,8 @@ class DeviceServices:
             return None  # an empty array (the bias left to the sensor) is declared unset
 
     def _capture(self) -> tuple[bool, str]:
-        ok, message = self.gyro_bias.run(int(self._parameter('gyro_bias_sampling_ms')))
-        path = self._parameter('calibration_file') if self._single else ''
+        ok, message = self.gyro_bias.run(int(self._parameter(GYRO_BIAS_SAMPLING_MS)))
+        path = self._parameter(CALIBRATION_FILE) if self._single else ''
         if ok and path:
             bias = self.gyro_bias.good_capture.bias
             try:

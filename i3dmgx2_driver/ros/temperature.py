@@ -38,14 +38,12 @@ from sensor_msgs.msg import Temperature
 
 from .conversions import set_stamp
 from ..codec import layouts
+from ..device import timeouts
 from ..device.firmware import SensorFirmware
 from ..device.link import DeviceLink, DeviceTimeout
 from ..device.port import PortError
 from ..device.throttle import Throttle
 
-#: Per-try timeout and tries of one poll: short, the next period tries again.
-POLL_TIMEOUT = 0.3
-POLL_RETRIES = 2
 #: Seconds between two warnings about failed polls.
 WARN_PERIOD = 60.0
 
@@ -118,7 +116,7 @@ class TemperaturePoller:
             return False
         try:
             reply = link.request(bytes((layouts.TEMPERATURES,)), layouts.TEMPERATURES,
-                                 POLL_TIMEOUT, POLL_RETRIES)
+                                 timeouts.TEMPERATURE_TIMEOUT, timeouts.TEMPERATURE_RETRIES)
         except (DeviceTimeout, PortError) as exc:
             if self._throttle.allow('poll') and not self._stop.is_set():
                 self.node.get_logger().warning(f'temperature poll failed: {exc}')

@@ -47,8 +47,10 @@ class CycleClock:
         self._grid_origin = 0.0
         self._next_index = 0
 
-    def restart(self, t: float, rate_hz: float) -> None:
-        """Start the grid from power-up at wall-clock time ``t``."""
+    def restart(self, t: float, rate_hz: float, timer_start: int | None = None) -> None:
+        """Start the grid from power-up at wall-clock time ``t`` (the timer at ``timer_start``)."""
+        if timer_start is not None:
+            self.timer_start = timer_start  # kept from now on, as the sensor's own
         self.power_up_time = t
         self._grid_origin = 0.0
         self._next_index = 0

@@ -157,6 +157,10 @@ class FaultState:
         self._stall_start = 0.0
         self._stall_end = 0.0
 
+    def configure(self, config: FaultConfig) -> None:
+        """Put ``config`` in effect from now on."""
+        self.config = config
+
     def stall(self, start: float, seconds: float) -> None:
         """Be silent from ``start`` for ``seconds``."""
         self._stall_start = start

@@ -52,6 +52,10 @@ class SensorInbox:
         #: Whether the next request to stream is ignored (a quirk, armed by the faults).
         self.ignore_next_continuous = faults.config.ignore_first_continuous
 
+    def arm_ignore_continuous(self) -> None:
+        """Ignore the next request to stream (the fault turned on while running)."""
+        self.ignore_next_continuous = True
+
     def port_opened(self) -> None:
         """Note that the host opened the port (or flushed its input)."""
         self._polled_since_open = False

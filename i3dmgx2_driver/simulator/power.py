@@ -64,9 +64,7 @@ class SensorPower:
     def on(self, timer_start: int | None = None) -> None:
         """Power up now, the timer at ``timer_start`` (None: the sensor's own, kept from now)."""
         with self._wake:
-            if timer_start is not None:
-                self._sensor.clock.timer_start = timer_start
-            self._sensor.power_up(time.time())
+            self._sensor.power_up(time.time(), timer_start)
             self._record.note_streaming(time.time(), self._sensor.streaming)
             self._wake.notify_all()
 

@@ -265,10 +265,10 @@ class PtySimulator(TruthQueries):
             if not self.config.wireless:
                 new.check_wired()
             for unit in self.units.values():
-                unit.faults.config = new
-            self._foreign.address = foreign_address(self.config, new)
+                unit.faults.configure(new)
+            self._foreign.answer_as(foreign_address(self.config, new))
             if new.ignore_first_continuous and not old.ignore_first_continuous:
-                self._inbox.ignore_next_continuous = True
+                self._inbox.arm_ignore_continuous()
             now = time.time()
             if new.already_streaming and not old.already_streaming and self.started:
                 for unit in self.units.values():

@@ -180,16 +180,17 @@ class SimulatedSensor:
 
     # -- power, time and the calculation cycle --------------------------------------------
 
-    def power_up(self, t: float) -> None:
+    def power_up(self, t: float, timer_start: int | None = None) -> None:
         """
         Start from power-up at wall-clock time ``t``.
 
-        The timer restarts at ``clock.timer_start``, the rate comes from the EEPROM
+        The timer restarts at ``timer_start`` if given (kept from then on),
+        else at ``clock.timer_start``; the rate comes from the EEPROM
         divider (unless overridden), the bias corrections from non-volatile
         memory, and streaming from the auto-start word, as on the device.
         """
         self.biases.restore()
-        self.clock.restart(t, self.rate_hz)
+        self.clock.restart(t, self.rate_hz, timer_start)
         autostart = self.settings.autostart
         #: Command byte being streamed, 0 when polled.
         self.streaming = 0
@@ -247,6 +248,10 @@ class SimulatedSensor:
         return self.clock.skip_to(t)
 
     # -- commands ---------------------------------------------------------------------------
+
+    def answer_as(self, address: int) -> None:
+        """Take ``address`` as this sensor's node address from now on (a foreign one moved)."""
+        self.address = address
 
     def ping_reply(self, address: int) -> bytes:
         """Return the base station's answer to a ping: 0x02 if ours, else 0x21."""

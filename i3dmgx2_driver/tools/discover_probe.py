@@ -77,13 +77,13 @@ class ProbeConfig:
     baud: int = 115200
     low_latency: bool = True
     #: Seconds to listen for sensors that already stream (one packet is enough).
-    listen_s: float = 0.5
+    listen_s: float = timeouts.PROBE_LISTEN_S
     #: Seconds to wait for the answer to a ping, until a base station has answered one.
     ping_timeout: float = timeouts.PROBE_PING_TIMEOUT
     #: Seconds to wait for it once a base station is known to be there.
     answer_timeout: float = timeouts.PROBE_ANSWER_TIMEOUT
     #: This many unanswered pings first: no base station on the port.
-    silent_pings: int = 2
+    silent_pings: int = timeouts.PROBE_SILENT_PINGS
     request_timeout: float = timeouts.PROBE_REQUEST_TIMEOUT
     request_retries: int = timeouts.PROBE_REQUEST_RETRIES
     #: Stop a streaming sensor to read it (and restart it), instead of trying
