@@ -146,7 +146,7 @@ class GyroBiasCapture:
             return False, message
         self._reached_device(Calibration(started, True, bias, sampling_ms, f'bias {text} rad/s'))
         lacking = self._device.firmware.refusal('the gyro bias store',
-                                                         layouts.TRANSFER_TO_NON_VOLATILE)
+                                                layouts.TRANSFER_TO_NON_VOLATILE)
         keep = (f'{lacking}: the gyro_bias parameter applies it at every start' if lacking
                 else '~/store_gyro_bias stores it')
         message = (f'gyro bias captured over {sampling_ms} ms: {text} rad/s; the device uses '
@@ -184,7 +184,7 @@ class GyroBiasCapture:
         2.1.12): it would answer nothing, and the store would look lost.
         """
         lacking = self._device.firmware.refusal('the gyro bias store',
-                                                         layouts.TRANSFER_TO_NON_VOLATILE)
+                                                layouts.TRANSFER_TO_NON_VOLATILE)
         if lacking:
             return False, (f'refused: {lacking}. Nothing sent. A captured bias is used until '
                            f'power-off; the gyro_bias parameter (or calibration_file) applies '

@@ -35,6 +35,7 @@ from collections import Counter
 from collections.abc import Iterable, Iterator
 import contextlib
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, NamedTuple
 
 from rclpy.serialization import serialize_message
@@ -43,19 +44,20 @@ from sensor_msgs.msg import Temperature
 from ..codec import layouts, line_budget, streams
 from ..codec.parser import SensorStreamParser
 from ..device.sample_clock import SampleClock
-from ..ros.conversions import mag_is_valid, MessageFactory, MessageSettings, set_stamp
+from ..ros.conversions import MessageFactory, MessageSettings, set_stamp
 from ..ros.parameter_table import SPECS
-from ..ros.publishers import SensorTopics
-from ..ros.sensor_set import SINGLE_NAME
+from ..ros.publishers import RECORD_TOPICS, SensorTopics
+from ..ros.sensor_set import SensorSetting, SINGLE_NAME
 
 #: What to do when rosbags is missing.
 ROSBAGS_HINT = (
     'reading and writing bags needs rosbags, an optional extra the driver does not install: '
     'pip install rosbags (pip install "i3dmgx2_driver[bag]" from a source checkout)')
-#: The message types, as rosbag2 names them.
-IMU_TYPE = 'sensor_msgs/msg/Imu'
-MAG_TYPE = 'sensor_msgs/msg/MagneticField'
-TEMPERATURE_TYPE = 'sensor_msgs/msg/Temperature'
+
+
+def bag_type(msg_type: type) -> str:
+    """Return the name rosbag2 gives a message class (``sensor_msgs/msg/Imu``)."""
+    return f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
 
 
 class RosbagsMissing(ImportError):
@@ -140,6 +142,14 @@ def capture_messages(chunks: Iterable[tuple[float, bytes]], header: dict,
     stream = stream_of(record for _, record in events)
     factory = MessageFactory(node_settings(stream))
     topics = SensorTopics.of(SINGLE_NAME, several=False)
+    # The node's own table: each topic the sensor publishes with its parameters' defaults,
+    # with its packer (which returns None for a record with nothing for it).
+    sensor = SensorSetting(0, SINGLE_NAME, factory.frame_id, stream.name, 0.0)
+    defaults = SimpleNamespace(publish_mag=_default('publish_mag'))
+    rows = [('/' + topic, bag_type(row.msg_type), factory.packer(row.packer, serialized=True))
+            for row, topic in zip(RECORD_TOPICS, topics.records, strict=True)
+            if row.wanted(defaults, sensor)]
+    temperature_type = bag_type(Temperature)
     clock = SampleClock(offset=lambda: 0.0)
     wire = line_budget.wire_time(stream.code, baud or int(header.get('baud') or 115200),
                                  wireless)
@@ -150,15 +160,14 @@ def capture_messages(chunks: Iterable[tuple[float, bytes]], header: dict,
         time_ns = round(receive_time * 1e9)
         if type(record) is stream.record_type:
             stamp = clock.stamp(record.timer, receive_time, wire)
-            out.append(BagMessage('/' + topics.imu, IMU_TYPE, time_ns,
-                                  factory.imu_cdr(record, stamp)))
-            if stream.mag and mag_is_valid(record.mag):
-                out.append(BagMessage('/' + topics.mag, MAG_TYPE, time_ns,
-                                      factory.mag_cdr(record.mag, stamp)))
+            for topic, msgtype, pack in rows:
+                data = pack(record, stamp)
+                if data is not None:
+                    out.append(BagMessage(topic, msgtype, time_ns, data))
         elif type(record) is layouts.LAYOUTS[layouts.TEMPERATURES].record_type:
             temperature.temperature = record.accel_celsius
             set_stamp(temperature.header, receive_time)
-            out.append(BagMessage('/' + topics.temperature, TEMPERATURE_TYPE, time_ns,
+            out.append(BagMessage('/' + topics.temperature, temperature_type, time_ns,
                                   serialize_message(temperature)))
     return out
 
