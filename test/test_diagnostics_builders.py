@@ -263,3 +263,33 @@ def test_lifecycle_status(label, state, level, words):
     assert status.value('lifecycle state') == label
     assert status.value('device state') == (state.value if state else
                                             'no port (not configured)')
+
+
+def test_the_ticks_end_quietly_when_the_node_is_destroyed_without_stop():
+    """A node destroyed under its diagnostics thread: the thread ends, nothing said as an error."""
+    import threading
+    import time
+
+    from i3dmgx2_driver.ros.diagnostics import DiagnosticsPublisher
+    import rclpy
+    from rclpy.node import Node
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = Node('diagnostics_destroyed_test', context=context)
+    errors = []
+    node.get_logger().error = errors.append
+    diagnostics = DiagnosticsPublisher(node, lambda: None, period=0.005)
+    time.sleep(0.05)  # a few ticks published
+    node.destroy_node()
+    try:
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline and any(
+                t.name == 'gx2-diagnostics' and t.is_alive() for t in threading.enumerate()):
+            time.sleep(0.01)
+        assert not any(t.name == 'gx2-diagnostics' and t.is_alive()
+                       for t in threading.enumerate())
+        assert errors == []
+    finally:
+        diagnostics.stop()
+        rclpy.shutdown(context=context)

@@ -37,6 +37,7 @@ import weakref
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
 from .diagnostic_statuses import (
@@ -100,6 +101,8 @@ class DiagnosticsPublisher:
             due = max(due + self.period, time.monotonic())
             try:
                 self.tick()
+            except InvalidHandle:
+                return  # the node was destroyed without stop(): nothing is left to report to
             except Exception:  # noqa: BLE001 - said once; the stream goes on without it
                 if not failed:
                     failed = True
