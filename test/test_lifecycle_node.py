@@ -53,7 +53,7 @@ TOPICS = {'imu/raw_data': Imu, EVENTS: TransitionEvent, '/diagnostics': Diagnost
 #: Quiet time in which no Imu message may arrive (s); the simulator streams at 100 Hz.
 QUIET = 1.0
 #: Every test starts node processes and waits on them: seconds each.
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.long]
 
 
 @pytest.fixture(autouse=True)

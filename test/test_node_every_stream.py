@@ -51,7 +51,7 @@ COUNT = 150
 #: How long after the first Imu message heard the first magnetic field may come (s).
 MAG_MATCHED_WITHIN_S = 1.0
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.long]
 
 
 def flip(convention: str) -> np.ndarray:

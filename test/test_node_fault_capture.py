@@ -45,7 +45,7 @@ import pytest
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.long]
 
 SECONDS = 3.0
 #: The causes, in the order the field run meets them.

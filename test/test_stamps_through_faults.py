@@ -38,7 +38,7 @@ from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 from i3dmgx2_driver.simulator.faults import FaultConfig
 import pytest
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.long]
 
 
 def test_steady_stream_and_the_timer_rollover():
