@@ -73,7 +73,7 @@ def pytest_cmdline_main(config):
     colcon starts one pytest, in the source folder, with what it installed on
     the paths; in one process the suite takes 18 minutes. Unless the command
     line chose its workers (``--pytest-args -n 0``) or coverage, this process runs the
-    ``parallel`` phase on pytest-xdist's workers as scripts/test.sh does (two
+    ``parallel`` phase on pytest-xdist's workers as scripts/test.sh does (three
     per core, ``--dist loadfile``), and :func:`pytest_sessionfinish` the
     ``alone`` tests afterwards, in one process.
     """
@@ -83,7 +83,7 @@ def pytest_cmdline_main(config):
             or getattr(config.option, 'numprocesses', 0) is not None
             or getattr(config.option, 'cov_source', None)):
         return
-    config.option.numprocesses = min(2 * len(os.sched_getaffinity(0)), MOST_WORKERS)
+    config.option.numprocesses = min(3 * len(os.sched_getaffinity(0)), MOST_WORKERS)
     config.option.dist = 'loadfile'
     os.environ[PHASE_ENV] = 'parallel'  # the workers inherit it
     config.stash[_ALONE_AFTER] = True
