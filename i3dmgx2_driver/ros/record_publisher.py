@@ -58,9 +58,6 @@ class StreamStats:
     device_resets: int = 0
     first_time: float = 0.0
     last_time: float = 0.0
-    #: Whether the next record's timer step counts packet loss: not across a
-    #: reconnect or a deliberate pause (deactivate, a capture).
-    counting: bool = False
 
     @property
     def mag_published(self) -> int:
@@ -114,6 +111,9 @@ class RecordPublisher:
         (first, self.imu_pub), *others = publishers.records
         self._imu_message = factory.packer(first.packer, serialized)
         self.stats = StreamStats()
+        #: Whether the next record's timer step counts packet loss: not across a
+        #: reconnect or a deliberate pause (deactivate, a capture).
+        self._counting = False
         #: The other topics of each record: publisher, packer, the count it adds to.
         self._also = tuple((publisher, factory.packer(row.packer, serialized), row.suffix)
                            for row, publisher in others)
@@ -168,7 +168,7 @@ class RecordPublisher:
         """
         with self._publish_lock:
             self.sample_clock.link_changed()
-            self.stats.counting = False
+            self._counting = False
 
     def clock_status(self) -> ClockStatus:
         """Return a snapshot of the stamping clock (from any thread)."""
@@ -193,7 +193,7 @@ class RecordPublisher:
     def forget_last_sample(self) -> None:
         """Let the next record start afresh: a deliberate pause is no packet loss."""
         with self._publish_lock:
-            self.stats.counting = False
+            self._counting = False
 
     def on_record(self, packet: DataPacket, read_time: float, read_mono: float) -> None:
         """
@@ -222,13 +222,13 @@ class RecordPublisher:
             # The timer's step since the record before, when it ran on (across a resync
             # of the fit too): the records in between were lost.
             since = clock.ticks_since_last
-            if since is not None and stats.counting:
+            if since is not None and self._counting:
                 expected = self._expected_ticks
                 if expected:
                     gap = round(since / expected) - 1
                     if gap > 0:
                         stats.lost += gap
-            stats.counting = True
+            self._counting = True
             if not self._use_device_time:
                 stamp = read_time
             stamp += self._time_offset
