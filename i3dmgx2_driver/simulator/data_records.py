@@ -82,6 +82,10 @@ class BiasCorrections:
         """Drop a gyro capture still running (power lost)."""
         self._pending_gyro = None
 
+    def set_accel(self, accel: Vector3) -> None:
+        """Use this accelerometer correction from now (0xC9)."""
+        self.accel = accel
+
     def set_gyro(self, gyro: Vector3) -> None:
         """Use this gyro correction from now (a capture still running is dropped)."""
         self.gyro = gyro

@@ -63,6 +63,10 @@ class SensorEeprom:
         #: Refuse every 0xD0 transfer (answer 0xFFFF, store nothing).
         self.refuse_bias_store = False
 
+    def override_rate(self, rate_hz: float | None) -> None:
+        """Calculate at ``rate_hz`` whatever the divider says (None: the divider's rate)."""
+        self.rate_override = rate_hz
+
     @property
     def rate_hz(self) -> float:
         """Return the calculation rate (Hz): the override, or 51200 / EEPROM divider."""

@@ -216,7 +216,7 @@ class SimulatedSensor:
         """Force a rate beyond the device's range (benchmarks), or None to drop it."""
         if rate_hz is not None and rate_hz <= 0:
             raise ValueError('rate_hz must be positive')
-        self.settings.rate_override = rate_hz
+        self.settings.override_rate(rate_hz)
         self.clock.regrid(t, self.rate_hz)
 
     def timer_at(self, t: float) -> int:
@@ -325,7 +325,7 @@ class SimulatedSensor:
         return [self._reply(record, due, sample_time)]
 
     def _write_accel_bias(self, args, now, timer):
-        self.biases.accel = float32(args[0])
+        self.biases.set_accel(float32(args[0]))
         return rec.AccelBias(self.biases.accel, timer), now, now
 
     def _write_gyro_bias(self, args, now, timer):
