@@ -57,6 +57,24 @@ reserve_ros_domain(BENCHMARK_DOMAINS)
 #: carries (11,520 bytes/s), from the codec's layout table.
 LINE_MAX_RATE_HZ = (line_budget.line_bytes_per_second(115200)
                     / line_budget.packet_size(layouts.ACCEL_ANG_RATE_MAG_ORIENTATION, True))
+#: A USB-serial adapter in low-latency mode hands the host what it holds once a USB frame (s).
+USB_FRAME_S = 1e-3
+
+
+def line_pieces(line: str) -> dict[str, Any]:
+    """
+    Return the simulator's settings for how the port hands over a packet (SimulatorConfig).
+
+    ``pty``: the simulator's own, each packet in one to three pieces at once;
+    ``usb``: as a USB-serial adapter in low-latency mode does at 115200 baud,
+    a piece a USB frame (about 11.5 bytes), so a 0xCC packet in eight pieces.
+    """
+    if line == 'pty':
+        return {}
+    per_frame = line_budget.line_bytes_per_second(115200) * USB_FRAME_S
+    pieces = math.ceil(
+        line_budget.packet_size(layouts.ACCEL_ANG_RATE_MAG_ORIENTATION, True) / per_frame)
+    return {'chunks': (pieces, pieces), 'chunk_gap_s': USB_FRAME_S}
 
 
 # -- statistics: one percentile for everything that reports one (interpolated, q in 0..100) --

@@ -31,7 +31,10 @@ reports its own stage times, nothing of it is replaced). The figures:
 Configurations are arguments, measured interleaved: every round runs each
 once, in an order that changes from round to round, so that the machine's
 other load falls on all of them alike; the figures pool every round and
-the ratios set side by side come from the same run. ``floor`` is
+the ratios set side by side come from the same run. ``--line usb`` has the
+simulator hand the port each packet as a USB adapter in low-latency mode
+does, a piece a millisecond (bench_common.line_pieces); the default, ``pty``,
+in one to three pieces at once. ``floor`` is
 ``floor_node.py``, a process that only reads the port and publishes fixed
 bytes: what no rclpy driver goes below on this machine. ``cpu`` is the
 driver with its timings off, for its CPU alone (the figure of docs/cpu.md);
@@ -47,6 +50,7 @@ The original C++ node: 0.99 ms mean, 1.16 ms max.
     python benchmarks/latency.py --configs default,fifo,floor,floor-fifo --rounds 4
     python benchmarks/latency.py --configs default,floor --rate line-max --rounds 2
     python benchmarks/latency.py --configs cpu --against /tmp/before --rounds 4 --seconds 40
+    python benchmarks/latency.py --configs default,floor --line usb --rounds 4
 """
 
 import argparse
@@ -60,8 +64,8 @@ import time
 from typing import Any, NamedTuple
 
 from bench_common import (
-    emit, LINE_MAX_RATE_HZ, machine_table, percentile, RunNote, stamp_key, summarise, Summary,
-    TimedNodeProcess,
+    emit, LINE_MAX_RATE_HZ, line_pieces, machine_table, percentile, RunNote, stamp_key,
+    summarise, Summary, TimedNodeProcess,
 )
 from harness.processes import (
     isolate_ros_domain, process_cpu_seconds, SimProcess, SubscriberProcess, thread_switches,
@@ -137,10 +141,10 @@ class RunResult(NamedTuple):
     wakes: dict[str, float]
 
 
-def run_once(config: Config, seconds: float, rate_hz: float) -> RunResult:
+def run_once(config: Config, seconds: float, rate_hz: float, line: str = 'pty') -> RunResult:
     """Run one configuration for ``seconds`` after the warm-up; return its figures."""
     floor = bool(config.script)
-    sim = SimProcess(rate_hz=rate_hz, streaming_at_start=floor)
+    sim = SimProcess(rate_hz=rate_hz, streaming_at_start=floor, **line_pieces(line))
     subscriber = SubscriberProcess() if config.subscribed else None
     node = None
     try:
@@ -288,7 +292,7 @@ def wake_table(results: dict[str, list[RunResult]]) -> list[str]:
 
 
 def measure(configs: dict[str, Config], rounds: int, seconds: float, rate_hz: float,
-            seed: int = 1) -> dict[str, list[RunResult]]:
+            seed: int = 1, line: str = 'pty') -> dict[str, list[RunResult]]:
     """Run every configuration once a round, in an order that changes; return the runs."""
     order_rng = random.Random(seed)
     results: dict[str, list[RunResult]] = {c: [] for c in configs}
@@ -297,7 +301,7 @@ def measure(configs: dict[str, Config], rounds: int, seconds: float, rate_hz: fl
         order_rng.shuffle(order)
         for name in order:
             print(f'-- round {round_ + 1}/{rounds}: {name}', file=sys.stderr, flush=True)
-            result = run_once(configs[name], seconds, rate_hz)
+            result = run_once(configs[name], seconds, rate_hz, line)
             results[name].append(result)
             print(f'   driver p50/p99/max {_ms(summarise(result.driver))} ms, '
                   f'end to end {_ms(summarise(result.end_to_end))} ms, '
@@ -315,6 +319,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seconds', type=float, default=20.0, help='measured s per run')
     parser.add_argument('--rate', default='100',
                         help='data rate (Hz), or line-max: the most a 115200-baud line carries')
+    parser.add_argument('--line', choices=('pty', 'usb'), default='pty',
+                        help="how the port hands over a packet: the simulator's pty, 1 to 3 "
+                             'pieces at once; usb, a piece a millisecond as a USB adapter does')
     parser.add_argument('--against', type=Path, metavar='DIR',
                         help='also run every configuration on the driver of this checkout')
     args = parser.parse_args(argv)
@@ -331,8 +338,8 @@ def main(argv: list[str] | None = None) -> int:
     rate_hz = LINE_MAX_RATE_HZ if args.rate == 'line-max' else float(args.rate)
     isolate_ros_domain()
     note = RunNote('latency.py', argv)
-    results = measure(configs, args.rounds, args.seconds, rate_hz)
-    lines = [f'## Latency, {rate_hz:.1f} Hz', '', machine_table(), '',
+    results = measure(configs, args.rounds, args.seconds, rate_hz, line=args.line)
+    lines = [f'## Latency, {rate_hz:.1f} Hz, {args.line} line', '', machine_table(), '',
              *tables(configs, results, rate_hz), '',
              note.text(f'{args.rounds} rounds x {len(configs)} configurations, '
                        f'{args.seconds:g} s measured per run after {WARM_UP_S:g} s; '),

@@ -265,6 +265,25 @@ def test_any_chunking_gives_the_same_events(items, cuts, wireless, address, ping
 
 
 @CI
+@given(items=st.lists(noisy_item, max_size=12), address=st.sampled_from([None, ADDRESS]),
+       ping=st.booleans())
+def test_a_packet_read_alone_gives_what_the_stream_read_whole_gives(items, address, ping):
+    """
+    Each item its own read, as the reader's whole-packet waits bring them (device/link.py).
+
+    A sound packet of the node alone in a read takes the parser's shortcut
+    (``_one_packet``); a flipped one, another node's, or a piece of garbage
+    must still be counted as the general path counts them.
+    """
+    whole, alone = _twin_parsers(address, True, ping)
+    events_whole = whole.feed(_noisy_stream(items, True))
+    events_alone = [event for item in items for event in alone.feed(_noisy_stream([item], True))]
+    assert [key(e) for e in events_alone] == [key(e) for e in events_whole]
+    assert alone.stats.as_dict() == whole.stats.as_dict()
+    assert alone.pending == whole.pending
+
+
+@CI
 @given(data=st.binary(max_size=1500), cuts=cuts_strategy, wireless=st.booleans(),
        ping=st.booleans())
 def test_random_bytes_never_raise(data, cuts, wireless, ping):

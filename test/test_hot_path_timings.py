@@ -95,6 +95,12 @@ class _Calls:
 class _CannedPort:
     """A port whose reads return the given chunks, then report it unplugged."""
 
+    #: Bytes a read waits for (SerialPort.wake_for): this port hands over what it has.
+    wakes_for = 1
+
+    def wake_for(self, nbytes: int) -> None:
+        self.wakes_for = nbytes
+
     def __init__(self, chunks: list[bytes]) -> None:
         self._chunks = list(chunks)
 

@@ -48,6 +48,12 @@ def _packet(record: object, lqi: int | None = 200, rssi: int | None = 150) -> Da
 class _Line:
     """A port whose every write runs ``answer`` at once, as if the reply came back."""
 
+    #: Bytes a read waits for (SerialPort.wake_for): this port hands over what it has.
+    wakes_for = 1
+
+    def wake_for(self, nbytes: int) -> None:
+        self.wakes_for = nbytes
+
     def __init__(self) -> None:
         self.written: list[bytes] = []
         self.answer = lambda: None

@@ -40,6 +40,12 @@ import pytest
 class _Unplugged:
     """A port gone at the first read; notes which thread read it."""
 
+    #: Bytes a read waits for (SerialPort.wake_for): this port hands over what it has.
+    wakes_for = 1
+
+    def wake_for(self, nbytes: int) -> None:
+        self.wakes_for = nbytes
+
     def __init__(self, readers: list[threading.Thread]) -> None:
         self._readers = readers
 

@@ -24,6 +24,9 @@ so that a corrupted length or checksum never swallows the good frames behind
 it. Neither raises on bad input: they count what they skipped and why.
 """
 
+from collections.abc import Callable
+from operator import itemgetter
+import struct
 from typing import Any, NamedTuple
 
 from .framing import (
@@ -95,25 +98,58 @@ class ParserStats:
         return f'ParserStats({fields})'
 
 
-def _decoders() -> dict:
-    """Map each echo byte to (record size, unpack, record type, plan)."""
+#: A data packet's header before the record (SOP, flags, app type, address, length,
+#: extra), the record's echo byte, and after the record LQI, RSSI and the sum, as struct
+#: codes: with a record's fields between them, one unpack reads a whole packet.
+_PACKET_HEAD = '>BBBHBBB'
+_PACKET_TAIL = 'BBH'
+#: Where a record's first field is in a whole packet's values.
+_FIELDS_IN_PACKET = len(_PACKET_HEAD) - 1
+
+
+class _Decoder(NamedTuple):
+    """How the records of one echo byte are read, in a wired frame and in a data packet."""
+
+    #: The record's bytes: its echo byte and fields.
+    size: int
+    #: The whole data packet's bytes: header, record, LQI, RSSI, sum.
+    packet_size: int
+    #: ``unpack_from`` of the record's fields (after the echo byte), and their record.
+    unpack: Callable[..., tuple]
+    record: Callable[[tuple], Any]
+    #: ``unpack_from`` of a whole data packet, and the record of its values.
+    unpack_packet: Callable[..., tuple]
+    packet_record: Callable[[tuple], Any]
+
+
+def _builder(code: int, plan: tuple, record_type: type, first: int) -> Callable[[tuple], Any]:
+    """Return what makes the record of unpacked values whose fields start at ``first``."""
+    if code == DEVICE_IDENTIFIER:
+        return lambda v: DeviceIdentifier(v[first], v[first + 1].decode('latin-1'))
+    items = [first + p if isinstance(p, int) else slice(first + p.start, first + p.stop)
+             for p in plan]
+    get, make = itemgetter(*items), record_type._make
+    if len(items) == 1:  # itemgetter of one item returns it, not a tuple
+        return lambda v: make((get(v),))
+    return lambda v: make(get(v))
+
+
+def _decoders() -> dict[int, _Decoder]:
+    """Map each echo byte that has a record to its :class:`_Decoder`."""
     table = {}
     for code, layout in LAYOUTS.items():
-        if layout.reply_struct is not None:
-            table[code] = (layout.record_size, layout.reply_struct.unpack_from,
-                           layout.record_type, layout.plan)
+        if layout.reply_struct is None:
+            continue
+        fields = layout.reply_struct.format.lstrip('>')
+        packet = struct.Struct(_PACKET_HEAD + fields + _PACKET_TAIL)
+        table[code] = _Decoder(
+            layout.record_size, packet.size, layout.reply_struct.unpack_from,
+            _builder(code, layout.plan, layout.record_type, 0), packet.unpack_from,
+            _builder(code, layout.plan, layout.record_type, _FIELDS_IN_PACKET))
     return table
 
 
 _DECODERS = _decoders()
-
-
-def _decode(buf: bytearray, start: int, code: int) -> Any:
-    _, unpack, record_type, plan = _DECODERS[code]
-    values = unpack(buf, start + 1)
-    if code == DEVICE_IDENTIFIER:
-        return DeviceIdentifier(values[0], values[1].decode('latin-1'))
-    return record_type(*[values[p] for p in plan])
 
 
 class SensorStreamParser:
@@ -172,6 +208,10 @@ class SensorStreamParser:
     def feed(self, chunk: ByteString) -> list[Event]:
         """Add bytes from the port; return the complete events, in order."""
         buf = self._buf
+        if not buf and not self._quiet and self.wireless:
+            packet = self._one_packet(chunk)
+            if packet is not None:
+                return [packet]
         buf += chunk
         self.stats.bytes_in += len(chunk)
         if self.wireless:
@@ -183,6 +223,32 @@ class SensorStreamParser:
             self.stats.bytes_skipped += len(buf)
             buf.clear()
         return events
+
+    def _one_packet(self, chunk: ByteString) -> DataPacket | None:
+        """
+        Return the data packet of this node that ``chunk`` is, whole and sound; else None.
+
+        What a flowing stream's read brings (the reader waits for a whole
+        packet, device/link.py): one packet and nothing carried over, read
+        with one unpack and the same checks as :meth:`_parse_wireless`.
+        Anything else (a piece, two packets, a bad length or sum, another
+        node's) returns None and takes the general path, which counts it.
+        """
+        n = len(chunk)
+        decoder = _DECODERS.get(chunk[HEADER_SIZE]) if n > HEADER_SIZE else None
+        if decoder is None or n != decoder.packet_size:
+            return None
+        values = decoder.unpack_packet(chunk)
+        node = values[3]
+        if values[0] != ACK or values[1] != DATA_FLAGS or values[2] or values[5] \
+                or values[4] != decoder.size + 1 \
+                or (self.address is not None and node != self.address) \
+                or (sum(chunk[1:n - DATA_TRAILER_SIZE]) & 0xFFFF) != values[-1]:
+            return None
+        stats = self.stats
+        stats.bytes_in += n
+        stats.good_frames += 1
+        return DataPacket(node, decoder.packet_record(values), values[-3], values[-2])
 
     def _lone_byte(self, byte: int, out: list[Event]) -> bool:
         """Handle a single-byte answer at a frame boundary; True if it was one."""
@@ -247,31 +313,31 @@ class SensorStreamParser:
             if n - i < HEADER_SIZE + 1:
                 break
             entry = decoders.get(buf[i + HEADER_SIZE])
-            if entry is None or buf[i + 5] != entry[0] + 1 or buf[i + 2] or buf[i + 6]:
+            if entry is None or buf[i + 5] != entry.size + 1 or buf[i + 2] or buf[i + 6]:
                 stats.length_failures += 1
                 stats.bytes_skipped += 1
                 if entry is not None and not buf[i + 2] and not buf[i + 6]:
                     # Only the length byte is wrong: the packet is as long as
                     # its echo byte says, and its bytes are no answers either.
-                    quiet_end = max(quiet_end, i + HEADER_SIZE + entry[0] + DATA_TRAILER_SIZE)
+                    quiet_end = max(quiet_end, i + HEADER_SIZE + entry.size + DATA_TRAILER_SIZE)
                 i += 1
                 continue
-            end = i + HEADER_SIZE + entry[0]
+            end = i + HEADER_SIZE + entry.size
             if end + DATA_TRAILER_SIZE > n:
                 break
-            if (sum(buf[i + 1:end]) & 0xFFFF) != ((buf[end + 2] << 8) | buf[end + 3]):
+            values = entry.unpack_packet(buf, i)
+            if (sum(buf[i + 1:end]) & 0xFFFF) != values[-1]:
                 stats.checksum_failures += 1
                 stats.bytes_skipped += 1
                 quiet_end = max(quiet_end, end + DATA_TRAILER_SIZE)
                 i += 1
                 continue
-            node = (buf[i + 3] << 8) | buf[i + 4]
+            node = values[3]
             if address is not None and node != address:
                 stats.foreign_frames += 1
             else:
                 stats.good_frames += 1
-                out.append(DataPacket(node, _decode(buf, i + HEADER_SIZE, buf[i + HEADER_SIZE]),
-                                      buf[end], buf[end + 1]))
+                out.append(DataPacket(node, entry.packet_record(values), values[-3], values[-2]))
             i = end + DATA_TRAILER_SIZE
         self._quiet = max(0, quiet_end - i)
         return i, out
@@ -292,7 +358,7 @@ class SensorStreamParser:
                     stats.bytes_skipped += 1
                     i += 1
                 continue
-            end = i + entry[0]
+            end = i + entry.size
             if end + 2 > n:
                 break
             if (sum(buf[i:end]) & 0xFFFF) != ((buf[end] << 8) | buf[end + 1]):
@@ -301,7 +367,7 @@ class SensorStreamParser:
                 i += 1
                 continue
             stats.good_frames += 1
-            out.append(DataPacket(None, _decode(buf, i, code), None, None))
+            out.append(DataPacket(None, entry.record(entry.unpack(buf, i + 1)), None, None))
             i = end + 2
         return i, out
 

@@ -46,7 +46,7 @@ from .observer import LineObserver, QUIET_AFTER
 from .port import PortDisconnected, SerialPort
 from .reader_threads import READERS
 from .realtime import NORMAL_SCHEDULING, NOTHING_GRANTED, PolicyOutcome, ThreadPolicy
-from ..codec import commands, layouts
+from ..codec import commands, layouts, line_budget
 from ..codec.commands import LAYOUT_BY_TYPE
 from ..codec.framing import DataPacket, encode_command_packet
 from ..codec.parser import Ack, Nack, SensorStreamParser
@@ -188,6 +188,16 @@ class PortReader:
         self.strays: dict[int, int] = {}
         self._request_lock = threading.Lock()
         self._write_lock = threading.Lock()
+        #: The packet size of each link's stream (:meth:`streams`), and the bytes a
+        #: wait for data may wait for while every link streams: the smallest of
+        #: those (0: any byte, as it must while a link streams nothing).
+        self._stream_sizes: dict[DeviceLink, int] = {}
+        self._whole = 0
+        #: Requests waiting for an answer (:meth:`awaiting_answer`): an ACK is one
+        #: byte, a reply shorter than a record, so no wait waits for a whole packet.
+        self._awaited = 0
+        #: Guards the port's wake size against a request that begins meanwhile.
+        self._wake_lock = threading.Lock()
         self._on_bytes = options.on_bytes
         self._observer = options.observer
         self._read_timeout = options.read_timeout
@@ -238,6 +248,44 @@ class PortReader:
         """Stop handing ``address``'s packets to ``link`` (if they still go to it)."""
         if self._routes.get(address) is link:
             del self._routes[address]
+        self.streams(link, None)
+
+    # -- how long a wait waits -----------------------------------------------
+
+    def streams(self, link: 'DeviceLink', code: int | None) -> None:
+        """
+        Take what ``link`` streams now (None: nothing), for the size a wait waits for.
+
+        While every link of the port streams, the reader waits until a whole
+        packet of the smallest stream is in (``SerialPort.wake_for``): it wakes
+        once a record rather than once a piece of it.
+        """
+        with self._wake_lock:
+            if code is None:
+                self._stream_sizes.pop(link, None)
+            else:
+                self._stream_sizes[link] = line_budget.packet_size(code, self.wireless)
+            sizes = [self._stream_sizes.get(each, 0) for each in self._links()]
+            self._whole = min(sizes) if sizes and all(sizes) else 0
+            if not self._whole:
+                self.port.wake_for(1)
+
+    @contextlib.contextmanager
+    def awaiting_answer(self) -> Iterator[None]:
+        """Wake for any byte while a request waits: its answer may be shorter than a packet."""
+        with self._wake_lock:
+            self._awaited += 1
+            self.port.wake_for(1)
+        try:
+            yield
+        finally:
+            with self._wake_lock:
+                self._awaited -= 1
+
+    def _wake_for(self, nbytes: int) -> None:
+        """Wait for ``nbytes`` from the next read on, unless a request began meanwhile."""
+        with self._wake_lock:
+            self.port.wake_for(1 if self._awaited else nbytes)
 
     @contextlib.contextmanager
     def holding(self, link: 'DeviceLink') -> Iterator[None]:
@@ -319,8 +367,16 @@ class PortReader:
         # when the parser was done with it; None costs one test per stage.
         timings = hot_path.timings
         routes = self._routes
+        port = self.port
+        data = b''
         while not self._stop.is_set():
-            timeout = 0.02 if parser.pending == 1 else self._read_timeout
+            pending = parser.pending
+            timeout = 0.02 if pending == 1 else self._read_timeout
+            # A whole packet while the stream flows and the parser is in step with it;
+            # any byte after a silence (what is left of a packet is read at once).
+            whole = self._whole if data and not pending and not self._awaited else 1
+            if whole != port.wakes_for:
+                self._wake_for(whole)
             try:
                 data = read(timeout)
             except PortDisconnected as exc:
@@ -437,6 +493,7 @@ class DeviceLink:
     def set_streamed(self, code: int | None) -> None:
         """Say which record the device streams from now on (None: none), for :meth:`on_data`."""
         self._streamed = code
+        self.reader.streams(self, code)
 
     # -- the reader thread's side --------------------------------------------
 
@@ -563,12 +620,13 @@ class DeviceLink:
                 pending = Pending(reply_code)
                 self._pending = pending
                 try:
-                    if self.shared:
-                        self._exchange_shared(command, pending, timeout)
-                    else:
-                        with self.reader.holding(self):
-                            self.send(command)
-                            self._wait(pending, timeout)
+                    with self.reader.awaiting_answer():
+                        if self.shared:
+                            self._exchange_shared(command, pending, timeout)
+                        else:
+                            with self.reader.holding(self):
+                                self.send(command)
+                                self._wait(pending, timeout)
                 finally:
                     self._pending = None
                 self._check_port()
@@ -637,9 +695,10 @@ class DeviceLink:
                 pending = Pending(layouts.PING)
                 self._pending = pending
                 try:
-                    parser.expect_ping()
-                    self.reader.write(commands.ping(address))
-                    self._wait(pending, timeout, nack_ends=False)
+                    with self.reader.awaiting_answer():
+                        parser.expect_ping()
+                        self.reader.write(commands.ping(address))
+                        self._wait(pending, timeout, nack_ends=False)
                 finally:
                     self._pending = None
                 self._check_port()

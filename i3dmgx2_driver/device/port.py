@@ -29,6 +29,7 @@ waiting for a fixed read size or a polling interval.
 """
 
 import array
+import contextlib
 import errno
 import fcntl
 import glob
@@ -108,6 +109,8 @@ DEVICE_GROUP_WORDS = ('i3dmgx2', 'gx2', 'microstrain', '3dm')
 ASYNC_LOW_LATENCY = 1 << 13
 #: How much one read takes at most; a few packets' worth.
 READ_SIZE = 4096
+#: The most a read of a terminal returns while VMIN is above it (:meth:`SerialPort._rest`).
+TTY_READ_CHUNK = 64
 #: The kernel's list of terminal drivers: name, node, major, minors, type.
 TTY_DRIVERS = '/proc/tty/drivers'
 #: Where Linux lists serial adapters by a stable name, and the usual nodes.
@@ -345,6 +348,11 @@ class SerialPort:
             self._fd: int | None = self._serial.fileno()
         except (AttributeError, OSError, serial.SerialException):
             self._fd = None
+        if self._fd is not None:
+            with contextlib.suppress(OSError):
+                os.set_blocking(self._fd, False)  # pyserial's is already; _rest() needs it
+        #: Bytes a wait for data waits for (:meth:`wake_for`): 1, any byte.
+        self.wakes_for = 1
 
     def low_latency_flag(self) -> bool | None:
         """
@@ -401,8 +409,54 @@ class SerialPort:
             data = os.read(self._fd, READ_SIZE)
             if not data:
                 data = self._after_empty_read()
+            elif self.wakes_for > 1:
+                data = self._rest(data)
         except (OSError, ValueError) as exc:
             raise PortDisconnected(f'{self.path}: {exc}') from exc
+        return data
+
+    def wake_for(self, nbytes: int) -> None:
+        """
+        Let :meth:`read_some` wait until ``nbytes`` bytes are in (1: any byte), where it can.
+
+        A port hands a packet over in pieces: a USB-serial adapter each of its
+        transfers (a millisecond apart in low-latency mode), a pty each write.
+        Woken for each, the reader thread runs the parser's Python on a cold
+        cache every time (docs/cpu.md). Set as the terminal's VMIN (VTIME 0),
+        ``select()`` reports the port readable only once ``nbytes`` are queued
+        (Linux's n_tty poll counts VMIN), so the reader wakes once a packet and
+        the pieces are joined by the kernel. The caller sets it back to 1
+        whenever an answer shorter than a packet may come. A port without a
+        file descriptor (not POSIX) keeps waking for any byte.
+        """
+        if nbytes == self.wakes_for or self._fd is None:
+            return
+        try:
+            attributes = termios.tcgetattr(self._fd)
+            attributes[6][termios.VMIN] = nbytes
+            attributes[6][termios.VTIME] = 0
+            termios.tcsetattr(self._fd, termios.TCSANOW, attributes)
+        except (termios.error, OSError):
+            return  # the port is going: the read says so
+        self.wakes_for = nbytes
+
+    def _rest(self, data: bytes) -> bytes:
+        """
+        Return ``data`` and what is still queued after it.
+
+        While VMIN is above 64, Linux hands a read at most 64 bytes
+        (:data:`TTY_READ_CHUNK`: the tty layer copies through a buffer of that
+        size and ends the read once VMIN is met): a read of exactly that many
+        may have left the rest of a packet behind, read at once rather than
+        after another wake.
+        """
+        more = data
+        while len(more) == TTY_READ_CHUNK:
+            try:
+                more = os.read(self._fd, READ_SIZE)
+            except BlockingIOError:
+                break
+            data += more
         return data
 
     def _after_empty_read(self) -> bytes:
