@@ -257,8 +257,9 @@ class PortReader:
         Take what ``link`` streams now (None: nothing), for the size a wait waits for.
 
         While every link of the port streams, the reader waits until a whole
-        packet of the smallest stream is in (``SerialPort.wake_for``): it wakes
-        once a record rather than once a piece of it.
+        packet of the smallest stream is in, or the rest of one whose start the
+        parser holds (``SerialPort.wake_for``): it wakes once a record rather
+        than once a piece of it, and never waits past a packet's last byte.
         """
         with self._wake_lock:
             if code is None:
@@ -372,9 +373,12 @@ class PortReader:
         while not self._stop.is_set():
             pending = parser.pending
             timeout = 0.02 if pending == 1 else self._read_timeout
-            # A whole packet while the stream flows and the parser is in step with it;
-            # any byte after a silence (what is left of a packet is read at once).
-            whole = self._whole if data and not pending and not self._awaited else 1
+            # While the stream flows, a whole packet, or the rest of the one the parser
+            # holds the start of (a late reader that caught the next packet's first pieces
+            # is back in step with the stream at its end); any byte after a silence.
+            whole = self._whole - pending if data and not self._awaited else 1
+            if whole < 1:
+                whole = 1
             if whole != port.wakes_for:
                 self._wake_for(whole)
             try:
