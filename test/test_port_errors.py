@@ -120,6 +120,29 @@ def test_a_queue_flushed_between_select_and_read_is_no_unplug(monkeypatch, open_
 
 
 @pytest.mark.slow
+def test_a_queue_flushed_while_waiting_for_a_whole_packet_is_no_unplug(monkeypatch, open_pty):
+    """The same race while a packet is waited for whole: the read says EAGAIN, not EOF."""
+    (master,), port = open_pty
+    real_select = port_module.select.select
+    port.wake_for(88)
+    os.write(master, bytes(88))
+
+    def select_then_flush(*args):
+        ready = real_select(*args)
+        port.flush_input()
+        return ready
+
+    monkeypatch.setattr(port_module.select, 'select', select_then_flush)
+    assert port.read_some(1.0) == b''  # raised PortDisconnected (EAGAIN) before the fix
+    monkeypatch.setattr(port_module.select, 'select', real_select)
+    os.write(master, bytes(88))
+    assert port.read_some(1.0) == bytes(88)
+    os.close(master)
+    with pytest.raises(PortDisconnected):
+        port.read_some(1.0)
+
+
+@pytest.mark.slow
 def test_flushes_from_another_thread_never_read_as_an_unplug(open_pty):
     (master,), port = open_pty
     stop = threading.Event()

@@ -377,8 +377,7 @@ class PortReader:
             # holds the start of (a late reader that caught the next packet's first pieces
             # is back in step with the stream at its end); any byte after a silence.
             whole = self._whole - pending if data and not self._awaited else 1
-            if whole < 1:
-                whole = 1
+            whole = max(whole, 1)
             if whole != port.wakes_for:
                 self._wake_for(whole)
             try:

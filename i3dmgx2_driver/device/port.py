@@ -397,8 +397,10 @@ class SerialPort:
         another thread (the dialogue's ``quiet`` while the reader runs) can
         empty the queue between select and read, and reading that as an
         unplug made a reconnect out of nothing (found by the stateful
-        dialogue test on a CI machine). A hung-up terminal says so in poll's
-        flags; an empty read that repeats at once is taken as one too.
+        dialogue test on a CI machine). The descriptor does not block, so
+        an emptied queue says EAGAIN: nothing there. A hung-up terminal says
+        so in poll's flags; an empty read that repeats at once is taken as
+        one too.
         """
         if self._fd is None:
             return self._read_portable(timeout)
@@ -406,7 +408,10 @@ class SerialPort:
             ready, _, _ = select.select([self._fd], [], [], timeout)
             if not ready:
                 return b''
-            data = os.read(self._fd, READ_SIZE)
+            try:
+                data = os.read(self._fd, READ_SIZE)
+            except BlockingIOError:
+                return b''  # flushed between the select and the read
             if not data:
                 data = self._after_empty_read()
             elif self.wakes_for > 1:
@@ -470,7 +475,10 @@ class SerialPort:
                 break
             if not flags & select.POLLIN:
                 return b''  # flushed: nothing there, nothing wrong
-            data = os.read(self._fd, READ_SIZE)
+            try:
+                data = os.read(self._fd, READ_SIZE)
+            except BlockingIOError:
+                return b''  # flushed between the poll and the read
             if data:
                 return data
         raise PortDisconnected(f'{self.path}: device disconnected')
