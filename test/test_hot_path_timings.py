@@ -31,6 +31,7 @@ import json
 import textwrap
 import time
 
+from fake_ports import FakePort
 from harness.processes import isolate_ros_domain, NodeProcess, ros_env
 from i3dmgx2_driver.device import hot_path
 from i3dmgx2_driver.device.hot_path import (
@@ -92,14 +93,8 @@ class _Calls:
         return lambda *args: self.calls.append(name)
 
 
-class _CannedPort:
+class _CannedPort(FakePort):
     """A port whose reads return the given chunks, then report it unplugged."""
-
-    #: Bytes a read waits for (SerialPort.wake_for): this port hands over what it has.
-    wakes_for = 1
-
-    def wake_for(self, nbytes: int) -> None:
-        self.wakes_for = nbytes
 
     def __init__(self, chunks: list[bytes]) -> None:
         self._chunks = list(chunks)

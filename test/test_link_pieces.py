@@ -28,6 +28,7 @@ import threading
 import time
 import weakref
 
+from fake_ports import FakePort
 from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.records import AccelAngRate, Magnetometer
@@ -45,14 +46,8 @@ def _packet(record: object, lqi: int | None = 200, rssi: int | None = 150) -> Da
     return DataPacket(95, record, lqi, rssi)
 
 
-class _Line:
+class _Line(FakePort):
     """A port whose every write runs ``answer`` at once, as if the reply came back."""
-
-    #: Bytes a read waits for (SerialPort.wake_for): this port hands over what it has.
-    wakes_for = 1
-
-    def wake_for(self, nbytes: int) -> None:
-        self.wakes_for = nbytes
 
     def __init__(self) -> None:
         self.written: list[bytes] = []

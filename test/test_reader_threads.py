@@ -28,6 +28,7 @@ import logging
 import threading
 import weakref
 
+from fake_ports import FakePort
 from i3dmgx2_driver.capture.fault_capture import FaultCapture
 from i3dmgx2_driver.capture.file_format import read_capture
 from i3dmgx2_driver.device.link import PortReader
@@ -37,14 +38,8 @@ from i3dmgx2_driver.device.realtime import NORMAL_SCHEDULING, PolicyOutcome, Thr
 import pytest
 
 
-class _Unplugged:
+class _Unplugged(FakePort):
     """A port gone at the first read; notes which thread read it."""
-
-    #: Bytes a read waits for (SerialPort.wake_for): this port hands over what it has.
-    wakes_for = 1
-
-    def wake_for(self, nbytes: int) -> None:
-        self.wakes_for = nbytes
 
     def __init__(self, readers: list[threading.Thread]) -> None:
         self._readers = readers

@@ -376,8 +376,7 @@ class PortReader:
             # While the stream flows, a whole packet, or the rest of the one the parser
             # holds the start of (a late reader that caught the next packet's first pieces
             # is back in step with the stream at its end); any byte after a silence.
-            whole = self._whole - pending if data and not self._awaited else 1
-            whole = max(whole, 1)
+            whole = max(self._whole - pending, 1) if data and not self._awaited else 1
             if whole != port.wakes_for:
                 self._wake_for(whole)
             try:
