@@ -55,9 +55,10 @@ N_TAU = 1.0
 K_TAU = 3.0
 #: Relative 1-sigma a term may have and be trusted.
 TRUSTED = 0.4
-#: K is trusted only when the walk dominates over this factor of tau below the longest
-#: fitted: seen over less, a high figure has a small sigma (2 min: 7 of 8 wrong).
-WALK_SPAN = 4.0
+#: K is trusted only from a fit that reaches this tau (s): under it, the slow part of a
+#: flicker floor bends like a walk, and a K that came out high looks sure (at 2 minutes,
+#: 7 of the 8 K under 40 % were further than 2-sigma off; the many-seed check).
+K_MIN_TAU = 30.0
 #: The fit's covariance ignores that the octave taus' estimates share samples
 #: (correlated, positively, the more the longer the tau); these factors on N's, B's and
 #: K's sigma make up for it, set by the many-seed check (benchmarks/noise_hour.py --check).
@@ -233,12 +234,6 @@ def minutes(seconds: float) -> str:
     return f'{seconds / 60:.0f} min' if seconds >= 120 else f'{seconds:.0f} s'
 
 
-def _walk_from(coef: np.ndarray) -> float:
-    """Return the tau (s) past which the random walk outgrows the floor (or the white noise)."""
-    a, f, c = coef
-    return f / c if f > 0 else math.sqrt(a / c)
-
-
 def read_terms(dev: Deviation, duration: float) -> list[AxisNoise]:
     """Read N, B (and its tau) and K off each axis of ``dev``, for a still time ``duration`` s."""
     usable = dev.clusters >= MIN_CLUSTERS
@@ -266,10 +261,9 @@ def read_terms(dev: Deviation, duration: float) -> list[AxisNoise]:
                 seen = 'not resolved' if coef[j] <= 0 else f'±{rel:.0%} after the fit'
                 need = duration * (rel / TRUSTED) ** 2 if math.isfinite(rel) else 4 * duration
                 short = Short(f'too short: {seen}', need)
-            elif name == 'random_walk' and (cross := _walk_from(coef)) * WALK_SPAN > behind[2]:
-                # A walk seen over less than its span: a high figure would look sure.
-                short = Short(f'too short: the random walk outgrows the rest at tau '
-                              f'{cross:.3g} s', WALK_SPAN * MIN_CLUSTERS * cross)
+            elif name == 'random_walk' and behind[2] < K_MIN_TAU:
+                short = Short(f'too short: no tau of {K_MIN_TAU:.0f} s fitted',
+                              2 * MIN_CLUSTERS * K_MIN_TAU)
             terms.append(Term(math.sqrt(coef[j] * scale), int(duration // tau), short, rel,
                               upper_bound(dev, axis, name)))
         out.append(AxisNoise(terms[0], terms[1], tau_b, terms[2]))
