@@ -18,10 +18,10 @@ What ``noise`` recovers of the simulator's noise from an hour's capture, and how
 Makes a still capture with the simulator's noise model (``--minutes``, 60 by
 default, at ``--rate`` Hz, 0xC2 through the base station), writes it, reads
 it back and analyses it as ``noise --capture`` does, and prints each term per
-axis against the model's truth with the time of each step. ``--check`` runs
+axis against the model's truth with the time of each step. ``--seeds N`` runs
 the many-seed check instead (the model's arrays, no bytes, through
 ``noise.analyse``): for two noise configurations, at 30 s, 2, 10 and 60
-minutes (``--short-seeds`` seeds, ``--seeds`` at the hour), per term: how
+minutes (``--short-seeds`` seeds, N at the hour), per term: how
 many figures are trusted, how many of those lie within their printed
 2-sigma of the truth, the printed 1-sigma over the real scatter (rms over
 axes and seeds), and the hour's worst axis per seed. Figures in docs/noise.md.
@@ -131,13 +131,12 @@ def main() -> None:
     parser.add_argument('--minutes', type=float, default=60.0)
     parser.add_argument('--rate', type=float, default=250.0)
     parser.add_argument('--seed', type=int, default=2)
-    parser.add_argument('--check', action='store_true', help='the many-seed check instead')
-    parser.add_argument('--seeds', type=int, default=12, metavar='N',
-                        help="the check's seeds at an hour")
+    parser.add_argument('--seeds', type=int, default=0, metavar='N',
+                        help='the many-seed check instead, N seeds at an hour')
     parser.add_argument('--short-seeds', type=int, default=40, metavar='N',
                         help="the check's seeds up to 10 minutes")
     args = parser.parse_args()
-    if args.check:
+    if args.seeds:
         check(args.rate, args.short_seeds, args.seeds)
         return
     seconds = args.minutes * 60.0

@@ -61,7 +61,7 @@ TRUSTED = 0.4
 K_MIN_TAU = 30.0
 #: The fit's covariance ignores that the octave taus' estimates share samples
 #: (correlated, positively, the more the longer the tau); these factors on N's, B's and
-#: K's sigma make up for it, set by the many-seed check (benchmarks/noise_hour.py --check).
+#: K's sigma make up for it, set by the many-seed check (benchmarks/noise_hour.py --seeds).
 CORRELATION = np.array([1.6, 2.0, 2.0])
 #: The three terms: their names, the tau each is read at, their shape in the Allan deviation.
 TERMS = ('white', 'bias_instability', 'random_walk')
