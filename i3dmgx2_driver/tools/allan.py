@@ -259,11 +259,13 @@ def read_terms(dev: Deviation, duration: float) -> list[AxisNoise]:
             short = None
             if not rel <= TRUSTED:
                 seen = 'not resolved' if coef[j] <= 0 else f'±{rel:.0%} after the fit'
-                need = duration * (rel / TRUSTED) ** 2 if math.isfinite(rel) else 4 * duration
+                # The sigma falls about as one over the root of the length; at most 4 times.
+                need = duration * min((rel / TRUSTED) ** 2, 16.0)
                 short = Short(f'too short: {seen}', need)
-            elif name == 'random_walk' and behind[2] < K_MIN_TAU:
-                short = Short(f'too short: no tau of {K_MIN_TAU:.0f} s fitted',
-                              2 * MIN_CLUSTERS * K_MIN_TAU)
+            if name == 'random_walk' and behind[2] < K_MIN_TAU:
+                short = Short(short.why if short else f'too short: no tau of {K_MIN_TAU:.0f} s '
+                              'fitted', max(short.record_s if short else 0.0,
+                                            2 * MIN_CLUSTERS * K_MIN_TAU))
             terms.append(Term(math.sqrt(coef[j] * scale), int(duration // tau), short, rel,
                               upper_bound(dev, axis, name)))
         out.append(AxisNoise(terms[0], terms[1], tau_b, terms[2]))
