@@ -361,6 +361,17 @@ def test_too_few_samples_and_half_a_second_get_the_same_advice(seconds):
         noise.analyse(model_samples(seconds, 1))
 
 
+def test_ten_seconds_polled_at_3_hz_is_analysed_without_a_warning():
+    # One window of the movement test (32 samples): no neighbours, nothing to find.
+    rates = np.random.default_rng(4).normal(0.0, 1e-3, (31, 6))
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        report = noise.analyse(Samples(np.arange(31) / 3.0, rates[:, :3], rates[:, 3:], None,
+                                       'polled'))
+    assert report.warnings == []
+    assert report.terms['gyroscope'][0].white.bound > 1e-3 / math.sqrt(3.0)
+
+
 def test_inflate_scales_imu_yaml_alone_and_says_so(minutes_capture, tmp_path, capsys):
     assert noise.main(['--capture', str(minutes_capture), '-o', str(tmp_path),
                        '--inflate', '3']) == noise.MARKED

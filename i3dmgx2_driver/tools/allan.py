@@ -313,6 +313,8 @@ def movement(time: np.ndarray, values: np.ndarray, labels: list[str], rate: floa
     seen = count > 0
     means = np.stack([np.bincount(bins, weights=v) for v in values.T], axis=1)[seen]
     means /= count[seen, None]
+    if means.shape[0] < 3:           # no neighbours to compare: nothing to find
+        return Still([], [(0, time.size)])
     steps = np.abs(np.diff(means, axis=0))
     spread = 1.4826 * np.median(steps, axis=0)
     jump = np.where(spread > 0, steps / np.where(spread > 0, spread, 1.0), 0.0)
