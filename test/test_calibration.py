@@ -32,7 +32,7 @@ from i3dmgx2_driver.codec.records import GyroBias, INVALID_QUANTITY
 from i3dmgx2_driver.device.dialogue import float32_vector, SensorDialogue
 from i3dmgx2_driver.device.firmware import SensorFirmware
 from i3dmgx2_driver.device.gyro_bias import Calibration, GyroBiasCapture
-from i3dmgx2_driver.device.link import DeviceTimeout
+from i3dmgx2_driver.device.link import DeviceTimeout, EchoMismatch
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.ros.calibration_file import calibration_yaml
 from i3dmgx2_driver.ros.parameters import declare_parameters, driver_config, ParameterError
@@ -225,7 +225,7 @@ def test_an_echo_that_differs_or_none_is_a_clear_error():
     talk = SensorDialogue(DeviceConfig(port='/dev/null', address=95, gyro_bias=BIAS), Log(),
                           lambda *args: None, threading.Event(),
                           on_gyro_bias=lambda: told.append(True))
-    with pytest.raises(DeviceTimeout, match=r'gyro_bias: wrote \(-0.0033, -0.0217, -0.0052\) '
+    with pytest.raises(EchoMismatch, match=r'gyro_bias: wrote \(-0.0033, -0.0217, -0.0052\) '
                                             r'rad/s, the sensor echoed \(0, 0, 0\) rad/s'):
         talk.write_biases(Link(SimulatedSensor(seed=1), wrong=(0.0, 0.0, 0.0)))
     assert told == [], 'a bias the sensor does not echo is not said to be in use'

@@ -29,7 +29,7 @@ from typing import Any, Protocol
 
 from . import timeouts
 from .firmware import SensorFirmware
-from .link import DeviceLink, DeviceTimeout
+from .link import DeviceError, DeviceLink
 from .port import PortError
 from .status import DeviceStatus
 from ..codec import layouts
@@ -39,7 +39,7 @@ from ..codec.records import Vector3
 #: Polled 0xC2 records averaged before and after a capture, and by the self test.
 POLLS = 5
 #: Errors a device operation can end with; anything else is a bug and propagates.
-OPERATION_ERRORS = (PortError, DeviceTimeout, CodecError, OSError)
+OPERATION_ERRORS = (PortError, DeviceError, CodecError, OSError)
 
 
 def norm(v: Sequence[float]) -> float:

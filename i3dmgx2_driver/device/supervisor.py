@@ -78,10 +78,11 @@ import logging
 import threading
 from typing import Any
 
+from . import timeouts
 from .bring_up import BringUp
 from .current_link import CurrentLink
 from .dialogue import SensorDialogue
-from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
+from .link import BytesCallback, DeviceError, DeviceLink, RecordCallback, RequestCancelled
 from .port import PortDisconnected, PortError, PortUnusable
 from .port_opener import PortOpener
 from .settings import DeviceConfig
@@ -89,6 +90,10 @@ from .shared_port import SharedPort
 from .status import DeviceReport, DeviceStatus, State
 from .throttle import EVENT_PERIOD
 from .watchdog import ReopenWait, StallWatch
+
+
+class DeviceUnavailable(DeviceError):
+    """The supervisor cannot take the request now: still stopping, or the stream not running."""
 
 
 class DeviceSupervisor:
@@ -178,7 +183,7 @@ class DeviceSupervisor:
         self._cancel.clear()
         self._start_thread(self._current.link)
 
-    def stop(self, timeout: float = 1.5) -> None:
+    def stop(self, timeout: float = timeouts.SUPERVISOR_STOP_WAIT_S) -> None:
         """Stop streaming (0xFA), stop the threads, close the port."""
         self._cancel.set()
         self._attention.set()  # the watch sees it at once
@@ -235,7 +240,7 @@ class DeviceSupervisor:
         as :meth:`start` recovers them.
         """
         if self._running():
-            raise DeviceTimeout('the supervisor is still stopping: try again')
+            raise DeviceUnavailable('the supervisor is still stopping: try again')
         self._cancel.clear()
         self._current.observe(True)
         link = self._current.link
@@ -249,14 +254,14 @@ class DeviceSupervisor:
             self._current.release()
             self._report.enter(State.DISCONNECTED)
             raise
-        except DeviceTimeout:
+        except DeviceError:
             current = self._current.link
             if current is not None:
                 self._steps.quiet(current)
             raise
         if self._cancel.is_set():
             # stop() came while the stream was starting: it has the port; no thread.
-            raise DeviceTimeout('the driver stopped while the stream was starting')
+            raise RequestCancelled('the driver stopped while the stream was starting')
         self._start_thread(link)
 
     def start_retrying(self) -> None:
@@ -271,7 +276,7 @@ class DeviceSupervisor:
         self._report.enter(State.DISCONNECTED)
         self.start()
 
-    def stop_streaming(self, timeout: float = 1.5) -> None:
+    def stop_streaming(self, timeout: float = timeouts.SUPERVISOR_STOP_WAIT_S) -> None:
         """
         Stop the stream (0xFA) and the supervisor thread; keep the port open.
 
@@ -292,14 +297,14 @@ class DeviceSupervisor:
         Stop the stream, run ``operation(link)``, then restart the stream.
 
         Used by services that need the device's full attention (gyro bias
-        capture, built-in test), one at a time. Raises DeviceTimeout at once
+        capture, built-in test), one at a time. Raises DeviceUnavailable at once
         unless the device streams (or has stalled); PortError or
-        DeviceTimeout from the operation or the restart.
+        DeviceError from the operation or the restart.
         """
         link = self._current.link
         state = self._report.state
         if link is None or state not in (State.STREAMING, State.STALLED):
-            raise DeviceTimeout(f'device not streaming (state: {state.value})')
+            raise DeviceUnavailable(f'device not streaming (state: {state.value})')
         self._paused.set()
         self._report.enter(State.PAUSED)
         self._current.observe(False)  # a long operation (a 30 s bias capture) is quiet
@@ -350,7 +355,7 @@ class DeviceSupervisor:
                 stalled = True
             except PortUnusable as exc:
                 self._fail(exc)
-            except (PortError, DeviceTimeout) as exc:
+            except (PortError, DeviceError) as exc:
                 if not self._cancel.is_set():  # else: cut short on purpose
                     self._say(exc)
             if self._cancel.is_set():
@@ -360,9 +365,9 @@ class DeviceSupervisor:
             report.enter(State.DISCONNECTED)
             self._reopen_wait(after_stall=stalled)
 
-    def _say(self, exc: PortError | DeviceTimeout) -> None:
+    def _say(self, exc: PortError | DeviceError) -> None:
         """Say why this attempt failed, and that the loop goes on."""
-        if isinstance(exc, DeviceTimeout):
+        if isinstance(exc, DeviceError):
             self._report.warn('timeout', f'device not answering: {exc} (wrong port or '
                                          f'address? ros2 run i3dmgx2_driver discover '
                                          f'finds sensors)')
@@ -406,7 +411,7 @@ class DeviceSupervisor:
                 # in its RAM: the kept ones go back before its stream does.
                 self.dialogue.write_biases(link)
                 resumed = self._steps.restart_stream(link)
-            except DeviceTimeout:
+            except DeviceError:
                 report.warn('stall', 'stream did not resume: reopening the port', EVENT_PERIOD)
                 return
             if resumed:

@@ -76,6 +76,15 @@ STOP_GAP_AT_EXIT_S = 0.01
 #: tries again.
 TEMPERATURE_TIMEOUT = 0.3
 TEMPERATURE_RETRIES = 2
+#: How often a wait for records, or for their silence, looks again (s).
+RECORD_POLL_S = 0.01
+#: How often a resume looks for a record of the stream still running (s; within RESUME_LOOK_S).
+RESUME_POLL_S = 0.002
+#: The reader's wait while the parser holds one byte (a lone 0xAA: an ACK, or a packet's
+#: start), to tell the two apart soon (s).
+LONE_BYTE_WAIT_S = 0.02
+#: How long stopping waits for the supervisor thread to end (s).
+SUPERVISOR_STOP_WAIT_S = 1.5
 #: How long a port's reader is waited for to start (s), and to end once told to stop
 #: (a read returns within its read timeout, far less).
 READER_START_WAIT_S = 1.0

@@ -66,7 +66,7 @@ from ..codec.timer import TIMER_MODULUS
 from ..device import timeouts
 from ..device.clock import DeviceClock
 from ..device.identity import read_identity
-from ..device.link import DeviceLink, DeviceTimeout, LinkOptions
+from ..device.link import DeviceError, DeviceLink, LinkOptions
 from ..device.port import port_group, PortError, SerialPort
 from ..device.sensor_steps import SensorSteps
 
@@ -221,7 +221,7 @@ class Bringup:
         self.say(fw.summary(self.firmware))
         try:
             self.found_divider = self.steps.read_divider(link)
-        except DeviceTimeout:
+        except DeviceError:
             self.found_divider = None
         self.divider = self.found_divider
         self.report['as_found'] = {
@@ -236,7 +236,7 @@ class Bringup:
         """Write the rate divider to EEPROM (once, read back); True if it holds."""
         try:
             self.divider = self.steps.write_divider(self.link, self.divider, divider)
-        except DeviceTimeout:
+        except DeviceError:
             self.divider = None  # written or not: unknown
             return False
         return True
@@ -267,7 +267,7 @@ class Bringup:
         try:
             self.steps.start_stream(self.link, stream.code, period)
             time.sleep(self.args.stream_seconds)
-        except DeviceTimeout:
+        except DeviceError:
             out['error'] = (f'no records after {timeouts.CONTINUOUS_TRIES} continuous-mode '
                             f'requests')
         log = self.log.stop()
@@ -289,7 +289,7 @@ class Bringup:
             ok = self.divider == self.found_divider or self._write_divider(self.found_divider)
             try:
                 readback = steps.read_divider(link)
-            except DeviceTimeout:
+            except DeviceError:
                 readback = None
             out['rate_divider'] = readback
             out['rate_divider_restored'] = bool(ok and readback == self.found_divider)
@@ -300,7 +300,7 @@ class Bringup:
             try:
                 restarted = steps.start_stream(link, self.found_stream,
                                                period_of_divider(self.divider))
-            except DeviceTimeout:
+            except DeviceError:
                 restarted = False
             out['streaming'] = f'0x{self.found_stream:02X}' if restarted else None
             out['stream_restored'] = restarted
@@ -492,7 +492,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         notes='bringup session'))
     log = RecordLog()
     link = DeviceLink(port, args.address, log,
-                      LinkOptions(read_timeout=timeouts.TOOL_READ_TIMEOUT, on_bytes=capture.write))
+                      LinkOptions.listening(True, capture.write))
     session = Bringup(link, log, args, say)
     session.report = report
     trips = session.round_trips
@@ -522,7 +522,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         status = EXIT_INTERRUPTED
         if not restored:
             report['left'] = session.restore()
-    except (PortError, DeviceTimeout) as exc:
+    except (PortError, DeviceError) as exc:
         report['error'] = str(exc)
     finally:
         link.stop()

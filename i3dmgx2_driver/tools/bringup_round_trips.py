@@ -30,7 +30,7 @@ from typing import Any
 
 from ..codec import commands, layouts
 from ..device import timeouts
-from ..device.link import DeviceLink, DeviceNack, DeviceTimeout
+from ..device.link import DeviceError, DeviceLink, DeviceNack
 from ..device.sensor_steps import SensorSteps
 
 #: How long a single measured exchange may take (s): far beyond every timeout the
@@ -104,7 +104,7 @@ class RoundTrips:
             except DeviceNack:
                 nacked += 1
                 continue
-            except DeviceTimeout:
+            except DeviceError:
                 lost += 1
                 continue
             times.append(time.monotonic() - start)
@@ -132,7 +132,7 @@ class RoundTrips:
                 replies.append(time.monotonic() - start)
             except DeviceNack:
                 nacked += 1
-            except DeviceTimeout:
+            except DeviceError:
                 lost += 1
             deadline = start + MEASURE_TIMEOUT + timeouts.RECORD_PERIODS * period
             first = None
