@@ -30,7 +30,7 @@ from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.commands import decode_command
 from i3dmgx2_driver.codec.records import GyroBias, INVALID_QUANTITY
 from i3dmgx2_driver.device.dialogue import float32_vector, SensorDialogue
-from i3dmgx2_driver.device.firmware import SensorFirmware
+from i3dmgx2_driver.device.sensor_firmware import SensorFirmware
 from i3dmgx2_driver.device.gyro_bias import Calibration, GyroBiasCapture
 from i3dmgx2_driver.device.link import DeviceTimeout, EchoMismatch
 from i3dmgx2_driver.device.settings import DeviceConfig
@@ -72,6 +72,9 @@ class FakeDialogue:
             raise DeviceTimeout('no reply to 0xD0')
         return quantity if self.answer == 0 else self.answer
 
+    def keep_gyro_bias(self, bias: Any) -> None:
+        """Nothing to write back to: no stream restarts here."""
+
 
 class FakeDevice:
     """Runs an operation on no link; its EEPROM is the fake dialogue's."""
@@ -83,11 +86,6 @@ class FakeDevice:
     def run_paused(self, operation: Any) -> Any:
         return operation(None)
 
-    def keep_gyro_bias(self, bias: Any) -> None:
-        """Nothing to write back to: no stream restarts here."""
-
-    def store_in_eeprom(self, link: Any, quantity: int) -> int:
-        return self.dialogue.transfer_to_non_volatile(link, quantity)
 
 
 def capture(device: FakeDevice, *outcomes: bool) -> GyroBiasCapture:

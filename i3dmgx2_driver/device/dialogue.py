@@ -65,7 +65,7 @@ import time
 from typing import Any
 
 from . import timeouts
-from .firmware import check_stream, SensorFirmware
+from .sensor_firmware import check_stream, SensorFirmware
 from .identity import DeviceInfo, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR
 from .link import DeviceError, DeviceLink, DeviceTimeout, EchoMismatch
 from .sensor_steps import ping, SensorSteps

@@ -28,7 +28,8 @@ import math
 from typing import Any, Protocol
 
 from . import timeouts
-from .firmware import SensorFirmware
+from .dialogue import SensorDialogue
+from .sensor_firmware import SensorFirmware
 from .link import DeviceError, DeviceLink
 from .port import PortError
 from .status import DeviceStatus
@@ -72,6 +73,9 @@ class Device(Protocol):
 
     #: The sensor's firmware (0xE9), asked before a gated command is sent.
     firmware: SensorFirmware
+    #: The steps an operation takes on the lent link (an EEPROM write among them, each
+    #: counted), and what is written back at every start (``keep_gyro_bias``).
+    dialogue: SensorDialogue
 
     def status(self) -> DeviceStatus:
         """Return the device side's snapshot."""
@@ -79,8 +83,3 @@ class Device(Protocol):
     def run_paused(self, operation: Callable[[DeviceLink], Any]) -> Any:
         """Stop the stream, run ``operation(link)``, start the stream again."""
 
-    def keep_gyro_bias(self, bias: Vector3) -> None:
-        """Write ``bias`` back from now on (at every start, resume and stall recovery)."""
-
-    def store_in_eeprom(self, link: DeviceLink, quantity: int) -> int:
-        """Store a bias (0xD0) on the lent ``link``; return the reply, an EEPROM write counted."""

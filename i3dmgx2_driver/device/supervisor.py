@@ -319,14 +319,6 @@ class DeviceSupervisor:
                 self._paused.clear()
                 self._attention.set()
 
-    def keep_gyro_bias(self, bias: tuple[float, float, float]) -> None:
-        """Have the dialogue write ``bias`` back from now on (an accepted capture's)."""
-        self.dialogue.keep_gyro_bias(bias)
-
-    def store_in_eeprom(self, link: DeviceLink, quantity: int) -> int:
-        """Store a bias in the sensor's EEPROM on the lent ``link`` (the dialogue counts it)."""
-        return self.dialogue.transfer_to_non_volatile(link, quantity)
-
     # -- the supervisor thread: stream and recover ---------------------------------------
 
     def _start_thread(self, link: DeviceLink | None) -> None:

@@ -54,7 +54,7 @@ from .port_listing import latency_timer_ms
 from .. import lifetime
 from ..arguments import seconds, whole_number
 from ..capture.file_format import CaptureWriter, default_header
-from ..codec import firmware as fw
+from ..codec import command_firmware as fw
 from ..codec import line_budget, streams
 from ..codec.commands import LAYOUT_BY_TYPE
 from ..codec.data_rate import (

@@ -43,7 +43,7 @@ from .port_listing import (
 )
 from .. import lifetime
 from ..arguments import seconds
-from ..codec import firmware as fw
+from ..codec import command_firmware as fw
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..device.port import port_group, serial_group, UDEV_RULE_INSTALL
 
