@@ -49,7 +49,9 @@ import threading
 import time
 from typing import Any, TextIO
 
-from .bringup_round_trips import MEASURE_TIMEOUT, note_longest, RoundTrips, spread
+from .bringup_round_trips import (
+    close_calls, MEASURE_TIMEOUT, note_longest, radio_timeouts, RECORD_GAP, RoundTrips, spread,
+)
 from .port_listing import latency_timer_ms
 from .. import lifetime
 from ..arguments import seconds, whole_number
@@ -274,7 +276,7 @@ class Bringup:
         self.steps.stop_until_quiet(self.link, period)
         out.update(stream_figures([e for e in log if e[1] == stream.code], divider,
                                   line_budget.wire_time(stream.code, self.args.baud, True)))
-        note_longest(self.longest, timeouts.RECORD_GAP, [out['longest_gap_ms'] / 1e3]
+        note_longest(self.longest, RECORD_GAP, [out['longest_gap_ms'] / 1e3]
                      if out.get('longest_gap_ms') is not None else [])
         return out
 
@@ -474,7 +476,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
                  'in_group': owner[1] if owner else None},
         'settings': {'pings': args.pings, 'commands': args.commands, 'cycles': args.cycles,
                      'stream_seconds': args.stream_seconds},
-        'timeouts': [t._asdict() for t in timeouts.radio_timeouts()],
+        'timeouts': [t._asdict() for t in radio_timeouts()],
         'round_trips': {}, 'streams': [],
     }
     status = EXIT_FAILED
@@ -514,7 +516,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         say('putting the sensor back as found')
         report['left'] = session.restore()
         restored = True
-        report['close_calls'] = timeouts.close_calls(session.longest)
+        report['close_calls'] = close_calls(session.longest)
         if report['left']['as_found'] and 'error' not in report:
             status = EXIT_OK
     except KeyboardInterrupt:
