@@ -28,11 +28,11 @@ import random
 
 from i3dmgx2_driver.codec import command_firmware as fw, commands, layouts as lay, streams
 from i3dmgx2_driver.codec.errors import EncodeError
-from i3dmgx2_driver.device.sensor_firmware import FirmwareLacksStream, SensorFirmware
 from i3dmgx2_driver.device.identity import DeviceInfo
 from i3dmgx2_driver.device.link import DeviceTimeout
 from i3dmgx2_driver.device.port import PortUnusable
 from i3dmgx2_driver.device.self_test import format_report, Step, temperature_step
+from i3dmgx2_driver.device.sensor_firmware import FirmwareLacksStream, SensorFirmware
 from i3dmgx2_driver.device.status import DeviceStatus
 from i3dmgx2_driver.ros import diagnostic_statuses as d
 from i3dmgx2_driver.ros.temperature import TemperaturePoller

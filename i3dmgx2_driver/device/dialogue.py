@@ -65,9 +65,9 @@ import time
 from typing import Any
 
 from . import timeouts
-from .sensor_firmware import check_stream, SensorFirmware
 from .identity import DeviceInfo, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR
 from .link import DeviceError, DeviceLink, DeviceTimeout, EchoMismatch
+from .sensor_firmware import check_stream, SensorFirmware
 from .sensor_steps import ping, SensorSteps
 from .settings import DeviceConfig
 from .throttle import EVENT_PERIOD, Throttle
@@ -305,7 +305,7 @@ class SensorDialogue(SensorSteps):
                 echo = link.request(request(bias), code, self.timeout, self.retries).bias
             except DeviceError as exc:
                 raise type(exc)(f'{name}: the sensor did not echo the bias written '
-                                    f'(0x{code:02X}): {exc}') from None
+                                f'(0x{code:02X}): {exc}') from None
             if tuple(echo) != float32_vector(bias):
                 raise EchoMismatch(
                     f'{name}: wrote {_vector(bias)} {unit}, the sensor echoed '

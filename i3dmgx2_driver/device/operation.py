@@ -29,9 +29,9 @@ from typing import Any, Protocol
 
 from . import timeouts
 from .dialogue import SensorDialogue
-from .sensor_firmware import SensorFirmware
 from .link import DeviceError, DeviceLink
 from .port import PortError
+from .sensor_firmware import SensorFirmware
 from .status import DeviceStatus
 from ..codec import layouts
 from ..codec.errors import CodecError
@@ -82,4 +82,3 @@ class Device(Protocol):
 
     def run_paused(self, operation: Callable[[DeviceLink], Any]) -> Any:
         """Stop the stream, run ``operation(link)``, start the stream again."""
-

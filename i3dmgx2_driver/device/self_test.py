@@ -31,12 +31,12 @@ import math
 import threading
 from typing import Any, NamedTuple
 
-from .sensor_firmware import SensorFirmware
 from .link import DeviceError, DeviceLink
 from .operation import Device, format_vector, norm, OPERATION_ERRORS, poll_inertial, POLLS
 from .record_rate import RATE_TOLERANCE, RateMeter
-from ..codec import commands, layouts
+from .sensor_firmware import SensorFirmware
 from ..codec import command_firmware as fw
+from ..codec import commands, layouts
 from ..codec.records import Vector3
 
 #: The self test expects |accel| = 1 g within this (g), the sensor at rest.

@@ -366,8 +366,7 @@ class DeviceSupervisor:
             return
         # An unplug is an event; a port that stays missing is a condition.
         period = EVENT_PERIOD if isinstance(exc, PortDisconnected) else None
-        self._report.warn(type(exc).__name__, f'{exc} (retrying every '
-                                              f'{self.config.reconnect_interval:g} s)', period)
+        self._report.warn(type(exc).__name__, f'{exc} ({self._reopen_wait.promise})', period)
 
     def _fail(self, exc: PortUnusable) -> None:
         """Give up for good: keep why, stop, and let the entry point say it and exit."""

@@ -59,6 +59,9 @@ STOP_TRIES = 3
 #: After 0xFA: how long (s) the records already on their way are given to arrive
 #: before they are dropped (the line quieted without waiting for silence).
 STOP_SETTLE_S = 0.05
+#: After a failed attempt the port is tried again this much later (s; sooner when it comes
+#: back: watchdog.ReopenWait), the node's ``reconnect_interval``.
+RECONNECT_INTERVAL = 1.0
 #: No record for this long (s): the stream has stalled (the node's ``read_timeout``).
 STALL_TIMEOUT = 1.0
 #: The first polls before continuous mode (dialogue.py): tries of each, short of the
@@ -98,4 +101,3 @@ PROBE_REQUEST_RETRIES = 3
 PROBE_LISTEN_S = 0.5
 #: discover: this many unanswered pings first mean no base station on the port.
 PROBE_SILENT_PINGS = 2
-

@@ -39,9 +39,9 @@ from sensor_msgs.msg import Temperature
 from .conversions import set_stamp
 from ..codec import layouts
 from ..device import timeouts
-from ..device.sensor_firmware import SensorFirmware
 from ..device.link import DeviceError, DeviceLink
 from ..device.port import PortError
+from ..device.sensor_firmware import SensorFirmware
 from ..device.throttle import Throttle
 
 #: Seconds between two warnings about failed polls.
