@@ -52,7 +52,7 @@ from typing import Any, TextIO
 from .bringup_round_trips import (
     close_calls, MEASURE_TIMEOUT, note_longest, radio_timeouts, RECORD_GAP, RoundTrips, spread,
 )
-from .port_listing import latency_timer_ms
+from .port_listing import latency_timer_ms, port_group
 from .. import lifetime
 from ..arguments import seconds, whole_number
 from ..capture.file_format import CaptureWriter, default_header
@@ -69,7 +69,7 @@ from ..device import timeouts
 from ..device.clock import DeviceClock
 from ..device.identity import read_identity
 from ..device.link import DeviceError, DeviceLink, LinkOptions
-from ..device.port import port_group, PortError, SerialPort
+from ..device.port import PortError, SerialPort
 from ..device.sensor_steps import SensorSteps
 
 #: One record of a stream measured: (monotonic read time, code, timer, LQI, RSSI).
