@@ -71,10 +71,14 @@ class PtyPort:
 
     ``io_lock`` guards the descriptors and every write. Lock order: a caller
     may hold the simulator's lock while taking ``io_lock``, never the reverse.
+    ``prefix`` names the private directory of a symlink not asked for (a
+    replay's says so).
     """
 
-    def __init__(self, symlink: str | None = None, link_via_proc: bool = True) -> None:
+    def __init__(self, symlink: str | None = None, link_via_proc: bool = True,
+                 prefix: str = 'i3dmgx2-sim-') -> None:
         self._symlink = symlink
+        self._prefix = prefix
         self._link_via_proc = link_via_proc
         self._dir: str | None = None
         self.io_lock = threading.Lock()
@@ -96,7 +100,7 @@ class PtyPort:
             if os.path.lexists(self.path) and not os.path.islink(self.path):
                 raise FileExistsError(f'{self.path} exists and is not a symlink')
         else:
-            self._dir = tempfile.mkdtemp(prefix='i3dmgx2-sim-')
+            self._dir = tempfile.mkdtemp(prefix=self._prefix)
             self.path = os.path.join(self._dir, PORT_NAME)
         return self.path
 
