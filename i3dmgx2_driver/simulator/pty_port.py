@@ -45,6 +45,8 @@ import threading
 import time
 import tty
 
+from ..lifetime import close_quietly
+
 #: Name of the port symlink inside the simulator's private directory.
 PORT_NAME = 'ttyGX2'
 #: Leading byte of a packet-mode read: data follow (anything else is a status).
@@ -53,16 +55,6 @@ TIOCPKT_DATA = 0
 TIOCPKT_FLUSHREAD = getattr(termios, 'TIOCPKT_FLUSHREAD', 0x01)
 
 _TIOCPKT = getattr(termios, 'TIOCPKT', 0x5420)
-
-
-def close_quietly(*fds: int | None) -> None:
-    """Close each descriptor given (None: none); one already closed is no error at the end."""
-    for fd in fds:
-        if fd is not None:
-            try:
-                os.close(fd)
-            except OSError:
-                pass
 
 
 class PtyPort:
