@@ -28,7 +28,7 @@ import argparse
 import math
 import time
 
-from i3dmgx2_driver.codec import firmware, framing
+from i3dmgx2_driver.codec import command_firmware as firmware, framing
 from i3dmgx2_driver.codec.data_rate import MAX_DIVIDER, MIN_DIVIDER
 
 from .config import SimulatorConfig
