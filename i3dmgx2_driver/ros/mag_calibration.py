@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-The magnetometer's calibration as the node applies it: ``soft_iron · (field − hard_iron)``.
+The magnetometer's calibration as the node applies it: ``soft_iron · (field - hard_iron)``.
 
 Iron that moves with the sensor shifts the field it reads (hard iron) and
 squeezes it (soft iron); ``ros2 run i3dmgx2_driver magcal`` fits both
@@ -63,7 +63,7 @@ def is_loaded(settings: Any) -> bool:
 
 
 def is_matrix_list(values: Sequence[float]) -> bool:
-    """Whether ``values`` are 3x3 matrices, each symmetric (within SYMMETRY) and positive definite."""
+    """Whether ``values`` are 3x3 matrices, each symmetric (SYMMETRY) and positive definite."""
     if not values or len(values) % 9:
         return False
     for k in range(0, len(values), 9):

@@ -146,7 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help='sway (default); tumble: through every attitude; yaw: level, '
                              'turning in yaw alone (a magnetometer calibration, docs/magcal.md)')
     device.add_argument('--hard-iron', type=float, nargs=3, default=(0.0, 0.0, 0.0),
-                        metavar=('X', 'Y', 'Z'), help="offset added to the field (Gauss, the "
+                        metavar=('X', 'Y', 'Z'), help='offset added to the field (Gauss, the '
                         "sensor's axes)")
     device.add_argument('--soft-iron', type=float, nargs=9, metavar='M',
                         default=MotionConfig.soft_iron,

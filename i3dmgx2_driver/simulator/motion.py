@@ -93,7 +93,8 @@ class MotionConfig:
     noise: NoiseConfig | None = None
     #: Iron that moves with the sensor (docs/magcal.md): the field read is
     #: ``soft_iron * true + hard_iron`` (Gauss, sensor axes, row-major), and the
-    #: sensor's own attitude takes its heading from that field, as its filter does.
+    #: sensor's own attitude takes its heading from that field, as its filter does
+    #: (magnetic: north of the field, not true north).
     hard_iron: Vector3 = (0.0, 0.0, 0.0)
     soft_iron: Matrix3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 
@@ -133,7 +134,7 @@ class Measurement(NamedTuple):
 
 
 def tilted_heading(field: Vector3, roll: float, pitch: float) -> float:
-    """Return the heading (rad) a compass levelled by ``roll`` and ``pitch`` reads off ``field``."""
+    """Return the heading (rad) a compass levelled by ``roll`` and ``pitch`` reads."""
     sr, cr, sp, cp = math.sin(roll), math.cos(roll), math.sin(pitch), math.cos(pitch)
     north = field[0] * cp + (field[1] * sr + field[2] * cr) * sp
     return math.atan2(field[2] * sr - field[1] * cr, north)
@@ -261,10 +262,11 @@ class Motion:
                          for i in range(3))
         field, matrix = truth.mag, truth.matrix
         if self._iron:
-            field = tuple(f + h for f, h in zip(mat_vec(c.soft_iron, field), c.hard_iron))
-            roll, pitch, yaw = truth.euler
-            matrix = matrix_from_euler(roll, pitch, yaw + tilted_heading(field, roll, pitch)
-                                       - tilted_heading(truth.mag, roll, pitch))
+            soft = mat_vec(c.soft_iron, field)
+            field = tuple(f + h for f, h in zip(soft, c.hard_iron, strict=True))
+            # As the sensor's filter: tilt from gravity, magnetic heading from the field read.
+            roll, pitch, _ = truth.euler
+            matrix = matrix_from_euler(roll, pitch, tilted_heading(field, roll, pitch))
         if c.nan_mag or (c.mag_nan_probability > 0.0
                          and rng.random() < c.mag_nan_probability):
             mag = (_NAN, _NAN, _NAN)

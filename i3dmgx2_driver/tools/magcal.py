@@ -29,6 +29,7 @@ Details, and how to read the figures: docs/magcal.md.
 """
 
 import argparse
+import ast
 from collections.abc import Sequence
 import json
 import math
@@ -38,7 +39,7 @@ import sys
 from typing import Any, NamedTuple
 
 import numpy as np
-import yaml
+from rclpy.parameter import parameter_dict_from_yaml_file, parameter_value_to_python
 
 from .bag_io import bag_reader, deserializer
 from .figures import agg_figure, MatplotlibMissing
@@ -53,9 +54,9 @@ from ..ros.mag_calibration import HARD_IRON, IDENTITY, is_matrix_list, SOFT_IRON
 AXIS_SHARE = 0.01
 #: Widest stretch of heading a yaw-only sweep may leave unseen (deg).
 MAX_GAP_DEG = 45.0
-#: A quarter of the recording whose residual is off by more than this (of the field)
-#: says the disturbance moved.
-MOVED = 0.01
+#: Offsets of the two halves of the recording further apart than this (of the field)
+#: say the disturbance moved.
+MOVED = 0.02
 #: The sensor's own heading off by more than this (deg) calls for advice.
 OWN_HEADING_DEG = 3.0
 _AXES = ('+x (front)', '-x (back)', '+y (right side)', '-y (left side)', '+z (bottom)',
@@ -63,7 +64,7 @@ _AXES = ('+x (front)', '-x (back)', '+y (right side)', '-y (left side)', '+z (bo
 
 
 class Sweep(NamedTuple):
-    """The readings: field (T) and gravity's direction, the sensor's axes (x fwd, y right, z down)."""
+    """The readings: field (T) and gravity's direction, in the sensor's axes (FRD)."""
 
     field: np.ndarray               # (n, 3) T, raw
     down: np.ndarray                # (n, 3) unit vectors, from the accelerometer
@@ -158,13 +159,15 @@ def undo(sweep: Sweep, hard_iron: Sequence[float], soft_iron: Sequence[float]) -
 
 
 def applied_file(path: str) -> tuple[list[float], list[float]]:
-    """Return the calibration a params file (magcal.yaml) sets, under any node's name."""
-    with open(path, encoding='utf-8') as f:
-        for node in (yaml.safe_load(f) or {}).values():
-            values = node.get('ros__parameters', {})
-            if HARD_IRON in values or SOFT_IRON in values:
-                return values.get(HARD_IRON, list(ZERO)), values.get(SOFT_IRON, list(IDENTITY))
-    raise ValueError(f'{path}: no {HARD_IRON} or {SOFT_IRON} in it')
+    """Return the calibration a params file (magcal.yaml) sets, read as rclpy reads it."""
+    values = {name: parameter_value_to_python(p.value)
+              for name, p in parameter_dict_from_yaml_file(path, use_wildcard=True).items()}
+    if HARD_IRON not in values and SOFT_IRON not in values:
+        raise ValueError(f'{path}: no {HARD_IRON} or {SOFT_IRON} in it')
+    # rclpy's reader gives a list with a number like 5e-06 back as its text.
+    return tuple([float(v) for v in (ast.literal_eval(given) if isinstance(given, str)
+                                     else given)]
+                 for given in (values.get(HARD_IRON, ZERO), values.get(SOFT_IRON, IDENTITY)))
 
 
 def level(down: np.ndarray) -> np.ndarray:
@@ -175,7 +178,7 @@ def level(down: np.ndarray) -> np.ndarray:
 
 
 def headings(field: np.ndarray, down: np.ndarray) -> np.ndarray:
-    """Return the heading (rad, clockwise from magnetic north) of the x axis, tilt from ``down``."""
+    """Return the heading (rad, clockwise from magnetic north) of x, levelled by ``down``."""
     east = _unit(np.cross(down, field))
     north = np.cross(east, down)
     return np.arctan2(east[:, 0], north[:, 0])
@@ -232,36 +235,47 @@ def _quadric_fit(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre * scale + mean, root / np.linalg.det(root) ** (1.0 / k)
 
 
+def _solve(sweep: Sweep, planar: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Return the hard and soft iron fitted on the sweep, 3-D or in the level plane."""
+    if not planar:
+        return _quadric_fit(sweep.field)
+    rot = level(sweep.down)
+    centre, matrix = _quadric_fit((sweep.field @ rot.T)[:, :2])
+    soft = np.eye(3)
+    soft[:2, :2] = matrix
+    # The offset's unseen vertical part: whatever leaves its z in the sensor's axes 0.
+    unseen = -(rot[0, 2] * centre[0] + rot[1, 2] * centre[1]) / rot[2, 2]
+    return rot.T @ np.append(centre, unseen), rot.T @ soft @ rot
+
+
 def fit(sweep: Sweep, planar: bool) -> Fit:
     """Fit the calibration; refuse a sweep that covers too little (ValueError says why)."""
     problem = coverage_problem(sweep, planar)
     if problem:
         raise ValueError(f'{sweep.source}: {problem}')
     field, warnings = sweep.field, []
+    hard_iron, soft_iron = _solve(sweep, planar)
+    rot = level(sweep.down)
     if planar:
-        rot = level(sweep.down)
-        centre, matrix = _quadric_fit((field @ rot.T)[:, :2])
-        soft = np.eye(3)
-        soft[:2, :2] = matrix
-        # The offset's unseen vertical part: whatever leaves its z in the sensor's axes 0.
-        unseen = -(rot[0, 2] * centre[0] + rot[1, 2] * centre[1]) / rot[2, 2]
-        hard_iron, soft_iron = rot.T @ np.append(centre, unseen), rot.T @ soft @ rot
         warnings.append('a yaw-only fit sees neither the vertical offset nor the vertical '
                         'scale, nor iron that turns vertical field into horizontal (it goes '
                         'into the offset): left 0 and 1; tumble the sensor for a 3-D fit')
-    else:
-        hard_iron, soft_iron = _quadric_fit(field)
     corrected = (field - hard_iron) @ soft_iron.T
     before, after = (np.linalg.norm(v @ rot.T[:, :2] if planar else v, axis=1)
                      for v in (field, corrected))
     radius = float(np.median(after))
     residual = after - radius
-    quarters = [float(q.mean()) / radius for q in np.array_split(residual, 4)]
-    if max(abs(q) for q in quarters) > MOVED:
-        warnings.append('the residual moved during the recording (quarters ' + ', '.join(
-            f'{q:+.1%}' for q in quarters) + ' of the field): the disturbance moved, or '
-            'the sensor neared other iron; the fit is doubtful, record again')
-    flat = np.median(np.linalg.norm((corrected @ level(sweep.down).T)[:, :2], axis=1))
+    # Each half fitted alone: an offset that differs says the disturbance moved.
+    halves = [sweep._replace(field=field[part], down=sweep.down[part])
+              for part in (slice(None, len(field) // 2), slice(len(field) // 2, None))]
+    if all(coverage_problem(half, planar) is None for half in halves):
+        first, second = (_solve(half, planar)[0] for half in halves)
+        moved = float(np.linalg.norm(soft_iron @ (second - first))) / radius
+        if moved > MOVED:
+            warnings.append(f'the offset moved during the recording: the halves differ by '
+                            f'{moved:.1%} of the field (the disturbance moved, or the sensor '
+                            'neared other iron); the fit is doubtful, record again')
+    flat = np.median(np.linalg.norm((corrected @ rot.T)[:, :2], axis=1))
     truth = headings(corrected, sweep.down)
     error = _wrap_deg(headings(field, sweep.down) - truth)
     lines = [
@@ -304,8 +318,9 @@ def params_yaml(result: Fit, source: str) -> str:
     def floats(values: np.ndarray) -> str:
         return '[' + ', '.join(yaml_float(float(v)) for v in values) + ']'
     return '\n'.join([
-        f'# Measured by `ros2 run i3dmgx2_driver magcal` ({"yaw-only" if result.planar else "3-D"} '
-        f'fit) from {source}.', '/**:', '  ros__parameters:',
+        f'# Measured by `ros2 run i3dmgx2_driver magcal` '
+        f'({"yaw-only" if result.planar else "3-D"} fit) from {source}.',
+        '/**:', '  ros__parameters:',
         f'    {HARD_IRON}: {floats(result.hard_iron)}',
         f'    {SOFT_IRON}: {floats(result.soft_iron.ravel())}']) + '\n'
 
@@ -388,7 +403,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 sweep = undo(sweep, *applied_file(args.applied))
         else:
             from .magcal_live import listen
-            sweep = listen(args.topic, args.node, args.minutes * 60.0, args.planar)
+
+            def lacks(pairs: list) -> str | None:
+                return coverage_problem(from_messages(pairs, 'live'), args.planar)
+            pairs, applied = listen(args.topic, args.node, args.minutes * 60.0, lacks)
+            sweep = undo(from_messages(pairs, f'{args.topic} (live)'), *applied)
         result = fit(sweep, args.planar)
         print('\n'.join(result.lines + [f'warning: {w}' for w in result.warnings]))
         for path in write_outputs(sweep, result, args.output) if args.output else ():

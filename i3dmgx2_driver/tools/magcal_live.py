@@ -23,12 +23,13 @@ listening and magcal fits what came. The node's own ``mag_hard_iron`` and
 fit is made on the raw field whatever the node applies.
 """
 
+from collections.abc import Callable
 import sys
 import threading
 import time
 
-import rclpy
 from rcl_interfaces.srv import GetParameters
+import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
@@ -36,7 +37,6 @@ from rclpy.qos import qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu, MagneticField
 
-from .magcal import coverage_problem, from_messages, Sweep, undo
 from .. import lifetime
 from ..ros.mag_calibration import HARD_IRON, SOFT_IRON
 
@@ -83,15 +83,19 @@ class Listener(Node):
             raise ValueError(f'node {node} did not give {HARD_IRON} and {SOFT_IRON}')
         return [list(parameter_value_to_python(v)) for v in values]
 
-    def sweep(self, source: str) -> Sweep | None:
-        """Return the readings so far, or None before the first."""
+    def paired(self) -> list[tuple[Imu, MagneticField]]:
+        """Return the pairs that came so far."""
         with self._lock:
-            pairs = list(self.pairs)
-        return from_messages(pairs, source) if pairs else None
+            return list(self.pairs)
 
 
-def listen(topic: str, node_name: str, seconds: float, planar: bool) -> Sweep:
-    """Listen for ``seconds`` (or until Ctrl-C); return the raw sweep that came."""
+def listen(topic: str, node_name: str, seconds: float,
+           lacks: Callable[[list], str | None]) -> tuple[list, list[list[float]]]:
+    """
+    Listen for ``seconds`` (or until Ctrl-C); return the pairs and the node's calibration.
+
+    ``lacks`` says what the pairs so far lack (magcal's coverage check), for the display.
+    """
     lifetime.die_with_parent()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Listener(topic)
@@ -105,23 +109,23 @@ def listen(topic: str, node_name: str, seconds: float, planar: bool) -> Sweep:
         spinner.start()
         start = time.monotonic()
         while time.monotonic() - start < seconds and not stopped.wait(1.0):
-            sweep = node.sweep(source)
-            lacks = coverage_problem(sweep, planar) if sweep is not None else 'nothing yet'
+            pairs = node.paired()
+            missing = lacks(pairs) if pairs else 'nothing yet'
             left = max(0.0, seconds - (time.monotonic() - start))
-            print(f'\r{left:5.0f} s left, {len(node.pairs)} readings: '
-                  f'{lacks or "enough: Ctrl-C fits them"}'[:160].ljust(160), end='',
+            print(f'\r{left:5.0f} s left, {len(pairs)} readings: '
+                  f'{missing or "enough: Ctrl-C fits them"}'[:160].ljust(160), end='',
                   file=sys.stderr, flush=True)
     finally:
         print(file=sys.stderr)
         stopped.restore()
         executor.shutdown(timeout_sec=1.0)
-        sweep = node.sweep(source)
+        pairs = node.paired()
         node.destroy_node()
         rclpy.try_shutdown()
-    if sweep is None:
+    if not pairs:
         raise ValueError(f'no field on {source} paired with an Imu message: is the driver '
                          'running, with publish_mag?')
-    return undo(sweep, *applied)
+    return pairs, applied
 
 
 def _spin(executor: SingleThreadedExecutor) -> None:
