@@ -29,7 +29,8 @@ from i3dmgx2_driver.codec.commands import encode_record
 from i3dmgx2_driver.codec.framing import encode_wired_record
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings
-from i3dmgx2_driver.ros.mag_calibration import field_correction, IDENTITY, is_matrix_list
+from i3dmgx2_driver.ros.mag_calibration import (field_correction, IDENTITY, is_matrix_list,
+                                               one_sensors, per_sensor_problem)
 from i3dmgx2_driver.simulator.motion import Motion, MotionConfig, MOTIONS
 from i3dmgx2_driver.tools import magcal
 from i3dmgx2_driver.tools.noise import yaml_float
@@ -189,3 +190,12 @@ def test_the_simulators_own_heading_carries_the_distortions_error():
     sweep = _sweep(distorted)
     from_field = magcal.headings(np.array([m.mag for m in distorted]), sweep.down)
     np.testing.assert_allclose(magcal._wrap_deg(sweep.heading - from_field), 0.0, atol=1.5)
+
+
+def test_one_calibration_for_all_sensors_or_one_each():
+    two = (*IDENTITY, 2.0, 0.5, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 1.0)
+    assert one_sensors(two, 9, 1)[0] == 2.0 and one_sensors(IDENTITY, 9, 1) == IDENTITY
+    assert per_sensor_problem((0.0,) * 6, two, 2) is None
+    assert per_sensor_problem((0.0,) * 6, two, 3) == (
+        "parameter 'mag_hard_iron' must give 3 values for all sensors or 3 per sensor "
+        '(3 addresses), got 6')
