@@ -44,8 +44,9 @@ from rclpy.parameter import parameter_dict_from_yaml_file, parameter_value_to_py
 from .bag_io import bag_reader, deserializer
 from .figures import agg_figure, MatplotlibMissing
 from .noise import yaml_float
+from .sources import add_sources, parse_args
 from ..capture.file_format import read_capture
-from ..codec.orientation import body_vector, ENU, matrix_from_quaternion
+from ..codec.orientation import body_vector, ENU
 from ..codec.parser import SensorStreamParser
 from ..ros.conversions import TESLA_PER_GAUSS
 from ..ros.mag_calibration import HARD_IRON, IDENTITY, is_matrix_list, SOFT_IRON, ZERO
@@ -125,14 +126,14 @@ def from_messages(pairs: Sequence[tuple[Any, Any]], source: str) -> Sweep:
                    for _, m in pairs]) * axes
     accel = _rows([(i.linear_acceleration.x, i.linear_acceleration.y,
                     i.linear_acceleration.z) for i, _ in pairs]) * axes
-    heading = []
-    for imu, _ in pairs:
-        o = imu.orientation
-        a = matrix_from_quaternion((o.x, o.y, o.z, o.w))
-        # The body's x axis in the world: (north, east) in NED, (east, north) in ENU.
-        heading.append(math.atan2(a[3], a[0]) if ned else math.atan2(a[0], a[3]))
+    x, y, z, w = np.array([(i.orientation.x, i.orientation.y, i.orientation.z,
+                            i.orientation.w) for i, _ in pairs]).T
+    # The body's x axis in the world (the rotation's first column): (north, east, down)
+    # in NED, (east, north, up) in ENU.
+    first, second = 1 - 2 * (y * y + z * z), 2 * (x * y + z * w)
+    heading = np.arctan2(second, first) if ned else np.arctan2(first, second)
     known = pairs[0][0].orientation_covariance[0] != -1.0
-    return Sweep(field, -_unit(accel), np.array(heading) if known else None, source)
+    return Sweep(field, -_unit(accel), heading if known else None, source)
 
 
 def from_bag(path: str, topic: str) -> Sweep:
@@ -371,29 +372,19 @@ def write_outputs(sweep: Sweep, result: Fit, directory: str) -> list[str]:
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='magcal', description=__doc__.split('\n\n')[0])
-    source = parser.add_mutually_exclusive_group(required=True)
-    source.add_argument('--capture', metavar='FILE', help="a capture (the node's capture_file)")
-    source.add_argument('--bag', metavar='PATH', help='a rosbag2 bag, sqlite3 or MCAP')
-    source.add_argument('--minutes', type=float, metavar='M',
-                        help='listen to the running node for M minutes (Ctrl-C fits what came)')
+    add_sources(parser, 'fits', 'magcal.yaml, magcal.json and magcal.png')
     parser.add_argument('--planar', action='store_true',
                         help='yaw-only fit: a ground robot turning in place')
-    parser.add_argument('--topic', default='/imu/raw_data', help='the Imu topic (bag, live)')
     parser.add_argument('--node', default='/i3dmgx2_driver',
                         help='live: the node whose calibration in use is undone')
     parser.add_argument('--applied', metavar='FILE',
                         help='bag: the params file of the calibration the node applied')
-    parser.add_argument('-o', '--output', metavar='DIR',
-                        help='write magcal.yaml, magcal.json and magcal.png here')
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run magcal; 0: fitted, 1: refused or failed, 3: fitted, but doubtful (warnings)."""
-    args_in = list(sys.argv[1:] if argv is None else argv)
-    if '--ros-args' in args_in:
-        args_in = args_in[:args_in.index('--ros-args')]
-    args = _parser().parse_args(args_in)
+    args = parse_args(_parser(), argv)
     try:
         if args.capture:
             sweep = from_capture(args.capture)

@@ -29,15 +29,12 @@ import threading
 import time
 
 from rcl_interfaces.srv import GetParameters
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu, MagneticField
 
-from .. import lifetime
+from .sources import listening
 from ..ros.mag_calibration import HARD_IRON, SOFT_IRON
 
 #: Seconds to wait for the node's parameters.
@@ -70,14 +67,16 @@ class Listener(Node):
             else:
                 self.pairs.append((other, msg) if side else (msg, other))
 
-    def calibration(self, node: str, executor: SingleThreadedExecutor) -> list[list[float]]:
+    def calibration(self, node: str) -> list[list[float]]:
         """Return ``node``'s mag_hard_iron and mag_soft_iron; ValueError when it does not say."""
         client = self.create_client(GetParameters, f'{node}/get_parameters')
         if not client.wait_for_service(timeout_sec=PARAMETERS_S):
             raise ValueError(f'node {node} does not answer get_parameters: is it running '
                              '(--node names it)?')
         future = client.call_async(GetParameters.Request(names=[HARD_IRON, SOFT_IRON]))
-        executor.spin_until_future_complete(future, timeout_sec=PARAMETERS_S)
+        deadline = time.monotonic() + PARAMETERS_S  # the listening's thread spins
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.05)
         values = future.result().values if future.done() else []
         if len(values) != 2:
             raise ValueError(f'node {node} did not give {HARD_IRON} and {SOFT_IRON}')
@@ -96,17 +95,9 @@ def listen(topic: str, node_name: str, seconds: float,
 
     ``lacks`` says what the pairs so far lack (magcal's coverage check), for the display.
     """
-    lifetime.die_with_parent()
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = Listener(topic)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    stopped = lifetime.StopSignal().install()
-    source = f'{node.resolve_topic_name(topic)} (live)'
-    try:
-        applied = node.calibration(node_name, executor)
-        spinner = threading.Thread(target=_spin, args=(executor,), daemon=True)
-        spinner.start()
+    with listening(lambda: Listener(topic)) as (node, stopped):
+        source = f'{node.resolve_topic_name(topic)} (live)'
+        applied = node.calibration(node_name)
         start = time.monotonic()
         while time.monotonic() - start < seconds and not stopped.wait(1.0):
             pairs = node.paired()
@@ -115,21 +106,8 @@ def listen(topic: str, node_name: str, seconds: float,
             print(f'\r{left:5.0f} s left, {len(pairs)} readings: '
                   f'{missing or "enough: Ctrl-C fits them"}'[:160].ljust(160), end='',
                   file=sys.stderr, flush=True)
-    finally:
-        print(file=sys.stderr)
-        stopped.restore()
-        executor.shutdown(timeout_sec=1.0)
-        pairs = node.paired()
-        node.destroy_node()
-        rclpy.try_shutdown()
+    pairs = node.paired()
     if not pairs:
         raise ValueError(f'no field on {source} paired with an Imu message: is the driver '
                          'running, with publish_mag?')
     return pairs, applied
-
-
-def _spin(executor: SingleThreadedExecutor) -> None:
-    try:
-        executor.spin()
-    except ExternalShutdownException:
-        pass
