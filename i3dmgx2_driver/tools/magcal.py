@@ -233,6 +233,7 @@ def _quadric_fit(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError('the readings lie on no ellipsoid: the sweep or the field is wrong')
     centre = -np.linalg.solve(a, v[len(pairs):len(pairs) + k])
     root = vectors @ np.diag(np.sqrt(w)) @ vectors.T
+    root = (root + root.T) / 2  # symmetric to the last bit, as the node checks it
     return centre * scale + mean, root / np.linalg.det(root) ** (1.0 / k)
 
 
@@ -330,13 +331,16 @@ def draw(sweep: Sweep, result: Fit, path: str) -> None:
     """Write magcal.png: the field before and after on three projections, the fitted circle."""
     fig = agg_figure(figsize=(12.0, 4.2), dpi=100)
     corrected = (sweep.field - result.hard_iron) @ result.soft_iron.T
-    radius = np.median(np.linalg.norm(corrected, axis=1)) * 1e6
+    # The fitted sphere, or (yaw-only) the fitted circle: near enough x-y for a ground robot.
+    radius = np.median(np.linalg.norm(corrected[:, :2] if result.planar else corrected,
+                                      axis=1)) * 1e6
     circle = np.linspace(0, 2 * math.pi, 200)
     for k, (i, j) in enumerate(((0, 1), (0, 2), (1, 2))):
         ax = fig.add_subplot(1, 3, k + 1)
         for points, label in ((sweep.field, 'before'), (corrected, 'after')):
             ax.plot(points[:, i] * 1e6, points[:, j] * 1e6, '.', ms=2, label=label)
-        ax.plot(radius * np.cos(circle), radius * np.sin(circle), 'k-', lw=0.8, label='fit')
+        if k == 0 or not result.planar:
+            ax.plot(radius * np.cos(circle), radius * np.sin(circle), 'k-', lw=0.8, label='fit')
         ax.set_xlabel(f'{"xyz"[i]} (µT)')
         ax.set_ylabel(f'{"xyz"[j]} (µT)')
         ax.set_aspect('equal')
