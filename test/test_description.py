@@ -47,7 +47,7 @@ def test_the_example_robot_carries_the_nodes_frames_in_a_chain():
     assert robot.get_chain('base_link', NED_FRAME, links=True, joints=False) == \
         ['base_link', FRAME, NED_FRAME]
     assert {joint.type for joint in robot.joints} == {'fixed'}
-    assert robot.joint_map['imu_joint'].origin.xyz == [0.0, 0.0, 0.2]
+    assert robot.joint_map['imu_joint'].origin.xyz == [0.0, 0.0, 0.25]
 
 
 def test_the_ned_frame_is_the_rep103_frame_turned_as_the_node_turns_its_vectors():
