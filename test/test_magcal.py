@@ -29,8 +29,8 @@ from i3dmgx2_driver.codec.commands import encode_record
 from i3dmgx2_driver.codec.framing import encode_wired_record
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings
-from i3dmgx2_driver.ros.mag_calibration import (field_correction, IDENTITY, is_matrix_list,
-                                               one_sensors, per_sensor_problem)
+from i3dmgx2_driver.ros.mag_calibration import (
+    field_correction, IDENTITY, is_matrix_list, one_sensors, per_sensor_problem)
 from i3dmgx2_driver.simulator.motion import Motion, MotionConfig, MOTIONS
 from i3dmgx2_driver.tools import magcal
 from i3dmgx2_driver.tools.noise import yaml_float
