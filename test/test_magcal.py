@@ -24,7 +24,7 @@ or as the node's messages; no process is started.
 import math
 import random
 
-from i3dmgx2_driver.capture.file_format import CaptureWriter, default_header
+from i3dmgx2_driver.capture.file_format import CaptureWriter, default_header, read_capture
 from i3dmgx2_driver.codec.commands import encode_record
 from i3dmgx2_driver.codec.framing import encode_wired_record
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
@@ -33,6 +33,7 @@ from i3dmgx2_driver.ros.mag_calibration import (
     field_correction, IDENTITY, is_matrix_list, one_sensors, per_sensor_problem)
 from i3dmgx2_driver.simulator.motion import Motion, MotionConfig, MOTIONS
 from i3dmgx2_driver.tools import magcal
+from i3dmgx2_driver.tools.bag_io import capture_messages, write_bag
 from i3dmgx2_driver.tools.noise import yaml_float
 import numpy as np
 import pytest
@@ -118,6 +119,19 @@ def test_turning_in_yaw_gives_the_horizontal_terms_within_2_percent(capsys):
     assert np.abs(horizontal - _inverse(SOFT_FLAT, 2)).max() < 0.02
     assert any('sees neither the vertical offset' in w for w in result.warnings)
     assert is_matrix_list(result.soft_iron.ravel().tolist())
+
+
+def test_a_bag_of_the_nodes_messages_gives_the_same_fit(tmp_path, capsys):
+    # The messages the node would publish from the capture (replay --bag's), as MCAP.
+    path = _capture(tmp_path / 'tumble.gx2cap', _measured('tumble', 300.0))
+    header, chunks = read_capture(path)
+    write_bag(tmp_path / 'bag', capture_messages(chunks, header))
+    assert magcal.main(['--bag', str(tmp_path / 'bag')]) == 0
+    printed = capsys.readouterr().out
+    assert '3000 readings, 3-D fit' in printed
+    hard = [float(v) for v in printed.split('hard iron (T): [')[1].split(']')[0].split(',')]
+    hard_iron = np.array(HARD) * 1e-4
+    np.testing.assert_allclose(hard, hard_iron, atol=0.01 * np.linalg.norm(hard_iron))
 
 
 def test_a_sweep_that_never_rolled_is_refused_with_the_axes_to_turn(tmp_path, capsys):
