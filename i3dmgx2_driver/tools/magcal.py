@@ -287,17 +287,17 @@ def fit(sweep: Sweep, planar: bool) -> Fit:
         f'field {"horizontal " if planar else ""}magnitude: {np.mean(before) * 1e6:.2f} µT '
         f'± {np.std(before) / np.mean(before):.1%} before, {radius * 1e6:.2f} µT '
         f'± {np.std(residual) / radius:.1%} after',
-        f'heading error of the distortion: {_rms(error):.2f} deg rms, {_peak(error):.1f} max '
-        f'before; {math.degrees(np.std(residual) / flat):.2f} deg rms after (the residual)']
+        f'heading error of the distortion: {_spread(error)} before; '
+        f'{math.degrees(np.std(residual) / flat):.2f} deg rms after (the residual)']
     if sweep.heading is not None:
         own = _wrap_deg(sweep.heading - truth)
-        lines.append(f"the sensor's own orientation's heading against the corrected field: "
-                     f'{_rms(own):.2f} deg rms, {_peak(own):.1f} max')
+        lines.append("the sensor's own orientation's heading against the corrected field: "
+                     + _spread(own))
         lines.append(
             'advice: the sensor computes its heading from the uncorrected field (it takes no '
             'correction): move it away from the iron, or fuse the corrected imu/mag with the '
             'rates in your own filter rather than use its orientation'
-            if _peak(own) > OWN_HEADING_DEG else
+            if np.abs(own).max() > OWN_HEADING_DEG else
             "advice: the sensor's own orientation is within "
             f'{OWN_HEADING_DEG:g} deg here: usable as it is')
     return Fit(hard_iron, soft_iron, planar, lines, warnings)
@@ -307,12 +307,8 @@ def _text(v: np.ndarray) -> str:
     return '[' + ', '.join(f'{x:.6g}' for x in v) + ']'
 
 
-def _rms(deg: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(deg ** 2)))
-
-
-def _peak(deg: np.ndarray) -> float:
-    return float(np.max(np.abs(deg)))
+def _spread(deg: np.ndarray) -> str:
+    return f'{np.sqrt(np.mean(deg ** 2)):.2f} deg rms, {np.abs(deg).max():.1f} max'
 
 
 def params_yaml(result: Fit, source: str) -> str:
