@@ -25,6 +25,8 @@ codec's, record for record.
 import json
 import math
 import os
+import re
+import select
 import signal
 import subprocess
 import sys
@@ -419,9 +421,15 @@ def test_noise_listens_to_the_running_node_and_ctrl_c_keeps_what_came():
         tool = subprocess.Popen(
             [sys.executable, '-m', 'i3dmgx2_driver.tools.noise', '--minutes', '10'],
             env=ros_env(), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        time.sleep(14.0)                                # N needs 10 s of samples
+        # N needs 10 s of samples: Ctrl-C once the progress bar counts 11 s of them.
+        progress, deadline = '', time.monotonic() + 60.0
+        while time.monotonic() < deadline and not any(
+                int(n) > 1100 for n in re.findall(r'(\d+) samples', progress)):
+            if select.select([tool.stderr], [], [], 1.0)[0]:
+                progress += os.read(tool.stderr.fileno(), 65536).decode()
         tool.send_signal(signal.SIGINT)
         out, err = tool.communicate(timeout=30)
+        err = progress + err
         assert tool.returncode == noise.MARKED, out + err     # B and K too short
         assert 'Traceback' not in err, err
         assert ' left, ' in err                        # the progress bar, with the time left

@@ -45,6 +45,7 @@ from typing import Any, NamedTuple
 from sensor_msgs.msg import Imu, MagneticField
 
 from .cdr import CDR_LE, reads_back, StampedDoubles
+from .mag_calibration import field_correction, IDENTITY, ZERO
 from ..codec import streams
 from ..codec.orientation import body_vector, ENU, matrix_from_euler, orientation, Quaternion
 from ..codec.streams import Stream
@@ -126,6 +127,9 @@ class MessageSettings:
     linear_acceleration_stddev: float = 0.0
     magnetic_field_stddev: float = 0.0
     stream: Stream = streams.DEFAULT
+    #: The field's calibration, the sensor's axes (mag_calibration.py): T, and row-major.
+    mag_hard_iron: tuple[float, ...] = ZERO
+    mag_soft_iron: tuple[float, ...] = IDENTITY
 
 
 class MessageFactory:
@@ -178,6 +182,8 @@ class MessageFactory:
         self._imu_struct, self._frame_cdr = imu_layout.struct, imu_layout.frame
         self._mag_struct = StampedDoubles(self.frame_id, 12).struct
         self._magnetic_field_cov = tuple(mag.magnetic_field_covariance)
+        self._calibrate = field_correction(settings.mag_hard_iron, settings.mag_soft_iron,
+                                           TESLA_PER_GAUSS)
 
     def orientation(self, record: Any) -> tuple[Quaternion, tuple[float, ...]]:
         """Return the record's orientation and its covariance (both marked when missing)."""
@@ -234,7 +240,8 @@ class MessageFactory:
         if not mag_is_valid(mag_gauss):
             return None
         sec, nanosec = stamp_parts(stamp)
-        m = body_vector(mag_gauss, self.convention)
+        m = body_vector(self._calibrate(mag_gauss) if self._calibrate else mag_gauss,
+                        self.convention)
         t = TESLA_PER_GAUSS
         return self._mag_struct.pack(
             CDR_LE, sec, nanosec, len(self._frame_cdr), self._frame_cdr,
@@ -268,7 +275,8 @@ class MessageFactory:
             return None
         msg = self.mag
         set_stamp(msg.header, stamp)
-        m = body_vector(mag_gauss, self.convention)
+        m = body_vector(self._calibrate(mag_gauss) if self._calibrate else mag_gauss,
+                        self.convention)
         f = msg.magnetic_field
         f.x = m[0] * TESLA_PER_GAUSS
         f.y = m[1] * TESLA_PER_GAUSS
