@@ -58,6 +58,14 @@ from ..device.status import State
 
 # -- the device operations' services -----------------------------------------------
 
+def _trigger(answer: Callable[[], tuple[bool, str]]) -> Callable[..., Trigger.Response]:
+    """Serve ``answer()``, a (success, message), as a std_srvs/Trigger callback."""
+    def callback(request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        response.success, response.message = answer()
+        return response
+    return callback
+
+
 class DeviceServices:
     """
     The ``~/capture_gyro_bias``, ``~/store_gyro_bias`` and ``~/self_test`` services.
@@ -103,9 +111,9 @@ class DeviceServices:
         self.services = [
             node.create_service(kind, f'{prefix}{name}', callback, callback_group=group)
             for name, kind, callback in (
-                ('capture_gyro_bias', Trigger, self._on_capture),
-                ('store_gyro_bias', Trigger, self._on_store),
-                ('self_test', Trigger, self._on_self_test),
+                ('capture_gyro_bias', Trigger, _trigger(self.capture_gyro_bias)),
+                ('store_gyro_bias', Trigger, _trigger(self.store_gyro_bias)),
+                ('self_test', Trigger, _trigger(self.self_test)),
                 ('diagnostic_self_test', SelfTest, self._on_diagnostic_self_test))]
         #: One sensor's node: the calibration file and a known bias are its (parameters.py).
         self._single = prefix == '~/'
@@ -144,21 +152,6 @@ class DeviceServices:
         return self.gyro_bias.last_capture, self.gyro_bias.good_capture
 
     # -- service callbacks (executor) ---------------------------------------
-
-    def _on_capture(self, request: Trigger.Request, response: Trigger.Response
-                    ) -> Trigger.Response:
-        response.success, response.message = self.capture_gyro_bias()
-        return response
-
-    def _on_store(self, request: Trigger.Request, response: Trigger.Response
-                  ) -> Trigger.Response:
-        response.success, response.message = self.store_gyro_bias()
-        return response
-
-    def _on_self_test(self, request: Trigger.Request, response: Trigger.Response
-                      ) -> Trigger.Response:
-        response.success, response.message = self.self_test()
-        return response
 
     def _on_diagnostic_self_test(self, request: SelfTest.Request,
                                  response: SelfTest.Response) -> SelfTest.Response:
@@ -268,18 +261,16 @@ class SaveCaptureService:
         self._node = node
         self._capture = capture
         self.service = node.create_service(
-            Trigger, '~/save_capture', self._save,
+            Trigger, '~/save_capture', _trigger(self._save),
             callback_group=MutuallyExclusiveCallbackGroup())
 
-    def _save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    def _save(self) -> tuple[bool, str]:
         try:
             path = self._capture.save('request')
         except (OSError, ValueError) as exc:
-            response.success, response.message = False, f'no capture written: {exc}'
-            return response
+            return False, f'no capture written: {exc}'
         self._node.get_logger().info(f'capture saved on request: {path}')
-        response.success, response.message = True, path
-        return response
+        return True, path
 
     def destroy(self) -> None:
         """Remove the service from the node (a managed node's cleanup)."""
