@@ -124,8 +124,7 @@ class CurrentLink:
         self._close(link)
         self._other_records += link.other_records
         if self._shared is None:
-            for key, value in link.parser.stats.as_dict().items():
-                self._parser_totals[key] = self._parser_totals.get(key, 0) + value
+            _add_counts(self._parser_totals, link)
 
     def _close(self, link: DeviceLink) -> None:
         """Close the link's port, or hand the link back to the shared one."""
@@ -148,8 +147,7 @@ class CurrentLink:
         else:
             parser = dict(self._parser_totals)
             if link is not None:
-                for key, value in link.parser.stats.as_dict().items():
-                    parser[key] = parser.get(key, 0) + value
+                _add_counts(parser, link)
         return {
             'parser': parser,
             'strays': self._shared.strays() if self._shared is not None else {},
@@ -164,12 +162,15 @@ class CurrentLink:
         """Resume or pause the line observer: silence is a symptom only while we ask."""
         observer = self._observer
         if observer is not None:
-            if on:
-                observer.resume()
-            else:
-                observer.pause()
+            (observer.resume if on else observer.pause)()
 
     def observed(self) -> str:
         """Say what the line observer last found on this link ('' if nothing)."""
         seen = self._observer.last_finding if self._observer is not None else None
         return seen.message if seen is not None else ''
+
+
+def _add_counts(totals: dict[str, int], link: DeviceLink) -> None:
+    """Add ``link``'s parser counters to ``totals``."""
+    for key, value in link.parser.stats.as_dict().items():
+        totals[key] = totals.get(key, 0) + value
