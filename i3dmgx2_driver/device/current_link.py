@@ -65,9 +65,8 @@ class CurrentLink:
         #: Guards who owns ``_link``: the thread opening one, or a caller releasing it.
         self._lock = threading.Lock()
         self._observer: LineObserver | None = None
-        #: Links opened so far, and how many of them were reconnections.
+        #: Links opened so far (all but the first were reconnections).
         self.connections = 0
-        self.reconnects = 0
         #: What the port last granted of low-latency mode.
         self.low_latency_state = ''
         self._parser_totals: dict[str, int] = {}
@@ -105,8 +104,6 @@ class CurrentLink:
                 raise PortDisconnected(f'{self._config.port}: closed, the driver is stopping')
             self._link = link
         self.connections += 1
-        if self.connections > 1:
-            self.reconnects += 1
         return link
 
     def release(self, send_stop: bool = False) -> None:
@@ -155,7 +152,7 @@ class CurrentLink:
                                                     else 0),
             'radio': link.radio.stats if link is not None else None,
             'connected': link is not None,
-            'connections': self.connections, 'reconnects': self.reconnects,
+            'connections': self.connections, 'reconnects': max(self.connections - 1, 0),
             'low_latency_state': self.low_latency_state}
 
     def observe(self, on: bool) -> None:
