@@ -349,11 +349,9 @@ class DeviceSupervisor:
         dialogue.expect_stream(link)
         self._hand_on()
         self._start_reader(link)
-        if not dialogue.resume(link):
-            return False
-        if not self._cancel.is_set():
+        if (resumed := dialogue.resume(link)) and not self._cancel.is_set():
             self._report.streaming('resumed')
-        return True
+        return resumed
 
     def _begin_stream(self, link: DeviceLink) -> None:
         """Start continuous mode on an initialised link; announce it once records arrive."""

@@ -182,9 +182,8 @@ class LifecycleDriverNode(LifecycleNode):
         except (ParameterError, PortUnusable) as exc:
             log.error(f'configure failed: {exc}')
             return FAILURE
-        drivers = DriverSet(self, config, publishers=self._data_publishers, publishing=False,
-                            refusal=self._refusal)
-        self.drivers = drivers
+        self.drivers = drivers = DriverSet(self, config, publishers=self._data_publishers,
+                                           publishing=False, refusal=self._refusal)
         if self._stopping.is_set():
             # A signal came while the set was made, before shutdown() could see it.
             self._release()
@@ -218,8 +217,7 @@ class LifecycleDriverNode(LifecycleNode):
         drivers = self.drivers
         if self._stopping.is_set():
             return FAILURE  # a signal stopped the device meanwhile: it stays stopped
-        result = super().on_activate(state)
-        if result != SUCCESS or drivers is None:
+        if super().on_activate(state) != SUCCESS or drivers is None:
             return FAILURE
         for core in drivers.cores:
             core.records.forget_last_sample()  # the pause since the last activation is no loss
@@ -361,8 +359,7 @@ def _each(cores: list[DriverCore], step: Callable[[DriverCore], None],
     if len(cores) == 1:
         take(cores[0])
         return failed
-    threads = [threading.Thread(target=take, args=(core,), name='gx2-transition',
-                                daemon=True)
+    threads = [threading.Thread(target=take, args=(core,), name='gx2-transition', daemon=True)
                for core in cores]
     for thread in threads:
         thread.start()

@@ -102,8 +102,7 @@ class DeviceServices:
         #: What is running now ('' when idle), for diagnostics.
         self.operation = ''
         #: The capture (and what the last ones came to), and the self test.
-        self.gyro_bias = GyroBiasCapture(device, forget_last_sample, self._calibrated,
-                                         self._log)
+        self.gyro_bias = GyroBiasCapture(device, forget_last_sample, self._calibrated, self._log)
         self.self_test_run = SelfTestRun(device, published, forget_last_sample, self._stop,
                                          self._log)
         group = MutuallyExclusiveCallbackGroup()
@@ -119,11 +118,9 @@ class DeviceServices:
         self._single = prefix == '~/'
         if self._single and self._parameter(GYRO_BIAS):
             self._calibrated(True)
-        self._start_thread: threading.Thread | None = None
         if capture_on_start:
-            self._start_thread = threading.Thread(
-                target=self._capture_on_start, name='gx2-bias-on-start', daemon=True)
-            self._start_thread.start()
+            threading.Thread(target=self._capture_on_start, name='gx2-bias-on-start',
+                             daemon=True).start()
 
     def stop(self) -> None:
         """Stop waiting (the capture at start, the rate window); the link aborts the rest."""
@@ -142,10 +139,9 @@ class DeviceServices:
         At shutdown, so that a call cut short by the link's abort still gets
         its answer out before the node (and its service) is destroyed.
         """
-        if not self._busy.acquire(timeout=timeout):
-            return False
-        self._busy.release()
-        return True
+        if idle := self._busy.acquire(timeout=timeout):
+            self._busy.release()
+        return idle
 
     def calibration(self) -> tuple[Calibration | None, Calibration | None]:
         """Return the last capture attempt and the last accepted capture (diagnostics)."""
@@ -169,8 +165,7 @@ class DeviceServices:
 
     def _exclusive(self, name: str, body: Callable[[], tuple[bool, str]]) -> tuple[bool, str]:
         """Run one operation at a time; refuse at once when another runs."""
-        refusal = self._refusal()
-        if refusal:
+        if refusal := self._refusal():
             return False, f'refused: {refusal}'
         if not self._busy.acquire(blocking=False):
             return False, f'refused: {self.operation or "another operation"} is in progress'
