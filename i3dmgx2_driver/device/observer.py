@@ -87,8 +87,7 @@ def _addresses(heard: dict[int, int], span: float) -> str:
     return ', '.join(parts) + (', ...' if len(ranked) > 4 else '')
 
 
-def judge(window: Window, port: str, address: int, wireless: bool,
-          baud: int) -> Finding | None:
+def judge(window: Window, port: str, address: int, wireless: bool, baud: int) -> Finding | None:
     """
     Say what a window without any packet of ours suggests; None if nothing yet.
 
@@ -96,8 +95,7 @@ def judge(window: Window, port: str, address: int, wireless: bool,
     the other framing are named first (they say exactly what to change),
     then unreadable bytes, then silence.
     """
-    span = window.seconds
-    heard = window.heard
+    span, heard = window.seconds, window.heard
     if span >= MIN_WINDOW:
         best = max(heard, key=heard.__getitem__) if heard else None
         if wireless and heard and not heard.get(address):
@@ -194,12 +192,10 @@ class LineObserver:
             self._restart(now, epoch)
         if data:
             self._bytes += len(data)
-            for event in self._packets.feed(data):
-                if isinstance(event, DataPacket):
-                    self._heard[event.address] += 1
-            for event in self._wired.feed(data):
-                if isinstance(event, DataPacket):
-                    self._wired_records += 1
+            self._heard.update(event.address for event in self._packets.feed(data)
+                               if isinstance(event, DataPacket))
+            self._wired_records += sum(isinstance(event, DataPacket)
+                                       for event in self._wired.feed(data))
         if now < self._next_judge:
             return None
         self._next_judge = now + JUDGE_EVERY

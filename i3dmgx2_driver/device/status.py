@@ -166,8 +166,7 @@ class DeviceReport:
 
     def records_flow(self) -> None:
         """Forget what the observer found: records flow again."""
-        if self.advice:
-            self.advice = ''
+        self.advice = ''
 
     def warn(self, key: str, message: str, period: float | None = None) -> None:
         """Log ``message`` once, then again at most every ``period`` s (a reminder)."""
