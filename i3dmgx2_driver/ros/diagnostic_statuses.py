@@ -75,7 +75,7 @@ class Status(NamedTuple):
 
     def value(self, key: str) -> str | None:
         """Return the value of ``key``, or None (for tests and logs)."""
-        return dict(self.values).get(key)
+        return next((value for name, value in self.values if name == key), None)
 
 
 def _fmt(value: float | None, digits: int) -> str:
@@ -279,9 +279,8 @@ def device_status(device: DeviceStatus, address: int, temperature_c: float | Non
                 else 'not connected yet')
         return Status(level, 'device', text, tuple(values))
     values = [('model', info.model_name or '?'), ('model number', info.model_number or '?'),
-              ('serial number', info.serial_number or '?'),
-              ('firmware', info.firmware or '?'), ('options', info.options or '-'),
-              *values]
+              ('serial number', info.serial_number or '?'), ('firmware', info.firmware or '?'),
+              ('options', info.options or '-'), *values]
     return Status(OK, 'device', f'{info.model_name or info.model_number or "?"}, serial '
                                 f'{info.serial_number or "?"}, firmware {info.firmware or "?"}',
                   tuple(values))
