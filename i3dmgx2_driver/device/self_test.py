@@ -70,8 +70,7 @@ class Step(NamedTuple):
 def format_report(steps: Sequence[Step]) -> str:
     """One line per step, ``PASS``/``FAIL``/``SKIP``, then a summary line."""
     lines = [f'{s.verdict} {s.name}: {s.detail}' for s in steps]
-    failed = sum(1 for s in steps if not s.passed)
-    skipped = sum(1 for s in steps if s.skipped)
+    failed, skipped = sum(not s.passed for s in steps), sum(s.skipped for s in steps)
     ran = len(steps) - skipped
     lines.append(f'self test {"passed" if not failed else "FAILED"}: '
                  f'{ran - failed}/{ran} steps passed'
