@@ -46,6 +46,7 @@ from .. import lifetime
 from ..arguments import seconds
 from ..codec import command_firmware as fw
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
+from ..device.identity import DeviceInfo
 from ..device.port import serial_group, UDEV_RULE_INSTALL
 
 EXIT_FOUND = 0
@@ -96,10 +97,10 @@ def port_command(path: str, sensors: Sequence[SensorFound]) -> str:
     The node opens its port exclusively, so several sensors behind one base
     station are served by one node (``addresses``), never one node each.
     """
-    wireless = [sensor for sensor in sensors if sensor.wireless]
+    wireless = sorted(sensor.address for sensor in sensors if sensor.wireless)
     if len(wireless) < 2:
         return node_command(path, sensors[0])
-    listed = ','.join(str(address) for address in sorted(s.address for s in wireless))
+    listed = ','.join(map(str, wireless))
     return (f'ros2 run i3dmgx2_driver node --ros-args -p port:={shlex.quote(path)} '
             f'-p {shlex.quote(f"addresses:=[{listed}]")}')
 
@@ -189,11 +190,7 @@ def _sensor_dict(sensor: SensorFound, command: str | None) -> dict[str, Any]:
         'address': sensor.address,
         'link': 'wireless' if sensor.wireless else 'wired',
         'found_by': sensor.found_by,
-        'model_number': info.model_number if info else None,
-        'serial_number': info.serial_number if info else None,
-        'model_name': info.model_name if info else None,
-        'options': info.options if info else None,
-        'firmware': info.firmware if info else None,
+        **(info._asdict() if info else dict.fromkeys(DeviceInfo._fields)),
         'firmware_lacks': fw.lacks(fw.version_of(info.firmware)) if info else None,
         'firmware_note': _firmware_note(sensor) or None,
         'rate_divider': sensor.divider,
@@ -286,13 +283,11 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
                   f'{probe.seconds:.1f} s\n')
         commands.append((probe.sensors, port_command(port.stable_path, probe.sensors)))
         for sensor in probe.sensors:
-            info = sensor.info
+            info = sensor.info or DeviceInfo('', '', '', '', '')
             rows.append([
                 port.device, 'wireless' if sensor.wireless else 'wired',
-                str(sensor.address) if sensor.wireless else '-',
-                (info.serial_number or '?') if info else '?',
-                (info.model_name or info.model_number or '?') if info else '?',
-                (info.firmware or '?') if info else '?',
+                str(sensor.address) if sensor.wireless else '-', info.serial_number or '?',
+                info.model_name or info.model_number or '?', info.firmware or '?',
                 f'{sensor.rate_hz:.1f} Hz' if sensor.rate_hz else '?',
                 _state(sensor), sensor.found_by])
     if not commands:
@@ -360,12 +355,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # closed, the sensors left as found.
     lifetime.interrupt_on_stop_signals()
     out = sys.stdout
-    if args.port:
-        ports = [describe_path(path, args.by_id_dir) for path in args.port]
-        probing = {p.device for p in ports}
-    else:
-        ports = list_ports(args.by_id_dir)
-        probing = {p.device for p in ports if p.likely or args.all}
+    ports = [describe_path(path, args.by_id_dir) for path in args.port] if args.port \
+        else list_ports(args.by_id_dir)
+    probing = {p.device for p in ports if args.port or args.all or p.likely}
     if not args.json and not args.port:
         print_ports(ports, probing, out)
     config = ProbeConfig(addresses=args.addresses, baud=args.baud, listen_s=args.listen,
