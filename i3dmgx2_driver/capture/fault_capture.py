@@ -25,6 +25,7 @@ offline.
 
 from collections import deque
 from collections.abc import Callable, Iterable
+import contextlib
 import datetime
 import math
 import os
@@ -144,9 +145,8 @@ class FaultCapture:
         self._log = log
         self._header = dict(header, baud=baud)
         #: The ring (None when off).
-        self.ring: RecentBytes | None = None
-        if self.directory:
-            self.ring = RecentBytes(seconds, int(seconds * baud / 10 * RING_BUDGET_FACTOR))
+        self.ring = RecentBytes(seconds, int(seconds * baud / 10 * RING_BUDGET_FACTOR)) \
+            if self.directory else None
         #: Files written so far, the last one's path and cause; why the last write failed.
         self.written = 0
         self.last_path = ''
@@ -291,7 +291,5 @@ class FaultCapture:
         names = sorted(name for name in os.listdir(self.directory)
                        if name.startswith(FAULT_PREFIX) and name.endswith(FAULT_SUFFIX))
         for name in names[:max(0, len(names) - self.kept)]:
-            try:
+            with contextlib.suppress(FileNotFoundError):  # another driver pruned it first
                 os.remove(os.path.join(self.directory, name))
-            except FileNotFoundError:
-                pass  # another driver writing here pruned it first

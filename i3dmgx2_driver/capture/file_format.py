@@ -90,11 +90,10 @@ def default_header(**overrides: Any) -> dict[str, Any]:
 def _header_line(header: dict[str, Any]) -> bytes:
     if not isinstance(header, dict):
         raise TypeError(f'a capture header is a dict, got {type(header).__name__}')
-    full = default_header()
-    full.update(header)
     try:
         # ASCII and no indent: one line whatever the strings contain.
-        text = json.dumps(full, sort_keys=True, ensure_ascii=True, allow_nan=False)
+        text = json.dumps({**default_header(), **header}, sort_keys=True, ensure_ascii=True,
+                          allow_nan=False)
     except (TypeError, ValueError) as exc:
         raise ValueError(f'capture header is not plain JSON: {exc}') from None
     return text.encode('ascii') + b'\n'

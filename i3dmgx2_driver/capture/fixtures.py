@@ -96,9 +96,7 @@ def timeline(sets: Iterable[FixtureSet],
     out: list[tuple[float, int, bytes]] = []
     offset = 0.0
     for index, fixture_set in enumerate(sets):
-        first = record_timer(fixture_set.records[0])
-        ticks = 0
-        last = first
+        ticks, last = 0, record_timer(fixture_set.records[0])
         for record in fixture_set.records:
             raw = record_timer(record)
             ticks += (raw - last) % TIMER_MODULUS
