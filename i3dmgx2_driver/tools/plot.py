@@ -256,19 +256,13 @@ def series_from_fixture(path: str, convention: str = ENU, gap: float | None = No
     return series_from_chunks(chunks, address, convention, True, source, segments, gap)
 
 
-def _csv_rows(path: str) -> tuple[list[str] | None, list[list[str]]]:
+def read_csv(path: str) -> dict[str, np.ndarray]:
+    """Read a recorded run into columns by CSV_COLUMNS name (float arrays)."""
     with open(path, newline='', encoding='utf-8') as f:
         rows = [row for row in csv.reader(f)
                 if row and ''.join(row).strip() and not row[0].lstrip().startswith('#')]
-    if rows and rows[0] and rows[0][0].strip().lower() == 'time':
-        return [c.strip().lower() for c in rows[0]], rows[1:]
-    return None, rows
-
-
-def read_csv(path: str) -> dict[str, np.ndarray]:
-    """Read a recorded run into columns by CSV_COLUMNS name (float arrays)."""
-    names, rows = _csv_rows(path)
-    if names is not None:
+    if rows and rows[0][0].strip().lower() == 'time':
+        names, rows = [c.strip().lower() for c in rows[0]], rows[1:]
         missing = [c for c in CSV_COLUMNS if c not in names]
         if missing:
             raise ValueError(f'{path}: CSV lacks columns {", ".join(missing)} '

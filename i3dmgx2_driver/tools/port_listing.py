@@ -84,9 +84,7 @@ class PortInfo(NamedTuple):
     @property
     def usb_id(self) -> str | None:
         """Return the USB vendor:product id as lsusb prints it, or None."""
-        if self.vid is None:
-            return None
-        return f'{self.vid:04x}:{self.pid or 0:04x}'
+        return None if self.vid is None else f'{self.vid:04x}:{self.pid or 0:04x}'
 
     @property
     def likely(self) -> bool:
@@ -137,25 +135,16 @@ def by_id_path(device: str, by_id_dir: str = BY_ID_DIR) -> str | None:
         names = sorted(os.listdir(by_id_dir))
     except OSError:
         return None
-    target = os.path.realpath(device)
-    for name in names:
-        path = os.path.join(by_id_dir, name)
-        if os.path.realpath(path) == target:
-            return path
-    return None
+    paths = (os.path.join(by_id_dir, name) for name in names)
+    return next((p for p in paths if os.path.realpath(p) == os.path.realpath(device)), None)
 
 
 def port_info(entry: Any, by_id_dir: str = BY_ID_DIR) -> PortInfo:
     """Turn one of pyserial's ListPortInfo (or alike) into a PortInfo."""
     description = entry.description if entry.description not in (None, 'n/a') else ''
-    return PortInfo(
-        device=entry.device,
-        by_id=by_id_path(entry.device, by_id_dir),
-        vid=entry.vid,
-        pid=entry.pid,
-        description=description,
-        kind=port_kind(entry.vid, description, getattr(entry, 'manufacturer', None) or ''),
-    )
+    return PortInfo(entry.device, by_id_path(entry.device, by_id_dir), entry.vid, entry.pid,
+                    description,
+                    port_kind(entry.vid, description, getattr(entry, 'manufacturer', None) or ''))
 
 
 def list_ports(by_id_dir: str = BY_ID_DIR,

@@ -42,29 +42,26 @@ class StampErrors(NamedTuple):
 def read_stamp_errors(path: str) -> StampErrors:
     """Read a stamp-error CSV; raise ValueError naming what is wrong."""
     times, errors, events = [], [], []
+    header = None
     with open(path, newline='') as source:
-        header = None
         for number, raw in enumerate(source, 1):
             line = raw.strip()
-            if not line:
-                continue
+            fields = line.split(',')
             if line.startswith('#'):
                 parts = line[1:].strip().split(',', 2)
                 if parts[0] == 'event' and len(parts) == 3:
                     events.append((float(parts[1]), parts[2]))
-                continue
-            fields = line.split(',')
-            if header is None:
+            elif line and header is None:
                 header = fields
                 if header[:2] != ['time', 'error']:
                     raise ValueError(f'{path}: the header must start with time,error '
                                      f'(got {line!r})')
-                continue
-            try:
-                times.append(float(fields[0]))
-                errors.append(float(fields[1]))
-            except (IndexError, ValueError):
-                raise ValueError(f'{path}:{number}: not two numbers: {line!r}') from None
+            elif line:
+                try:
+                    times.append(float(fields[0]))
+                    errors.append(float(fields[1]))
+                except (IndexError, ValueError):
+                    raise ValueError(f'{path}:{number}: not two numbers: {line!r}') from None
     return StampErrors(np.array(times), np.array(errors), events)
 
 
