@@ -65,8 +65,7 @@ _DEVNULL: list[Any] = []
 
 def _stop_signals(signals: tuple[int, ...] = STOP_SIGNALS) -> list[int]:
     """Return ``signals`` but SIGHUP when ignored (``nohup``: outliving the terminal is asked)."""
-    return [s for s in signals
-            if s != signal.SIGHUP or signal.getsignal(s) is not signal.SIG_IGN]
+    return [s for s in signals if s != signal.SIGHUP or signal.getsignal(s) is not signal.SIG_IGN]
 
 
 class StopSignal:
@@ -196,8 +195,7 @@ def arm_deadline(seconds: float = SHUTDOWN_DEADLINE) -> None:
     Without a standard error to write to, the deadline still ends the process.
     """
     try:
-        faulthandler.dump_traceback_later(seconds, exit=True,
-                                          file=sys.__stderr__ or sys.stderr)
+        faulthandler.dump_traceback_later(seconds, exit=True, file=sys.__stderr__ or sys.stderr)
     except (AttributeError, RuntimeError, ValueError, OSError):
         if not _DEVNULL:
             _DEVNULL.append(open(os.devnull, 'w'))  # noqa: SIM115 - for the process's life

@@ -134,8 +134,7 @@ class FaultCapture:
 
     def __init__(self, directory: str | None, seconds: float, kept: int, log: Any, *,
                  baud: int = DEFAULT_BAUD, min_gap: float | None = None,
-                 after: float = FAULT_AFTER, poll: float = FAULT_POLL,
-                 **header: Any) -> None:
+                 after: float = FAULT_AFTER, poll: float = FAULT_POLL, **header: Any) -> None:
         self.directory = os.path.expanduser(directory) if directory else ''
         self.seconds = seconds
         self.kept = kept
@@ -176,8 +175,7 @@ class FaultCapture:
         if self.ring is None or self._thread is not None:
             return
         self._watch = watch
-        self._thread = threading.Thread(target=self._run, name='gx2-fault-capture',
-                                        daemon=True)
+        self._thread = threading.Thread(target=self._run, name='gx2-fault-capture', daemon=True)
         self._thread.start()
 
     def trigger(self, cause: str, now: float | None = None) -> None:
@@ -276,8 +274,7 @@ class FaultCapture:
             again += 1
             path = os.path.join(self.directory, f'{name}-{again}{FAULT_SUFFIX}')
         header = default_header(
-            start_time=chunks[0][0], driver_version=__version__, cause=cause,
-            written_time=now,
+            start_time=chunks[0][0], driver_version=__version__, cause=cause, written_time=now,
             notes=(f'fault capture by the i3dmgx2_driver node: the last {self.seconds:g} s '
                    f'of reads before it was written ({cause}), as read'),
             **self._header)

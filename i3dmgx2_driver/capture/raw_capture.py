@@ -73,8 +73,7 @@ class RawCapture:
         try:
             self._writer = _Writer(self.path, default_header(
                 driver_version=__version__,
-                notes='raw capture by the i3dmgx2_driver node: every read, as read',
-                **header))
+                notes='raw capture by the i3dmgx2_driver node: every read, as read', **header))
         except (OSError, ValueError) as exc:
             self._fail(f'cannot write the raw capture {self.path}: {exc}')
             return

@@ -156,8 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
                         default=list(FACTORY_ADDRESSES),
                         help='node addresses to ping, e.g. 95, 1-65534 or 3,7,10-20 '
                              '(default: 1-99, the factory addresses)')
-    parser.add_argument('--listen', type=_seconds, default=ProbeConfig.listen_s,
-                        metavar='SECONDS',
+    parser.add_argument('--listen', type=_seconds, default=ProbeConfig.listen_s, metavar='SECONDS',
                         help='listen this long for sensors that already stream '
                              f'(default {ProbeConfig.listen_s})')
     parser.add_argument('--ping-timeout', type=_seconds, default=ProbeConfig.ping_timeout,
@@ -187,20 +186,15 @@ def _firmware_note(sensor: SensorFound) -> str:
 def _sensor_dict(sensor: SensorFound, command: str | None) -> dict[str, Any]:
     info = sensor.info
     return {
-        'address': sensor.address,
-        'link': 'wireless' if sensor.wireless else 'wired',
+        'address': sensor.address, 'link': 'wireless' if sensor.wireless else 'wired',
         'found_by': sensor.found_by,
         **(info._asdict() if info else dict.fromkeys(DeviceInfo._fields)),
         'firmware_lacks': fw.lacks(fw.version_of(info.firmware)) if info else None,
-        'firmware_note': _firmware_note(sensor) or None,
-        'rate_divider': sensor.divider,
+        'firmware_note': _firmware_note(sensor) or None, 'rate_divider': sensor.divider,
         'rate_hz': round(sensor.rate_hz, 3) if sensor.rate_hz else None,
         'streaming': f'0x{sensor.streaming:02X}' if sensor.streaming else None,
-        'stream_restarted': sensor.restarted,
-        'lqi': sensor.lqi,
-        'rssi': sensor.rssi,
-        'note': sensor.note or None,
-        'command': command,
+        'stream_restarted': sensor.restarted, 'lqi': sensor.lqi, 'rssi': sensor.rssi,
+        'note': sensor.note or None, 'command': command,
     }
 
 
@@ -215,13 +209,10 @@ def _port_dict(port: PortInfo, probe: PortProbe | None) -> dict[str, Any]:
     if probe is not None:
         command = port_command(port.stable_path, probe.sensors) if probe.sensors else None
         out.update({
-            'message': probe.message or None,
-            'base_station': probe.base_station,
-            'pinged': probe.pinged,
-            'ping_seconds': round(probe.ping_seconds, 3),
+            'message': probe.message or None, 'base_station': probe.base_station,
+            'pinged': probe.pinged, 'ping_seconds': round(probe.ping_seconds, 3),
             'seconds': round(probe.seconds, 3),
-            'sensors': [_sensor_dict(s, command) for s in probe.sensors],
-            'command': command,
+            'sensors': [_sensor_dict(s, command) for s in probe.sensors], 'command': command,
         })
     return out
 

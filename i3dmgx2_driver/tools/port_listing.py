@@ -36,12 +36,7 @@ BY_ID_DIR = '/dev/serial/by-id'
 #: MicroStrain's USB vendor id.
 MICROSTRAIN_VID = 0x199B
 #: USB vendor ids of the usual USB-serial bridge chips.
-USB_SERIAL_VIDS = {
-    0x0403: 'FTDI',
-    0x10C4: 'Silicon Labs',
-    0x067B: 'Prolific',
-    0x1A86: 'WCH CH340',
-}
+USB_SERIAL_VIDS = {0x0403: 'FTDI', 0x10C4: 'Silicon Labs', 0x067B: 'Prolific', 0x1A86: 'WCH CH340'}
 #: What a port looks like, in the order of how likely it leads to a sensor.
 KIND_MICROSTRAIN = 'MicroStrain'
 KIND_USB_SERIAL = 'USB-serial'

@@ -109,8 +109,7 @@ class Replayer:
         self._threads: list[threading.Thread] = []
         #: The pseudo-terminal played into: ``pty_name``, ``pending_output()``.
         self.pty = ReplayPty(link, self._stop)
-        self._answers = BaseStationAnswers(self.pty, self.stats, wireless, self._wake,
-                                           self._stop)
+        self._answers = BaseStationAnswers(self.pty, self.stats, wireless, self._wake, self._stop)
         self._dropping = False
         #: Path for the driver's ``port`` parameter (None before start).
         self.port: str | None = None
@@ -128,10 +127,9 @@ class Replayer:
             raise RuntimeError('replayer already started')
         self.pty.create()
         self.port = self.pty.path
-        self._threads = [
-            threading.Thread(target=self._play, name='replay-play', daemon=True),
-            threading.Thread(target=self._answers.listen, name='replay-listen', daemon=True),
-        ]
+        self._threads = [threading.Thread(target=self._play, name='replay-play', daemon=True),
+                         threading.Thread(target=self._answers.listen, name='replay-listen',
+                                          daemon=True)]
         for thread in self._threads:
             thread.start()
         _LOG.info('replaying %d chunks into %s (%s), speed %s%s', len(self.chunks), self.port,
@@ -229,8 +227,7 @@ class Replayer:
         self.stats.bytes_sent += sent
         self.stats.bytes_dropped += len(data) - sent
         if sent < len(data) and not self._dropping:
-            _LOG.warning('nobody is reading %s: dropping data, as a serial line would',
-                         self.port)
+            _LOG.warning('nobody is reading %s: dropping data, as a serial line would', self.port)
         self._dropping = sent < len(data)
         self._answers.played(data[:sent])
 
@@ -316,8 +313,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _to_bag(args, chunks, header)
     replayer = Replayer(chunks, speed=args.speed, loop=args.loop, link=args.link,
                         wireless=bool(header.get('wireless', True)), max_gap=args.max_gap,
-                        wait_for_host=args.wait_for_host,
-                        wait_for_stream=args.wait_for_stream)
+                        wait_for_host=args.wait_for_host, wait_for_stream=args.wait_for_stream)
     lifetime.die_with_parent()
     # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).
     stop = lifetime.StopSignal().install()
