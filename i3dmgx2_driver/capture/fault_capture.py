@@ -147,12 +147,8 @@ class FaultCapture:
         self.ring = RecentBytes(seconds, int(seconds * baud / 10 * RING_BUDGET_FACTOR)) \
             if self.directory else None
         #: Files written so far, the last one's path and cause; why the last write failed.
-        self.written = 0
-        self.last_path = ''
-        self.last_cause = ''
-        self.error = ''
-        self._lock = threading.Lock()
-        self._write_lock = threading.Lock()
+        self.written, self.last_path, self.last_cause, self.error = 0, '', '', ''
+        self._lock, self._write_lock = threading.Lock(), threading.Lock()
         self._causes: list[str] = []
         self._due: float | None = None
         self._last_write = -math.inf

@@ -114,13 +114,11 @@ class CaptureWriter:
             raise ValueError(f'flush_interval must be positive, got {flush_interval!r}')
         line = _header_line(header or {})
         self.path = os.fspath(path)
-        self.chunks = 0
-        self.bytes = 0
+        self.chunks = self.bytes = 0
         self._fsync = fsync
         self._interval = flush_interval
         self._lock = threading.Lock()
-        self._dirty = False
-        self._closed = False
+        self._dirty = self._closed = False
         # Open for the writer's lifetime, closed by close() (or __exit__).
         self._file: BinaryIO = open(self.path, 'wb', buffering=64 * 1024)  # noqa: SIM115
         try:

@@ -103,9 +103,7 @@ class Replayer:
         self.wait_for_stream = wait_for_stream
         self.stats = ReplayStats()
         self._offsets = schedule([t for t, _ in self.chunks], max_gap)
-        self._stop = threading.Event()
-        self._wake = threading.Event()
-        self._finished = threading.Event()
+        self._stop, self._wake, self._finished = (threading.Event() for _ in range(3))
         self._threads: list[threading.Thread] = []
         #: The pseudo-terminal played into: ``pty_name``, ``pending_output()``.
         self.pty = ReplayPty(link, self._stop)
@@ -283,18 +281,6 @@ def _load(args: argparse.Namespace) -> tuple[list[Chunk], dict[str, Any], str]:
     return list(chunks), header, args.capture
 
 
-def _to_bag(args: argparse.Namespace, chunks: list[Chunk], header: dict[str, Any]) -> int:
-    """Write the capture as the node's messages in a bag (bag_io.py); return the exit status."""
-    from .bag_io import capture_messages, write_bag
-    try:
-        count = write_bag(args.bag, capture_messages(chunks, header))
-    except (ImportError, OSError, ValueError) as exc:
-        print(f'replay: {exc}', file=sys.stderr)
-        return 1
-    print(f'wrote {count} messages to {args.bag}', flush=True)
-    return 0
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the replay command line; return the exit status."""
     args = _parser().parse_args(argv)
@@ -306,11 +292,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         chunks, header, source = _load(args)
-    except (OSError, ValueError) as exc:
+        if args.bag:  # the node's messages in a bag instead (bag_io.py)
+            from .bag_io import capture_messages, write_bag
+            count = write_bag(args.bag, capture_messages(chunks, header))
+            print(f'wrote {count} messages to {args.bag}', flush=True)
+            return 0
+    except (ImportError, OSError, ValueError) as exc:
         print(f'replay: {exc}', file=sys.stderr)
         return 1
-    if args.bag:
-        return _to_bag(args, chunks, header)
     replayer = Replayer(chunks, speed=args.speed, loop=args.loop, link=args.link,
                         wireless=bool(header.get('wireless', True)), max_gap=args.max_gap,
                         wait_for_host=args.wait_for_host, wait_for_stream=args.wait_for_stream)
@@ -318,18 +307,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).
     stop = lifetime.StopSignal().install()
     try:
-        try:
-            port = replayer.start()
-        except OSError as exc:
-            print(f'replay: {exc}', file=sys.stderr)
-            return 1
-        print(f'port: {port}', flush=True)
+        print(f'port: {replayer.start()}', flush=True)
         _LOG.info('source %s: %d chunks, %d bytes', source, len(chunks),
                   sum(len(d) for _, d in chunks))
         while not stop.is_set() and not replayer.wait(0.1):
             pass
         if not stop.is_set() and not replayer.drain(args.linger, stop) and not stop.is_set():
             _LOG.info('%d bytes were not read by anyone', replayer.pty.pending_output())
+    except OSError as exc:
+        print(f'replay: {exc}', file=sys.stderr)
+        return 1
     finally:
         replayer.stop()
         stop.restore()

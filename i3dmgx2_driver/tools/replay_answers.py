@@ -73,8 +73,7 @@ class BaseStationAnswers:
         self._wireless = wireless
         self._wake = wake
         self._stop = stop
-        self.host_seen = threading.Event()
-        self.stream_asked = threading.Event()
+        self.host_seen, self.stream_asked = threading.Event(), threading.Event()
         self._answers: list[bytes] = []
         self._answers_lock = threading.Lock()
         self._answer_due = 0.0
