@@ -186,8 +186,7 @@ class RoundTrips:
 
         ``period`` is the time between records at the sensor's rate.
         """
-        self.say(f'timing {self.args.cycles} continuous-mode starts and stops '
-                 f'(0x{code:02X})')
+        self.say(f'timing {self.args.cycles} continuous-mode starts and stops (0x{code:02X})')
         link, steps = self.link, self.steps
         starts, stops, replies = [], [], []
         lost = nacked = failed = 0
@@ -196,7 +195,7 @@ class RoundTrips:
             start = time.monotonic()
             try:
                 link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
-                                  MEASURE_TIMEOUT, 1)
+                             MEASURE_TIMEOUT, 1)
                 replies.append(time.monotonic() - start)
             except DeviceNack:
                 nacked += 1
@@ -220,8 +219,6 @@ class RoundTrips:
                 continue
             stops.append(max(0.0, last - stop_sent))
         note_longest(self.longest, CONTINUOUS_START, starts)
-        return {
-            'continuous_start': {
-                **spread(starts, 1e3), 'reply': spread(replies, 1e3), 'lost': lost,
-                'nacked': nacked, 'no_records': failed},
-            'continuous_stop': spread(stops, 1e3)}
+        return {'continuous_start': {**spread(starts, 1e3), 'reply': spread(replies, 1e3),
+                                     'lost': lost, 'nacked': nacked, 'no_records': failed},
+                'continuous_stop': spread(stops, 1e3)}
