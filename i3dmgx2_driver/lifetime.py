@@ -155,9 +155,7 @@ def die_with_parent(signum: int = signal.SIGTERM) -> bool:
     the kernel, the *thread* that started this process: a program that starts
     one from a thread must keep that thread until the process ends.
     """
-    if not sys.platform.startswith('linux'):
-        return False
-    if signal.getsignal(signal.SIGHUP) is signal.SIG_IGN:
+    if not sys.platform.startswith('linux') or signal.getsignal(signal.SIGHUP) is signal.SIG_IGN:
         return False
     if signal.getsignal(signum) is signal.SIG_IGN and \
             threading.current_thread() is threading.main_thread():

@@ -146,8 +146,7 @@ class CaptureWriter:
 
         Empty reads (timeouts) carry nothing to replay and are not stored.
         """
-        if receive_time is None:
-            receive_time = time.time()
+        receive_time = time.time() if receive_time is None else receive_time
         if not math.isfinite(receive_time):
             raise ValueError(f'receive time must be finite, got {receive_time!r}')
         data = bytes(data)

@@ -22,6 +22,7 @@ the README's first command shows that data flows without the ``ros2`` CLI.
 """
 
 import argparse
+import contextlib
 import math
 import sys
 import threading
@@ -91,9 +92,8 @@ def _spin(executor: SingleThreadedExecutor, stopped: lifetime.StopSignal) -> Non
     it ignored).
     """
     try:
-        executor.spin()
-    except ExternalShutdownException:
-        pass
+        with contextlib.suppress(ExternalShutdownException):
+            executor.spin()
     finally:
         stopped.set()
 
@@ -121,16 +121,15 @@ def main(argv: list[str] | None = None) -> int:
     spinner.start()
     start = last = time.monotonic()
     try:
-        while not args.duration or time.monotonic() - start < args.duration:
-            if stopped.wait(args.period):
-                break
-            msg, count = node.take()
-            now = time.monotonic()
-            print(f'waiting for {node.resolve_topic_name(args.topic)} ...' if msg is None
-                  else describe(msg, count / (now - last), time.time()), flush=True)
-            last = now
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        with contextlib.suppress(KeyboardInterrupt, ExternalShutdownException):
+            while not args.duration or time.monotonic() - start < args.duration:
+                if stopped.wait(args.period):
+                    break
+                msg, count = node.take()
+                now = time.monotonic()
+                print(f'waiting for {node.resolve_topic_name(args.topic)} ...' if msg is None
+                      else describe(msg, count / (now - last), time.time()), flush=True)
+                last = now
     finally:
         # The spinning thread must be out of rclpy's C++ before the interpreter
         # exits, or the process aborts ("terminate called without an active
