@@ -220,13 +220,11 @@ class FaultCapture:
         if self.ring is None:
             return 'off'
         reads, held = self.ring.held
-        text = (f'keeping the last {self.seconds:g} s ({reads} reads, {held // 1024} KiB) '
-                f'for {self.directory}; ')
-        if self.error:
-            text += f'last write failed: {self.error}; '
-        if self.written:
-            return text + f'{self.written} written, the last {self.last_path} ({self.last_cause})'
-        return text + 'none written yet'
+        failed = f'last write failed: {self.error}; ' if self.error else ''
+        last = f'{self.written} written, the last {self.last_path} ({self.last_cause})' \
+            if self.written else 'none written yet'
+        return (f'keeping the last {self.seconds:g} s ({reads} reads, {held // 1024} KiB) '
+                f'for {self.directory}; {failed}{last}')
 
     def close(self) -> None:
         """Stop the writer thread (at shutdown: an episode not yet written is dropped)."""

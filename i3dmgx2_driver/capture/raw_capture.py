@@ -90,9 +90,7 @@ class RawCapture:
         writer = self._writer
         if writer is not None:
             return f'{self.path}: {writer.chunks} reads, {writer.bytes} bytes'
-        if self.error:
-            return f'stopped: {self.error}'
-        return 'off'
+        return f'stopped: {self.error}' if self.error else 'off'
 
     def on_bytes(self, data: bytes, receive_time: float) -> None:
         """Store one read (called from the reader thread; never raises)."""

@@ -210,11 +210,9 @@ def series_from_chunks(chunks: Iterable[tuple[float, bytes]], address: int | Non
     rate = _rows(body_vector(r.angular_rate, convention) for r in records)
     euler = _rows(euler_deg(orientation(r.matrix, convention)) for r in records)
     t = np.array(times, dtype=float)
-    labels = []
-    for when, text in segments:
-        later = [i for i, h in enumerate(host) if h >= when - 1e-6]
-        if later:
-            labels.append((float(t[later[0]]), text))
+    firsts = ((next((i for i, h in enumerate(host) if h >= when - 1e-6), None), text)
+              for when, text in segments)
+    labels = [(float(t[i]), text) for i, text in firsts if i is not None]
     return _with_gaps(Series(t, accel, rate, euler, [], [], labels, source, frame,
                              'from the device timer, unwrapped'), break_idx, gap)
 
