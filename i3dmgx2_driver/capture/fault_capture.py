@@ -270,8 +270,7 @@ class FaultCapture:
         header = default_header(
             start_time=chunks[0][0], driver_version=__version__, cause=cause, written_time=now,
             notes=(f'fault capture by the i3dmgx2_driver node: the last {self.seconds:g} s '
-                   f'of reads before it was written ({cause}), as read'),
-            **self._header)
+                   f'of reads before it was written ({cause}), as read'), **self._header)
         with CaptureWriter(path, header, flush_interval=None) as writer:
             for receive_time, data in chunks:
                 writer.write(data, receive_time)

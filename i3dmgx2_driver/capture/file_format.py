@@ -228,23 +228,20 @@ def _iter_chunks(path: str, offset: int) -> Iterator[Chunk]:
             if not head:
                 return
             if len(head) < CHUNK_HEADER.size:
-                warnings.warn(
-                    f'{path}: capture ends inside a chunk header at byte {start} '
-                    f'({len(head)} of {CHUNK_HEADER.size} bytes); the writer was probably '
-                    f'killed; the chunks before it are intact', TruncatedCaptureWarning,
-                    stacklevel=2)
+                warnings.warn(f'{path}: capture ends inside a chunk header at byte {start} '
+                              f'({len(head)} of {CHUNK_HEADER.size} bytes); the writer was '
+                              f'probably killed; the chunks before it are intact',
+                              TruncatedCaptureWarning, stacklevel=2)
                 return
             receive_time, count = CHUNK_HEADER.unpack(head)
             if count > MAX_CHUNK_SIZE or not math.isfinite(receive_time):
-                raise CaptureFormatError(
-                    f'{path}: corrupted chunk at byte {start} (time {receive_time!r}, '
-                    f'{count} bytes)')
+                raise CaptureFormatError(f'{path}: corrupted chunk at byte {start} (time '
+                                         f'{receive_time!r}, {count} bytes)')
             data = f.read(count)
             if len(data) < count:
-                warnings.warn(
-                    f'{path}: last chunk (byte {start}) cut short: {len(data)} of {count} '
-                    f'bytes; the writer was probably killed; yielding what is there',
-                    TruncatedCaptureWarning, stacklevel=2)
+                warnings.warn(f'{path}: last chunk (byte {start}) cut short: {len(data)} of '
+                              f'{count} bytes; the writer was probably killed; yielding what '
+                              'is there', TruncatedCaptureWarning, stacklevel=2)
                 if data:
                     yield receive_time, data
                 return

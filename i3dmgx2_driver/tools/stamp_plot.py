@@ -75,8 +75,7 @@ def render_stamp_errors(series: StampErrors, output: str, title: str | None = No
     for at, label in series.events:
         ax.axvline(at - start, color='tab:red', linestyle='--', linewidth=1)
         ax.annotate(label, (at - start, 1.0), xycoords=('data', 'axes fraction'),
-                    xytext=(3, -12), textcoords='offset points', color='tab:red',
-                    fontsize='small')
+                    xytext=(3, -12), textcoords='offset points', color='tab:red', fontsize='small')
     ax.set_xlabel('time since the first record (s)')
     ax.set_ylabel('stamp error (ms)')
     ax.grid(True, alpha=0.3)
