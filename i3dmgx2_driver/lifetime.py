@@ -125,8 +125,7 @@ class StopSignal:
             left = None if deadline is None else deadline - time.monotonic()
             if left is not None and left <= 0:
                 break
-            ready, _, _ = select.select([self._read], [], [], left)
-            if ready:
+            if select.select([self._read], [], [], left)[0]:
                 with contextlib.suppress(BlockingIOError):
                     while os.read(self._read, 64):
                         pass

@@ -117,9 +117,8 @@ def udev_note(path: str, message: str = '', sys_class_tty: str = SYS_CLASS_TTY) 
     timer = latency_timer_ms(path, sys_class_tty)
     if timer is not None and timer >= DEFAULT_LATENCY_TIMER_MS:
         reasons.append(f'its latency timer is {timer} ms (records arrive in {timer} ms bursts)')
-    owner = port_group(path)
-    if owner is not None and not owner[1] and 'udev rule' not in message:
-        group = owner[0]
+    group, member = port_group(path) or ('', True)
+    if not member and 'udev rule' not in message:
         why = '' if serial_group(group, path) else \
             f', and joining {group} would give you far more than this port'
         reasons.append(f'it belongs to the {group} group, which you are not in{why}')
@@ -231,10 +230,8 @@ def print_ports(ports: Sequence[PortInfo], probing: set[str], out: TextIO) -> No
                   'plugged in? dmesg tells what the kernel saw.\n')
         return
     rows = [['device', 'stable path', 'usb id', 'description', 'looks like', '']]
-    for port in ports:
-        rows.append([port.device, port.by_id or '-', port.usb_id or '-',
-                     port.description or '-', port.kind or '-',
-                     'probe' if port.device in probing else 'skip'])
+    rows += [[port.device, port.by_id or '-', port.usb_id or '-', port.description or '-',
+              port.kind or '-', 'probe' if port.device in probing else 'skip'] for port in ports]
     out.write('Serial ports:\n')
     _table(rows, out)
 
@@ -356,11 +353,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     progress = _ProgressLine(sys.stderr, sys.stderr.isatty() and not args.json)
     results = []
     try:
-        for port in ports:
-            if port.device in probing:
-                progress.port = port.device
-                results.append((port, probe_port(port.device, config, progress)))
-                progress.clear()
+        for port in (p for p in ports if p.device in probing):
+            progress.port = port.device
+            results.append((port, probe_port(port.device, config, progress)))
+            progress.clear()
     except KeyboardInterrupt:
         progress.clear()  # the port is closed on the way out; nothing was changed
         return EXIT_INTERRUPTED

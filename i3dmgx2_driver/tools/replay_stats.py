@@ -34,7 +34,3 @@ class ReplayStats:
     host_bytes: int = 0
     nacks_sent: int = 0
     passes: int = 0
-
-    def as_dict(self) -> dict:
-        """Return the counters by name."""
-        return dataclasses.asdict(self)

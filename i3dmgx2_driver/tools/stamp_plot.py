@@ -76,8 +76,7 @@ def render_stamp_errors(series: StampErrors, output: str, title: str | None = No
         ax.axvline(at - start, color='tab:red', linestyle='--', linewidth=1)
         ax.annotate(label, (at - start, 1.0), xycoords=('data', 'axes fraction'),
                     xytext=(3, -12), textcoords='offset points', color='tab:red', fontsize='small')
-    ax.set_xlabel('time since the first record (s)')
-    ax.set_ylabel('stamp error (ms)')
+    ax.set(xlabel='time since the first record (s)', ylabel='stamp error (ms)')
     ax.grid(True, alpha=0.3)
     ax.legend(loc='lower right', fontsize='small')
     fig.suptitle(title or 'Stamp error against the true sample time', fontsize='medium')
