@@ -85,9 +85,8 @@ def parse_addresses(text: str) -> list[int]:
 def node_command(path: str, sensor: SensorFound) -> str:
     """Return the ``ros2 run`` line that starts the driver for ``sensor``."""
     head = f'ros2 run i3dmgx2_driver node --ros-args -p port:={shlex.quote(path)}'
-    if sensor.wireless:
-        return f'{head} -p address:={sensor.address}'
-    return f'{head} -p wireless:=false -p address:={WIRED_ADDRESS}'
+    return f'{head} -p address:={sensor.address}' if sensor.wireless else \
+        f'{head} -p wireless:=false -p address:={WIRED_ADDRESS}'
 
 
 def port_command(path: str, sensors: Sequence[SensorFound]) -> str:

@@ -103,9 +103,7 @@ def port_kind(vid: int | None, description: str = '', manufacturer: str = '') ->
     text = f'{description} {manufacturer}'.lower()
     if vid == MICROSTRAIN_VID or 'microstrain' in text:
         return KIND_MICROSTRAIN
-    if vid in USB_SERIAL_VIDS:
-        return f'{KIND_USB_SERIAL} ({USB_SERIAL_VIDS[vid]})'
-    return None
+    return f'{KIND_USB_SERIAL} ({USB_SERIAL_VIDS[vid]})' if vid in USB_SERIAL_VIDS else None
 
 
 def latency_timer_ms(device: str, sys_class_tty: str = SYS_CLASS_TTY) -> int | None:
