@@ -123,8 +123,7 @@ class ReplayPty:
         if master is None:
             raise OSError('the pty is closed')
         try:
-            ready, _, _ = select.select([master], [], [], POLL)
-            data = os.read(master, 4096) if ready else b''
+            data = os.read(master, 4096) if select.select([master], [], [], POLL)[0] else b''
         except BlockingIOError:
             return b''
         # The master is in packet mode: a data read starts with TIOCPKT_DATA, a
