@@ -219,12 +219,10 @@ def series_from_chunks(chunks: Iterable[tuple[float, bytes]], address: int | Non
 
 def _with_gaps(series: Series, break_idx: Sequence[int], gap: float | None) -> Series:
     """Return ``series`` with its gaps and timer restarts found from its times."""
-    t = series.time
-    starts, _ = find_gaps(t, break_idx, gap)
-    breaks = set(break_idx)
-    gaps = [(float(t[i - 1]), float(t[i])) for i in starts if i not in breaks]
-    restarts = [(float(t[i - 1]), float(t[i])) for i in starts if i in breaks]
-    return series._replace(gaps=gaps, breaks=restarts)
+    t, restarts = series.time, set(break_idx)
+    spans = {i: (float(t[i - 1]), float(t[i])) for i in find_gaps(t, break_idx, gap)[0]}
+    return series._replace(gaps=[s for i, s in spans.items() if i not in restarts],
+                           breaks=[s for i, s in spans.items() if i in restarts])
 
 
 def series_from_capture(path: str, address: int | None = None, convention: str = ENU,
