@@ -28,8 +28,7 @@ from i3dmgx2_driver.simulator.eeprom import (
     AUTOSTART_ADDRESS, ERASED_WORD, FACTORY_DIVIDER, SensorEeprom,
 )
 from i3dmgx2_driver.simulator.faults import FaultConfig
-from i3dmgx2_driver.simulator.sensor_unit import unit_at
-from i3dmgx2_driver.simulator.wiring import foreign_address
+from i3dmgx2_driver.simulator.sensor_unit import foreign_address, unit_at
 import pytest
 
 

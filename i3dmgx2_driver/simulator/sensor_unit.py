@@ -21,10 +21,9 @@ quirks), its own power, its own faults in effect (a stall of one sensor
 leaves the others streaming) and its own transmitter thread, whose packets
 go through the one line writer under the simulator's lock, so that the
 sensors' packets interleave on the line whole, as the base station forwards
-them. :class:`SensorUnit` holds these parts for one address, built from what the
-sensor is (:class:`UnitSensor`), the line it shares (:class:`UnitLine`) and
-what can go wrong for it (:class:`UnitFaults`); :func:`unit_specs` says how
-the sensors after the first differ from it.
+them. :class:`SensorUnit` holds these parts for one address;
+:func:`unit_specs` says how the sensors after the first differ from it, and
+:func:`foreign_address` where the stranger stands among them.
 """
 
 import collections.abc
@@ -34,7 +33,7 @@ import threading
 
 from .base_station import BaseStation
 from .config import SimulatorConfig
-from .faults import FaultState
+from .faults import FaultConfig, FaultState
 from .ground_truth import GroundTruth
 from .inbox import SensorInbox
 from .line_writer import LineWriter
@@ -48,6 +47,14 @@ from .wired_line import WiredLine
 #: How far apart the clocks of neighbouring sensors run (ppm), so that a
 #: driver mixing up two sensors' clocks shows it.
 CLOCK_STEP_PPM = 30.0
+
+
+def foreign_address(config: SimulatorConfig, faults: FaultConfig) -> int:
+    """Return the stranger's address: next to the first sensor's, and none of ours."""
+    address = faults.foreign_of(config.address)
+    while faults.foreign_address is None and address in config.all_addresses:
+        address = faults.foreign_of(address)
+    return address
 
 
 def unit_specs(config: SimulatorConfig,
@@ -77,69 +84,33 @@ def unit_specs(config: SimulatorConfig,
     return out
 
 
-@dataclasses.dataclass(frozen=True)
-class UnitSensor:
-    """What the sensor is: its spec, its motion and the seed of its noise."""
-
-    spec: SensorSpec
-    motion: MotionConfig
-    seed: int
-
-
-@dataclasses.dataclass(frozen=True)
-class UnitLine:
-    """
-    Where a sensor's packets go, shared with the other sensors.
-
-    ``end`` is the line end (base station or wired line), ``writer`` the
-    line writer every unit shares, ``shared`` the serial line its packets
-    share with the other sensors' (several; None: one sensor).
-    """
-
-    end: BaseStation | WiredLine
-    writer: LineWriter
-    shared: SharedLine | None = None
-
-
-@dataclasses.dataclass(frozen=True)
-class UnitFaults:
-    """
-    What can go wrong for one sensor: its random choices and the stranger's packets.
-
-    ``rng`` draws its faults, ``foreign`` is the stranger whose packets the
-    radio may pick up, ``state`` the faults in effect for it if the line end
-    shares them (the first sensor's; None: its own, from the configuration).
-    """
-
-    rng: random.Random
-    foreign: SimulatedSensor
-    state: FaultState | None = None
-
-
 class SensorUnit:
     """
-    The parts of one sensor: model, faults, packet faults, transmitter, inbox, power.
+    The parts of one sensor: model, faults, transmitter, inbox, power.
 
-    ``record`` is the ground truth, ``wake`` the condition on the
-    simulator's lock, ``post`` schedules actions on its reader thread.
+    ``seed`` seeds its noise, ``rng`` draws its faults, ``faults`` are the
+    faults in effect for it (the first sensor shares the line end's), ``end``
+    the line end (base station or wired line), ``writer`` the line writer
+    every unit shares, ``shared`` the serial line its packets share with the
+    other sensors' (None: one sensor), ``foreign`` the stranger whose packets
+    the radio may pick up, ``record`` the ground truth, ``wake`` the
+    condition on the simulator's lock; ``post`` schedules actions on its
+    reader thread.
     """
 
-    def __init__(self, config: SimulatorConfig, sensor: UnitSensor, line: UnitLine,
-                 faults: UnitFaults, record: GroundTruth, wake: threading.Condition,
+    def __init__(self, config: SimulatorConfig, spec: SensorSpec, motion: MotionConfig,
+                 seed: int, rng: random.Random, faults: FaultState,
+                 end: BaseStation | WiredLine, writer: LineWriter, shared: SharedLine | None,
+                 foreign: SimulatedSensor, record: GroundTruth, wake: threading.Condition,
                  post: Post) -> None:
-        self.sensor = SimulatedSensor(sensor.spec, Motion(sensor.motion), seed=sensor.seed)
-        self.address = sensor.spec.address
-        self.faults = faults.state if faults.state is not None else FaultState(config.faults)
-        self.packet_faults = PacketFaults(self.faults, faults.rng, line.end, faults.foreign,
-                                          line.writer, record)
-        self.tx = Transmitter(config, self.sensor, line.end, record, wake, self.packet_faults,
-                              line.writer, line.shared)
-        self.inbox = SensorInbox(self.sensor, record, self.tx, wake, self.faults)
-        self.power = SensorPower(self.sensor, self.tx, record, wake, self.faults, post)
-
-    def deliver(self, command, raw: bytes, now: float) -> str:
-        """Hand a command that reached this sensor to its inbox."""
-        return self.inbox.deliver(command, raw, now)
+        self.sensor = SimulatedSensor(spec, Motion(motion), seed=seed)
+        self.address = spec.address
+        self.faults = faults
+        packet_faults = PacketFaults(faults, rng, end, foreign, writer, record)
+        self.tx = Transmitter(config, self.sensor, end, record, wake, packet_faults, writer,
+                              shared)
+        self.inbox = SensorInbox(self.sensor, record, self.tx, wake, faults)
+        self.power = SensorPower(self.sensor, self.tx, record, wake, faults, post)
 
 
 def unit_at(units: collections.abc.Mapping[int, SensorUnit], address: int | None) -> SensorUnit:
@@ -149,15 +120,3 @@ def unit_at(units: collections.abc.Mapping[int, SensorUnit], address: int | None
     if address not in units:
         raise ValueError(f'no sensor at address {address}: the sensors are {list(units)}')
     return units[address]
-
-
-class AllInboxes:
-    """Tell every sensor's inbox that the host opened the port (what the reader needs)."""
-
-    def __init__(self, units: collections.abc.Mapping[int, SensorUnit]) -> None:
-        self._units = units
-
-    def port_opened(self) -> None:
-        """Note on every sensor that the host opened the port (or flushed its input)."""
-        for unit in self._units.values():
-            unit.inbox.port_opened()
