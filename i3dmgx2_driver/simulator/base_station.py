@@ -30,8 +30,7 @@ from typing import Any
 
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
-from i3dmgx2_driver.codec.commands import Command, decode_command
-from i3dmgx2_driver.codec.errors import CodecError
+from i3dmgx2_driver.codec.commands import Command
 from i3dmgx2_driver.codec.parser import (
     CommandStreamParser, HostEvent, RawCommand, RejectedPacket,
 )
@@ -40,7 +39,7 @@ from . import faults as flt
 from .faults import FaultState
 from .ground_truth import GroundTruth, HostCommand
 from .pty_port import PtyPort
-from .sensor import Reply, SimulatedSensor
+from .sensor import decoded, Reply, SimulatedSensor
 
 _PING_FAILED = bytes((framing.NACK,))
 
@@ -88,11 +87,8 @@ class BaseStation:
 
     def _on_raw_command(self, raw: bytes, now: float) -> None:
         """Answer a ping."""
-        try:
-            command = decode_command(raw)
-        except CodecError:
-            return
-        if command.code != lay.PING:
+        command = decoded(raw)
+        if command is None or command.code != lay.PING:
             return
         unit = self._units.get(command.args[0])
         if unit is None or unit.faults.silent(now):
@@ -117,10 +113,7 @@ class BaseStation:
                                          'rejected: busy'), nacks=1)
             return
         self._write(bytes((framing.ACK,)))
-        try:
-            command: Command | None = decode_command(packet.command)
-        except CodecError:
-            command = None
+        command = decoded(packet.command)
         unit = self._units.get(packet.address)
         if unit is None:
             outcome, counter = 'other_address', 'commands_other_address'

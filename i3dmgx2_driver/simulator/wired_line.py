@@ -30,15 +30,13 @@ set up for the wrong framing shows it at once.
 """
 
 from i3dmgx2_driver.codec import framing
-from i3dmgx2_driver.codec.commands import Command, decode_command
-from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.parser import CommandStreamParser, HostEvent, RawCommand
 
 from . import faults as flt
 from .base_station import Deliver
 from .faults import FaultState
 from .ground_truth import GroundTruth, HostCommand
-from .sensor import Reply, SimulatedSensor, WIRED_COMMANDS
+from .sensor import decoded, Reply, SimulatedSensor, WIRED_COMMANDS
 
 #: Bytes after a wired record: its checksum.
 _CHECKSUM_SIZE = 2
@@ -66,10 +64,7 @@ class WiredLine:
         if not isinstance(event, RawCommand):  # pragma: no cover - a wired reader has no other
             return
         raw = event.command
-        try:
-            command: Command | None = decode_command(raw)
-        except CodecError:
-            command = None
+        command = decoded(raw)
         if self._faults.silent(now):
             outcome, counter = 'stalled', 'commands_lost'
         else:
