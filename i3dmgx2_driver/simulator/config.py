@@ -174,9 +174,8 @@ class SimulatorConfig:
     @property
     def start_stream(self) -> int:
         """Command byte streamed from power-up, 0 for none."""
-        if self.faults.already_streaming and not self.streaming_at_start:
-            return DEFAULT_STREAM
-        if self.streaming_at_start is True:
+        if self.streaming_at_start is True or (self.faults.already_streaming
+                                               and not self.streaming_at_start):
             return DEFAULT_STREAM
         return int(self.streaming_at_start)
 

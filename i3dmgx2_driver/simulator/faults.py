@@ -53,11 +53,6 @@ FAULT_OVERFLOW = 'overflow'
 FAULT_LINE_RATE = 'line_rate'
 
 
-def _check_probability(name: str, value: float) -> None:
-    if not 0.0 <= value <= 1.0:
-        raise ValueError(f'{name} is a probability in 0..1, got {value!r}')
-
-
 @dataclasses.dataclass
 class FaultConfig:
     """
@@ -121,8 +116,9 @@ class FaultConfig:
     def __post_init__(self) -> None:
         """Reject settings that cannot mean anything, naming the field."""
         for item in dataclasses.fields(self):
-            if item.name.endswith('_probability'):
-                _check_probability(item.name, getattr(self, item.name))
+            value = getattr(self, item.name)
+            if item.name.endswith('_probability') and not 0.0 <= value <= 1.0:
+                raise ValueError(f'{item.name} is a probability in 0..1, got {value!r}')
         if self.garbage_max_bytes < 1:
             raise ValueError('garbage_max_bytes must be at least 1')
         for name in ('jitter_ms', 'stall_seconds', 'unplug_seconds', 'power_off_seconds'):
@@ -156,10 +152,6 @@ class FaultState:
         self.config = config
         self._stall_start = 0.0
         self._stall_end = 0.0
-
-    def configure(self, config: FaultConfig) -> None:
-        """Put ``config`` in effect from now on."""
-        self.config = config
 
     def stall(self, start: float, seconds: float) -> None:
         """Be silent from ``start`` for ``seconds``."""

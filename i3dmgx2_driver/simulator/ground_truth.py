@@ -24,6 +24,7 @@ and its record appear together.
 """
 
 import collections
+import copy
 import threading
 from typing import Any, NamedTuple
 
@@ -109,10 +110,7 @@ class SimulatorStats:
 
     def copy(self) -> 'SimulatorStats':
         """Return a snapshot that later counting does not change."""
-        other = SimulatorStats()
-        for name in self.__slots__:
-            setattr(other, name, getattr(self, name))
-        return other
+        return copy.copy(self)
 
     def __repr__(self) -> str:
         fields_ = ', '.join(f'{k}={v}' for k, v in self.as_dict().items() if v)
@@ -166,10 +164,6 @@ class GroundTruth:
         self.host_log.append(entry)
         self.count(**counters)
         self._changed.notify_all()
-
-    def received(self, now: float, command: Command) -> None:
-        """Record a command the sensor received and decoded."""
-        self.commands.append((now, command))
 
     def note_streaming(self, now: float, code: int) -> None:
         """Record the sensor's stream at ``now`` if it changed."""

@@ -52,10 +52,6 @@ class SensorInbox:
         #: Whether the next request to stream is ignored (a quirk, armed by the faults).
         self.ignore_next_continuous = faults.config.ignore_first_continuous
 
-    def arm_ignore_continuous(self) -> None:
-        """Ignore the next request to stream (the fault turned on while running)."""
-        self.ignore_next_continuous = True
-
     def port_opened(self) -> None:
         """Note that the host opened the port (or flushed its input)."""
         self._polled_since_open = False
@@ -66,7 +62,7 @@ class SensorInbox:
         if command is None:
             sensor.handle(raw, now)
             return 'ignored'
-        self._record.received(now, command)
+        self._record.commands.append((now, command))
         if command.code == lay.SET_CONTINUOUS and command.args[0] != 0:
             if self.ignore_next_continuous:
                 self.ignore_next_continuous = False

@@ -53,10 +53,8 @@ class PacketFaults:
 
     def jitter(self) -> float:
         """Return the extra delay (s) of a packet on its way."""
-        faults = self._faults.config
-        if faults.jitter_ms > 0:
-            return self._rng.uniform(0.0, faults.jitter_ms / 1000.0)
-        return 0.0
+        jitter_ms = self._faults.config.jitter_ms
+        return self._rng.uniform(0.0, jitter_ms / 1000.0) if jitter_ms > 0 else 0.0
 
     def lost(self, send: float) -> str | None:
         """Return why a packet sent at ``send`` never arrives (stall, drop), or None."""

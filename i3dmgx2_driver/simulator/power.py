@@ -62,8 +62,13 @@ class SensorPower:
             return now
 
     def on(self, timer_start: int | None = None) -> None:
-        """Power up now, the timer at ``timer_start`` (None: the sensor's own, kept from now)."""
+        """
+        Power up now, the timer at ``timer_start`` (None: the sensor's own, kept from now).
+
+        What was queued before is gone (a power cycle's old queue included).
+        """
         with self._wake:
+            self._tx.clear()
             self._sensor.power_up(time.time(), timer_start)
             self._record.note_streaming(time.time(), self._sensor.streaming)
             self._wake.notify_all()
@@ -75,14 +80,9 @@ class SensorPower:
         if off_seconds < 0:
             raise ValueError(f'off_seconds must not be negative, got {off_seconds!r}')
         if off_seconds == 0:
-            self._restart(timer_start)
+            self.on(timer_start)
             return
         with self._wake:
             now = self.off()
             self._faults.stall(now, off_seconds)
-        self._post(off_seconds, lambda: self._restart(timer_start))
-
-    def _restart(self, timer_start: int | None) -> None:
-        with self._wake:
-            self._tx.clear()  # what the old power cycle had not sent is gone
-            self.on(timer_start)
+        self._post(off_seconds, lambda: self.on(timer_start))

@@ -34,7 +34,7 @@ thread that merely slept until the due time wrote 0.2-0.7 ms late, by an
 amount that wandered with the machine's load, and that lateness, not the
 driver, was most of the noise the stamp benchmarks measured
 (docs/timestamps.md).
-recorded in the ground truth, written or lost, and why. Several sensors
+Several sensors
 behind one base station each have a transmitter, and their packets take the
 one serial line in turn (``SharedLine``): interleaved, never overlapping,
 at the line's rate.
@@ -197,12 +197,19 @@ class Transmitter:
         reply = item.reply
         with self._wake:
             packet = self._end.frame(reply, item.address, self._sensor)
-            fault = self._faults.lost(item.send) or self._line_busy(item) \
-                or (flt.FAULT_LINE_RATE if item.overflow else None)
+            # With ``limit_to_line_rate`` the device skips a streamed record while its
+            # UART still sends the stream's last one, judged on its own schedule (send
+            # times), never on when this thread ran. Only the stream's own records
+            # count: a reply is interleaved with the stream (docs/protocol.md §4,
+            # combined mode) and never costs a record of a stream that fits.
+            paced = self._config.limit_to_line_rate and item.source == 'stream'
+            fault = self._faults.lost(item.send) or (
+                flt.FAULT_LINE_RATE if item.overflow or (
+                    paced and item.send < self._stream_line_free_at - 1e-9) else None)
             if fault is not None:
                 self._record.add(reply, None, packet, item.address, False, fault, item.source)
                 return
-            if self._config.limit_to_line_rate and item.source == 'stream':
+            if paced:
                 self._stream_line_free_at = (max(item.send, self._stream_line_free_at)
                                              + len(packet) / LINE_BYTES_PER_SECOND)
             before = self._record.stats.bytes_written
@@ -238,22 +245,6 @@ class Transmitter:
         done = max(ready, self._uart_free_at) + (before + size) * byte_s
         self._uart_free_at = done
         return done
-
-    def _line_busy(self, item: Outgoing) -> str | None:
-        """
-        Return FAULT_LINE_RATE when the device's UART is still sending the stream's last record.
-
-        Then the device skips this one. Judged on the device's own schedule
-        (send times), never on when this thread happened to run. Only the
-        stream's own records count: a reply to a command is interleaved with
-        the stream (docs/protocol.md §4, combined mode) and never costs a
-        record of a stream that fits, such as the first cycle after the 0xC4
-        that started it.
-        """
-        if self._config.limit_to_line_rate and item.source == 'stream' \
-                and item.send < self._stream_line_free_at - 1e-9:
-            return flt.FAULT_LINE_RATE
-        return None
 
 
 def _wait_until(due: float) -> None:
