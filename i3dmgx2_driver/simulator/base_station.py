@@ -52,7 +52,7 @@ class BaseStation:
     A base station between the host and the wireless sensors; call with the lock held.
 
     ``units`` maps each sensor's address to its parts (``sensor``, ``faults``
-    in effect for it, ``inbox``): a command packet or ping goes to the
+    in effect for it, ``deliver``): a command packet or ping goes to the
     sensor it names, if that one is on the channel. ``faults`` is the base
     station's own (busy NACKs).
     """
@@ -122,7 +122,7 @@ class BaseStation:
         elif self._rng.random() < faults.command_loss_probability:
             outcome, counter = 'lost', 'commands_lost'
         else:
-            outcome = unit.inbox.deliver(command, packet.command, now)
+            outcome = unit.deliver(command, packet.command, now)
             counter = 'commands_received' if outcome == 'delivered' else 'commands_ignored'
         self._record.log(
             HostCommand(now, 'packet', packet.address, command, packet.command, outcome),

@@ -21,11 +21,11 @@ talks to it with pyserial. Behind it sits either a wireless base station
 wired sensor on its own line (``wired_line``). Two threads: the
 ``HostReader`` (``host_reader``) reads the host's bytes and runs the
 scheduled actions (unplugging and replugging the cable, power-up after a
-power cycle by the ``SensorPower``, the timed faults this class schedules);
-one ``Transmitter`` a sensor (``SensorUnit``, ``sensor_unit``) writes the
+power cycle, the timed faults this class schedules); one ``Transmitter``
+a sensor (``SensorUnit``, ``sensor_unit``) writes the
 sensor's records at their scheduled times, with their ``PacketFaults``,
 through the ``LineWriter`` to the pty (``pty_port``). A command that
-reaches the sensor goes through its ``SensorInbox`` (the firmware's
+reaches the sensor goes through its ``SensorUnit`` (the firmware's
 quirks). Every data packet, written or lost, is recorded in ``sim.truth``
 (``ground_truth``, read through ``TruthQueries``) with the time its
 sample was taken and the time its last byte was written, so that tests and
@@ -78,7 +78,7 @@ from i3dmgx2_driver.codec.commands import Command
 from .base_station import BaseStation
 from .config import DEFAULT_STREAM, SimulatorConfig
 from .faults import FaultConfig, FaultState
-from .ground_truth import GroundTruth
+from .ground_truth import GroundTruth, TruthQueries
 from .host_reader import HostReader
 from .line_writer import LineWriter
 from .motion import Motion, MotionConfig
@@ -86,7 +86,6 @@ from .pty_port import PtyPort
 from .sensor import SensorSpec, SimulatedSensor
 from .sensor_unit import foreign_address, SensorUnit, unit_at, unit_specs
 from .transmitter import SharedLine
-from .truth_queries import TruthQueries
 from .wired_line import WiredLine
 
 if typing.TYPE_CHECKING:  # typing.Self is new in Python 3.11; Jazzy allows 3.10
@@ -169,10 +168,8 @@ class PtySimulator(TruthQueries):
         first = unit_at(self.units, None)
         #: The device model of the first sensor; touch it only while holding ``sim.lock``.
         self.sensor = first.sensor
-        #: The first sensor's faults in effect (every sensor has the same configuration).
-        self._faults = first.faults
-        self._inbox = first.inbox
-        self._power = first.power
+        #: The first sensor: its faults in effect are every sensor's configuration.
+        self._first = first
         self._threads: list[threading.Thread] = []
         #: Path to open: a symlink that survives unplug and replug (None before start).
         self.port: str | None = None
@@ -183,12 +180,12 @@ class PtySimulator(TruthQueries):
 
     def _deliver(self, command: Command | None, raw: bytes, now: float) -> str:
         """Hand a command to the first inbox (built after the line end that calls this)."""
-        return self._inbox.deliver(command, raw, now)
+        return self._first.deliver(command, raw, now)
 
     def _port_opened(self) -> None:
         """Note on every sensor that the host opened the port (or flushed its input)."""
         for unit in self.units.values():
-            unit.inbox.port_opened()
+            unit.port_opened()
 
     # -- lifecycle --------------------------------------------------------------------------
 
@@ -251,7 +248,7 @@ class PtySimulator(TruthQueries):
             self._record.note_streaming(now, unit.sensor.streaming)
         # The stranger's clock somewhere; the timed faults from now.
         self._foreign.power_up(now - 1000.0 * self._fault_rng.random())
-        self._schedule(self._faults.config, now, None)
+        self._schedule(self._first.faults.config, now, None)
 
     def _schedule(self, faults: FaultConfig, now: float,
                   changes: collections.abc.Collection[str] | None) -> None:
@@ -274,9 +271,9 @@ class PtySimulator(TruthQueries):
             post(faults.unplug_at, lambda: self._pull_cable(seconds))
         if faults.power_cycle_at is not None and asked(
                 'power_cycle_at', 'power_off_seconds', 'power_up_timer'):
-            power = unit_at(self.units, address).power
+            unit = unit_at(self.units, address)
             off, timer = faults.power_off_seconds, faults.power_up_timer
-            post(faults.power_cycle_at, lambda: power.cycle(off, timer))
+            post(faults.power_cycle_at, lambda: unit.power_cycle(off, timer))
 
     def _stall(self, start: float, seconds: float, address: int | None) -> None:
         """Silence the sensor at ``address`` (None: the base station, every sensor)."""
@@ -318,7 +315,7 @@ class PtySimulator(TruthQueries):
         with self._changed:
             self._record.count(unplugs=1)
             if not self.config.wireless:
-                self._power.off()
+                self._first.power_off()
         self.pty.pull_out()
         if seconds is not None:
             self.host_reader.post(seconds, self._plug_cable)
@@ -327,7 +324,7 @@ class PtySimulator(TruthQueries):
         """Plug the cable back in (if unplugged and still running); notify ``changed``."""
         if self.pty.master is None and not self._stop.is_set():
             if not self.config.wireless:
-                self._power.on()
+                self._first.power_on()
             self.host_reader.plug_in()
             with self._changed:
                 self._changed.notify_all()
@@ -347,7 +344,7 @@ class PtySimulator(TruthQueries):
     @property
     def faults(self) -> FaultConfig:
         """Return the faults in effect."""
-        return self._faults.config
+        return self._first.faults.config
 
     def set_faults(self, faults: FaultConfig | None = None, **changes: Any) -> FaultConfig:
         """
@@ -358,7 +355,7 @@ class PtySimulator(TruthQueries):
         A wired simulator refuses the radio's faults (ValueError).
         """
         with self._wake:
-            old = self._faults.config
+            old = self._first.faults.config
             new = faults if faults is not None else dataclasses.replace(old, **changes)
             if not self.config.wireless:
                 new.check_wired()
@@ -366,7 +363,7 @@ class PtySimulator(TruthQueries):
                 unit.faults.config = new
             self._foreign.address = foreign_address(self.config, new)
             if new.ignore_first_continuous and not old.ignore_first_continuous:
-                self._inbox.ignore_next_continuous = True
+                self._first.ignore_next_continuous = True
             now = time.time()
             if new.already_streaming and not old.already_streaming and self.started:
                 for unit in self.units.values():
@@ -399,7 +396,7 @@ class PtySimulator(TruthQueries):
         sensor's from then on), the stream as the EEPROM auto-start says.
         ``address``: that sensor, the others going on; None: the first.
         """
-        unit_at(self.units, address).power.cycle(off_seconds, timer_start)
+        unit_at(self.units, address).power_cycle(off_seconds, timer_start)
 
     # -- the device now ---------------------------------------------------------------------
 
