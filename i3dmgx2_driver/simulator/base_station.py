@@ -128,13 +128,11 @@ class BaseStation:
             HostCommand(now, 'packet', packet.address, command, packet.command, outcome),
             acks=1, **{counter: 1})
 
-    def _write(self, data: bytes) -> bool:
+    def _write(self, data: bytes) -> None:
         """Write a base-station byte (ACK, NACK, ping answer) between packets."""
         written = self._port.write(data)
-        if written is None:
-            return False
-        self._record.written(len(data), written)
-        return written == len(data)
+        if written is not None:
+            self._record.written(len(data), written)
 
     # -- the sensor's records, to the host --------------------------------------------------
 

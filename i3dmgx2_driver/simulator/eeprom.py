@@ -89,10 +89,7 @@ class SensorEeprom:
 
         An invalid divider is not stored (the reply shows the word kept).
         """
-        if address == RATE_DIVIDER_ADDRESS:
-            if MIN_DIVIDER <= value <= MAX_DIVIDER:
-                self.words[address] = value
-                return True
+        if address == RATE_DIVIDER_ADDRESS and not MIN_DIVIDER <= value <= MAX_DIVIDER:
             return False
         self.words[address] = value
-        return False
+        return address == RATE_DIVIDER_ADDRESS

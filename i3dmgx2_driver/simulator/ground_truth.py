@@ -192,17 +192,11 @@ class GroundTruth:
         self.truth_index += 1
         if self.truth is not None:
             self.truth.append(entry)
-        stats = self.stats
-        if write_time is not None:
-            stats.packets_written += 1
-        if valid:
-            if source == 'stream':
-                stats.records_sent += 1
-            else:
-                stats.replies_sent += 1
-        counter = FAULT_COUNTERS.get(fault)
-        if counter is not None:
-            setattr(stats, counter, getattr(stats, counter) + 1)
+        self.count(packets_written=int(write_time is not None),
+                   records_sent=int(valid and source == 'stream'),
+                   replies_sent=int(valid and source != 'stream'))
+        if fault in FAULT_COUNTERS:
+            self.count(**{FAULT_COUNTERS[fault]: 1})
         self._changed.notify_all()
 
 

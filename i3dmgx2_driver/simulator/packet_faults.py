@@ -82,10 +82,16 @@ class PacketFaults:
             self._transmit_foreign(code, send)
         if faults.corrupt_checksum_probability \
                 and rng.random() < faults.corrupt_checksum_probability:
-            return self._flip_bit(packet), flt.FAULT_CHECKSUM
+            # A bit the checksum covers (record data) or of the checksum itself.
+            data = bytearray(packet)
+            data[rng.choice(self._end.checksum_positions(len(data)))] ^= 1 << rng.randrange(8)
+            return bytes(data), flt.FAULT_CHECKSUM
         if faults.corrupt_length_probability \
                 and rng.random() < faults.corrupt_length_probability:
-            return self._bad_length(packet), flt.FAULT_LENGTH
+            # The length byte of a data packet (wireless only: wired records have none).
+            data = bytearray(packet)
+            data[5] = (data[5] + rng.randint(1, 255)) & 0xFF
+            return bytes(data), flt.FAULT_LENGTH
         return packet, None
 
     def _transmit_foreign(self, code: int, send: float) -> None:
@@ -107,16 +113,3 @@ class PacketFaults:
                 byte = rng.randrange(256)
             out.append(byte)
         return bytes(out)
-
-    def _flip_bit(self, packet: bytes) -> bytes:
-        """Flip one bit the checksum covers (record data) or of the checksum itself."""
-        rng = self._rng
-        data = bytearray(packet)
-        data[rng.choice(self._end.checksum_positions(len(data)))] ^= 1 << rng.randrange(8)
-        return bytes(data)
-
-    def _bad_length(self, packet: bytes) -> bytes:
-        """Change a data packet's length byte (wireless only: wired records have none)."""
-        data = bytearray(packet)
-        data[5] = (data[5] + self._rng.randint(1, 255)) & 0xFF
-        return bytes(data)

@@ -200,7 +200,12 @@ class PtySimulator(TruthQueries):
         now = time.time()
         with self._wake:
             self.start_time = now
-            self._power_up(now)
+            # Every sensor up, then the stranger's clock somewhere; the timed faults from now.
+            for unit in self.units.values():
+                unit.sensor.power_up(now)
+                self._record.note_streaming(now, unit.sensor.streaming)
+            self._foreign.power_up(now - 1000.0 * self._fault_rng.random())
+            self._schedule(self._first.faults.config, now, None)
         self.started = True
         # An interpreter that exits without stop() still removes the port.
         atexit.register(self.stop)
@@ -240,15 +245,6 @@ class PtySimulator(TruthQueries):
     def __exit__(self, *exc_info: object) -> None:
         """Stop at the end of the ``with`` block."""
         self.stop()
-
-    def _power_up(self, now: float) -> None:
-        """Power every sensor up at start (lock held), then the stranger and the timed faults."""
-        for unit in self.units.values():
-            unit.sensor.power_up(now)
-            self._record.note_streaming(now, unit.sensor.streaming)
-        # The stranger's clock somewhere; the timed faults from now.
-        self._foreign.power_up(now - 1000.0 * self._fault_rng.random())
-        self._schedule(self._first.faults.config, now, None)
 
     def _schedule(self, faults: FaultConfig, now: float,
                   changes: collections.abc.Collection[str] | None) -> None:
