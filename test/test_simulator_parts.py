@@ -55,7 +55,7 @@ def test_eeprom_keeps_only_a_valid_divider() -> None:
 def test_eeprom_rate_override_beats_the_divider() -> None:
     eeprom = SensorEeprom(rate_override=1000.0)
     assert eeprom.rate_hz == 1000.0
-    eeprom.override_rate(None)
+    eeprom.rate_override = None
     assert eeprom.rate_hz == 100.0
 
 

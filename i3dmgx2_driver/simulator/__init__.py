@@ -21,8 +21,8 @@ faults from ``FaultConfig`` and the ground truth of every packet in
 ``SentRecord`` entries. One module per part: ``config`` (how it is set up),
 ``sensor``, ``cycle_clock``, ``data_records`` and ``motion`` (the device),
 ``base_station`` (wireless: ACK/NACK, ping) or ``wired_line`` (a wired
-sensor's own line), ``transmitter`` (the records on their way: timing) with
-``packet_faults`` and ``line_writer``, ``host_reader`` (the reader thread),
+sensor's own line), ``transmitter`` (the records on their way: timing,
+faults, chunked writes), ``host_reader`` (the reader thread),
 ``sensor_unit`` (one sensor's parts: its inbox with the firmware's quirks,
 its power), ``pty_port`` (the pseudo-terminal, its symlink), ``ground_truth``
 (the record of it all, and its read side), and

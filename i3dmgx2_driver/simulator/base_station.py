@@ -30,7 +30,6 @@ from typing import Any
 
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
-from i3dmgx2_driver.codec.commands import Command
 from i3dmgx2_driver.codec.parser import (
     CommandStreamParser, HostEvent, RawCommand, RejectedPacket,
 )
@@ -43,9 +42,6 @@ from .sensor import decoded, Reply, SimulatedSensor
 
 _PING_FAILED = bytes((framing.NACK,))
 
-#: Hands a command to the sensor (decoded or None, raw bytes, time); returns the outcome.
-Deliver = collections.abc.Callable[[Command | None, bytes, float], str]
-
 
 class BaseStation:
     """
@@ -57,7 +53,6 @@ class BaseStation:
     station's own (busy NACKs).
     """
 
-    wireless = True
     #: Bytes that "safe" garbage avoids on this line (see faults.SIGNIFICANT_BYTES).
     significant_bytes = flt.SIGNIFICANT_BYTES
 

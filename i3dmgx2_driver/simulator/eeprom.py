@@ -59,13 +59,10 @@ class SensorEeprom:
                                       AUTOSTART_ADDRESS: 0x0000}
         if presets:
             self.words.update(presets)
+        #: A rate (Hz) calculated at whatever the divider says (None: the divider's).
         self.rate_override = rate_override
         #: Refuse every 0xD0 transfer (answer 0xFFFF, store nothing).
         self.refuse_bias_store = False
-
-    def override_rate(self, rate_hz: float | None) -> None:
-        """Calculate at ``rate_hz`` whatever the divider says (None: the divider's rate)."""
-        self.rate_override = rate_hz
 
     @property
     def rate_hz(self) -> float:

@@ -73,19 +73,16 @@ import time
 import typing
 from typing import Any
 
-from i3dmgx2_driver.codec.commands import Command
-
 from .base_station import BaseStation
 from .config import DEFAULT_STREAM, SimulatorConfig
 from .faults import FaultConfig, FaultState
 from .ground_truth import GroundTruth, TruthQueries
 from .host_reader import HostReader
-from .line_writer import LineWriter
 from .motion import Motion, MotionConfig
 from .pty_port import PtyPort
 from .sensor import SensorSpec, SimulatedSensor
 from .sensor_unit import foreign_address, SensorUnit, unit_at, unit_specs
-from .transmitter import SharedLine
+from .transmitter import LineWriter, SharedLine
 from .wired_line import WiredLine
 
 if typing.TYPE_CHECKING:  # typing.Self is new in Python 3.11; Jazzy allows 3.10
@@ -153,7 +150,7 @@ class PtySimulator(TruthQueries):
         writer = LineWriter(self.pty, record, config.chunks, config.chunk_gap_s, chunk_rng)
         station_faults = FaultState(config.faults)
         end = (BaseStation(self.units, record, self.pty, station_faults, command_rng)
-               if config.wireless else WiredLine(record, self._deliver, station_faults))
+               if config.wireless else WiredLine(self.units, record))
         #: Reads the host's bytes and runs the scheduled actions.
         self.host_reader = HostReader(self.pty, end, record, self._port_opened, changed)
         specs = unit_specs(config, seeds)
@@ -177,10 +174,6 @@ class PtySimulator(TruthQueries):
         self.started = False
         #: Wall-clock time of start() (the sensor's power-up).
         self.start_time: float | None = None
-
-    def _deliver(self, command: Command | None, raw: bytes, now: float) -> str:
-        """Hand a command to the first inbox (built after the line end that calls this)."""
-        return self._first.deliver(command, raw, now)
 
     def _port_opened(self) -> None:
         """Note on every sensor that the host opened the port (or flushed its input)."""

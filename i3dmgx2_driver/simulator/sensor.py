@@ -221,7 +221,7 @@ class SimulatedSensor:
         """Force a rate beyond the device's range (benchmarks), or None to drop it."""
         if rate_hz is not None and rate_hz <= 0:
             raise ValueError('rate_hz must be positive')
-        self.settings.override_rate(rate_hz)
+        self.settings.rate_override = rate_hz
         self.clock.regrid(t, self.rate_hz)
 
     def timer_at(self, t: float) -> int:

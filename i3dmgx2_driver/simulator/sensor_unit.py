@@ -45,11 +45,9 @@ from .base_station import BaseStation
 from .config import SimulatorConfig
 from .faults import FaultConfig, FaultState
 from .ground_truth import GroundTruth
-from .line_writer import LineWriter
 from .motion import Motion, MotionConfig
-from .packet_faults import PacketFaults
 from .sensor import SensorSpec, SimulatedSensor
-from .transmitter import SharedLine, Transmitter
+from .transmitter import LineWriter, SharedLine, Transmitter
 from .wired_line import WiredLine
 
 #: Runs an action on the simulator's reader thread after a delay (s).
@@ -119,9 +117,8 @@ class SensorUnit:
         self.sensor = SimulatedSensor(spec, Motion(motion), seed=seed)
         self.address = spec.address
         self.faults = faults
-        self.tx = Transmitter(config, self.sensor, end, record, wake,
-                              PacketFaults(faults, rng, end, foreign, writer, record), writer,
-                              shared)
+        self.tx = Transmitter(config, self.sensor, end, record, wake, faults, rng, foreign,
+                              writer, shared)
         self._record = record
         self._wake = wake
         self._post = post

@@ -29,12 +29,13 @@ accept packets as well; this model is the stricter firmware, so that a driver
 set up for the wrong framing shows it at once.
 """
 
+import collections.abc
+from typing import Any
+
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec.parser import CommandStreamParser, HostEvent, RawCommand
 
 from . import faults as flt
-from .base_station import Deliver
-from .faults import FaultState
 from .ground_truth import GroundTruth, HostCommand
 from .sensor import decoded, Reply, SimulatedSensor, WIRED_COMMANDS
 
@@ -43,16 +44,18 @@ _CHECKSUM_SIZE = 2
 
 
 class WiredLine:
-    """The serial line of one wired sensor; call with the lock held."""
+    """
+    The serial line of one wired sensor; call with the lock held.
 
-    wireless = False
+    ``units`` holds that sensor's parts (``sensor_unit``) by its address.
+    """
+
     #: Bytes that "safe" garbage avoids on this line (any echo byte, ping answers).
     significant_bytes = flt.WIRED_SIGNIFICANT_BYTES
 
-    def __init__(self, record: GroundTruth, deliver: Deliver, faults: FaultState) -> None:
+    def __init__(self, units: collections.abc.Mapping[int, Any], record: GroundTruth) -> None:
+        self._units = units
         self._record = record
-        self._deliver = deliver
-        self._faults = faults
 
     @staticmethod
     def new_parser() -> CommandStreamParser:
@@ -65,10 +68,11 @@ class WiredLine:
             return
         raw = event.command
         command = decoded(raw)
-        if self._faults.silent(now):
+        unit = next(iter(self._units.values()))  # the one sensor on the line
+        if unit.faults.silent(now):
             outcome, counter = 'stalled', 'commands_lost'
         else:
-            outcome = self._deliver(command, raw, now)
+            outcome = unit.deliver(command, raw, now)
             counter = 'commands_received' if outcome == 'delivered' else 'commands_ignored'
         self._record.log(HostCommand(now, 'wired', None, command, raw, outcome), **{counter: 1})
 
