@@ -55,6 +55,8 @@ class BaseStation:
 
     #: Bytes that "safe" garbage avoids on this line (see faults.SIGNIFICANT_BYTES).
     significant_bytes = flt.SIGNIFICANT_BYTES
+    #: Bytes on the line beside a record's own (echo and data): header and trailer.
+    frame_overhead = framing.HEADER_SIZE + framing.DATA_TRAILER_SIZE
 
     def __init__(self, units: collections.abc.Mapping[int, Any], record: GroundTruth,
                  port: PtyPort, faults: FaultState, rng: random.Random) -> None:
@@ -136,11 +138,6 @@ class BaseStation:
         """Return the data packet of one record, with ``link``'s LQI and RSSI."""
         lqi, rssi = link.link_quality()
         return framing.encode_data_packet(address, reply.data, lqi, rssi)
-
-    @staticmethod
-    def frame_size(record_size: int) -> int:
-        """Bytes on the line for a record of ``record_size`` bytes (echo and data)."""
-        return record_size + framing.HEADER_SIZE + framing.DATA_TRAILER_SIZE
 
     @staticmethod
     def checksum_positions(size: int) -> list[int]:

@@ -170,18 +170,14 @@ class SimulatedSensor:
                                 else spec.timer_start)
         #: The bias corrections the host set.
         self.biases = BiasCorrections()
-        self._maker = RecordMaker(motion if motion is not None else Motion(), self.rng,
-                                  spec.temperature_c, self.biases)
+        #: The motion the sensor goes through.
+        self.motion = motion if motion is not None else Motion()
+        self._maker = RecordMaker(self.motion, self.rng, spec.temperature_c, self.biases)
         self._lqi = 230.0
         self._rssi = 170.0
         #: Commands received but not understood or not allowed (counted, not answered).
         self.ignored = 0
         self.power_up(power_up_time)
-
-    @property
-    def motion(self) -> Motion:
-        """Return the motion the sensor goes through."""
-        return self._maker.motion
 
     # -- power, time and the calculation cycle --------------------------------------------
 
@@ -238,9 +234,7 @@ class SimulatedSensor:
     @property
     def next_sample_time(self) -> float | None:
         """Wall-clock time of the next streamed cycle, or None when not streaming."""
-        if not self.streaming:
-            return None
-        return self.clock.next_time
+        return self.clock.next_time if self.streaming else None
 
     def stream_sample(self) -> Reply:
         """Take the next streamed cycle (call when :attr:`next_sample_time` is due)."""

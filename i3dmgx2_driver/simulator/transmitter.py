@@ -177,7 +177,7 @@ class Transmitter:
         """Queue a record the sensor sends at ``reply.due``."""
         config = self._config
         delay = config.latency_s
-        wire = (self._end.frame_size(len(reply.data)) * 10.0 / config.wire_baud
+        wire = ((len(reply.data) + self._end.frame_overhead) * 10.0 / config.wire_baud
                 if config.wire_baud else 0.0)
         line = self._line
         overflow = False

@@ -39,10 +39,6 @@ from . import faults as flt
 from .ground_truth import GroundTruth, HostCommand
 from .sensor import decoded, Reply, SimulatedSensor, WIRED_COMMANDS
 
-#: Bytes after a wired record: its checksum.
-_CHECKSUM_SIZE = 2
-
-
 class WiredLine:
     """
     The serial line of one wired sensor; call with the lock held.
@@ -52,6 +48,8 @@ class WiredLine:
 
     #: Bytes that "safe" garbage avoids on this line (any echo byte, ping answers).
     significant_bytes = flt.WIRED_SIGNIFICANT_BYTES
+    #: Bytes on the line beside a record's own (echo and data): its checksum.
+    frame_overhead = 2
 
     def __init__(self, units: collections.abc.Mapping[int, Any], record: GroundTruth) -> None:
         self._units = units
@@ -82,11 +80,6 @@ class WiredLine:
     def frame(reply: Reply, address: int, link: SimulatedSensor) -> bytes:
         """Return the wired record: echo, data, checksum (no address, no LQI/RSSI)."""
         return framing.encode_wired_record(reply.data)
-
-    @staticmethod
-    def frame_size(record_size: int) -> int:
-        """Bytes on the line for a record of ``record_size`` bytes (echo and data)."""
-        return record_size + _CHECKSUM_SIZE
 
     @staticmethod
     def checksum_positions(size: int) -> list[int]:
