@@ -66,10 +66,8 @@ class BaseStation:
         self._faults = faults
         self._rng = rng
 
-    @staticmethod
-    def new_parser() -> CommandStreamParser:
-        """Return a reader of the host's bytes: command packets and pings."""
-        return CommandStreamParser()
+    #: Returns a reader of the host's bytes: command packets and pings.
+    new_parser = CommandStreamParser
 
     def on_event(self, event: HostEvent, now: float) -> None:
         """Act on one thing the host sent."""

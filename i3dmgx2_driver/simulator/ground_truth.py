@@ -177,9 +177,7 @@ class GroundTruth:
 
     def written(self, wanted: int, written: int) -> None:
         """Count bytes written to the host, and those a full line lost."""
-        self.stats.bytes_written += written
-        if written < wanted:
-            self.stats.overflow_bytes += wanted - written
+        self.count(bytes_written=written, overflow_bytes=max(wanted - written, 0))
 
     def add(self, reply: Reply, write_time: float | None, packet: bytes, address: int,
             valid: bool, fault: str | None, source: str,
@@ -219,8 +217,7 @@ class TruthQueries:
     def truth(self) -> list[SentRecord]:
         """Every data packet produced so far, in order (a copy)."""
         with self._changed:
-            truth = self._record.truth
-            return list(truth) if truth is not None else []
+            return list(self._record.truth or ())
 
     @property
     def commands(self) -> list[tuple[float, Command]]:

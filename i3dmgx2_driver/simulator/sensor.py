@@ -220,10 +220,6 @@ class SimulatedSensor:
         self.settings.rate_override = rate_hz
         self.clock.regrid(t, self.rate_hz)
 
-    def timer_at(self, t: float) -> int:
-        """Return the timer the device shows at wall-clock time ``t``."""
-        return self.clock.timer_at(t)
-
     def start_streaming(self, code: int, t: float) -> None:
         """Stream ``code`` from the first calculation cycle after ``t``."""
         if code not in STREAMABLE:
@@ -241,10 +237,6 @@ class SimulatedSensor:
         rel = self.clock.take()
         t = self.clock.power_up_time + rel
         return self._reply(self._record(self.streaming, rel), t, t)
-
-    def skip_to(self, t: float) -> int:
-        """Skip streamed cycles before ``t`` (a host too slow to keep up); return how many."""
-        return self.clock.skip_to(t)
 
     # -- commands ---------------------------------------------------------------------------
 

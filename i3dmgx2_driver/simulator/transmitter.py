@@ -210,7 +210,7 @@ class Transmitter:
                 next_sample = sensor.next_sample_time
                 if next_sample is not None and next_sample <= now:
                     if now - next_sample > self._config.max_lag_s:
-                        self._record.count(late_skipped=sensor.skip_to(now))
+                        self._record.count(late_skipped=sensor.clock.skip_to(now))
                     else:
                         self.enqueue(sensor.stream_sample(), 'stream', sensor.address)
                     continue

@@ -30,6 +30,7 @@ set up for the wrong framing shows it at once.
 """
 
 import collections.abc
+import functools
 from typing import Any
 
 from i3dmgx2_driver.codec import framing
@@ -38,6 +39,7 @@ from i3dmgx2_driver.codec.parser import CommandStreamParser, HostEvent, RawComma
 from . import faults as flt
 from .ground_truth import GroundTruth, HostCommand
 from .sensor import decoded, Reply, SimulatedSensor, WIRED_COMMANDS
+
 
 class WiredLine:
     """
@@ -55,10 +57,8 @@ class WiredLine:
         self._units = units
         self._record = record
 
-    @staticmethod
-    def new_parser() -> CommandStreamParser:
-        """Return the sensor's reader of the host's bytes: bare commands it knows."""
-        return CommandStreamParser(wireless=False, codes=WIRED_COMMANDS)
+    #: Returns the sensor's reader of the host's bytes: bare commands it knows.
+    new_parser = functools.partial(CommandStreamParser, wireless=False, codes=WIRED_COMMANDS)
 
     def on_event(self, event: HostEvent, now: float) -> None:
         """Act on a command the sensor read from the line; there is nothing to ACK."""
