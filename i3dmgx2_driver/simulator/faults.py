@@ -25,7 +25,6 @@ the quirks of the firmware when it is asked to stream too early.
 
 import dataclasses
 
-from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
 
 #: Bytes that a parser of the host side takes for an answer of the base
@@ -124,12 +123,6 @@ class FaultConfig:
         for name in ('jitter_ms', 'stall_seconds', 'unplug_seconds', 'power_off_seconds'):
             if getattr(self, name) < 0:
                 raise ValueError(f'{name} must not be negative')
-
-    def foreign_of(self, address: int) -> int:
-        """Return the address of the other sensor next to the one at ``address``."""
-        if self.foreign_address is not None:
-            return self.foreign_address
-        return address % framing.MAX_ADDRESS + framing.MIN_ADDRESS
 
     def check_wired(self) -> None:
         """Reject the faults a wired sensor cannot have, naming the field."""

@@ -66,9 +66,7 @@ class HostReader:
 
     def open_pipe(self) -> None:
         """Make the wake-up pipe (before the thread starts)."""
-        self._wake_r, self._wake_w = os.pipe()
-        os.set_blocking(self._wake_r, False)
-        os.set_blocking(self._wake_w, False)
+        self._wake_r, self._wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
 
     def close_pipe(self) -> None:
         """Close the wake-up pipe (after the thread ended)."""

@@ -392,11 +392,10 @@ class PtySimulator(TruthQueries):
     @property
     def streaming(self) -> int:
         """Command byte the (first) sensor streams now, 0 when polled."""
-        with self.lock:
-            return self.sensor.streaming
+        return self.streaming_of(None)
 
-    def streaming_of(self, address: int) -> int:
-        """Command byte the sensor at ``address`` streams now, 0 when polled."""
+    def streaming_of(self, address: int | None) -> int:
+        """Command byte the sensor at ``address`` (None: the first) streams now, 0 when polled."""
         with self.lock:
             return unit_at(self.units, address).sensor.streaming
 

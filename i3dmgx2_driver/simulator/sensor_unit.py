@@ -37,6 +37,7 @@ import random
 import threading
 import time
 
+from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec.commands import Command
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
@@ -59,10 +60,12 @@ CLOCK_STEP_PPM = 30.0
 
 
 def foreign_address(config: SimulatorConfig, faults: FaultConfig) -> int:
-    """Return the stranger's address: next to the first sensor's, and none of ours."""
-    address = faults.foreign_of(config.address)
-    while faults.foreign_address is None and address in config.all_addresses:
-        address = faults.foreign_of(address)
+    """Return the stranger's address: as set, or next to the first sensor's and none of ours."""
+    if faults.foreign_address is not None:
+        return faults.foreign_address
+    address = config.address % framing.MAX_ADDRESS + framing.MIN_ADDRESS
+    while address in config.all_addresses:  # the next one, wrapping inside 1..65534
+        address = address % framing.MAX_ADDRESS + framing.MIN_ADDRESS
     return address
 
 
@@ -150,7 +153,7 @@ class SensorUnit:
             self._polled_since_open = True
         ignored_before = sensor.ignored
         for reply in sensor.handle(command, now):
-            self.tx.enqueue(reply, 'reply', sensor.address)
+            self.tx.enqueue(reply, 'reply')
         self._record.note_streaming(now, sensor.streaming)
         self._wake.notify_all()
         return 'ignored' if sensor.ignored != ignored_before else 'delivered'

@@ -132,7 +132,6 @@ class Outgoing(NamedTuple):
     write_at: float
     reply: Reply
     source: str
-    address: int
     #: Dropped by the base station: its line was too far behind (SharedLine).
     overflow: bool = False
 
@@ -173,19 +172,18 @@ class Transmitter:
         self._uart_free_at = 0.0
         self._uart_last_send: float | None = None
 
-    def enqueue(self, reply: Reply, source: str, address: int) -> None:
-        """Queue a record the sensor sends at ``reply.due``."""
+    def enqueue(self, reply: Reply, source: str) -> None:
+        """Queue a record the sensor sends at ``reply.due`` ('stream' or 'reply')."""
         config = self._config
-        delay = config.latency_s
         wire = ((len(reply.data) + self._end.frame_overhead) * 10.0 / config.wire_baud
                 if config.wire_baud else 0.0)
         line = self._line
         overflow = False
         if line is None:
-            write_at = reply.due + (delay + wire + self._jitter())
+            write_at = reply.due + (config.latency_s + wire + self._jitter())
         else:
             # Several sensors: each packet waits for the line behind the others'.
-            ready = reply.due + delay + self._jitter()
+            ready = reply.due + config.latency_s + self._jitter()
             overflow = line.free_at - ready > LINE_BUFFER_S
             if overflow:
                 write_at = ready
@@ -193,8 +191,8 @@ class Transmitter:
                 write_at = max(ready, line.free_at) + wire
                 line.free_at = write_at
         self._seq += 1
-        heapq.heappush(self._outbox, Outgoing(reply.due, self._seq, write_at,
-                                              reply, source, address, overflow))
+        heapq.heappush(self._outbox,
+                       Outgoing(reply.due, self._seq, write_at, reply, source, overflow))
 
     def clear(self) -> None:
         """Forget what is queued (the sensor lost its power)."""
@@ -212,7 +210,7 @@ class Transmitter:
                     if now - next_sample > self._config.max_lag_s:
                         self._record.count(late_skipped=sensor.clock.skip_to(now))
                     else:
-                        self.enqueue(sensor.stream_sample(), 'stream', sensor.address)
+                        self.enqueue(sensor.stream_sample(), 'stream')
                     continue
                 # The radio is a FIFO: the packet sent first is written first,
                 # even when its delay (jitter) makes a later one ready sooner.
@@ -235,9 +233,9 @@ class Transmitter:
         The lock is held throughout, so that a host that has read a packet and
         then looks at ``truth`` always finds it there, complete.
         """
-        reply = item.reply
+        reply, address = item.reply, self._sensor.address
         with self._wake:
-            packet = self._end.frame(reply, item.address, self._sensor)
+            packet = self._end.frame(reply, address, self._sensor)
             # With ``limit_to_line_rate`` the device skips a streamed record while its
             # UART still sends the stream's last one, judged on its own schedule (send
             # times), never on when this thread ran. Only the stream's own records
@@ -248,7 +246,7 @@ class Transmitter:
                 flt.FAULT_LINE_RATE if item.overflow or (
                     paced and item.send < self._stream_line_free_at - 1e-9) else None)
             if fault is not None:
-                self._record.add(reply, None, packet, item.address, False, fault, item.source)
+                self._record.add(reply, None, packet, address, False, fault, item.source)
                 return
             if paced:
                 self._stream_line_free_at = (max(item.send, self._stream_line_free_at)
@@ -263,7 +261,7 @@ class Transmitter:
             _wait_until(write_at)
             error, first_write, write_time = self._writer.write(packet)
             valid = fault is None and error is None
-            self._record.add(reply, write_time, packet, item.address, valid, fault or error,
+            self._record.add(reply, write_time, packet, address, valid, fault or error,
                              item.source, first_write)
 
     def _through_uart(self, item: Outgoing, size: int, before: int) -> float:
