@@ -18,18 +18,18 @@ The simulated sensor behind a pseudo-terminal: ``PtySimulator``, which puts the 
 A driver opens ``sim.port`` exactly as it would open ``/dev/ttyUSB0`` and
 talks to it with pyserial. Behind it sits either a wireless base station
 (``base_station``: ACK/NACK, ping) and a wireless ``SimulatedSensor``, or a
-wired sensor on its own line (``wired_line``). Two threads: the
+wired sensor on its own line (``wired_line``). Two kinds of thread: the
 ``HostReader`` (``host_reader``) reads the host's bytes and runs the
 scheduled actions (unplugging and replugging the cable, power-up after a
 power cycle, the timed faults this class schedules); one ``Transmitter``
-a sensor (``SensorUnit``, ``sensor_unit``) writes the
-sensor's records at their scheduled times, with their ``PacketFaults``,
-through the ``LineWriter`` to the pty (``pty_port``). A command that
-reaches the sensor goes through its ``SensorUnit`` (the firmware's
-quirks). Every data packet, written or lost, is recorded in ``sim.truth``
-(``ground_truth``, read through ``TruthQueries``) with the time its
-sample was taken and the time its last byte was written, so that tests and
-benchmarks can compare what the driver publishes with what really happened.
+a sensor (``SensorUnit``, ``sensor_unit``) writes the sensor's records at
+their scheduled times, with their faults, through the ``LineWriter`` to
+the pty (``pty_port``). A command that reaches the sensor goes through
+its ``SensorUnit`` (the firmware's quirks). Every data packet, written or
+lost, is recorded in ``sim.truth`` (``ground_truth``, read through
+``TruthQueries``) with the time its sample was taken and the time its last
+byte was written, so that tests and benchmarks can compare what the driver
+publishes with what really happened.
 
 Wired (``SimulatorConfig(wireless=False)``), the sensor sits on the port
 itself and reads the host's bytes as a plain stream: it picks out the
