@@ -28,8 +28,7 @@ from i3dmgx2_driver.simulator.eeprom import (
     AUTOSTART_ADDRESS, ERASED_WORD, FACTORY_DIVIDER, SensorEeprom,
 )
 from i3dmgx2_driver.simulator.faults import FaultConfig
-from i3dmgx2_driver.simulator.sensor_unit import unit_at
-from i3dmgx2_driver.simulator.wiring import foreign_address
+from i3dmgx2_driver.simulator.sensor_unit import foreign_address, unit_at
 import pytest
 
 
@@ -56,7 +55,7 @@ def test_eeprom_keeps_only_a_valid_divider() -> None:
 def test_eeprom_rate_override_beats_the_divider() -> None:
     eeprom = SensorEeprom(rate_override=1000.0)
     assert eeprom.rate_hz == 1000.0
-    eeprom.override_rate(None)
+    eeprom.rate_override = None
     assert eeprom.rate_hz == 100.0
 
 

@@ -131,11 +131,11 @@ def test_nan_magnetometer():
 
 def test_timer_formula_and_default_start_near_the_rollover():
     s = sensor(clock_ppm=40.0)
-    assert s.timer_at(T0) == DEFAULT_TIMER_START == 2**32 - 5 * TPS
-    assert s.timer_at(T0 + 1.0) == (DEFAULT_TIMER_START + round(TPS * (1 + 40e-6))) % 2**32
-    assert s.timer_at(T0 + 6.0) < 2**31, 'the timer wraps five seconds after power-up'
+    assert s.clock.timer_at(T0) == DEFAULT_TIMER_START == 2**32 - 5 * TPS
+    assert s.clock.timer_at(T0 + 1.0) == (DEFAULT_TIMER_START + round(TPS * (1 + 40e-6))) % 2**32
+    assert s.clock.timer_at(T0 + 6.0) < 2**31, 'the timer wraps five seconds after power-up'
     custom = sensor(timer_start=1000, clock_ppm=-100.0)
-    assert custom.timer_at(T0 + 2.0) == 1000 + round(2 * TPS * (1 - 100e-6))
+    assert custom.clock.timer_at(T0 + 2.0) == 1000 + round(2 * TPS * (1 - 100e-6))
 
 
 def test_streamed_timers_are_spaced_exactly_across_the_rollover():
@@ -156,7 +156,7 @@ def test_default_rate_is_the_factory_divider_and_skip_to_keeps_the_grid():
     assert s.rate_hz == 100.0 and s.eeprom[0xFCA2] == 512
     s.start_streaming(lay.ACCEL_ANG_RATE_MAG_ORIENTATION, T0 + 0.005)
     assert s.next_sample_time == pytest.approx(T0 + 0.01)
-    skipped = s.skip_to(T0 + 1.0)
+    skipped = s.clock.skip_to(T0 + 1.0)
     assert skipped == 99 and s.next_sample_time == pytest.approx(T0 + 1.0)
 
 
@@ -202,7 +202,7 @@ def test_eeprom_divider_changes_the_rate_and_persists_over_power_cycles():
     s.power_up(T0 + 10.0)
     assert s.rate_hz == pytest.approx(51200 / 170)
     assert s.streaming == 0xC2, 'auto-start from EEPROM 0xFCA6'
-    assert s.timer_at(T0 + 10.0) == DEFAULT_TIMER_START
+    assert s.clock.timer_at(T0 + 10.0) == DEFAULT_TIMER_START
 
 
 def test_rate_override_wins_over_the_divider():
@@ -220,7 +220,7 @@ def test_gyro_bias_capture_is_due_after_its_sampling_time_and_then_applied():
     [reply] = s.handle(cmd.capture_gyro_bias(10000), T0 + 1.0)
     assert reply.due == pytest.approx(T0 + 11.0)
     assert reply.record.bias == pytest.approx(config.gyro_bias, abs=3e-4)
-    assert reply.record.timer == s.timer_at(T0 + 11.0)
+    assert reply.record.timer == s.clock.timer_at(T0 + 11.0)
     early = s.record_at(lay.ACCEL_ANG_RATE, T0 + 5.0).record.angular_rate
     assert early == pytest.approx(config.gyro_bias, abs=0.01)
     late = s.record_at(lay.ACCEL_ANG_RATE, T0 + 12.0).record.angular_rate

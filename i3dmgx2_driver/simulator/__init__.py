@@ -21,14 +21,13 @@ faults from ``FaultConfig`` and the ground truth of every packet in
 ``SentRecord`` entries. One module per part: ``config`` (how it is set up),
 ``sensor``, ``cycle_clock``, ``data_records`` and ``motion`` (the device),
 ``base_station`` (wireless: ACK/NACK, ping) or ``wired_line`` (a wired
-sensor's own line), ``inbox`` (the firmware's quirks), ``transmitter`` (the
-records on their way: timing) with ``packet_faults`` and ``line_writer``,
-``host_reader`` (the reader thread), ``power``, ``cable`` and
-``fault_schedule`` (power cycles, unplugging, timed faults), ``pty_port``
-(the pseudo-terminal, its symlink), ``ground_truth`` and ``truth_queries``
-(the record of it all), ``wiring`` (every part built and wired), and
-``pty_link`` (``PtySimulator``, which starts and stops them and changes their
-faults).
+sensor's own line), ``transmitter`` (the records on their way: timing,
+faults, chunked writes), ``host_reader`` (the reader thread),
+``sensor_unit`` (one sensor's parts: its inbox with the firmware's quirks,
+its power), ``pty_port`` (the pseudo-terminal, its symlink), ``ground_truth``
+(the record of it all, and its read side), and
+``pty_link`` (``PtySimulator``, which builds every part, starts and stops
+them, unplugs the cable and changes their faults, timed ones included).
 ``python -m i3dmgx2_driver.simulator`` runs it from a shell. Pure Python on
 top of the codec: the simulator and the driver share one implementation of
 every byte.

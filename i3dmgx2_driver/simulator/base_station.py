@@ -30,8 +30,6 @@ from typing import Any
 
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
-from i3dmgx2_driver.codec.commands import Command, decode_command
-from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.parser import (
     CommandStreamParser, HostEvent, RawCommand, RejectedPacket,
 )
@@ -40,12 +38,9 @@ from . import faults as flt
 from .faults import FaultState
 from .ground_truth import GroundTruth, HostCommand
 from .pty_port import PtyPort
-from .sensor import Reply, SimulatedSensor
+from .sensor import decoded, Reply, SimulatedSensor
 
 _PING_FAILED = bytes((framing.NACK,))
-
-#: Hands a command to the sensor (decoded or None, raw bytes, time); returns the outcome.
-Deliver = collections.abc.Callable[[Command | None, bytes, float], str]
 
 
 class BaseStation:
@@ -58,9 +53,10 @@ class BaseStation:
     station's own (busy NACKs).
     """
 
-    wireless = True
     #: Bytes that "safe" garbage avoids on this line (see faults.SIGNIFICANT_BYTES).
     significant_bytes = flt.SIGNIFICANT_BYTES
+    #: Bytes on the line beside a record's own (echo and data): header and trailer.
+    frame_overhead = framing.HEADER_SIZE + framing.DATA_TRAILER_SIZE
 
     def __init__(self, units: collections.abc.Mapping[int, Any], record: GroundTruth,
                  port: PtyPort, faults: FaultState, rng: random.Random) -> None:
@@ -70,10 +66,8 @@ class BaseStation:
         self._faults = faults
         self._rng = rng
 
-    @staticmethod
-    def new_parser() -> CommandStreamParser:
-        """Return a reader of the host's bytes: command packets and pings."""
-        return CommandStreamParser()
+    #: Returns a reader of the host's bytes: command packets and pings.
+    new_parser = CommandStreamParser
 
     def on_event(self, event: HostEvent, now: float) -> None:
         """Act on one thing the host sent."""
@@ -88,11 +82,8 @@ class BaseStation:
 
     def _on_raw_command(self, raw: bytes, now: float) -> None:
         """Answer a ping."""
-        try:
-            command = decode_command(raw)
-        except CodecError:
-            return
-        if command.code != lay.PING:
+        command = decoded(raw)
+        if command is None or command.code != lay.PING:
             return
         unit = self._units.get(command.args[0])
         if unit is None or unit.faults.silent(now):
@@ -117,10 +108,7 @@ class BaseStation:
                                          'rejected: busy'), nacks=1)
             return
         self._write(bytes((framing.ACK,)))
-        try:
-            command: Command | None = decode_command(packet.command)
-        except CodecError:
-            command = None
+        command = decoded(packet.command)
         unit = self._units.get(packet.address)
         if unit is None:
             outcome, counter = 'other_address', 'commands_other_address'
@@ -135,13 +123,11 @@ class BaseStation:
             HostCommand(now, 'packet', packet.address, command, packet.command, outcome),
             acks=1, **{counter: 1})
 
-    def _write(self, data: bytes) -> bool:
+    def _write(self, data: bytes) -> None:
         """Write a base-station byte (ACK, NACK, ping answer) between packets."""
         written = self._port.write(data)
-        if written is None:
-            return False
-        self._record.written(len(data), written)
-        return written == len(data)
+        if written is not None:
+            self._record.written(len(data), written)
 
     # -- the sensor's records, to the host --------------------------------------------------
 
@@ -150,11 +136,6 @@ class BaseStation:
         """Return the data packet of one record, with ``link``'s LQI and RSSI."""
         lqi, rssi = link.link_quality()
         return framing.encode_data_packet(address, reply.data, lqi, rssi)
-
-    @staticmethod
-    def frame_size(record_size: int) -> int:
-        """Bytes on the line for a record of ``record_size`` bytes (echo and data)."""
-        return record_size + framing.HEADER_SIZE + framing.DATA_TRAILER_SIZE
 
     @staticmethod
     def checksum_positions(size: int) -> list[int]:

@@ -174,9 +174,8 @@ class SimulatorConfig:
     @property
     def start_stream(self) -> int:
         """Command byte streamed from power-up, 0 for none."""
-        if self.faults.already_streaming and not self.streaming_at_start:
-            return DEFAULT_STREAM
-        if self.streaming_at_start is True:
+        if self.streaming_at_start is True or (self.faults.already_streaming
+                                               and not self.streaming_at_start):
             return DEFAULT_STREAM
         return int(self.streaming_at_start)
 
@@ -184,11 +183,11 @@ class SimulatorConfig:
     def sensor_motion(self) -> MotionConfig:
         """Return the sensor's motion, with the magnetometer shortcuts applied."""
         motion = self.motion
-        if self.nan_mag or self.mag_nan_probability:
-            motion = dataclasses.replace(
-                motion, nan_mag=self.nan_mag or motion.nan_mag,
-                mag_nan_probability=self.mag_nan_probability or motion.mag_nan_probability)
-        return motion
+        if not (self.nan_mag or self.mag_nan_probability):
+            return motion
+        return dataclasses.replace(
+            motion, nan_mag=self.nan_mag or motion.nan_mag,
+            mag_nan_probability=self.mag_nan_probability or motion.mag_nan_probability)
 
     @property
     def sensor_spec(self) -> sns.SensorSpec:

@@ -40,20 +40,17 @@ class CycleClock:
         #: Timer at power-up.
         self.timer_start = timer_start
         self._tick_rate = rec.TICKS_PER_SECOND * (1.0 + clock_ppm * 1e-6)
-        #: Wall-clock time of the last power-up.
-        self.power_up_time = 0.0
-        #: Seconds between two cycles.
-        self.period = 1.0
-        self._grid_origin = 0.0
-        self._next_index = 0
+        self.restart(0.0, 1.0)
 
     def restart(self, t: float, rate_hz: float, timer_start: int | None = None) -> None:
         """Start the grid from power-up at wall-clock time ``t`` (the timer at ``timer_start``)."""
         if timer_start is not None:
             self.timer_start = timer_start  # kept from now on, as the sensor's own
+        #: Wall-clock time of the last power-up.
         self.power_up_time = t
         self._grid_origin = 0.0
         self._next_index = 0
+        #: Seconds between two cycles.
         self.period = 1.0 / rate_hz
 
     def regrid(self, t: float, rate_hz: float) -> None:

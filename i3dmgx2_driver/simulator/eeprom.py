@@ -59,13 +59,10 @@ class SensorEeprom:
                                       AUTOSTART_ADDRESS: 0x0000}
         if presets:
             self.words.update(presets)
+        #: A rate (Hz) calculated at whatever the divider says (None: the divider's).
         self.rate_override = rate_override
         #: Refuse every 0xD0 transfer (answer 0xFFFF, store nothing).
         self.refuse_bias_store = False
-
-    def override_rate(self, rate_hz: float | None) -> None:
-        """Calculate at ``rate_hz`` whatever the divider says (None: the divider's rate)."""
-        self.rate_override = rate_hz
 
     @property
     def rate_hz(self) -> float:
@@ -89,10 +86,7 @@ class SensorEeprom:
 
         An invalid divider is not stored (the reply shows the word kept).
         """
-        if address == RATE_DIVIDER_ADDRESS:
-            if MIN_DIVIDER <= value <= MAX_DIVIDER:
-                self.words[address] = value
-                return True
+        if address == RATE_DIVIDER_ADDRESS and not MIN_DIVIDER <= value <= MAX_DIVIDER:
             return False
         self.words[address] = value
-        return False
+        return address == RATE_DIVIDER_ADDRESS

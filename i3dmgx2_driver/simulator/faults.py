@@ -25,7 +25,6 @@ the quirks of the firmware when it is asked to stream too early.
 
 import dataclasses
 
-from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
 
 #: Bytes that a parser of the host side takes for an answer of the base
@@ -51,11 +50,6 @@ FAULT_STALL = 'stall'
 FAULT_UNPLUGGED = 'unplugged'
 FAULT_OVERFLOW = 'overflow'
 FAULT_LINE_RATE = 'line_rate'
-
-
-def _check_probability(name: str, value: float) -> None:
-    if not 0.0 <= value <= 1.0:
-        raise ValueError(f'{name} is a probability in 0..1, got {value!r}')
 
 
 @dataclasses.dataclass
@@ -121,19 +115,14 @@ class FaultConfig:
     def __post_init__(self) -> None:
         """Reject settings that cannot mean anything, naming the field."""
         for item in dataclasses.fields(self):
-            if item.name.endswith('_probability'):
-                _check_probability(item.name, getattr(self, item.name))
+            value = getattr(self, item.name)
+            if item.name.endswith('_probability') and not 0.0 <= value <= 1.0:
+                raise ValueError(f'{item.name} is a probability in 0..1, got {value!r}')
         if self.garbage_max_bytes < 1:
             raise ValueError('garbage_max_bytes must be at least 1')
         for name in ('jitter_ms', 'stall_seconds', 'unplug_seconds', 'power_off_seconds'):
             if getattr(self, name) < 0:
                 raise ValueError(f'{name} must not be negative')
-
-    def foreign_of(self, address: int) -> int:
-        """Return the address of the other sensor next to the one at ``address``."""
-        if self.foreign_address is not None:
-            return self.foreign_address
-        return address % framing.MAX_ADDRESS + framing.MIN_ADDRESS
 
     def check_wired(self) -> None:
         """Reject the faults a wired sensor cannot have, naming the field."""
@@ -156,10 +145,6 @@ class FaultState:
         self.config = config
         self._stall_start = 0.0
         self._stall_end = 0.0
-
-    def configure(self, config: FaultConfig) -> None:
-        """Put ``config`` in effect from now on."""
-        self.config = config
 
     def stall(self, start: float, seconds: float) -> None:
         """Be silent from ``start`` for ``seconds``."""

@@ -20,13 +20,19 @@ data packet produced (``SentRecord``, written or lost, with why), everything
 the host sent (``HostCommand``), the stream the sensor was in over time, and
 the counters (``SimulatorStats``). ``GroundTruth`` keeps them all; it has no
 lock of its own: the simulator's lock guards it, so that one packet's bytes
-and its record appear together.
+and its record appear together. ``TruthQueries`` is its read side: every
+answer is a copy taken under the simulator's lock, so a caller can keep it
+while the simulation runs on, and every wait wakes on each new entry.
 """
 
 import collections
+import collections.abc
+import copy
 import threading
+import time
 from typing import Any, NamedTuple
 
+from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec.commands import Command
 
 from . import faults as flt
@@ -109,10 +115,7 @@ class SimulatorStats:
 
     def copy(self) -> 'SimulatorStats':
         """Return a snapshot that later counting does not change."""
-        other = SimulatorStats()
-        for name in self.__slots__:
-            setattr(other, name, getattr(self, name))
-        return other
+        return copy.copy(self)
 
     def __repr__(self) -> str:
         fields_ = ', '.join(f'{k}={v}' for k, v in self.as_dict().items() if v)
@@ -167,10 +170,6 @@ class GroundTruth:
         self.count(**counters)
         self._changed.notify_all()
 
-    def received(self, now: float, command: Command) -> None:
-        """Record a command the sensor received and decoded."""
-        self.commands.append((now, command))
-
     def note_streaming(self, now: float, code: int) -> None:
         """Record the sensor's stream at ``now`` if it changed."""
         if not self.stream_changes or self.stream_changes[-1][1] != code:
@@ -178,9 +177,7 @@ class GroundTruth:
 
     def written(self, wanted: int, written: int) -> None:
         """Count bytes written to the host, and those a full line lost."""
-        self.stats.bytes_written += written
-        if written < wanted:
-            self.stats.overflow_bytes += wanted - written
+        self.count(bytes_written=written, overflow_bytes=max(wanted - written, 0))
 
     def add(self, reply: Reply, write_time: float | None, packet: bytes, address: int,
             valid: bool, fault: str | None, source: str,
@@ -193,15 +190,89 @@ class GroundTruth:
         self.truth_index += 1
         if self.truth is not None:
             self.truth.append(entry)
-        stats = self.stats
-        if write_time is not None:
-            stats.packets_written += 1
-        if valid:
-            if source == 'stream':
-                stats.records_sent += 1
-            else:
-                stats.replies_sent += 1
-        counter = FAULT_COUNTERS.get(fault)
-        if counter is not None:
-            setattr(stats, counter, getattr(stats, counter) + 1)
+        self.count(packets_written=int(write_time is not None),
+                   records_sent=int(valid and source == 'stream'),
+                   replies_sent=int(valid and source != 'stream'))
+        if fault in FAULT_COUNTERS:
+            self.count(**{FAULT_COUNTERS[fault]: 1})
         self._changed.notify_all()
+
+
+class TruthQueries:
+    """
+    The ground truth as copies, and waits until it shows something; thread-safe.
+
+    The simulator's observation surface: its users are the tests, the harness and
+    the benchmarks (the package itself reads only ``stats``, for the command
+    line), so that they all ask the ground truth one way and none reads it
+    unlocked. ``changed`` is a condition on the simulator's lock, notified on
+    every new entry.
+    """
+
+    def __init__(self, record: GroundTruth, changed: threading.Condition) -> None:
+        self._record = record
+        self._changed = changed
+
+    @property
+    def truth(self) -> list[SentRecord]:
+        """Every data packet produced so far, in order (a copy)."""
+        with self._changed:
+            return list(self._record.truth or ())
+
+    @property
+    def commands(self) -> list[tuple[float, Command]]:
+        """(time, command) of every command the sensor received (a copy)."""
+        with self._changed:
+            return list(self._record.commands)
+
+    @property
+    def host_log(self) -> list[HostCommand]:
+        """Everything the host sent, with what became of it (a copy)."""
+        with self._changed:
+            return list(self._record.host_log)
+
+    @property
+    def stats(self) -> SimulatorStats:
+        """Return a snapshot of the counters."""
+        with self._changed:
+            return self._record.stats.copy()
+
+    @property
+    def stream_changes(self) -> list[tuple[float, int]]:
+        """
+        (time, command byte or 0) each time the sensor's stream changed (a copy).
+
+        The first entry is the power-up state. A start, stop or change of
+        stream (0xC4, 0xFA, power cycle, unplugging a wired sensor) adds one;
+        asking for the record already streamed adds none. A test proves that
+        an interrupted stream was restarted by finding a 0 followed by a code.
+        """
+        with self._changed:
+            return list(self._record.stream_changes)
+
+    def commands_of(self, *codes: int) -> list[tuple[float, Command]]:
+        """(time, command) of the commands with these command bytes the sensor received."""
+        with self._changed:
+            return [entry for entry in self._record.commands if entry[1].code in codes]
+
+    def eeprom_writes(self) -> list[tuple[float, Command]]:
+        """
+        Every EEPROM write (0xE4) the sensor received, whether or not it stored it.
+
+        Empty proves that nothing was written to the EEPROM. (A write the radio
+        lost never reached the sensor; ``host_log`` still shows it was sent.)
+        """
+        return self.commands_of(lay.WRITE_EEPROM)
+
+    def wait_until(self, condition: collections.abc.Callable[[], bool],
+                   timeout: float = 5.0) -> bool:
+        """Wait until ``condition()`` is true (checked on every change); return it."""
+        deadline = time.monotonic() + timeout
+        with self._changed:
+            while True:
+                if condition():
+                    return True
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._changed.wait(min(remaining, 0.05))

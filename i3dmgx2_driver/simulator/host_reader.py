@@ -33,7 +33,6 @@ import time
 
 from .base_station import BaseStation
 from .ground_truth import GroundTruth
-from .inbox import SensorInbox
 from .pty_port import PtyPort, TIOCPKT_DATA, TIOCPKT_FLUSHREAD
 from .transmitter import POLL_S
 from .wired_line import WiredLine
@@ -48,15 +47,17 @@ class HostReader:
 
     ``changed`` is a condition on the simulator's lock: each event is
     handled whole under it, answer written included, so that the ground truth
-    already shows a command when the host sees its ACK.
+    already shows a command when the host sees its ACK. ``port_opened`` tells
+    every sensor's inbox that the host opened the port (or flushed its input).
     """
 
     def __init__(self, port: PtyPort, end: BaseStation | WiredLine, record: GroundTruth,
-                 inbox: SensorInbox, changed: threading.Condition) -> None:
+                 port_opened: collections.abc.Callable[[], None],
+                 changed: threading.Condition) -> None:
         self._port = port
         self._end = end
         self._record = record
-        self._inbox = inbox
+        self._port_opened = port_opened
         self._changed = changed
         self._parser = end.new_parser()
         self._actions: list[tuple[float, int, collections.abc.Callable[[], None]]] = []
@@ -65,9 +66,7 @@ class HostReader:
 
     def open_pipe(self) -> None:
         """Make the wake-up pipe (before the thread starts)."""
-        self._wake_r, self._wake_w = os.pipe()
-        os.set_blocking(self._wake_r, False)
-        os.set_blocking(self._wake_w, False)
+        self._wake_r, self._wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
 
     def close_pipe(self) -> None:
         """Close the wake-up pipe (after the thread ended)."""
@@ -78,7 +77,7 @@ class HostReader:
         self._port.plug_in()
         with self._changed:
             self._parser = self._end.new_parser()
-            self._inbox.port_opened()
+            self._port_opened()
 
     def wake(self) -> None:
         """Wake the thread up (a new action, or stop)."""
@@ -134,7 +133,7 @@ class HostReader:
         if data[0] != TIOCPKT_DATA:
             if data[0] & TIOCPKT_FLUSHREAD:
                 with self._changed:
-                    self._inbox.port_opened()
+                    self._port_opened()
                     self._record.count(port_opens=1)
                     self._changed.notify_all()
             return

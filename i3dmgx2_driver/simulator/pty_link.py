@@ -18,18 +18,18 @@ The simulated sensor behind a pseudo-terminal: ``PtySimulator``, which puts the 
 A driver opens ``sim.port`` exactly as it would open ``/dev/ttyUSB0`` and
 talks to it with pyserial. Behind it sits either a wireless base station
 (``base_station``: ACK/NACK, ping) and a wireless ``SimulatedSensor``, or a
-wired sensor on its own line (``wired_line``). Two threads: the
+wired sensor on its own line (``wired_line``). Two kinds of thread: the
 ``HostReader`` (``host_reader``) reads the host's bytes and runs the
-scheduled actions (unplug and replug by the ``Cable``, power-up after a
-power cycle by the ``SensorPower``, the timed faults of the
-``FaultSchedule``); the ``Transmitter`` writes the
-sensor's records at their scheduled times, with their ``PacketFaults``,
-through the ``LineWriter`` to the pty (``pty_port``). A command that
-reaches the sensor goes through its ``SensorInbox`` (the firmware's
-quirks). Every data packet, written or lost, is recorded in ``sim.truth``
-(``ground_truth``, read through ``TruthQueries``) with the time its
-sample was taken and the time its last byte was written, so that tests and
-benchmarks can compare what the driver publishes with what really happened.
+scheduled actions (unplugging and replugging the cable, power-up after a
+power cycle, the timed faults this class schedules); one ``Transmitter``
+a sensor (``SensorUnit``, ``sensor_unit``) writes the sensor's records at
+their scheduled times, with their faults, through the ``LineWriter`` to
+the pty (``pty_port``). A command that reaches the sensor goes through
+its ``SensorUnit`` (the firmware's quirks). Every data packet, written or
+lost, is recorded in ``sim.truth`` (``ground_truth``, read through
+``TruthQueries``) with the time its sample was taken and the time its last
+byte was written, so that tests and benchmarks can compare what the driver
+publishes with what really happened.
 
 Wired (``SimulatorConfig(wireless=False)``), the sensor sits on the port
 itself and reads the host's bytes as a plain stream: it picks out the
@@ -65,19 +65,25 @@ address, or the first sensor.
 """
 
 import atexit
+import collections.abc
 import dataclasses
+import random
 import threading
 import time
 import typing
 from typing import Any
 
+from .base_station import BaseStation
 from .config import DEFAULT_STREAM, SimulatorConfig
-from .faults import FaultConfig
+from .faults import FaultConfig, FaultState
+from .ground_truth import GroundTruth, TruthQueries
 from .host_reader import HostReader
+from .motion import Motion, MotionConfig
 from .pty_port import PtyPort
-from .sensor_unit import SensorUnit, unit_at
-from .truth_queries import TruthQueries
-from .wiring import foreign_address, SimulatorParts, stall_every
+from .sensor import SensorSpec, SimulatedSensor
+from .sensor_unit import foreign_address, SensorUnit, unit_at, unit_specs
+from .transmitter import LineWriter, SharedLine
+from .wired_line import WiredLine
 
 if typing.TYPE_CHECKING:  # typing.Self is new in Python 3.11; Jazzy allows 3.10
     from typing import Self
@@ -96,9 +102,9 @@ class PtySimulator(TruthQueries):
     ``commands``, ``host_log``, ``stats``, ``stream_changes``: see
     :class:`TruthQueries`) is thread-safe to read at any time; the
     properties return copies. The module's docstring tells how a wired
-    sensor differs. The parts are built by ``SimulatorParts`` (``wiring``);
-    this class starts and stops them and changes their faults: it is the
-    face that tests, the harness and the benchmarks use.
+    sensor differs. It builds every part once from the configuration, in one
+    order, starts and stops them and changes their faults: it is the face
+    that tests, the harness and the benchmarks use.
 
     The run-time control (``unplug``, ``replug``, ``stall``, ``set_faults``,
     ``set_moving``, ``set_rate``, ``power_cycle``) is the simulator's control
@@ -113,39 +119,66 @@ class PtySimulator(TruthQueries):
         elif overrides:
             config = dataclasses.replace(config, **overrides)
         self.config = config
-        parts = SimulatorParts(config)
-        super().__init__(parts.record, parts.changed)
+        seeds = random.Random(config.seed)
+        # The seeds are drawn in the order they always were, the first sensor's
+        # first: a seeded run of one sensor is the same run it was before there
+        # could be several.
+        sensor_seed = seeds.getrandbits(64)
+        #: The stranger whose packets the radio may pick up.
+        self._foreign = SimulatedSensor(
+            SensorSpec(foreign_address(config, config.faults), '0000', clock_ppm=-25.0,
+                       timer_start=seeds.getrandbits(32)),
+            Motion(MotionConfig(static=True)), seed=seeds.getrandbits(64))
+        self._fault_rng = random.Random(seeds.getrandbits(64))
+        command_rng = random.Random(seeds.getrandbits(64))
+        chunk_rng = random.Random(seeds.getrandbits(64))
         #: Guards the sensor, the queues and the ground truth. Lock order: ``lock``
         #: may be held while taking the port's ``io_lock``, never the reverse.
-        self.lock = parts.lock
-        self._wake = parts.wake
-        self._stop = parts.stop
-        #: Every sensor's parts, by address, in the order given (sensor_unit.py).
-        self.units: dict[int, SensorUnit] = parts.units
-        first = unit_at(self.units, None)
-        #: The device model of the first sensor; touch it only while holding ``sim.lock``.
-        self.sensor = first.sensor
+        self.lock = threading.RLock()
+        #: What the transmitters wait on; notified when their work may have changed.
+        self._wake = threading.Condition(self.lock)
+        changed = threading.Condition(self.lock)
+        record = GroundTruth(config.truth_limit, changed)
+        super().__init__(record, changed)
+        self._stop = threading.Event()
         #: The pseudo-terminal behind ``port``: ``device`` (the pty now, None while
         #: unplugged), ``link_target`` (what the symlink points to now) and
         #: ``plugged`` (an event, set while the port exists).
-        self.pty: PtyPort = parts.pty
+        self.pty = PtyPort(config.symlink, config.link_via_proc)
+        #: Every sensor's parts, by address, in the order given (sensor_unit.py).
+        self.units: dict[int, SensorUnit] = {}
+        writer = LineWriter(self.pty, record, config.chunks, config.chunk_gap_s, chunk_rng)
+        station_faults = FaultState(config.faults)
+        end = (BaseStation(self.units, record, self.pty, station_faults, command_rng)
+               if config.wireless else WiredLine(self.units, record))
         #: Reads the host's bytes and runs the scheduled actions.
-        self.host_reader: HostReader = parts.reader
-        self._cable = parts.cable
-        self._transmitters = parts.transmitters()
+        self.host_reader = HostReader(self.pty, end, record, self._port_opened, changed)
+        specs = unit_specs(config, seeds)
+        shared = SharedLine() if len(specs) > 1 else None
+        for i, (spec, motion) in enumerate(specs):
+            seed = sensor_seed if i == 0 else seeds.getrandbits(64)
+            rng = self._fault_rng if i == 0 else random.Random(seeds.getrandbits(64))
+            self.units[spec.address] = SensorUnit(
+                config, spec, motion, seed, rng,
+                station_faults if i == 0 else FaultState(config.faults), end, writer, shared,
+                self._foreign, record, self._wake, self.host_reader.post)
+        first = unit_at(self.units, None)
+        #: The device model of the first sensor; touch it only while holding ``sim.lock``.
+        self.sensor = first.sensor
+        #: The first sensor: its faults in effect are every sensor's configuration.
+        self._first = first
         self._threads: list[threading.Thread] = []
-        self._foreign = parts.foreign
-        self._fault_rng = parts.fault_rng
-        self._schedule = parts.schedule
-        #: The first sensor's faults in effect (every sensor has the same configuration).
-        self._faults = first.faults
-        self._inbox = first.inbox
         #: Path to open: a symlink that survives unplug and replug (None before start).
         self.port: str | None = None
         #: Whether the threads run.
         self.started = False
         #: Wall-clock time of start() (the sensor's power-up).
         self.start_time: float | None = None
+
+    def _port_opened(self) -> None:
+        """Note on every sensor that the host opened the port (or flushed its input)."""
+        for unit in self.units.values():
+            unit.port_opened()
 
     # -- lifecycle --------------------------------------------------------------------------
 
@@ -160,15 +193,21 @@ class PtySimulator(TruthQueries):
         now = time.time()
         with self._wake:
             self.start_time = now
-            self._power_up(now)
+            # Every sensor up, then the stranger's clock somewhere; the timed faults from now.
+            for unit in self.units.values():
+                unit.sensor.power_up(now)
+                self._record.note_streaming(now, unit.sensor.streaming)
+            self._foreign.power_up(now - 1000.0 * self._fault_rng.random())
+            self._schedule(self._first.faults.config, now, None)
         self.started = True
         # An interpreter that exits without stop() still removes the port.
         atexit.register(self.stop)
         self._threads = [
             threading.Thread(target=self.host_reader.run, args=(self._stop,),
                              name='gx2sim-rx', daemon=True),
-            *(threading.Thread(target=tx.run, args=(self._stop,), name=name, daemon=True)
-              for name, tx in self._transmitters),
+            *(threading.Thread(target=unit.tx.run, args=(self._stop,), daemon=True,
+                               name='gx2sim-tx' if i == 0 else f'gx2sim-tx-{unit.address}')
+              for i, unit in enumerate(self.units.values())),
         ]
         for thread in self._threads:
             thread.start()
@@ -200,14 +239,35 @@ class PtySimulator(TruthQueries):
         """Stop at the end of the ``with`` block."""
         self.stop()
 
-    def _power_up(self, now: float) -> None:
-        """Power every sensor up at start (lock held), then the stranger and the timed faults."""
-        for unit in self.units.values():
-            unit.sensor.power_up(now)
-            self._record.note_streaming(now, unit.sensor.streaming)
-        # The stranger's clock somewhere; the timed faults from now.
-        self._foreign.power_up(now - 1000.0 * self._fault_rng.random())
-        self._schedule.schedule(self._faults.config, now, None)
+    def _schedule(self, faults: FaultConfig, now: float,
+                  changes: collections.abc.Collection[str] | None) -> None:
+        """
+        Schedule from ``now`` the timed faults (``changes`` None: all; else those it names).
+
+        They count from when the configuration takes effect (:meth:`start` or
+        :meth:`set_faults`); a change of configuration schedules again only
+        the ones it names. They hit ``config.fault_address`` (None: a stall
+        every sensor, a power cycle the first).
+        """
+        def asked(*names: str) -> bool:
+            return changes is None or any(name in changes for name in names)
+
+        post, address = self.host_reader.post, self.config.fault_address
+        if faults.stall_at is not None and asked('stall_at', 'stall_seconds'):
+            self._stall(now + faults.stall_at, faults.stall_seconds, address)
+        if faults.unplug_at is not None and asked('unplug_at', 'unplug_seconds'):
+            seconds = faults.unplug_seconds
+            post(faults.unplug_at, lambda: self._pull_cable(seconds))
+        if faults.power_cycle_at is not None and asked(
+                'power_cycle_at', 'power_off_seconds', 'power_up_timer'):
+            unit = unit_at(self.units, address)
+            off, timer = faults.power_off_seconds, faults.power_up_timer
+            post(faults.power_cycle_at, lambda: unit.power_cycle(off, timer))
+
+    def _stall(self, start: float, seconds: float, address: int | None) -> None:
+        """Silence the sensor at ``address`` (None: the base station, every sensor)."""
+        for unit in self.units.values() if address is None else [unit_at(self.units, address)]:
+            unit.faults.stall(start, seconds)
 
     # -- the port ---------------------------------------------------------------------------
 
@@ -221,15 +281,42 @@ class PtySimulator(TruthQueries):
         loses its power and starts again from power-up when plugged back in.
         Returns once the port is gone (the cable is pulled on the reader thread).
         """
-        self.host_reader.post(0.0, lambda: self._cable.unplug(seconds))
+        self.host_reader.post(0.0, lambda: self._pull_cable(seconds))
         deadline = time.monotonic() + timeout
         while self.pty.plugged.is_set() and time.monotonic() < deadline:
             time.sleep(0.005)
 
     def replug(self, timeout: float = 5.0) -> bool:
         """Plug the base station back in now; return whether the port is back in ``timeout`` s."""
-        self.host_reader.post(0.0, self._cable.replug)
+        self.host_reader.post(0.0, self._plug_cable)
         return self.pty.plugged.wait(timeout)
+
+    def _pull_cable(self, seconds: float | None) -> None:
+        """
+        Pull the cable now (on the reader thread); plug it back in after ``seconds``.
+
+        A wired sensor is fed by the cable: it goes dark with the port (first,
+        so that whoever sees the port gone sees it off too), and starts from
+        power-up when the cable is back. ``seconds`` None: only on :meth:`replug`.
+        """
+        if self.pty.master is None:
+            return
+        with self._changed:
+            self._record.count(unplugs=1)
+            if not self.config.wireless:
+                self._first.power_off()
+        self.pty.pull_out()
+        if seconds is not None:
+            self.host_reader.post(seconds, self._plug_cable)
+
+    def _plug_cable(self) -> None:
+        """Plug the cable back in (if unplugged and still running); notify ``changed``."""
+        if self.pty.master is None and not self._stop.is_set():
+            if not self.config.wireless:
+                self._first.power_on()
+            self.host_reader.plug_in()
+            with self._changed:
+                self._changed.notify_all()
 
     # -- run-time control -------------------------------------------------------------------
 
@@ -241,15 +328,12 @@ class PtySimulator(TruthQueries):
         streaming on; None the base station (every sensor).
         """
         with self._wake:
-            if address is None:
-                stall_every(self.units, time.time(), seconds)
-            else:
-                unit_at(self.units, address).faults.stall(time.time(), seconds)
+            self._stall(time.time(), seconds, address)
 
     @property
     def faults(self) -> FaultConfig:
         """Return the faults in effect."""
-        return self._faults.config
+        return self._first.faults.config
 
     def set_faults(self, faults: FaultConfig | None = None, **changes: Any) -> FaultConfig:
         """
@@ -260,22 +344,22 @@ class PtySimulator(TruthQueries):
         A wired simulator refuses the radio's faults (ValueError).
         """
         with self._wake:
-            old = self._faults.config
+            old = self._first.faults.config
             new = faults if faults is not None else dataclasses.replace(old, **changes)
             if not self.config.wireless:
                 new.check_wired()
             for unit in self.units.values():
-                unit.faults.configure(new)
-            self._foreign.answer_as(foreign_address(self.config, new))
+                unit.faults.config = new
+            self._foreign.address = foreign_address(self.config, new)
             if new.ignore_first_continuous and not old.ignore_first_continuous:
-                self._inbox.arm_ignore_continuous()
+                self._first.ignore_next_continuous = True
             now = time.time()
             if new.already_streaming and not old.already_streaming and self.started:
                 for unit in self.units.values():
                     unit.sensor.start_streaming(DEFAULT_STREAM, now)
                     self._record.note_streaming(now, unit.sensor.streaming)
             if self.started:
-                self._schedule.schedule(new, now, None if faults is not None else changes)
+                self._schedule(new, now, None if faults is not None else changes)
             self._wake.notify_all()
         return new
 
@@ -301,18 +385,17 @@ class PtySimulator(TruthQueries):
         sensor's from then on), the stream as the EEPROM auto-start says.
         ``address``: that sensor, the others going on; None: the first.
         """
-        unit_at(self.units, address).power.cycle(off_seconds, timer_start)
+        unit_at(self.units, address).power_cycle(off_seconds, timer_start)
 
     # -- the device now ---------------------------------------------------------------------
 
     @property
     def streaming(self) -> int:
         """Command byte the (first) sensor streams now, 0 when polled."""
-        with self.lock:
-            return self.sensor.streaming
+        return self.streaming_of(None)
 
-    def streaming_of(self, address: int) -> int:
-        """Command byte the sensor at ``address`` streams now, 0 when polled."""
+    def streaming_of(self, address: int | None) -> int:
+        """Command byte the sensor at ``address`` (None: the first) streams now, 0 when polled."""
         with self.lock:
             return unit_at(self.units, address).sensor.streaming
 

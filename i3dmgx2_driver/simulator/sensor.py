@@ -56,10 +56,8 @@ from .data_records import BiasCorrections, float32, RecordMaker
 from .eeprom import SensorEeprom
 from .motion import Motion
 
-#: Ticks per second of the device timer.
-TICKS_PER_SECOND = rec.TICKS_PER_SECOND
 #: Default timer at power-up: five seconds before the rollover.
-DEFAULT_TIMER_START = TIMER_MODULUS - 5 * TICKS_PER_SECOND
+DEFAULT_TIMER_START = TIMER_MODULUS - 5 * rec.TICKS_PER_SECOND
 #: Data records: these can be polled and streamed (the codec's table says which).
 STREAMABLE = lay.STREAMABLE
 #: Firmware of a simulated sensor unless told: one that answers every command.
@@ -68,6 +66,14 @@ DEFAULT_FIRMWARE = firmware.NEWEST
 #: Commands a wired sensor recognises in its byte stream: every command of the
 #: table but the wireless ping, which only a base station answers.
 WIRED_COMMANDS = frozenset(code for code in lay.LAYOUTS if code != lay.PING)
+
+
+def decoded(raw: bytes) -> Command | None:
+    """Return the command ``raw`` holds, or None where it does not decode (not answered)."""
+    try:
+        return decode_command(raw)
+    except CodecError:
+        return None
 
 
 class Reply(NamedTuple):
@@ -152,7 +158,6 @@ class SimulatedSensor:
                  seed: int | None = None, power_up_time: float = 0.0) -> None:
         spec = spec if spec is not None else SensorSpec()
         self.address = spec.address
-        self.serial_number = spec.serial_number
         self.firmware_version = spec.firmware_version
         self.identifiers = spec.identifiers
         #: The EEPROM and the settings it holds; it persists across power cycles.
@@ -165,18 +170,14 @@ class SimulatedSensor:
                                 else spec.timer_start)
         #: The bias corrections the host set.
         self.biases = BiasCorrections()
-        self._maker = RecordMaker(motion if motion is not None else Motion(), self.rng,
-                                  spec.temperature_c, self.biases)
+        #: The motion the sensor goes through.
+        self.motion = motion if motion is not None else Motion()
+        self._maker = RecordMaker(self.motion, self.rng, spec.temperature_c, self.biases)
         self._lqi = 230.0
         self._rssi = 170.0
         #: Commands received but not understood or not allowed (counted, not answered).
         self.ignored = 0
         self.power_up(power_up_time)
-
-    @property
-    def motion(self) -> Motion:
-        """Return the motion the sensor goes through."""
-        return self._maker.motion
 
     # -- power, time and the calculation cycle --------------------------------------------
 
@@ -216,12 +217,8 @@ class SimulatedSensor:
         """Force a rate beyond the device's range (benchmarks), or None to drop it."""
         if rate_hz is not None and rate_hz <= 0:
             raise ValueError('rate_hz must be positive')
-        self.settings.override_rate(rate_hz)
+        self.settings.rate_override = rate_hz
         self.clock.regrid(t, self.rate_hz)
-
-    def timer_at(self, t: float) -> int:
-        """Return the timer the device shows at wall-clock time ``t``."""
-        return self.clock.timer_at(t)
 
     def start_streaming(self, code: int, t: float) -> None:
         """Stream ``code`` from the first calculation cycle after ``t``."""
@@ -233,9 +230,7 @@ class SimulatedSensor:
     @property
     def next_sample_time(self) -> float | None:
         """Wall-clock time of the next streamed cycle, or None when not streaming."""
-        if not self.streaming:
-            return None
-        return self.clock.next_time
+        return self.clock.next_time if self.streaming else None
 
     def stream_sample(self) -> Reply:
         """Take the next streamed cycle (call when :attr:`next_sample_time` is due)."""
@@ -243,15 +238,7 @@ class SimulatedSensor:
         t = self.clock.power_up_time + rel
         return self._reply(self._record(self.streaming, rel), t, t)
 
-    def skip_to(self, t: float) -> int:
-        """Skip streamed cycles before ``t`` (a host too slow to keep up); return how many."""
-        return self.clock.skip_to(t)
-
     # -- commands ---------------------------------------------------------------------------
-
-    def answer_as(self, address: int) -> None:
-        """Take ``address`` as this sensor's node address from now on (a foreign one moved)."""
-        self.address = address
 
     def ping_reply(self, address: int) -> bytes:
         """Return the base station's answer to a ping: 0x02 if ours, else 0x21."""
@@ -282,18 +269,14 @@ class SimulatedSensor:
         the real sensor answers nothing, and the host must time out and retry.
         """
         if not isinstance(command, Command):
-            try:
-                command = decode_command(bytes(command))
-            except CodecError:
-                self.ignored += 1
-                return []
-        code, args = command.code, command.args
+            command = decoded(bytes(command))
         version = self.firmware_version
-        if not firmware.has(version, code) or (
-                code == lay.SET_CONTINUOUS and args[0] in lay.LAYOUTS
-                and not firmware.has(version, args[0])):
+        if command is None or not firmware.has(version, command.code) or (
+                command.code == lay.SET_CONTINUOUS and command.args[0] in lay.LAYOUTS
+                and not firmware.has(version, command.args[0])):
             self.ignored += 1
             return []
+        code, args = command.code, command.args
         rel = self.clock.rel(now)
         cycle = self.clock.latest_cycle_rel(rel)
         cycle_time = self.clock.power_up_time + cycle
@@ -317,25 +300,17 @@ class SimulatedSensor:
         if code == lay.STOP_CONTINUOUS:
             self.streaming = 0
             return []
-        handler = self._HANDLERS.get(code)
-        if handler is None:
+        if code == lay.CAPTURE_GYRO_BIAS:
+            return [self._capture_gyro_bias(args[0] / 1000.0, now)]
+        answer = self._ANSWERS.get(code)
+        if answer is None:
             self.ignored += 1
             return []
-        record, due, sample_time = handler(self, args, now, timer)
-        return [self._reply(record, due, sample_time)]
+        return [self._reply(answer(self, args, now, timer), now, now)]
 
-    def _write_accel_bias(self, args, now, timer):
-        self.biases.set_accel(float32(args[0]))
-        return rec.AccelBias(self.biases.accel, timer), now, now
-
-    def _write_gyro_bias(self, args, now, timer):
-        self.biases.set_gyro(float32(args[0]))
-        return rec.GyroBias(self.biases.gyro, timer), now, now
-
-    def _capture_gyro_bias(self, args, now, timer):
+    def _capture_gyro_bias(self, seconds: float, now: float) -> Reply:
         # The device averages its raw gyros over the sampling time: the true
         # bias if it is still, the bias plus the mean rotation if it is not.
-        seconds = args[0] / 1000.0
         rel = self.clock.rel(now)
         motion = self.motion
         mean = motion.mean_rate(rel, rel + seconds)
@@ -344,46 +319,41 @@ class SimulatedSensor:
         bias = float32(tuple(mean[i] + motion.config.gyro_bias[i]
                              + self.rng.gauss(0.0, noise) for i in range(3)))
         self.biases.capture_gyro(rel + seconds, bias)
-        return (rec.CapturedGyroBias(bias, self.clock.timer_rel(rel + seconds)),
-                now + seconds, now + seconds)
+        return self._reply(rec.CapturedGyroBias(bias, self.clock.timer_rel(rel + seconds)),
+                           now + seconds, now + seconds)
+
+    def _write_accel_bias(self, args, now, timer):
+        self.biases.set_accel(float32(args[0]))
+        return rec.AccelBias(self.biases.accel, timer)
+
+    def _write_gyro_bias(self, args, now, timer):
+        self.biases.set_gyro(float32(args[0]))
+        return rec.GyroBias(self.biases.gyro, timer)
 
     def _transfer(self, args, now, timer):
         # The RAM corrections go to non-volatile memory, which a power-up loads;
         # unless the memory refuses (then nothing is stored, and 0xFFFF says so).
         if self.settings.refuse_bias_store:
-            return rec.TransferToNonVolatile(rec.INVALID_QUANTITY, timer), now, now
-        quantity = self.biases.store(args[0], self.clock.rel(now))
-        return rec.TransferToNonVolatile(quantity, timer), now, now
+            return rec.TransferToNonVolatile(rec.INVALID_QUANTITY, timer)
+        return rec.TransferToNonVolatile(self.biases.store(args[0], self.clock.rel(now)), timer)
 
     def _write_eeprom(self, args, now, timer):
         address, value = args
         if self.settings.write(address, value):
             self.clock.regrid(now, self.rate_hz)
-        return rec.EepromWritten(self.settings.read(address)), now, now
+        return rec.EepromWritten(self.settings.read(address))
 
-    def _read_eeprom(self, args, now, timer):
-        return rec.EepromWord(self.settings.read(args[0])), now, now
-
-    def _firmware(self, args, now, timer):
-        return rec.FirmwareVersion(self.firmware_version), now, now
-
-    def _identifier(self, args, now, timer):
-        selector = args[0]
-        return rec.DeviceIdentifier(selector, self.identifiers.get(selector, ' ' * 16)), now, now
-
-    def _built_in_test(self, args, now, timer):
-        return rec.BuiltInTest(args[0]), now, now
-
-    _HANDLERS: ClassVar[dict[int, Any]] = {
+    #: The answer to each command that is not a data record, a stream or a capture.
+    _ANSWERS: ClassVar[dict[int, Any]] = {
         lay.WRITE_ACCEL_BIAS: _write_accel_bias,
         lay.WRITE_GYRO_BIAS: _write_gyro_bias,
-        lay.CAPTURE_GYRO_BIAS: _capture_gyro_bias,
         lay.TRANSFER_TO_NON_VOLATILE: _transfer,
         lay.WRITE_EEPROM: _write_eeprom,
-        lay.READ_EEPROM: _read_eeprom,
-        lay.FIRMWARE_VERSION: _firmware,
-        lay.DEVICE_IDENTIFIER: _identifier,
-        lay.BUILT_IN_TEST: _built_in_test,
+        lay.READ_EEPROM: lambda self, args, *_: rec.EepromWord(self.settings.read(args[0])),
+        lay.FIRMWARE_VERSION: lambda self, *_: rec.FirmwareVersion(self.firmware_version),
+        lay.DEVICE_IDENTIFIER: lambda self, args, *_: rec.DeviceIdentifier(
+            args[0], self.identifiers.get(args[0], ' ' * 16)),
+        lay.BUILT_IN_TEST: lambda self, args, *_: rec.BuiltInTest(args[0]),
     }
 
     # -- records ----------------------------------------------------------------------------

@@ -16,38 +16,57 @@
 One sensor behind the base station, with everything that is its own.
 
 A base station serves every sensor on its radio channel: each has its own
-model (motion, clock error, timer, EEPROM), its own inbox (the firmware's
-quirks), its own power, its own faults in effect (a stall of one sensor
-leaves the others streaming) and its own transmitter thread, whose packets
-go through the one line writer under the simulator's lock, so that the
-sensors' packets interleave on the line whole, as the base station forwards
-them. :class:`SensorUnit` holds these parts for one address, built from what the
-sensor is (:class:`UnitSensor`), the line it shares (:class:`UnitLine`) and
-what can go wrong for it (:class:`UnitFaults`); :func:`unit_specs` says how
-the sensors after the first differ from it.
+model (motion, clock error, timer, EEPROM), its own faults in effect (a stall
+of one sensor leaves the others streaming), its own transmitter thread, whose
+packets go through the one line writer under the simulator's lock, so that
+the sensors' packets interleave on the line whole, as the base station
+forwards them, its own inbox and its own power. :class:`SensorUnit` holds
+these for one address: a command that reaches the sensor passes the
+firmware's quirks (``FaultConfig.ignore_first_continuous``,
+``needs_polled_first``) before ``SimulatedSensor.handle`` sees it, and its
+replies are queued on the transmitter; power lost takes what the sensor had
+not yet sent with it, power back starts it as from power-up (timer, EEPROM
+rate and auto-start). Each change of stream is recorded in the ground truth.
+:func:`unit_specs` says how the sensors after the first differ from it, and
+:func:`foreign_address` where the stranger stands among them.
 """
 
 import collections.abc
 import dataclasses
 import random
 import threading
+import time
+
+from i3dmgx2_driver.codec import framing
+from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec.commands import Command
+from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 
 from .base_station import BaseStation
 from .config import SimulatorConfig
-from .faults import FaultState
+from .faults import FaultConfig, FaultState
 from .ground_truth import GroundTruth
-from .inbox import SensorInbox
-from .line_writer import LineWriter
 from .motion import Motion, MotionConfig
-from .packet_faults import PacketFaults
-from .power import Post, SensorPower
 from .sensor import SensorSpec, SimulatedSensor
-from .transmitter import SharedLine, Transmitter
+from .transmitter import LineWriter, SharedLine, Transmitter
 from .wired_line import WiredLine
+
+#: Runs an action on the simulator's reader thread after a delay (s).
+Post = collections.abc.Callable[[float, collections.abc.Callable[[], None]], None]
 
 #: How far apart the clocks of neighbouring sensors run (ppm), so that a
 #: driver mixing up two sensors' clocks shows it.
 CLOCK_STEP_PPM = 30.0
+
+
+def foreign_address(config: SimulatorConfig, faults: FaultConfig) -> int:
+    """Return the stranger's address: as set, or next to the first sensor's and none of ours."""
+    if faults.foreign_address is not None:
+        return faults.foreign_address
+    address = config.address % framing.MAX_ADDRESS + framing.MIN_ADDRESS
+    while address in config.all_addresses:  # the next one, wrapping inside 1..65534
+        address = address % framing.MAX_ADDRESS + framing.MIN_ADDRESS
+    return address
 
 
 def unit_specs(config: SimulatorConfig,
@@ -77,69 +96,103 @@ def unit_specs(config: SimulatorConfig,
     return out
 
 
-@dataclasses.dataclass(frozen=True)
-class UnitSensor:
-    """What the sensor is: its spec, its motion and the seed of its noise."""
-
-    spec: SensorSpec
-    motion: MotionConfig
-    seed: int
-
-
-@dataclasses.dataclass(frozen=True)
-class UnitLine:
-    """
-    Where a sensor's packets go, shared with the other sensors.
-
-    ``end`` is the line end (base station or wired line), ``writer`` the
-    line writer every unit shares, ``shared`` the serial line its packets
-    share with the other sensors' (several; None: one sensor).
-    """
-
-    end: BaseStation | WiredLine
-    writer: LineWriter
-    shared: SharedLine | None = None
-
-
-@dataclasses.dataclass(frozen=True)
-class UnitFaults:
-    """
-    What can go wrong for one sensor: its random choices and the stranger's packets.
-
-    ``rng`` draws its faults, ``foreign`` is the stranger whose packets the
-    radio may pick up, ``state`` the faults in effect for it if the line end
-    shares them (the first sensor's; None: its own, from the configuration).
-    """
-
-    rng: random.Random
-    foreign: SimulatedSensor
-    state: FaultState | None = None
-
-
 class SensorUnit:
     """
-    The parts of one sensor: model, faults, packet faults, transmitter, inbox, power.
+    One sensor: its model, faults in effect, transmitter, inbox and power.
 
-    ``record`` is the ground truth, ``wake`` the condition on the
-    simulator's lock, ``post`` schedules actions on its reader thread.
+    ``seed`` seeds its noise, ``rng`` draws its faults, ``faults`` are the
+    faults in effect for it (the first sensor shares the line end's), ``end``
+    the line end (base station or wired line), ``writer`` the line writer
+    every unit shares, ``shared`` the serial line its packets share with the
+    other sensors' (None: one sensor), ``foreign`` the stranger whose packets
+    the radio may pick up, ``record`` the ground truth, ``wake`` the
+    condition on the simulator's lock, notified when the sensor has
+    something new to send; ``post`` schedules the power-up after a power
+    cycle's dark time on the reader thread. Call with the simulator's lock
+    held; the power methods take it themselves.
     """
 
-    def __init__(self, config: SimulatorConfig, sensor: UnitSensor, line: UnitLine,
-                 faults: UnitFaults, record: GroundTruth, wake: threading.Condition,
+    def __init__(self, config: SimulatorConfig, spec: SensorSpec, motion: MotionConfig,
+                 seed: int, rng: random.Random, faults: FaultState,
+                 end: BaseStation | WiredLine, writer: LineWriter, shared: SharedLine | None,
+                 foreign: SimulatedSensor, record: GroundTruth, wake: threading.Condition,
                  post: Post) -> None:
-        self.sensor = SimulatedSensor(sensor.spec, Motion(sensor.motion), seed=sensor.seed)
-        self.address = sensor.spec.address
-        self.faults = faults.state if faults.state is not None else FaultState(config.faults)
-        self.packet_faults = PacketFaults(self.faults, faults.rng, line.end, faults.foreign,
-                                          line.writer, record)
-        self.tx = Transmitter(config, self.sensor, line.end, record, wake, self.packet_faults,
-                              line.writer, line.shared)
-        self.inbox = SensorInbox(self.sensor, record, self.tx, wake, self.faults)
-        self.power = SensorPower(self.sensor, self.tx, record, wake, self.faults, post)
+        self.sensor = SimulatedSensor(spec, Motion(motion), seed=seed)
+        self.address = spec.address
+        self.faults = faults
+        self.tx = Transmitter(config, self.sensor, end, record, wake, faults, rng, foreign,
+                              writer, shared)
+        self._record = record
+        self._wake = wake
+        self._post = post
+        #: Whether a polled request came since the host opened the port.
+        self._polled_since_open = False
+        #: Whether the next request to stream is ignored (a quirk, armed by the faults).
+        self.ignore_next_continuous = faults.config.ignore_first_continuous
 
-    def deliver(self, command, raw: bytes, now: float) -> str:
-        """Hand a command that reached this sensor to its inbox."""
-        return self.inbox.deliver(command, raw, now)
+    # -- the inbox: a command that reached the sensor ---------------------------------------
+
+    def port_opened(self) -> None:
+        """Note that the host opened the port (or flushed its input)."""
+        self._polled_since_open = False
+
+    def deliver(self, command: Command | None, raw: bytes, now: float) -> str:
+        """Hand a command to the sensor; return the outcome ('delivered' or 'ignored')."""
+        sensor = self.sensor
+        if command is None:
+            sensor.handle(raw, now)
+            return 'ignored'
+        self._record.commands.append((now, command))
+        if command.code == lay.SET_CONTINUOUS and command.args[0] != 0:
+            if self.ignore_next_continuous:
+                self.ignore_next_continuous = False
+                return 'ignored'
+            if self.faults.config.needs_polled_first and not self._polled_since_open:
+                return 'ignored'
+        elif command.code not in (lay.SET_CONTINUOUS, lay.STOP_CONTINUOUS):
+            self._polled_since_open = True
+        ignored_before = sensor.ignored
+        for reply in sensor.handle(command, now):
+            self.tx.enqueue(reply, 'reply')
+        self._record.note_streaming(now, sensor.streaming)
+        self._wake.notify_all()
+        return 'ignored' if sensor.ignored != ignored_before else 'delivered'
+
+    # -- power ------------------------------------------------------------------------------
+
+    def power_off(self) -> float:
+        """Lose power now: the stream stops, the queue is forgotten; return the time."""
+        with self._wake:
+            self.tx.clear()
+            self.sensor.power_off()
+            now = time.time()
+            self._record.note_streaming(now, self.sensor.streaming)
+            return now
+
+    def power_on(self, timer_start: int | None = None) -> None:
+        """
+        Power up now, the timer at ``timer_start`` (None: the sensor's own, kept from now).
+
+        What was queued before is gone (a power cycle's old queue included).
+        """
+        with self._wake:
+            self.tx.clear()
+            self.sensor.power_up(time.time(), timer_start)
+            self._record.note_streaming(time.time(), self.sensor.streaming)
+            self._wake.notify_all()
+
+    def power_cycle(self, off_seconds: float, timer_start: int | None) -> None:
+        """Go dark for ``off_seconds`` (silent both ways), then power up (see PtySimulator)."""
+        if timer_start is not None and not 0 <= timer_start < TIMER_MODULUS:
+            raise ValueError(f'timer_start must be a uint32, got {timer_start!r}')
+        if off_seconds < 0:
+            raise ValueError(f'off_seconds must not be negative, got {off_seconds!r}')
+        if off_seconds == 0:
+            self.power_on(timer_start)
+            return
+        with self._wake:
+            self.faults.stall(self.power_off(), off_seconds)
+        self._post(off_seconds, lambda: self.power_on(timer_start))
 
 
 def unit_at(units: collections.abc.Mapping[int, SensorUnit], address: int | None) -> SensorUnit:
@@ -149,15 +202,3 @@ def unit_at(units: collections.abc.Mapping[int, SensorUnit], address: int | None
     if address not in units:
         raise ValueError(f'no sensor at address {address}: the sensors are {list(units)}')
     return units[address]
-
-
-class AllInboxes:
-    """Tell every sensor's inbox that the host opened the port (what the reader needs)."""
-
-    def __init__(self, units: collections.abc.Mapping[int, SensorUnit]) -> None:
-        self._units = units
-
-    def port_opened(self) -> None:
-        """Note on every sensor that the host opened the port (or flushed its input)."""
-        for unit in self._units.values():
-            unit.inbox.port_opened()

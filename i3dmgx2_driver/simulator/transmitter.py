@@ -21,10 +21,13 @@ the record's time on the serial line (10 bits a byte at ``wire_baud``, the
 size of its frame: a data packet wireless, a wired record wired), and any
 jitter. One thread takes the sensor's streamed cycles on an absolute grid,
 so that no drift accumulates, and writes what is due, first sent first,
-with its faults (``packet_faults``: silence, loss, garbage before it, a
-packet of another sensor, a flipped bit, a wrong length byte) and the
-line's rate limit. Each is written in random chunks (``line_writer``) and
-recorded in the ground truth, written or lost, and why.
+with its faults (silence, loss, garbage before it, a packet of another
+sensor, a flipped bit, a wrong length byte; each draw made from the fault
+generator in a fixed order, so a seeded run repeats exactly) and the line's
+rate limit. Each is written in random chunks (``LineWriter``: a real serial
+port hands a reader a packet in pieces, so a host parser meets every split;
+what a full line could not take is lost and counted) and recorded in the
+ground truth, written or lost, and why.
 
 A record is written at its due time to within a few microseconds: the
 thread takes it ``WRITE_LEAD_S`` early, makes its frame, sleeps until
@@ -33,26 +36,28 @@ for the rest. A radio's delay does not depend on the host's scheduler; a
 thread that merely slept until the due time wrote 0.2-0.7 ms late, by an
 amount that wandered with the machine's load, and that lateness, not the
 driver, was most of the noise the stamp benchmarks measured
-(docs/timestamps.md).
-recorded in the ground truth, written or lost, and why. Several sensors
-behind one base station each have a transmitter, and their packets take the
-one serial line in turn (``SharedLine``): interleaved, never overlapping,
-at the line's rate.
+(docs/timestamps.md). Several sensors behind one base station each have a
+transmitter, and their packets take the one serial line in turn
+(``SharedLine``): interleaved, never overlapping, at the line's rate.
 """
 
 import heapq
+import itertools
 import os
+import random
 import threading
 import time
 from typing import NamedTuple
 
+from i3dmgx2_driver.codec import layouts as lay
+
 from . import faults as flt
 from .base_station import BaseStation
 from .config import SimulatorConfig
+from .faults import FaultConfig, FaultState
 from .ground_truth import GroundTruth
-from .line_writer import LineWriter
-from .packet_faults import PacketFaults
-from .sensor import Reply, SimulatedSensor
+from .pty_port import PtyPort
+from .sensor import Reply, SimulatedSensor, STREAMABLE
 from .wired_line import WiredLine
 
 #: Bytes per second of a 115200-baud 8N1 line.
@@ -71,6 +76,37 @@ LINE_BUFFER_S = 0.05
 #: Time between two packets the sensor sent (s) from which the radio's link is taken to
 #: have been away: the first packet after it is held ``radio_hold_s`` (``line_queue``).
 GAP_S = 0.1
+
+
+class LineWriter:
+    """Writes frames to the port in random chunks; call with the simulator's lock held."""
+
+    def __init__(self, port: PtyPort, record: GroundTruth, chunks: tuple[int, int],
+                 gap_s: float, rng: random.Random) -> None:
+        self._port = port
+        self._record = record
+        self._chunks = chunks
+        self._gap_s = gap_s
+        self._rng = rng
+
+    def write(self, data: bytes) -> tuple[str | None, float | None, float | None]:
+        """Write one frame in chunks; return (fault or None, time of its first and last write)."""
+        written, first_write, write_time = self._port.write_chunks(self._split(data),
+                                                                   self._gap_s)
+        if write_time is None:
+            return flt.FAULT_UNPLUGGED, None, None
+        self._record.written(len(data), written)
+        if written < len(data):
+            return flt.FAULT_OVERFLOW, None, None
+        return None, first_write, write_time
+
+    def _split(self, data: bytes) -> list[bytes]:
+        low, high = self._chunks
+        count = min(self._rng.randint(low, high), len(data))
+        if count <= 1:
+            return [data]
+        cuts = sorted(self._rng.sample(range(1, len(data)), count - 1))
+        return [data[a:b] for a, b in itertools.pairwise([0, *cuts, len(data)])]
 
 
 class SharedLine:
@@ -96,7 +132,6 @@ class Outgoing(NamedTuple):
     write_at: float
     reply: Reply
     source: str
-    address: int
     #: Dropped by the base station: its line was too far behind (SharedLine).
     overflow: bool = False
 
@@ -108,12 +143,15 @@ class Transmitter:
     ``wake`` is a condition on the simulator's lock: every method but
     :meth:`run` is called with the lock held, and :meth:`run` takes it for
     each step. It is notified whenever the queue or the stream changed.
+    ``faults`` are the faults in effect, their draws made from ``rng`` in a
+    fixed order, so that a seeded run repeats exactly; ``foreign`` is the
+    other sensor whose packets the radio may pick up.
     """
 
     def __init__(self, config: SimulatorConfig, sensor: SimulatedSensor,
                  end: BaseStation | WiredLine, record: GroundTruth, wake: threading.Condition,
-                 faults: PacketFaults, writer: LineWriter,
-                 line: SharedLine | None = None) -> None:
+                 faults: FaultState, rng: random.Random, foreign: SimulatedSensor,
+                 writer: LineWriter, line: SharedLine | None = None) -> None:
         self._config = config
         self._line = line
         self._sensor = sensor
@@ -121,6 +159,8 @@ class Transmitter:
         self._record = record
         self._wake = wake
         self._faults = faults
+        self._rng = rng
+        self._foreign = foreign
         self._writer = writer
         self._outbox: list[Outgoing] = []
         self._seq = 0
@@ -132,19 +172,18 @@ class Transmitter:
         self._uart_free_at = 0.0
         self._uart_last_send: float | None = None
 
-    def enqueue(self, reply: Reply, source: str, address: int) -> None:
-        """Queue a record the sensor sends at ``reply.due``."""
+    def enqueue(self, reply: Reply, source: str) -> None:
+        """Queue a record the sensor sends at ``reply.due`` ('stream' or 'reply')."""
         config = self._config
-        delay = config.latency_s
-        wire = (self._end.frame_size(len(reply.data)) * 10.0 / config.wire_baud
+        wire = ((len(reply.data) + self._end.frame_overhead) * 10.0 / config.wire_baud
                 if config.wire_baud else 0.0)
         line = self._line
         overflow = False
         if line is None:
-            write_at = reply.due + (delay + wire + self._faults.jitter())
+            write_at = reply.due + (config.latency_s + wire + self._jitter())
         else:
             # Several sensors: each packet waits for the line behind the others'.
-            ready = reply.due + delay + self._faults.jitter()
+            ready = reply.due + config.latency_s + self._jitter()
             overflow = line.free_at - ready > LINE_BUFFER_S
             if overflow:
                 write_at = ready
@@ -152,8 +191,8 @@ class Transmitter:
                 write_at = max(ready, line.free_at) + wire
                 line.free_at = write_at
         self._seq += 1
-        heapq.heappush(self._outbox, Outgoing(reply.due, self._seq, write_at,
-                                              reply, source, address, overflow))
+        heapq.heappush(self._outbox,
+                       Outgoing(reply.due, self._seq, write_at, reply, source, overflow))
 
     def clear(self) -> None:
         """Forget what is queued (the sensor lost its power)."""
@@ -169,9 +208,9 @@ class Transmitter:
                 next_sample = sensor.next_sample_time
                 if next_sample is not None and next_sample <= now:
                     if now - next_sample > self._config.max_lag_s:
-                        self._record.count(late_skipped=sensor.skip_to(now))
+                        self._record.count(late_skipped=sensor.clock.skip_to(now))
                     else:
-                        self.enqueue(sensor.stream_sample(), 'stream', sensor.address)
+                        self.enqueue(sensor.stream_sample(), 'stream')
                     continue
                 # The radio is a FIFO: the packet sent first is written first,
                 # even when its delay (jitter) makes a later one ready sooner.
@@ -194,19 +233,26 @@ class Transmitter:
         The lock is held throughout, so that a host that has read a packet and
         then looks at ``truth`` always finds it there, complete.
         """
-        reply = item.reply
+        reply, address = item.reply, self._sensor.address
         with self._wake:
-            packet = self._end.frame(reply, item.address, self._sensor)
-            fault = self._faults.lost(item.send) or self._line_busy(item) \
-                or (flt.FAULT_LINE_RATE if item.overflow else None)
+            packet = self._end.frame(reply, address, self._sensor)
+            # With ``limit_to_line_rate`` the device skips a streamed record while its
+            # UART still sends the stream's last one, judged on its own schedule (send
+            # times), never on when this thread ran. Only the stream's own records
+            # count: a reply is interleaved with the stream (docs/protocol.md §4,
+            # combined mode) and never costs a record of a stream that fits.
+            paced = self._config.limit_to_line_rate and item.source == 'stream'
+            fault = self._lost(item.send) or (
+                flt.FAULT_LINE_RATE if item.overflow or (
+                    paced and item.send < self._stream_line_free_at - 1e-9) else None)
             if fault is not None:
-                self._record.add(reply, None, packet, item.address, False, fault, item.source)
+                self._record.add(reply, None, packet, address, False, fault, item.source)
                 return
-            if self._config.limit_to_line_rate and item.source == 'stream':
+            if paced:
                 self._stream_line_free_at = (max(item.send, self._stream_line_free_at)
                                              + len(packet) / LINE_BYTES_PER_SECOND)
             before = self._record.stats.bytes_written
-            packet, fault = self._faults.spoil(packet, reply.code, item.send)
+            packet, fault = self._spoil(packet, reply.code, item.send)
             if self._config.line_queue:
                 write_at = self._through_uart(item, len(packet),
                                               self._record.stats.bytes_written - before)
@@ -215,7 +261,7 @@ class Transmitter:
             _wait_until(write_at)
             error, first_write, write_time = self._writer.write(packet)
             valid = fault is None and error is None
-            self._record.add(reply, write_time, packet, item.address, valid, fault or error,
+            self._record.add(reply, write_time, packet, address, valid, fault or error,
                              item.source, first_write)
 
     def _through_uart(self, item: Outgoing, size: int, before: int) -> float:
@@ -239,21 +285,70 @@ class Transmitter:
         self._uart_free_at = done
         return done
 
-    def _line_busy(self, item: Outgoing) -> str | None:
-        """
-        Return FAULT_LINE_RATE when the device's UART is still sending the stream's last record.
+    # -- what the radio and the line do to a packet on its way ------------------------------
 
-        Then the device skips this one. Judged on the device's own schedule
-        (send times), never on when this thread happened to run. Only the
-        stream's own records count: a reply to a command is interleaved with
-        the stream (docs/protocol.md §4, combined mode) and never costs a
-        record of a stream that fits, such as the first cycle after the 0xC4
-        that started it.
-        """
-        if self._config.limit_to_line_rate and item.source == 'stream' \
-                and item.send < self._stream_line_free_at - 1e-9:
-            return flt.FAULT_LINE_RATE
+    def _jitter(self) -> float:
+        """Return the extra delay (s) of a packet on its way."""
+        jitter_ms = self._faults.config.jitter_ms
+        return self._rng.uniform(0.0, jitter_ms / 1000.0) if jitter_ms > 0 else 0.0
+
+    def _lost(self, send: float) -> str | None:
+        """Return why a packet sent at ``send`` never arrives (stall, drop), or None."""
+        faults = self._faults.config
+        if self._faults.silent(send):
+            return flt.FAULT_STALL
+        if faults.drop_probability and self._rng.random() < faults.drop_probability:
+            return flt.FAULT_DROPPED
         return None
+
+    def _spoil(self, packet: bytes, code: int, send: float) -> tuple[bytes, str | None]:
+        """
+        Write what comes before a packet (garbage, a foreign packet); return it as spoiled.
+
+        Returns the packet to write (a bit flipped or its length byte changed,
+        or as it was) and that fault (None: intact).
+        """
+        faults = self._faults.config
+        rng = self._rng
+        if faults.garbage_probability and rng.random() < faults.garbage_probability:
+            garbage = self._garbage(faults)
+            self._writer.write(garbage)
+            self._record.count(garbage_bytes=len(garbage), garbage_bursts=1)
+        if faults.foreign_probability and rng.random() < faults.foreign_probability:
+            self._transmit_foreign(code, send)
+        if faults.corrupt_checksum_probability \
+                and rng.random() < faults.corrupt_checksum_probability:
+            # A bit the checksum covers (record data) or of the checksum itself.
+            data = bytearray(packet)
+            data[rng.choice(self._end.checksum_positions(len(data)))] ^= 1 << rng.randrange(8)
+            return bytes(data), flt.FAULT_CHECKSUM
+        if faults.corrupt_length_probability \
+                and rng.random() < faults.corrupt_length_probability:
+            # The length byte of a data packet (wireless only: wired records have none).
+            data = bytearray(packet)
+            data[5] = (data[5] + rng.randint(1, 255)) & 0xFF
+            return bytes(data), flt.FAULT_LENGTH
+        return packet, None
+
+    def _transmit_foreign(self, code: int, send: float) -> None:
+        """Write a well-formed packet of another sensor (wireless only)."""
+        foreign = self._foreign
+        other = foreign.record_at(code if code in STREAMABLE else lay.ACCEL_ANG_RATE, send)
+        packet = BaseStation.frame(other, foreign.address, foreign)
+        error, first_write, write_time = self._writer.write(packet)
+        self._record.add(other, write_time, packet, foreign.address, False,
+                         flt.FAULT_FOREIGN if error is None else error, 'foreign', first_write)
+
+    def _garbage(self, faults: FaultConfig) -> bytes:
+        rng = self._rng
+        significant = self._end.significant_bytes
+        out = bytearray()
+        for _ in range(rng.randint(1, faults.garbage_max_bytes)):
+            byte = rng.randrange(256)
+            while faults.garbage_safe and byte in significant:
+                byte = rng.randrange(256)
+            out.append(byte)
+        return bytes(out)
 
 
 def _wait_until(due: float) -> None:

@@ -29,51 +29,48 @@ accept packets as well; this model is the stricter firmware, so that a driver
 set up for the wrong framing shows it at once.
 """
 
+import collections.abc
+import functools
+from typing import Any
+
 from i3dmgx2_driver.codec import framing
-from i3dmgx2_driver.codec.commands import Command, decode_command
-from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.parser import CommandStreamParser, HostEvent, RawCommand
 
 from . import faults as flt
-from .base_station import Deliver
-from .faults import FaultState
 from .ground_truth import GroundTruth, HostCommand
-from .sensor import Reply, SimulatedSensor, WIRED_COMMANDS
-
-#: Bytes after a wired record: its checksum.
-_CHECKSUM_SIZE = 2
+from .sensor import decoded, Reply, SimulatedSensor, WIRED_COMMANDS
 
 
 class WiredLine:
-    """The serial line of one wired sensor; call with the lock held."""
+    """
+    The serial line of one wired sensor; call with the lock held.
 
-    wireless = False
+    ``units`` holds that sensor's parts (``sensor_unit``) by its address.
+    """
+
     #: Bytes that "safe" garbage avoids on this line (any echo byte, ping answers).
     significant_bytes = flt.WIRED_SIGNIFICANT_BYTES
+    #: Bytes on the line beside a record's own (echo and data): its checksum.
+    frame_overhead = 2
 
-    def __init__(self, record: GroundTruth, deliver: Deliver, faults: FaultState) -> None:
+    def __init__(self, units: collections.abc.Mapping[int, Any], record: GroundTruth) -> None:
+        self._units = units
         self._record = record
-        self._deliver = deliver
-        self._faults = faults
 
-    @staticmethod
-    def new_parser() -> CommandStreamParser:
-        """Return the sensor's reader of the host's bytes: bare commands it knows."""
-        return CommandStreamParser(wireless=False, codes=WIRED_COMMANDS)
+    #: Returns the sensor's reader of the host's bytes: bare commands it knows.
+    new_parser = functools.partial(CommandStreamParser, wireless=False, codes=WIRED_COMMANDS)
 
     def on_event(self, event: HostEvent, now: float) -> None:
         """Act on a command the sensor read from the line; there is nothing to ACK."""
         if not isinstance(event, RawCommand):  # pragma: no cover - a wired reader has no other
             return
         raw = event.command
-        try:
-            command: Command | None = decode_command(raw)
-        except CodecError:
-            command = None
-        if self._faults.silent(now):
+        command = decoded(raw)
+        unit = next(iter(self._units.values()))  # the one sensor on the line
+        if unit.faults.silent(now):
             outcome, counter = 'stalled', 'commands_lost'
         else:
-            outcome = self._deliver(command, raw, now)
+            outcome = unit.deliver(command, raw, now)
             counter = 'commands_received' if outcome == 'delivered' else 'commands_ignored'
         self._record.log(HostCommand(now, 'wired', None, command, raw, outcome), **{counter: 1})
 
@@ -83,11 +80,6 @@ class WiredLine:
     def frame(reply: Reply, address: int, link: SimulatedSensor) -> bytes:
         """Return the wired record: echo, data, checksum (no address, no LQI/RSSI)."""
         return framing.encode_wired_record(reply.data)
-
-    @staticmethod
-    def frame_size(record_size: int) -> int:
-        """Bytes on the line for a record of ``record_size`` bytes (echo and data)."""
-        return record_size + _CHECKSUM_SIZE
 
     @staticmethod
     def checksum_positions(size: int) -> list[int]:
