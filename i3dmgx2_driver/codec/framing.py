@@ -24,8 +24,9 @@ start byte, LQI and RSSI.
 from typing import Any, NamedTuple
 
 from .checksum import append_checksum, checksum16
-from .commands import decode_record
+from .commands import decode_record, record_of
 from .errors import ChecksumError, DecodeError, EncodeError, LengthError
+from .layouts import LAYOUTS
 
 #: Start of every wireless packet; the base station's ACK is the same byte.
 SOP = 0xAA
@@ -49,12 +50,26 @@ MAX_COMMAND_SIZE = 100
 
 
 class DataPacket(NamedTuple):
-    """A record that arrived through the base station, with its radio link."""
+    """
+    A record as it arrived, flat: its sensor, its echo byte, its fields, its radio link.
 
-    address: int
-    record: Any
-    lqi: int
-    rssi: int
+    ``values`` are the record's fields as its layout unpacks them, in the
+    layout's order (``LAYOUTS[code].plan`` says where each sits; a streamed
+    record's timer is the last): the record path reads them where they lie,
+    with no named record made. :attr:`record` names them, for replies and
+    tools. ``address``, ``lqi`` and ``rssi`` are None for a wired frame.
+    """
+
+    address: int | None
+    code: int
+    values: tuple
+    lqi: int | None
+    rssi: int | None
+
+    @property
+    def record(self) -> Any:
+        """Return the fields named, as their record type of codec/records.py."""
+        return record_of(self.code, self.values)
 
 
 class CommandPacket(NamedTuple):
@@ -121,7 +136,10 @@ def decode_data_packet(packet: bytes) -> DataPacket:
     end = HEADER_SIZE + size
     if checksum16(packet[1:end]) != int.from_bytes(packet[end + 2:end + 4], 'big'):
         raise ChecksumError('data packet checksum mismatch')
-    return DataPacket((packet[3] << 8) | packet[4], decode_record(bytes(packet[HEADER_SIZE:end])),
+    record = bytes(packet[HEADER_SIZE:end])
+    decode_record(record)  # raises for an unknown echo byte or a wrong size
+    return DataPacket((packet[3] << 8) | packet[4], record[0],
+                      LAYOUTS[record[0]].reply_struct.unpack_from(record, 1),
                       packet[end], packet[end + 1])
 
 

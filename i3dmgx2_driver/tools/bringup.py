@@ -56,11 +56,11 @@ from ..arguments import seconds, whole_number
 from ..capture.file_format import CaptureWriter, default_header
 from ..codec import firmware as fw
 from ..codec import line_budget, streams
-from ..codec.commands import LAYOUT_BY_TYPE
 from ..codec.data_rate import (
     divider_for_rate, period_of_divider, rate_of_divider, ticks_per_cycle,
 )
 from ..codec.framing import DataPacket, MAX_ADDRESS, MIN_ADDRESS
+from ..codec.layouts import STREAMABLE
 from ..codec.records import TICKS_PER_SECOND
 from ..codec.timer import TIMER_MODULUS
 from ..device import timeouts
@@ -68,6 +68,7 @@ from ..device.clock import DeviceClock
 from ..device.identity import read_identity
 from ..device.link import DeviceLink, DeviceTimeout, LinkOptions
 from ..device.port import port_group, PortError, SerialPort
+from ..device.sample_clock import records_lost
 from ..device.sensor_steps import SensorSteps
 
 #: One record of a stream measured: (monotonic read time, code, timer, LQI, RSSI).
@@ -131,10 +132,8 @@ class RecordLog:
     def __call__(self, packet: DataPacket, now: float, mono: float) -> None:
         with self._lock:
             if self._entries is not None:
-                record = packet.record
-                layout = LAYOUT_BY_TYPE.get(type(record))
-                self._entries.append((mono, layout.code if layout is not None else 0,
-                                      getattr(record, 'timer', 0), packet.lqi, packet.rssi))
+                timer = packet.values[-1] if packet.code in STREAMABLE else 0
+                self._entries.append((mono, packet.code, timer, packet.lqi, packet.rssi))
 
     def start(self) -> None:
         """Keep every record from now on."""
@@ -325,7 +324,7 @@ def stream_figures(log: Sequence[Entry], divider: int, wire_time: float) -> dict
     for previous, entry in itertools.pairwise(log):
         step = (entry[2] - previous[2]) % TIMER_MODULUS
         ticks.append(ticks[-1] + step)
-        lost += max(0, round(step / expected) - 1)
+        lost += records_lost(step, expected)
     span = ticks[-1] / TICKS_PER_SECOND
     host_span = log[-1][0] - log[0][0]
     # The driver's own fit of the device clock, with ten envelope windows in the run.
