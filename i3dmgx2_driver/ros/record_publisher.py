@@ -121,7 +121,7 @@ class RecordPath:
         # The timer's step since the record before, when it ran on (across a resync of
         # the fit too): the records in between were lost.
         since, expected = clock.ticks_since_last, self.expected_ticks
-        if since is not None and since != expected and self.counting and expected:
+        if since is not None and self.counting and expected and 2 * since >= 3 * expected:
             self.stats.lost += records_lost(since, expected)
         self.counting = True
         if not self._device_time:
@@ -133,7 +133,10 @@ class RecordPath:
         if nanosec >= 1_000_000_000:
             sec += 1
             nanosec -= 1_000_000_000
-        return [pack(values, sec, nanosec) for pack in self.packers]
+        messages = []
+        for pack in self.packers:  # a loop, not a comprehension: no call of its own
+            messages.append(pack(values, sec, nanosec))
+        return messages
 
 
 class RecordPublisher:
