@@ -33,9 +33,10 @@ import math
 import re
 
 from fixture_files import real_records_path
+from harness.decoders import decode_data_packet
 from i3dmgx2_driver.capture.fixtures import FixtureSet, timeline
 from i3dmgx2_driver.codec import (
-    DataPacket, decode_data_packet, encode_data_packet, encode_record, SensorStreamParser,
+    DataPacket, encode_data_packet, encode_record, SensorStreamParser,
 )
 from i3dmgx2_driver.codec.orientation import (
     attitude_enu, attitude_ned, body_vector, euler_from_matrix, orientation, shepperd,

@@ -24,10 +24,10 @@ a literal fails loudly instead of silently agreeing with a codec bug.
 import math
 import struct
 
+from harness.decoders import decode_command_packet, decode_data_packet, decode_wired_record
 from i3dmgx2_driver.codec import (
     Ack, ChecksumError, Command, CommandPacket, CommandStreamParser, DataPacket,
-    decode_command, decode_command_packet, decode_data_packet, decode_record,
-    decode_wired_record, encode_command, encode_command_packet, encode_data_packet,
+    decode_command, decode_record, encode_command, encode_command_packet, encode_data_packet,
     encode_record, encode_wired_record, layout_of, Nack, RawCommand, SensorStreamParser,
 )
 from i3dmgx2_driver.codec import commands, records

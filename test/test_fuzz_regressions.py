@@ -28,10 +28,10 @@ stream is chunked, and every fixture must keep the fuzzer's properties.
 import json
 from pathlib import Path
 
+from harness.decoders import decode_command_packet, decode_data_packet, decode_wired_record
 from harness.fuzz_checks import check_input, same
 from i3dmgx2_driver.codec import (
-    CommandStreamParser, decode_command_packet, decode_data_packet, decode_wired_record,
-    RawCommand, RejectedPacket, SensorStreamParser,
+    CommandStreamParser, RawCommand, RejectedPacket, SensorStreamParser,
 )
 from i3dmgx2_driver.codec.parser import ACK_EVENT, NACK_EVENT
 from i3dmgx2_driver.codec.records import PingReply

@@ -24,8 +24,9 @@ applied on each side of the attitude:
     R_enu_flu = P * M^T * D,   P = [[0, 1, 0], [1, 0, 0], [0, 0, -1]],
                                D = diag(1, -1, -1).
 
-Pure Python on 9-tuples, so the codec needs no numpy; the node uses these
-same functions, and the tests compare them with scipy.
+Pure Python, so the codec needs no numpy: the node's packers call
+:func:`quaternion` on a record's fields where they lie, and the tests compare
+it with scipy and with the attitudes built as matrices.
 """
 
 from collections.abc import Sequence
@@ -109,38 +110,6 @@ _NAN4 = (math.nan,) * 4
 def shepperd(m: Sequence[float]) -> Quaternion:
     """Convert a row-major 3x3 rotation matrix to a unit quaternion (:func:`quaternion`)."""
     return Quaternion(*quaternion(m))
-
-
-def transpose(m: Sequence[float]) -> Matrix3:
-    """Return the transpose of a row-major 3x3 matrix."""
-    return (m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8])
-
-
-def attitude_ned(m: Sequence[float]) -> Matrix3:
-    """Sensor attitude in the device's own convention: NED world, FRD body."""
-    return transpose(m)
-
-
-def attitude_enu(m: Sequence[float]) -> Matrix3:
-    """
-    Sensor attitude per REP-103: ENU world, FLU body, as P * M^T * D.
-
-    With A = M^T (row-major a0..a8), swapping the first two rows and negating
-    the third gives P * A; negating the last two columns then applies D.
-    """
-    a0, a1, a2, a3, a4, a5, a6, a7, a8 = transpose(m)
-    return (a3, -a4, -a5,
-            a0, -a1, -a2,
-            -a6, a7, a8)
-
-
-def attitude(m: Sequence[float], convention: str) -> Matrix3:
-    """Sensor attitude in the named convention (``'enu'`` or ``'ned'``)."""
-    if convention == ENU:
-        return attitude_enu(m)
-    if convention == NED:
-        return attitude_ned(m)
-    raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
 
 
 def orientation(m: Sequence[float], convention: str) -> Quaternion:
