@@ -63,6 +63,7 @@ from i3dmgx2_driver.codec import layouts, streams  # noqa: E402, I100
 from i3dmgx2_driver.codec.framing import DATA_FLAGS, DATA_TRAILER_SIZE, HEADER_SIZE  # noqa: E402
 from i3dmgx2_driver.device import realtime  # noqa: E402
 from i3dmgx2_driver.device.hot_path import recorder_from_environment  # noqa: E402
+from i3dmgx2_driver.device.port import TTY_READ_CHUNK  # noqa: E402
 from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings  # noqa: E402
 
 _LAYOUT = layouts.LAYOUTS[layouts.ACCEL_ANG_RATE_MAG_ORIENTATION]
@@ -107,7 +108,7 @@ def main() -> int:
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     policy = realtime.ThreadPolicy(int(params.get('realtime_priority', '0')))
-    fd = os.open(params['port'], os.O_RDWR | os.O_NOCTTY)
+    fd = os.open(params['port'], os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
     attributes = termios.tcgetattr(fd)  # select() says readable once a whole packet is in
     attributes[6][termios.VMIN], attributes[6][termios.VTIME] = PACKET_SIZE, 0
     termios.tcsetattr(fd, termios.TCSANOW, attributes)
@@ -119,7 +120,13 @@ def main() -> int:
             readable, _, _ = select.select([fd], [], [], 0.2)
             if not readable:
                 continue
-            data = os.read(fd, 4096)
+            data = more = os.read(fd, 4096)
+            while len(more) == TTY_READ_CHUNK:  # the rest of the packet, as read_some reads it
+                try:
+                    more = os.read(fd, 4096)
+                except BlockingIOError:
+                    break
+                data += more
             timings.read(len(data), time.time())
             buf += data
             while len(buf) >= PACKET_SIZE:
