@@ -30,6 +30,7 @@ setup(
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
         (os.path.join('share', package_name, 'launch'), glob('launch/*.launch.py')),
         (os.path.join('share', package_name, 'udev'), glob('udev/*.rules')),
+        (os.path.join('share', package_name, 'urdf'), glob('urdf/*.xacro')),
     ],
     install_requires=['setuptools'],
     # Only the plot tool (and noise's allan.png) draws; on a robot matplotlib would pull in a
@@ -52,6 +53,7 @@ setup(
             'discover = i3dmgx2_driver.tools.discover:main',
             'bringup = i3dmgx2_driver.tools.bringup:main',
             'noise = i3dmgx2_driver.tools.noise:main',
+            'magcal = i3dmgx2_driver.tools.magcal:main',
         ],
     },
 )

@@ -136,12 +136,17 @@ class StopSignal:
             pass
 
     def __del__(self) -> None:
-        for fd in (getattr(self, '_read', None), getattr(self, '_write', None)):
-            if fd is not None:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
+        close_quietly(getattr(self, '_read', None), getattr(self, '_write', None))
+
+
+def close_quietly(*fds: int | None) -> None:
+    """Close each descriptor given (None: none); one already closed is no error at the end."""
+    for fd in fds:
+        if fd is not None:
+            try:
+                os.close(fd)
+            except OSError:
+                pass
 
 
 def die_with_parent(signum: int = signal.SIGTERM) -> bool:

@@ -109,7 +109,7 @@ for dir in build install log; do
 done
 
 LIB="$ROOT/install/i3dmgx2_driver/lib/i3dmgx2_driver"
-for exe in node lifecycle_node simulator replay plot monitor discover bringup; do
+for exe in node lifecycle_node simulator replay plot monitor discover bringup magcal; do
   [ -x "$LIB/$exe" ] || die "colcon did not install $LIB/$exe"
 done
 log "done: executables in $LIB; run 'source scripts/env.sh' to use them"

@@ -38,6 +38,7 @@ from i3dmgx2_driver.device import timeouts
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
 from i3dmgx2_driver.simulator.faults import FaultConfig
 from i3dmgx2_driver.tools import bringup
+from i3dmgx2_driver.tools import bringup_round_trips as rt
 from i3dmgx2_driver.tools.replay import Replayer
 import pytest
 from sensor_msgs.msg import Imu
@@ -72,19 +73,19 @@ def test_stream_figures_count_lost_records_by_the_timer_and_fit_the_clock():
 
 
 def test_a_round_trip_near_a_timeout_names_it():
-    assert timeouts.close_calls({timeouts.PING: 0.01, timeouts.COMMAND: 0.03}) == []
-    said = timeouts.close_calls({timeouts.COMMAND: 0.06, timeouts.RECORD_GAP: 0.6})
+    assert rt.close_calls({rt.PING: 0.01, rt.COMMAND: 0.03}) == []
+    said = rt.close_calls({rt.COMMAND: 0.06, rt.RECORD_GAP: 0.6})
     assert any('RESUME_TIMEOUT = 0.1 s' in s for s in said)
     assert any('raise the node parameter read_timeout' in s for s in said)
     assert not any('REQUEST_TIMEOUT' in s for s in said), '60 ms is far from 0.5 s'
-    ping = timeouts.close_calls({timeouts.PING: 0.26})
+    ping = rt.close_calls({rt.PING: 0.26})
     assert any('PING_TIMEOUT = 0.3 s' in s and 'ping took up to 260 ms' in s for s in ping)
     assert any('discover --ping-timeout' in s for s in ping)
 
 
 def test_every_timeout_bounds_something_bringup_measures():
-    kinds = {timeouts.PING, timeouts.COMMAND, timeouts.CONTINUOUS_START, timeouts.RECORD_GAP}
-    for timeout in timeouts.radio_timeouts():
+    kinds = {rt.PING, rt.COMMAND, rt.CONTINUOUS_START, rt.RECORD_GAP}
+    for timeout in rt.radio_timeouts():
         assert timeout.measured in kinds
         assert getattr(timeouts, timeout.name) == timeout.seconds
 

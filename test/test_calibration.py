@@ -30,9 +30,9 @@ from i3dmgx2_driver.codec import layouts
 from i3dmgx2_driver.codec.commands import decode_command
 from i3dmgx2_driver.codec.records import GyroBias, INVALID_QUANTITY
 from i3dmgx2_driver.device.dialogue import float32_vector, SensorDialogue
-from i3dmgx2_driver.device.firmware import SensorFirmware
 from i3dmgx2_driver.device.gyro_bias import Calibration, GyroBiasCapture
-from i3dmgx2_driver.device.link import DeviceTimeout
+from i3dmgx2_driver.device.link import DeviceTimeout, EchoMismatch
+from i3dmgx2_driver.device.sensor_firmware import SensorFirmware
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.ros.calibration_file import calibration_yaml
 from i3dmgx2_driver.ros.parameters import declare_parameters, driver_config, ParameterError
@@ -72,6 +72,9 @@ class FakeDialogue:
             raise DeviceTimeout('no reply to 0xD0')
         return quantity if self.answer == 0 else self.answer
 
+    def keep_gyro_bias(self, bias: Any) -> None:
+        """Nothing to write back to: no stream restarts here."""
+
 
 class FakeDevice:
     """Runs an operation on no link; its EEPROM is the fake dialogue's."""
@@ -82,12 +85,6 @@ class FakeDevice:
 
     def run_paused(self, operation: Any) -> Any:
         return operation(None)
-
-    def keep_gyro_bias(self, bias: Any) -> None:
-        """Nothing to write back to: no stream restarts here."""
-
-    def store_in_eeprom(self, link: Any, quantity: int) -> int:
-        return self.dialogue.transfer_to_non_volatile(link, quantity)
 
 
 def capture(device: FakeDevice, *outcomes: bool) -> GyroBiasCapture:
@@ -225,8 +222,8 @@ def test_an_echo_that_differs_or_none_is_a_clear_error():
     talk = SensorDialogue(DeviceConfig(port='/dev/null', address=95, gyro_bias=BIAS), Log(),
                           lambda *args: None, threading.Event(),
                           on_gyro_bias=lambda: told.append(True))
-    with pytest.raises(DeviceTimeout, match=r'gyro_bias: wrote \(-0.0033, -0.0217, -0.0052\) '
-                                            r'rad/s, the sensor echoed \(0, 0, 0\) rad/s'):
+    with pytest.raises(EchoMismatch, match=r'gyro_bias: wrote \(-0.0033, -0.0217, -0.0052\) '
+                                           r'rad/s, the sensor echoed \(0, 0, 0\) rad/s'):
         talk.write_biases(Link(SimulatedSensor(seed=1), wrong=(0.0, 0.0, 0.0)))
     assert told == [], 'a bias the sensor does not echo is not said to be in use'
     with pytest.raises(DeviceTimeout, match='gyro_bias: the sensor did not echo'):

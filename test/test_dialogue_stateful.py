@@ -39,7 +39,7 @@ from hypothesis.stateful import invariant, precondition, rule, RuleBasedStateMac
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec.data_rate import divider_for_rate
 from i3dmgx2_driver.device.dialogue import SensorDialogue
-from i3dmgx2_driver.device.link import DeviceLink, DeviceTimeout, LinkOptions
+from i3dmgx2_driver.device.link import DeviceError, DeviceLink, LinkOptions
 from i3dmgx2_driver.device.port import SerialPort
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.simulator import PtySimulator, SimulatorConfig
@@ -66,7 +66,7 @@ class HostileDialogue(RuleBasedStateMachine):
         self.foreign: list[int] = []
         self.records: list[int] = []
         self.link = DeviceLink(SerialPort(self.station.path, low_latency=False), ADDRESS,
-                               self._on_record, LinkOptions(read_timeout=0.05))
+                               self._on_record, LinkOptions(select_timeout=0.05))
         self.dialogue = SensorDialogue(
             DeviceConfig(port=self.station.path, address=ADDRESS, data_rate_hz=RATE_HZ,
                          request_timeout=0.15, continuous_retries=3),
@@ -86,7 +86,7 @@ class HostileDialogue(RuleBasedStateMachine):
         try:
             action()
             ok = True
-        except DeviceTimeout:
+        except DeviceError:
             ok = False
         assert time.monotonic() - start < STEP_LIMIT
         return ok

@@ -15,7 +15,7 @@
 """
 Every firmware the sensor shipped with: each command's least firmware, and who reads it.
 
-The codec's table and what it says (codec/firmware.py), the simulator that
+The codec's table and what it says (codec/command_firmware.py), the simulator that
 answers only what its firmware has, at each boundary (the version below a
 command's least firmware and that version itself) for every gated command,
 the dialogue that stops at a stream the firmware lacks, the temperature
@@ -26,13 +26,13 @@ discover and bringup print. The node processes are test_node_firmware.py's.
 import io
 import random
 
-from i3dmgx2_driver.codec import commands, firmware as fw, layouts as lay, streams
+from i3dmgx2_driver.codec import command_firmware as fw, commands, layouts as lay, streams
 from i3dmgx2_driver.codec.errors import EncodeError
-from i3dmgx2_driver.device.firmware import FirmwareLacksStream, SensorFirmware
 from i3dmgx2_driver.device.identity import DeviceInfo
 from i3dmgx2_driver.device.link import DeviceTimeout
 from i3dmgx2_driver.device.port import PortUnusable
 from i3dmgx2_driver.device.self_test import format_report, Step, temperature_step
+from i3dmgx2_driver.device.sensor_firmware import FirmwareLacksStream, SensorFirmware
 from i3dmgx2_driver.device.status import DeviceStatus
 from i3dmgx2_driver.ros import diagnostic_statuses as d
 from i3dmgx2_driver.ros.temperature import TemperaturePoller

@@ -19,7 +19,7 @@ from i3dmgx2_driver.codec.records import DeviceIdentifier, FirmwareVersion
 from i3dmgx2_driver.device.identity import (
     DeviceInfo, read_firmware, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR,
 )
-from i3dmgx2_driver.device.link import DeviceTimeout
+from i3dmgx2_driver.device.link import DeviceTimeout, EchoMismatch
 import pytest
 
 
@@ -50,7 +50,7 @@ def test_a_late_reply_for_another_selector_is_not_taken_for_this_one():
 
 def test_only_replies_for_other_selectors_is_no_answer():
     link = ScriptedLink([ident(0, 'x')] * 3)
-    with pytest.raises(DeviceTimeout, match='other selectors'):
+    with pytest.raises(EchoMismatch, match='other selectors'):
         read_identifier(link, 1, 0.1, 3)
 
 

@@ -50,7 +50,7 @@ class Collected:
 
 def open_link(path: str, address: int | None, on_record=None) -> DeviceLink:
     link = DeviceLink(SerialPort(path), address, on_record or (lambda p, t, m: None),
-                      LinkOptions(read_timeout=0.05))
+                      LinkOptions(select_timeout=0.05))
     link.start()
     return link
 

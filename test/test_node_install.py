@@ -77,7 +77,7 @@ def installed_env(prefix) -> dict:
 def test_layout_is_what_ros2_expects(prefix):
     lib = prefix / 'lib' / 'i3dmgx2_driver'
     for exe in ('node', 'lifecycle_node', 'simulator', 'replay', 'plot', 'monitor',
-                'discover', 'bringup', 'noise'):
+                'discover', 'bringup', 'noise', 'magcal'):
         assert os.access(lib / exe, os.X_OK), f'{exe} is not an executable in {lib}'
     share = prefix / 'share'
     assert (share / 'ament_index' / 'resource_index' / 'packages' / 'i3dmgx2_driver').exists()
@@ -85,6 +85,8 @@ def test_layout_is_what_ros2_expects(prefix):
     assert (share / 'i3dmgx2_driver' / 'config' / 'i3dmgx2.yaml').exists()
     assert (share / 'i3dmgx2_driver' / 'launch' / 'i3dmgx2.launch.py').exists()
     assert (share / 'i3dmgx2_driver' / 'udev' / '99-i3dmgx2.rules').exists()
+    for xacro in ('i3dmgx2.urdf.xacro', 'example.urdf.xacro'):
+        assert (share / 'i3dmgx2_driver' / 'urdf' / xacro).exists()
     assert not (prefix / 'bin' / 'node').exists(), 'node must not land on PATH'
     site = glob.glob(str(prefix / 'lib' / 'python3*' / 'site-packages'))
     assert sorted(p.name for p in Path(site[0]).iterdir() if not p.name.endswith('-info')) \

@@ -251,8 +251,9 @@ def test_each_parameter_feeds_a_field_that_exists_and_the_drivers_own_are_all_fe
             fed[config].add(field or spec.name)
     # Every device setting is a user's: the address, stream and rate each sensor's.
     assert fed['device'] == device - {'address', 'stream', 'data_rate_hz'}
-    # The frame and the stream are each sensor's (sensor_set.py).
-    assert fed['messages'] == messages - {'frame_id', 'stream'}
+    # The frame and the stream are each sensor's (sensor_set.py), and the field's
+    # calibration (DriverConfig.messages_for picks it from one for all or one each).
+    assert fed['messages'] == messages - {'frame_id', 'stream', 'mag_hard_iron', 'mag_soft_iron'}
     assert fed['driver'] == own
 
 

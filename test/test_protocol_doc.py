@@ -25,7 +25,7 @@ codec's ticks per second: a document that drifts from the code fails here.
 from pathlib import Path
 import re
 
-from i3dmgx2_driver.codec import firmware, layouts
+from i3dmgx2_driver.codec import command_firmware as firmware, layouts
 from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
 
 REPO = Path(__file__).resolve().parents[1]

@@ -26,11 +26,11 @@ import os
 import threading
 import time
 
-from i3dmgx2_driver.device.link import DeviceTimeout
+from i3dmgx2_driver.device.link import DeviceError, DeviceTimeout
 from i3dmgx2_driver.device.port import PortBusy, PortMissing, SerialPort
 from i3dmgx2_driver.device.settings import DeviceConfig
 from i3dmgx2_driver.device.status import State
-from i3dmgx2_driver.device.supervisor import DeviceSupervisor
+from i3dmgx2_driver.device.supervisor import DeviceSupervisor, DeviceUnavailable
 from i3dmgx2_driver.simulator import FaultConfig, PtySimulator, SimulatorConfig
 import pytest
 
@@ -84,7 +84,7 @@ def in_thread(call) -> tuple[threading.Thread, list[str]]:
     def run():
         try:
             call()
-        except DeviceTimeout as exc:
+        except DeviceError as exc:
             errors.append(str(exc))
 
     thread = threading.Thread(target=run)
@@ -139,7 +139,7 @@ def test_an_operation_has_the_sensor_paused_then_the_stream_back():
         sup = supervisor(sim.port, records)
         try:
             sup.connect()
-            with pytest.raises(DeviceTimeout, match='not streaming'):
+            with pytest.raises(DeviceUnavailable, match='not streaming'):
                 sup.run_paused(lambda link: None)
             sup.start_streaming()
             seen = []

@@ -116,7 +116,7 @@ class _Counted:
             return data
 
         port.read_some = counted  # type: ignore[method-assign]  # bound when the reader starts
-        self.link = DeviceLink(port, 95, self._on_record, LinkOptions(read_timeout=read_timeout))
+        self.link = DeviceLink(port, 95, self._on_record, LinkOptions(select_timeout=read_timeout))
         self.steps = SensorSteps()
         self.steps.quiet(self.link)
         self.link.start()

@@ -65,9 +65,9 @@ import time
 from typing import Any
 
 from . import timeouts
-from .firmware import check_stream, SensorFirmware
 from .identity import DeviceInfo, read_identifier, read_identity, SERIAL_NUMBER_SELECTOR
-from .link import DeviceLink, DeviceTimeout
+from .link import DeviceError, DeviceLink, DeviceTimeout, EchoMismatch
+from .sensor_firmware import check_stream, SensorFirmware
 from .sensor_steps import ping, SensorSteps
 from .settings import DeviceConfig
 from .throttle import EVENT_PERIOD, Throttle
@@ -201,7 +201,7 @@ class SensorDialogue(SensorSteps):
             try:
                 link.request(bytes((code,)), code, cfg.request_timeout,
                              timeouts.FIRST_POLL_RETRIES)
-            except DeviceTimeout:
+            except DeviceError:
                 pass
         if require_answer and not self.ping_ok and not link.heard:
             silent = (f'node {cfg.address} is silent: no answer to the base station '
@@ -242,7 +242,7 @@ class SensorDialogue(SensorSteps):
         cfg = self.config
         try:
             current = self.read_divider(link)
-        except DeviceTimeout:
+        except DeviceError:
             if cfg.data_rate_hz is not None or self._cancel.is_set():
                 raise
             # Nothing to set, so streaming can go on without knowing the rate
@@ -303,11 +303,11 @@ class SensorDialogue(SensorSteps):
                 continue
             try:
                 echo = link.request(request(bias), code, self.timeout, self.retries).bias
-            except DeviceTimeout as exc:
-                raise DeviceTimeout(f'{name}: the sensor did not echo the bias written '
-                                    f'(0x{code:02X}): {exc}') from None
+            except DeviceError as exc:
+                raise type(exc)(f'{name}: the sensor did not echo the bias written '
+                                f'(0x{code:02X}): {exc}') from None
             if tuple(echo) != float32_vector(bias):
-                raise DeviceTimeout(
+                raise EchoMismatch(
                     f'{name}: wrote {_vector(bias)} {unit}, the sensor echoed '
                     f'{_vector(echo)} {unit} (0x{code:02X}): it does not use the bias asked '
                     f'for; check the parameter and the sensor')
@@ -376,7 +376,7 @@ class SensorDialogue(SensorSteps):
         try:
             serial = read_identifier(link, SERIAL_NUMBER_SELECTOR, cfg.resume_timeout,
                                      cfg.resume_retries)
-        except DeviceTimeout:
+        except DeviceError:
             if self._cancel.is_set():
                 raise
             if self._throttle.allow('resume', EVENT_PERIOD):
@@ -393,7 +393,7 @@ class SensorDialogue(SensorSteps):
         deadline = time.monotonic() + min(2 * self.period, timeouts.RESUME_LOOK_S)
         while not link.records and time.monotonic() < deadline \
                 and not self._cancel.is_set():
-            time.sleep(0.002)
+            time.sleep(timeouts.RESUME_POLL_S)
         # Not streaming (power-cycled meanwhile), or streaming another record: ask for it.
         # A power cycle meanwhile lost the biases in the sensor's RAM: write them again.
         self.write_biases(link)

@@ -164,7 +164,7 @@ class GyroBiasCapture:
         self.last_capture = calibration
         if calibration.accepted:
             self.good_capture = calibration
-            self._device.keep_gyro_bias(calibration.bias)
+            self._device.dialogue.keep_gyro_bias(calibration.bias)
         self._calibrated(calibration.accepted)
 
     # -- keeping it ----------------------------------------------------------
@@ -199,7 +199,7 @@ class GyroBiasCapture:
         text = format_vector(good.bias)
 
         def operation(link: DeviceLink) -> int:
-            quantity = self._device.store_in_eeprom(link, GYRO_BIAS_QUANTITY)
+            quantity = self._device.dialogue.transfer_to_non_volatile(link, GYRO_BIAS_QUANTITY)
             self._forget()  # the pause is the operation's, not the radio's
             return quantity
 

@@ -24,7 +24,7 @@ must not pass for this one's.
 
 from typing import NamedTuple
 
-from .link import DeviceLink, DeviceTimeout
+from .link import DeviceError, DeviceLink, EchoMismatch
 from ..codec import commands, layouts
 
 IDENTIFIER_NAMES = ('model_number', 'serial_number', 'model_name', 'options')
@@ -54,7 +54,7 @@ def read_identifier(link: DeviceLink, selector: int, timeout: float, retries: in
                              timeout, retries)
         if reply.selector == selector:
             return reply.text.strip(' \x00')
-    raise DeviceTimeout(f'device identifier {selector}: only replies for other selectors')
+    raise EchoMismatch(f'device identifier {selector}: only replies for other selectors')
 
 
 def read_firmware(link: DeviceLink, timeout: float, retries: int) -> str:
@@ -69,10 +69,10 @@ def read_identity(link: DeviceLink, timeout: float, retries: int) -> DeviceInfo:
     for selector in range(len(IDENTIFIER_NAMES)):
         try:
             texts.append(read_identifier(link, selector, timeout, retries))
-        except DeviceTimeout:
+        except DeviceError:
             texts.append('')
     try:
         firmware = read_firmware(link, timeout, retries)
-    except DeviceTimeout:
+    except DeviceError:
         firmware = ''
     return DeviceInfo(*texts, firmware)

@@ -51,8 +51,9 @@ from ..codec.framing import DataPacket, encode_command_packet
 from ..codec.parser import Ack, Nack, SensorStreamParser
 from ..codec.records import PingReply
 
-__all__ = ['BytesCallback', 'DeviceLink', 'DeviceNack', 'DeviceTimeout', 'LinkOptions',
-           'PortReader', 'RadioStats', 'RecordCallback']
+__all__ = ['BytesCallback', 'DeviceError', 'DeviceLink', 'DeviceNack', 'DeviceTimeout',
+           'EchoMismatch', 'LinkOptions', 'PortReader', 'RadioStats', 'RecordCallback',
+           'RequestCancelled']
 
 #: Called from the reader thread with each data packet and its read time.
 #: Called with a record, the system-clock time its last byte was read and the same
@@ -69,7 +70,9 @@ class LinkOptions:
     How a link reads and whom it tells, besides the consumer of records.
 
     ``wireless=False`` speaks to a wired sensor (no packets, no ACKs).
-    ``read_timeout`` bounds each read (s). ``on_bytes``, if given, receives
+    ``select_timeout`` bounds each wait for bytes (s): how soon the reader
+    sees it is told to stop (not the stall timeout, the node's ``read_timeout``
+    parameter, which is the supervisor's). ``on_bytes``, if given, receives
     every read's bytes as read, before they are parsed (a raw capture); it
     runs in the reader thread and must not raise or block. ``observer``, if
     given, is fed every read while no packet of ours has arrived for
@@ -86,7 +89,7 @@ class LinkOptions:
     """
 
     wireless: bool = True
-    read_timeout: float = 0.2
+    select_timeout: float = 0.2
     on_bytes: BytesCallback | None = None
     observer: LineObserver | None = None
     cancel: threading.Event | None = None
@@ -94,13 +97,31 @@ class LinkOptions:
     records_of: int | None = None
     on_lost: Callable[[], None] | None = None
 
+    @classmethod
+    def listening(cls, wireless: bool, on_bytes: BytesCallback | None) -> 'LinkOptions':
+        """Return a tool's options: every read's bytes to ``on_bytes``, a short wait."""
+        return cls(wireless=wireless, select_timeout=timeouts.TOOL_READ_TIMEOUT,
+                   on_bytes=on_bytes)
 
-class DeviceTimeout(Exception):
+
+class DeviceError(Exception):
+    """A request to the sensor did not end as asked: catch this for every kind below."""
+
+
+class DeviceTimeout(DeviceError):
     """A request got no reply after every retry."""
 
 
 class DeviceNack(DeviceTimeout):
     """The base station rejected a request on every try."""
+
+
+class RequestCancelled(DeviceError):
+    """Given up on this side (the link shutting down, the stream stopped), not by the sensor."""
+
+
+class EchoMismatch(DeviceError):
+    """The sensor answered with other than what was written or asked (a read-back, an echo)."""
 
 
 class RadioStats(NamedTuple):
@@ -190,7 +211,7 @@ class PortReader:
         self._wake_lock = threading.Lock()
         self._on_bytes = options.on_bytes
         self._observer = options.observer
-        self._read_timeout = options.read_timeout
+        self._read_timeout = options.select_timeout
         self._thread_policy = options.thread_policy
         self._stop = threading.Event()
         self._started = False
@@ -362,7 +383,7 @@ class PortReader:
         data = b''
         while not self._stop.is_set():
             pending = len(held)
-            timeout = 0.02 if pending == 1 else self._read_timeout
+            timeout = timeouts.LONE_BYTE_WAIT_S if pending == 1 else self._read_timeout
             # While the stream flows, a whole packet, or the rest of the one the parser
             # holds the start of (a late reader that caught the next packet's first pieces
             # is back in step with the stream at its end); any byte after a silence.
@@ -671,9 +692,9 @@ class DeviceLink:
 
     def _check_cancelled(self) -> None:
         if self._stopped.is_set() or self.reader.stopping:
-            raise DeviceTimeout('the link is shutting down')
+            raise RequestCancelled('the link is shutting down')
         if self._cancel.is_set():
-            raise DeviceTimeout('cancelled: the stream is being stopped')
+            raise RequestCancelled('cancelled: the stream is being stopped')
 
     def ping_once(self, address: int, timeout: float) -> bool | None:
         """

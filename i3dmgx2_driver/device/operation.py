@@ -28,9 +28,10 @@ import math
 from typing import Any, Protocol
 
 from . import timeouts
-from .firmware import SensorFirmware
-from .link import DeviceLink, DeviceTimeout
+from .dialogue import SensorDialogue
+from .link import DeviceError, DeviceLink
 from .port import PortError
+from .sensor_firmware import SensorFirmware
 from .status import DeviceStatus
 from ..codec import layouts
 from ..codec.errors import CodecError
@@ -39,7 +40,7 @@ from ..codec.records import Vector3
 #: Polled 0xC2 records averaged before and after a capture, and by the self test.
 POLLS = 5
 #: Errors a device operation can end with; anything else is a bug and propagates.
-OPERATION_ERRORS = (PortError, DeviceTimeout, CodecError, OSError)
+OPERATION_ERRORS = (PortError, DeviceError, CodecError, OSError)
 
 
 def norm(v: Sequence[float]) -> float:
@@ -72,15 +73,12 @@ class Device(Protocol):
 
     #: The sensor's firmware (0xE9), asked before a gated command is sent.
     firmware: SensorFirmware
+    #: The steps an operation takes on the lent link (an EEPROM write among them, each
+    #: counted), and what is written back at every start (``keep_gyro_bias``).
+    dialogue: SensorDialogue
 
     def status(self) -> DeviceStatus:
         """Return the device side's snapshot."""
 
     def run_paused(self, operation: Callable[[DeviceLink], Any]) -> Any:
         """Stop the stream, run ``operation(link)``, start the stream again."""
-
-    def keep_gyro_bias(self, bias: Vector3) -> None:
-        """Write ``bias`` back from now on (at every start, resume and stall recovery)."""
-
-    def store_in_eeprom(self, link: DeviceLink, quantity: int) -> int:
-        """Store a bias (0xD0) on the lent ``link``; return the reply, an EEPROM write counted."""

@@ -259,25 +259,6 @@ def serial_group(group: str, path: str = '') -> bool:
     return any(len(n) >= 4 and (n == name or n in name) for n in names)
 
 
-def port_group(path: str) -> tuple[str, bool] | None:
-    """
-    Return the group that owns ``path`` and whether this session is in it.
-
-    None if the path cannot be examined. Root is counted as a member: it
-    opens every port whatever the group.
-    """
-    owner = _owning_group(path)
-    if owner is None:
-        return None
-    group = owner[0]
-    try:
-        gid = grp.getgrnam(group).gr_gid
-    except KeyError:
-        gid = int(group) if group.isdigit() else -1
-    member = os.geteuid() == 0 or gid == os.getegid() or gid in os.getgroups()
-    return group, member
-
-
 def _permission_message(path: str) -> str:
     owner = _owning_group(path)
     text = f'permission denied opening {path}: '

@@ -31,12 +31,12 @@ import math
 import threading
 from typing import Any, NamedTuple
 
-from .firmware import SensorFirmware
-from .link import DeviceLink, DeviceTimeout
+from .link import DeviceError, DeviceLink
 from .operation import Device, format_vector, norm, OPERATION_ERRORS, poll_inertial, POLLS
 from .record_rate import RATE_TOLERANCE, RateMeter
+from .sensor_firmware import SensorFirmware
+from ..codec import command_firmware as fw
 from ..codec import commands, layouts
-from ..codec import firmware as fw
 from ..codec.records import Vector3
 
 #: The self test expects |accel| = 1 g within this (g), the sensor at rest.
@@ -95,7 +95,7 @@ def temperature_step(link: DeviceLink, firmware: SensorFirmware) -> Step:
         return skipped
     try:
         reply = link.request(bytes((layouts.TEMPERATURES,)), layouts.TEMPERATURES)
-    except DeviceTimeout as exc:
+    except DeviceError as exc:
         return Step(name, False, str(exc))
     return Step(name, True, f'accelerometer {reply.accel_celsius:.1f} C')
 
@@ -166,14 +166,14 @@ class SelfTestRun:
             steps.append(Step('accel & angular rate respond (0xC2)', True,
                               f'mean of {POLLS}: accel {format_vector(accel, 4)} g, '
                               f'rate {format_vector(rate, 4)} rad/s'))
-        except DeviceTimeout as exc:
+        except DeviceError as exc:
             steps.append(Step('accel & angular rate respond (0xC2)', False, str(exc)))
         try:
             mag = link.request(bytes((layouts.MAGNETOMETER,)), layouts.MAGNETOMETER).mag
             detail = (f'mag {format_vector(mag, 4)} G' if not any(map(math.isnan, mag))
                       else 'answered NaN (no new reading, or no magnetometer)')
             steps.append(Step('magnetometer responds (0xC7)', True, detail))
-        except DeviceTimeout as exc:
+        except DeviceError as exc:
             steps.append(Step('magnetometer responds (0xC7)', False, str(exc)))
         steps.append(temperature_step(link, self._device.firmware))
         if accel is not None:
@@ -196,7 +196,7 @@ class SelfTestRun:
         label = f'{name} (0xFB config 0x{bit:02X})'
         try:
             reply = link.request(commands.built_in_test(bit), layouts.BUILT_IN_TEST)
-        except DeviceTimeout as exc:
+        except DeviceError as exc:
             hint = '; power-cycle the sensor to be sure it is off' if not bit else ''
             return Step(label, False, f'{exc}{hint}')
         if reply.config != bit:
@@ -210,7 +210,7 @@ class SelfTestRun:
                 reading = link.request(bytes((sensor,)), sensor)
                 detail += (f'; accel under test {format_vector(reading.accel, 4)} g, '
                            f'rate {format_vector(reading.angular_rate, 4)} rad/s')
-        except DeviceTimeout:
+        except DeviceError:
             detail += '; no reading under test (not judged)'
         return Step(label, True, detail)
 

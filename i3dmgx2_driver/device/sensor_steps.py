@@ -36,7 +36,7 @@ import threading
 import time
 
 from . import timeouts
-from .link import DeviceLink, DeviceTimeout
+from .link import DeviceError, DeviceLink, DeviceTimeout, EchoMismatch
 from .port import PortDisconnected
 from ..codec import commands, layouts
 from ..codec.data_rate import RATE_DIVIDER_ADDRESS
@@ -130,7 +130,7 @@ class SensorSteps:
             last = link.last_data_mono
             if time.monotonic() - max(last, since) >= quiet:
                 return last
-            time.sleep(0.01)
+            time.sleep(timeouts.RECORD_POLL_S)
         return None
 
     def start_stream(self, link: DeviceLink, code: int, period: float,
@@ -151,7 +151,7 @@ class SensorSteps:
             try:
                 link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
                              self.timeout, 1)
-            except DeviceTimeout:
+            except DeviceError:
                 pass  # the reply may be lost while the stream started: look for records
             deadline = time.monotonic() + max(timeouts.FIRST_RECORD_S,
                                               timeouts.RECORD_PERIODS * period)
@@ -160,7 +160,7 @@ class SensorSteps:
                     return True
                 if link.disconnected.is_set():
                     raise PortDisconnected(link.error or 'device disconnected')
-                time.sleep(0.01)
+                time.sleep(timeouts.RECORD_POLL_S)
             if self._cancel.is_set():
                 return False
         raise DeviceTimeout(f'continuous mode: no records after {tries} requests')
@@ -189,13 +189,13 @@ class SensorSteps:
             try:
                 link.request(commands.write_eeprom(RATE_DIVIDER_ADDRESS, wanted),
                              layouts.WRITE_EEPROM, self.timeout, 1)
-            except DeviceTimeout:
+            except DeviceError:
                 pass  # written or not: the read below tells
             readback = self.read_divider(link)
             if readback != current:
                 break
         if readback != wanted:
-            raise DeviceTimeout(f'data rate: wrote divider {wanted}, read back {readback}')
+            raise EchoMismatch(f'data rate: wrote divider {wanted}, read back {readback}')
         return readback
 
     def transfer_to_non_volatile(self, link: DeviceLink, quantity: int) -> int:

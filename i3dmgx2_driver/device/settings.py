@@ -42,7 +42,7 @@ class DeviceConfig:
     wireless: bool = True
     low_latency: bool = True
     stall_timeout: float = timeouts.STALL_TIMEOUT
-    reconnect_interval: float = 1.0
+    reconnect_interval: float = timeouts.RECONNECT_INTERVAL
     data_rate_hz: float | None = None
     #: Command byte of the record to stream (one of codec.streams.STREAMS).
     stream: int = streams.DEFAULT.code

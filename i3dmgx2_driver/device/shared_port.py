@@ -36,7 +36,7 @@ from collections.abc import Callable
 import threading
 from typing import Any
 
-from .link import BytesCallback, DeviceLink, LinkOptions, PortReader, RecordCallback
+from .link import BytesCallback, DeviceLink, PortReader, RecordCallback
 from .port_opener import PortOpener
 from .settings import DeviceConfig
 from ..codec import streams
@@ -81,7 +81,6 @@ class SharedPort:
         The link receives nothing until it is started (its address routed).
         Raises PortError when the port cannot be opened.
         """
-        cfg = self.config
         with self._lock:
             reader = self._reader
             if reader is None or reader.disconnected.is_set():
@@ -92,8 +91,8 @@ class SharedPort:
                 reader = self._reader = PortReader(port, None, self._opener.reader_options())
                 self.opens += 1
             link = DeviceLink(reader.port, address, on_record,
-                              LinkOptions(wireless=cfg.wireless, cancel=cancel,
-                                          records_of=records_of, on_lost=on_lost),
+                              self._opener.reader_options(cancel=cancel, records_of=records_of,
+                                                          on_lost=on_lost),
                               reader=reader)
             self._links.add(link)
             return link

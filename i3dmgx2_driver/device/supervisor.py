@@ -25,9 +25,6 @@ each read and tested alone:
   sensor (quiet, identity, rate, continuous mode, resume); no thread.
 - ``current_link.py``: :class:`~.current_link.CurrentLink`, the one open
   link (who owns it, under a lock) and what outlives each link.
-- ``bring_up.py``: :class:`~.bring_up.BringUp`, the steps from an open port
-  to a stream, each moving the report's state, the same for the thread and
-  the phases.
 - ``watchdog.py``: when a stream has stalled and when to try the port again
   (the reconnect back-off), decided on a clock passed in.
 - ``status.py``: :class:`~.status.DeviceReport`, the state and counters,
@@ -78,17 +75,23 @@ import logging
 import threading
 from typing import Any
 
-from .bring_up import BringUp
+from . import timeouts
 from .current_link import CurrentLink
 from .dialogue import SensorDialogue
-from .link import BytesCallback, DeviceLink, DeviceTimeout, RecordCallback
+from .link import BytesCallback, DeviceError, DeviceLink, RecordCallback, RequestCancelled
 from .port import PortDisconnected, PortError, PortUnusable
 from .port_opener import PortOpener
+from .realtime import PolicyOutcome
 from .settings import DeviceConfig
 from .shared_port import SharedPort
 from .status import DeviceReport, DeviceStatus, State
 from .throttle import EVENT_PERIOD
 from .watchdog import ReopenWait, StallWatch
+from ..codec.data_rate import ticks_per_cycle
+
+
+class DeviceUnavailable(DeviceError):
+    """The supervisor cannot take the request now: still stopping, or the stream not running."""
 
 
 class DeviceSupervisor:
@@ -100,7 +103,7 @@ class DeviceSupervisor:
     re-anchors its clock), ``on_fatal`` (once, the port can never work;
     default: logged), ``on_bytes`` (reader thread, every read: a raw
     capture), ``on_gyro_bias`` (the kept bias written and echoed),
-    ``on_stream_known`` (the tick step and the bias flag, bring_up.py). ``log``
+    ``on_stream_known`` (the tick step and the bias flag, :meth:`_hand_on`). ``log``
     has ``debug/info/warning/error``. ``shared``: the port this sensor
     shares behind one base station (shared_port.py), which opens and closes
     it; no line observer watches it.
@@ -139,9 +142,10 @@ class DeviceSupervisor:
         self._current = CurrentLink(config, PortOpener(config, log, on_bytes), on_record,
                                     self._cancel, self._attention.set, self._report.finding,
                                     shared)
-        #: The steps from an open port to a stream.
-        self._steps = BringUp(self.dialogue, self._report, self._current, self._cancel,
-                              on_connect, log, on_stream_known)
+        self._on_connect = on_connect
+        self._on_stream_known = on_stream_known
+        #: The reader thread's scheduling as last logged (logged again when it changes).
+        self._policy_logged = PolicyOutcome()
         self._reopen_wait = ReopenWait(config.port, config.reconnect_interval, self._cancel.wait)
         self._thread: threading.Thread | None = None
 
@@ -178,7 +182,7 @@ class DeviceSupervisor:
         self._cancel.clear()
         self._start_thread(self._current.link)
 
-    def stop(self, timeout: float = 1.5) -> None:
+    def stop(self, timeout: float = timeouts.SUPERVISOR_STOP_WAIT_S) -> None:
         """Stop streaming (0xFA), stop the threads, close the port."""
         self._cancel.set()
         self._attention.set()  # the watch sees it at once
@@ -216,7 +220,7 @@ class DeviceSupervisor:
         self._cancel.clear()
         link = self._current.open_link()
         try:
-            self._steps.initialise(link, require_answer=True)
+            self._initialise(link, require_answer=True)
         except BaseException:
             self._current.release()
             self._report.enter(State.STOPPED)
@@ -235,7 +239,7 @@ class DeviceSupervisor:
         as :meth:`start` recovers them.
         """
         if self._running():
-            raise DeviceTimeout('the supervisor is still stopping: try again')
+            raise DeviceUnavailable('the supervisor is still stopping: try again')
         self._cancel.clear()
         self._current.observe(True)
         link = self._current.link
@@ -243,20 +247,20 @@ class DeviceSupervisor:
             if link is None or link.disconnected.is_set():
                 self._current.release()
                 link = self._current.open_link()
-                self._steps.initialise(link)
-            self._steps.begin_stream(link)
+                self._initialise(link)
+            self._begin_stream(link)
         except PortError:
             self._current.release()
             self._report.enter(State.DISCONNECTED)
             raise
-        except DeviceTimeout:
+        except DeviceError:
             current = self._current.link
             if current is not None:
-                self._steps.quiet(current)
+                self._quiet(current)
             raise
         if self._cancel.is_set():
             # stop() came while the stream was starting: it has the port; no thread.
-            raise DeviceTimeout('the driver stopped while the stream was starting')
+            raise RequestCancelled('the driver stopped while the stream was starting')
         self._start_thread(link)
 
     def start_retrying(self) -> None:
@@ -271,7 +275,7 @@ class DeviceSupervisor:
         self._report.enter(State.DISCONNECTED)
         self.start()
 
-    def stop_streaming(self, timeout: float = 1.5) -> None:
+    def stop_streaming(self, timeout: float = timeouts.SUPERVISOR_STOP_WAIT_S) -> None:
         """
         Stop the stream (0xFA) and the supervisor thread; keep the port open.
 
@@ -283,7 +287,7 @@ class DeviceSupervisor:
         self.join(timeout)
         link = self._current.link
         if link is not None and not link.disconnected.is_set():
-            self._steps.quiet(link)
+            self._quiet(link)
 
     # -- for services: the sensor lent for an operation -----------------------------------
 
@@ -292,14 +296,14 @@ class DeviceSupervisor:
         Stop the stream, run ``operation(link)``, then restart the stream.
 
         Used by services that need the device's full attention (gyro bias
-        capture, built-in test), one at a time. Raises DeviceTimeout at once
+        capture, built-in test), one at a time. Raises DeviceUnavailable at once
         unless the device streams (or has stalled); PortError or
-        DeviceTimeout from the operation or the restart.
+        DeviceError from the operation or the restart.
         """
         link = self._current.link
         state = self._report.state
         if link is None or state not in (State.STREAMING, State.STALLED):
-            raise DeviceTimeout(f'device not streaming (state: {state.value})')
+            raise DeviceUnavailable(f'device not streaming (state: {state.value})')
         self._paused.set()
         self._report.enter(State.PAUSED)
         self._current.observe(False)  # a long operation (a 30 s bias capture) is quiet
@@ -309,18 +313,112 @@ class DeviceSupervisor:
             try:
                 self._current.observe(True)
                 if not self._cancel.is_set():
-                    self._steps.restart_stream(link)
+                    self._restart_stream(link)
             finally:
                 self._paused.clear()
                 self._attention.set()
 
-    def keep_gyro_bias(self, bias: tuple[float, float, float]) -> None:
-        """Have the dialogue write ``bias`` back from now on (an accepted capture's)."""
-        self.dialogue.keep_gyro_bias(bias)
+    # -- the steps from an open port to a stream, each moving the report's state ------------
+    #
+    # The thread and the phases take the same steps in different orders and with
+    # different answers to failure (the thread retries forever, a phase fails with the
+    # reason), so that they cannot tell a different story about the same step.
 
-    def store_in_eeprom(self, link: DeviceLink, quantity: int) -> int:
-        """Store a bias in the sensor's EEPROM on the lent ``link`` (the dialogue counts it)."""
-        return self.dialogue.transfer_to_non_volatile(link, quantity)
+    def _initialise(self, link: DeviceLink, require_answer: bool = False) -> None:
+        """Quiet the device, start reading, and have the dialogue learn what it is."""
+        self._report.enter(State.INITIALISING)
+        self.dialogue.quiet(link)
+        if link.running.is_set():
+            # The reader runs already (a resume that was not confirmed): anchor afresh.
+            self._anchor()
+        else:
+            self._start_reader(link)
+        self.dialogue.initialise(link, require_answer, self._current.observed)
+        self._hand_on()
+
+    def _resume(self, link: DeviceLink) -> bool:
+        """
+        Resume a known sensor after a reconnect, or return False for the full dialogue.
+
+        Returns False, with nothing done or the reader running, when the
+        driver knows no sensor yet (or must not resume), or when the sensor
+        does not answer or another serial number does. A resume cut short by
+        the cancel is not announced.
+        """
+        dialogue = self.dialogue
+        if not dialogue.can_resume():
+            return False
+        self._report.enter(State.INITIALISING)
+        dialogue.expect_stream(link)
+        self._hand_on()
+        self._start_reader(link)
+        if not dialogue.resume(link):
+            return False
+        if not self._cancel.is_set():
+            self._report.streaming('resumed')
+        return True
+
+    def _begin_stream(self, link: DeviceLink) -> None:
+        """Start continuous mode on an initialised link; announce it once records arrive."""
+        if self.dialogue.start_continuous(link):
+            self._report.streaming('full')
+            self.dialogue.announce_streaming()
+
+    def _restart_stream(self, link: DeviceLink) -> bool:
+        """
+        Ask for the stream again on the same link (after a stall or a pause).
+
+        True once records arrive again, False if cancelled first; raises
+        DeviceTimeout when none comes, PortDisconnected if the port goes.
+        """
+        self._hand_on()  # a capture in the pause may have given a bias to keep
+        if not self.dialogue.start_continuous(link):
+            return False
+        self._report.streaming()
+        return True
+
+    def _quiet(self, link: DeviceLink) -> None:
+        """Stop the device's stream and drop what is in flight: READY, or DISCONNECTED."""
+        try:
+            self.dialogue.quiet(link)
+            self._report.enter(State.READY)
+            self._current.observe(False)
+        except PortError as exc:
+            self._report.warn(type(exc).__name__, str(exc))
+            self._current.release()
+            self._report.enter(State.DISCONNECTED)
+
+    def _hand_on(self) -> None:
+        """
+        Hand the record path what it needs of what the dialogue learned, before records come.
+
+        ``on_stream_known`` gets the timer ticks between two records (None
+        while the divider is unknown) and whether a gyro bias is kept and
+        written back after a power cycle.
+        """
+        if self._on_stream_known is not None:
+            divider = self.dialogue.divider
+            self._on_stream_known(ticks_per_cycle(divider) if divider else None,
+                                  self.dialogue.gyro_bias is not None)
+
+    def _anchor(self) -> None:
+        """Let the consumer re-anchor before the first record of a new link reaches it."""
+        if self._on_connect is not None:
+            self._on_connect()
+
+    def _start_reader(self, link: DeviceLink) -> None:
+        """Anchor the consumer, start the reader thread; log its scheduling when it changes."""
+        self._anchor()
+        link.start()
+        if not link.running.wait(timeouts.READER_START_WAIT_S):
+            return
+        outcome = link.policy_outcome
+        if outcome != self._policy_logged:
+            self._policy_logged = outcome
+            if outcome.applied:
+                self._log.info(f'reader thread: {", ".join(outcome.applied)}')
+            for refusal in outcome.refused:
+                self._log.warning(refusal)
 
     # -- the supervisor thread: stream and recover ---------------------------------------
 
@@ -343,14 +441,14 @@ class DeviceSupervisor:
                 if link is None:
                     report.enter(State.CONNECTING)
                     link = self._current.open_link()
-                    if not self._steps.resume(link):
-                        self._steps.initialise(link)
-                        self._steps.begin_stream(link)
+                    if not self._resume(link):
+                        self._initialise(link)
+                        self._begin_stream(link)
                 self._watch(link)
                 stalled = True
             except PortUnusable as exc:
                 self._fail(exc)
-            except (PortError, DeviceTimeout) as exc:
+            except (PortError, DeviceError) as exc:
                 if not self._cancel.is_set():  # else: cut short on purpose
                     self._say(exc)
             if self._cancel.is_set():
@@ -360,17 +458,16 @@ class DeviceSupervisor:
             report.enter(State.DISCONNECTED)
             self._reopen_wait(after_stall=stalled)
 
-    def _say(self, exc: PortError | DeviceTimeout) -> None:
+    def _say(self, exc: PortError | DeviceError) -> None:
         """Say why this attempt failed, and that the loop goes on."""
-        if isinstance(exc, DeviceTimeout):
+        if isinstance(exc, DeviceError):
             self._report.warn('timeout', f'device not answering: {exc} (wrong port or '
                                          f'address? ros2 run i3dmgx2_driver discover '
                                          f'finds sensors)')
             return
         # An unplug is an event; a port that stays missing is a condition.
         period = EVENT_PERIOD if isinstance(exc, PortDisconnected) else None
-        self._report.warn(type(exc).__name__, f'{exc} (retrying every '
-                                              f'{self.config.reconnect_interval:g} s)', period)
+        self._report.warn(type(exc).__name__, f'{exc} ({self._reopen_wait.promise})', period)
 
     def _fail(self, exc: PortUnusable) -> None:
         """Give up for good: keep why, stop, and let the entry point say it and exit."""
@@ -405,8 +502,8 @@ class DeviceSupervisor:
                 # A sensor power-cycled meanwhile (a battery swap) lost the biases
                 # in its RAM: the kept ones go back before its stream does.
                 self.dialogue.write_biases(link)
-                resumed = self._steps.restart_stream(link)
-            except DeviceTimeout:
+                resumed = self._restart_stream(link)
+            except DeviceError:
                 report.warn('stall', 'stream did not resume: reopening the port', EVENT_PERIOD)
                 return
             if resumed:

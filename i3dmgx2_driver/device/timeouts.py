@@ -21,11 +21,9 @@ is stopped, the next record of a stream) is named here, with the setting
 that changes it, so that the node (``settings.DeviceConfig``, the dialogue),
 ``discover`` (``tools.discover_probe.ProbeConfig``) and ``bringup``, which
 measures the real round trips and warns when one comes within a factor 2 of
-a timeout, cannot disagree about them. The steps that wait
+a timeout (tools/bringup_round_trips.py), cannot disagree about them. The steps that wait
 (``sensor_steps.py``) are the same for all three.
 """
-
-from typing import NamedTuple
 
 #: The driver's ping of its sensor at start-up (s per try), and its tries.
 PING_TIMEOUT = 0.3
@@ -61,6 +59,9 @@ STOP_TRIES = 3
 #: After 0xFA: how long (s) the records already on their way are given to arrive
 #: before they are dropped (the line quieted without waiting for silence).
 STOP_SETTLE_S = 0.05
+#: After a failed attempt the port is tried again this much later (s; sooner when it comes
+#: back: watchdog.ReopenWait), the node's ``reconnect_interval``.
+RECONNECT_INTERVAL = 1.0
 #: No record for this long (s): the stream has stalled (the node's ``read_timeout``).
 STALL_TIMEOUT = 1.0
 #: The first polls before continuous mode (dialogue.py): tries of each, short of the
@@ -76,6 +77,15 @@ STOP_GAP_AT_EXIT_S = 0.01
 #: tries again.
 TEMPERATURE_TIMEOUT = 0.3
 TEMPERATURE_RETRIES = 2
+#: How often a wait for records, or for their silence, looks again (s).
+RECORD_POLL_S = 0.01
+#: How often a resume looks for a record of the stream still running (s; within RESUME_LOOK_S).
+RESUME_POLL_S = 0.002
+#: The reader's wait while the parser holds one byte (a lone 0xAA: an ACK, or a packet's
+#: start), to tell the two apart soon (s).
+LONE_BYTE_WAIT_S = 0.02
+#: How long stopping waits for the supervisor thread to end (s).
+SUPERVISOR_STOP_WAIT_S = 1.5
 #: How long a port's reader is waited for to start (s), and to end once told to stop
 #: (a read returns within its read timeout, far less).
 READER_START_WAIT_S = 1.0
@@ -91,68 +101,3 @@ PROBE_REQUEST_RETRIES = 3
 PROBE_LISTEN_S = 0.5
 #: discover: this many unanswered pings first mean no base station on the port.
 PROBE_SILENT_PINGS = 2
-
-#: What bringup measures, by the names of its round trips.
-PING = 'ping'
-COMMAND = 'command'
-CONTINUOUS_START = 'continuous start'
-RECORD_GAP = 'record gap'
-
-
-class RadioTimeout(NamedTuple):
-    """One wait on the radio, what it waits for and how to change it."""
-
-    #: The constant's name in this module.
-    name: str
-    seconds: float
-    #: Which measured round trip it bounds: PING, COMMAND, CONTINUOUS_START or RECORD_GAP.
-    measured: str
-    #: Who waits, in words.
-    waits: str
-    #: How a user changes it: a parameter, an option, or this module's constant.
-    setting: str
-
-
-def radio_timeouts() -> tuple[RadioTimeout, ...]:
-    """Return every timeout on the radio, with the round trip it bounds."""
-    here = 'i3dmgx2_driver/device/timeouts.py'
-    return (
-        RadioTimeout('PING_TIMEOUT', PING_TIMEOUT, PING,
-                     "the node's start-up ping", f'PING_TIMEOUT in {here}'),
-        RadioTimeout('PROBE_PING_TIMEOUT', PROBE_PING_TIMEOUT, PING,
-                     "discover's first pings", 'discover --ping-timeout'),
-        RadioTimeout('PROBE_ANSWER_TIMEOUT', PROBE_ANSWER_TIMEOUT, PING,
-                     "discover's pings through a known base station",
-                     f'PROBE_ANSWER_TIMEOUT in {here}'),
-        RadioTimeout('REQUEST_TIMEOUT', REQUEST_TIMEOUT, COMMAND,
-                     "the node's commands (per try)", 'the node parameter request_timeout'),
-        RadioTimeout('RESUME_TIMEOUT', RESUME_TIMEOUT, COMMAND,
-                     "the node's serial-number read on a reconnect (per try; the node "
-                     'parameter fast_reconnect false avoids it)',
-                     'the node parameter resume_timeout'),
-        RadioTimeout('PROBE_REQUEST_TIMEOUT', PROBE_REQUEST_TIMEOUT, COMMAND,
-                     "discover's commands (per try)", f'PROBE_REQUEST_TIMEOUT in {here}'),
-        RadioTimeout('REQUEST_TIMEOUT', REQUEST_TIMEOUT, CONTINUOUS_START,
-                     "the node's continuous-mode request (per try)",
-                     'the node parameter request_timeout'),
-        RadioTimeout('STALL_TIMEOUT', STALL_TIMEOUT, RECORD_GAP,
-                     "the node's stall watch", 'the node parameter read_timeout'),
-    )
-
-
-def close_calls(measured: dict[str, float], factor: float = 2.0) -> list[str]:
-    """
-    Say which timeouts a measured round trip comes within ``factor`` of.
-
-    ``measured`` maps PING, COMMAND, CONTINUOUS_START, RECORD_GAP to the
-    longest time seen (s); one sentence per timeout it comes close to.
-    """
-    said = []
-    for timeout in radio_timeouts():
-        seen = measured.get(timeout.measured)
-        if seen is None or seen * factor < timeout.seconds:
-            continue
-        said.append(f'{timeout.measured} took up to {seen * 1e3:.0f} ms, within a factor '
-                    f'{factor:g} of {timeout.name} = {timeout.seconds:g} s ({timeout.waits}): '
-                    f'raise {timeout.setting}')
-    return said

@@ -80,6 +80,11 @@ class ReopenWait:
         self._exists = exists
         self._clock = clock
 
+    @property
+    def promise(self) -> str:
+        """Say when the port is tried again, as a failed attempt's warning ends."""
+        return f'retrying every {self.interval:g} s'
+
     def __call__(self, after_stall: bool = False) -> None:
         """
         Return when the port may be tried again, or the driver stops.

@@ -40,6 +40,7 @@ import math
 import struct
 
 from .cdr import CDR_LE, StampedDoubles
+from .mag_calibration import field_correction, IDENTITY, ZERO
 from ..codec import streams
 from ..codec.layouts import LAYOUTS
 from ..codec.orientation import ENU, matrix_from_euler, quaternion
@@ -105,6 +106,9 @@ class MessageSettings:
     linear_acceleration_stddev: float = 0.0
     magnetic_field_stddev: float = 0.0
     stream: Stream = streams.DEFAULT
+    #: The field's calibration, the sensor's axes (mag_calibration.py): T, and row-major.
+    mag_hard_iron: tuple[float, ...] = ZERO
+    mag_soft_iron: tuple[float, ...] = IDENTITY
 
 
 class MessageFactory:
@@ -193,11 +197,15 @@ class MessageFactory:
         cov = _COVARIANCE.pack(*diagonal_covariance(settings.magnetic_field_stddev))
         field, enu, t = self._at[self.stream.mag], self.convention == ENU, TESLA_PER_GAUSS
         isnan = math.isnan
+        # The field's calibration, in the sensor's axes, Gauss (None: none asked for).
+        calibrate = field_correction(settings.mag_hard_iron, settings.mag_soft_iron, t)
 
         def mag_cdr(v: tuple, sec: int, nanosec: int) -> bytes | None:
             x, y, z = v[field], v[field + 1], v[field + 2]
             if isnan(x) or isnan(y) or isnan(z):  # no new reading (docs/protocol.md §7)
                 return None
+            if calibrate is not None:
+                x, y, z = calibrate((x, y, z))
             if enu:
                 y, z = -y, -z
             return pack(CDR_LE, sec, nanosec, flen, frame, x * t, y * t, z * t, cov)

@@ -356,13 +356,16 @@ def time_status(time_source: str, clock: ClockStatus, now: float,
 
 
 def calibration_status(last: Calibration | None, good: Calibration | None,
-                       now: float) -> Status:
+                       now: float, mag_calibrated: bool = False) -> Status:
     """
     Show the gyro bias captured in this session, and WARN if the last try failed.
 
-    ``last`` is the last attempt, ``good`` the last accepted one.
+    ``last`` is the last attempt, ``good`` the last accepted one;
+    ``mag_calibrated``: whether mag_hard_iron or mag_soft_iron correct the field.
     """
-    values: list[tuple[str, str]] = [('gyro bias captured', 'yes' if good else 'no')]
+    values: list[tuple[str, str]] = [('gyro bias captured', 'yes' if good else 'no'),
+                                     ('magnetometer calibration',
+                                      'loaded' if mag_calibrated else 'none')]
     if good is not None and good.bias is not None:
         values += [('gyro bias (rad/s)', format_vector(good.bias)),
                    ('captured (s ago)', f'{now - good.time:.0f}'),

@@ -44,6 +44,7 @@ from .diagnostic_statuses import (
     calibration_status, connection_status, device_status, lifecycle_status, parser_status,
     radio_status, Status, stream_status, StreamPeriod, time_status, to_message,
 )
+from .mag_calibration import is_loaded
 from .publishers import create_publisher
 from ..device.record_rate import RateMeter
 from ..device.status import DeviceStatus, RadioStats, State
@@ -176,7 +177,8 @@ class DiagnosticsPublisher:
                           core.temperature.unavailable),
             time_status(cfg.time_source, core.records.clock_status(), now,
                         time_offset=cfg.time_offset),
-            calibration_status(last, good, time.time()),
+            calibration_status(last, good, time.time(),
+                               is_loaded(cfg.messages_for(core.sensor))),
         ]
         self._last_parser = parser
         return statuses

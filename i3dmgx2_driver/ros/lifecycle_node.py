@@ -67,14 +67,14 @@ from .main import run
 from .parameters import declare_parameters, driver_config, DriverConfig, ParameterError
 from .publishers import create_publishers, Publishers
 from .. import lifetime
-from ..device.link import DeviceTimeout
+from ..device.link import DeviceError
 from ..device.port import check_port_path, PortError, PortUnusable
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
 ERROR = TransitionCallbackReturn.ERROR
 #: What a transition can fail with that is the device's or the port's doing.
-DEVICE_ERRORS = (PortError, DeviceTimeout)
+DEVICE_ERRORS = (PortError, DeviceError)
 #: How long a signal waits for a transition under way to end (s); the
 #: device was cut off first, so it ends within milliseconds.
 TRANSITION_WAIT = 1.0

@@ -50,6 +50,8 @@ from typing import Any, NamedTuple
 
 from rclpy.parameter import Parameter
 
+from .mag_calibration import (HARD_IRON, IDENTITY, is_matrix_list, is_offset_list, SOFT_IRON,
+                              ZERO)
 from ..codec import streams
 from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
@@ -273,6 +275,18 @@ SPECS: list[Spec] = [
     Spec('magnetic_field_stddev', DOUBLE, 0.0,
          'Magnetic field standard deviation (T); 0: unknown (no published figure).',
          (0.0, 1.0), feeds='messages.magnetic_field_stddev'),
+    # The field's calibration (ros/mag_calibration.py), measured by magcal (docs/magcal.md).
+    Spec(HARD_IRON, DOUBLES, list(ZERO),
+         "Hard-iron offset [x, y, z] (T, the sensor's own axes: x forward, y right, z down) "
+         'taken off the field before it is published (imu/mag); with addresses, 3 for all '
+         'or 3 per sensor. Measured by magcal.', valid='3 finite numbers (T), or 3 per sensor',
+         accepts=is_offset_list),
+    Spec(SOFT_IRON, DOUBLES, list(IDENTITY),
+         'Soft-iron matrix (row-major, 9 values) the field is multiplied by once the hard '
+         'iron is off, in the same axes; with addresses, 9 for all or 9 per sensor. '
+         'Measured by magcal.',
+         valid='a symmetric (within 1e-6 relative), positive-definite 3x3 matrix, row-major '
+               '(9 numbers), or 9 per sensor', accepts=is_matrix_list),
     Spec('time_source', TEXT, 'device',
          'device: sample time from the sensor timer aligned to the host clock; '
          'host: time the packet was read.', choices=TIME_SOURCES),

@@ -53,6 +53,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .conversions import MessageSettings
+from .mag_calibration import one_sensors, per_sensor_problem
 from .parameter_table import ACCEL_BIAS, GYRO_BIAS, REQUIRED, Spec, SPECS
 from .sensor_set import check_shared_budget, sensor_settings, SensorSetting
 from ..codec import streams
@@ -95,14 +96,20 @@ class DriverConfig:
     fault_capture_dir: str
     fault_capture_seconds: float
     fault_captures_kept: int
+    #: The field's calibration as given: one for all sensors, or one each (mag_calibration.py).
+    mag_hard_iron: tuple[float, ...]
+    mag_soft_iron: tuple[float, ...]
 
     def device_for(self, sensor: SensorSetting) -> DeviceConfig:
         """Return how the device side reaches and treats ``sensor``."""
         return _sensor_device(self.device, sensor)
 
     def messages_for(self, sensor: SensorSetting) -> MessageSettings:
-        """Return how ``sensor``'s records become messages (its frame and stream)."""
-        return replace(self.messages, frame_id=sensor.frame_id, stream=sensor.stream_choice)
+        """Return how ``sensor``'s records become messages (its frame, stream, calibration)."""
+        index = self.sensors.index(sensor)
+        return replace(self.messages, frame_id=sensor.frame_id, stream=sensor.stream_choice,
+                       mag_hard_iron=one_sensors(self.mag_hard_iron, 3, index),
+                       mag_soft_iron=one_sensors(self.mag_soft_iron, 9, index))
 
 
 def _sensor_device(device: DeviceConfig, sensor: SensorSetting) -> DeviceConfig:
@@ -316,9 +323,14 @@ def _line_budget(config: DriverConfig) -> str | None:
             f'{stream.name!r}: ' + streams.advice(stream, budget))
 
 
+def _calibration_per_sensor(config: DriverConfig) -> str | None:
+    """Refuse a field calibration that is neither one for all sensors nor one each."""
+    return per_sensor_problem(config.mag_hard_iron, config.mag_soft_iron, len(config.sensors))
+
+
 #: The rules between parameters, each a refusal or None, applied in this order.
 RULES: tuple[Callable[[DriverConfig], str | None], ...] = (
-    _shared_line_budget, _one_sensors_bias, _line_budget)
+    _shared_line_budget, _one_sensors_bias, _line_budget, _calibration_per_sensor)
 
 
 def unknown_names(given: Iterable[str], known: Iterable[str]) -> list[tuple[str, str | None]]:

@@ -39,13 +39,15 @@ from sensor_msgs.msg import Temperature
 from .conversions import set_stamp
 from ..codec import layouts
 from ..device import timeouts
-from ..device.firmware import SensorFirmware
-from ..device.link import DeviceLink, DeviceTimeout
+from ..device.link import DeviceError, DeviceLink
 from ..device.port import PortError
+from ..device.sensor_firmware import SensorFirmware
 from ..device.throttle import Throttle
 
 #: Seconds between two warnings about failed polls.
 WARN_PERIOD = 60.0
+#: How long stopping waits for a poll under way (s): shutdown has a time budget.
+STOP_WAIT = 0.1
 
 
 class TemperaturePoller:
@@ -94,7 +96,7 @@ class TemperaturePoller:
         """
         self._stop.set()
         if self._thread is not None:
-            self._thread.join(timeout=0.1)
+            self._thread.join(timeout=STOP_WAIT)
 
     def _run(self) -> None:
         while not self._stop.wait(self.period):
@@ -117,7 +119,7 @@ class TemperaturePoller:
         try:
             reply = link.request(bytes((layouts.TEMPERATURES,)), layouts.TEMPERATURES,
                                  timeouts.TEMPERATURE_TIMEOUT, timeouts.TEMPERATURE_RETRIES)
-        except (DeviceTimeout, PortError) as exc:
+        except (DeviceError, PortError) as exc:
             if self._throttle.allow('poll') and not self._stop.is_set():
                 self.node.get_logger().warning(f'temperature poll failed: {exc}')
             return False

@@ -28,12 +28,12 @@ import argparse
 import math
 import time
 
-from i3dmgx2_driver.codec import firmware, framing
+from i3dmgx2_driver.codec import command_firmware as firmware, framing
 from i3dmgx2_driver.codec.data_rate import MAX_DIVIDER, MIN_DIVIDER
 
 from .config import SimulatorConfig
 from .faults import FaultConfig
-from .motion import MotionConfig
+from .motion import MotionConfig, MOTIONS
 from .noise_model import NoiseConfig
 from .pty_link import PtySimulator
 from .sensor import DEFAULT_FIRMWARE, STREAMABLE
@@ -142,6 +142,15 @@ def build_parser() -> argparse.ArgumentParser:
                         help='no magnetometer: every field reading is NaN (Inertia-Link)')
     device.add_argument('--mag-nan-probability', type=_probability, default=0.0, metavar='P',
                         help='share of cycles without a new magnetometer reading')
+    device.add_argument('--motion', choices=tuple(MOTIONS), default='sway',
+                        help='sway (default); tumble: through every attitude; yaw: level, '
+                             'turning in yaw alone (a magnetometer calibration, docs/magcal.md)')
+    device.add_argument('--hard-iron', type=float, nargs=3, default=(0.0, 0.0, 0.0),
+                        metavar=('X', 'Y', 'Z'), help='offset added to the field (Gauss, the '
+                        "sensor's axes)")
+    device.add_argument('--soft-iron', type=float, nargs=9, metavar='M',
+                        default=MotionConfig.soft_iron,
+                        help='matrix the field is multiplied by (row-major), before the offset')
     device.add_argument('--ppm', type=float, default=40.0,
                         help='clock error of the sensor timer in ppm (default: 40)')
     device.add_argument('--timer-start', type=lambda s: int(s, 0), metavar='TICKS',
@@ -225,7 +234,9 @@ def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
         streaming_at_start=args.stream or False,
         serial_number=args.serial, rate_hz=args.rate, seed=args.seed,
         motion=MotionConfig(static=args.static,
-                            noise=NoiseConfig() if args.honest_noise else None),
+                            noise=NoiseConfig() if args.honest_noise else None,
+                            hard_iron=tuple(args.hard_iron), soft_iron=tuple(args.soft_iron),
+                            **MOTIONS[args.motion]),
         faults=faults, nan_mag=args.nan_mag,
         mag_nan_probability=args.mag_nan_probability, clock_ppm=args.ppm,
         timer_start=args.timer_start, latency_s=args.latency_ms / 1000.0,

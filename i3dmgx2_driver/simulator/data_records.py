@@ -155,8 +155,8 @@ class Cycle:
 
     @property
     def matrix(self) -> Matrix3:
-        """Orientation matrix M: the true attitude (the device's filter is not modelled)."""
-        return self._measured.truth.matrix
+        """Orientation matrix M: the true attitude, its heading from the field read (iron)."""
+        return self._measured.matrix
 
     @property
     def update_matrix(self) -> Matrix3:

@@ -34,9 +34,10 @@ import time
 from .base_station import BaseStation
 from .ground_truth import GroundTruth
 from .inbox import SensorInbox
-from .pty_port import close_quietly, PtyPort, TIOCPKT_DATA, TIOCPKT_FLUSHREAD
+from .pty_port import PtyPort, TIOCPKT_DATA, TIOCPKT_FLUSHREAD
 from .transmitter import POLL_S
 from .wired_line import WiredLine
+from ..lifetime import close_quietly
 
 _READ_SIZE = 4096
 

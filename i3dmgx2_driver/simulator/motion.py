@@ -91,6 +91,20 @@ class MotionConfig:
     #: instability, random walk per axis) instead of ``gyro_noise`` and ``accel_noise``
     #: alone; None: those alone, white, as the simulator always made it.
     noise: NoiseConfig | None = None
+    #: Iron that moves with the sensor (docs/magcal.md): the field read is
+    #: ``soft_iron * true + hard_iron`` (Gauss, sensor axes, row-major), and the
+    #: sensor's own attitude takes its heading from that field, as its filter does
+    #: (magnetic: north of the field, not true north).
+    hard_iron: Vector3 = (0.0, 0.0, 0.0)
+    soft_iron: Matrix3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+
+
+#: The sway of each ``--motion``: the default; through every attitude (a magnetometer
+#: calibration's sweep); level, turning in yaw alone (a ground robot turning in place).
+MOTIONS = {'sway': {},
+           'tumble': {'sway_amplitude_deg': (180.0, 80.0, 0.0), 'sway_period_s': (23.0, 37.0, 1.0),
+                      'yaw_rate_dps': 13.0},
+           'yaw': {'sway_amplitude_deg': (0.0, 0.0, 0.0), 'yaw_rate_dps': 12.0}}
 
 
 class TrueState(NamedTuple):
@@ -115,6 +129,15 @@ class Measurement(NamedTuple):
     angular_rate: Vector3
     mag: Vector3
     truth: TrueState
+    #: The sensor's own attitude (0xC5, 0xC8, 0xCC, Euler): its heading from the field read.
+    matrix: Matrix3
+
+
+def tilted_heading(field: Vector3, roll: float, pitch: float) -> float:
+    """Return the heading (rad) a compass levelled by ``roll`` and ``pitch`` reads."""
+    sr, cr, sp, cp = math.sin(roll), math.cos(roll), math.sin(pitch), math.cos(pitch)
+    north = field[0] * cp + (field[1] * sr + field[2] * cr) * sp
+    return math.atan2(field[2] * sr - field[1] * cr, north)
 
 
 def mat_vec(m: Matrix3, v: Vector3) -> Vector3:
@@ -158,6 +181,7 @@ class Motion:
         self._frozen_tau: float | None = 0.0 if c.static else None
         self._offset = 0.0
         self._noise: NoiseStream | None = None
+        self._iron = c.hard_iron != (0.0, 0.0, 0.0) or c.soft_iron != MotionConfig.soft_iron
 
     @property
     def static(self) -> bool:
@@ -236,9 +260,16 @@ class Motion:
             accel = tuple(truth.accel[i] + c.accel_bias[i] + accel_error[i] for i in range(3))
             rate = tuple(truth.angular_rate[i] + c.gyro_bias[i] + gyro_error[i]
                          for i in range(3))
+        field, matrix = truth.mag, truth.matrix
+        if self._iron:
+            soft = mat_vec(c.soft_iron, field)
+            field = tuple(f + h for f, h in zip(soft, c.hard_iron, strict=True))
+            # As the sensor's filter: tilt from gravity, magnetic heading from the field read.
+            roll, pitch, _ = truth.euler
+            matrix = matrix_from_euler(roll, pitch, tilted_heading(field, roll, pitch))
         if c.nan_mag or (c.mag_nan_probability > 0.0
                          and rng.random() < c.mag_nan_probability):
             mag = (_NAN, _NAN, _NAN)
         else:
-            mag = tuple(truth.mag[i] + gauss(0.0, c.mag_noise) for i in range(3))
-        return Measurement(accel, rate, mag, truth)
+            mag = tuple(field[i] + gauss(0.0, c.mag_noise) for i in range(3))
+        return Measurement(accel, rate, mag, truth, matrix)

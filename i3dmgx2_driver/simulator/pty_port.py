@@ -45,6 +45,8 @@ import threading
 import time
 import tty
 
+from ..lifetime import close_quietly
+
 #: Name of the port symlink inside the simulator's private directory.
 PORT_NAME = 'ttyGX2'
 #: Leading byte of a packet-mode read: data follow (anything else is a status).
@@ -55,26 +57,20 @@ TIOCPKT_FLUSHREAD = getattr(termios, 'TIOCPKT_FLUSHREAD', 0x01)
 _TIOCPKT = getattr(termios, 'TIOCPKT', 0x5420)
 
 
-def close_quietly(*fds: int | None) -> None:
-    """Close each descriptor given (None: none); one already closed is no error at the end."""
-    for fd in fds:
-        if fd is not None:
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-
-
 class PtyPort:
     """
     One pseudo-terminal at a time behind the symlink ``path``; unplugging closes it.
 
     ``io_lock`` guards the descriptors and every write. Lock order: a caller
     may hold the simulator's lock while taking ``io_lock``, never the reverse.
+    ``prefix`` names the private directory of a symlink not asked for (a
+    replay's says so).
     """
 
-    def __init__(self, symlink: str | None = None, link_via_proc: bool = True) -> None:
+    def __init__(self, symlink: str | None = None, link_via_proc: bool = True,
+                 prefix: str = 'i3dmgx2-sim-') -> None:
         self._symlink = symlink
+        self._prefix = prefix
         self._link_via_proc = link_via_proc
         self._dir: str | None = None
         self.io_lock = threading.Lock()
@@ -96,7 +92,7 @@ class PtyPort:
             if os.path.lexists(self.path) and not os.path.islink(self.path):
                 raise FileExistsError(f'{self.path} exists and is not a symlink')
         else:
-            self._dir = tempfile.mkdtemp(prefix='i3dmgx2-sim-')
+            self._dir = tempfile.mkdtemp(prefix=self._prefix)
             self.path = os.path.join(self._dir, PORT_NAME)
         return self.path
 

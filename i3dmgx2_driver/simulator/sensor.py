@@ -37,7 +37,7 @@ import math
 import random
 from typing import Any, ClassVar, NamedTuple
 
-from i3dmgx2_driver.codec import firmware, framing
+from i3dmgx2_driver.codec import command_firmware as firmware, framing
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec import records as rec
 from i3dmgx2_driver.codec.commands import (
@@ -110,7 +110,7 @@ class SensorSpec:
     #: Calculation rate (Hz) overriding the EEPROM divider (None: the divider's).
     rate_hz: float | None = None
     #: Firmware as 0xE9 reports it (2113: 2.1.13); a command newer than it goes
-    #: unanswered, as on a real sensor (codec/firmware.py says which).
+    #: unanswered, as on a real sensor (codec/command_firmware.py says which).
     firmware_version: int = DEFAULT_FIRMWARE
     model_number: str = '3DM-GX2'
     model_name: str = '3DM-GX2 Wireless'

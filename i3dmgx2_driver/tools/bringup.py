@@ -49,12 +49,14 @@ import threading
 import time
 from typing import Any, TextIO
 
-from .bringup_round_trips import MEASURE_TIMEOUT, note_longest, RoundTrips, spread
-from .port_listing import latency_timer_ms
+from .bringup_round_trips import (
+    close_calls, MEASURE_TIMEOUT, note_longest, radio_timeouts, RECORD_GAP, RoundTrips, spread,
+)
+from .port_listing import latency_timer_ms, port_group
 from .. import lifetime
 from ..arguments import seconds, whole_number
 from ..capture.file_format import CaptureWriter, default_header
-from ..codec import firmware as fw
+from ..codec import command_firmware as fw
 from ..codec import line_budget, streams
 from ..codec.data_rate import (
     divider_for_rate, period_of_divider, rate_of_divider, ticks_per_cycle,
@@ -66,8 +68,8 @@ from ..codec.timer import TIMER_MODULUS
 from ..device import timeouts
 from ..device.clock import DeviceClock
 from ..device.identity import read_identity
-from ..device.link import DeviceLink, DeviceTimeout, LinkOptions
-from ..device.port import port_group, PortError, SerialPort
+from ..device.link import DeviceError, DeviceLink, LinkOptions
+from ..device.port import PortError, SerialPort
 from ..device.sample_clock import records_lost
 from ..device.sensor_steps import SensorSteps
 
@@ -220,7 +222,7 @@ class Bringup:
         self.say(fw.summary(self.firmware))
         try:
             self.found_divider = self.steps.read_divider(link)
-        except DeviceTimeout:
+        except DeviceError:
             self.found_divider = None
         self.divider = self.found_divider
         self.report['as_found'] = {
@@ -235,7 +237,7 @@ class Bringup:
         """Write the rate divider to EEPROM (once, read back); True if it holds."""
         try:
             self.divider = self.steps.write_divider(self.link, self.divider, divider)
-        except DeviceTimeout:
+        except DeviceError:
             self.divider = None  # written or not: unknown
             return False
         return True
@@ -266,14 +268,14 @@ class Bringup:
         try:
             self.steps.start_stream(self.link, stream.code, period)
             time.sleep(self.args.stream_seconds)
-        except DeviceTimeout:
+        except DeviceError:
             out['error'] = (f'no records after {timeouts.CONTINUOUS_TRIES} continuous-mode '
                             f'requests')
         log = self.log.stop()
         self.steps.stop_until_quiet(self.link, period)
         out.update(stream_figures([e for e in log if e[1] == stream.code], divider,
                                   line_budget.wire_time(stream.code, self.args.baud, True)))
-        note_longest(self.longest, timeouts.RECORD_GAP, [out['longest_gap_ms'] / 1e3]
+        note_longest(self.longest, RECORD_GAP, [out['longest_gap_ms'] / 1e3]
                      if out.get('longest_gap_ms') is not None else [])
         return out
 
@@ -288,7 +290,7 @@ class Bringup:
             ok = self.divider == self.found_divider or self._write_divider(self.found_divider)
             try:
                 readback = steps.read_divider(link)
-            except DeviceTimeout:
+            except DeviceError:
                 readback = None
             out['rate_divider'] = readback
             out['rate_divider_restored'] = bool(ok and readback == self.found_divider)
@@ -299,7 +301,7 @@ class Bringup:
             try:
                 restarted = steps.start_stream(link, self.found_stream,
                                                period_of_divider(self.divider))
-            except DeviceTimeout:
+            except DeviceError:
                 restarted = False
             out['streaming'] = f'0x{self.found_stream:02X}' if restarted else None
             out['stream_restored'] = restarted
@@ -473,7 +475,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
                  'in_group': owner[1] if owner else None},
         'settings': {'pings': args.pings, 'commands': args.commands, 'cycles': args.cycles,
                      'stream_seconds': args.stream_seconds},
-        'timeouts': [t._asdict() for t in timeouts.radio_timeouts()],
+        'timeouts': [t._asdict() for t in radio_timeouts()],
         'round_trips': {}, 'streams': [],
     }
     status = EXIT_FAILED
@@ -491,7 +493,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         notes='bringup session'))
     log = RecordLog()
     link = DeviceLink(port, args.address, log,
-                      LinkOptions(read_timeout=timeouts.TOOL_READ_TIMEOUT, on_bytes=capture.write))
+                      LinkOptions.listening(True, capture.write))
     session = Bringup(link, log, args, say)
     session.report = report
     trips = session.round_trips
@@ -513,7 +515,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         say('putting the sensor back as found')
         report['left'] = session.restore()
         restored = True
-        report['close_calls'] = timeouts.close_calls(session.longest)
+        report['close_calls'] = close_calls(session.longest)
         if report['left']['as_found'] and 'error' not in report:
             status = EXIT_OK
     except KeyboardInterrupt:
@@ -521,7 +523,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         status = EXIT_INTERRUPTED
         if not restored:
             report['left'] = session.restore()
-    except (PortError, DeviceTimeout) as exc:
+    except (PortError, DeviceError) as exc:
         report['error'] = str(exc)
     finally:
         link.stop()

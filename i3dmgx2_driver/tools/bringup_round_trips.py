@@ -18,7 +18,7 @@ The round trips a bring-up measures: ping, a short command, continuous mode's st
 Each is timed with :data:`MEASURE_TIMEOUT`, far beyond the driver's own
 timeouts, so that a slow round trip is measured rather than counted lost;
 the longest of each kind is noted for the check of the driver's timeouts
-(``device/timeouts.py``: ``close_calls``). When a stream is stopped is told
+(:func:`close_calls`). When a stream is stopped is told
 as every tool and the node tell it (``device/sensor_steps.py``).
 """
 
@@ -26,18 +26,85 @@ import argparse
 from collections.abc import Callable, Sequence
 import statistics
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 from ..codec import commands, layouts
 from ..device import timeouts
-from ..device.link import DeviceLink, DeviceNack, DeviceTimeout
+from ..device.link import DeviceError, DeviceLink, DeviceNack
 from ..device.sensor_steps import SensorSteps
+from ..ros.parameter_table import SPECS
 
 #: How long a single measured exchange may take (s): far beyond every timeout the
 #: driver uses, so that a slow round trip is measured rather than counted lost.
 MEASURE_TIMEOUT = 2.0
 #: The short command whose round trip is measured: the firmware version (0xE9).
 SHORT_COMMAND = layouts.FIRMWARE_VERSION
+
+#: What bringup measures, by the names of its round trips.
+PING = 'ping'
+COMMAND = 'command'
+CONTINUOUS_START = 'continuous start'
+RECORD_GAP = 'record gap'
+_HERE = 'i3dmgx2_driver/device/timeouts.py'
+#: The waits on the radio a round trip is held against: the constant in device/timeouts.py,
+#: the round trip it bounds, who waits, and how a user changes it: the ``DeviceConfig``
+#: field a node parameter sets (named from the parameter table), a tool's option, or
+#: '' (the constant itself).
+_WAITS = (
+    ('PING_TIMEOUT', PING, "the node's start-up ping", ''),
+    ('PROBE_PING_TIMEOUT', PING, "discover's first pings", 'discover --ping-timeout'),
+    ('PROBE_ANSWER_TIMEOUT', PING, "discover's pings through a known base station", ''),
+    ('REQUEST_TIMEOUT', COMMAND, "the node's commands (per try)", 'request_timeout'),
+    ('RESUME_TIMEOUT', COMMAND, "the node's serial-number read on a reconnect (per try; the "
+     'node parameter fast_reconnect false avoids it)', 'resume_timeout'),
+    ('PROBE_REQUEST_TIMEOUT', COMMAND, "discover's commands (per try)", ''),
+    ('REQUEST_TIMEOUT', CONTINUOUS_START, "the node's continuous-mode request (per try)",
+     'request_timeout'),
+    ('STALL_TIMEOUT', RECORD_GAP, "the node's stall watch", 'stall_timeout'),
+)
+
+
+class RadioTimeout(NamedTuple):
+    """One wait on the radio, what it waits for and how to change it."""
+
+    #: The constant's name in device/timeouts.py.
+    name: str
+    seconds: float
+    #: Which measured round trip it bounds: PING, COMMAND, CONTINUOUS_START or RECORD_GAP.
+    measured: str
+    #: Who waits, in words.
+    waits: str
+    #: How a user changes it: a parameter, an option, or the constant.
+    setting: str
+
+
+def radio_timeouts() -> tuple[RadioTimeout, ...]:
+    """Return every timeout on the radio, with the round trip it bounds."""
+    parameters = {spec.feeds[len('device.'):]: spec.name for spec in SPECS
+                  if spec.feeds.startswith('device.')}
+    return tuple(
+        RadioTimeout(name, getattr(timeouts, name), measured, waits,
+                     f'the node parameter {parameters[setting]}' if setting in parameters
+                     else setting or f'{name} in {_HERE}')
+        for name, measured, waits, setting in _WAITS)
+
+
+def close_calls(measured: dict[str, float], factor: float = 2.0) -> list[str]:
+    """
+    Say which timeouts a measured round trip comes within ``factor`` of.
+
+    ``measured`` maps PING, COMMAND, CONTINUOUS_START, RECORD_GAP to the
+    longest time seen (s); one sentence per timeout it comes close to.
+    """
+    said = []
+    for timeout in radio_timeouts():
+        seen = measured.get(timeout.measured)
+        if seen is None or seen * factor < timeout.seconds:
+            continue
+        said.append(f'{timeout.measured} took up to {seen * 1e3:.0f} ms, within a factor '
+                    f'{factor:g} of {timeout.name} = {timeout.seconds:g} s ({timeout.waits}): '
+                    f'raise {timeout.setting}')
+    return said
 
 
 def spread(values: Sequence[float], scale: float = 1.0,
@@ -89,7 +156,7 @@ class RoundTrips:
                 absent += 1  # the base station answered, the sensor did not (0x21)
             else:
                 times.append(took)
-        note_longest(self.longest, timeouts.PING, times)
+        note_longest(self.longest, PING, times)
         return {'ping': {
             **spread(times, 1e3), 'lost': lost, 'not_answered_by_sensor': absent}}
 
@@ -104,11 +171,11 @@ class RoundTrips:
             except DeviceNack:
                 nacked += 1
                 continue
-            except DeviceTimeout:
+            except DeviceError:
                 lost += 1
                 continue
             times.append(time.monotonic() - start)
-        note_longest(self.longest, timeouts.COMMAND, times)
+        note_longest(self.longest, COMMAND, times)
         return {'command': {
             **spread(times, 1e3), 'lost': lost, 'nacked': nacked}}
 
@@ -132,7 +199,7 @@ class RoundTrips:
                 replies.append(time.monotonic() - start)
             except DeviceNack:
                 nacked += 1
-            except DeviceTimeout:
+            except DeviceError:
                 lost += 1
             deadline = start + MEASURE_TIMEOUT + timeouts.RECORD_PERIODS * period
             first = None
@@ -155,7 +222,7 @@ class RoundTrips:
                 steps.stop_until_quiet(link, period)
                 continue
             stops.append(max(0.0, last - stop_sent))
-        note_longest(self.longest, timeouts.CONTINUOUS_START, starts)
+        note_longest(self.longest, CONTINUOUS_START, starts)
         return {
             'continuous_start': {
                 **spread(starts, 1e3), 'reply': spread(replies, 1e3), 'lost': lost,

@@ -38,14 +38,15 @@ from typing import Any, TextIO
 
 from .discover_probe import FACTORY_ADDRESSES, PortProbe, probe_port, ProbeConfig, SensorFound
 from .port_listing import (
-    BY_ID_DIR, DEFAULT_LATENCY_TIMER_MS, describe_path, latency_timer_ms, list_ports, PortInfo,
+    BY_ID_DIR, DEFAULT_LATENCY_TIMER_MS, describe_path, latency_timer_ms, list_ports, port_group,
+    PortInfo,
     SYS_CLASS_TTY,
 )
 from .. import lifetime
 from ..arguments import seconds
-from ..codec import firmware as fw
+from ..codec import command_firmware as fw
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
-from ..device.port import port_group, serial_group, UDEV_RULE_INSTALL
+from ..device.port import serial_group, UDEV_RULE_INSTALL
 
 EXIT_FOUND = 0
 EXIT_NONE = 1

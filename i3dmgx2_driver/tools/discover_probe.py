@@ -51,7 +51,7 @@ from ..codec.framing import DataPacket
 from ..codec.parser import SensorStreamParser
 from ..device import timeouts
 from ..device.identity import DeviceInfo, read_identity
-from ..device.link import DeviceLink, DeviceTimeout, LinkOptions
+from ..device.link import DeviceError, DeviceLink, LinkOptions
 from ..device.port import (
     PortBusy, PortDisconnected, PortError, PortMissing, PortPermissionDenied, SerialPort,
 )
@@ -201,8 +201,8 @@ class _Prober:
         if self.link is not None:
             self.link.stop()
         # No address yet: a listening link takes packets from every node.
-        self.link = DeviceLink(self.port, None, self._on_record, LinkOptions(
-            wireless=wireless, read_timeout=timeouts.TOOL_READ_TIMEOUT, on_bytes=self._on_bytes))
+        self.link = DeviceLink(self.port, None, self._on_record,
+                               LinkOptions.listening(wireless, self._on_bytes))
         self.link.start()
         return self.link
 
@@ -329,7 +329,7 @@ class _Prober:
             # The one word every sensor has, read first: unanswered, there is nobody to
             # ask the rest (a port without a sensor is given up in one request's time).
             divider = steps.read_divider(link)
-        except DeviceTimeout:
+        except DeviceError:
             return None, None
         return read_identity(link, steps.timeout, steps.retries), divider
 
@@ -337,7 +337,7 @@ class _Prober:
         """Stream ``code`` again, as it was; True once its records flow."""
         try:
             return self.steps.start_stream(link, code, period_of_divider(divider))
-        except DeviceTimeout:
+        except DeviceError:
             return False
 
 

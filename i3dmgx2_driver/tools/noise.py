@@ -37,7 +37,8 @@ import numpy as np
 
 from . import allan
 from .figures import agg_figure, MatplotlibMissing
-from .imu_samples import DEFAULT_TOPIC, from_bag, from_capture, Samples
+from .imu_samples import from_bag, from_capture, Samples
+from .sources import add_sources, parse_args
 
 #: Units of each sensor's terms: N, B, K.
 UNITS = {'gyroscope': ('rad/s/√Hz', 'rad/s', 'rad/s²/√Hz'),
@@ -265,26 +266,13 @@ def _parser() -> argparse.ArgumentParser:
         prog='noise', description=__doc__.split('\n\n')[0],
         epilog='Keep the sensor still for the whole recording: an hour or more for the '
                'bias instability and the random walk, minutes for the white noise.')
-    source = parser.add_mutually_exclusive_group(required=True)
-    source.add_argument('--capture', metavar='FILE',
-                        help="a capture: the node's capture_file, a fault capture, bringup's")
-    source.add_argument('--bag', metavar='PATH', help='a rosbag2 bag, sqlite3 or MCAP')
-    source.add_argument('--minutes', type=float, metavar='M',
-                        help='listen to the running node for M minutes (Ctrl-C ends early '
-                             'and analyses what came)')
-    parser.add_argument('--topic', default=DEFAULT_TOPIC,
-                        help='the Imu topic (default %(default)s): of the bag, or live')
-    parser.add_argument('-o', '--output', metavar='DIR',
-                        help='write noise.json, noise.yaml, imu.yaml and allan.png here')
+    add_sources(parser, 'analyses', 'noise.json, noise.yaml, imu.yaml and allan.png')
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the noise tool; return the exit status."""
-    args_in = list(sys.argv[1:] if argv is None else argv)
-    if '--ros-args' in args_in:
-        args_in = args_in[:args_in.index('--ros-args')]
-    args = _parser().parse_args(args_in)
+    args = parse_args(_parser(), argv)
     start = time.monotonic()
     try:
         if args.capture:

@@ -28,16 +28,13 @@ import threading
 import time
 
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu, MagneticField
 
 from . import allan
 from .imu_samples import Samples
-from .. import lifetime
+from .sources import listening
 
 #: Seconds between two updates of the progress bar, and of its estimate.
 PROGRESS_S = 1.0
@@ -101,19 +98,10 @@ def _estimate(samples: Samples | None) -> str:
 
 def listen(topic: str, seconds: float) -> Samples:
     """Listen to ``topic`` for ``seconds`` (or until Ctrl-C); return what came."""
-    lifetime.die_with_parent()
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = Listener(topic)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).
-    stopped = lifetime.StopSignal().install()
-    spinner = threading.Thread(target=_spin, args=(executor,), daemon=True)
-    spinner.start()
-    source = f'{node.resolve_topic_name(topic)} (live)'
-    start = time.monotonic()
-    estimate, next_estimate = '', start + ESTIMATE_S
-    try:
+    with listening(lambda: Listener(topic)) as (node, stopped):
+        source = f'{node.resolve_topic_name(topic)} (live)'
+        start = time.monotonic()
+        estimate, next_estimate = '', start + ESTIMATE_S
         while (elapsed := time.monotonic() - start) < seconds:
             if stopped.wait(PROGRESS_S):
                 break
@@ -122,21 +110,7 @@ def listen(topic: str, seconds: float) -> Samples:
                 next_estimate += ESTIMATE_S
             print(progress(elapsed, seconds, len(node.rows), estimate), end='',
                   file=sys.stderr, flush=True)
-    finally:
-        print(file=sys.stderr)
-        stopped.restore()
-        executor.shutdown(timeout_sec=1.0)
-        spinner.join(timeout=5.0)
-        samples = node.samples(source)
-        node.destroy_node()
-        rclpy.try_shutdown()
+    samples = node.samples(source)
     if samples is None:
         raise ValueError(f'no message on {source}: is the driver running?')
     return samples
-
-
-def _spin(executor: SingleThreadedExecutor) -> None:
-    try:
-        executor.spin()
-    except ExternalShutdownException:
-        pass

@@ -25,6 +25,7 @@ a GPS, a motor controller, which discovery must not send bytes to unasked.
 """
 
 from collections.abc import Callable, Iterable
+import grp
 import os
 from typing import Any, NamedTuple
 
@@ -48,6 +49,24 @@ KIND_USB_SERIAL = 'USB-serial'
 SYS_CLASS_TTY = '/sys/class/tty'
 #: The FTDI latency timer as the chip comes up (ms): bytes wait up to this long in the chip.
 DEFAULT_LATENCY_TIMER_MS = 16
+
+
+def port_group(path: str) -> tuple[str, bool] | None:
+    """
+    Return the group that owns ``path`` and whether this session is in it.
+
+    None if the path cannot be examined. Root is counted as a member: it
+    opens every port whatever the group.
+    """
+    try:
+        gid = os.stat(path).st_gid
+    except OSError:
+        return None
+    try:
+        group = grp.getgrgid(gid).gr_name
+    except KeyError:
+        group = str(gid)
+    return group, os.geteuid() == 0 or gid == os.getegid() or gid in os.getgroups()
 
 
 class PortInfo(NamedTuple):

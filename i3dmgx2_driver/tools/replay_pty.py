@@ -15,25 +15,24 @@
 """
 The pseudo-terminal a replay plays into, and the symlink that names it.
 
-The driver opens the pty's slave path as if it were the base station's
-port. The slave is put in raw mode at once (no echo, no line editing: the
-bytes are binary) and kept open here, so that the driver may close and
-reopen the port without the pty hanging up. A paced write that nobody reads
-drops the rest after :data:`WRITE_STALL`, as a serial line does. The
-replay's playing and answering (replay.py, replay_answers.py) write and read
-through :class:`ReplayPty` only.
+The pty, raw and behind its symlink, is the simulator's (:class:`PtyPort`):
+the slave is kept open here, so that the driver may close and reopen the
+port without the pty hanging up, and the link points at the pty itself. What
+is the replay's own: a paced write that nobody reads drops the rest after
+:data:`WRITE_STALL`, as a serial line does, and :meth:`ReplayPty.pending_output`
+tells when the driver has read it all. The replay's playing and answering
+(replay.py, replay_answers.py) write and read through :class:`ReplayPty` only.
 """
 
 import fcntl
 import os
 import select
-import shutil
 import struct
-import tempfile
 import termios
 import threading
 import time
-import tty
+
+from ..simulator.pty_port import PtyPort, TIOCPKT_DATA
 
 #: How long a paced write waits for the reader to make room before dropping
 #: the rest of the chunk, as a serial line does when the host stops reading.
@@ -69,76 +68,36 @@ class ReplayPty:
     """
 
     def __init__(self, link: str | None, stop: threading.Event) -> None:
-        self._link_request = link
-        self._link: str | None = None
-        self._tmpdir: str | None = None
-        self._master = -1
-        self._slave = -1
-        self.pty_name: str | None = None
+        self._port = PtyPort(link, link_via_proc=False, prefix='gx2-replay-')
         self._stop = stop
-
-    @property
-    def path(self) -> str | None:
-        """Path for the driver's ``port`` parameter (None before create)."""
-        return self._link or self.pty_name
+        #: Path for the driver's ``port`` parameter (None before create).
+        self.path: str | None = None
+        self.pty_name: str | None = None
 
     def create(self) -> None:
         """Open the pty, raw, and make its link."""
-        self._master, self._slave = os.openpty()
+        path = self._port.create()
         try:
-            # Raw at once: no echo of the driver's commands back into the stream, no
-            # CR/LF translation, no signal characters in binary data.
-            tty.setraw(self._slave)
-            os.set_blocking(self._master, False)
-            self.pty_name = os.ttyname(self._slave)
-            self._make_link()
+            self._port.plug_in()
         except BaseException:
-            self._close_fds()
+            self.close()
             raise
+        self.path, self.pty_name = path, self._port.device
 
     def close(self) -> None:
         """Close the pty and remove the link; idempotent."""
-        self._close_fds()
-        self._remove_link()
+        self._port.pull_out()
+        self._port.remove()
 
     def pending_output(self) -> int:
         """Bytes written but not yet read by the driver (0 only if none; 0 after close)."""
-        if self._slave < 0:
+        slave = self._port.slave
+        if slave is None:
             return 0
         try:
-            return unread_bytes(self._slave)
+            return unread_bytes(slave)
         except (OSError, ValueError):
             return 0
-
-    def _make_link(self) -> None:
-        link = self._link_request
-        if link is None:
-            self._tmpdir = tempfile.mkdtemp(prefix='gx2-replay-')
-            link = os.path.join(self._tmpdir, 'ttyGX2')
-        elif os.path.islink(link):
-            os.unlink(link)  # a stale link of an earlier replay
-        elif os.path.exists(link):
-            raise FileExistsError(f'{link} exists and is not a symlink; not replacing it')
-        os.symlink(self.pty_name, link)
-        self._link = link
-
-    def _remove_link(self) -> None:
-        link, self._link = self._link, None
-        if link and os.path.islink(link) and os.readlink(link) == self.pty_name:
-            os.unlink(link)
-        if self._tmpdir:
-            shutil.rmtree(self._tmpdir, ignore_errors=True)
-            self._tmpdir = None
-
-    def _close_fds(self) -> None:
-        for name in ('_master', '_slave'):
-            fd = getattr(self, name)
-            if fd >= 0:
-                setattr(self, name, -1)
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
 
     def write(self, data: bytes, paced: bool) -> int:
         """
@@ -147,26 +106,31 @@ class ReplayPty:
         Paced, a full pty (nobody reading) drops the rest after WRITE_STALL, as
         a serial port nobody reads overruns; unpaced, the reader sets the pace.
         """
+        master = self._port.master
         view = memoryview(data)
         written = 0
         stall_end = time.monotonic() + WRITE_STALL
-        while written < len(data):
+        while written < len(data) and master is not None:
             try:
-                written += os.write(self._master, view[written:])
+                written += os.write(master, view[written:])
                 continue
             except BlockingIOError:
                 pass
             if self._stop.is_set() or (paced and time.monotonic() >= stall_end):
                 break
-            select.select([], [self._master], [], POLL)
+            select.select([], [master], [], POLL)
         return written
 
     def read(self) -> bytes:
         """Return what the host wrote, waiting up to :data:`POLL` (b'' if nothing)."""
+        master = self._port.master
+        if master is None:
+            raise OSError('the pty is closed')
         try:
-            ready, _, _ = select.select([self._master], [], [], POLL)
-            if not ready:
-                return b''
-            return os.read(self._master, 4096)
+            ready, _, _ = select.select([master], [], [], POLL)
+            data = os.read(master, 4096) if ready else b''
         except BlockingIOError:
             return b''
+        # The master is in packet mode: a data read starts with TIOCPKT_DATA, a
+        # status read (the host's flush as it opens the port) is nothing to answer.
+        return data[1:] if data[:1] == bytes((TIOCPKT_DATA,)) else b''

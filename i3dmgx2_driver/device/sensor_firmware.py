@@ -15,7 +15,7 @@
 """
 One sensor's firmware as the node holds it: read with the identity, asked before a gated command.
 
-Which firmware answers which command is the codec's (codec/firmware.py
+Which firmware answers which command is the codec's (codec/command_firmware.py
 reads the layout table). The dialogue reads the firmware (0xE9) with the
 identity, before anything that depends on it is sent, and keeps it here
 for each sensor: the stream is checked at once (:func:`check_stream`), the
@@ -25,7 +25,7 @@ before it read the firmware at all, and says once that it could not check.
 """
 
 from .port import PortUnusable
-from ..codec import firmware as fw
+from ..codec import command_firmware as fw
 from ..codec import streams
 
 
