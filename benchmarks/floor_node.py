@@ -38,6 +38,7 @@ Usage: ``I3DMGX2_TIMINGS=out.json floor_node.py --ros-args -p port:=PATH
 [-p realtime_priority:=N]``.
 """
 
+import inspect
 import itertools
 import os
 from pathlib import Path
@@ -48,6 +49,7 @@ import sys
 import termios
 import threading
 import time
+from typing import NamedTuple
 
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
@@ -56,15 +58,15 @@ if str(REPO) not in sys.path:
 import rclpy  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from sensor_msgs.msg import Imu, MagneticField  # noqa: E402
 
-from i3dmgx2_driver.codec import layouts, streams  # noqa: E402, I100
+from i3dmgx2_driver.codec import layouts  # noqa: E402, I100
 from i3dmgx2_driver.codec.framing import DATA_FLAGS, DATA_TRAILER_SIZE, HEADER_SIZE  # noqa: E402
 from i3dmgx2_driver.device import realtime  # noqa: E402
 from i3dmgx2_driver.device.hot_path import recorder_from_environment  # noqa: E402
 from i3dmgx2_driver.device.port import TTY_READ_CHUNK  # noqa: E402
-from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings  # noqa: E402
 
 _LAYOUT = layouts.LAYOUTS[layouts.ACCEL_ANG_RATE_MAG_ORIENTATION]
 PACKET_SIZE = HEADER_SIZE + _LAYOUT.record_size + DATA_TRAILER_SIZE
@@ -73,9 +75,19 @@ _TIMER = struct.Struct('>I')
 _TIMER_AT = HEADER_SIZE + _LAYOUT.record_size - 4
 
 
-#: The fields of the record whose messages the floor publishes, over and over.
-_FIELDS = (0.125, -0.5, -1.0, 0.01, -0.02, 0.03, 0.2, -0.1, 0.4,
-           0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 123456)
+class _Record(NamedTuple):
+    """What an older tree's recorder takes of a record (``published(record, stamp)``)."""
+
+    timer: int
+
+
+def _messages(stamp: float) -> tuple[bytes, bytes]:
+    """Return the Imu and MagneticField the floor publishes, the driver's sizes, serialized."""
+    imu, mag = Imu(), MagneticField()
+    for message in (imu, mag):
+        message.header.frame_id = 'imu_link'  # the driver's default frame
+        message.header.stamp.sec = int(stamp)
+    return serialize_message(imu), serialize_message(mag)
 
 
 def _parameters(ros_args: list[str]) -> dict[str, str]:
@@ -102,9 +114,11 @@ def main() -> int:
                      reliability=ReliabilityPolicy.RELIABLE)
     publish_imu = node.create_publisher(Imu, 'imu/raw_data', qos).publish
     publish_mag = node.create_publisher(MagneticField, 'imu/mag', qos).publish
-    factory = MessageFactory(MessageSettings('imu_link', 'enu', stream=streams.DEFAULT))
     stamp = time.time()
-    imu, mag = factory.imu_cdr(_FIELDS, int(stamp), 0), factory.mag_cdr(_FIELDS, int(stamp), 0)
+    imu, mag = _messages(stamp)
+    # Built with rclpy alone, the floor runs on another tree's package too (latency.py
+    # --against); an older recorder takes the record at the publish, not at the pack.
+    older = 'record' in inspect.signature(timings.published).parameters
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     policy = realtime.ThreadPolicy(int(params.get('realtime_priority', '0')))
@@ -135,9 +149,13 @@ def main() -> int:
                     continue
                 timer = _TIMER.unpack_from(buf, _TIMER_AT)[0]
                 del buf[:PACKET_SIZE]
-                timings.packed(timer)
-                publish_imu(imu)
-                timings.published(stamp)
+                if older:
+                    publish_imu(imu)
+                    timings.published(_Record(timer), stamp)
+                else:
+                    timings.packed(timer)
+                    publish_imu(imu)
+                    timings.published(stamp)
                 publish_mag(mag)
 
     thread = threading.Thread(target=reader, name='gx2-reader', daemon=True)
