@@ -42,6 +42,7 @@ starts a process:
   a thread stuck in C code cannot hold it up either.
 """
 
+import contextlib
 import ctypes
 import faulthandler
 import os
@@ -60,6 +61,11 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 _PR_SET_PDEATHSIG = 1
 #: Where the deadline writes when the process has no standard error.
 _DEVNULL: list[Any] = []
+
+
+def _stop_signals(signals: tuple[int, ...] = STOP_SIGNALS) -> list[int]:
+    """Return ``signals`` but SIGHUP when ignored (``nohup``: outliving the terminal is asked)."""
+    return [s for s in signals if s != signal.SIGHUP or signal.getsignal(s) is not signal.SIG_IGN]
 
 
 class StopSignal:
@@ -87,9 +93,7 @@ class StopSignal:
         """Have ``signals`` set the flag (from the main thread; elsewhere nothing changes)."""
         if threading.current_thread() is not threading.main_thread():
             return self
-        for signum in signals:
-            if signum == signal.SIGHUP and signal.getsignal(signum) is signal.SIG_IGN:
-                continue  # nohup: outliving the terminal is what was asked for
+        for signum in _stop_signals(signals):
             self._previous[signum] = signal.signal(signum, self._on_signal)
         return self
 
@@ -107,10 +111,8 @@ class StopSignal:
     def set(self) -> None:  # noqa: A003 - threading.Event's name, for the same use
         """Set the flag and wake whoever waits (any thread, or a signal handler)."""
         self._set = True
-        try:
+        with contextlib.suppress(OSError):  # the pipe is full: a wake-up is pending already
             os.write(self._write, b'\0')
-        except OSError:
-            pass  # the pipe is full: a wake-up is pending already
 
     def is_set(self) -> bool:
         """Whether the flag is set."""
@@ -123,17 +125,11 @@ class StopSignal:
             left = None if deadline is None else deadline - time.monotonic()
             if left is not None and left <= 0:
                 break
-            ready, _, _ = select.select([self._read], [], [], left)
-            if ready:
-                self._drain()
+            if select.select([self._read], [], [], left)[0]:
+                with contextlib.suppress(BlockingIOError):
+                    while os.read(self._read, 64):
+                        pass
         return self._set
-
-    def _drain(self) -> None:
-        try:
-            while os.read(self._read, 64):
-                pass
-        except BlockingIOError:
-            pass
 
     def __del__(self) -> None:
         close_quietly(getattr(self, '_read', None), getattr(self, '_write', None))
@@ -143,10 +139,8 @@ def close_quietly(*fds: int | None) -> None:
     """Close each descriptor given (None: none); one already closed is no error at the end."""
     for fd in fds:
         if fd is not None:
-            try:
+            with contextlib.suppress(OSError):
                 os.close(fd)
-            except OSError:
-                pass
 
 
 def die_with_parent(signum: int = signal.SIGTERM) -> bool:
@@ -160,9 +154,7 @@ def die_with_parent(signum: int = signal.SIGTERM) -> bool:
     the kernel, the *thread* that started this process: a program that starts
     one from a thread must keep that thread until the process ends.
     """
-    if not sys.platform.startswith('linux'):
-        return False
-    if signal.getsignal(signal.SIGHUP) is signal.SIG_IGN:
+    if not sys.platform.startswith('linux') or signal.getsignal(signal.SIGHUP) is signal.SIG_IGN:
         return False
     if signal.getsignal(signum) is signal.SIG_IGN and \
             threading.current_thread() is threading.main_thread():
@@ -187,9 +179,7 @@ def interrupt_on_stop_signals() -> None:
     """
     if threading.current_thread() is not threading.main_thread():
         return
-    for signum in STOP_SIGNALS:
-        if signum == signal.SIGHUP and signal.getsignal(signum) is signal.SIG_IGN:
-            continue
+    for signum in _stop_signals():
         signal.signal(signum, signal.default_int_handler)
     die_with_parent(signal.SIGINT)
 
@@ -202,8 +192,7 @@ def arm_deadline(seconds: float = SHUTDOWN_DEADLINE) -> None:
     Without a standard error to write to, the deadline still ends the process.
     """
     try:
-        faulthandler.dump_traceback_later(seconds, exit=True,
-                                          file=sys.__stderr__ or sys.stderr)
+        faulthandler.dump_traceback_later(seconds, exit=True, file=sys.__stderr__ or sys.stderr)
     except (AttributeError, RuntimeError, ValueError, OSError):
         if not _DEVNULL:
             _DEVNULL.append(open(os.devnull, 'w'))  # noqa: SIM115 - for the process's life

@@ -25,6 +25,7 @@ offline.
 
 from collections import deque
 from collections.abc import Callable, Iterable
+import contextlib
 import datetime
 import math
 import os
@@ -133,8 +134,7 @@ class FaultCapture:
 
     def __init__(self, directory: str | None, seconds: float, kept: int, log: Any, *,
                  baud: int = DEFAULT_BAUD, min_gap: float | None = None,
-                 after: float = FAULT_AFTER, poll: float = FAULT_POLL,
-                 **header: Any) -> None:
+                 after: float = FAULT_AFTER, poll: float = FAULT_POLL, **header: Any) -> None:
         self.directory = os.path.expanduser(directory) if directory else ''
         self.seconds = seconds
         self.kept = kept
@@ -144,16 +144,11 @@ class FaultCapture:
         self._log = log
         self._header = dict(header, baud=baud)
         #: The ring (None when off).
-        self.ring: RecentBytes | None = None
-        if self.directory:
-            self.ring = RecentBytes(seconds, int(seconds * baud / 10 * RING_BUDGET_FACTOR))
+        self.ring = RecentBytes(seconds, int(seconds * baud / 10 * RING_BUDGET_FACTOR)) \
+            if self.directory else None
         #: Files written so far, the last one's path and cause; why the last write failed.
-        self.written = 0
-        self.last_path = ''
-        self.last_cause = ''
-        self.error = ''
-        self._lock = threading.Lock()
-        self._write_lock = threading.Lock()
+        self.written, self.last_path, self.last_cause, self.error = 0, '', '', ''
+        self._lock, self._write_lock = threading.Lock(), threading.Lock()
         self._causes: list[str] = []
         self._due: float | None = None
         self._last_write = -math.inf
@@ -176,8 +171,7 @@ class FaultCapture:
         if self.ring is None or self._thread is not None:
             return
         self._watch = watch
-        self._thread = threading.Thread(target=self._run, name='gx2-fault-capture',
-                                        daemon=True)
+        self._thread = threading.Thread(target=self._run, name='gx2-fault-capture', daemon=True)
         self._thread.start()
 
     def trigger(self, cause: str, now: float | None = None) -> None:
@@ -226,13 +220,11 @@ class FaultCapture:
         if self.ring is None:
             return 'off'
         reads, held = self.ring.held
-        text = (f'keeping the last {self.seconds:g} s ({reads} reads, {held // 1024} KiB) '
-                f'for {self.directory}; ')
-        if self.error:
-            text += f'last write failed: {self.error}; '
-        if self.written:
-            return text + f'{self.written} written, the last {self.last_path} ({self.last_cause})'
-        return text + 'none written yet'
+        failed = f'last write failed: {self.error}; ' if self.error else ''
+        last = f'{self.written} written, the last {self.last_path} ({self.last_cause})' \
+            if self.written else 'none written yet'
+        return (f'keeping the last {self.seconds:g} s ({reads} reads, {held // 1024} KiB) '
+                f'for {self.directory}; {failed}{last}')
 
     def close(self) -> None:
         """Stop the writer thread (at shutdown: an episode not yet written is dropped)."""
@@ -276,11 +268,9 @@ class FaultCapture:
             again += 1
             path = os.path.join(self.directory, f'{name}-{again}{FAULT_SUFFIX}')
         header = default_header(
-            start_time=chunks[0][0], driver_version=__version__, cause=cause,
-            written_time=now,
+            start_time=chunks[0][0], driver_version=__version__, cause=cause, written_time=now,
             notes=(f'fault capture by the i3dmgx2_driver node: the last {self.seconds:g} s '
-                   f'of reads before it was written ({cause}), as read'),
-            **self._header)
+                   f'of reads before it was written ({cause}), as read'), **self._header)
         with CaptureWriter(path, header, flush_interval=None) as writer:
             for receive_time, data in chunks:
                 writer.write(data, receive_time)
@@ -291,7 +281,5 @@ class FaultCapture:
         names = sorted(name for name in os.listdir(self.directory)
                        if name.startswith(FAULT_PREFIX) and name.endswith(FAULT_SUFFIX))
         for name in names[:max(0, len(names) - self.kept)]:
-            try:
+            with contextlib.suppress(FileNotFoundError):  # another driver pruned it first
                 os.remove(os.path.join(self.directory, name))
-            except FileNotFoundError:
-                pass  # another driver writing here pruned it first

@@ -75,13 +75,8 @@ class TruncatedCaptureWarning(UserWarning):
 def default_header(**overrides: Any) -> dict[str, Any]:
     """Return a header with every standard key, updated with ``overrides``."""
     header: dict[str, Any] = {
-        'port': None,
-        'address': None,
-        'baud': DEFAULT_BAUD,
-        'wireless': True,
-        'start_time': time.time(),
-        'tool_version': f'i3dmgx2_driver {__version__}',
-        'notes': '',
+        'port': None, 'address': None, 'baud': DEFAULT_BAUD, 'wireless': True,
+        'start_time': time.time(), 'tool_version': f'i3dmgx2_driver {__version__}', 'notes': '',
     }
     header.update(overrides)
     return header
@@ -90,11 +85,10 @@ def default_header(**overrides: Any) -> dict[str, Any]:
 def _header_line(header: dict[str, Any]) -> bytes:
     if not isinstance(header, dict):
         raise TypeError(f'a capture header is a dict, got {type(header).__name__}')
-    full = default_header()
-    full.update(header)
     try:
         # ASCII and no indent: one line whatever the strings contain.
-        text = json.dumps(full, sort_keys=True, ensure_ascii=True, allow_nan=False)
+        text = json.dumps({**default_header(), **header}, sort_keys=True, ensure_ascii=True,
+                          allow_nan=False)
     except (TypeError, ValueError) as exc:
         raise ValueError(f'capture header is not plain JSON: {exc}') from None
     return text.encode('ascii') + b'\n'
@@ -120,13 +114,11 @@ class CaptureWriter:
             raise ValueError(f'flush_interval must be positive, got {flush_interval!r}')
         line = _header_line(header or {})
         self.path = os.fspath(path)
-        self.chunks = 0
-        self.bytes = 0
+        self.chunks = self.bytes = 0
         self._fsync = fsync
         self._interval = flush_interval
         self._lock = threading.Lock()
-        self._dirty = False
-        self._closed = False
+        self._dirty = self._closed = False
         # Open for the writer's lifetime, closed by close() (or __exit__).
         self._file: BinaryIO = open(self.path, 'wb', buffering=64 * 1024)  # noqa: SIM115
         try:
@@ -154,8 +146,7 @@ class CaptureWriter:
 
         Empty reads (timeouts) carry nothing to replay and are not stored.
         """
-        if receive_time is None:
-            receive_time = time.time()
+        receive_time = time.time() if receive_time is None else receive_time
         if not math.isfinite(receive_time):
             raise ValueError(f'receive time must be finite, got {receive_time!r}')
         data = bytes(data)
@@ -237,23 +228,20 @@ def _iter_chunks(path: str, offset: int) -> Iterator[Chunk]:
             if not head:
                 return
             if len(head) < CHUNK_HEADER.size:
-                warnings.warn(
-                    f'{path}: capture ends inside a chunk header at byte {start} '
-                    f'({len(head)} of {CHUNK_HEADER.size} bytes); the writer was probably '
-                    f'killed; the chunks before it are intact', TruncatedCaptureWarning,
-                    stacklevel=2)
+                warnings.warn(f'{path}: capture ends inside a chunk header at byte {start} '
+                              f'({len(head)} of {CHUNK_HEADER.size} bytes); the writer was '
+                              f'probably killed; the chunks before it are intact',
+                              TruncatedCaptureWarning, stacklevel=2)
                 return
             receive_time, count = CHUNK_HEADER.unpack(head)
             if count > MAX_CHUNK_SIZE or not math.isfinite(receive_time):
-                raise CaptureFormatError(
-                    f'{path}: corrupted chunk at byte {start} (time {receive_time!r}, '
-                    f'{count} bytes)')
+                raise CaptureFormatError(f'{path}: corrupted chunk at byte {start} (time '
+                                         f'{receive_time!r}, {count} bytes)')
             data = f.read(count)
             if len(data) < count:
-                warnings.warn(
-                    f'{path}: last chunk (byte {start}) cut short: {len(data)} of {count} '
-                    f'bytes; the writer was probably killed; yielding what is there',
-                    TruncatedCaptureWarning, stacklevel=2)
+                warnings.warn(f'{path}: last chunk (byte {start}) cut short: {len(data)} of '
+                              f'{count} bytes; the writer was probably killed; yielding what '
+                              'is there', TruncatedCaptureWarning, stacklevel=2)
                 if data:
                     yield receive_time, data
                 return

@@ -55,7 +55,7 @@ def load_fixture(path: PathLike) -> list[FixtureSet]:
     Every record is decoded once here, so that a damaged fixture fails loudly
     rather than turning into a capture the parser silently skips.
     """
-    sets: list[FixtureSet] = []
+    sets = [FixtureSet('records', '', [])]  # for records before the first set line
     with open(path, encoding='utf-8') as f:
         for number, raw in enumerate(f, 1):
             line = raw.strip()
@@ -70,8 +70,6 @@ def load_fixture(path: PathLike) -> list[FixtureSet]:
                 decode_record(record)
             except ValueError as exc:
                 raise ValueError(f'{path}:{number}: not a record: {exc}') from None
-            if not sets:
-                sets.append(FixtureSet('records', '', []))
             sets[-1].records.append(record)
     return [s for s in sets if s.records]
 
@@ -96,9 +94,7 @@ def timeline(sets: Iterable[FixtureSet],
     out: list[tuple[float, int, bytes]] = []
     offset = 0.0
     for index, fixture_set in enumerate(sets):
-        first = record_timer(fixture_set.records[0])
-        ticks = 0
-        last = first
+        ticks, last = 0, record_timer(fixture_set.records[0])
         for record in fixture_set.records:
             raw = record_timer(record)
             ticks += (raw - last) % TIMER_MODULUS

@@ -25,9 +25,9 @@ once and capture turns itself off while the stream goes on.
 """
 
 from collections.abc import Callable
+import contextlib
 import os
 import threading
-import time
 from typing import Any
 
 from .file_format import CaptureWriter, default_header
@@ -72,10 +72,8 @@ class RawCapture:
         existed = os.path.exists(self.path)
         try:
             self._writer = _Writer(self.path, default_header(
-                start_time=time.time(), tool_version=f'i3dmgx2_driver {__version__}',
                 driver_version=__version__,
-                notes='raw capture by the i3dmgx2_driver node: every read, as read',
-                **header))
+                notes='raw capture by the i3dmgx2_driver node: every read, as read', **header))
         except (OSError, ValueError) as exc:
             self._fail(f'cannot write the raw capture {self.path}: {exc}')
             return
@@ -92,9 +90,7 @@ class RawCapture:
         writer = self._writer
         if writer is not None:
             return f'{self.path}: {writer.chunks} reads, {writer.bytes} bytes'
-        if self.error:
-            return f'stopped: {self.error}'
-        return 'off'
+        return f'stopped: {self.error}' if self.error else 'off'
 
     def on_bytes(self, data: bytes, receive_time: float) -> None:
         """Store one read (called from the reader thread; never raises)."""
@@ -122,10 +118,8 @@ class RawCapture:
 
     @staticmethod
     def _close_quietly(writer: CaptureWriter) -> None:
-        try:
+        with contextlib.suppress(OSError, ValueError):  # why it stopped was logged already
             writer.close()
-        except (OSError, ValueError):
-            pass  # the error that stopped it was already logged
 
     def close(self) -> None:
         """Flush and close the file (at shutdown, after the reader stopped)."""
@@ -153,10 +147,8 @@ def bytes_sink(*sinks: Callable[[bytes, float], None] | None
     always did.
     """
     live = [sink for sink in sinks if sink is not None]
-    if not live:
-        return None
-    if len(live) == 1:
-        return live[0]
+    if len(live) < 2:
+        return live[0] if live else None
 
     def every(data: bytes, receive_time: float) -> None:
         for sink in live:

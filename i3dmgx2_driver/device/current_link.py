@@ -65,9 +65,8 @@ class CurrentLink:
         #: Guards who owns ``_link``: the thread opening one, or a caller releasing it.
         self._lock = threading.Lock()
         self._observer: LineObserver | None = None
-        #: Links opened so far, and how many of them were reconnections.
+        #: Links opened so far (all but the first were reconnections).
         self.connections = 0
-        self.reconnects = 0
         #: What the port last granted of low-latency mode.
         self.low_latency_state = ''
         self._parser_totals: dict[str, int] = {}
@@ -105,8 +104,6 @@ class CurrentLink:
                 raise PortDisconnected(f'{self._config.port}: closed, the driver is stopping')
             self._link = link
         self.connections += 1
-        if self.connections > 1:
-            self.reconnects += 1
         return link
 
     def release(self, send_stop: bool = False) -> None:
@@ -124,8 +121,7 @@ class CurrentLink:
         self._close(link)
         self._other_records += link.other_records
         if self._shared is None:
-            for key, value in link.parser.stats.as_dict().items():
-                self._parser_totals[key] = self._parser_totals.get(key, 0) + value
+            _add_counts(self._parser_totals, link)
 
     def _close(self, link: DeviceLink) -> None:
         """Close the link's port, or hand the link back to the shared one."""
@@ -148,8 +144,7 @@ class CurrentLink:
         else:
             parser = dict(self._parser_totals)
             if link is not None:
-                for key, value in link.parser.stats.as_dict().items():
-                    parser[key] = parser.get(key, 0) + value
+                _add_counts(parser, link)
         return {
             'parser': parser,
             'strays': self._shared.strays() if self._shared is not None else {},
@@ -157,19 +152,22 @@ class CurrentLink:
                                                     else 0),
             'radio': link.radio.stats if link is not None else None,
             'connected': link is not None,
-            'connections': self.connections, 'reconnects': self.reconnects,
+            'connections': self.connections, 'reconnects': max(self.connections - 1, 0),
             'low_latency_state': self.low_latency_state}
 
     def observe(self, on: bool) -> None:
         """Resume or pause the line observer: silence is a symptom only while we ask."""
         observer = self._observer
         if observer is not None:
-            if on:
-                observer.resume()
-            else:
-                observer.pause()
+            (observer.resume if on else observer.pause)()
 
     def observed(self) -> str:
         """Say what the line observer last found on this link ('' if nothing)."""
         seen = self._observer.last_finding if self._observer is not None else None
         return seen.message if seen is not None else ''
+
+
+def _add_counts(totals: dict[str, int], link: DeviceLink) -> None:
+    """Add ``link``'s parser counters to ``totals``."""
+    for key, value in link.parser.stats.as_dict().items():
+        totals[key] = totals.get(key, 0) + value

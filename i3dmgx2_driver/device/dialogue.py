@@ -113,8 +113,7 @@ class SensorDialogue(SensorSteps):
     warn).
     """
 
-    def __init__(self, config: DeviceConfig, log: Any, warn: Warn,
-                 cancel: threading.Event,
+    def __init__(self, config: DeviceConfig, log: Any, warn: Warn, cancel: threading.Event,
                  on_gyro_bias: Callable[[], None] | None = None) -> None:
         super().__init__(config.request_timeout, config.request_retries, cancel)
         self.config = config
@@ -251,10 +250,7 @@ class SensorDialogue(SensorSteps):
             self._warn('rate', 'the device did not tell its data rate (EEPROM 0xFCA2)', None)
             return
         self.divider = current
-        if cfg.data_rate_hz is None:
-            return
-        wanted = divider_for_rate(cfg.data_rate_hz)
-        if wanted == current:
+        if cfg.data_rate_hz is None or (wanted := divider_for_rate(cfg.data_rate_hz)) == current:
             return
         if wanted in self._divider_written:
             # Written before: a retry, a reconnect or a restart of the stream must not
@@ -331,12 +327,10 @@ class SensorDialogue(SensorSteps):
         stream = streams.BY_CODE[cfg.stream]
         budget = streams.line_budget(stream, self.expected_rate_hz, cfg.baud, cfg.wireless)
         self.line_use = streams.describe(budget)
-        if budget.fits:
-            self.line_warning = ''
-            return
-        self.line_warning = ('the device is set to a rate the line cannot carry, records '
-                             'will be skipped: ' + streams.advice(stream, budget))
-        if self._throttle.allow('line'):
+        self.line_warning = '' if budget.fits else (
+            'the device is set to a rate the line cannot carry, records will be skipped: '
+            + streams.advice(stream, budget))
+        if self.line_warning and self._throttle.allow('line'):
             self._log.warning(self.line_warning)
 
     # -- continuous mode ----------------------------------------------------------------
@@ -391,8 +385,7 @@ class SensorDialogue(SensorSteps):
         # The link counts only records of the stream (expect_stream said which): a
         # sensor power-cycled meanwhile streams nothing, or the record its EEPROM says.
         deadline = time.monotonic() + min(2 * self.period, timeouts.RESUME_LOOK_S)
-        while not link.records and time.monotonic() < deadline \
-                and not self._cancel.is_set():
+        while not link.records and time.monotonic() < deadline and not self._cancel.is_set():
             time.sleep(timeouts.RESUME_POLL_S)
         # Not streaming (power-cycled meanwhile), or streaming another record: ask for it.
         # A power cycle meanwhile lost the biases in the sensor's RAM: write them again.

@@ -73,18 +73,13 @@ def judge_capture(bias: Vector3, accel_before: Vector3, accel_after: Vector3,
     large to be one, a gravity vector that changed between before and after,
     and an angular rate that is not about zero once the new bias is applied.
     """
-    reasons = []
-    size = norm(bias)
-    if not math.isfinite(size) or size > max_bias:
-        reasons.append(f'captured bias |{size:.4f}| rad/s exceeds {max_bias:g}')
-    change = norm([a - b for a, b in zip(accel_after, accel_before, strict=True)])
-    if not math.isfinite(change) or change > max_accel_change:
-        reasons.append(f'gravity vector changed by {change:.4f} g (over {max_accel_change:g})')
-    residual = norm(rate_after)
-    if not math.isfinite(residual) or residual > max_residual:
-        reasons.append(f'angular rate after the capture |{residual:.4f}| rad/s '
-                       f'(over {max_residual:g})')
-    return reasons
+    change = [a - b for a, b in zip(accel_after, accel_before, strict=True)]
+    signs = ((norm(bias), max_bias, 'captured bias |{:.4f}| rad/s exceeds {:g}'),
+             (norm(change), max_accel_change, 'gravity vector changed by {:.4f} g (over {:g})'),
+             (norm(rate_after), max_residual,
+              'angular rate after the capture |{:.4f}| rad/s (over {:g})'))
+    return [text.format(size, limit) for size, limit, text in signs
+            if not math.isfinite(size) or size > limit]
 
 
 class GyroBiasCapture:
@@ -126,8 +121,7 @@ class GyroBiasCapture:
         self._log.info(f'capturing the gyro bias over {sampling_ms} ms: keep the sensor still')
         started = time.time()
         try:
-            accel_before, reply, accel_after, rate_after = \
-                self._device.run_paused(operation)
+            accel_before, reply, accel_after, rate_after = self._device.run_paused(operation)
         except OPERATION_ERRORS as exc:
             summary = f'no capture: {exc}'
             self.last_capture = Calibration(started, False, None, sampling_ms, summary)

@@ -22,6 +22,7 @@ late reply to the previous selector can arrive while the next is asked, and it
 must not pass for this one's.
 """
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 from .link import DeviceError, DeviceLink, EchoMismatch
@@ -65,14 +66,11 @@ def read_firmware(link: DeviceLink, timeout: float, retries: int) -> str:
 
 def read_identity(link: DeviceLink, timeout: float, retries: int) -> DeviceInfo:
     """Ask every identifier and the firmware; what goes unanswered is ''."""
-    texts = []
-    for selector in range(len(IDENTIFIER_NAMES)):
+    def answer(read: Callable[[], str]) -> str:
         try:
-            texts.append(read_identifier(link, selector, timeout, retries))
+            return read()
         except DeviceError:
-            texts.append('')
-    try:
-        firmware = read_firmware(link, timeout, retries)
-    except DeviceError:
-        firmware = ''
-    return DeviceInfo(*texts, firmware)
+            return ''
+    return DeviceInfo(*(answer(lambda s=s: read_identifier(link, s, timeout, retries))
+                        for s in range(len(IDENTIFIER_NAMES))),
+                      answer(lambda: read_firmware(link, timeout, retries)))

@@ -87,8 +87,7 @@ def _addresses(heard: dict[int, int], span: float) -> str:
     return ', '.join(parts) + (', ...' if len(ranked) > 4 else '')
 
 
-def judge(window: Window, port: str, address: int, wireless: bool,
-          baud: int) -> Finding | None:
+def judge(window: Window, port: str, address: int, wireless: bool, baud: int) -> Finding | None:
     """
     Say what a window without any packet of ours suggests; None if nothing yet.
 
@@ -96,11 +95,10 @@ def judge(window: Window, port: str, address: int, wireless: bool,
     the other framing are named first (they say exactly what to change),
     then unreadable bytes, then silence.
     """
-    span = window.seconds
-    heard = window.heard
+    span, heard = window.seconds, window.heard
     if span >= MIN_WINDOW:
+        best = max(heard, key=heard.__getitem__) if heard else None
         if wireless and heard and not heard.get(address):
-            best = max(heard, key=heard.__getitem__)
             return Finding(ADDRESS, (
                 f'packets arrive from {_addresses(heard, span)}, none from node '
                 f'{address}: is that your sensor? If so, set -p address:={best}'))
@@ -110,7 +108,6 @@ def judge(window: Window, port: str, address: int, wireless: bool,
                 f'{span:.1f} s), not wireless packets: is a wired sensor on this port? '
                 f'Then set -p wireless:=false'))
         if not wireless and heard:
-            best = max(heard, key=heard.__getitem__)
             also = '' if best == address else f' and -p address:={best}'
             return Finding(FRAMING, (
                 f'{port} sends wireless packets from {_addresses(heard, span)}, not '
@@ -159,17 +156,12 @@ class LineObserver:
         #: False while the driver keeps the device quiet on purpose: the link
         #: then feeds nothing, and the next window starts when it resumes.
         self.active = True
-        self._epoch: float | None = None
-        self._start = 0.0
-        self._next_judge = 0.0
         self._packets = SensorStreamParser(address=None, wireless=True)
         self._wired = SensorStreamParser(wireless=False)
         self._heard: Counter[int] = Counter()
-        self._wired_records = 0
-        self._bytes = 0
-        self._base = (0, 0)
+        self._restart(0.0, None)  # the first feed starts the first window
 
-    def _restart(self, now: float, epoch: float) -> None:
+    def _restart(self, now: float, epoch: float | None) -> None:
         self._epoch = epoch
         self._start = now
         self._next_judge = now + JUDGE_EVERY
@@ -200,12 +192,10 @@ class LineObserver:
             self._restart(now, epoch)
         if data:
             self._bytes += len(data)
-            for event in self._packets.feed(data):
-                if isinstance(event, DataPacket):
-                    self._heard[event.address] += 1
-            for event in self._wired.feed(data):
-                if isinstance(event, DataPacket):
-                    self._wired_records += 1
+            self._heard.update(event.address for event in self._packets.feed(data)
+                               if isinstance(event, DataPacket))
+            self._wired_records += sum(isinstance(event, DataPacket)
+                                       for event in self._wired.feed(data))
         if now < self._next_judge:
             return None
         self._next_judge = now + JUDGE_EVERY

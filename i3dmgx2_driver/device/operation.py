@@ -49,9 +49,7 @@ def norm(v: Sequence[float]) -> float:
 
 
 def _mean(vectors: Sequence[Sequence[float]]) -> Vector3:
-    n = len(vectors)
-    return (sum(v[0] for v in vectors) / n, sum(v[1] for v in vectors) / n,
-            sum(v[2] for v in vectors) / n)
+    return tuple(sum(axis) / len(vectors) for axis in zip(*vectors, strict=True))
 
 
 def format_vector(v: Sequence[float], digits: int = 5) -> str:

@@ -61,8 +61,6 @@ class PortOpener:
                        records_of: int | None = None,
                        on_lost: Callable[[], None] | None = None) -> LinkOptions:
         """Return how the port's reader reads, whom it tells, what its link's consumer takes."""
-        cfg = self.config
-        return LinkOptions(wireless=cfg.wireless, on_bytes=self._on_bytes,
-                           observer=observer, cancel=cancel,
-                           thread_policy=cfg.thread_policy, records_of=records_of,
-                           on_lost=on_lost)
+        return LinkOptions(wireless=self.config.wireless, on_bytes=self._on_bytes,
+                           observer=observer, cancel=cancel, records_of=records_of,
+                           thread_policy=self.config.thread_policy, on_lost=on_lost)

@@ -84,20 +84,18 @@ def apply_to_current_thread(policy: ThreadPolicy) -> PolicyOutcome:
     Never raises: a refusal leaves that part of the thread's scheduling as it
     was, and its sentence says what was refused, why, and how to allow it.
     """
-    applied: list[str] = []
-    refused: list[str] = []
-    if policy.realtime_priority > 0:
-        priority = policy.realtime_priority
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-            applied.append(f'SCHED_FIFO priority {priority}')
-        except (AttributeError, OSError) as exc:
-            reason = getattr(exc, 'strerror', None) or 'not available on this platform'
-            refused.append(
-                f'realtime_priority {priority} refused ({reason}): the reader thread keeps '
-                f'normal scheduling; allow SCHED_FIFO with an rtprio limit of at least '
-                f'{priority} (ulimit -r, /etc/security/limits.conf)')
-    return PolicyOutcome(tuple(applied), tuple(refused))
+    priority = policy.realtime_priority
+    if priority <= 0:
+        return NOTHING_GRANTED
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (AttributeError, OSError) as exc:
+        reason = getattr(exc, 'strerror', None) or 'not available on this platform'
+        return PolicyOutcome(refused=(
+            f'realtime_priority {priority} refused ({reason}): the reader thread keeps '
+            f'normal scheduling; allow SCHED_FIFO with an rtprio limit of at least '
+            f'{priority} (ulimit -r, /etc/security/limits.conf)',))
+    return PolicyOutcome(applied=(f'SCHED_FIFO priority {priority}',))
 
 
 def freeze_startup_heap() -> int:

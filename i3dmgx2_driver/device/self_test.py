@@ -70,8 +70,7 @@ class Step(NamedTuple):
 def format_report(steps: Sequence[Step]) -> str:
     """One line per step, ``PASS``/``FAIL``/``SKIP``, then a summary line."""
     lines = [f'{s.verdict} {s.name}: {s.detail}' for s in steps]
-    failed = sum(1 for s in steps if not s.passed)
-    skipped = sum(1 for s in steps if s.skipped)
+    failed, skipped = sum(not s.passed for s in steps), sum(s.skipped for s in steps)
     ran = len(steps) - skipped
     lines.append(f'self test {"passed" if not failed else "FAILED"}: '
                  f'{ran - failed}/{ran} steps passed'
@@ -87,17 +86,24 @@ def firmware_skip(name: str, code: int, firmware: SensorFirmware) -> Step | None
                             f'this sensor has {fw.text(firmware.version)}', skipped=True)
 
 
+def _answered(name: str, ask: Callable[[], str]) -> Step:
+    """Step ``name``: passed with what ``ask()`` says, failed with the DeviceError it raises."""
+    try:
+        return Step(name, True, ask())
+    except DeviceError as exc:
+        return Step(name, False, str(exc))
+
+
+def _poll(link: DeviceLink, code: int) -> Any:
+    """Poll record ``code`` once; return its reply."""
+    return link.request(bytes((code,)), code)
+
+
 def temperature_step(link: DeviceLink, firmware: SensorFirmware) -> Step:
     """Poll the temperatures (0xD1) once; skipped on a firmware without them."""
     name = 'temperatures respond (0xD1)'
-    skipped = firmware_skip(name, layouts.TEMPERATURES, firmware)
-    if skipped is not None:
-        return skipped
-    try:
-        reply = link.request(bytes((layouts.TEMPERATURES,)), layouts.TEMPERATURES)
-    except DeviceError as exc:
-        return Step(name, False, str(exc))
-    return Step(name, True, f'accelerometer {reply.accel_celsius:.1f} C')
+    return firmware_skip(name, layouts.TEMPERATURES, firmware) or _answered(
+        name, lambda: f'accelerometer {_poll(link, layouts.TEMPERATURES).accel_celsius:.1f} C')
 
 
 def gravity_step(accel: Vector3, tolerance: float = GRAVITY_TOLERANCE) -> Step:
@@ -159,27 +165,24 @@ class SelfTestRun:
 
     def _device_steps(self, link: DeviceLink) -> list[Step]:
         """Run the steps that need the device alone (with the stream stopped)."""
-        steps: list[Step] = []
-        accel = None
-        try:
+        polled: list[Vector3] = []
+
+        def inertial() -> str:
             accel, rate = poll_inertial(link)
-            steps.append(Step('accel & angular rate respond (0xC2)', True,
-                              f'mean of {POLLS}: accel {format_vector(accel, 4)} g, '
-                              f'rate {format_vector(rate, 4)} rad/s'))
-        except DeviceError as exc:
-            steps.append(Step('accel & angular rate respond (0xC2)', False, str(exc)))
-        try:
-            mag = link.request(bytes((layouts.MAGNETOMETER,)), layouts.MAGNETOMETER).mag
-            detail = (f'mag {format_vector(mag, 4)} G' if not any(map(math.isnan, mag))
-                      else 'answered NaN (no new reading, or no magnetometer)')
-            steps.append(Step('magnetometer responds (0xC7)', True, detail))
-        except DeviceError as exc:
-            steps.append(Step('magnetometer responds (0xC7)', False, str(exc)))
-        steps.append(temperature_step(link, self._device.firmware))
-        if accel is not None:
-            steps.append(gravity_step(accel))
-        else:
-            steps.append(Step('gravity at rest', False, 'no acceleration to judge'))
+            polled.append(accel)
+            return (f'mean of {POLLS}: accel {format_vector(accel, 4)} g, '
+                    f'rate {format_vector(rate, 4)} rad/s')
+
+        def magnetometer() -> str:
+            mag = _poll(link, layouts.MAGNETOMETER).mag
+            return (f'mag {format_vector(mag, 4)} G' if not any(map(math.isnan, mag))
+                    else 'answered NaN (no new reading, or no magnetometer)')
+
+        steps = [_answered('accel & angular rate respond (0xC2)', inertial),
+                 _answered('magnetometer responds (0xC7)', magnetometer),
+                 temperature_step(link, self._device.firmware),
+                 gravity_step(polled[0]) if polled
+                 else Step('gravity at rest', False, 'no acceleration to judge')]
         try:
             for bit, name, sensor in BIT_STEPS:
                 steps.append(self._bit_step(link, bit, name, sensor))
@@ -204,10 +207,9 @@ class SelfTestRun:
         detail = 'accepted'
         try:
             if sensor == layouts.MAGNETOMETER:
-                mag = link.request(bytes((sensor,)), sensor).mag
-                detail += f'; mag under test {format_vector(mag, 4)} G'
+                detail += f'; mag under test {format_vector(_poll(link, sensor).mag, 4)} G'
             elif sensor == layouts.ACCEL_ANG_RATE:
-                reading = link.request(bytes((sensor,)), sensor)
+                reading = _poll(link, sensor)
                 detail += (f'; accel under test {format_vector(reading.accel, 4)} g, '
                            f'rate {format_vector(reading.angular_rate, 4)} rad/s')
         except DeviceError:

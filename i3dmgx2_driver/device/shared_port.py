@@ -122,13 +122,12 @@ class SharedPort:
         self._streams[address] = (code, rate_hz)
         if len(self._streams) < 2:
             return ''
+        baud, wireless = self.config.baud, self.config.wireless
         chosen = [(a, streams.BY_CODE[c], r) for a, (c, r) in sorted(self._streams.items())]
-        if streams.shared_line_fits([(st, r) for _, st, r in chosen], self.config.baud,
-                                    self.config.wireless):
+        if streams.shared_line_fits([(st, r) for _, st, r in chosen], baud, wireless):
             return ''
         text = ('the sensors on this port are set to rates the line cannot carry together, '
-                'records will be skipped: '
-                + streams.shared_advice(chosen, self.config.baud, self.config.wireless))
+                'records will be skipped: ' + streams.shared_advice(chosen, baud, wireless))
         if text != self._warned:
             self._warned = text
             self._log.warning(text)

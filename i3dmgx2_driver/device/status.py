@@ -131,7 +131,7 @@ class DeviceReport:
         #: records flow), for diagnostics.
         self.advice = ''
         #: The port can never work (a path that is no serial port): why.
-        self.fatal_error: PortError | None = None
+        self.fatal_error = ''
         #: How the last connection got streaming: 'full' (the whole dialogue) or 'resumed'.
         self.last_start = ''
         self.resumes = 0
@@ -166,8 +166,7 @@ class DeviceReport:
 
     def records_flow(self) -> None:
         """Forget what the observer found: records flow again."""
-        if self.advice:
-            self.advice = ''
+        self.advice = ''
 
     def warn(self, key: str, message: str, period: float | None = None) -> None:
         """Log ``message`` once, then again at most every ``period`` s (a reminder)."""
@@ -183,14 +182,12 @@ class DeviceReport:
     def failed(self, error: PortError) -> None:
         """Keep why the port can never work; the supervisor stops."""
         with self._lock:
-            self.fatal_error = error
+            self.fatal_error = str(error)
             self.last_error = str(error)
             self.state = State.STOPPED
 
     def fields(self) -> dict[str, Any]:
         """Return the report's fields at one moment, named as in DeviceStatus."""
         with self._lock:
-            return {
-                'state': self.state, 'stalls': self.stalls, 'last_error': self.last_error,
-                'advice': self.advice, 'last_start': self.last_start, 'resumes': self.resumes,
-                'fatal_error': str(self.fatal_error) if self.fatal_error is not None else ''}
+            return {name: getattr(self, name) for name in (
+                'state', 'stalls', 'last_error', 'advice', 'last_start', 'resumes', 'fatal_error')}

@@ -118,8 +118,7 @@ class DeviceSupervisor:
                  on_stream_known: Callable[[int | None, bool], None] | None = None) -> None:
         self.config = config
         self._shared = shared
-        log = log or logging.getLogger('i3dmgx2_driver')
-        self._log = log
+        self._log = log = log or logging.getLogger('i3dmgx2_driver')
         #: Set means "no stream wanted now": the thread ends, and every request on the
         #: link gives up within a few tens of milliseconds (the link's ``cancel`` event),
         #: and a link opened meanwhile is closed at once. Only this class sets or clears
@@ -133,8 +132,7 @@ class DeviceSupervisor:
         self._attention = threading.Event()
         self._report = DeviceReport(log)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
-        self.dialogue = SensorDialogue(config, log, self._report.warn, self._cancel,
-                                       on_gyro_bias)
+        self.dialogue = SensorDialogue(config, log, self._report.warn, self._cancel, on_gyro_bias)
         #: Its firmware, as the dialogue reads it: what a service may ask of the sensor.
         self.firmware = self.dialogue.firmware
         self._on_fatal = on_fatal or (lambda error: log.error(str(error)))
@@ -142,8 +140,8 @@ class DeviceSupervisor:
         self._current = CurrentLink(config, PortOpener(config, log, on_bytes), on_record,
                                     self._cancel, self._attention.set, self._report.finding,
                                     shared)
-        self._on_connect = on_connect
-        self._on_stream_known = on_stream_known
+        self._on_connect = on_connect or (lambda: None)
+        self._on_stream_known = on_stream_known or (lambda ticks, bias_kept: None)
         #: The reader thread's scheduling as last logged (logged again when it changes).
         self._policy_logged = PolicyOutcome()
         self._reopen_wait = ReopenWait(config.port, config.reconnect_interval, self._cancel.wait)
@@ -172,8 +170,7 @@ class DeviceSupervisor:
 
     def streaming_link(self) -> DeviceLink | None:
         """Return the link while the device streams (a poll may share it), else None."""
-        link = self._current.link
-        return link if link is not None and self._report.state is State.STREAMING else None
+        return self._current.link if self._report.state is State.STREAMING else None
 
     # -- the plain node: one thread for everything ----------------------------------------
 
@@ -330,7 +327,7 @@ class DeviceSupervisor:
         self.dialogue.quiet(link)
         if link.running.is_set():
             # The reader runs already (a resume that was not confirmed): anchor afresh.
-            self._anchor()
+            self._on_connect()
         else:
             self._start_reader(link)
         self.dialogue.initialise(link, require_answer, self._current.observed)
@@ -352,11 +349,9 @@ class DeviceSupervisor:
         dialogue.expect_stream(link)
         self._hand_on()
         self._start_reader(link)
-        if not dialogue.resume(link):
-            return False
-        if not self._cancel.is_set():
+        if (resumed := dialogue.resume(link)) and not self._cancel.is_set():
             self._report.streaming('resumed')
-        return True
+        return resumed
 
     def _begin_stream(self, link: DeviceLink) -> None:
         """Start continuous mode on an initialised link; announce it once records arrive."""
@@ -372,10 +367,9 @@ class DeviceSupervisor:
         DeviceTimeout when none comes, PortDisconnected if the port goes.
         """
         self._hand_on()  # a capture in the pause may have given a bias to keep
-        if not self.dialogue.start_continuous(link):
-            return False
-        self._report.streaming()
-        return True
+        if started := self.dialogue.start_continuous(link):
+            self._report.streaming()
+        return started
 
     def _quiet(self, link: DeviceLink) -> None:
         """Stop the device's stream and drop what is in flight: READY, or DISCONNECTED."""
@@ -396,19 +390,13 @@ class DeviceSupervisor:
         while the divider is unknown) and whether a gyro bias is kept and
         written back after a power cycle.
         """
-        if self._on_stream_known is not None:
-            divider = self.dialogue.divider
-            self._on_stream_known(ticks_per_cycle(divider) if divider else None,
-                                  self.dialogue.gyro_bias is not None)
-
-    def _anchor(self) -> None:
-        """Let the consumer re-anchor before the first record of a new link reaches it."""
-        if self._on_connect is not None:
-            self._on_connect()
+        divider = self.dialogue.divider
+        self._on_stream_known(ticks_per_cycle(divider) if divider else None,
+                              self.dialogue.gyro_bias is not None)
 
     def _start_reader(self, link: DeviceLink) -> None:
         """Anchor the consumer, start the reader thread; log its scheduling when it changes."""
-        self._anchor()
+        self._on_connect()  # before the first record of a new link reaches it
         link.start()
         if not link.running.wait(timeouts.READER_START_WAIT_S):
             return
@@ -434,12 +422,11 @@ class DeviceSupervisor:
 
     def _run(self, link: DeviceLink | None) -> None:
         """Stream and recover until cancelled."""
-        report = self._report
         while not self._cancel.is_set():
             stalled = False
             try:
                 if link is None:
-                    report.enter(State.CONNECTING)
+                    self._report.enter(State.CONNECTING)
                     link = self._current.open_link()
                     if not self._resume(link):
                         self._initialise(link)
@@ -455,7 +442,7 @@ class DeviceSupervisor:
                 break  # whoever stopped us decides about the port
             self._current.release()
             link = None
-            report.enter(State.DISCONNECTED)
+            self._report.enter(State.DISCONNECTED)
             self._reopen_wait(after_stall=stalled)
 
     def _say(self, exc: PortError | DeviceError) -> None:

@@ -59,15 +59,10 @@ RESET_WARNING_S = 60.0
 PARSER_FAILURES = ('checksum_failures', 'length_failures')
 #: Parser counters shown, with their labels.
 PARSER_KEYS = (
-    ('good_frames', 'good frames'),
-    ('checksum_failures', 'checksum failures'),
-    ('length_failures', 'length failures'),
-    ('bytes_skipped', 'bytes skipped'),
-    ('foreign_frames', 'foreign-address frames'),
-    ('acks', 'ACKs'),
-    ('nacks', 'NACKs'),
-    ('bytes_in', 'bytes read'),
-)
+    ('good_frames', 'good frames'), ('checksum_failures', 'checksum failures'),
+    ('length_failures', 'length failures'), ('bytes_skipped', 'bytes skipped'),
+    ('foreign_frames', 'foreign-address frames'), ('acks', 'ACKs'), ('nacks', 'NACKs'),
+    ('bytes_in', 'bytes read'))
 
 
 class Status(NamedTuple):
@@ -80,17 +75,11 @@ class Status(NamedTuple):
 
     def value(self, key: str) -> str | None:
         """Return the value of ``key``, or None (for tests and logs)."""
-        for name, value in self.values:
-            if name == key:
-                return value
-        return None
+        return next((value for name, value in self.values if name == key), None)
 
 
-def _fmt(value: float | None, digits: int = 3, unit: str = '') -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return 'n/a'
-    text = f'{value:.{digits}f}'
-    return f'{text} {unit}' if unit else text
+def _fmt(value: float | None, digits: int) -> str:
+    return 'n/a' if value is None or math.isnan(value) else f'{value:.{digits}f}'
 
 
 def connection_status(device: DeviceStatus, capture: str, fault_capture: str = '') -> Status:
@@ -106,9 +95,8 @@ def connection_status(device: DeviceStatus, capture: str, fault_capture: str = '
     ``fault_capture`` what the fault capture keeps and where it last wrote
     ('' leaves its line out).
     """
-    state, advice, last_error = device.state, device.advice, device.last_error
-    connections, reconnects = device.connections, device.reconnects
-    wireless = device.wireless
+    state, advice, last_error, wireless = device.state, device.advice, device.last_error, \
+        device.wireless
     if state is State.STREAMING:
         level, message = OK, 'streaming'
     elif state is State.READY:
@@ -119,8 +107,8 @@ def connection_status(device: DeviceStatus, capture: str, fault_capture: str = '
         level, message = ERROR, f'no records: {advice}'
     elif state is State.STALLED:
         level, message = WARN, 'stream stalled: re-requesting continuous mode'
-    elif state in (State.CONNECTING, State.INITIALISING) and not reconnects \
-            and connections <= 1 and not last_error:
+    elif state in (State.CONNECTING, State.INITIALISING) and not device.reconnects \
+            and device.connections <= 1 and not last_error:
         level, message = WARN, f'{state.value}'
     elif state is State.STOPPED:
         level, message = ERROR, 'driver stopped'
@@ -129,21 +117,15 @@ def connection_status(device: DeviceStatus, capture: str, fault_capture: str = '
     else:
         level, message = ERROR, f'disconnected: {last_error or "port lost"}'
     return Status(level, 'connection', message, (
-        ('port', device.port),
-        ('node address', str(device.address)),
-        ('link', 'wireless' if wireless else 'wired'),
-        ('state', state.value),
-        ('connections', str(connections)),
-        ('reconnects', str(reconnects)),
-        ('stalls', str(device.stalls)),
-        ('last error', last_error or '-'),
+        ('port', device.port), ('node address', str(device.address)),
+        ('link', 'wireless' if wireless else 'wired'), ('state', state.value),
+        ('connections', str(device.connections)), ('reconnects', str(device.reconnects)),
+        ('stalls', str(device.stalls)), ('last error', last_error or '-'),
         ('low-latency mode', device.low_latency_state or 'not opened yet'),
         ('base station ping', {None: 'not tried', True: 'ok', False: 'no answer'}[
             device.ping_ok] if wireless else 'n/a (wired)'),
-        ('raw capture', capture),
-        *((('fault capture', fault_capture),) if fault_capture else ()),
-        ('observed on the line', advice or '-'),
-    ))
+        ('raw capture', capture), *((('fault capture', fault_capture),) if fault_capture else ()),
+        ('observed on the line', advice or '-')))
 
 
 def rate_level(measured_hz: float | None, expected_hz: float | None,
@@ -204,19 +186,15 @@ def stream_status(device: DeviceStatus, seen: StreamPeriod) -> Status:
     else:
         level, message = rate_level(seen.measured_hz, expected_hz)
     return Status(level, 'stream', message, (
-        ('stream', seen.label or 'n/a'),
-        ('line use', device.line_use or 'rate unknown'),
+        ('stream', seen.label or 'n/a'), ('line use', device.line_use or 'rate unknown'),
         ('measured rate (Hz)', _fmt(seen.measured_hz, 2)),
         ('configured rate (Hz)', _fmt(expected_hz, 2)),
-        ('records in last period', str(seen.received)),
-        ('period (s)', _fmt(seen.period, 2)),
-        ('published', str(seen.published)),
-        ('lost (timer gaps)', str(seen.lost)),
+        ('records in last period', str(seen.received)), ('period (s)', _fmt(seen.period, 2)),
+        ('published', str(seen.published)), ('lost (timer gaps)', str(seen.lost)),
         ('lost in last period', str(seen.lost_in_period)),
         ('magnetometer published', str(seen.mag_published)),
         ('other records', str(seen.other_records)),
-        ('device resets', str(seen.device_resets)),
-    ))
+        ('device resets', str(seen.device_resets))))
 
 
 def radio_status(wireless: bool, radio: RadioStats | None, fresh: bool,
@@ -231,16 +209,10 @@ def radio_status(wireless: bool, radio: RadioStats | None, fresh: bool,
         return Status(OK, 'radio link', 'wired sensor: no radio', ())
     if radio is None:
         return Status(STALE, 'radio link', 'no packet received yet', ())
-    values = (
-        ('LQI', str(radio.lqi)),
-        ('RSSI', str(radio.rssi)),
-        ('LQI min', str(radio.lqi_min)),
-        ('RSSI min', str(radio.rssi_min)),
-        ('LQI mean', f'{radio.lqi_mean:.1f}'),
-        ('RSSI mean', f'{radio.rssi_mean:.1f}'),
-        ('LQI warn below', str(low_lqi)),
-        ('RSSI warn below', str(low_rssi)),
-    )
+    values = (('LQI', str(radio.lqi)), ('RSSI', str(radio.rssi)),
+              ('LQI min', str(radio.lqi_min)), ('RSSI min', str(radio.rssi_min)),
+              ('LQI mean', f'{radio.lqi_mean:.1f}'), ('RSSI mean', f'{radio.rssi_mean:.1f}'),
+              ('LQI warn below', str(low_lqi)), ('RSSI warn below', str(low_rssi)))
     if not fresh:
         return Status(STALE, 'radio link', 'no packet in the last period', values)
     low = [f'{name} {value} < {limit}' for name, value, limit in
@@ -307,9 +279,8 @@ def device_status(device: DeviceStatus, address: int, temperature_c: float | Non
                 else 'not connected yet')
         return Status(level, 'device', text, tuple(values))
     values = [('model', info.model_name or '?'), ('model number', info.model_number or '?'),
-              ('serial number', info.serial_number or '?'),
-              ('firmware', info.firmware or '?'), ('options', info.options or '-'),
-              *values]
+              ('serial number', info.serial_number or '?'), ('firmware', info.firmware or '?'),
+              ('options', info.options or '-'), *values]
     return Status(OK, 'device', f'{info.model_name or info.model_number or "?"}, serial '
                                 f'{info.serial_number or "?"}, firmware {info.firmware or "?"}',
                   tuple(values))
@@ -326,20 +297,15 @@ def time_status(time_source: str, clock: ClockStatus, now: float,
     the fit is implausible; STALE before the first sample (device time).
     ``time_offset`` is the ``time_offset`` parameter, added to every stamp.
     """
-    samples = clock.samples
-    drift_ppm = clock.drift_ppm
+    samples, drift_ppm = clock.samples, clock.drift_ppm
     restarts = ', '.join(f'{reason.value} {clock.restarts.get(reason.value, 0)}'
                          for reason in Restart)
     values = (
-        ('time source', time_source),
-        ('time offset (s)', f'{time_offset:+.6f}'),
+        ('time source', time_source), ('time offset (s)', f'{time_offset:+.6f}'),
         ('clock drift (ppm)', f'{drift_ppm:.1f}' if samples else 'n/a'),
-        ('samples in this fit', str(samples)),
-        ('fit started afresh', restarts),
+        ('samples in this fit', str(samples)), ('fit started afresh', restarts),
         ('last fresh start', clock.last_restart or 'n/a'),
-        ('timer rollovers', str(clock.rollovers)),
-        ('gaps bridged', str(clock.gaps)),
-    )
+        ('timer rollovers', str(clock.rollovers)), ('gaps bridged', str(clock.gaps)))
     if time_source != 'device':
         return Status(OK, 'time', 'host time: stamps are packet read times', values)
     if not samples:
@@ -411,13 +377,8 @@ def to_message(statuses: Iterable[Status], hardware_id: str,
     The node passes its own name as the prefix, so that two drivers side by
     side (two sensors) publish statuses an aggregator tells apart.
     """
-    out = []
-    for status in statuses:
-        msg = DiagnosticStatus()
-        msg.level = bytes((status.level,))
-        msg.name = prefix + status.name
-        msg.message = status.message
-        msg.hardware_id = hardware_id
-        msg.values = [KeyValue(key=key, value=value) for key, value in status.values]
-        out.append(msg)
-    return out
+    return [DiagnosticStatus(level=bytes((status.level,)), name=prefix + status.name,
+                             message=status.message, hardware_id=hardware_id,
+                             values=[KeyValue(key=key, value=value)
+                                     for key, value in status.values])
+            for status in statuses]

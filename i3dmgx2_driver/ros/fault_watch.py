@@ -78,19 +78,15 @@ class FaultWatch:
         if last is None:
             return []
         before, resets_before = last
-        causes = []
-        if device.stalls > before.stalls:
-            causes.append('stall')
-        if device.reconnects > before.reconnects or (
-                device.state is State.DISCONNECTED and before.state in _RUNNING):
-            causes.append('disconnect')
-        if resets > resets_before:
-            causes.append('device_reset')
-        if bad - self._corrupt[0][1] >= CORRUPT_BURST:
-            causes.append('corrupt')
+        burst = bad - self._corrupt[0][1] >= CORRUPT_BURST
+        if burst:
             self._corrupt.clear()  # the burst is told; the next one counts afresh
             self._corrupt.append((now, bad))
-        if device.parser.get('nacks', 0) > before.parser.get('nacks', 0) \
-                and before.state in _SERVING:
-            causes.append('refused')
-        return [self._prefix + cause for cause in causes]
+        seen = {'stall': device.stalls > before.stalls,
+                'disconnect': device.reconnects > before.reconnects or (
+                    device.state is State.DISCONNECTED and before.state in _RUNNING),
+                'device_reset': resets > resets_before,
+                'corrupt': burst,
+                'refused': device.parser.get('nacks', 0) > before.parser.get('nacks', 0)
+                and before.state in _SERVING}
+        return [self._prefix + cause for cause, happened in seen.items() if happened]

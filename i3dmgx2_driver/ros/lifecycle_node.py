@@ -64,7 +64,7 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 from .diagnostics import DiagnosticsPublisher
 from .driver_core import DriverCore, DriverSet, load_config
 from .main import run
-from .parameters import declare_parameters, driver_config, DriverConfig, ParameterError
+from .parameters import declare_parameters, driver_config, ParameterError
 from .publishers import create_publishers, Publishers
 from .. import lifetime
 from ..device.link import DeviceError
@@ -73,8 +73,6 @@ from ..device.port import check_port_path, PortError, PortUnusable
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
 ERROR = TransitionCallbackReturn.ERROR
-#: What a transition can fail with that is the device's or the port's doing.
-DEVICE_ERRORS = (PortError, DeviceError)
 #: How long a signal waits for a transition under way to end (s); the
 #: device was cut off first, so it ends within milliseconds.
 TRANSITION_WAIT = 1.0
@@ -127,24 +125,19 @@ class LifecycleDriverNode(LifecycleNode):
         self.on_done: Callable[[], None] = lambda: None
         #: Set by a signal's shutdown(): a transition under way does not start the device again.
         self._stopping = threading.Event()
-        config: DriverConfig | None = None
         try:
             # Declared now so that ``ros2 param`` shows them before configure, and
             # names the node does not know are said once; configure checks them
             # again and reports what is wrong.
-            config = load_config(self)
+            names = [s.name for s in load_config(self).sensors]
         except ParameterError:
-            pass
-        names = [s.name for s in config.sensors] if config is not None else []
-        if len(names) > 1:
-            self.diagnostics = [
-                DiagnosticsPublisher(self, lambda i=i: self._core(i),
-                                     lifecycle=self.state_label if i == 0 else None,
-                                     sensor=name)
-                for i, name in enumerate(names)]
-        else:
-            self.diagnostics = [DiagnosticsPublisher(self, lambda: self.core,
-                                                     lifecycle=self.state_label)]
+            names = []
+        several = len(names) > 1
+        self.diagnostics = [
+            DiagnosticsPublisher(self, lambda i=i: self._core(i),
+                                 lifecycle=self.state_label if i == 0 else None,
+                                 sensor=name if several else '')
+            for i, name in enumerate(names if several else [''])]
 
     @property
     def core(self) -> DriverCore | None:
@@ -181,44 +174,30 @@ class LifecycleDriverNode(LifecycleNode):
         log = self.get_logger()
         try:
             config = driver_config(declare_parameters(self))
-        except ParameterError as exc:
-            log.error(f'configure failed: {exc}')
-            return FAILURE
-        try:
             check_port_path(config.device.port)  # the words of the plain node's exit 2
-        except PortUnusable as exc:
-            log.error(f'configure failed: {exc}')
-            return FAILURE
-        if self._data_publishers is None:
-            try:
+            if self._data_publishers is None:  # (a bad qos_overrides parameter raises)
                 self._data_publishers = [
                     create_publishers(self, config, lifecycle=True, sensor=s)
                     for s in config.sensors]
-            except ParameterError as exc:  # a bad qos_overrides parameter
-                log.error(f'configure failed: {exc}')
-                return FAILURE
-        drivers = DriverSet(self, config, publishers=self._data_publishers, publishing=False,
-                            refusal=self._refusal)
-        self.drivers = drivers
+        except (ParameterError, PortUnusable) as exc:
+            log.error(f'configure failed: {exc}')
+            return FAILURE
+        self.drivers = drivers = DriverSet(self, config, publishers=self._data_publishers,
+                                           publishing=False, refusal=self._refusal)
         if self._stopping.is_set():
             # A signal came while the set was made, before shutdown() could see it.
             self._release()
             return FAILURE
         failed = _each(drivers.cores, lambda core: core.supervisor.connect())
+        # A sensor that can never give what is asked (its firmware lacks the stream):
+        # the words of the plain node's exit 2, whatever the other sensors answered.
         never = [exc for _, exc in failed if isinstance(exc, PortUnusable)]
-        if never:
-            # A sensor that can never give what is asked (its firmware lacks the stream):
-            # the words of the plain node's exit 2, whatever the other sensors answered.
+        if never or len(failed) == len(drivers.cores):
             self._release()
-            log.error(f'configure failed: {never[0]}')
-            return FAILURE
-        if len(failed) == len(drivers.cores):
-            self._release()
-            if not drivers.several:
-                log.error(f'configure failed: {failed[0][1]}')
-            else:
-                log.error('configure failed: no listed sensor answers: ' + '; '.join(
+            why = never[0] if never else failed[0][1] if not drivers.several else (
+                'no listed sensor answers: ' + '; '.join(
                     f'node {core.sensor.address}: {exc}' for core, exc in failed))
+            log.error(f'configure failed: {why}')
             return FAILURE
         for core, exc in failed:
             log.warning(f'configure: node {core.sensor.address} does not answer ({exc}); '
@@ -238,8 +217,7 @@ class LifecycleDriverNode(LifecycleNode):
         drivers = self.drivers
         if self._stopping.is_set():
             return FAILURE  # a signal stopped the device meanwhile: it stays stopped
-        result = super().on_activate(state)
-        if result != SUCCESS or drivers is None:
+        if super().on_activate(state) != SUCCESS or drivers is None:
             return FAILURE
         for core in drivers.cores:
             core.records.forget_last_sample()  # the pause since the last activation is no loss
@@ -344,16 +322,14 @@ class LifecycleDriverNode(LifecycleNode):
         if drivers is not None:
             drivers.set_publishing(False)
             _each(drivers.cores, lambda core: core.supervisor.stop(), timeout=STOP_WAIT)
-        locked = self._transition_lock.acquire(timeout=TRANSITION_WAIT)
-        try:
-            if locked and not self._finished.is_set():
-                try:
+        if self._transition_lock.acquire(timeout=TRANSITION_WAIT):
+            try:
+                if not self._finished.is_set():
                     self.trigger_shutdown()
                     time.sleep(EVENT_GRACE)
-                except RCLError:
-                    pass  # in a transition state: release below without the state machine
-        finally:
-            if locked:
+            except RCLError:
+                pass  # in a transition state: release below without the state machine
+            finally:
                 self._transition_lock.release()
         if not self._finished.is_set():
             self._release('shutdown')
@@ -377,14 +353,13 @@ def _each(cores: list[DriverCore], step: Callable[[DriverCore], None],
     def take(core: DriverCore) -> None:
         try:
             step(core)
-        except DEVICE_ERRORS as exc:
+        except (PortError, DeviceError) as exc:  # the device's or the port's doing
             failed.append((core, exc))
 
     if len(cores) == 1:
         take(cores[0])
         return failed
-    threads = [threading.Thread(target=take, args=(core,), name='gx2-transition',
-                                daemon=True)
+    threads = [threading.Thread(target=take, args=(core,), name='gx2-transition', daemon=True)
                for core in cores]
     for thread in threads:
         thread.start()

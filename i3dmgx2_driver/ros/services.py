@@ -58,6 +58,14 @@ from ..device.status import State
 
 # -- the device operations' services -----------------------------------------------
 
+def _trigger(answer: Callable[[], tuple[bool, str]]) -> Callable[..., Trigger.Response]:
+    """Serve ``answer()``, a (success, message), as a std_srvs/Trigger callback."""
+    def callback(request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        response.success, response.message = answer()
+        return response
+    return callback
+
+
 class DeviceServices:
     """
     The ``~/capture_gyro_bias``, ``~/store_gyro_bias`` and ``~/self_test`` services.
@@ -94,8 +102,7 @@ class DeviceServices:
         #: What is running now ('' when idle), for diagnostics.
         self.operation = ''
         #: The capture (and what the last ones came to), and the self test.
-        self.gyro_bias = GyroBiasCapture(device, forget_last_sample, self._calibrated,
-                                         self._log)
+        self.gyro_bias = GyroBiasCapture(device, forget_last_sample, self._calibrated, self._log)
         self.self_test_run = SelfTestRun(device, published, forget_last_sample, self._stop,
                                          self._log)
         group = MutuallyExclusiveCallbackGroup()
@@ -103,19 +110,17 @@ class DeviceServices:
         self.services = [
             node.create_service(kind, f'{prefix}{name}', callback, callback_group=group)
             for name, kind, callback in (
-                ('capture_gyro_bias', Trigger, self._on_capture),
-                ('store_gyro_bias', Trigger, self._on_store),
-                ('self_test', Trigger, self._on_self_test),
+                ('capture_gyro_bias', Trigger, _trigger(self.capture_gyro_bias)),
+                ('store_gyro_bias', Trigger, _trigger(self.store_gyro_bias)),
+                ('self_test', Trigger, _trigger(self.self_test)),
                 ('diagnostic_self_test', SelfTest, self._on_diagnostic_self_test))]
         #: One sensor's node: the calibration file and a known bias are its (parameters.py).
         self._single = prefix == '~/'
         if self._single and self._parameter(GYRO_BIAS):
             self._calibrated(True)
-        self._start_thread: threading.Thread | None = None
         if capture_on_start:
-            self._start_thread = threading.Thread(
-                target=self._capture_on_start, name='gx2-bias-on-start', daemon=True)
-            self._start_thread.start()
+            threading.Thread(target=self._capture_on_start, name='gx2-bias-on-start',
+                             daemon=True).start()
 
     def stop(self) -> None:
         """Stop waiting (the capture at start, the rate window); the link aborts the rest."""
@@ -134,31 +139,15 @@ class DeviceServices:
         At shutdown, so that a call cut short by the link's abort still gets
         its answer out before the node (and its service) is destroyed.
         """
-        if not self._busy.acquire(timeout=timeout):
-            return False
-        self._busy.release()
-        return True
+        if idle := self._busy.acquire(timeout=timeout):
+            self._busy.release()
+        return idle
 
     def calibration(self) -> tuple[Calibration | None, Calibration | None]:
         """Return the last capture attempt and the last accepted capture (diagnostics)."""
         return self.gyro_bias.last_capture, self.gyro_bias.good_capture
 
     # -- service callbacks (executor) ---------------------------------------
-
-    def _on_capture(self, request: Trigger.Request, response: Trigger.Response
-                    ) -> Trigger.Response:
-        response.success, response.message = self.capture_gyro_bias()
-        return response
-
-    def _on_store(self, request: Trigger.Request, response: Trigger.Response
-                  ) -> Trigger.Response:
-        response.success, response.message = self.store_gyro_bias()
-        return response
-
-    def _on_self_test(self, request: Trigger.Request, response: Trigger.Response
-                      ) -> Trigger.Response:
-        response.success, response.message = self.self_test()
-        return response
 
     def _on_diagnostic_self_test(self, request: SelfTest.Request,
                                  response: SelfTest.Response) -> SelfTest.Response:
@@ -176,8 +165,7 @@ class DeviceServices:
 
     def _exclusive(self, name: str, body: Callable[[], tuple[bool, str]]) -> tuple[bool, str]:
         """Run one operation at a time; refuse at once when another runs."""
-        refusal = self._refusal()
-        if refusal:
+        if refusal := self._refusal():
             return False, f'refused: {refusal}'
         if not self._busy.acquire(blocking=False):
             return False, f'refused: {self.operation or "another operation"} is in progress'
@@ -268,18 +256,16 @@ class SaveCaptureService:
         self._node = node
         self._capture = capture
         self.service = node.create_service(
-            Trigger, '~/save_capture', self._save,
+            Trigger, '~/save_capture', _trigger(self._save),
             callback_group=MutuallyExclusiveCallbackGroup())
 
-    def _save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    def _save(self) -> tuple[bool, str]:
         try:
             path = self._capture.save('request')
         except (OSError, ValueError) as exc:
-            response.success, response.message = False, f'no capture written: {exc}'
-            return response
+            return False, f'no capture written: {exc}'
         self._node.get_logger().info(f'capture saved on request: {path}')
-        response.success, response.message = True, path
-        return response
+        return True, path
 
     def destroy(self) -> None:
         """Remove the service from the node (a managed node's cleanup)."""

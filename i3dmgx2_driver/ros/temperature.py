@@ -83,8 +83,7 @@ class TemperaturePoller:
         if period > 0 and publisher is not None:
             self._msg = Temperature()  # variance 0.0: unknown (sensor_msgs)
             self._msg.header.frame_id = frame_id
-            self._thread = threading.Thread(target=self._run, name='gx2-temperature',
-                                            daemon=True)
+            self._thread = threading.Thread(target=self._run, name='gx2-temperature', daemon=True)
             self._thread.start()
 
     def stop(self) -> None:
@@ -108,12 +107,11 @@ class TemperaturePoller:
         if link is None:
             return False
         why = self._firmware.refusal('the temperature poll', layouts.TEMPERATURES)
-        if why != self.unavailable:
-            self.unavailable = why
-            if why:
-                self.node.get_logger().warning(
-                    f'temperature_period {self.period:g} s: {why}: the temperature is not '
-                    f'polled (imu/temperature stays silent)')
+        if why and why != self.unavailable:
+            self.node.get_logger().warning(
+                f'temperature_period {self.period:g} s: {why}: the temperature is not '
+                f'polled (imu/temperature stays silent)')
+        self.unavailable = why
         if why:
             return False
         try:
@@ -123,13 +121,10 @@ class TemperaturePoller:
             if self._throttle.allow('poll') and not self._stop.is_set():
                 self.node.get_logger().warning(f'temperature poll failed: {exc}')
             return False
-        read_time = time.time()
-        self.latest = reply.accel_celsius
-        msg = self._msg
-        msg.temperature = self.latest
-        set_stamp(msg.header, read_time + self._time_offset)
+        self.latest = self._msg.temperature = reply.accel_celsius
+        set_stamp(self._msg.header, time.time() + self._time_offset)
         try:
-            self.publisher.publish(msg)
+            self.publisher.publish(self._msg)
         except RCLError:
             return False  # ROS is shutting down
         self.published += 1

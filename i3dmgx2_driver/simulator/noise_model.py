@@ -51,8 +51,10 @@ Vector3 = tuple[float, float, float]
 #: Spacing of the Gauss-Markov time constants that make the flicker noise.
 FLICKER_RATIO = 2.0
 #: Shortest and longest time constant (s): the flicker is flat from a few times the
-#: shortest to a fraction of the longest; below it, the white noise dominates anyway.
-FLICKER_SHORTEST_S = 0.0625
+#: shortest to a fraction of the longest. Half a sample at 250 Hz: from 0.06 s the floor
+#: missing under it biased an hour's N by a few times its scatter, and much shorter ones
+#: add white noise (issue 56).
+FLICKER_SHORTEST_S = 2.0 ** -9
 FLICKER_LONGEST_S = 4096.0
 #: Samples drawn at once: the Gauss-Markov processes take 16 columns per axis.
 BLOCK = 1 << 15

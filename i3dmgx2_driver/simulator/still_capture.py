@@ -26,11 +26,15 @@ the timer) and framed as wireless data packets or wired records, with the
 checksums summed in numpy. The codec itself stays free of numpy; the tests
 check these bytes against its encoder, record for record.
 
-What comes out are ``(receive_time, bytes)`` chunks, as a capture holds
-them: a tool or a test writes them with ``capture.file_format``.
+A still sensor is also disturbed as recordings are: tilted (gravity turns
+about the device's x axis while the gyro reads the turn), knocked (a
+ringing that averages out of a second's mean), or with a dead axis (no
+noise at all). What comes out are ``(receive_time, bytes)`` chunks, as a
+capture holds them: a tool or a test writes them with ``capture.file_format``
+(and cuts the file to make a cut capture).
 """
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 import math
 from typing import NamedTuple
 
@@ -48,6 +52,11 @@ from .sensor import DEFAULT_TIMER_START
 _STILL_FIELDS = ('accel', 'angular_rate', 'mag', 'matrix', 'timer')
 #: Records made at once; a block's chunks are yielded before the next is made.
 BLOCK = 1 << 15
+#: A tilt turns at a steady rate over this long (s).
+TILT_S = 1.0
+#: A knock: a ringing at this frequency (Hz) under a Gaussian of this width (s), of this
+#: amplitude on the accelerometer (g) and the gyro (rad/s): no mean left in a second's.
+KNOCK_HZ, KNOCK_S, KNOCK_G, KNOCK_RAD_S = 40.0, 0.05, 0.3, 0.2
 
 
 class StillTruth(NamedTuple):
@@ -108,12 +117,37 @@ def frame(records: np.ndarray, wireless: bool, address: int, lqi: int = 230,
     return np.concatenate([body, link, _checksums(body[:, 1:])], axis=1)
 
 
+def disturb(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
+            tilts: Sequence[tuple[float, float]], knocks: Sequence[float]) -> None:
+    """
+    Add tilts ``(start s, degrees)`` and knocks (times, s) to samples at ``t``, in place.
+
+    A tilt turns the device about its x axis at a steady rate for ``TILT_S``:
+    the gyro reads the rate, the accelerometer's gravity turns with it. A
+    knock rings about its time, and averages out of any mean around it.
+    """
+    angle = np.zeros(t.size)
+    for start, degrees in tilts:
+        ramp = np.clip((t - start) / TILT_S, 0.0, 1.0)
+        angle += math.radians(degrees) * ramp
+        gyro[:, 0] += math.radians(degrees) / TILT_S * ((ramp > 0) & (ramp < 1))
+    cos, sin = np.cos(angle), np.sin(angle)
+    accel[:, 1], accel[:, 2] = cos * accel[:, 1] - sin * accel[:, 2], \
+        sin * accel[:, 1] + cos * accel[:, 2]
+    for when in knocks:
+        age = t - when
+        ring = np.cos(2 * math.pi * KNOCK_HZ * age) * np.exp(-0.5 * (age / KNOCK_S) ** 2)
+        accel += KNOCK_G * ring[:, None]
+        gyro += KNOCK_RAD_S * ring[:, None]
+
+
 def still_chunks(seconds: float, rate_hz: float, code: int = lay.ACCEL_ANG_RATE,
                  wireless: bool = True, address: int = 95,
                  noise: NoiseConfig | None = None, motion: MotionConfig | None = None,
                  seed: int | None = None, start_time: float = 1_700_000_000.0,
-                 per_read: int = 8, timer_start: int = DEFAULT_TIMER_START
-                 ) -> Iterator[tuple[float, bytes]]:
+                 per_read: int = 8, timer_start: int = DEFAULT_TIMER_START,
+                 tilts: Sequence[tuple[float, float]] = (), knocks: Sequence[float] = (),
+                 dead: Sequence[int] = ()) -> Iterator[tuple[float, bytes]]:
     """
     Yield the reads of a sensor at rest streaming ``code`` at ``rate_hz`` for ``seconds``.
 
@@ -121,6 +155,8 @@ def still_chunks(seconds: float, rate_hz: float, code: int = lay.ACCEL_ANG_RATE,
     sampled (plus nothing: the line's delays do not matter to noise). The
     timer advances by the whole number of ticks nearest a period, from
     ``timer_start`` (by default near its rollover, which the reader must unwrap).
+    ``tilts`` and ``knocks`` disturb it (``disturb``); the ``dead`` axes
+    (0-5: gyro x, y, z, accelerometer x, y, z, the device's) have no noise.
     """
     if not rate_hz > 0 or not seconds > 0 or per_read < 1:
         raise ValueError(f'rate_hz and seconds must be positive and per_read >= 1, got '
@@ -139,11 +175,15 @@ def still_chunks(seconds: float, rate_hz: float, code: int = lay.ACCEL_ANG_RATE,
         records = np.zeros(n, dtype)
         records['echo'] = code
         errors = model.draw(n, dt)
+        errors[:, list(dead)] = 0.0
+        gyro = np.asarray(truth.angular_rate) + errors[:, :3]
+        accel = np.asarray(truth.accel) + errors[:, 3:]
+        disturb(index * dt, gyro, accel, tilts, knocks)
         names = dtype.names
         if 'angular_rate' in names:
-            records['angular_rate'] = np.asarray(truth.angular_rate) + errors[:, :3]
+            records['angular_rate'] = gyro
         if 'accel' in names:
-            records['accel'] = np.asarray(truth.accel) + errors[:, 3:]
+            records['accel'] = accel
         if 'mag' in names:
             records['mag'] = np.asarray(truth.mag) + rng.normal(0.0, mag_noise, (n, 3))
         if 'matrix' in names:

@@ -142,42 +142,43 @@ class RoundTrips:
         self.say = say
         self.longest = longest
 
+    def _timed(self, kind: str, count: int, failures: tuple[str, ...],
+               attempt: Callable[[], str | None]) -> dict[str, Any]:
+        """Time ``count`` tries of ``attempt`` (it returns the failure's name, or None)."""
+        times, failed = [], dict.fromkeys(failures, 0)
+        for _ in range(count):
+            start = time.monotonic()
+            failure = attempt()
+            if failure is None:
+                times.append(time.monotonic() - start)
+            else:
+                failed[failure] += 1
+        note_longest(self.longest, kind, times)
+        return {kind: {**spread(times, 1e3), **failed}}
+
     def ping(self) -> dict[str, Any]:
         """Time pings through the base station (no answer: lost; 0x21: not the sensor's)."""
         self.say(f'timing {self.args.pings} pings')
-        times, lost, absent = [], 0, 0
-        for _ in range(self.args.pings):
-            start = time.monotonic()
+
+        def once() -> str | None:
             answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
-            took = time.monotonic() - start
-            if answer is None:
-                lost += 1
-            elif not answer:
-                absent += 1  # the base station answered, the sensor did not (0x21)
-            else:
-                times.append(took)
-        note_longest(self.longest, PING, times)
-        return {'ping': {
-            **spread(times, 1e3), 'lost': lost, 'not_answered_by_sensor': absent}}
+            # Falsy: the base station answered, the sensor did not (0x21).
+            return 'lost' if answer is None else None if answer else 'not_answered_by_sensor'
+        return self._timed(PING, self.args.pings, ('lost', 'not_answered_by_sensor'), once)
 
     def command(self) -> dict[str, Any]:
         """Time the short command's request and reply."""
         self.say(f'timing {self.args.commands} short commands (0x{SHORT_COMMAND:02X})')
-        times, lost, nacked = [], 0, 0
-        for _ in range(self.args.commands):
-            start = time.monotonic()
+
+        def once() -> str | None:
             try:
                 self.link.request(bytes((SHORT_COMMAND,)), SHORT_COMMAND, MEASURE_TIMEOUT, 1)
             except DeviceNack:
-                nacked += 1
-                continue
+                return 'nacked'
             except DeviceError:
-                lost += 1
-                continue
-            times.append(time.monotonic() - start)
-        note_longest(self.longest, COMMAND, times)
-        return {'command': {
-            **spread(times, 1e3), 'lost': lost, 'nacked': nacked}}
+                return 'lost'
+            return None
+        return self._timed(COMMAND, self.args.commands, ('lost', 'nacked'), once)
 
     def continuous(self, code: int, period: float) -> dict[str, Any]:
         """
@@ -185,8 +186,7 @@ class RoundTrips:
 
         ``period`` is the time between records at the sensor's rate.
         """
-        self.say(f'timing {self.args.cycles} continuous-mode starts and stops '
-                 f'(0x{code:02X})')
+        self.say(f'timing {self.args.cycles} continuous-mode starts and stops (0x{code:02X})')
         link, steps = self.link, self.steps
         starts, stops, replies = [], [], []
         lost = nacked = failed = 0
@@ -194,24 +194,20 @@ class RoundTrips:
             before = link.records
             start = time.monotonic()
             try:
-                self.link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
-                                  MEASURE_TIMEOUT, 1)
+                link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
+                             MEASURE_TIMEOUT, 1)
                 replies.append(time.monotonic() - start)
             except DeviceNack:
                 nacked += 1
             except DeviceError:
                 lost += 1
             deadline = start + MEASURE_TIMEOUT + timeouts.RECORD_PERIODS * period
-            first = None
-            while time.monotonic() < deadline:
-                if link.records > before:
-                    first = link.last_data_mono
-                    break
+            while link.records <= before and time.monotonic() < deadline:
                 time.sleep(0.002)
-            if first is None:
+            if link.records <= before:
                 failed += 1
                 continue
-            starts.append(first - start)
+            starts.append(link.last_data_mono - start)
             time.sleep(0.2)
             # Once, no retry: the stop's round trip is measured.
             stop_sent = time.monotonic()
@@ -223,8 +219,6 @@ class RoundTrips:
                 continue
             stops.append(max(0.0, last - stop_sent))
         note_longest(self.longest, CONTINUOUS_START, starts)
-        return {
-            'continuous_start': {
-                **spread(starts, 1e3), 'reply': spread(replies, 1e3), 'lost': lost,
-                'nacked': nacked, 'no_records': failed},
-            'continuous_stop': spread(stops, 1e3)}
+        return {'continuous_start': {**spread(starts, 1e3), 'reply': spread(replies, 1e3),
+                                     'lost': lost, 'nacked': nacked, 'no_records': failed},
+                'continuous_stop': spread(stops, 1e3)}

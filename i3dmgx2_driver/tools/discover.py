@@ -46,6 +46,7 @@ from .. import lifetime
 from ..arguments import seconds
 from ..codec import command_firmware as fw
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
+from ..device.identity import DeviceInfo
 from ..device.port import serial_group, UDEV_RULE_INSTALL
 
 EXIT_FOUND = 0
@@ -84,9 +85,8 @@ def parse_addresses(text: str) -> list[int]:
 def node_command(path: str, sensor: SensorFound) -> str:
     """Return the ``ros2 run`` line that starts the driver for ``sensor``."""
     head = f'ros2 run i3dmgx2_driver node --ros-args -p port:={shlex.quote(path)}'
-    if sensor.wireless:
-        return f'{head} -p address:={sensor.address}'
-    return f'{head} -p wireless:=false -p address:={WIRED_ADDRESS}'
+    return f'{head} -p address:={sensor.address}' if sensor.wireless else \
+        f'{head} -p wireless:=false -p address:={WIRED_ADDRESS}'
 
 
 def port_command(path: str, sensors: Sequence[SensorFound]) -> str:
@@ -96,10 +96,10 @@ def port_command(path: str, sensors: Sequence[SensorFound]) -> str:
     The node opens its port exclusively, so several sensors behind one base
     station are served by one node (``addresses``), never one node each.
     """
-    wireless = [sensor for sensor in sensors if sensor.wireless]
+    wireless = sorted(sensor.address for sensor in sensors if sensor.wireless)
     if len(wireless) < 2:
         return node_command(path, sensors[0])
-    listed = ','.join(str(address) for address in sorted(s.address for s in wireless))
+    listed = ','.join(map(str, wireless))
     return (f'ros2 run i3dmgx2_driver node --ros-args -p port:={shlex.quote(path)} '
             f'-p {shlex.quote(f"addresses:=[{listed}]")}')
 
@@ -116,9 +116,8 @@ def udev_note(path: str, message: str = '', sys_class_tty: str = SYS_CLASS_TTY) 
     timer = latency_timer_ms(path, sys_class_tty)
     if timer is not None and timer >= DEFAULT_LATENCY_TIMER_MS:
         reasons.append(f'its latency timer is {timer} ms (records arrive in {timer} ms bursts)')
-    owner = port_group(path)
-    if owner is not None and not owner[1] and 'udev rule' not in message:
-        group = owner[0]
+    group, member = port_group(path) or ('', True)
+    if not member and 'udev rule' not in message:
         why = '' if serial_group(group, path) else \
             f', and joining {group} would give you far more than this port'
         reasons.append(f'it belongs to the {group} group, which you are not in{why}')
@@ -155,8 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
                         default=list(FACTORY_ADDRESSES),
                         help='node addresses to ping, e.g. 95, 1-65534 or 3,7,10-20 '
                              '(default: 1-99, the factory addresses)')
-    parser.add_argument('--listen', type=_seconds, default=ProbeConfig.listen_s,
-                        metavar='SECONDS',
+    parser.add_argument('--listen', type=_seconds, default=ProbeConfig.listen_s, metavar='SECONDS',
                         help='listen this long for sensors that already stream '
                              f'(default {ProbeConfig.listen_s})')
     parser.add_argument('--ping-timeout', type=_seconds, default=ProbeConfig.ping_timeout,
@@ -186,24 +184,15 @@ def _firmware_note(sensor: SensorFound) -> str:
 def _sensor_dict(sensor: SensorFound, command: str | None) -> dict[str, Any]:
     info = sensor.info
     return {
-        'address': sensor.address,
-        'link': 'wireless' if sensor.wireless else 'wired',
+        'address': sensor.address, 'link': 'wireless' if sensor.wireless else 'wired',
         'found_by': sensor.found_by,
-        'model_number': info.model_number if info else None,
-        'serial_number': info.serial_number if info else None,
-        'model_name': info.model_name if info else None,
-        'options': info.options if info else None,
-        'firmware': info.firmware if info else None,
+        **(info._asdict() if info else dict.fromkeys(DeviceInfo._fields)),
         'firmware_lacks': fw.lacks(fw.version_of(info.firmware)) if info else None,
-        'firmware_note': _firmware_note(sensor) or None,
-        'rate_divider': sensor.divider,
+        'firmware_note': _firmware_note(sensor) or None, 'rate_divider': sensor.divider,
         'rate_hz': round(sensor.rate_hz, 3) if sensor.rate_hz else None,
         'streaming': f'0x{sensor.streaming:02X}' if sensor.streaming else None,
-        'stream_restarted': sensor.restarted,
-        'lqi': sensor.lqi,
-        'rssi': sensor.rssi,
-        'note': sensor.note or None,
-        'command': command,
+        'stream_restarted': sensor.restarted, 'lqi': sensor.lqi, 'rssi': sensor.rssi,
+        'note': sensor.note or None, 'command': command,
     }
 
 
@@ -218,13 +207,10 @@ def _port_dict(port: PortInfo, probe: PortProbe | None) -> dict[str, Any]:
     if probe is not None:
         command = port_command(port.stable_path, probe.sensors) if probe.sensors else None
         out.update({
-            'message': probe.message or None,
-            'base_station': probe.base_station,
-            'pinged': probe.pinged,
-            'ping_seconds': round(probe.ping_seconds, 3),
+            'message': probe.message or None, 'base_station': probe.base_station,
+            'pinged': probe.pinged, 'ping_seconds': round(probe.ping_seconds, 3),
             'seconds': round(probe.seconds, 3),
-            'sensors': [_sensor_dict(s, command) for s in probe.sensors],
-            'command': command,
+            'sensors': [_sensor_dict(s, command) for s in probe.sensors], 'command': command,
         })
     return out
 
@@ -243,10 +229,8 @@ def print_ports(ports: Sequence[PortInfo], probing: set[str], out: TextIO) -> No
                   'plugged in? dmesg tells what the kernel saw.\n')
         return
     rows = [['device', 'stable path', 'usb id', 'description', 'looks like', '']]
-    for port in ports:
-        rows.append([port.device, port.by_id or '-', port.usb_id or '-',
-                     port.description or '-', port.kind or '-',
-                     'probe' if port.device in probing else 'skip'])
+    rows += [[port.device, port.by_id or '-', port.usb_id or '-', port.description or '-',
+              port.kind or '-', 'probe' if port.device in probing else 'skip'] for port in ports]
     out.write('Serial ports:\n')
     _table(rows, out)
 
@@ -286,13 +270,11 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
                   f'{probe.seconds:.1f} s\n')
         commands.append((probe.sensors, port_command(port.stable_path, probe.sensors)))
         for sensor in probe.sensors:
-            info = sensor.info
+            info = sensor.info or DeviceInfo('', '', '', '', '')
             rows.append([
                 port.device, 'wireless' if sensor.wireless else 'wired',
-                str(sensor.address) if sensor.wireless else '-',
-                (info.serial_number or '?') if info else '?',
-                (info.model_name or info.model_number or '?') if info else '?',
-                (info.firmware or '?') if info else '?',
+                str(sensor.address) if sensor.wireless else '-', info.serial_number or '?',
+                info.model_name or info.model_number or '?', info.firmware or '?',
                 f'{sensor.rate_hz:.1f} Hz' if sensor.rate_hz else '?',
                 _state(sensor), sensor.found_by])
     if not commands:
@@ -360,12 +342,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # closed, the sensors left as found.
     lifetime.interrupt_on_stop_signals()
     out = sys.stdout
-    if args.port:
-        ports = [describe_path(path, args.by_id_dir) for path in args.port]
-        probing = {p.device for p in ports}
-    else:
-        ports = list_ports(args.by_id_dir)
-        probing = {p.device for p in ports if p.likely or args.all}
+    ports = [describe_path(path, args.by_id_dir) for path in args.port] if args.port \
+        else list_ports(args.by_id_dir)
+    probing = {p.device for p in ports if args.port or args.all or p.likely}
     if not args.json and not args.port:
         print_ports(ports, probing, out)
     config = ProbeConfig(addresses=args.addresses, baud=args.baud, listen_s=args.listen,
@@ -373,11 +352,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     progress = _ProgressLine(sys.stderr, sys.stderr.isatty() and not args.json)
     results = []
     try:
-        for port in ports:
-            if port.device in probing:
-                progress.port = port.device
-                results.append((port, probe_port(port.device, config, progress)))
-                progress.clear()
+        for port in (p for p in ports if p.device in probing):
+            progress.port = port.device
+            results.append((port, probe_port(port.device, config, progress)))
+            progress.clear()
     except KeyboardInterrupt:
         progress.clear()  # the port is closed on the way out; nothing was changed
         return EXIT_INTERRUPTED

@@ -26,13 +26,15 @@ messages' stamps (a bag).
 """
 
 from collections import Counter
+import os
 from pathlib import Path
 from typing import NamedTuple
+import warnings
 
 import numpy as np
 
 from .bag_io import bag_reader, deserializer
-from ..capture.file_format import read_capture
+from ..capture.file_format import read_capture, TruncatedCaptureWarning
 from ..codec.orientation import body_vector, ENU
 from ..codec.parser import SensorStreamParser
 from ..codec.records import TICKS_PER_SECOND
@@ -55,6 +57,8 @@ class Samples(NamedTuple):
     accel: np.ndarray          # (n, 3) m/s^2
     mag: np.ndarray | None     # (m, 3) T, its valid readings only; None without a field
     source: str
+    #: What the reader found wrong with the source (a capture cut short), for the report.
+    notes: tuple[str, ...] = ()
 
     @property
     def rate_hz(self) -> float:
@@ -87,17 +91,21 @@ def from_capture(path: str) -> Samples:
     the stream most of them are (replies to polls of another record are
     not part of the stream).
     """
+    if os.path.isfile(path) and os.path.getsize(path) == 0:
+        raise ValueError(f'{path}: an empty file (0 bytes), not a capture')
     header, chunks = read_capture(path)
     address = header.get('address')
     parser = SensorStreamParser(address if isinstance(address, int) else None,
                                 bool(header.get('wireless', True)))
     rows = []
-    for receive_time, data in chunks:
-        for event in parser.feed(data):
-            record = getattr(event, 'record', None)
-            if record is not None and hasattr(record, 'angular_rate') \
-                    and hasattr(record, 'accel') and hasattr(record, 'timer'):
-                rows.append((receive_time, record))
+    with warnings.catch_warnings(record=True) as cut:
+        warnings.simplefilter('always', TruncatedCaptureWarning)
+        for receive_time, data in chunks:
+            for event in parser.feed(data):
+                record = getattr(event, 'record', None)
+                if record is not None and hasattr(record, 'angular_rate') \
+                        and hasattr(record, 'accel') and hasattr(record, 'timer'):
+                    rows.append((receive_time, record))
     if not rows:
         raise ValueError(f'{path}: no record with acceleration and angular rate '
                          f'({parser.stats.good_frames} frames decoded)')
@@ -111,7 +119,8 @@ def from_capture(path: str) -> Samples:
     if hasattr(kind, '_fields') and 'mag' in kind._fields:
         field = np.array([record.mag for _, record in rows])
         mag = field[~np.isnan(field).any(axis=1)] * (_ENU_SIGNS * TESLA_PER_GAUSS)
-    return Samples(unwrap_timer(timers, host), gyro, accel, mag, path)
+    notes = tuple(f'the capture was cut: {w.message}' for w in cut)
+    return Samples(unwrap_timer(timers, host), gyro, accel, mag, path, notes)
 
 
 def _vector(v) -> tuple[float, float, float]:
@@ -127,6 +136,15 @@ def from_bag(path: str, topic: str = DEFAULT_TOPIC, mag_topic: str | None = None
     """
     if mag_topic is None:
         mag_topic = topic.rsplit('/', 1)[0] + '/mag'
+    try:
+        return _read_bag(path, topic, mag_topic)
+    except Exception as exc:     # rosbags' own errors (AnyReaderError...): a message, no trace
+        if not type(exc).__module__.startswith('rosbags'):
+            raise
+        raise ValueError(f'{path}: not a readable bag ({type(exc).__name__}: {exc})') from None
+
+
+def _read_bag(path: str, topic: str, mag_topic: str) -> Samples:
     stamps, gyro, accel, mag = [], [], [], []
     with bag_reader(Path(path)) as reader:
         known = {c.topic: c.msgtype for c in reader.connections}

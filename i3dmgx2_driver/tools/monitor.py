@@ -22,6 +22,7 @@ the README's first command shows that data flows without the ``ros2`` CLI.
 """
 
 import argparse
+import contextlib
 import math
 import sys
 import threading
@@ -64,13 +65,15 @@ class Monitor(Node):
         qos = qos_profile_sensor_data if best_effort else QoSProfile(depth=10)
         self.create_subscription(Imu, topic, self._store, qos)
         self.latest: Imu | None = None
-        self.count = 0
+        #: Messages since the last :meth:`take`, and in all.
+        self.count = self.received = 0
         self._lock = threading.Lock()
 
     def _store(self, msg: Imu) -> None:
         with self._lock:
             self.latest = msg
             self.count += 1
+            self.received += 1
 
     def take(self) -> tuple[Imu | None, int]:
         """Return the latest message and how many arrived since the last call."""
@@ -89,9 +92,8 @@ def _spin(executor: SingleThreadedExecutor, stopped: lifetime.StopSignal) -> Non
     it ignored).
     """
     try:
-        executor.spin()
-    except ExternalShutdownException:
-        pass
+        with contextlib.suppress(ExternalShutdownException):
+            executor.spin()
     finally:
         stopped.set()
 
@@ -118,22 +120,16 @@ def main(argv: list[str] | None = None) -> int:
     spinner = threading.Thread(target=_spin, args=(executor, stopped), daemon=True)
     spinner.start()
     start = last = time.monotonic()
-    received = 0
     try:
-        while not args.duration or time.monotonic() - start < args.duration:
-            if stopped.wait(args.period):
-                received += node.take()[1]
-                break
-            msg, count = node.take()
-            now = time.monotonic()
-            received += count
-            if msg is None:
-                print(f'waiting for {node.resolve_topic_name(args.topic)} ...', flush=True)
-            else:
-                print(describe(msg, count / (now - last), time.time()), flush=True)
-            last = now
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        with contextlib.suppress(KeyboardInterrupt, ExternalShutdownException):
+            while not args.duration or time.monotonic() - start < args.duration:
+                if stopped.wait(args.period):
+                    break
+                msg, count = node.take()
+                now = time.monotonic()
+                print(f'waiting for {node.resolve_topic_name(args.topic)} ...' if msg is None
+                      else describe(msg, count / (now - last), time.time()), flush=True)
+                last = now
     finally:
         # The spinning thread must be out of rclpy's C++ before the interpreter
         # exits, or the process aborts ("terminate called without an active
@@ -142,8 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         spinner.join(timeout=5.0)
         node.destroy_node()
         rclpy.try_shutdown()
-    print(f'{received} messages received', flush=True)
-    return 0 if received else 1
+    print(f'{node.received} messages received', flush=True)
+    return 0 if node.received else 1
 
 
 if __name__ == '__main__':

@@ -43,10 +43,12 @@ from .sources import add_sources, parse_args
 #: Units of each sensor's terms: N, B, K.
 UNITS = {'gyroscope': ('rad/s/√Hz', 'rad/s', 'rad/s²/√Hz'),
          'accelerometer': ('m/s²/√Hz', 'm/s²', 'm/s³/√Hz')}
-#: A one-second mean further than this from the rest says the sensor moved.
-MOVED = {'gyroscope': 0.01, 'accelerometer': 0.1}
 #: Missing records beyond this share make the figures doubtful.
 MISSING_SHARE = 0.01
+#: Exit status when some figure printed or written is a bound, marked, or warned about.
+MARKED = 3
+#: The three terms as the table labels them.
+LABELS = dict(zip(allan.TERMS, 'NBK', strict=True))
 
 
 class Report(NamedTuple):
@@ -60,37 +62,50 @@ class Report(NamedTuple):
     warnings: list[str]
     mag_stddev: float | None
 
+    def trusted(self) -> bool:
+        """Return whether every figure is trusted and nothing is warned about."""
+        return not self.warnings and all(
+            getattr(axis, part).short is None for terms in self.terms.values()
+            for axis in terms for part in allan.TERMS)
+
 
 def analyse(samples: Samples) -> Report:
-    """Take the Allan deviation of both sensors and read the terms; note what is doubtful."""
+    """Take the Allan deviation of both sensors' still stretches and read the terms."""
     n = samples.time.size
-    if n < 16:
-        raise ValueError(f'{samples.source}: {n} samples; the Allan deviation needs a '
-                         'recording of minutes')
     rate = samples.rate_hz
-    dt = 1.0 / rate
-    duration = n * dt
-    warnings = []
+    duration = n / rate if rate > 0 else 0.0
+    if duration < allan.MIN_STILL_S:
+        raise ValueError(f'{samples.source}: {n} samples over {duration:.3g} s: too short for '
+                         f'even the white noise; record at least {allan.MIN_STILL_S:.0f} s')
+    warnings = list(samples.notes)
     gaps = allan.find_gaps(samples.time)
     if gaps.missing:
-        doubt = (' : the figures are doubtful' if gaps.missing > MISSING_SHARE * n else '')
+        doubt = ('; the figures are doubtful' if gaps.missing > MISSING_SHARE * n else '')
         warnings.append(f'{gaps.missing} records missing in {gaps.count} gaps (longest '
                         f'{gaps.longest:.3g} s); the deviation takes the rest as '
                         f'contiguous{doubt}')
+    values = np.concatenate([samples.gyro, samples.accel], axis=1)
+    still = allan.movement(samples.time, values,
+                           [f'{name} {axis}' for name in UNITS for axis in 'xyz'], rate)
+    for begin, end, what in still.moved[:5]:
+        warnings.append(f'the sensor moved: {begin:.0f}-{end:.0f} s, {what}')
+    if len(still.moved) > 5:
+        warnings.append(f'the sensor moved: {len(still.moved) - 5} more times')
+    still_s = duration
+    if still.moved:
+        if not still.stretches:
+            raise ValueError(f'{samples.source}: the sensor moved ({still.moved[0][2]} at '
+                             f'{still.moved[0][0]:.0f} s, {len(still.moved)} times in all) and '
+                             f'no still stretch of {allan.MIN_STILL_S:.0f} s is left: keep it '
+                             'still and record again')
+        still_s = sum(stop - start for start, stop in still.stretches) / rate
+        warnings.append(f'analysed {len(still.stretches)} still stretches ({still_s:.0f} s of '
+                        f'{duration:.0f} s), their Allan variances combined')
     deviation, terms = {}, {}
-    for name, values in (('gyroscope', samples.gyro), ('accelerometer', samples.accel)):
-        still = allan.movement(samples.time, values, MOVED[name])
-        for begin, end, step in still.stretches[:5]:
-            warnings.append(f'the sensor moved: {name} {begin:.0f}-{end:.0f} s, a one-second '
-                            f'mean {step:.3g} {UNITS[name][1]} off the rest')
-        if len(still.stretches) > 5:
-            warnings.append(f'the sensor moved: {name}, {len(still.stretches) - 5} more '
-                            'stretches')
-        deviation[name] = allan.overlapping_adev(values, dt)
-        terms[name] = allan.read_terms(deviation[name], duration)
-        if any(math.isnan(axis.white.value) for axis in terms[name]):
-            raise ValueError(f'{samples.source}: {n} samples over {duration:.3g} s are too '
-                             'few for even the white noise: record at least a minute')
+    for j, name in enumerate(UNITS):
+        deviation[name] = allan.overlapping_adev(values[:, 3 * j:3 * j + 3], 1.0 / rate,
+                                                 still.stretches if still.moved else None)
+        terms[name] = allan.read_terms(deviation[name], still_s)
     mag = None
     if samples.mag is not None and samples.mag.shape[0] > 2:
         # The field's white noise a reading: the scatter of steps over sqrt(2) (a slow
@@ -108,17 +123,48 @@ def yaml_float(value: float) -> str:
     return mantissa + e + exponent
 
 
-def _axes(terms: list[allan.AxisNoise], part: str) -> list[float]:
-    return [getattr(axis, part).value for axis in terms]
+def _axes(terms: list[allan.AxisNoise], part: str) -> list[float | None]:
+    """Return a term's measured figure per axis, None where there is none (JSON has no NaN)."""
+    return [_number(getattr(axis, part).value) for axis in terms]
+
+
+def _number(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
+class Unbounded(ValueError):
+    """A file would need a figure that no axis gives, not even as a bound."""
+
+
+def figure(terms: list[allan.AxisNoise], part: str) -> tuple[float, str]:
+    """
+    Return what a file holds for a term: the worst trusted axis, or an upper bound.
+
+    An axis not trusted enters as its bound (never its figure), so that the
+    file never claims less noise than the recording allows; a dead axis not
+    at all. Also the comment that says which it is.
+    """
+    values, bounded = [], []
+    for label, axis in zip('xyz', terms, strict=True):
+        term = getattr(axis, part)
+        if term.short is None:
+            values.append(term.value)
+        elif math.isfinite(term.bound):
+            values.append(term.bound)
+            bounded.append(label)
+    worst = max(values, default=0.0)
+    if not worst > 0:
+        raise Unbounded(f'{LABELS[part]} has neither a figure nor a bound on any axis')
+    return worst, (f'an upper bound: {LABELS[part]} not resolved on {", ".join(bounded)}'
+                   if bounded else 'the worst axis')
 
 
 def parameters(report: Report) -> dict[str, float]:
     """Return the covariance parameters: N sqrt(rate), a sample's white noise, worst axis."""
     root = math.sqrt(report.rate_hz)
-    out = {
-        'angular_velocity_stddev': max(_axes(report.terms['gyroscope'], 'white')) * root,
-        'linear_acceleration_stddev': max(_axes(report.terms['accelerometer'], 'white')) * root,
-    }
+    out = {key: figure(report.terms[name], 'white')[0] * root for key, name in
+           (('angular_velocity_stddev', 'gyroscope'),
+            ('linear_acceleration_stddev', 'accelerometer'))}
     if report.mag_stddev is not None:
         out['magnetic_field_stddev'] = report.mag_stddev
     return out
@@ -134,12 +180,16 @@ def as_json(report: Report) -> dict[str, Any]:
             'noise_density': _axes(terms, 'white'),
             'random_walk': _axes(terms, 'random_walk'),
             'bias_instability': _axes(terms, 'bias_instability'),
-            'bias_instability_tau_s': [axis.bias_tau for axis in terms],
+            'bias_instability_tau_s': [_number(axis.bias_tau) for axis in terms],
             'clusters': {part: [getattr(axis, part).clusters for axis in terms]
-                         for part in ('white', 'bias_instability', 'random_walk')},
-            'too_short': [s for axis in terms for s in
-                          (axis.white.short, axis.bias_instability.short, axis.random_walk.short)
-                          if s],
+                         for part in allan.TERMS},
+            'one_sigma': {part: [_number(getattr(axis, part).error) for axis in terms]
+                          for part in allan.TERMS},
+            'too_short': [{'axis': label, 'term': LABELS[part], 'why': term.short.why,
+                           'record_s': term.short.record_s, 'upper_bound': _number(term.bound)}
+                          for label, axis in zip('xyz', terms, strict=True)
+                          for part in allan.TERMS
+                          if (term := getattr(axis, part)).short is not None],
             'allan_deviation': {'tau_s': report.deviation[name].tau.tolist(),
                                 'adev': report.deviation[name].adev.T.tolist()},
         }
@@ -150,11 +200,13 @@ def as_json(report: Report) -> dict[str, Any]:
 
 def params_yaml(report: Report) -> str:
     """Return noise.yaml: the covariance parameters as a params file the node takes."""
+    notes = {figure(report.terms[name], 'white')[1] for name in UNITS}
     lines = [
         '# Measured by `ros2 run i3dmgx2_driver noise` at rest from',
         f'# {report.samples.source}: {report.duration_s / 60:.1f} min at {report.rate_hz:.4g} Hz.',
-        '# The white noise of one sample (N * sqrt(rate)), the worst axis. Load it after the',
-        "# driver's own file: --params-file config/i3dmgx2.yaml --params-file noise.yaml",
+        f'# The white noise of one sample (N * sqrt(rate)), {" / ".join(sorted(notes))}. Load',
+        "# it after the driver's own file: --params-file config/i3dmgx2.yaml --params-file "
+        'noise.yaml',
         '/**:',
         '  ros__parameters:',
     ]
@@ -162,27 +214,35 @@ def params_yaml(report: Report) -> str:
     return '\n'.join(lines) + '\n'
 
 
-def kalibr_yaml(report: Report, topic: str) -> str:
-    """Return imu.yaml, kalibr's IMU file: densities and random walks, the worst axis."""
-    gyro, accel = report.terms['gyroscope'], report.terms['accelerometer']
-    return '\n'.join([
-        '# kalibr IMU file, measured by `ros2 run i3dmgx2_driver noise` (worst axis of each).',
-        f'# From {report.samples.source}: {report.duration_s / 60:.1f} min.',
-        f'rostopic: {topic}',
-        f'update_rate: {yaml_float(report.rate_hz)}',
-        f'accelerometer_noise_density: {yaml_float(max(_axes(accel, "white")))}'
-        '  # m/s^2/sqrt(Hz)',
-        f'accelerometer_random_walk: {yaml_float(max(_axes(accel, "random_walk")))}'
-        '  # m/s^3/sqrt(Hz)',
-        f'gyroscope_noise_density: {yaml_float(max(_axes(gyro, "white")))}  # rad/s/sqrt(Hz)',
-        f'gyroscope_random_walk: {yaml_float(max(_axes(gyro, "random_walk")))}'
-        '  # rad/s^2/sqrt(Hz)',
-    ]) + '\n'
+#: kalibr's four noise keys: the sensor, the term, the unit.
+KALIBR = (('accelerometer_noise_density', 'accelerometer', 'white', 'm/s^2/sqrt(Hz)'),
+          ('accelerometer_random_walk', 'accelerometer', 'random_walk', 'm/s^3/sqrt(Hz)'),
+          ('gyroscope_noise_density', 'gyroscope', 'white', 'rad/s/sqrt(Hz)'),
+          ('gyroscope_random_walk', 'gyroscope', 'random_walk', 'rad/s^2/sqrt(Hz)'))
 
 
-def _sure(term: allan.Term) -> str:
-    pct = allan.uncertainty(term.clusters) * 100
-    return f'±{pct:.0f}% ({term.clusters})' if math.isfinite(pct) else '(too short)'
+def kalibr_yaml(report: Report, topic: str, inflate: float = 1.0) -> str:
+    """Return imu.yaml, kalibr's IMU file: densities and random walks, times ``inflate``."""
+    lines = ['# kalibr IMU file, measured by `ros2 run i3dmgx2_driver noise`.',
+             f'# From {report.samples.source}: {report.duration_s / 60:.1f} min.']
+    if inflate != 1.0:
+        lines.append(f'# Inflated x{inflate:g} (--inflate), for the noise a still recording '
+                     'does not see; noise.json holds the measured figures.')
+    lines += [f'rostopic: {topic}', f'update_rate: {yaml_float(report.rate_hz)}']
+    for key, name, part, unit in KALIBR:
+        value, note = figure(report.terms[name], part)
+        scaled = f', x{inflate:g}' if inflate != 1.0 else ''
+        lines.append(f'{key}: {yaml_float(value * inflate)}  # {unit}, {note}{scaled}')
+    return '\n'.join(lines) + '\n'
+
+
+def _cell(term: allan.Term) -> str:
+    """Return a term as the table prints it: figure and 1-sigma, or its bound, or why not."""
+    if term.short is None:
+        return f'{term.value:10.3e} {f"±{100 * term.error:.2g}% ({term.clusters})":15}'
+    if math.isfinite(term.bound):
+        return f'{"<" + format(term.bound, ".3e"):>10} {"bound *":15}'
+    return f'{"-":>10} {"*":15}'
 
 
 def table(report: Report) -> str:
@@ -191,63 +251,91 @@ def table(report: Report) -> str:
              f'{report.duration_s / 60:.1f} min at {report.rate_hz:.4g} Hz']
     for name, terms in report.terms.items():
         n_unit, b_unit, k_unit = UNITS[name]
-        lines.append(f'{name}: N {n_unit}, B {b_unit}, K {k_unit}; ± the 1-sigma error of '
-                     'the deviation behind each (its clusters)')
+        lines.append(f'{name}: N {n_unit}, B {b_unit}, K {k_unit}; ± the 1-sigma of each '
+                     'after the fit (clusters behind it); * not trusted, see below')
         lines.append(f'  {"axis":4} {"N":>10} {"":15} {"B":>10} {"(tau)":>9} {"":15} '
                      f'{"K":>10}')
         for label, axis in zip('xyz', terms, strict=True):
-            lines.append(
-                f'  {label:4} {axis.white.value:10.3e} {_sure(axis.white):15} '
-                f'{axis.bias_instability.value:10.3e} {f"({axis.bias_tau:.3g} s)":>9} '
-                f'{_sure(axis.bias_instability):15} {axis.random_walk.value:10.3e} '
-                f'{_sure(axis.random_walk)}')
+            lines.append(f'  {label:4} {_cell(axis.white)} {_cell(axis.bias_instability)[:10]} '
+                         f'{f"({axis.bias_tau:.3g} s)":>9} {_cell(axis.bias_instability)[11:]} '
+                         f'{_cell(axis.random_walk)}'.rstrip())
         for label, axis in zip('xyz', terms, strict=True):
-            for term, short in (('N', axis.white.short), ('B', axis.bias_instability.short),
-                                ('K', axis.random_walk.short)):
-                if short:
-                    lines.append(f'  {name} {label}: {term} {short}')
+            shorts = [(LABELS[p], getattr(axis, p).short) for p in allan.TERMS
+                      if getattr(axis, p).short is not None]
+            if shorts and shorts[0][1].why.startswith('dead'):
+                lines.append(f'  {name} {label}: {shorts[0][1]}')
+                continue
+            lines += [f'  {name} {label}: {term} {short}' for term, short in shorts]
     lines += [f'warning: {w}' for w in report.warnings]
     return '\n'.join(lines)
 
 
-def draw(report: Report, path: str) -> None:
-    """Write allan.png: the deviation per axis, the three fitted terms marked."""
+def draw(report: Report, path: str) -> Any:
+    """
+    Write allan.png: the deviation per axis with its 1-sigma, the fitted lines, N, B and K.
+
+    Hollow: the points the fit leaves out (under 4 clusters) and the terms
+    not trusted (at their bound); the y range holds every marker.
+    """
+    from matplotlib.lines import Line2D
     fig = agg_figure(figsize=(10.0, 8.0), dpi=120)
     colours = ('tab:red', 'tab:green', 'tab:blue')
     for row, (name, terms) in enumerate(report.terms.items()):
         ax = fig.add_subplot(2, 1, row + 1)
         dev = report.deviation[name]
-        for axis, (label, colour) in enumerate(zip('xyz', colours, strict=True)):
+        fitted = dev.clusters >= allan.MIN_CLUSTERS
+        error = np.array([allan.uncertainty(int(c)) for c in dev.clusters])
+        shown = [dev.adev[dev.adev > 0]]
+        for axis, colour in enumerate(colours):
             t = terms[axis]
-            ax.loglog(dev.tau, dev.adev[:, axis], 'o-', color=colour, ms=3, label=label)
-            ax.loglog(dev.tau, t.white.value / np.sqrt(dev.tau), ':', color=colour, lw=0.8)
-            ax.loglog(dev.tau, t.random_walk.value * np.sqrt(dev.tau / allan.K_TAU), '--',
-                      color=colour, lw=0.8)
-            ax.axhline(t.bias_instability.value * allan.FLICKER_FLOOR, color=colour, lw=0.6,
-                       ls='-.')
-            ax.plot([allan.N_TAU], [t.white.value], 's', color=colour)
-            ax.plot([t.bias_tau], [t.bias_instability.value * allan.FLICKER_FLOOR], 'v',
-                    color=colour)
-            ax.plot([allan.K_TAU], [t.random_walk.value], '^', color=colour)
-        lo = np.nanmin(dev.adev) / 3
-        ax.set_ylim(lo, np.nanmax(dev.adev) * 3)
-        ax.set_title(f'{name}: N (square, tau 1 s), B (triangle down, 0.664 B), '
-                     'K (triangle up, tau 3 s)', fontsize=9)
+            adev = dev.adev[:, axis]
+            ax.errorbar(dev.tau[fitted], adev[fitted], yerr=adev[fitted] * error[fitted],
+                        fmt='o-', color=colour, ms=3, lw=1, capsize=2)
+            ax.loglog(dev.tau[~fitted], adev[~fitted], 'o', mfc='none', color=colour, ms=4)
+            lines = ((t.white, ':', allan.N_TAU, 1.0 / np.sqrt(dev.tau / allan.N_TAU)),
+                     (t.bias_instability, '-.', t.bias_tau,
+                      np.full(dev.tau.shape, allan.FLICKER_FLOOR)),
+                     (t.random_walk, '--', allan.K_TAU, np.sqrt(dev.tau / allan.K_TAU)))
+            for (term, style, tau, shape), marker in zip(lines, ('s', 'v', '^'), strict=True):
+                level = term.value if term.short is None else term.bound
+                if not math.isfinite(level) or not level > 0:
+                    continue
+                scale = allan.FLICKER_FLOOR if marker == 'v' else 1.0
+                ax.loglog(dev.tau, level * shape, style, color=colour, lw=0.8)
+                ax.plot([tau], [level * scale], marker, color=colour, ms=7,
+                        mfc=colour if term.short is None else 'none')
+                shown.append(np.array([level * scale]))
+        low, high = (float(f(np.concatenate(shown))) for f in (np.min, np.max))
+        ax.set_ylim(low / 2, high * 2)
+        ax.set_xscale('log')
+        ax.set_yscale('log')
+        key = [Line2D([], [], color=c, marker='o', ms=3, label=f'{label} (±1 sigma)')
+               for label, c in zip('xyz', colours, strict=True)]
+        key += [Line2D([], [], color='k', ls=ls, lw=0.8, label=label) for ls, label in
+                ((':', 'white, -1/2'), ('-.', 'floor, 0.664 B'), ('--', 'random walk, +1/2'))]
+        key += [Line2D([], [], color='k', ls='', marker=m, mfc=f, label=label) for m, f, label in
+                (('s', 'k', 'N at 1 s'), ('v', 'k', '0.664 B at its tau'),
+                 ('^', 'k', 'K at 3 s'), ('o', 'none', 'hollow: not fitted / a bound'))]
+        ax.legend(handles=key, fontsize=7, ncol=2, loc='lower left')
+        ax.set_title(f'{name}: the overlapping Allan deviation and the terms read off it',
+                     fontsize=9)
         ax.set_ylabel(f'Allan deviation ({UNITS[name][1]})')
         ax.grid(True, which='both', alpha=0.3)
-        ax.legend(fontsize=8)
     fig.axes[-1].set_xlabel('tau (s)')
     fig.tight_layout()
     fig.savefig(path)
+    return fig
 
 
-def write_outputs(report: Report, directory: str, topic: str) -> list[str]:
+def write_outputs(report: Report, directory: str, topic: str,
+                  inflate: float = 1.0) -> list[str]:
     """Write noise.json, noise.yaml, imu.yaml and (with matplotlib) allan.png; return them."""
+    texts = (('noise.json', json.dumps(as_json(report), indent=2) + '\n'),
+             ('noise.yaml', params_yaml(report)),
+             ('imu.yaml', kalibr_yaml(report, topic, inflate)))    # all made before any write
     os.makedirs(directory, exist_ok=True)
     written = []
-    for name, text in (('noise.json', json.dumps(as_json(report), indent=2) + '\n'),
-                       ('noise.yaml', params_yaml(report)),
-                       ('imu.yaml', kalibr_yaml(report, topic))):
+    for name, text in texts:
         path = os.path.join(directory, name)
         with open(path, 'w', encoding='utf-8') as f:
             f.write(text)
@@ -265,14 +353,25 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='noise', description=__doc__.split('\n\n')[0],
         epilog='Keep the sensor still for the whole recording: an hour or more for the '
-               'bias instability and the random walk, minutes for the white noise.')
+               'bias instability and the random walk, minutes for the white noise. Exit '
+               f'status 0: every figure trusted; {MARKED}: some are bounds, marked or warned '
+               'about; 1: nothing to analyse or to write; 2: usage.')
     add_sources(parser, 'analyses', 'noise.json, noise.yaml, imu.yaml and allan.png')
+    parser.add_argument('--inflate', type=float, default=1.0, metavar='F',
+                        help="multiply imu.yaml's four figures by F >= 1 (kalibr's advice: "
+                             'noise a still recording does not see); the other files keep '
+                             'the measured ones')
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the noise tool; return the exit status."""
-    args = parse_args(_parser(), argv)
+    parser = _parser()
+    args = parse_args(parser, argv)
+    if args.minutes is not None and not args.minutes > 0:
+        parser.error(f'--minutes must be positive, got {args.minutes:g}')
+    if not args.inflate >= 1.0:
+        parser.error(f'--inflate must be 1 or more, got {args.inflate:g}')
     start = time.monotonic()
     try:
         if args.capture:
@@ -280,25 +379,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.bag:
             samples = from_bag(args.bag, args.topic)
         else:
-            if not args.minutes > 0:
-                print('noise: --minutes must be positive', file=sys.stderr)
-                return 2
             from .noise_live import listen
             samples = listen(args.topic, args.minutes * 60.0)
         read = time.monotonic() - start
         report = analyse(samples)
-    except ImportError as exc:
-        print(f'noise: {exc}', file=sys.stderr)
-        return 1
-    except (OSError, ValueError) as exc:
+    except (ImportError, OSError, ValueError) as exc:
         print(f'noise: {exc}', file=sys.stderr)
         return 1
     print(table(report))
     print(f'(read in {read:.1f} s, analysed in {time.monotonic() - start - read:.1f} s)')
     if args.output:
-        for path in write_outputs(report, args.output, args.topic):
+        try:
+            written = write_outputs(report, args.output, args.topic, args.inflate)
+        except Unbounded as exc:
+            print(f'noise: no files written: {exc}', file=sys.stderr)
+            return 1
+        for path in written:
             print(f'wrote {path}')
-    return 0
+    if report.trusted():
+        return 0
+    print(f'noise: not every figure is trusted (the * and warnings above): exit {MARKED}',
+          file=sys.stderr)
+    return MARKED
 
 
 if __name__ == '__main__':

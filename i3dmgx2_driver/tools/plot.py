@@ -54,7 +54,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .figures import agg_figure, have_matplotlib, MATPLOTLIB_HINT, patch
-from .stamp_plot import read_stamp_errors, render_stamp_errors
+from .stamp_plot import read_stamp_errors, render_stamp_errors, StampErrors
 from .. import lifetime
 from ..capture.file_format import is_capture, read_capture
 from ..capture.fixtures import FIXTURE_ADDRESS, fixture_chunks, load_fixture, timeline
@@ -139,13 +139,10 @@ def device_times(timers: Sequence[int], host_times: Sequence[float],
     restarted (a power cycle, or separate captures joined): the host's
     elapsed time is used instead and the index is returned as a break.
     """
-    times: list[float] = []
+    times = [0.0] * min(1, len(timers))
     breaks: list[int] = []
-    for i, raw in enumerate(timers):
-        if i == 0:
-            times.append(0.0)
-            continue
-        step = ((raw - timers[i - 1]) % TIMER_MODULUS) / TICKS_PER_SECOND
+    for i in range(1, len(timers)):
+        step = ((timers[i] - timers[i - 1]) % TIMER_MODULUS) / TICKS_PER_SECOND
         host = max(0.0, host_times[i] - host_times[i - 1])
         periods = max(0, round((host - step) / TIMER_PERIOD))
         candidate = step + periods * TIMER_PERIOD
@@ -179,15 +176,9 @@ def find_gaps(time: np.ndarray, breaks: Iterable[int] = (),
 # Inputs ---------------------------------------------------------------------------
 
 
-def _empty_series(source: str, frame: str, note: str) -> Series:
-    empty = np.zeros((0, 3))
-    return Series(np.zeros(0), empty, empty.copy(), empty.copy(), [], [], [], source, frame,
-                  note)
-
-
-def _frame_name(convention: str) -> str:
-    return 'ENU world / FLU body (REP-103)' if convention == ENU else \
-        'NED world / FRD body (device axes)'
+def _rows(values: Iterable[Sequence[float]]) -> np.ndarray:
+    """Return ``values`` as an (n, 3) array, (0, 3) when there are none."""
+    return np.array(list(values), dtype=float).reshape(-1, 3)
 
 
 def series_from_chunks(chunks: Iterable[tuple[float, bytes]], address: int | None = None,
@@ -212,32 +203,26 @@ def series_from_chunks(chunks: Iterable[tuple[float, bytes]], address: int | Non
                     hasattr(event.record, name) for name in ('accel', 'angular_rate', 'matrix')):
                 host.append(receive_time)
                 records.append(event.record)
-    frame = _frame_name(convention)
-    note = 'from the device timer, unwrapped'
-    if not records:
-        return _empty_series(source, frame, note)
+    frame = 'ENU world / FLU body (REP-103)' if convention == ENU else \
+        'NED world / FRD body (device axes)'
     times, break_idx = device_times([r.timer for r in records], host)
-    accel = np.array([body_vector(r.accel, convention) for r in records]) * STANDARD_GRAVITY
-    rate = np.array([body_vector(r.angular_rate, convention) for r in records])
-    euler = np.array([euler_deg(orientation(r.matrix, convention)) for r in records])
-    t = np.array(times)
-    labels = []
-    for when, text in segments:
-        later = [i for i, h in enumerate(host) if h >= when - 1e-6]
-        if later:
-            labels.append((float(t[later[0]]), text))
-    return _with_gaps(Series(t, accel, rate, euler, [], [], labels, source, frame, note),
-                      break_idx, gap)
+    accel = _rows(body_vector(r.accel, convention) for r in records) * STANDARD_GRAVITY
+    rate = _rows(body_vector(r.angular_rate, convention) for r in records)
+    euler = _rows(euler_deg(orientation(r.matrix, convention)) for r in records)
+    t = np.array(times, dtype=float)
+    firsts = ((next((i for i, h in enumerate(host) if h >= when - 1e-6), None), text)
+              for when, text in segments)
+    labels = [(float(t[i]), text) for i, text in firsts if i is not None]
+    return _with_gaps(Series(t, accel, rate, euler, [], [], labels, source, frame,
+                             'from the device timer, unwrapped'), break_idx, gap)
 
 
 def _with_gaps(series: Series, break_idx: Sequence[int], gap: float | None) -> Series:
     """Return ``series`` with its gaps and timer restarts found from its times."""
-    t = series.time
-    starts, _ = find_gaps(t, break_idx, gap)
-    breaks = set(break_idx)
-    gaps = [(float(t[i - 1]), float(t[i])) for i in starts if i not in breaks]
-    restarts = [(float(t[i - 1]), float(t[i])) for i in starts if i in breaks]
-    return series._replace(gaps=gaps, breaks=restarts)
+    t, restarts = series.time, set(break_idx)
+    spans = {i: (float(t[i - 1]), float(t[i])) for i in find_gaps(t, break_idx, gap)[0]}
+    return series._replace(gaps=[s for i, s in spans.items() if i not in restarts],
+                           breaks=[s for i, s in spans.items() if i in restarts])
 
 
 def series_from_capture(path: str, address: int | None = None, convention: str = ENU,
@@ -247,11 +232,8 @@ def series_from_capture(path: str, address: int | None = None, convention: str =
     segments = [(float(s['start_time']), str(s['label']).split(' (')[0])
                 for s in header.get('segments', ()) if isinstance(s, dict)
                 and 'start_time' in s and 'label' in s]
-    source = os.path.basename(path)
-    if header.get('address') is not None and address is None:
-        source += f' (node {header["address"]})'
-    elif address is not None:
-        source += f' (node {address})'
+    node = header.get('address') if address is None else address
+    source = os.path.basename(path) + (f' (node {node})' if node is not None else '')
     return series_from_chunks(chunks, address, convention,
                               bool(header.get('wireless', True)), source, segments, gap)
 
@@ -260,32 +242,23 @@ def series_from_fixture(path: str, convention: str = ENU, gap: float | None = No
                         address: int = FIXTURE_ADDRESS) -> Series:
     """Build the series of the real-records fixture, labelled with its poses."""
     sets = load_fixture(path)
-    start = 0.0
-    segments = []
-    seen = set()
+    starts: dict[int, float] = {}
     for seconds, index, _ in timeline(sets):
-        if index not in seen:
-            seen.add(index)
-            segments.append((start + seconds, f'{sets[index].name}: '
-                             f'{sets[index].description.split(" (")[0]}'))
-    chunks = fixture_chunks(path, address=address, start_time=start)
+        starts.setdefault(index, seconds)
+    segments = [(seconds, f'{sets[i].name}: {sets[i].description.split(" (")[0]}')
+                for i, seconds in starts.items()]
+    chunks = fixture_chunks(path, address=address, start_time=0.0)
     source = f'real records, sensor at rest in three poses ({os.path.basename(path)})'
     return series_from_chunks(chunks, address, convention, True, source, segments, gap)
 
 
-def _csv_rows(path: str) -> tuple[list[str] | None, list[list[str]]]:
+def read_csv(path: str) -> dict[str, np.ndarray]:
+    """Read a recorded run into columns by CSV_COLUMNS name (float arrays)."""
     with open(path, newline='', encoding='utf-8') as f:
         rows = [row for row in csv.reader(f)
                 if row and ''.join(row).strip() and not row[0].lstrip().startswith('#')]
-    if rows and rows[0] and rows[0][0].strip().lower() == 'time':
-        return [c.strip().lower() for c in rows[0]], rows[1:]
-    return None, rows
-
-
-def read_csv(path: str) -> dict[str, np.ndarray]:
-    """Read a recorded run into columns by CSV_COLUMNS name (float arrays)."""
-    names, rows = _csv_rows(path)
-    if names is not None:
+    if rows and rows[0][0].strip().lower() == 'time':
+        names, rows = [c.strip().lower() for c in rows[0]], rows[1:]
         missing = [c for c in CSV_COLUMNS if c not in names]
         if missing:
             raise ValueError(f'{path}: CSV lacks columns {", ".join(missing)} '
@@ -307,18 +280,14 @@ def read_csv(path: str) -> dict[str, np.ndarray]:
 def series_from_csv(path: str, gap: float | None = None) -> Series:
     """Build the series of a recorded run, in the frame it was published in."""
     cols = read_csv(path)
-    stamp = cols['time']
-    frame = 'as published (frame_convention of the recording)'
-    note = 'from the CSV time column'
-    if not stamp.size:
-        return _empty_series(os.path.basename(path), frame, note)
-    t = stamp - stamp[0]
+    t = cols['time'] - (cols['time'][0] if cols['time'].size else 0.0)
     accel = np.column_stack([cols['ax'], cols['ay'], cols['az']])
     rate = np.column_stack([cols['wx'], cols['wy'], cols['wz']])
     quats = np.column_stack([cols['qx'], cols['qy'], cols['qz'], cols['qw']])
-    euler = np.array([euler_deg(q) for q in quats]).reshape(-1, 3)
-    return _with_gaps(Series(t, accel, rate, euler, [], [], [], os.path.basename(path), frame,
-                             note), [], gap)
+    return _with_gaps(Series(t, accel, rate, _rows(euler_deg(q) for q in quats), [], [], [],
+                             os.path.basename(path),
+                             'as published (frame_convention of the recording)',
+                             'from the CSV time column'), [], gap)
 
 
 # Drawing --------------------------------------------------------------------------
@@ -344,12 +313,6 @@ def render(series: Series, output: str, title: str | None = None) -> Any:
     """
     fig = agg_figure(figsize=FIGSIZE, layout='constrained')
     axes = fig.subplots(3, 1, sharex=True)
-    _draw(fig, axes, series, title)
-    fig.savefig(output, dpi=DPI)
-    return fig
-
-
-def _draw(fig, axes, series: Series, title: str | None) -> None:
     t = series.time
     ends = [b for _, b in series.gaps + series.breaks]
     starts = sorted({int(i) for i in np.searchsorted(t, ends) if 0 < i < t.size})
@@ -358,31 +321,26 @@ def _draw(fig, axes, series: Series, title: str | None) -> None:
         (series.angular_rate, 'Angular rate (rad/s)', ('x', 'y', 'z'), None),
         (series.euler, 'Orientation (deg)', ('roll', 'pitch', 'yaw'), 180.0),
     )
+    shades = ((series.gaps, {'color': '0.85'}, 'no data'),
+              (series.breaks, {'facecolor': '0.92', 'edgecolor': '0.6', 'hatch': '///'},
+               'timer restarts\n(separate captures)'))
     for ax, (values, ylabel, names, wrap) in zip(axes, panels, strict=True):
         for k, (name, colour) in enumerate(zip(names, COLOURS, strict=True)):
             x, y = _broken(t, values[:, k], starts, wrap)
             ax.plot(x, y, color=colour, linewidth=0.9, label=name)
-        for a, b in series.gaps:
-            ax.axvspan(a, b, color='0.85', linewidth=0, zorder=0)
-        for a, b in series.breaks:
-            ax.axvspan(a, b, facecolor='0.92', edgecolor='0.6', hatch='///', linewidth=0,
-                       zorder=0)
+        for spans, style, _ in shades:
+            for a, b in spans:
+                ax.axvspan(a, b, linewidth=0, zorder=0, **style)
         ax.set_ylabel(ylabel)
         ax.grid(True, color='0.85', linewidth=0.6)
         ax.margins(x=0.01)
+        handles = ax.get_legend_handles_labels()[0]
+        if ax is axes[0]:
+            handles += [patch(label=label, **style) for spans, style, label in shades if spans]
+        ax.legend(handles=handles, loc='upper left', bbox_to_anchor=(1.01, 1.0),
+                  frameon=False, fontsize='small')
     axes[2].set_yticks(np.arange(-180, 181, 90))
     axes[2].set_ylim(-200, 200)
-    for ax in axes:
-        handles, names = ax.get_legend_handles_labels()
-        if ax is axes[0]:
-            if series.gaps:
-                handles.append(patch(color='0.85', label='no data'))
-            if series.breaks:
-                handles.append(patch(facecolor='0.92', edgecolor='0.6', hatch='///',
-                                     label='timer restarts\n(separate captures)'))
-            names = [h.get_label() for h in handles]
-        ax.legend(handles, names, loc='upper left', bbox_to_anchor=(1.01, 1.0),
-                  frameon=False, fontsize='small')
     if series.labels:
         for when, text in series.labels:
             axes[0].annotate(text, xy=(when, 1.0), xycoords=('data', 'axes fraction'),
@@ -391,9 +349,10 @@ def _draw(fig, axes, series: Series, title: str | None) -> None:
         low, high = axes[0].get_ylim()
         axes[0].set_ylim(low, high + 0.18 * (high - low))
     axes[2].set_xlabel(f'Time (s), {series.time_note}')
-    count = f'{t.size:,} samples'
     heading = title or f'3DM-GX2: {series.source}'
-    fig.suptitle(f'{heading}\n{count}; {series.frame}', fontsize='medium')
+    fig.suptitle(f'{heading}\n{t.size:,} samples; {series.frame}', fontsize='medium')
+    fig.savefig(output, dpi=DPI)
+    return fig
 
 
 # Command line ---------------------------------------------------------------------
@@ -433,44 +392,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not have_matplotlib():
         print(f'plot: {MATPLOTLIB_HINT}', file=sys.stderr)
         return 1
-    convention = args.convention or ENU
     source_path = args.fixture or args.stamp_errors or args.input
     output = args.output or os.path.splitext(os.path.basename(source_path))[0] + '.png'
-    if args.stamp_errors:
-        return _plot_stamp_errors(args.stamp_errors, output, args.title)
     try:
-        if args.fixture:
-            series = series_from_fixture(args.fixture, convention, args.gap)
-        elif is_capture(args.input):
-            series = series_from_capture(args.input, args.address, convention, args.gap)
+        if args.stamp_errors:
+            series: Series | StampErrors = read_stamp_errors(args.stamp_errors)
+            draw, count, empty = render_stamp_errors, 'stamp errors', 'rows'
         else:
-            if args.convention:
-                print('plot: a CSV is plotted in the frame it was recorded in; '
-                      '--convention ignored', file=sys.stderr)
-            series = series_from_csv(args.input, args.gap)
+            draw, count = render, 'samples'
+            empty = 'records with acceleration, angular rate and orientation'
+            if args.fixture:
+                series = series_from_fixture(args.fixture, args.convention or ENU, args.gap)
+            elif is_capture(args.input):
+                series = series_from_capture(args.input, args.address, args.convention or ENU,
+                                             args.gap)
+            else:
+                if args.convention:
+                    print('plot: a CSV is plotted in the frame it was recorded in; '
+                          '--convention ignored', file=sys.stderr)
+                series = series_from_csv(args.input, args.gap)
     except (OSError, ValueError) as exc:
         print(f'plot: {exc}', file=sys.stderr)
         return 1
     if not series.time.size:
-        print(f'plot: no records with acceleration, angular rate and orientation in '
-              f'{source_path}', file=sys.stderr)
+        print(f'plot: no {empty} in {source_path}', file=sys.stderr)
         return 1
-    render(series, output, args.title)
-    print(f'plot: {series.time.size} samples -> {output}')
-    return 0
-
-
-def _plot_stamp_errors(path: str, output: str, title: str | None) -> int:
-    try:
-        errors = read_stamp_errors(path)
-    except (OSError, ValueError) as exc:
-        print(f'plot: {exc}', file=sys.stderr)
-        return 1
-    if not errors.time.size:
-        print(f'plot: no rows in {path}', file=sys.stderr)
-        return 1
-    render_stamp_errors(errors, output, title)
-    print(f'plot: {errors.time.size} stamp errors -> {output}')
+    draw(series, output, args.title)
+    print(f'plot: {series.time.size} {count} -> {output}')
     return 0
 
 

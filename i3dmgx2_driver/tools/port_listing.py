@@ -36,12 +36,7 @@ BY_ID_DIR = '/dev/serial/by-id'
 #: MicroStrain's USB vendor id.
 MICROSTRAIN_VID = 0x199B
 #: USB vendor ids of the usual USB-serial bridge chips.
-USB_SERIAL_VIDS = {
-    0x0403: 'FTDI',
-    0x10C4: 'Silicon Labs',
-    0x067B: 'Prolific',
-    0x1A86: 'WCH CH340',
-}
+USB_SERIAL_VIDS = {0x0403: 'FTDI', 0x10C4: 'Silicon Labs', 0x067B: 'Prolific', 0x1A86: 'WCH CH340'}
 #: What a port looks like, in the order of how likely it leads to a sensor.
 KIND_MICROSTRAIN = 'MicroStrain'
 KIND_USB_SERIAL = 'USB-serial'
@@ -84,9 +79,7 @@ class PortInfo(NamedTuple):
     @property
     def usb_id(self) -> str | None:
         """Return the USB vendor:product id as lsusb prints it, or None."""
-        if self.vid is None:
-            return None
-        return f'{self.vid:04x}:{self.pid or 0:04x}'
+        return None if self.vid is None else f'{self.vid:04x}:{self.pid or 0:04x}'
 
     @property
     def likely(self) -> bool:
@@ -110,9 +103,7 @@ def port_kind(vid: int | None, description: str = '', manufacturer: str = '') ->
     text = f'{description} {manufacturer}'.lower()
     if vid == MICROSTRAIN_VID or 'microstrain' in text:
         return KIND_MICROSTRAIN
-    if vid in USB_SERIAL_VIDS:
-        return f'{KIND_USB_SERIAL} ({USB_SERIAL_VIDS[vid]})'
-    return None
+    return f'{KIND_USB_SERIAL} ({USB_SERIAL_VIDS[vid]})' if vid in USB_SERIAL_VIDS else None
 
 
 def latency_timer_ms(device: str, sys_class_tty: str = SYS_CLASS_TTY) -> int | None:
@@ -137,25 +128,16 @@ def by_id_path(device: str, by_id_dir: str = BY_ID_DIR) -> str | None:
         names = sorted(os.listdir(by_id_dir))
     except OSError:
         return None
-    target = os.path.realpath(device)
-    for name in names:
-        path = os.path.join(by_id_dir, name)
-        if os.path.realpath(path) == target:
-            return path
-    return None
+    paths = (os.path.join(by_id_dir, name) for name in names)
+    return next((p for p in paths if os.path.realpath(p) == os.path.realpath(device)), None)
 
 
 def port_info(entry: Any, by_id_dir: str = BY_ID_DIR) -> PortInfo:
     """Turn one of pyserial's ListPortInfo (or alike) into a PortInfo."""
     description = entry.description if entry.description not in (None, 'n/a') else ''
-    return PortInfo(
-        device=entry.device,
-        by_id=by_id_path(entry.device, by_id_dir),
-        vid=entry.vid,
-        pid=entry.pid,
-        description=description,
-        kind=port_kind(entry.vid, description, getattr(entry, 'manufacturer', None) or ''),
-    )
+    return PortInfo(entry.device, by_id_path(entry.device, by_id_dir), entry.vid, entry.pid,
+                    description,
+                    port_kind(entry.vid, description, getattr(entry, 'manufacturer', None) or ''))
 
 
 def list_ports(by_id_dir: str = BY_ID_DIR,

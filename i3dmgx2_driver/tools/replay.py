@@ -64,16 +64,10 @@ def schedule(times: Sequence[float], max_gap: float | None = None) -> list[float
     zero; with ``max_gap``, longer silences are shortened to it, so that a
     capture with long pauses can be replayed without waiting them out.
     """
-    offsets: list[float] = []
-    total = 0.0
-    for i, t in enumerate(times):
-        if i:
-            step = max(0.0, t - times[i - 1])
-            if max_gap is not None:
-                step = min(step, max_gap)
-            total += step
-        offsets.append(total)
-    return offsets
+    steps = (max(0.0, b - a) for a, b in itertools.pairwise(times))
+    if max_gap is not None:
+        steps = (min(step, max_gap) for step in steps)
+    return list(itertools.accumulate(steps, initial=0.0))[:len(times)]
 
 
 class Replayer:
@@ -109,14 +103,11 @@ class Replayer:
         self.wait_for_stream = wait_for_stream
         self.stats = ReplayStats()
         self._offsets = schedule([t for t, _ in self.chunks], max_gap)
-        self._stop = threading.Event()
-        self._wake = threading.Event()
-        self._finished = threading.Event()
+        self._stop, self._wake, self._finished = (threading.Event() for _ in range(3))
         self._threads: list[threading.Thread] = []
         #: The pseudo-terminal played into: ``pty_name``, ``pending_output()``.
         self.pty = ReplayPty(link, self._stop)
-        self._answers = BaseStationAnswers(self.pty, self.stats, wireless, self._wake,
-                                           self._stop)
+        self._answers = BaseStationAnswers(self.pty, self.stats, wireless, self._wake, self._stop)
         self._dropping = False
         #: Path for the driver's ``port`` parameter (None before start).
         self.port: str | None = None
@@ -134,10 +125,9 @@ class Replayer:
             raise RuntimeError('replayer already started')
         self.pty.create()
         self.port = self.pty.path
-        self._threads = [
-            threading.Thread(target=self._play, name='replay-play', daemon=True),
-            threading.Thread(target=self._answers.listen, name='replay-listen', daemon=True),
-        ]
+        self._threads = [threading.Thread(target=self._play, name='replay-play', daemon=True),
+                         threading.Thread(target=self._answers.listen, name='replay-listen',
+                                          daemon=True)]
         for thread in self._threads:
             thread.start()
         _LOG.info('replaying %d chunks into %s (%s), speed %s%s', len(self.chunks), self.port,
@@ -189,11 +179,8 @@ class Replayer:
             self._finished.set()
 
     def _play_passes(self) -> None:
-        awaited = None
-        if self.wait_for_stream:
-            awaited = self._answers.stream_asked
-        elif self.wait_for_host:
-            awaited = self._answers.host_seen
+        awaited = self._answers.stream_asked if self.wait_for_stream else \
+            self._answers.host_seen if self.wait_for_host else None
         if awaited is not None:
             while not awaited.wait(POLL):
                 if self._stop.is_set():
@@ -227,10 +214,8 @@ class Replayer:
         while True:
             self._answers.send()
             remaining = deadline - time.monotonic()
-            if remaining <= 0:
+            if remaining <= 0 or self._stop.is_set():
                 return not self._stop.is_set()
-            if self._stop.is_set():
-                return False
             self._wake.wait(min(remaining, ACK_HOLD))
             self._wake.clear()
 
@@ -238,14 +223,10 @@ class Replayer:
         sent = self.pty.write(data, paced=self.speed > 0)
         self.stats.chunks_sent += 1
         self.stats.bytes_sent += sent
-        if sent < len(data):
-            self.stats.bytes_dropped += len(data) - sent
-            if not self._dropping:
-                _LOG.warning('nobody is reading %s: dropping data, as a serial line would',
-                             self.port)
-            self._dropping = True
-        else:
-            self._dropping = False
+        self.stats.bytes_dropped += len(data) - sent
+        if sent < len(data) and not self._dropping:
+            _LOG.warning('nobody is reading %s: dropping data, as a serial line would', self.port)
+        self._dropping = sent < len(data)
         self._answers.played(data[:sent])
 
 
@@ -291,27 +272,13 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _load(args: argparse.Namespace) -> tuple[list[Chunk], bool, str]:
+def _load(args: argparse.Namespace) -> tuple[list[Chunk], dict[str, Any], str]:
+    """Return the chunks to play, the capture's header (the fixture's: its address), the source."""
     if args.fixture:
-        return list(fixture_chunks(args.fixture, address=args.address)), True, args.fixture
+        return (list(fixture_chunks(args.fixture, address=args.address)),
+                {'wireless': True, 'address': args.address}, args.fixture)
     header, chunks = read_capture(args.capture)
-    return list(chunks), bool(header.get('wireless', True)), args.capture
-
-
-def _to_bag(args: argparse.Namespace, chunks: list[Chunk], wireless: bool) -> int:
-    """Write the capture as the node's messages in a bag (bag_io.py); return the exit status."""
-    from .bag_io import capture_messages, write_bag
-    header = {'wireless': wireless,
-              'address': args.address if args.fixture else None}
-    if args.capture:
-        header, _ = read_capture(args.capture)
-    try:
-        count = write_bag(args.bag, capture_messages(chunks, header))
-    except (ImportError, OSError, ValueError) as exc:
-        print(f'replay: {exc}', file=sys.stderr)
-        return 1
-    print(f'wrote {count} messages to {args.bag}', flush=True)
-    return 0
+    return list(chunks), header, args.capture
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -324,34 +291,32 @@ def main(argv: Sequence[str] | None = None) -> int:
         print('replay: --speed must be >= 0', file=sys.stderr)
         return 2
     try:
-        chunks, wireless, source = _load(args)
-    except (OSError, ValueError) as exc:
+        chunks, header, source = _load(args)
+        if args.bag:  # the node's messages in a bag instead (bag_io.py)
+            from .bag_io import capture_messages, write_bag
+            count = write_bag(args.bag, capture_messages(chunks, header))
+            print(f'wrote {count} messages to {args.bag}', flush=True)
+            return 0
+    except (ImportError, OSError, ValueError) as exc:
         print(f'replay: {exc}', file=sys.stderr)
         return 1
-    if args.bag:
-        return _to_bag(args, chunks, wireless)
     replayer = Replayer(chunks, speed=args.speed, loop=args.loop, link=args.link,
-                        wireless=wireless, max_gap=args.max_gap,
-                        wait_for_host=args.wait_for_host,
-                        wait_for_stream=args.wait_for_stream)
+                        wireless=bool(header.get('wireless', True)), max_gap=args.max_gap,
+                        wait_for_host=args.wait_for_host, wait_for_stream=args.wait_for_stream)
     lifetime.die_with_parent()
     # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).
     stop = lifetime.StopSignal().install()
     try:
-        try:
-            port = replayer.start()
-        except OSError as exc:
-            print(f'replay: {exc}', file=sys.stderr)
-            return 1
-        print(f'port: {port}', flush=True)
+        print(f'port: {replayer.start()}', flush=True)
         _LOG.info('source %s: %d chunks, %d bytes', source, len(chunks),
                   sum(len(d) for _, d in chunks))
         while not stop.is_set() and not replayer.wait(0.1):
             pass
-        if not stop.is_set():
-            drained = replayer.drain(args.linger, stop)
-            if not drained and not stop.is_set():
-                _LOG.info('%d bytes were not read by anyone', replayer.pty.pending_output())
+        if not stop.is_set() and not replayer.drain(args.linger, stop) and not stop.is_set():
+            _LOG.info('%d bytes were not read by anyone', replayer.pty.pending_output())
+    except OSError as exc:
+        print(f'replay: {exc}', file=sys.stderr)
+        return 1
     finally:
         replayer.stop()
         stop.restore()

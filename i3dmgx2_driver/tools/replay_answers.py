@@ -42,10 +42,6 @@ _LOG = logging.getLogger('i3dmgx2_driver.replay')
 ACK_HOLD = 0.5
 
 
-def _hex(data: bytes) -> str:
-    return data.hex(' ')
-
-
 def _asks_for_stream(event: HostEvent) -> bool:
     """Whether the host asks for continuous mode of a record (0xC4 not stopping it)."""
     if not isinstance(event, (CommandPacket, RawCommand)):
@@ -77,8 +73,7 @@ class BaseStationAnswers:
         self._wireless = wireless
         self._wake = wake
         self._stop = stop
-        self.host_seen = threading.Event()
-        self.stream_asked = threading.Event()
+        self.host_seen, self.stream_asked = threading.Event(), threading.Event()
         self._answers: list[bytes] = []
         self._answers_lock = threading.Lock()
         self._answer_due = 0.0
@@ -89,25 +84,18 @@ class BaseStationAnswers:
         if self._wireless:
             self._tracker.feed(data)
 
-    def _at_boundary(self) -> bool:
-        # At most a lone 0xAA held back: an ACK after it reads the same either way.
-        return self._tracker.pending <= 1
-
     def send(self, force: bool = False) -> None:
         """Send queued ACK/NACKs between packets, never inside one."""
-        with self._answers_lock:
-            if not self._answers:
-                return
-        if not force and not self._at_boundary() and time.monotonic() < self._answer_due:
+        # Between packets: at most a lone 0xAA held back (an ACK after it reads the same).
+        if not self._answers or (not force and self._tracker.pending > 1
+                                 and time.monotonic() < self._answer_due):
             return
         with self._answers_lock:
             answers, self._answers = self._answers, []
         for answer in answers:
             if self._pty.write(answer, paced=False) == len(answer):
-                if answer[0] == ACK:
-                    self._stats.acks_sent += 1
-                else:
-                    self._stats.nacks_sent += 1
+                self._stats.acks_sent += answer[0] == ACK
+                self._stats.nacks_sent += answer[0] != ACK
 
     def _queue(self, byte: int) -> None:
         with self._answers_lock:
@@ -130,7 +118,7 @@ class BaseStationAnswers:
                 continue
             self._stats.host_bytes += len(data)
             self.host_seen.set()
-            _LOG.debug('host wrote %d bytes: %s', len(data), _hex(data))
+            _LOG.debug('host wrote %d bytes: %s', len(data), data.hex(' '))
             for event in parser.feed(data):
                 if _asks_for_stream(event):
                     self.stream_asked.set()
@@ -139,11 +127,11 @@ class BaseStationAnswers:
                 if isinstance(event, CommandPacket):
                     self._stats.commands += 1
                     _LOG.info('host command to node %d: %s (ACK; replay does not answer it)',
-                              event.address, _hex(event.command))
+                              event.address, event.command.hex(' '))
                     self._queue(ACK)
                 elif isinstance(event, RejectedPacket):
                     _LOG.info('host sent a malformed packet (%s): NACK', event.reason)
                     self._queue(NACK)
                 else:
                     _LOG.info('host sent %s: not answered (no sensor behind a replay)',
-                              _hex(event.command))
+                              event.command.hex(' '))

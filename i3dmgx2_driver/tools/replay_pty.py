@@ -24,6 +24,7 @@ tells when the driver has read it all. The replay's playing and answering
 (replay.py, replay_answers.py) write and read through :class:`ReplayPty` only.
 """
 
+import contextlib
 import fcntl
 import os
 import select
@@ -92,12 +93,9 @@ class ReplayPty:
     def pending_output(self) -> int:
         """Bytes written but not yet read by the driver (0 only if none; 0 after close)."""
         slave = self._port.slave
-        if slave is None:
-            return 0
-        try:
-            return unread_bytes(slave)
-        except (OSError, ValueError):
-            return 0
+        with contextlib.suppress(OSError, ValueError):  # closed meanwhile
+            return 0 if slave is None else unread_bytes(slave)
+        return 0
 
     def write(self, data: bytes, paced: bool) -> int:
         """
@@ -111,11 +109,9 @@ class ReplayPty:
         written = 0
         stall_end = time.monotonic() + WRITE_STALL
         while written < len(data) and master is not None:
-            try:
+            with contextlib.suppress(BlockingIOError):  # full: wait for room, or give up
                 written += os.write(master, view[written:])
                 continue
-            except BlockingIOError:
-                pass
             if self._stop.is_set() or (paced and time.monotonic() >= stall_end):
                 break
             select.select([], [master], [], POLL)
@@ -127,8 +123,7 @@ class ReplayPty:
         if master is None:
             raise OSError('the pty is closed')
         try:
-            ready, _, _ = select.select([master], [], [], POLL)
-            data = os.read(master, 4096) if ready else b''
+            data = os.read(master, 4096) if select.select([master], [], [], POLL)[0] else b''
         except BlockingIOError:
             return b''
         # The master is in packet mode: a data read starts with TIOCPKT_DATA, a

@@ -19,28 +19,18 @@ One set of counters, filled by the playing (replay.py) and the answering
 (replay_answers.py): here so that neither has to import the other.
 """
 
+import dataclasses
 
+
+@dataclasses.dataclass(slots=True)
 class ReplayStats:
     """What a replay did, for the log and for tests."""
 
-    __slots__ = (
-        'acks_sent',
-        'bytes_dropped',
-        'bytes_sent',
-        'chunks_sent',
-        'commands',
-        'host_bytes',
-        'nacks_sent',
-        'passes',
-    )
-
-    def __init__(self) -> None:
-        for name in self.__slots__:
-            setattr(self, name, 0)
-
-    def as_dict(self) -> dict:
-        """Return the counters by name."""
-        return {name: getattr(self, name) for name in self.__slots__}
-
-    def __repr__(self) -> str:
-        return 'ReplayStats(' + ', '.join(f'{k}={v}' for k, v in self.as_dict().items()) + ')'
+    acks_sent: int = 0
+    bytes_dropped: int = 0
+    bytes_sent: int = 0
+    chunks_sent: int = 0
+    commands: int = 0
+    host_bytes: int = 0
+    nacks_sent: int = 0
+    passes: int = 0

@@ -42,29 +42,26 @@ class StampErrors(NamedTuple):
 def read_stamp_errors(path: str) -> StampErrors:
     """Read a stamp-error CSV; raise ValueError naming what is wrong."""
     times, errors, events = [], [], []
+    header = None
     with open(path, newline='') as source:
-        header = None
         for number, raw in enumerate(source, 1):
             line = raw.strip()
-            if not line:
-                continue
+            fields = line.split(',')
             if line.startswith('#'):
                 parts = line[1:].strip().split(',', 2)
                 if parts[0] == 'event' and len(parts) == 3:
                     events.append((float(parts[1]), parts[2]))
-                continue
-            fields = line.split(',')
-            if header is None:
+            elif line and header is None:
                 header = fields
                 if header[:2] != ['time', 'error']:
                     raise ValueError(f'{path}: the header must start with time,error '
                                      f'(got {line!r})')
-                continue
-            try:
-                times.append(float(fields[0]))
-                errors.append(float(fields[1]))
-            except (IndexError, ValueError):
-                raise ValueError(f'{path}:{number}: not two numbers: {line!r}') from None
+            elif line:
+                try:
+                    times.append(float(fields[0]))
+                    errors.append(float(fields[1]))
+                except (IndexError, ValueError):
+                    raise ValueError(f'{path}:{number}: not two numbers: {line!r}') from None
     return StampErrors(np.array(times), np.array(errors), events)
 
 
@@ -78,10 +75,8 @@ def render_stamp_errors(series: StampErrors, output: str, title: str | None = No
     for at, label in series.events:
         ax.axvline(at - start, color='tab:red', linestyle='--', linewidth=1)
         ax.annotate(label, (at - start, 1.0), xycoords=('data', 'axes fraction'),
-                    xytext=(3, -12), textcoords='offset points', color='tab:red',
-                    fontsize='small')
-    ax.set_xlabel('time since the first record (s)')
-    ax.set_ylabel('stamp error (ms)')
+                    xytext=(3, -12), textcoords='offset points', color='tab:red', fontsize='small')
+    ax.set(xlabel='time since the first record (s)', ylabel='stamp error (ms)')
     ax.grid(True, alpha=0.3)
     ax.legend(loc='lower right', fontsize='small')
     fig.suptitle(title or 'Stamp error against the true sample time', fontsize='medium')
