@@ -36,10 +36,11 @@ import time
 
 from bench_common import emit, machine_table, RunNote
 
-from i3dmgx2_driver.codec import commands, framing, streams
+from i3dmgx2_driver.codec import commands, framing
 from i3dmgx2_driver.codec.parser import SensorStreamParser
+from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
 from i3dmgx2_driver.device.sample_clock import SampleClock
-from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings, probe_records
+from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings
 
 #: Ticks between two records at 100 Hz (the device timer's 19,660.8 ticks a second).
 TICKS_AT_100_HZ = 1966
@@ -49,7 +50,8 @@ WIRE_S = 0.0076
 
 def steps() -> dict[str, Callable[[int], object]]:
     """Return each step to time, called with the record's index."""
-    record = probe_records(streams.DEFAULT)[0]
+    record = AccelAngRateMagOrientation((0.125, -0.5, -1.0), (0.01, -0.02, 0.03), (0.2, -0.1, 0.4),
+                                        (0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0), 123456)
     packets = [framing.encode_data_packet(
         95, commands.encode_record(record._replace(timer=1000 + i * TICKS_AT_100_HZ)), 200, 100)
         for i in range(4096)]
@@ -57,13 +59,14 @@ def steps() -> dict[str, Callable[[int], object]]:
     clock = SampleClock()
     factory = MessageFactory(MessageSettings('imu_link', 'enu'))
     host = time.monotonic() + 1000.0
+    values = parser.feed(packets[0])[0].values
     unpack = struct.Struct('>' + 'f' * 18 + 'I').unpack_from
     return {
         'parser.feed, one packet': lambda i: parser.feed(packets[i]),
         'SampleClock.stamp': lambda i: clock.stamp(1000 + i * TICKS_AT_100_HZ,
                                                    host + i * 0.01, WIRE_S),
-        'MessageFactory.imu_cdr': lambda i: factory.imu_cdr(record, 1.7e9 + i * 0.01),
-        'MessageFactory.mag_cdr': lambda i: factory.mag_cdr(record, 1.7e9 + i * 0.01),
+        'MessageFactory.imu_cdr': lambda i: factory.imu_cdr(values, 1_700_000_000, i),
+        'MessageFactory.mag_cdr': lambda i: factory.mag_cdr(values, 1_700_000_000, i),
         'an empty lambda': lambda i: None,
         'one struct unpack (19 fields)': lambda i: unpack(packets[i], 8),
         'sum of 83 bytes (the checksum)': lambda i: sum(packets[i][1:84]),

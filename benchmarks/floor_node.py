@@ -15,14 +15,17 @@
 """
 The floor under the driver's share: a process that only reads the port and publishes.
 
-A process built as the driver's is (an rclpy node, the same publisher and
-QoS, a multi-threaded executor, the start-up heap frozen as main.py freezes
-it) whose reader thread does the least any rclpy driver must: wait in
-``select()``, read, and once a whole packet is in, publish a ready-serialized
-Imu message of the same size, with no parsing, stamping or packing. Its
-read() returned -> publish() returned is what the driver's share cannot go
-below with rclpy on this machine; the rest of the driver's share is the
-driver's own Python.
+A process built as the driver's is (an rclpy node, the same publishers and
+QoS, a multi-threaded executor spinning in a thread of its own without a
+timeout, the main thread blocked on the stop, the start-up heap frozen as
+main.py freezes it) whose reader thread does the least any rclpy driver
+must: wait in ``select()`` until a whole packet is in (the terminal's VMIN,
+as the driver's ``SerialPort.wake_for`` sets it), read it, and publish what
+the driver publishes for 0xCC, a ready-serialized Imu and MagneticField
+message of the same sizes, with no parsing, stamping or packing. Its read()
+returned -> publish() returned is what the driver's share cannot go below
+with rclpy on this machine; the rest of the driver's share is the driver's
+own Python.
 
 It records its timings as the driver does when ``I3DMGX2_TIMINGS`` names a
 file (device/hot_path.py's TimingsRecorder: the read and the publish of each
@@ -35,6 +38,7 @@ Usage: ``I3DMGX2_TIMINGS=out.json floor_node.py --ros-args -p port:=PATH
 [-p realtime_priority:=N]``.
 """
 
+import inspect
 import itertools
 import os
 from pathlib import Path
@@ -42,6 +46,7 @@ import select
 import signal
 import struct
 import sys
+import termios
 import threading
 import time
 from typing import NamedTuple
@@ -53,16 +58,15 @@ if str(REPO) not in sys.path:
 import rclpy  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
-from sensor_msgs.msg import Imu  # noqa: E402
+from sensor_msgs.msg import Imu, MagneticField  # noqa: E402
 
-from i3dmgx2_driver.codec import layouts, streams  # noqa: E402, I100
+from i3dmgx2_driver.codec import layouts  # noqa: E402, I100
 from i3dmgx2_driver.codec.framing import DATA_FLAGS, DATA_TRAILER_SIZE, HEADER_SIZE  # noqa: E402
 from i3dmgx2_driver.device import realtime  # noqa: E402
 from i3dmgx2_driver.device.hot_path import recorder_from_environment  # noqa: E402
-from i3dmgx2_driver.ros.conversions import (  # noqa: E402
-    MessageFactory, MessageSettings, probe_records,
-)
+from i3dmgx2_driver.device.port import TTY_READ_CHUNK  # noqa: E402
 
 _LAYOUT = layouts.LAYOUTS[layouts.ACCEL_ANG_RATE_MAG_ORIENTATION]
 PACKET_SIZE = HEADER_SIZE + _LAYOUT.record_size + DATA_TRAILER_SIZE
@@ -71,10 +75,19 @@ _TIMER = struct.Struct('>I')
 _TIMER_AT = HEADER_SIZE + _LAYOUT.record_size - 4
 
 
-class _Packet(NamedTuple):
-    """What the recorder needs of a record: its timer."""
+class _Record(NamedTuple):
+    """What an older tree's recorder takes of a record (``published(record, stamp)``)."""
 
     timer: int
+
+
+def _messages(stamp: float) -> tuple[bytes, bytes]:
+    """Return the Imu and MagneticField the floor publishes, the driver's sizes, serialized."""
+    imu, mag = Imu(), MagneticField()
+    for message in (imu, mag):
+        message.header.frame_id = 'imu_link'  # the driver's default frame
+        message.header.stamp.sec = int(stamp)
+    return serialize_message(imu), serialize_message(mag)
 
 
 def _parameters(ros_args: list[str]) -> dict[str, str]:
@@ -99,14 +112,20 @@ def main() -> int:
     node = rclpy.create_node('i3dmgx2_floor')
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                      reliability=ReliabilityPolicy.RELIABLE)
-    publisher = node.create_publisher(Imu, 'imu/raw_data', qos)
-    factory = MessageFactory(MessageSettings('imu_link', 'enu', stream=streams.DEFAULT))
+    publish_imu = node.create_publisher(Imu, 'imu/raw_data', qos).publish
+    publish_mag = node.create_publisher(MagneticField, 'imu/mag', qos).publish
     stamp = time.time()
-    message = factory.imu_cdr(probe_records(streams.DEFAULT)[0], stamp)
+    imu, mag = _messages(stamp)
+    # Built with rclpy alone, the floor runs on another tree's package too (latency.py
+    # --against); an older recorder takes the record at the publish, not at the pack.
+    older = 'record' in inspect.signature(timings.published).parameters
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     policy = realtime.ThreadPolicy(int(params.get('realtime_priority', '0')))
-    fd = os.open(params['port'], os.O_RDWR | os.O_NOCTTY)
+    fd = os.open(params['port'], os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    attributes = termios.tcgetattr(fd)  # select() says readable once a whole packet is in
+    attributes[6][termios.VMIN], attributes[6][termios.VTIME] = PACKET_SIZE, 0
+    termios.tcsetattr(fd, termios.TCSANOW, attributes)
 
     def reader() -> None:
         realtime.apply_to_current_thread(policy)
@@ -115,7 +134,13 @@ def main() -> int:
             readable, _, _ = select.select([fd], [], [], 0.2)
             if not readable:
                 continue
-            data = os.read(fd, 4096)
+            data = more = os.read(fd, 4096)
+            while len(more) == TTY_READ_CHUNK:  # the rest of the packet, as read_some reads it
+                try:
+                    more = os.read(fd, 4096)
+                except BlockingIOError:
+                    break
+                data += more
             timings.read(len(data), time.time())
             buf += data
             while len(buf) >= PACKET_SIZE:
@@ -124,16 +149,23 @@ def main() -> int:
                     continue
                 timer = _TIMER.unpack_from(buf, _TIMER_AT)[0]
                 del buf[:PACKET_SIZE]
-                publisher.publish(message)
-                timings.published(_Packet(timer), stamp)
+                if older:
+                    publish_imu(imu)
+                    timings.published(_Record(timer), stamp)
+                else:
+                    timings.packed(timer)
+                    publish_imu(imu)
+                    timings.published(stamp)
+                publish_mag(mag)
 
     thread = threading.Thread(target=reader, name='gx2-reader', daemon=True)
     thread.start()
     frozen = realtime.freeze_startup_heap()
     print(f'floor: start-up heap frozen ({frozen} objects)', flush=True)
+    spinner = threading.Thread(target=executor.spin, name='gx2-executor', daemon=True)
+    spinner.start()
     try:
-        while not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
+        stop.wait()
     finally:
         stop.set()
         thread.join(1.0)

@@ -42,12 +42,13 @@ import time
 
 from harness.campaign_verdict import Sent
 from harness.processes import Listener, NodeProcess
-from i3dmgx2_driver.codec.commands import decode_record
+from i3dmgx2_driver.codec.commands import decode_record, encode_record
 from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.framing import HEADER_SIZE
 from i3dmgx2_driver.codec.layouts import LAYOUTS
 from i3dmgx2_driver.codec.orientation import ENU
 from i3dmgx2_driver.codec.streams import STREAMS
+from i3dmgx2_driver.ros.cdr import StampedDoubles
 from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings
 from i3dmgx2_driver.simulator import PtySimulator
 from sensor_msgs.msg import Imu
@@ -57,6 +58,8 @@ from sensor_msgs.msg import Imu
 VALUES = struct.Struct('<6d')
 #: Its orientation, packed.
 QUATERNION = struct.Struct('<4d')
+#: The Imu message of frame imu_link, as the node's packer writes it (ros/conversions.py).
+_IMU = StampedDoubles('imu_link', '4d72s3d72s3d72s').struct
 #: The bytes that can each become a spurious parser event (ACK/start of packet, NACK).
 _MARKS = (0xAA, 0x21)
 
@@ -83,9 +86,11 @@ def imu_values(record) -> tuple[bytes, bytes] | None:
     made = _FACTORIES.get(type(record))
     if made is None:
         return None
-    factory = made[0]
-    key = VALUES.pack(*factory.linear_acceleration(record), *factory.angular_velocity(record))
-    return key, QUATERNION.pack(*factory.orientation(record)[0])
+    factory, _, code = made
+    values = LAYOUTS[code].reply_struct.unpack_from(encode_record(record), 1)
+    # The Imu's bytes as the node packs them: orientation 5-8, rate 10-12, acceleration 14-16.
+    imu = _IMU.unpack(factory.imu_cdr(values, 0, 0))
+    return VALUES.pack(*imu[14:17], *imu[10:13]), QUATERNION.pack(*imu[5:9])
 
 
 def compact(entry) -> Sent:

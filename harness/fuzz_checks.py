@@ -139,6 +139,7 @@ def _frame_for(event, wireless: bool) -> bytes:
 
 def _find_frame(data: bytes, start: int, limit: int, event, wireless: bool) -> int:
     """Where the frame of ``event`` sits in ``data[start:limit]``; -1 if nowhere."""
+    from harness import decoders  # with the codec, after any instrumentation
     frame = _frame_for(event, wireless)
     at = data.find(frame, start, limit)
     if at >= 0:
@@ -152,12 +153,12 @@ def _find_frame(data: bytes, start: int, limit: int, event, wireless: bool) -> i
             continue
         try:
             if wireless:
-                decoded = framing.decode_data_packet(piece)
+                decoded = decoders.decode_data_packet(piece)
                 link = (decoded.address == event.address and decoded.lqi == event.lqi
                         and decoded.rssi == event.rssi)
                 record = decoded.record
             else:
-                record = framing.decode_wired_record(piece)
+                record = decoders.decode_wired_record(piece)
                 link = True
         except CodecError:
             continue
@@ -309,6 +310,7 @@ def _one_shot(name: str, function, piece: bytes):
 
 def check_one_shot(data: bytes) -> list:
     """Run the one-shot decoders on the input and its slices; return what decoded."""
+    from harness import decoders  # with the codec, after any instrumentation
     records = []
     codes = commands.LAYOUTS
     starts = {0, *[i for i, byte in enumerate(data) if byte == 0xAA][:16],
@@ -323,18 +325,18 @@ def check_one_shot(data: bytes) -> list:
             piece = tail[:size]
             records += [
                 _one_shot('decode_record', commands.decode_record, piece),
-                getattr(_one_shot('decode_data_packet', framing.decode_data_packet, piece),
+                getattr(_one_shot('decode_data_packet', decoders.decode_data_packet, piece),
                         'record', None),
-                _one_shot('decode_wired_record', framing.decode_wired_record, piece)]
-            _one_shot('decode_command_packet', framing.decode_command_packet, piece)
+                _one_shot('decode_wired_record', decoders.decode_wired_record, piece)]
+            _one_shot('decode_command_packet', decoders.decode_command_packet, piece)
             _one_shot('decode_command', commands.decode_command, piece)
         # Whatever length the frame's own length byte claims.
         if len(tail) >= 6:
             claimed = tail[:framing.HEADER_SIZE + tail[5] - 1 + framing.DATA_TRAILER_SIZE]
-            packet = _one_shot('decode_data_packet', framing.decode_data_packet, claimed)
+            packet = _one_shot('decode_data_packet', decoders.decode_data_packet, claimed)
             records.append(getattr(packet, 'record', None))
             claimed = tail[:framing.HEADER_SIZE + tail[5] - 1 + 2]
-            _one_shot('decode_command_packet', framing.decode_command_packet, claimed)
+            _one_shot('decode_command_packet', decoders.decode_command_packet, claimed)
     return [record for record in records if record is not None]
 
 

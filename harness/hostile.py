@@ -50,11 +50,11 @@ import tty
 from typing import NamedTuple
 
 from harness.campaign import imu_values
+from harness.decoders import decode_data_packet
 from i3dmgx2_driver.codec import streams
 from i3dmgx2_driver.codec.checksum import checksum16
 from i3dmgx2_driver.codec.framing import (
-    CommandPacket, DATA_FLAGS, DATA_TRAILER_SIZE, DataPacket, decode_data_packet, HEADER_SIZE,
-    SOP)
+    CommandPacket, DATA_FLAGS, DATA_TRAILER_SIZE, DataPacket, HEADER_SIZE, SOP)
 from i3dmgx2_driver.codec.parser import CommandStreamParser, RawCommand, SensorStreamParser
 from i3dmgx2_driver.simulator.pty_port import PtyPort, TIOCPKT_DATA, TIOCPKT_FLUSHREAD
 

@@ -33,12 +33,13 @@ import math
 import re
 
 from fixture_files import real_records_path
+from harness.decoders import decode_data_packet
 from i3dmgx2_driver.capture.fixtures import FixtureSet, timeline
 from i3dmgx2_driver.codec import (
-    DataPacket, decode_data_packet, encode_data_packet, encode_record, SensorStreamParser,
+    DataPacket, encode_data_packet, encode_record, SensorStreamParser,
 )
 from i3dmgx2_driver.codec.orientation import (
-    attitude_enu, attitude_ned, body_vector, euler_from_matrix, orientation, shepperd,
+    body_vector, euler_from_matrix, orientation, shepperd,
 )
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation, TICKS_PER_SECOND
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
@@ -46,6 +47,7 @@ from i3dmgx2_driver.device.sample_clock import SampleClock
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from test_codec_orientation import attitude_enu, attitude_ned
 
 ADDRESS = 95
 

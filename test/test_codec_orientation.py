@@ -30,6 +30,43 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+
+# The attitudes as whole matrices: what the codec reads in place (o.quaternion), built
+# step by step as the module docstring writes them.
+
+
+def transpose(m: tuple) -> tuple:
+    """Return the transpose of a row-major 3x3 matrix."""
+    return (m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8])
+
+
+def attitude_ned(m: tuple) -> tuple:
+    """Sensor attitude in the device's own convention: NED world, FRD body."""
+    return transpose(m)
+
+
+def attitude_enu(m: tuple) -> tuple:
+    """
+    Sensor attitude per REP-103: ENU world, FLU body, as P * M^T * D.
+
+    With A = M^T (row-major a0..a8), swapping the first two rows and negating
+    the third gives P * A; negating the last two columns then applies D.
+    """
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = transpose(m)
+    return (a3, -a4, -a5,
+            a0, -a1, -a2,
+            -a6, a7, a8)
+
+
+def attitude(m: tuple, convention: str) -> tuple:
+    """Sensor attitude in the named convention (``'enu'`` or ``'ned'``)."""
+    if convention == o.ENU:
+        return attitude_enu(m)
+    if convention == o.NED:
+        return attitude_ned(m)
+    raise ValueError(f'convention must be one of {o.CONVENTIONS}, got {convention!r}')
+
+
 CI = settings(max_examples=300, deadline=None, database=None)
 P = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])  # NED -> ENU
 D = np.diag([1.0, -1.0, -1.0])                                       # FLU -> FRD
@@ -173,14 +210,14 @@ def test_float32_matrices_give_unit_quaternions():
 def test_attitude_ned_is_m_transposed():
     """NED attitude is M^T, and transpose() is the transpose."""
     for matrix in RANDOM_ROTATIONS.as_matrix()[:200]:
-        assert np.array_equal(mat(o.attitude_ned(m9(matrix))), matrix.T)
-        assert np.array_equal(mat(o.transpose(m9(matrix))), matrix.T)
+        assert np.array_equal(mat(attitude_ned(m9(matrix))), matrix.T)
+        assert np.array_equal(mat(transpose(m9(matrix))), matrix.T)
 
 
 def test_attitude_enu_is_p_mt_d():
     """ENU attitude equals P M^T D built with numpy, and is a proper rotation."""
     for matrix in RANDOM_ROTATIONS.as_matrix()[:500]:
-        enu = mat(o.attitude_enu(m9(matrix)))
+        enu = mat(attitude_enu(m9(matrix)))
         assert np.allclose(enu, P @ matrix.T @ D, atol=0.0)
         assert np.allclose(enu @ enu.T, np.eye(3), atol=1e-12)
         assert abs(np.linalg.det(enu) - 1.0) < 1e-12
@@ -191,8 +228,8 @@ def test_attitude_enu_maps_body_vectors_consistently():
     rng = np.random.default_rng(3)
     for matrix in RANDOM_ROTATIONS.as_matrix()[:300]:
         v_frd = rng.normal(size=3)
-        enu_path = mat(o.attitude_enu(m9(matrix))) @ np.array(o.body_vector(v_frd, o.ENU))
-        ned_path = P @ (mat(o.attitude_ned(m9(matrix))) @ np.array(o.body_vector(v_frd, o.NED)))
+        enu_path = mat(attitude_enu(m9(matrix))) @ np.array(o.body_vector(v_frd, o.ENU))
+        ned_path = P @ (mat(attitude_ned(m9(matrix))) @ np.array(o.body_vector(v_frd, o.NED)))
         assert np.allclose(enu_path, ned_path, atol=1e-12)
 
 
@@ -200,10 +237,10 @@ def test_orientation_and_attitude_dispatch():
     """orientation() is Shepperd of attitude(); an unknown convention is a ValueError."""
     matrix = m9(RANDOM_ROTATIONS.as_matrix()[0])
     for convention in o.CONVENTIONS:
-        assert o.orientation(matrix, convention) == o.shepperd(o.attitude(matrix, convention))
-    assert o.attitude(matrix, 'enu') == o.attitude_enu(matrix)
-    assert o.attitude(matrix, 'ned') == o.attitude_ned(matrix)
-    for call in (o.attitude, o.orientation, o.body_vector):
+        assert o.orientation(matrix, convention) == o.shepperd(attitude(matrix, convention))
+    assert attitude(matrix, 'enu') == attitude_enu(matrix)
+    assert attitude(matrix, 'ned') == attitude_ned(matrix)
+    for call in (attitude, o.orientation, o.body_vector):
         with pytest.raises(ValueError):
             call(matrix if call is not o.body_vector else (1.0, 2.0, 3.0), 'nwu')
 
@@ -217,7 +254,7 @@ def test_body_vector():
 
 def enu_yaw_deg(m):
     """Heading in ENU (counter-clockwise from east) of the sensor with matrix M."""
-    r = mat(o.attitude_enu(m))
+    r = mat(attitude_enu(m))
     return math.degrees(math.atan2(r[1, 0], r[0, 0]))
 
 
@@ -234,7 +271,7 @@ def test_level_facing_north():
     """M = I: flat, level, x to the north. NED: no rotation. ENU: yaw +90 degrees."""
     identity = m9(np.eye(3))
     assert o.orientation(identity, 'ned') == (0.0, 0.0, 0.0, 1.0)
-    enu = mat(o.attitude_enu(identity))
+    enu = mat(attitude_enu(identity))
     # Columns: forward -> north (0, 1, 0), left -> west (-1, 0, 0), up -> up (0, 0, 1).
     assert np.array_equal(enu, [[0, -1, 0], [1, 0, 0], [0, 0, 1]])
     assert enu_yaw_deg(identity) == 90.0
@@ -246,7 +283,7 @@ def test_level_facing_east_and_west():
     """Facing east, ENU attitude is the identity; facing west, a half turn about up."""
     # Rows of M are the sensor axes in NED: forward = east (0, 1, 0), right = south.
     east = (0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
-    assert np.allclose(mat(o.attitude_enu(east)), np.eye(3), atol=0.0)
+    assert np.allclose(mat(attitude_enu(east)), np.eye(3), atol=0.0)
     assert np.allclose(o.orientation(east, 'enu'), (0, 0, 0, 1), atol=1e-15)
     assert math.degrees(o.euler_from_matrix(east)[2]) == 90.0  # NED yaw: clockwise from north
     west = (0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
@@ -261,7 +298,7 @@ def test_nose_up_30_degrees_facing_north():
     roll, pitch, yaw = o.euler_from_matrix(m)
     assert (roll, yaw) == (0.0, 0.0)
     assert math.degrees(pitch) == pytest.approx(30.0, abs=1e-12)
-    enu = mat(o.attitude_enu(m))
+    enu = mat(attitude_enu(m))
     assert np.allclose(enu[:, 0], (0.0, C30, S30), atol=1e-15)   # forward
     assert np.allclose(enu[:, 1], (-1.0, 0.0, 0.0), atol=1e-15)  # left: west, level
     # ROS pitch is about the left axis, positive nose down: -30 degrees here.
@@ -275,14 +312,14 @@ def test_rolled_right_20_degrees_facing_north():
     roll, pitch, yaw = o.euler_from_matrix(m)
     assert math.degrees(roll) == pytest.approx(20.0, abs=1e-12)
     assert (pitch, yaw) == (-0.0, 0.0)
-    enu = mat(o.attitude_enu(m))
+    enu = mat(attitude_enu(m))
     assert np.allclose(enu[:, 1], (-C20, 0.0, S20), atol=1e-15)  # left: west and up
 
 
 def test_upside_down():
     """Rolled 180 degrees: z (down) points up and reads +1 g; FLU up points down in ENU."""
     m = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)
-    enu = mat(o.attitude_enu(m))
+    enu = mat(attitude_enu(m))
     assert np.array_equal(enu, P)
     assert np.allclose(enu[:, 2], (0.0, 0.0, -1.0))
     up = enu @ np.array(o.body_vector((0.0, 0.0, 1.0), 'enu'))
@@ -295,7 +332,7 @@ def test_flat_at_rest_accel_points_up_at_any_heading(heading):
     h = math.radians(heading)
     # Rows: forward (cos h, sin h, 0), right (-sin h, cos h, 0), down (0, 0, 1).
     m = (math.cos(h), math.sin(h), 0.0, -math.sin(h), math.cos(h), 0.0, 0.0, 0.0, 1.0)
-    up = mat(o.attitude_enu(m)) @ np.array(o.body_vector((0.0, 0.0, -1.0), 'enu'))
+    up = mat(attitude_enu(m)) @ np.array(o.body_vector((0.0, 0.0, -1.0), 'enu'))
     assert np.allclose(up, (0.0, 0.0, 1.0), atol=1e-15)
     assert wrap_deg(math.degrees(o.euler_from_matrix(m)[2]) - heading) == pytest.approx(
         0.0, abs=1e-9)

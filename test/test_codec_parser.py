@@ -34,6 +34,7 @@ from i3dmgx2_driver.codec import (
 from i3dmgx2_driver.codec import commands, records
 from i3dmgx2_driver.codec.layouts import LAYOUTS, RECORD_SIZES
 from i3dmgx2_driver.codec.parser import MAX_FRAME_SIZE
+from packets import packet_of
 import pytest
 
 CI = settings(max_examples=200, deadline=None, database=None,
@@ -430,7 +431,7 @@ def test_length_claiming_a_longer_record_does_not_swallow():
 # ---------------------------------------------------------------- ACK and NACK
 
 E5_PACKET = bytes.fromhex('AA 07 00 00 5F 04 00 E5 02 00 10 20 01 51')  # word 0x0200
-E5_EVENT = DataPacket(ADDRESS, records.EepromWord(0x0200), 0x10, 0x20)
+E5_EVENT = packet_of(ADDRESS, records.EepromWord(0x0200), 0x10, 0x20)
 
 
 def test_hand_made_packet_sum():
@@ -538,8 +539,8 @@ def test_counters_on_a_hand_made_wired_stream():
               + c2[:10])                                 # first 10 bytes of a 0xC2 reply
     parser = SensorStreamParser(wireless=False)
     events = parser.feed(stream)
-    assert events == [DataPacket(None, records.EepromWord(512), None, None),
-                      DataPacket(None, records.FirmwareVersion(2103), None, None)]
+    assert events == [packet_of(None, records.EepromWord(512), None, None),
+                      packet_of(None, records.FirmwareVersion(2103), None, None)]
     assert parser.stats.as_dict() == {
         'good_frames': 2, 'checksum_failures': 1, 'length_failures': 0,
         'bytes_skipped': 3 + 5 + 1, 'foreign_frames': 0, 'acks': 0, 'nacks': 0,
@@ -588,7 +589,7 @@ def test_ping_reply_between_packets():
     wired = SensorStreamParser(wireless=False)
     wired.expect_ping()
     assert wired.feed(bytes.fromhex('E5 02 00 00 E7 02')) == [
-        DataPacket(None, records.EepromWord(512), None, None), records.PingReply(True)]
+        packet_of(None, records.EepromWord(512), None, None), records.PingReply(True)]
 
 
 # ---------------------------------------------------------------- the sensor side

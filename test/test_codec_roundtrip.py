@@ -25,11 +25,11 @@ give back the same bits; NaN is compared as NaN and -0.0 keeps its sign.
 import math
 import struct
 
+from harness.decoders import decode_command_packet, decode_data_packet, decode_wired_record
 from hypothesis import given, HealthCheck, settings, strategies as st
 from i3dmgx2_driver.codec import (
     ChecksumError, CodecError, Command, CommandPacket, CommandStreamParser, DataPacket,
-    decode_command, decode_command_packet, decode_data_packet, decode_record,
-    decode_wired_record, DecodeError, encode_command, encode_command_packet,
+    decode_command, decode_record, DecodeError, encode_command, encode_command_packet,
     encode_data_packet, encode_record, encode_wired_record, EncodeError, LengthError,
     RawCommand, SensorStreamParser, UnknownCommandError,
 )

@@ -28,14 +28,14 @@ stream is chunked, and every fixture must keep the fuzzer's properties.
 import json
 from pathlib import Path
 
+from harness.decoders import decode_command_packet, decode_data_packet, decode_wired_record
 from harness.fuzz_checks import check_input, same
 from i3dmgx2_driver.codec import (
-    CommandStreamParser, decode_command_packet, decode_data_packet, decode_wired_record,
-    RawCommand, RejectedPacket, SensorStreamParser,
+    CommandStreamParser, RawCommand, RejectedPacket, SensorStreamParser,
 )
-from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.parser import ACK_EVENT, NACK_EVENT
 from i3dmgx2_driver.codec.records import PingReply
+from packets import packet_of
 import pytest
 
 FUZZ_DIR = Path(__file__).resolve().parent / 'fixtures' / 'fuzz'
@@ -65,7 +65,7 @@ def expected_events(spec: dict, blob: bytes) -> list:
         if kind == 'data' and spec['wireless']:
             out.append(decode_data_packet(piece))
         elif kind == 'data':
-            out.append(DataPacket(None, decode_wired_record(piece), None, None))
+            out.append(packet_of(None, decode_wired_record(piece), None, None))
         elif kind == 'ack':
             out.append(ACK_EVENT)
         elif kind == 'nack':

@@ -37,13 +37,14 @@ from i3dmgx2_driver.device.link import DeviceLink, LinkOptions, PortReader, Radi
 from i3dmgx2_driver.device.port import PortDisconnected, SerialPort
 from i3dmgx2_driver.device.port_opener import PortOpener
 from i3dmgx2_driver.device.settings import DeviceConfig
+from packets import packet_of
 import pytest
 
 ZERO = (0.0, 0.0, 0.0)
 
 
 def _packet(record: object, lqi: int | None = 200, rssi: int | None = 150) -> DataPacket:
-    return DataPacket(95, record, lqi, rssi)
+    return packet_of(95, record, lqi, rssi)
 
 
 class _Line(FakePort):
@@ -261,4 +262,4 @@ def test_port_opener_gives_every_reader_the_same_parts() -> None:
 def test_an_observer_inherits_methods_that_note_nothing() -> None:
     quiet = _Reads()
     assert quiet.parsed() is None and quiet.stamped() is None
-    assert quiet.published(object(), 2.0) is None
+    assert quiet.packed(7) is None and quiet.published(2.0) is None

@@ -28,7 +28,7 @@ from i3dmgx2_driver.capture.file_format import CaptureWriter, default_header, re
 from i3dmgx2_driver.codec.commands import encode_record
 from i3dmgx2_driver.codec.framing import encode_wired_record
 from i3dmgx2_driver.codec.records import AccelAngRateMagOrientation
-from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings
+from i3dmgx2_driver.ros.conversions import MessageFactory, MessageSettings, stamp_parts
 from i3dmgx2_driver.ros.mag_calibration import (
     field_correction, IDENTITY, is_matrix_list, one_sensors, per_sensor_problem)
 from i3dmgx2_driver.simulator.motion import Motion, MotionConfig, MOTIONS
@@ -36,8 +36,9 @@ from i3dmgx2_driver.tools import magcal
 from i3dmgx2_driver.tools.bag_io import capture_messages, write_bag
 from i3dmgx2_driver.tools.noise import yaml_float
 import numpy as np
+from packets import as_sent, values_of
 import pytest
-from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu, MagneticField
 
 #: The distortion (Gauss, and the matrix the field is multiplied by): ~20 % of the field.
@@ -164,15 +165,16 @@ def test_the_node_corrects_the_field_and_magcal_fits_the_raw_one_under_it(tmp_pa
     factory = MessageFactory(MessageSettings('imu_link', 'enu', mag_hard_iron=tuple(applied[0]),
                                              mag_soft_iron=applied[1]))
     pairs = []
-    for k, m in enumerate(measured):
-        record = AccelAngRateMagOrientation(m.accel, m.angular_rate, m.mag, m.matrix, k)
-        # The messages are refilled: keep a copy of each, as a bag holds them.
-        pairs.append(tuple(deserialize_message(serialize_message(msg), kind) for msg, kind in (
-            (factory.fill_imu(record, k * 0.1), Imu), (factory.fill_mag(record, k * 0.1),
-                                                       MagneticField))))
+    # The records as the node reads them (float32), packed as it packs them.
+    sent = [as_sent(AccelAngRateMagOrientation(m.accel, m.angular_rate, m.mag, m.matrix, k))
+            for k, m in enumerate(measured)]
+    for k, record in enumerate(sent):
+        values, stamp = values_of(record), stamp_parts(k * 0.1)
+        pairs.append((deserialize_message(factory.imu_cdr(values, *stamp), Imu),
+                      deserialize_message(factory.mag_cdr(values, *stamp), MagneticField)))
     # The published field is the sensor's corrected one, turned into REP-103 axes.
     correct = field_correction(*applied, 1e-4)
-    x, y, z = correct(measured[0].mag)
+    x, y, z = correct(sent[0].mag)
     assert tuple(pairs[0][1].magnetic_field.__getattribute__(a) for a in 'xyz') == \
         pytest.approx((x * 1e-4, -y * 1e-4, -z * 1e-4), rel=1e-12)
     path = tmp_path / 'applied.yaml'
@@ -185,13 +187,18 @@ def test_the_node_corrects_the_field_and_magcal_fits_the_raw_one_under_it(tmp_pa
     assert np.linalg.norm(result.hard_iron - hard) < 0.01 * np.linalg.norm(hard)
     assert np.abs(result.soft_iron - _inverse(SOFT)).max() < 0.02
     # The sensor's own heading comes back from the published quaternion.
-    own = np.array([math.atan2(m.matrix[1], m.matrix[0]) for m in measured])
-    assert np.abs(magcal._wrap_deg(sweep.heading - own)).max() < 1e-6
+    own = np.array([math.atan2(m.matrix[1], m.matrix[0]) for m in sent])
+    # (to float32's precision: the matrix is the wire's, orthonormal to about 1e-7)
+    assert np.abs(magcal._wrap_deg(sweep.heading - own)).max() < 1e-4
 
 
 def test_at_the_defaults_nothing_corrects_the_field():
     assert field_correction((0.0, 0.0, 0.0), IDENTITY, 1e-4) is None
-    assert MessageFactory(MessageSettings('imu_link', 'enu'))._calibrate is None
+    record = as_sent(AccelAngRateMagOrientation((0.0,) * 3, (0.0,) * 3, (0.25, -0.5, 0.125),
+                                                (1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0), 0))
+    field = deserialize_message(MessageFactory(MessageSettings('imu_link', 'ned')).mag_cdr(
+        values_of(record), 0, 0), MagneticField).magnetic_field
+    assert (field.x, field.y, field.z) == (0.25e-4, -0.5e-4, 0.125e-4)
     assert not is_matrix_list((1.0, 0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0))  # not symmetric
     assert not is_matrix_list((1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0))  # not definite
     assert is_matrix_list((*IDENTITY, 2.0, 0.5, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 1.0))

@@ -23,11 +23,11 @@ that diagnostics and the self test read.
 
 from i3dmgx2_driver.codec import streams
 from i3dmgx2_driver.codec.data_rate import ticks_per_cycle
-from i3dmgx2_driver.codec.framing import DataPacket
 from i3dmgx2_driver.codec.records import AccelAngRate, TICKS_PER_SECOND
 from i3dmgx2_driver.ros.conversions import MessageSettings
 from i3dmgx2_driver.ros.publishers import calibrated_qos, Publishers, RECORD_TOPICS
 from i3dmgx2_driver.ros.record_publisher import RecordPublisher, Stamping
+from packets import packet_of
 import pytest
 import rclpy
 from rclpy.node import Node
@@ -62,7 +62,7 @@ def feed(records: RecordPublisher, cycles: list[int], start: float = 100.0) -> N
     for cycle in cycles:
         record = AccelAngRate((0.0, 0.0, -1.0), (0.0, 0.0, 0.0), 1000 + cycle * TICKS)
         mono = start + cycle * PERIOD
-        records.on_record(DataPacket(95, record, 0, 0), 1.7e9 + mono, mono)
+        records.on_record(packet_of(95, record, 0, 0), 1.7e9 + mono, mono)
 
 
 def test_records_are_counted_not_published_until_publishing_is_on(records):

@@ -26,9 +26,10 @@ from itertools import pairwise
 import os
 import time
 
+from harness.decoders import decode_wired_record
 from i3dmgx2_driver.codec import commands as cmd
 from i3dmgx2_driver.codec import (
-    DataPacket, decode_wired_record, encode_command_packet, encode_record, SensorStreamParser,
+    DataPacket, encode_command_packet, encode_record, SensorStreamParser,
 )
 from i3dmgx2_driver.codec import layouts as lay
 from i3dmgx2_driver.codec import records as rec

@@ -29,9 +29,8 @@ from .errors import (
     ChecksumError, CodecError, DecodeError, EncodeError, LengthError, UnknownCommandError,
 )
 from .framing import (
-    ACK, CommandPacket, DataPacket, decode_command_packet, decode_data_packet,
-    decode_wired_record, encode_command_packet, encode_data_packet, encode_wired_record,
-    MAX_ADDRESS, MIN_ADDRESS, NACK,
+    ACK, CommandPacket, DataPacket, encode_command_packet, encode_data_packet,
+    encode_wired_record, MAX_ADDRESS, MIN_ADDRESS, NACK,
 )
 from .parser import (
     Ack, CommandStreamParser, Nack, ParserStats, RawCommand, RejectedPacket,
@@ -60,10 +59,7 @@ __all__ = [
     'SensorStreamParser',
     'UnknownCommandError',
     'decode_command',
-    'decode_command_packet',
-    'decode_data_packet',
     'decode_record',
-    'decode_wired_record',
     'encode_command',
     'encode_command_packet',
     'encode_data_packet',

@@ -22,7 +22,9 @@ encoder and a decoder, so that the driver and the simulated sensor share one
 implementation and every layout can be tested by a round trip.
 """
 
+from collections.abc import Callable
 import math
+from operator import itemgetter
 from typing import Any, NamedTuple
 
 from .errors import DecodeError, EncodeError, LengthError, UnknownCommandError
@@ -128,9 +130,25 @@ def decode_command(data: bytes) -> Command:
     return Command(layout.code, _group(values, layout.request))
 
 
-def record_size(code: int) -> int:
-    """Return the size of a command's reply record (0 when it has none)."""
-    return layout_of(code).record_size
+def _builder(layout: Layout) -> Callable[[tuple], Any]:
+    """Return what makes ``layout``'s named record of its unpacked fields."""
+    if layout.record_type is DeviceIdentifier:
+        return lambda v: DeviceIdentifier(v[0], v[1].decode('latin-1'))
+    get, make = itemgetter(*layout.plan), layout.record_type._make
+    if len(layout.plan) == 1:  # itemgetter of one item returns it, not a tuple
+        return lambda v: make((get(v),))
+    return lambda v: make(get(v))
+
+
+#: The named record of each echo byte's unpacked fields (replies and tools; a streamed
+#: record goes on as its fields, framing.DataPacket).
+_RECORDS = {code: _builder(layout) for code, layout in LAYOUTS.items()
+            if layout.reply_struct is not None}
+
+
+def record_of(code: int, values: tuple) -> Any:
+    """Return the named record of echo byte ``code`` whose unpacked fields are ``values``."""
+    return _RECORDS[code](values)
 
 
 def decode_record(data: bytes) -> Any:
@@ -147,14 +165,7 @@ def decode_record(data: bytes) -> Any:
     if len(data) != layout.record_size:
         raise LengthError(
             f'{layout.name} record is {layout.record_size} bytes, got {len(data)}')
-    return _decode_known(layout, data)
-
-
-def _decode_known(layout: Layout, data: bytes) -> Any:
-    values = layout.reply_struct.unpack_from(data, 1)
-    if layout.record_type is DeviceIdentifier:
-        return DeviceIdentifier(values[0], values[1].decode('latin-1'))
-    return layout.record_type(*[values[p] for p in layout.plan])
+    return record_of(layout.code, layout.reply_struct.unpack_from(data, 1))
 
 
 def encode_record(record: Any) -> bytes:

@@ -24,8 +24,8 @@ start byte, LQI and RSSI.
 from typing import Any, NamedTuple
 
 from .checksum import append_checksum, checksum16
-from .commands import decode_record
-from .errors import ChecksumError, DecodeError, EncodeError, LengthError
+from .commands import record_of
+from .errors import EncodeError
 
 #: Start of every wireless packet; the base station's ACK is the same byte.
 SOP = 0xAA
@@ -49,12 +49,26 @@ MAX_COMMAND_SIZE = 100
 
 
 class DataPacket(NamedTuple):
-    """A record that arrived through the base station, with its radio link."""
+    """
+    A record as it arrived, flat: its sensor, its echo byte, its fields, its radio link.
 
-    address: int
-    record: Any
-    lqi: int
-    rssi: int
+    ``values`` are the record's fields as its layout unpacks them, in the
+    layout's order (``LAYOUTS[code].plan`` says where each sits; a streamed
+    record's timer is the last): the record path reads them where they lie,
+    with no named record made. :attr:`record` names them, for replies and
+    tools. ``address``, ``lqi`` and ``rssi`` are None for a wired frame.
+    """
+
+    address: int | None
+    code: int
+    values: tuple
+    lqi: int | None
+    rssi: int | None
+
+    @property
+    def record(self) -> Any:
+        """Return the fields named, as their record type of codec/records.py."""
+        return record_of(self.code, self.values)
 
 
 class CommandPacket(NamedTuple):
@@ -84,21 +98,6 @@ def encode_command_packet(address: int, command: bytes) -> bytes:
     return body + checksum16(body[1:]).to_bytes(2, 'big')
 
 
-def decode_command_packet(packet: bytes) -> CommandPacket:
-    """Unwrap a wireless command packet (what the base station checks)."""
-    if len(packet) < HEADER_SIZE + 3:
-        raise LengthError(f'a command packet is at least 10 bytes, got {len(packet)}')
-    if packet[0] != SOP or packet[1] != COMMAND_FLAGS or packet[2] != 0 or packet[6] != 0:
-        raise DecodeError('not a command packet header')
-    size = packet[5] - 1
-    if len(packet) != HEADER_SIZE + size + 2:
-        raise LengthError(f'length byte says {size} command bytes, packet has '
-                          f'{len(packet) - HEADER_SIZE - 2}')
-    if checksum16(packet[1:-2]) != int.from_bytes(packet[-2:], 'big'):
-        raise ChecksumError('command packet checksum mismatch')
-    return CommandPacket((packet[3] << 8) | packet[4], bytes(packet[HEADER_SIZE:-2]))
-
-
 def encode_data_packet(address: int, record: bytes, lqi: int, rssi: int) -> bytes:
     """Wrap record bytes (echo and data, no checksum) in a data packet."""
     _check_address(address)
@@ -108,32 +107,6 @@ def encode_data_packet(address: int, record: bytes, lqi: int, rssi: int) -> byte
     return body + bytes((lqi, rssi)) + checksum16(body[1:]).to_bytes(2, 'big')
 
 
-def decode_data_packet(packet: bytes) -> DataPacket:
-    """Unwrap and decode one complete wireless data packet."""
-    if len(packet) < HEADER_SIZE + 1 + DATA_TRAILER_SIZE:
-        raise LengthError(f'a data packet is at least 12 bytes, got {len(packet)}')
-    if packet[0] != SOP or packet[1] != DATA_FLAGS or packet[2] != 0 or packet[6] != 0:
-        raise DecodeError('not a data packet header')
-    size = packet[5] - 1
-    if len(packet) != HEADER_SIZE + size + DATA_TRAILER_SIZE:
-        raise LengthError(f'length byte says {size} record bytes, packet has '
-                          f'{len(packet) - HEADER_SIZE - DATA_TRAILER_SIZE}')
-    end = HEADER_SIZE + size
-    if checksum16(packet[1:end]) != int.from_bytes(packet[end + 2:end + 4], 'big'):
-        raise ChecksumError('data packet checksum mismatch')
-    return DataPacket((packet[3] << 8) | packet[4], decode_record(bytes(packet[HEADER_SIZE:end])),
-                      packet[end], packet[end + 1])
-
-
 def encode_wired_record(record: bytes) -> bytes:
     """Append the wired checksum to record bytes."""
     return append_checksum(record)
-
-
-def decode_wired_record(data: bytes) -> Any:
-    """Check the checksum of a wired reply and decode its record."""
-    if len(data) < 3:
-        raise LengthError(f'a wired record is at least 3 bytes, got {len(data)}')
-    if checksum16(data[:-2]) != int.from_bytes(data[-2:], 'big'):
-        raise ChecksumError('wired record checksum mismatch')
-    return decode_record(bytes(data[:-2]))

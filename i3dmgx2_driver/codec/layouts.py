@@ -18,8 +18,8 @@ The command table: for each command byte, the request and reply layouts.
 Everything else in the codec is driven by this one table, in both
 directions: the driver encodes requests and decodes replies with it, the
 simulated sensor decodes requests and encodes replies with it, so the two
-cannot disagree about a single byte. Sizes in docs/protocol.md §6 are checked
-against the table when the module loads.
+cannot disagree about a single byte. test/test_protocol_doc.py holds the
+sizes to docs/protocol.md §6.
 
 Each command also carries the least firmware that answers it (``firmware``,
 as 0xE9 reports it: 2105 for 2.1.05), from the 3DM-GX2 Data Communications
@@ -207,16 +207,6 @@ LAYOUTS: dict[int, Layout] = {layout.code: layout for layout in (
     _layout(BUILT_IN_TEST, 'built_in_test', (Field('config', 'B'),), r.BuiltInTest,
             _CONFIRM, (Field('config', 'B'),)),
 )}
-
-#: Wired reply sizes as docs/protocol.md §6 lists them, checked against the table.
-_PROTOCOL_WIRED_SIZES = {
-    0xC1: 31, 0xC2: 31, 0xC3: 31, 0xC4: 8, 0xC5: 43, 0xC6: 43, 0xC7: 19, 0xC8: 67,
-    0xC9: 19, 0xCA: 19, 0xCB: 43, 0xCC: 79, 0xCD: 19, 0xCE: 19, 0xCF: 31, 0xD0: 9,
-    0xD1: 15, 0xD2: 43, 0xD3: 43, 0xE4: 5, 0xE5: 5, 0xE9: 7, 0xEA: 20, 0xFA: 0, 0xFB: 4,
-}
-for _code, _size in _PROTOCOL_WIRED_SIZES.items():
-    if LAYOUTS[_code].wired_size != _size:  # pragma: no cover - a table typo
-        raise AssertionError(f'layout of 0x{_code:02X} disagrees with docs/protocol.md §6')
 
 #: Commands whose replies are framed records: echo byte -> record size.
 RECORD_SIZES: dict[int, int] = {

@@ -24,8 +24,9 @@ applied on each side of the attitude:
     R_enu_flu = P * M^T * D,   P = [[0, 1, 0], [1, 0, 0], [0, 0, -1]],
                                D = diag(1, -1, -1).
 
-Pure Python on 9-tuples, so the codec needs no numpy; the node uses these
-same functions, and the tests compare them with scipy.
+Pure Python, so the codec needs no numpy: the node's packers call
+:func:`quaternion` on a record's fields where they lie, and the tests compare
+it with scipy and with the attitudes built as matrices.
 """
 
 from collections.abc import Sequence
@@ -50,23 +51,37 @@ class Quaternion(NamedTuple):
     w: float
 
 
-def shepperd(m: Sequence[float]) -> Quaternion:
+def quaternion(m: Sequence[float], at: int = 0, convention: str = '') -> tuple:
     """
-    Convert a row-major 3x3 rotation matrix to a unit quaternion.
+    Return (x, y, z, w) of the rotation matrix ``m[at:at + 9]`` (row-major), by Shepperd.
+
+    ``convention`` ENU or NED: ``m`` is the device's matrix M, and the
+    quaternion is of the sensor's attitude in that convention (the module
+    docstring), its elements read where they lie in ``m`` (a record's
+    fields) without a matrix made in between; '': ``m`` is the attitude.
 
     Shepperd (1978) takes the square root of whichever of the trace and the
     three diagonal terms is largest, so the divisor is never below 1/2 and the
     result stays accurate for every rotation, 180 degrees included. The result
     is normalised because real matrices are float32 and only close to
     orthonormal, and w is made non-negative so that equal rotations give equal
-    quaternions.
+    quaternions. A matrix that is no rotation gives NaNs.
     """
-    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
+    if convention == ENU:  # P * M^T * D
+        m00, m01, m02 = m[at + 1], -m[at + 4], -m[at + 7]
+        m10, m11, m12 = m[at], -m[at + 3], -m[at + 6]
+        m20, m21, m22 = -m[at + 2], m[at + 5], m[at + 8]
+    elif convention == NED:  # M^T
+        m00, m01, m02 = m[at], m[at + 3], m[at + 6]
+        m10, m11, m12 = m[at + 1], m[at + 4], m[at + 7]
+        m20, m21, m22 = m[at + 2], m[at + 5], m[at + 8]
+    else:
+        m00, m01, m02, m10, m11, m12, m20, m21, m22 = m[at:at + 9]
     # A rotation's elements square-sum to 3; far from that (a zero matrix,
     # garbage that passed a checksum) there is no orientation to give.
     if not 2.5 < m00 * m00 + m01 * m01 + m02 * m02 + m10 * m10 + m11 * m11 + m12 * m12 \
             + m20 * m20 + m21 * m21 + m22 * m22 < 3.5:
-        return Quaternion(math.nan, math.nan, math.nan, math.nan)
+        return _NAN4
     trace = m00 + m11 + m22
     if trace >= m00 and trace >= m11 and trace >= m22:
         s = 2.0 * math.sqrt(max(1.0 + trace, 0.0)) or math.nan
@@ -83,47 +98,25 @@ def shepperd(m: Sequence[float]) -> Quaternion:
     norm = math.sqrt(w * w + x * x + y * y + z * z)
     if not 0.0 < norm < math.inf:
         # Garbage in (NaN, infinities, a zero matrix): say so, never raise.
-        return Quaternion(math.nan, math.nan, math.nan, math.nan)
+        return _NAN4
     if w < 0.0:
         norm = -norm
-    return Quaternion(x / norm, y / norm, z / norm, w / norm)
+    return (x / norm, y / norm, z / norm, w / norm)
 
 
-def transpose(m: Sequence[float]) -> Matrix3:
-    """Return the transpose of a row-major 3x3 matrix."""
-    return (m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8])
+_NAN4 = (math.nan,) * 4
 
 
-def attitude_ned(m: Sequence[float]) -> Matrix3:
-    """Sensor attitude in the device's own convention: NED world, FRD body."""
-    return transpose(m)
-
-
-def attitude_enu(m: Sequence[float]) -> Matrix3:
-    """
-    Sensor attitude per REP-103: ENU world, FLU body, as P * M^T * D.
-
-    With A = M^T (row-major a0..a8), swapping the first two rows and negating
-    the third gives P * A; negating the last two columns then applies D.
-    """
-    a0, a1, a2, a3, a4, a5, a6, a7, a8 = transpose(m)
-    return (a3, -a4, -a5,
-            a0, -a1, -a2,
-            -a6, a7, a8)
-
-
-def attitude(m: Sequence[float], convention: str) -> Matrix3:
-    """Sensor attitude in the named convention (``'enu'`` or ``'ned'``)."""
-    if convention == ENU:
-        return attitude_enu(m)
-    if convention == NED:
-        return attitude_ned(m)
-    raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
+def shepperd(m: Sequence[float]) -> Quaternion:
+    """Convert a row-major 3x3 rotation matrix to a unit quaternion (:func:`quaternion`)."""
+    return Quaternion(*quaternion(m))
 
 
 def orientation(m: Sequence[float], convention: str) -> Quaternion:
     """Quaternion of the sensor attitude in the named convention."""
-    return shepperd(attitude(m, convention))
+    if convention not in CONVENTIONS:
+        raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
+    return Quaternion(*quaternion(m, 0, convention))
 
 
 def body_vector(v: Sequence[float], convention: str) -> Vector3:

@@ -25,16 +25,16 @@ it. Neither raises on bad input: they count what they skipped and why.
 """
 
 from collections.abc import Callable
-from operator import itemgetter
 import struct
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
+from .checksum import checksum16
 from .framing import (
     ACK, COMMAND_FLAGS, CommandPacket, DATA_FLAGS, DATA_TRAILER_SIZE, DataPacket,
     HEADER_SIZE, NACK,
 )
-from .layouts import DEVICE_IDENTIFIER, LAYOUTS, MAX_RECORD_SIZE, PING
-from .records import DeviceIdentifier, PingReply
+from .layouts import LAYOUTS, MAX_RECORD_SIZE, PING
+from .records import PingReply
 
 ByteString = bytes | bytearray | memoryview
 
@@ -103,53 +103,40 @@ class ParserStats:
 #: codes: with a record's fields between them, one unpack reads a whole packet.
 _PACKET_HEAD = '>BBBHBBB'
 _PACKET_TAIL = 'BBH'
-#: Where a record's first field is in a whole packet's values.
-_FIELDS_IN_PACKET = len(_PACKET_HEAD) - 1
+#: Where a record's first field is in a whole packet's values, and its last after it.
+_FIELDS = slice(len(_PACKET_HEAD) - 1, -len(_PACKET_TAIL))
+_new = tuple.__new__
+#: What :meth:`SensorStreamParser._packet_at` returns for a packet not yet whole, one
+#: whose length byte, app type or extra byte is wrong, and one whose sum is wrong.
+_WAIT, _BAD_LENGTH, _BAD_SUM = 0, 1, 2
 
 
-class _Decoder(NamedTuple):
+class _Frame(NamedTuple):
     """How the records of one echo byte are read, in a wired frame and in a data packet."""
 
     #: The record's bytes: its echo byte and fields.
     size: int
     #: The whole data packet's bytes: header, record, LQI, RSSI, sum.
     packet_size: int
-    #: ``unpack_from`` of the record's fields (after the echo byte), and their record.
+    #: ``unpack_from`` of the record's fields (after the echo byte), and of a whole packet.
     unpack: Callable[..., tuple]
-    record: Callable[[tuple], Any]
-    #: ``unpack_from`` of a whole data packet, and the record of its values.
     unpack_packet: Callable[..., tuple]
-    packet_record: Callable[[tuple], Any]
 
 
-def _builder(code: int, plan: tuple, record_type: type, first: int) -> Callable[[tuple], Any]:
-    """Return what makes the record of unpacked values whose fields start at ``first``."""
-    if code == DEVICE_IDENTIFIER:
-        return lambda v: DeviceIdentifier(v[first], v[first + 1].decode('latin-1'))
-    items = [first + p if isinstance(p, int) else slice(first + p.start, first + p.stop)
-             for p in plan]
-    get, make = itemgetter(*items), record_type._make
-    if len(items) == 1:  # itemgetter of one item returns it, not a tuple
-        return lambda v: make((get(v),))
-    return lambda v: make(get(v))
-
-
-def _decoders() -> dict[int, _Decoder]:
-    """Map each echo byte that has a record to its :class:`_Decoder`."""
+def _frames() -> dict[int, _Frame]:
+    """Map each echo byte that has a record to its :class:`_Frame`, from the command table."""
     table = {}
     for code, layout in LAYOUTS.items():
         if layout.reply_struct is None:
             continue
         fields = layout.reply_struct.format.lstrip('>')
         packet = struct.Struct(_PACKET_HEAD + fields + _PACKET_TAIL)
-        table[code] = _Decoder(
-            layout.record_size, packet.size, layout.reply_struct.unpack_from,
-            _builder(code, layout.plan, layout.record_type, 0), packet.unpack_from,
-            _builder(code, layout.plan, layout.record_type, _FIELDS_IN_PACKET))
+        table[code] = _Frame(layout.record_size, packet.size, layout.reply_struct.unpack_from,
+                             packet.unpack_from)
     return table
 
 
-_DECODERS = _decoders()
+_FRAMES = _frames()
 
 
 class SensorStreamParser:
@@ -167,7 +154,8 @@ class SensorStreamParser:
         self.address = address
         self.wireless = wireless
         self.stats = ParserStats()
-        self._buf = bytearray()
+        #: Bytes held back for the rest of a frame (the reader reads their count).
+        self.buffer = self._buf = bytearray()
         self._ping_pending = False
         self._quiet = 0
 
@@ -208,10 +196,18 @@ class SensorStreamParser:
     def feed(self, chunk: ByteString) -> list[Event]:
         """Add bytes from the port; return the complete events, in order."""
         buf = self._buf
-        if not buf and not self._quiet and self.wireless:
-            packet = self._one_packet(chunk)
-            if packet is not None:
-                return [packet]
+        if not buf and not self._quiet and self.wireless and len(chunk) > HEADER_SIZE:
+            # What a flowing stream's read brings (the reader waits for a whole packet,
+            # device/link.py): one sound packet of this node and nothing carried over.
+            # Anything else takes the general path, which counts it.
+            values = self._packet_at(chunk, 0, len(chunk))
+            if type(values) is tuple and len(chunk) == _FRAMES[chunk[HEADER_SIZE]].packet_size \
+                    and (self.address is None or values[3] == self.address):
+                stats = self.stats
+                stats.bytes_in += len(chunk)
+                stats.good_frames += 1
+                return [_new(DataPacket, (values[3], values[6], values[_FIELDS], values[-3],
+                                          values[-2]))]
         buf += chunk
         self.stats.bytes_in += len(chunk)
         if self.wireless:
@@ -224,31 +220,28 @@ class SensorStreamParser:
             buf.clear()
         return events
 
-    def _one_packet(self, chunk: ByteString) -> DataPacket | None:
+    @staticmethod
+    def _packet_at(buf: ByteString, i: int, n: int) -> tuple | int:
         """
-        Return the data packet of this node that ``chunk`` is, whole and sound; else None.
+        Return the values of the data packet at ``buf[i]``, checked; or why there are none.
 
-        What a flowing stream's read brings (the reader waits for a whole
-        packet, device/link.py): one packet and nothing carried over, read
-        with one unpack and the same checks as :meth:`_parse_wireless`.
-        Anything else (a piece, two packets, a bad length or sum, another
-        node's) returns None and takes the general path, which counts it.
+        The one check of a data packet, each of its bytes from the command
+        table: its start and flags, its echo byte's record size in the length
+        byte, the app type and extra byte zero, its sum. ``_WAIT``: not whole
+        in the ``n`` bytes yet; ``_BAD_LENGTH``, ``_BAD_SUM``: not a packet.
         """
-        n = len(chunk)
-        decoder = _DECODERS.get(chunk[HEADER_SIZE]) if n > HEADER_SIZE else None
-        if decoder is None or n != decoder.packet_size:
-            return None
-        values = decoder.unpack_packet(chunk)
-        node = values[3]
-        if values[0] != ACK or values[1] != DATA_FLAGS or values[2] or values[5] \
-                or values[4] != decoder.size + 1 \
-                or (self.address is not None and node != self.address) \
-                or (sum(chunk[1:n - DATA_TRAILER_SIZE]) & 0xFFFF) != values[-1]:
-            return None
-        stats = self.stats
-        stats.bytes_in += n
-        stats.good_frames += 1
-        return DataPacket(node, decoder.packet_record(values), values[-3], values[-2])
+        if n - i <= HEADER_SIZE or buf[i] != ACK or buf[i + 1] != DATA_FLAGS:
+            return _WAIT if n - i <= HEADER_SIZE else _BAD_LENGTH
+        frame = _FRAMES.get(buf[i + HEADER_SIZE])
+        if frame is None or buf[i + 5] != frame.size + 1 or buf[i + 2] or buf[i + 6]:
+            return _BAD_LENGTH
+        end = i + frame.packet_size
+        if end > n:
+            return _WAIT
+        values = frame.unpack_packet(buf, i)
+        if (sum(buf[i + 1:end - DATA_TRAILER_SIZE]) & 0xFFFF) != values[-1]:
+            return _BAD_SUM
+        return values
 
     def _lone_byte(self, byte: int, out: list[Event]) -> bool:
         """Handle a single-byte answer at a frame boundary; True if it was one."""
@@ -282,7 +275,6 @@ class SensorStreamParser:
     def _parse_wireless(self, buf: bytearray):
         out: list[Event] = []
         stats = self.stats
-        decoders = _DECODERS
         address = self.address
         n = len(buf)
         i = 0
@@ -310,23 +302,21 @@ class SensorStreamParser:
                     out.append(ACK_EVENT)
                 i += 1
                 continue
-            if n - i < HEADER_SIZE + 1:
+            values = self._packet_at(buf, i, n)
+            if values is _WAIT:
                 break
-            entry = decoders.get(buf[i + HEADER_SIZE])
-            if entry is None or buf[i + 5] != entry.size + 1 or buf[i + 2] or buf[i + 6]:
+            if values is _BAD_LENGTH:
                 stats.length_failures += 1
                 stats.bytes_skipped += 1
-                if entry is not None and not buf[i + 2] and not buf[i + 6]:
+                frame = _FRAMES.get(buf[i + HEADER_SIZE])
+                if frame is not None and not buf[i + 2] and not buf[i + 6]:
                     # Only the length byte is wrong: the packet is as long as
                     # its echo byte says, and its bytes are no answers either.
-                    quiet_end = max(quiet_end, i + HEADER_SIZE + entry.size + DATA_TRAILER_SIZE)
+                    quiet_end = max(quiet_end, i + frame.packet_size)
                 i += 1
                 continue
-            end = i + HEADER_SIZE + entry.size
-            if end + DATA_TRAILER_SIZE > n:
-                break
-            values = entry.unpack_packet(buf, i)
-            if (sum(buf[i + 1:end]) & 0xFFFF) != values[-1]:
+            end = i + _FRAMES[buf[i + HEADER_SIZE]].packet_size - DATA_TRAILER_SIZE
+            if values is _BAD_SUM:
                 stats.checksum_failures += 1
                 stats.bytes_skipped += 1
                 quiet_end = max(quiet_end, end + DATA_TRAILER_SIZE)
@@ -337,7 +327,8 @@ class SensorStreamParser:
                 stats.foreign_frames += 1
             else:
                 stats.good_frames += 1
-                out.append(DataPacket(node, entry.packet_record(values), values[-3], values[-2]))
+                out.append(_new(DataPacket, (node, values[6], values[_FIELDS], values[-3],
+                                             values[-2])))
             i = end + DATA_TRAILER_SIZE
         self._quiet = max(0, quiet_end - i)
         return i, out
@@ -345,12 +336,11 @@ class SensorStreamParser:
     def _parse_wired(self, buf: bytearray):
         out: list[Event] = []
         stats = self.stats
-        decoders = _DECODERS
         n = len(buf)
         i = 0
         while i < n:
             code = buf[i]
-            entry = decoders.get(code)
+            entry = _FRAMES.get(code)
             if entry is None:
                 if self._lone_byte(code, out):
                     i += 1
@@ -361,13 +351,13 @@ class SensorStreamParser:
             end = i + entry.size
             if end + 2 > n:
                 break
-            if (sum(buf[i:end]) & 0xFFFF) != ((buf[end] << 8) | buf[end + 1]):
+            if checksum16(buf[i:end]) != ((buf[end] << 8) | buf[end + 1]):
                 stats.checksum_failures += 1
                 stats.bytes_skipped += 1
                 i += 1
                 continue
             stats.good_frames += 1
-            out.append(DataPacket(None, entry.record(entry.unpack(buf, i + 1)), None, None))
+            out.append(_new(DataPacket, (None, code, entry.unpack(buf, i + 1), None, None)))
             i = end + 2
         return i, out
 
@@ -463,7 +453,7 @@ class CommandStreamParser:
             end = i + HEADER_SIZE + size
             if end + 2 > n:
                 return 0
-            if (sum(buf[i + 1:end]) & 0xFFFF) != ((buf[end] << 8) | buf[end + 1]):
+            if checksum16(buf[i + 1:end]) != ((buf[end] << 8) | buf[end + 1]):
                 stats.checksum_failures += 1
                 return self._reject(out, 'bad checksum', end + 2 - i)
             stats.good_frames += 1

@@ -212,10 +212,34 @@ class DeviceClock:
         if self._origin is None:
             self._origin = device
         t = device - self._origin
-        self._add(t, latest - device)
-        stamp = device + self._offset + self._drift * t
-        if self._centre is not None:
-            self._note_near(t, latest - stamp)
+        excess = latest - device
+        # The envelope: the least excess of each window; a window closed fits the line.
+        bucket = int(t // self.window)
+        if bucket != self._bucket:
+            if self._bucket is not None:
+                self._points.append(self._bucket_min)
+                self._fit()
+            self._bucket = bucket
+            self._bucket_min = (t, excess)
+        elif excess < self._bucket_min[1]:
+            self._bucket_min = (t, excess)
+        if self._centre is None:
+            # Until there is a line, the running minimum is the best offset.
+            if self.samples == 0 or excess < self._offset + self._drift * t:
+                self._offset = excess - self._drift * t
+            stamp = device + self._offset + self._drift * t
+        else:
+            stamp = device + self._offset + self._drift * t
+            # How near the line the samples come: the least residual of each block.
+            residual = latest - stamp
+            block = int(t // NEAR_S)
+            if block != self._near_block:
+                if self._near_block is not None:
+                    self._near_blocks.append(self._near_least)
+                self._near_block = block
+                self._near_least = residual
+            elif residual < self._near_least:
+                self._near_least = residual
         if stamp > latest:
             # The line says this sample was taken after it was read. One such
             # packet is stamped at its read time and no more: a packet read
@@ -238,31 +262,6 @@ class DeviceClock:
         """Stamp nothing at or before ``other``'s last stamp (it stamped in between)."""
         self._last_stamp = max(self._last_stamp, other._last_stamp)
 
-    def _note_near(self, t: float, residual: float) -> None:
-        block = int(t // NEAR_S)
-        if block != self._near_block:
-            if self._near_block is not None:
-                self._near_blocks.append(self._near_least)
-            self._near_block = block
-            self._near_least = residual
-        elif residual < self._near_least:
-            self._near_least = residual
-
-    def _add(self, t: float, excess: float) -> None:
-        bucket = int(t // self.window)
-        if bucket != self._bucket:
-            if self._bucket is not None:
-                self._points.append(self._bucket_min)
-                self._fit()
-            self._bucket = bucket
-            self._bucket_min = (t, excess)
-        elif excess < self._bucket_min[1]:
-            self._bucket_min = (t, excess)
-        # Until there is a line, the running minimum is the best offset.
-        if self._centre is None and (
-                self.samples == 0 or excess < self._offset + self._drift * t):
-            self._offset = excess - self._drift * t
-
     def _fit(self) -> None:
         """Fit the line to the envelope points (module docstring: weights, slope, height)."""
         points = self._points
@@ -278,7 +277,9 @@ class DeviceClock:
             centre, drift, scatter = self._centre, self._drift, self._scatter
         limit = BAND * scatter + BAND_FLOOR_S
         fading = self.history - TAPER
-        weights = []
+        # Plain loops, once a window: a generator would be a call per point.
+        weighted = []
+        total = sum_t = sum_e = 0.0
         for age, (t, e) in enumerate(reversed(points)):
             w = 1.0 if age < fading else (self.history - age) / TAPER
             above = e - (centre + drift * t)
@@ -287,20 +288,25 @@ class DeviceClock:
                 w /= 1.0 + (above / (scatter + BAND_FLOOR_S)) ** 2
             if off > limit:
                 w *= (limit / off) ** 4
-            weights.append(w)
-        weights.reverse()
-        total = sum(weights)
-        mean_t = sum(w * t for w, (t, _) in zip(weights, points, strict=True)) / total
-        mean_e = sum(w * e for w, (_, e) in zip(weights, points, strict=True)) / total
-        stt = sum(w * (t - mean_t) ** 2 for w, (t, _) in zip(weights, points, strict=True))
-        ste = sum(w * (t - mean_t) * (e - mean_e)
-                  for w, (t, e) in zip(weights, points, strict=True))
+            weighted.append((w, t, e))
+        weighted.reverse()
+        for w, t, e in weighted:
+            total += w
+            sum_t += w * t
+            sum_e += w * e
+        mean_t, mean_e = sum_t / total, sum_e / total
+        stt = ste = 0.0
+        for w, t, e in weighted:
+            stt += w * (t - mean_t) ** 2
+            ste += w * (t - mean_t) * (e - mean_e)
         # The prior weighs as one window of average weight: busy windows, weighing little,
         # do not let it hold the slope at 0 (a floor that rose, once the old windows left).
         slope = ste / (stt + SLOPE_PRIOR_S2 * total / n)
         centre = mean_e - slope * mean_t
-        variance = sum(w * (e - centre - slope * t) ** 2
-                       for w, (t, e) in zip(weights, points, strict=True)) / total
+        variance = 0.0
+        for w, t, e in weighted:
+            variance += w * (e - centre - slope * t) ** 2
+        variance /= total
         self._centre = centre
         self._scatter = math.sqrt(variance)
         self._drift = slope

@@ -24,16 +24,17 @@ parse (the codec knows bytes only and is timed from around its call), the
 driver core the stamp, the pack and the publish.
 
 There is one observer for the process, :data:`timings`, here and nowhere
-else: every stage boundary reads it from this module, so no constructor of
-the driver takes one and nothing hands it down through the layers. It is
-installed once, before the node starts (:func:`observe`). Off (the default,
-None), it costs one ``is not None`` test per stage and allocates nothing.
+else, installed once before the node starts (:func:`observe`). Off (the
+default, None), the path is not touched: the reader and the record publisher
+look once, when they start, and only then wrap what marks a stage
+(:func:`marked`, :func:`timed_read`); nothing of it runs for a record.
 The node turns it on only when asked: ``main.py`` reads :data:`TIMINGS_ENV`
 through :func:`recorder_from_environment` and, if it names a file, records
 every sample's stage times with :class:`TimingsRecorder` and writes them
 there at shutdown.
 """
 
+from collections.abc import Callable
 import gc
 import json
 import os
@@ -62,11 +63,11 @@ class HotPathObserver(Protocol):
     def stamped(self) -> None:
         """Note that the sample clock stamped a record."""
 
-    def packed(self) -> None:
-        """Note that the record's Imu message was packed."""
+    def packed(self, timer: int) -> None:
+        """Note that the Imu message of the record with ``timer`` was packed."""
 
-    def published(self, record: Any, stamp: float) -> None:
-        """Note that ``publish()`` returned for ``record``'s Imu message, stamped ``stamp``."""
+    def published(self, stamp: float) -> None:
+        """Note that ``publish()`` returned for that Imu message, stamped ``stamp``."""
 
 
 #: The fields of :attr:`TimingsRecorder.rows`, in order.
@@ -95,7 +96,7 @@ class TimingsRecorder:
         self.collections: list[tuple[int, float, float]] = []
         #: The reader thread's scheduling, noted at its first read: policy, priority, CPUs.
         self.reader: dict[str, Any] = {}
-        self._marks = [0.0] * 5
+        self._marks = [0.0] * 6
         self._gc_start = 0.0
         gc.callbacks.append(self._on_gc)
 
@@ -119,16 +120,16 @@ class TimingsRecorder:
         """Note the stamp's end."""
         self._marks[2] = self._clock()
 
-    def packed(self) -> None:
-        """Note the pack's end."""
+    def packed(self, timer: int) -> None:
+        """Note the pack's end, and the record's timer."""
         self._marks[3] = self._clock()
+        self._marks[5] = timer
 
-    def published(self, record: Any, stamp: float) -> None:
+    def published(self, stamp: float) -> None:
         """Add the row of this message."""
         now = self._clock()
         m = self._marks
-        self.rows.append((record.timer, stamp, m[0], m[1], m[2], m[3], now, m[4],
-                          self._cpu_clock()))
+        self.rows.append((m[5], stamp, m[0], m[1], m[2], m[3], now, m[4], self._cpu_clock()))
 
     # -- the rest ----------------------------------------------------------------------
 
@@ -169,6 +170,28 @@ def observe(observer: HotPathObserver | None) -> None:
     """
     global timings  # noqa: PLW0603 - the process's one hook, set before the node starts
     timings = observer
+
+
+def marked(fn: Callable[..., Any], stage: str) -> Callable[..., Any]:
+    """Return ``fn`` telling the observer ``stage`` (``'parsed'``, ...) once it returned."""
+    mark = getattr(timings, stage)
+
+    def timed(*args: Any) -> Any:
+        out = fn(*args)
+        mark()
+        return out
+    return timed
+
+
+def timed_read(read: Callable[[float], bytes]) -> Callable[[float], bytes]:
+    """Return the port's ``read`` telling the observer what it returned, and when."""
+    note = timings.read
+
+    def timed(timeout: float) -> bytes:
+        data = read(timeout)
+        note(len(data), time.time())
+        return data
+    return timed
 
 
 def recorder_from_environment() -> tuple[TimingsRecorder | None, str]:

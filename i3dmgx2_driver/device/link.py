@@ -47,7 +47,6 @@ from .port import PortDisconnected, SerialPort
 from .reader_threads import READERS
 from .realtime import NORMAL_SCHEDULING, NOTHING_GRANTED, PolicyOutcome, ThreadPolicy
 from ..codec import commands, layouts, line_budget
-from ..codec.commands import LAYOUT_BY_TYPE
 from ..codec.framing import DataPacket, encode_command_packet
 from ..codec.parser import Ack, Nack, SensorStreamParser
 from ..codec.records import PingReply
@@ -140,23 +139,14 @@ class RadioMeter:
     """The radio's link quality so far: latest, lowest and mean LQI and RSSI."""
 
     def __init__(self) -> None:
-        #: Latest LQI and RSSI, their lowest, their sums and the packets counted.
-        self._radio: list[int] = [0, 0, 255, 255, 0, 0, 0]
-
-    def note(self, lqi: int, rssi: int) -> None:
-        """Count one packet's LQI and RSSI (reader thread; allocates nothing)."""
-        radio = self._radio
-        radio[0], radio[1] = lqi, rssi
-        radio[2] = min(radio[2], lqi)
-        radio[3] = min(radio[3], rssi)
-        radio[4] += lqi
-        radio[5] += rssi
-        radio[6] += 1
+        #: Latest LQI and RSSI, their lowest, their sums and the packets counted
+        #: (DeviceLink.on_data counts each packet: it allocates nothing).
+        self.counts: list[int] = [0, 0, 255, 255, 0, 0, 0]
 
     @property
     def stats(self) -> RadioStats | None:
         """Return the quality so far, or None before the first packet."""
-        r = self._radio
+        r = self.counts
         if not r[6]:
             return None
         return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
@@ -383,16 +373,16 @@ class PortReader:
         for link in self._links():
             link.reader_started(self.policy_outcome)
         parser = self.parser
-        read = self.port.read_some
+        held = parser.buffer
+        read, feed = self.port.read_some, parser.feed
+        if hot_path.timings is not None:  # the hot path timed (hot_path.py): off by default
+            read, feed = hot_path.timed_read(read), hot_path.marked(feed, 'parsed')
         observer = self._observer
-        # The hot path's observer (hot_path.py), told when each read returned and
-        # when the parser was done with it; None costs one test per stage.
-        timings = hot_path.timings
         routes = self._routes
         port = self.port
         data = b''
         while not self._stop.is_set():
-            pending = parser.pending
+            pending = len(held)
             timeout = timeouts.LONE_BYTE_WAIT_S if pending == 1 else self._read_timeout
             # While the stream flows, a whole packet, or the rest of the one the parser
             # holds the start of (a late reader that caught the next packet's first pieces
@@ -411,16 +401,12 @@ class PortReader:
                 return
             now = time.time()
             mono = time.monotonic()
-            if timings is not None:
-                timings.read(len(data), now)
             if data and self._on_bytes is not None:
                 self._on_bytes(data, now)
             if observer is not None and observer.active and self._fallback is not None \
                     and mono - self._fallback.last_data_mono > QUIET_AFTER:
                 observer.feed(data, mono, self._fallback.last_data_mono)
-            events = parser.feed(data) if data else parser.idle()
-            if timings is not None:
-                timings.parsed()
+            events = feed(data) if data else parser.idle()
             fallback = self._fallback
             for event in events:
                 if type(event) is DataPacket:
@@ -534,7 +520,7 @@ class DeviceLink:
         stream read :attr:`records` and :attr:`last_data_mono` instead of
         comparing codes. Allocates nothing, takes no lock.
         """
-        code = LAYOUT_BY_TYPE[type(event.record)].code
+        code = event.code
         streamed = self._streamed
         # While a stream runs, only its records keep it alive: a sensor power-cycled
         # into its EEPROM auto-start streams another record, and the stall watch
@@ -545,7 +531,14 @@ class DeviceLink:
             self.last_data_mono = mono
         lqi = event.lqi
         if lqi is not None:
-            self.radio.note(lqi, event.rssi)
+            # RadioMeter.note's counts, here: one call less a record.
+            radio, rssi = self.radio.counts, event.rssi
+            radio[0], radio[1] = lqi, rssi
+            radio[2] = min(radio[2], lqi)
+            radio[3] = min(radio[3], rssi)
+            radio[4] += lqi
+            radio[5] += rssi
+            radio[6] += 1
         pending = self._pending
         if pending is not None and pending.code == code:
             pending.fulfil(event.record)

@@ -109,7 +109,7 @@ DEVICE_GROUP_WORDS = ('i3dmgx2', 'gx2', 'microstrain', '3dm')
 ASYNC_LOW_LATENCY = 1 << 13
 #: How much one read takes at most; a few packets' worth.
 READ_SIZE = 4096
-#: The most a read of a terminal returns while VMIN is above it (:meth:`SerialPort._rest`).
+#: The most a read of a terminal returns while VMIN is above it (:meth:`SerialPort.read_some`).
 TTY_READ_CHUNK = 64
 #: The kernel's list of terminal drivers: name, node, major, minors, type.
 TTY_DRIVERS = '/proc/tty/drivers'
@@ -331,7 +331,7 @@ class SerialPort:
             self._fd = None
         if self._fd is not None:
             with contextlib.suppress(OSError):
-                os.set_blocking(self._fd, False)  # pyserial's is already; _rest() needs it
+                os.set_blocking(self._fd, False)  # pyserial's is already; read_some() needs it
         #: Bytes a wait for data waits for (:meth:`wake_for`): 1, any byte.
         self.wakes_for = 1
 
@@ -395,8 +395,17 @@ class SerialPort:
                 return b''  # flushed between the select and the read
             if not data:
                 data = self._after_empty_read()
-            elif self.wakes_for > 1:
-                data = self._rest(data)
+            elif len(data) == TTY_READ_CHUNK and self.wakes_for > 1:
+                # While VMIN is above 64, Linux hands a read at most 64 bytes (the tty
+                # layer copies through a buffer of that size and ends the read once
+                # VMIN is met): the rest of a packet is read at once, not after a wake.
+                more = data
+                while len(more) == TTY_READ_CHUNK:
+                    try:
+                        more = os.read(self._fd, READ_SIZE)
+                    except BlockingIOError:
+                        break
+                    data += more
         except (OSError, ValueError) as exc:
             raise PortDisconnected(f'{self.path}: {exc}') from exc
         return data
@@ -425,25 +434,6 @@ class SerialPort:
         except (termios.error, OSError):
             return  # the port is going: the read says so
         self.wakes_for = nbytes
-
-    def _rest(self, data: bytes) -> bytes:
-        """
-        Return ``data`` and what is still queued after it.
-
-        While VMIN is above 64, Linux hands a read at most 64 bytes
-        (:data:`TTY_READ_CHUNK`: the tty layer copies through a buffer of that
-        size and ends the read once VMIN is met): a read of exactly that many
-        may have left the rest of a packet behind, read at once rather than
-        after another wake.
-        """
-        more = data
-        while len(more) == TTY_READ_CHUNK:
-            try:
-                more = os.read(self._fd, READ_SIZE)
-            except BlockingIOError:
-                break
-            data += more
-        return data
 
     def _after_empty_read(self) -> bytes:
         """Tell a hang-up from a queue another thread flushed: raise, or return bytes."""

@@ -177,6 +177,11 @@ def system_clock_offset() -> float:
     return best
 
 
+def records_lost(step: int, expected: int) -> int:
+    """Return the records lost between two ``step`` ticks apart, ``expected`` ticks a record."""
+    return max(0, round(step / expected) - 1)
+
+
 @dataclass(frozen=True)
 class ClockStatus:
     """What the stamping clock has been through, for /diagnostics."""
@@ -365,10 +370,21 @@ class SampleClock:
         """
         host = read_time - wire_time
         self.restarted = False
-        if self._last_raw is None:
+        last = self._last_raw
+        if last is None:
             self._restart(self._pending, raw_timer)
         else:
-            self._follow(raw_timer, host, read_time, wire_time)
+            step = raw_timer - last
+            # The steady case, in place (what _follow would find): the timer ran on by
+            # less than a gap, no rollover, the host lost no time, nothing on watch.
+            if step >= 0 and step / TICKS_PER_SECOND <= GAP_S \
+                    and host - self._last_host - step / TICKS_PER_SECOND <= RESET_S \
+                    and not self._check_next and self._replaced is None \
+                    and self._probation_end is None:
+                self.ticks_since_last = step
+                self.ticks += step
+            else:
+                self._follow(raw_timer, host, read_time, wire_time)
         self._last_raw, self._last_host = raw_timer, host
         return self.fit.stamp(self.ticks, read_time, wire_time) + self._system_offset()
 

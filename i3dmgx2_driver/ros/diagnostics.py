@@ -154,7 +154,8 @@ class DiagnosticsPublisher:
             silent_for=time.time() - stats.last_time if stats.last_time else None,
             published=published, lost=stats.lost, lost_in_period=stats.lost - self._last_lost,
             device_resets=stats.device_resets, other_records=device.other_records,
-            mag_published=stats.mag_published, operation=core.device_services.operation)
+            mag_published=stats.published_on.get('mag', 0),
+            operation=core.device_services.operation)
         self._last_published = published
         self._last_lost = stats.lost
         parser = device.parser

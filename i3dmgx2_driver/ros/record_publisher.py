@@ -15,16 +15,22 @@
 """
 A sample's path from the reader thread to its publishers: stamp, count, pack, publish.
 
-:class:`RecordPublisher` holds what the reader thread changes for every
-record (the stamping clock, the stream's counters) and what the other
-threads may touch of it (a new link, a deliberate pause, publishing on or
-off, a snapshot of the clock), all under one lock. It is a room of its own
-so that the hot path can be read, timed and changed without the rest of the
-driver core (driver_core.py), which builds it and hands its
-:meth:`RecordPublisher.on_record` to the supervisor's reader.
+:class:`RecordPath` is what becomes of a record of the stream, written once:
+its stamp (the sample clock and the parameters' time source and offset),
+the records lost before it (the timer's step), and the bytes of each record
+topic's message (the packers of ``publishers.RECORD_TOPICS``). The node's
+:class:`RecordPublisher` publishes them; ``replay --bag`` (tools/bag_io.py)
+writes them to a bag. :class:`RecordPublisher` holds what the other threads
+may touch of the path (a new link, a deliberate pause, publishing on or off,
+a snapshot of the clock), all under one lock, so that the hot path can be
+read, timed and changed without the rest of the driver core (driver_core.py),
+which builds it and hands its :meth:`RecordPublisher.on_record` to the
+supervisor's reader.
 """
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+import math
 import threading
 
 from rclpy._rclpy_pybind11 import RCLError
@@ -33,17 +39,12 @@ from std_msgs.msg import Bool
 
 from .conversions import MessageFactory, MessageSettings
 from .parameters import DriverConfig
-from .publishers import Publishers
+from .publishers import Publishers, RecordTopic
 from ..codec import line_budget
 from ..codec.framing import DataPacket
 from ..codec.streams import Stream
 from ..device import hot_path
-from ..device.sample_clock import ClockStatus, Restart, SampleClock
-
-#: Whether ready-serialized messages read back right, by the message factory's
-#: settings: checked once per process, because a managed node makes a core at
-#: every configure and rclpy's deserialize_message keeps a little memory per call.
-_SERIALIZED_MATCHES: dict[MessageSettings, bool] = {}
+from ..device.sample_clock import ClockStatus, records_lost, Restart, SampleClock
 
 
 @dataclass
@@ -58,11 +59,6 @@ class StreamStats:
     device_resets: int = 0
     first_time: float = 0.0
     last_time: float = 0.0
-
-    @property
-    def mag_published(self) -> int:
-        """Magnetic field messages published (diagnostics)."""
-        return self.published_on.get('mag', 0)
 
 
 @dataclass(frozen=True)
@@ -81,6 +77,68 @@ class Stamping:
                                          config.device.wireless))
 
 
+class RecordPath:
+    """
+    Stamp a record of the stream, count the records lost before it, pack its messages.
+
+    ``rows`` are the record topics the sensor publishes (the first, the
+    Imu, always); :meth:`messages` returns their bytes in that order (None
+    where a record has nothing for a topic: a field of NaN). The timer's
+    step from the record before counts the records in between as lost, once
+    :attr:`expected_ticks` (the ticks between two records) is known, and not
+    across a new link or a pause (:attr:`counting` False).
+    """
+
+    def __init__(self, messages: MessageSettings, stamping: Stamping,
+                 rows: Sequence[RecordTopic], clock: SampleClock | None = None,
+                 stats: StreamStats | None = None) -> None:
+        #: The message factory (its ``frame_id`` is the one published, _ned and all).
+        self.factory = factory = MessageFactory(messages)
+        self.packers = tuple(factory.packer(row.packer) for row in rows)
+        #: Device timer -> system-clock stamps, through resets, rollovers and gaps.
+        self.clock = clock or SampleClock()
+        self.stats = stats or StreamStats()
+        self._stamp = self.clock.stamp
+        self._device_time = stamping.device_time
+        self._offset = stamping.offset
+        self._wire_time = stamping.wire_time
+        #: Timer ticks between two records (None: the divider not known yet).
+        self.expected_ticks: int | None = None
+        #: Whether the next record's timer step counts packet loss.
+        self.counting = False
+        #: The last record's stamp (s, system clock).
+        self.stamp = 0.0
+
+    def messages(self, values: tuple, read_time: float, read_mono: float) -> list:
+        """
+        Return the messages of a record (its ``DataPacket.values``) read at these times.
+
+        ``read_time`` on the system clock, ``read_mono`` the same instant on
+        the monotonic one. The stamp is kept in :attr:`stamp`.
+        """
+        clock = self.clock
+        stamp = self._stamp(values[-1], read_mono, self._wire_time)
+        # The timer's step since the record before, when it ran on (across a resync of
+        # the fit too): the records in between were lost.
+        since, expected = clock.ticks_since_last, self.expected_ticks
+        if since is not None and self.counting and expected and 2 * since >= 3 * expected:
+            self.stats.lost += records_lost(since, expected)
+        self.counting = True
+        if not self._device_time:
+            stamp = read_time
+        self.stamp = stamp = stamp + self._offset
+        # The stamp's sec and nanosec (conversions.stamp_parts), once for every message.
+        sec = math.floor(stamp)
+        nanosec = round((stamp - sec) * 1e9)
+        if nanosec >= 1_000_000_000:
+            sec += 1
+            nanosec -= 1_000_000_000
+        messages = []
+        for pack in self.packers:  # a loop, not a comprehension: no call of its own
+            messages.append(pack(values, sec, nanosec))
+        return messages
+
+
 class RecordPublisher:
     """
     Stamp and publish each record of the stream the link hands on; count those lost.
@@ -93,47 +151,50 @@ class RecordPublisher:
     keeps a gyro bias it writes back after a power cycle (so that a power
     cycle seen in the timer leaves ``~/is_calibrated`` true). ``publishing``
     False: records are counted, not published, until :meth:`set_publishing`.
-    The hot path's observer (device/hot_path.py), when on, is told the
-    stamp, the pack and the publish of every sample; off, it costs one test
-    each.
     """
 
     def __init__(self, publishers: Publishers, messages: MessageSettings,
                  stamping: Stamping, log: RcutilsLogger, publishing: bool = True) -> None:
         self.publishers = publishers
-        #: The message factory (its ``frame_id`` is the one published, _ned and all).
-        self.messages = factory = MessageFactory(messages)
-        # Published ready-serialized (conversions.py says why) when the bytes read
-        # back right with this middleware; otherwise as message objects.
-        if messages not in _SERIALIZED_MATCHES:
-            _SERIALIZED_MATCHES[messages] = factory.serialized_matches()
-        serialized = _SERIALIZED_MATCHES[messages]
-        (first, self.imu_pub), *others = publishers.records
-        self._imu_message = factory.packer(first.packer, serialized)
         self.stats = StreamStats()
-        #: Whether the next record's timer step counts packet loss: not across a
-        #: reconnect or a deliberate pause (deactivate, a capture).
-        self._counting = False
-        #: The other topics of each record: publisher, packer, the count it adds to.
-        self._also = tuple((publisher, factory.packer(row.packer, serialized), row.suffix)
-                           for row, publisher in others)
-        for _, _, suffix in self._also:
+        self.path = path = RecordPath(messages, stamping, [row for row, _ in publishers.records],
+                                      stats=self.stats)
+        #: The message factory (its ``frame_id`` is the one published, _ned and all).
+        self.messages = path.factory
+        (_, imu), *others = publishers.records
+        self._publish_imu: Callable[[bytes], None] = imu.publish
+        #: The other topics of each record: publish, the suffix its count is under.
+        self._also = tuple((publisher.publish, row.suffix) for row, publisher in others)
+        for _, suffix in self._also:
             self.stats.published_on[suffix] = 0
-        #: Device timer -> system-clock stamps, through resets, rollovers and gaps.
-        self.sample_clock = SampleClock()
+        self.sample_clock = path.clock
+        if hot_path.timings is not None:
+            self._time(hot_path.timings)
         #: Whether records are published: always for the plain node; while
         #: active for the managed one (records still in flight after a
         #: deactivate are counted as unpublished, not as published).
         self.publishing = publishing
-        self._use_device_time = stamping.device_time
-        self._time_offset = stamping.offset
-        self._wire_time = stamping.wire_time
-        #: Timer ticks between two records (None: the divider not known yet).
-        self._expected_ticks: int | None = None
         #: Whether the device side writes a kept gyro bias back after a power cycle.
         self._bias_kept = False
         self._log = log
         self._publish_lock = threading.Lock()
+
+    def _time(self, timings: hot_path.HotPathObserver) -> None:
+        """Tell ``timings`` each record's stamp, pack and publish (hot_path.py): off by default."""
+        path = self.path
+        path._stamp = hot_path.marked(path._stamp, 'stamped')
+        imu, publish = path.packers[0], self._publish_imu
+
+        def packed(values: tuple, sec: int, nanosec: int) -> bytes:
+            message = imu(values, sec, nanosec)
+            timings.packed(values[-1])
+            return message
+
+        def published(message: bytes) -> None:
+            publish(message)
+            timings.published(path.stamp)
+        path.packers = (packed, *path.packers[1:])
+        self._publish_imu = published
 
     def announce_calibrated(self, calibrated: bool) -> None:
         """
@@ -154,7 +215,7 @@ class RecordPublisher:
     def stream_known(self, expected_ticks: int | None, bias_kept: bool) -> None:
         """Take what the device side learned: the ticks between records, whether a bias is kept."""
         with self._publish_lock:
-            self._expected_ticks = expected_ticks
+            self.path.expected_ticks = expected_ticks
             self._bias_kept = bias_kept
 
     def link_changed(self) -> None:
@@ -168,7 +229,7 @@ class RecordPublisher:
         """
         with self._publish_lock:
             self.sample_clock.link_changed()
-            self._counting = False
+            self.path.counting = False
 
     def clock_status(self) -> ClockStatus:
         """Return a snapshot of the stamping clock (from any thread)."""
@@ -193,7 +254,7 @@ class RecordPublisher:
     def forget_last_sample(self) -> None:
         """Let the next record start afresh: a deliberate pause is no packet loss."""
         with self._publish_lock:
-            self._counting = False
+            self.path.counting = False
 
     def on_record(self, packet: DataPacket, read_time: float, read_mono: float) -> None:
         """
@@ -202,53 +263,30 @@ class RecordPublisher:
         Only records of the stream come here: the link keeps back replies and
         counts any other record (device/link.py, ``set_streamed``).
         """
-        record = packet.record
         with self._publish_lock:
             stats = self.stats
             if not self.publishing:
                 stats.unpublished += 1
                 return
+            messages = self.path.messages(packet.values, read_time, read_mono)
             clock = self.sample_clock
-            stamp = clock.stamp(record.timer, read_mono, self._wire_time)
-            timings = hot_path.timings
-            if timings is not None:
-                timings.stamped()
             if clock.restarted and clock.last_restart == Restart.RESET.value:
                 stats.device_resets += 1
                 self.announce_calibrated(self._bias_kept)
                 self._log.warning(
                     "the sensor's timer restarted (a power cycle or brown-out): "
                     'timestamps start afresh from its new clock')
-            # The timer's step since the record before, when it ran on (across a resync
-            # of the fit too): the records in between were lost.
-            since = clock.ticks_since_last
-            if since is not None and self._counting:
-                expected = self._expected_ticks
-                if expected:
-                    gap = round(since / expected) - 1
-                    if gap > 0:
-                        stats.lost += gap
-            self._counting = True
-            if not self._use_device_time:
-                stamp = read_time
-            stamp += self._time_offset
-            message = self._imu_message(record, stamp)
-            if timings is not None:
-                timings.packed()
             try:
-                self.imu_pub.publish(message)
+                self._publish_imu(messages[0])
             except RCLError:
                 # ROS is shutting down under the reader: nothing left to publish to.
                 stats.unpublished += 1
                 return
-            if timings is not None:
-                timings.published(record, stamp)
             stats.published += 1
             if not stats.first_time:
                 stats.first_time = read_time
             stats.last_time = read_time
-            for publisher, pack, suffix in self._also:
-                message = pack(record, stamp)
+            for (publish, suffix), message in zip(self._also, messages[1:], strict=True):
                 if message is not None:
-                    publisher.publish(message)
+                    publish(message)
                     stats.published_on[suffix] += 1

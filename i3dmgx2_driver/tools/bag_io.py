@@ -24,30 +24,33 @@ matplotlib for ``plot`` it is an optional extra (``pip install
 "i3dmgx2_driver[bag]"``): the robot's image needs neither, and nothing
 imports it until a bag is read or written.
 
-A capture becomes messages through the node's own path: the codec's
-parser, the device's ``SampleClock`` for the stamps (the receive times
-standing for the host clock) and the node's ``MessageFactory`` for the
-bytes, ready-serialized as the node publishes them; the temperatures
-(replies to 0xD1 polls) as the node's poller stamps them, at their read.
+A capture becomes messages through the node's own record path
+(ros/record_publisher.py ``RecordPath``: the stamp, from the record's timer
+with the receive times standing for the host clock, and the packers of the
+topics the node publishes, ready-serialized as it publishes them) with the
+node's parameters at their defaults; the temperatures (replies to 0xD1
+polls) as the node's poller stamps them, at their read.
 """
 
 from collections import Counter
 from collections.abc import Iterable, Iterator
 import contextlib
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any, NamedTuple
 
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Temperature
 
 from ..codec import layouts, line_budget, streams
+from ..codec.framing import DataPacket, MIN_ADDRESS
 from ..codec.parser import SensorStreamParser
 from ..device.sample_clock import SampleClock
-from ..ros.conversions import MessageFactory, MessageSettings, set_stamp
+from ..ros.conversions import set_stamp
 from ..ros.parameter_table import SPECS
+from ..ros.parameters import driver_config, DriverConfig
 from ..ros.publishers import RECORD_TOPICS, SensorTopics
-from ..ros.sensor_set import SensorSetting, SINGLE_NAME
+from ..ros.record_publisher import RecordPath, Stamping
+from ..ros.sensor_set import SINGLE_NAME
 
 #: What to do when rosbags is missing.
 ROSBAGS_HINT = (
@@ -102,25 +105,17 @@ class BagMessage(NamedTuple):
     data: bytes
 
 
-def _default(name: str) -> Any:
-    return next(spec.default for spec in SPECS if spec.name == name)
+def node_config(stream: streams.Stream, address: int = MIN_ADDRESS) -> DriverConfig:
+    """Return the configuration of a node at its parameters' defaults, streaming ``stream``."""
+    return driver_config({**{spec.name: spec.default for spec in SPECS},
+                          'stream': stream.name, 'address': address})
 
 
-def node_settings(stream: streams.Stream) -> MessageSettings:
-    """Return the message settings of a node left at its parameters' defaults."""
-    return MessageSettings(
-        _default('frame_id'), _default('frame_convention'), _default('orientation_stddev'),
-        _default('angular_velocity_stddev'), _default('linear_acceleration_stddev'),
-        _default('magnetic_field_stddev'), stream)
-
-
-def stream_of(records: Iterable[Any]) -> streams.Stream:
-    """Return the stream most of a capture's data records belong to."""
-    counts = Counter(type(record) for record in records)
-    for kind, _ in counts.most_common():
-        for stream in streams.STREAMS:
-            if stream.record_type is kind:
-                return stream
+def stream_of(codes: Iterable[int]) -> streams.Stream:
+    """Return the stream most of a capture's data records (their codes) belong to."""
+    for code, _ in Counter(codes).most_common():
+        if code in streams.BY_CODE:
+            return streams.BY_CODE[code]
     raise ValueError('no record of a stream the driver publishes '
                      f'({", ".join(s.label for s in streams.STREAMS)})')
 
@@ -130,42 +125,40 @@ def capture_messages(chunks: Iterable[tuple[float, bytes]], header: dict,
     """
     Return the messages the node (default parameters) would have published for a capture.
 
-    The stream is the one most records are of; its records are stamped by a
-    ``SampleClock`` from their timers and their reads' receive times (the
-    node's ``time_source`` device), and packed by the node's factory.
+    The stream is the one most records are of; its records go through the
+    node's record path, stamped from their timers and their reads' receive
+    times (the node's ``time_source`` device).
     """
     address = header.get('address')
     wireless = bool(header.get('wireless', True))
     parser = SensorStreamParser(address if isinstance(address, int) else None, wireless)
-    events = [(t, record) for t, data in chunks for event in parser.feed(data)
-              if (record := getattr(event, 'record', None)) is not None]
-    stream = stream_of(record for _, record in events)
-    factory = MessageFactory(node_settings(stream))
+    events = [(t, event) for t, data in chunks for event in parser.feed(data)
+              if isinstance(event, DataPacket)]
+    stream = stream_of(event.code for _, event in events)
+    config = node_config(stream, address if isinstance(address, int) else MIN_ADDRESS)
+    sensor = config.sensors[0]
     topics = SensorTopics.of(SINGLE_NAME, several=False)
-    # The node's own table: each topic the sensor publishes with its parameters' defaults,
-    # with its packer (which returns None for a record with nothing for it).
-    sensor = SensorSetting(0, SINGLE_NAME, factory.frame_id, stream.name, 0.0)
-    defaults = SimpleNamespace(publish_mag=_default('publish_mag'))
-    rows = [('/' + topic, bag_type(row.msg_type), factory.packer(row.packer, serialized=True))
-            for row, topic in zip(RECORD_TOPICS, topics.records, strict=True)
-            if row.wanted(defaults, sensor)]
-    temperature_type = bag_type(Temperature)
-    clock = SampleClock(offset=lambda: 0.0)
+    # The node's own table: each topic the sensor publishes with its parameters' defaults.
+    rows = [(row, '/' + topic) for row, topic in zip(RECORD_TOPICS, topics.records, strict=True)
+            if row.wanted(config, sensor)]
     wire = line_budget.wire_time(stream.code, baud or int(header.get('baud') or 115200),
                                  wireless)
+    path = RecordPath(config.messages_for(sensor), Stamping(True, 0.0, wire),
+                      [row for row, _ in rows], SampleClock(offset=lambda: 0.0))
+    names = [(topic, bag_type(row.msg_type)) for row, topic in rows]
+    temperature_type = bag_type(Temperature)
     temperature = Temperature()
-    temperature.header.frame_id = factory.frame_id
+    temperature.header.frame_id = path.factory.frame_id
     out = []
-    for receive_time, record in events:
+    for receive_time, event in events:
         time_ns = round(receive_time * 1e9)
-        if type(record) is stream.record_type:
-            stamp = clock.stamp(record.timer, receive_time, wire)
-            for topic, msgtype, pack in rows:
-                data = pack(record, stamp)
+        if event.code == stream.code:
+            for (topic, msgtype), data in zip(
+                    names, path.messages(event.values, receive_time, receive_time), strict=True):
                 if data is not None:
                     out.append(BagMessage(topic, msgtype, time_ns, data))
-        elif type(record) is layouts.LAYOUTS[layouts.TEMPERATURES].record_type:
-            temperature.temperature = record.accel_celsius
+        elif event.code == layouts.TEMPERATURES:
+            temperature.temperature = event.record.accel_celsius
             set_stamp(temperature.header, receive_time)
             out.append(BagMessage('/' + topics.temperature, temperature_type, time_ns,
                                   serialize_message(temperature)))

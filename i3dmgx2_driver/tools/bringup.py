@@ -58,11 +58,11 @@ from ..arguments import seconds, whole_number
 from ..capture.file_format import CaptureWriter, default_header
 from ..codec import command_firmware as fw
 from ..codec import line_budget, streams
-from ..codec.commands import LAYOUT_BY_TYPE
 from ..codec.data_rate import (
     divider_for_rate, period_of_divider, rate_of_divider, ticks_per_cycle,
 )
 from ..codec.framing import DataPacket, MAX_ADDRESS, MIN_ADDRESS
+from ..codec.layouts import STREAMABLE
 from ..codec.records import TICKS_PER_SECOND
 from ..codec.timer import TIMER_MODULUS
 from ..device import timeouts
@@ -70,6 +70,7 @@ from ..device.clock import DeviceClock
 from ..device.identity import read_identity
 from ..device.link import DeviceError, DeviceLink, LinkOptions
 from ..device.port import PortError, SerialPort
+from ..device.sample_clock import records_lost
 from ..device.sensor_steps import SensorSteps
 
 #: One record of a stream measured: (monotonic read time, code, timer, LQI, RSSI).
@@ -133,10 +134,8 @@ class RecordLog:
     def __call__(self, packet: DataPacket, now: float, mono: float) -> None:
         with self._lock:
             if self._entries is not None:
-                record = packet.record
-                layout = LAYOUT_BY_TYPE.get(type(record))
-                self._entries.append((mono, layout.code if layout is not None else 0,
-                                      getattr(record, 'timer', 0), packet.lqi, packet.rssi))
+                timer = packet.values[-1] if packet.code in STREAMABLE else 0
+                self._entries.append((mono, packet.code, timer, packet.lqi, packet.rssi))
 
     def start(self) -> None:
         """Keep every record from now on."""
@@ -327,7 +326,7 @@ def stream_figures(log: Sequence[Entry], divider: int, wire_time: float) -> dict
     for previous, entry in itertools.pairwise(log):
         step = (entry[2] - previous[2]) % TIMER_MODULUS
         ticks.append(ticks[-1] + step)
-        lost += max(0, round(step / expected) - 1)
+        lost += records_lost(step, expected)
     span = ticks[-1] / TICKS_PER_SECOND
     host_span = log[-1][0] - log[0][0]
     # The driver's own fit of the device clock, with ten envelope windows in the run.

@@ -46,7 +46,6 @@ import threading
 import time
 from typing import NamedTuple
 
-from ..codec import commands
 from ..codec.data_rate import period_of_divider, rate_of_divider
 from ..codec.framing import DataPacket
 from ..codec.parser import SensorStreamParser
@@ -174,8 +173,7 @@ class _Prober:
     # -- what the reader thread sees ------------------------------------
 
     def _on_record(self, packet: DataPacket, now: float, mono: float = 0.0) -> None:
-        layout = commands.LAYOUT_BY_TYPE.get(type(packet.record))
-        code = layout.code if layout is not None else 0
+        code = packet.code
         with self._heard_lock:
             heard = self._heard.setdefault(packet.address, _Heard())
             heard.code = code
