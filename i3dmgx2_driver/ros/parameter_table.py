@@ -43,7 +43,7 @@ The QoS of the publishers is not here: rclpy declares its standard
 and ``qos_depth`` remain for one release, warned about when given.
 """
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import fields
 import math
 from typing import Any, NamedTuple
@@ -57,7 +57,7 @@ from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.orientation import CONVENTIONS
 from ..device.realtime import MAX_PRIORITY, ThreadPolicy
-from ..device.settings import DeviceConfig, Vector3
+from ..device.settings import DeviceConfig
 
 TIME_SOURCES = ('device', 'host')
 #: Default standard deviations, per axis. No noise density of the 3DM-GX2 was
@@ -153,15 +153,10 @@ class Spec(NamedTuple):
     def valid_range(self) -> str:
         """Return what is valid, as its refusals and ``ros2 param describe`` say it."""
         if self.choices:
-            return 'one of ' + ', '.join(repr(c) for c in self.choices)
-        if self.valid:
-            return self.valid
-        if self.empty_ok:
-            return "a string, or '' (off)"
-        if self.limits is not None:
-            low, high = self.limits
-            return f'{low:g}..{high:g}'
-        return self.kind.valid
+            return 'one of ' + ', '.join(map(repr, self.choices))
+        if self.valid or self.empty_ok or self.limits is None:
+            return self.valid or ("a string, or '' (off)" if self.empty_ok else self.kind.valid)
+        return f'{self.limits[0]:g}..{self.limits[1]:g}'
 
 
 def _names_a_stream(text: str) -> bool:
@@ -172,32 +167,21 @@ def _names_a_stream(text: str) -> bool:
         return False
 
 
-def _off_or_a_rate(rate: float) -> bool:
-    """0 leaves the device's rate; any other must be one its divider can give."""
-    return not rate or MIN_RATE_HZ <= rate <= MAX_RATE_HZ
-
-
-def _bias_valid(unit: str) -> str:
-    return f'[] (as the sensor is), or three finite numbers [x, y, z] in {unit}'
-
-
-def _is_bias(value: Sequence[float]) -> bool:
-    return not value or (len(value) == 3 and all(math.isfinite(v) for v in value))
-
-
-def _bias_vector(value: Sequence[float]) -> Vector3 | None:
-    """Return a bias parameter's three values, or None when it is [] (left to the sensor)."""
-    if not value:
-        return None
-    x, y, z = value
-    return float(x), float(y), float(z)
-
-
 def _device_setting(name: str, kind: Kind, description: str,
-                    limits: tuple[float, float] | None = None) -> Spec:
-    """Return the row of a parameter that sets the ``DeviceConfig`` field of its name."""
-    return Spec(name, kind, DEVICE_DEFAULTS[name], description, limits,
-                feeds=f'device.{name}')
+                    limits: tuple[float, float] | None = None, field: str = '') -> Spec:
+    """Return the row of a parameter that sets a ``DeviceConfig`` field (of its name)."""
+    field = field or name
+    return Spec(name, kind, DEVICE_DEFAULTS[field], description, limits, feeds=f'device.{field}')
+
+
+def _bias(name: str, what: str, unit: str, command: str) -> Spec:
+    """Return the row of a bias written to the sensor at every start ([]: the sensor's own)."""
+    return Spec(name, DOUBLES, [], f"{what} bias [x, y, z] ({unit}, the sensor's axes and units) "
+                f"written to the sensor at every start ({command}) and checked against its echo; "
+                "[]: leave the sensor's own. One sensor only (not with addresses).",
+                valid=f'[] (as the sensor is), or three finite numbers [x, y, z] in {unit}',
+                accepts=lambda v: not v or (len(v) == 3 and all(map(math.isfinite, v))),
+                feeds=f'device.{name}', convert=lambda v: tuple(map(float, v)) or None)
 
 
 def _one_for_all(single: str) -> str:
@@ -234,20 +218,17 @@ SENSOR_SET_SPECS = (
 
 
 SPECS: list[Spec] = [
-    Spec('port', TEXT, '/dev/ttyUSB0',
-         'Serial port of the base station (or wired sensor).', feeds='device.port'),
+    Spec('port', TEXT, '/dev/ttyUSB0', 'Serial port of the base station (or wired sensor).',
+         feeds='device.port'),
     Spec('address', INTEGER, REQUIRED,
          'Node address of the sensor (factory: last two digits of its serial number).',
          (MIN_ADDRESS, MAX_ADDRESS), unless='addresses', feeds='sensors'),
     # Several sensors behind one base station (ros/sensor_set.py): the defaults,
     # empty, leave the one sensor of 'address' as it always was.
     *SENSOR_SET_SPECS,
-    Spec('baud', INTEGER, DEVICE_DEFAULTS['baud'], 'Serial baud rate.',
-         (9600, 921600),
-         feeds='device.baud'),
-    Spec('wireless', BOOL, DEVICE_DEFAULTS['wireless'],
-         'True: through a wireless base station (packets, ACK/NACK); false: wired sensor.',
-         feeds='device.wireless'),
+    _device_setting('baud', INTEGER, 'Serial baud rate.', (9600, 921600)),
+    _device_setting('wireless', BOOL, 'True: through a wireless base station (packets, '
+                    'ACK/NACK); false: wired sensor.'),
     Spec('stream', CODE, streams.DEFAULT.name,
          'What the sensor streams: a stream name, or the command byte of its record as '
          "text (e.g. '0xC2'); see Choosing a stream. With data_rate it must fit the "
@@ -284,9 +265,8 @@ SPECS: list[Spec] = [
     Spec(SOFT_IRON, DOUBLES, list(IDENTITY),
          'Soft-iron matrix (row-major, 9 values) the field is multiplied by once the hard '
          'iron is off, in the same axes; with addresses, 9 for all or 9 per sensor. '
-         'Measured by magcal.',
-         valid='a symmetric (within 1e-6 relative), positive-definite 3x3 matrix, row-major '
-               '(9 numbers), or 9 per sensor', accepts=is_matrix_list),
+         'Measured by magcal.', valid='a symmetric (within 1e-6 relative), positive-definite '
+         '3x3 matrix, row-major (9 numbers), or 9 per sensor', accepts=is_matrix_list),
     Spec('time_source', TEXT, 'device',
          'device: sample time from the sensor timer aligned to the host clock; '
          'host: time the packet was read.', choices=TIME_SOURCES),
@@ -303,12 +283,10 @@ SPECS: list[Spec] = [
          'Deprecated (removed in the next release): use '
          'qos_overrides./imu/raw_data.publisher.depth. QoS history depth of the data '
          'publishers.', (1, 1000), replaced_by='depth'),
-    Spec('read_timeout', DOUBLE, DEVICE_DEFAULTS['stall_timeout'],
-         'Seconds without data before the stream counts as stalled.', (0.1, 60.0),
-         feeds='device.stall_timeout'),
-    Spec('reconnect_interval', DOUBLE, DEVICE_DEFAULTS['reconnect_interval'],
-         'Seconds between attempts to reopen a lost port.', (0.1, 60.0),
-         feeds='device.reconnect_interval'),
+    _device_setting('read_timeout', DOUBLE, 'Seconds without data before the stream counts '
+                    'as stalled.', (0.1, 60.0), field='stall_timeout'),
+    _device_setting('reconnect_interval', DOUBLE,
+                    'Seconds between attempts to reopen a lost port.', (0.1, 60.0)),
     # How patient the dialogue is (device/timeouts.py has each default and why).
     _device_setting('request_timeout', DOUBLE,
                     "Seconds to wait for a command's reply, per try (a slow radio link may "
@@ -335,10 +313,10 @@ SPECS: list[Spec] = [
          f'must fit the serial line at that rate (see Choosing a stream).',
          (0.0, round(MAX_RATE_HZ, 1)),
          valid=f'0 (leave the device as it is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz',
-         accepts=_off_or_a_rate, feeds='sensors'),
-    Spec('low_latency', BOOL, DEVICE_DEFAULTS['low_latency'],
-         'Put the serial port in Linux low-latency mode (USB adapters) when it supports it.',
-         feeds='device.low_latency'),
+         # 0 leaves the device's rate; any other must be one its divider can give.
+         accepts=lambda rate: not rate or MIN_RATE_HZ <= rate <= MAX_RATE_HZ, feeds='sensors'),
+    _device_setting('low_latency', BOOL, 'Put the serial port in Linux low-latency mode (USB '
+                    'adapters) when it supports it.'),
     Spec(GYRO_BIAS_SAMPLING_MS, INTEGER, 10000,
          'Sampling time (ms) of ~/capture_gyro_bias (0xCD); the sensor must stay still that '
          'long. The protocol advises 10000..30000; down to 100 is accepted for tests and the '
@@ -349,16 +327,8 @@ SPECS: list[Spec] = [
          'be still then).'),
     # A calibration that lasts (README, Calibration): known biases written at every
     # start, and where a capture writes its result for the next start.
-    Spec(GYRO_BIAS, DOUBLES, [],
-         "Gyro bias [x, y, z] (rad/s, the sensor's axes and units) written to the sensor "
-         "at every start (0xCA) and checked against its echo; []: leave the sensor's own. "
-         'One sensor only (not with addresses).', valid=_bias_valid('rad/s'), accepts=_is_bias,
-         feeds='device.gyro_bias', convert=_bias_vector),
-    Spec(ACCEL_BIAS, DOUBLES, [],
-         "Accelerometer bias [x, y, z] (g, the sensor's axes and units) written to the "
-         "sensor at every start (0xC9) and checked against its echo; []: leave the sensor's "
-         'own. One sensor only (not with addresses).', valid=_bias_valid('g'), accepts=_is_bias,
-         feeds='device.accel_bias', convert=_bias_vector),
+    _bias(GYRO_BIAS, 'Gyro', 'rad/s', '0xCA'),
+    _bias(ACCEL_BIAS, 'Accelerometer', 'g', '0xC9'),
     Spec(CALIBRATION_FILE, TEXT, '',
          'An accepted ~/capture_gyro_bias writes its bias to this YAML parameter file '
          "(gyro_bias under the node's name, overwritten), to load at the next start; "
@@ -373,20 +343,17 @@ SPECS: list[Spec] = [
          feeds='device.thread_policy', convert=ThreadPolicy),
     Spec('capture_file', TEXT, '',
          'Write every byte read from the port, with its receive time, to this capture file '
-         '(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '
-         "'': off.",
+         "(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '': off.",
          empty_ok=True),
     # The fault capture (capture/fault_capture.py FaultCapture): the last seconds, kept always.
     Spec('fault_capture_dir', TEXT, '~/.ros/i3dmgx2_captures',
          'Keep the last fault_capture_seconds of bytes read from the port in memory, and '
          'write them to a capture file in this directory (named by UTC time and cause) on a '
          'stall, a disconnect, a device reset, a burst of corrupted packets, a refused '
-         "command, or a ~/save_capture call; '': off.",
-         empty_ok=True),
+         "command, or a ~/save_capture call; '': off.", empty_ok=True),
     Spec('fault_capture_seconds', DOUBLE, 30.0,
          'Seconds of the port kept in memory for a fault capture (also the least time '
          'between two of its files: faults closer together share one).', (1.0, 600.0)),
     Spec('fault_captures_kept', INTEGER, 20,
-         'Fault capture files kept in fault_capture_dir; the oldest are deleted.',
-         (1, 10000)),
+         'Fault capture files kept in fault_capture_dir; the oldest are deleted.', (1, 10000)),
 ]
