@@ -200,89 +200,74 @@ SENSOR_SET_SPECS = (
          'sensors).',
          valid=f"[] (then 'address'), or distinct addresses {MIN_ADDRESS}..{MAX_ADDRESS}",
          feeds='sensors'),
-    Spec('sensor_names', NAMES, [],
-         "With addresses: each sensor's name, the prefix of its topics (<name>/raw_data); "
-         "default imu_<address>. For one sensor: 'imu'.", valid=_ONE_NAME_EACH,
-         feeds='sensors'),
-    Spec('frame_ids', NAMES, [],
-         "With addresses: each sensor's frame; default <name>_link (frame_id is one "
-         "sensor's).", valid=_ONE_NAME_EACH, feeds='sensors'),
-    Spec('streams', CODES, [],
-         "With addresses: each sensor's stream (or one for all); default: stream for all.",
-         valid=_one_for_all('stream'), feeds='sensors'),
-    Spec('data_rates', DOUBLES, [],
-         "With addresses: each sensor's data rate (Hz; or one for all; 0: as the device "
-         'is); default: data_rate for all. Together they must fit the serial line.',
-         valid=_one_for_all('data_rate'), feeds='sensors'),
+    Spec('sensor_names', NAMES, [], "With addresses: each sensor's name, the prefix of its "
+         "topics (<name>/raw_data); default imu_<address>. For one sensor: 'imu'.",
+         valid=_ONE_NAME_EACH, feeds='sensors'),
+    Spec('frame_ids', NAMES, [], "With addresses: each sensor's frame; default <name>_link "
+         "(frame_id is one sensor's).", valid=_ONE_NAME_EACH, feeds='sensors'),
+    Spec('streams', CODES, [], "With addresses: each sensor's stream (or one for all); default: "
+         'stream for all.', valid=_one_for_all('stream'), feeds='sensors'),
+    Spec('data_rates', DOUBLES, [], "With addresses: each sensor's data rate (Hz; or one for "
+         'all; 0: as the device is); default: data_rate for all. Together they must fit the '
+         'serial line.', valid=_one_for_all('data_rate'), feeds='sensors'),
 )
 
 
 SPECS: list[Spec] = [
     Spec('port', TEXT, '/dev/ttyUSB0', 'Serial port of the base station (or wired sensor).',
          feeds='device.port'),
-    Spec('address', INTEGER, REQUIRED,
-         'Node address of the sensor (factory: last two digits of its serial number).',
-         (MIN_ADDRESS, MAX_ADDRESS), unless='addresses', feeds='sensors'),
+    Spec('address', INTEGER, REQUIRED, 'Node address of the sensor (factory: last two digits of '
+         'its serial number).', (MIN_ADDRESS, MAX_ADDRESS), unless='addresses', feeds='sensors'),
     # Several sensors behind one base station (ros/sensor_set.py): the defaults,
     # empty, leave the one sensor of 'address' as it always was.
     *SENSOR_SET_SPECS,
     _device_setting('baud', INTEGER, 'Serial baud rate.', (9600, 921600)),
     _device_setting('wireless', BOOL, 'True: through a wireless base station (packets, '
                     'ACK/NACK); false: wired sensor.'),
-    Spec('stream', CODE, streams.DEFAULT.name,
-         'What the sensor streams: a stream name, or the command byte of its record as '
-         "text (e.g. '0xC2'); see Choosing a stream. With data_rate it must fit the "
-         'serial line, or the node refuses to start.',
+    Spec('stream', CODE, streams.DEFAULT.name, 'What the sensor streams: a stream name, or the '
+         "command byte of its record as text (e.g. '0xC2'); see Choosing a stream. With "
+         'data_rate it must fit the serial line, or the node refuses to start.',
          valid=streams.valid_text(), accepts=_names_a_stream, feeds='sensors'),
-    Spec('frame_id', TEXT, 'imu_link',
-         'Frame of the published messages (_ned is appended in the ned convention).',
-         feeds='sensors'),
-    Spec('frame_convention', TEXT, 'enu',
-         'enu: REP-103 (ENU world, x-forward/y-left/z-up body); ned: device axes '
-         '(NED world, x-forward/y-right/z-down body).', choices=CONVENTIONS,
+    Spec('frame_id', TEXT, 'imu_link', 'Frame of the published messages (_ned is appended in the '
+         'ned convention).', feeds='sensors'),
+    Spec('frame_convention', TEXT, 'enu', 'enu: REP-103 (ENU world, x-forward/y-left/z-up body); '
+         'ned: device axes (NED world, x-forward/y-right/z-down body).', choices=CONVENTIONS,
          feeds='messages.frame_convention'),
     Spec('orientation_stddev', DOUBLE, ORIENTATION_STDDEV,
          'Orientation standard deviation (rad); 0: unknown. Default: 2.0 degrees, the '
          "3DM-GX2 datasheet's dynamic orientation accuracy (0.5 degrees static), as the ROS 1 "
          'microstrain_3dmgx2_imu driver.', (0.0, 10.0), feeds='messages.orientation_stddev'),
-    Spec('angular_velocity_stddev', DOUBLE, ANGULAR_VELOCITY_STDDEV,
-         'Angular velocity standard deviation (rad/s); 0: unknown. Default: the ROS 1 '
-         "microstrain_3dmgx2_imu driver's figure for this sensor.", (0.0, 10.0),
-         feeds='messages.angular_velocity_stddev'),
+    Spec('angular_velocity_stddev', DOUBLE, ANGULAR_VELOCITY_STDDEV, 'Angular velocity standard '
+         "deviation (rad/s); 0: unknown. Default: the ROS 1 microstrain_3dmgx2_imu driver's "
+         'figure for this sensor.', (0.0, 10.0), feeds='messages.angular_velocity_stddev'),
     Spec('linear_acceleration_stddev', DOUBLE, LINEAR_ACCELERATION_STDDEV,
          'Linear acceleration standard deviation (m/s^2); 0: unknown. Default: the ROS 1 '
          "microstrain_3dmgx2_imu driver's figure for this sensor (10 mg).", (0.0, 100.0),
          feeds='messages.linear_acceleration_stddev'),
-    Spec('magnetic_field_stddev', DOUBLE, 0.0,
-         'Magnetic field standard deviation (T); 0: unknown (no published figure).',
-         (0.0, 1.0), feeds='messages.magnetic_field_stddev'),
+    Spec('magnetic_field_stddev', DOUBLE, 0.0, 'Magnetic field standard deviation (T); 0: '
+         'unknown (no published figure).', (0.0, 1.0), feeds='messages.magnetic_field_stddev'),
     # The field's calibration (ros/mag_calibration.py), measured by magcal (docs/magcal.md).
-    Spec(HARD_IRON, DOUBLES, list(ZERO),
-         "Hard-iron offset [x, y, z] (T, the sensor's own axes: x forward, y right, z down) "
-         'taken off the field before it is published (imu/mag); with addresses, 3 for all '
-         'or 3 per sensor. Measured by magcal.', valid='3 finite numbers (T), or 3 per sensor',
-         accepts=is_offset_list),
+    Spec(HARD_IRON, DOUBLES, list(ZERO), "Hard-iron offset [x, y, z] (T, the sensor's own axes: "
+         'x forward, y right, z down) taken off the field before it is published (imu/mag); with '
+         'addresses, 3 for all or 3 per sensor. Measured by magcal.',
+         valid='3 finite numbers (T), or 3 per sensor', accepts=is_offset_list),
     Spec(SOFT_IRON, DOUBLES, list(IDENTITY),
          'Soft-iron matrix (row-major, 9 values) the field is multiplied by once the hard '
          'iron is off, in the same axes; with addresses, 9 for all or 9 per sensor. '
          'Measured by magcal.', valid='a symmetric (within 1e-6 relative), positive-definite '
          '3x3 matrix, row-major (9 numbers), or 9 per sensor', accepts=is_matrix_list),
-    Spec('time_source', TEXT, 'device',
-         'device: sample time from the sensor timer aligned to the host clock; '
-         'host: time the packet was read.', choices=TIME_SOURCES),
-    Spec('time_offset', DOUBLE, 0.0,
-         'Seconds added to every stamp (imu/raw_data, imu/mag, imu/temperature), for the '
-         "radio's latency the host cannot see; shown on /diagnostics (status time).",
-         (-TIME_OFFSET_LIMIT, TIME_OFFSET_LIMIT)),
-    Spec('qos_reliability', TEXT, 'reliable',
-         'Deprecated (removed in the next release): use '
+    Spec('time_source', TEXT, 'device', 'device: sample time from the sensor timer aligned to '
+         'the host clock; host: time the packet was read.', choices=TIME_SOURCES),
+    Spec('time_offset', DOUBLE, 0.0, 'Seconds added to every stamp (imu/raw_data, imu/mag, '
+         "imu/temperature), for the radio's latency the host cannot see; shown on /diagnostics "
+         '(status time).', (-TIME_OFFSET_LIMIT, TIME_OFFSET_LIMIT)),
+    Spec('qos_reliability', TEXT, 'reliable', 'Deprecated (removed in the next release): use '
          'qos_overrides./imu/raw_data.publisher.reliability. QoS reliability of the data '
-         'publishers (best_effort does not match reliable subscribers).',
-         choices=RELIABILITIES, replaced_by='reliability'),
-    Spec('qos_depth', INTEGER, 10,
-         'Deprecated (removed in the next release): use '
-         'qos_overrides./imu/raw_data.publisher.depth. QoS history depth of the data '
-         'publishers.', (1, 1000), replaced_by='depth'),
+         'publishers (best_effort does not match reliable subscribers).', choices=RELIABILITIES,
+         replaced_by='reliability'),
+    Spec('qos_depth', INTEGER, 10, 'Deprecated (removed in the next release): use '
+         'qos_overrides./imu/raw_data.publisher.depth. QoS history depth of the data publishers.',
+         (1, 1000), replaced_by='depth'),
     _device_setting('read_timeout', DOUBLE, 'Seconds without data before the stream counts '
                     'as stalled.', (0.1, 60.0), field='stall_timeout'),
     _device_setting('reconnect_interval', DOUBLE,
@@ -293,18 +278,16 @@ SPECS: list[Spec] = [
                     'need more; bringup measures the round trips).', (0.05, 10.0)),
     _device_setting('request_retries', INTEGER,
                     'Tries of a command before the sensor counts as not answering.', (1, 20)),
-    _device_setting('continuous_retries', INTEGER,
-                    'Tries of the continuous-mode request before the stream counts as not '
-                    'started.', (1, 20)),
+    _device_setting('continuous_retries', INTEGER, 'Tries of the continuous-mode request before '
+                    'the stream counts as not started.', (1, 20)),
     _device_setting('fast_reconnect', BOOL,
                     'After a reconnect, confirm the sensor already identified with one '
                     'serial-number read; false: the full start-up dialogue every time.'),
     _device_setting('resume_timeout', DOUBLE,
                     "Seconds per try of a fast reconnect's serial-number read (short: a reply "
                     'lost in a stall is asked again soon after the radio is back).', (0.02, 5.0)),
-    _device_setting('resume_retries', INTEGER,
-                    "Tries of a fast reconnect's serial-number read before the full dialogue.",
-                    (1, 20)),
+    _device_setting('resume_retries', INTEGER, "Tries of a fast reconnect's serial-number read "
+                    'before the full dialogue.', (1, 20)),
     Spec('publish_mag', BOOL, True,
          'Publish sensor_msgs/MagneticField on imu/mag (NaN readings are skipped).'),
     Spec('data_rate', DOUBLE, 0.0,
@@ -317,34 +300,28 @@ SPECS: list[Spec] = [
          accepts=lambda rate: not rate or MIN_RATE_HZ <= rate <= MAX_RATE_HZ, feeds='sensors'),
     _device_setting('low_latency', BOOL, 'Put the serial port in Linux low-latency mode (USB '
                     'adapters) when it supports it.'),
-    Spec(GYRO_BIAS_SAMPLING_MS, INTEGER, 10000,
-         'Sampling time (ms) of ~/capture_gyro_bias (0xCD); the sensor must stay still that '
-         'long. The protocol advises 10000..30000; down to 100 is accepted for tests and the '
-         'simulator, at the cost of a noisier bias.',
+    Spec(GYRO_BIAS_SAMPLING_MS, INTEGER, 10000, 'Sampling time (ms) of ~/capture_gyro_bias '
+         '(0xCD); the sensor must stay still that long. The protocol advises 10000..30000; down '
+         'to 100 is accepted for tests and the simulator, at the cost of a noisier bias.',
          (100, 30000), read_only=False, feeds='node'),
-    Spec('capture_gyro_bias_on_start', BOOL, False,
-         'Capture the gyro bias once, right after streaming first starts (the sensor must '
-         'be still then).'),
+    Spec('capture_gyro_bias_on_start', BOOL, False, 'Capture the gyro bias once, right after '
+         'streaming first starts (the sensor must be still then).'),
     # A calibration that lasts (README, Calibration): known biases written at every
     # start, and where a capture writes its result for the next start.
     _bias(GYRO_BIAS, 'Gyro', 'rad/s', '0xCA'),
     _bias(ACCEL_BIAS, 'Accelerometer', 'g', '0xC9'),
-    Spec(CALIBRATION_FILE, TEXT, '',
-         'An accepted ~/capture_gyro_bias writes its bias to this YAML parameter file '
-         "(gyro_bias under the node's name, overwritten), to load at the next start; "
-         "'': off.", empty_ok=True, feeds='node'),
-    Spec('temperature_period', DOUBLE, 0.0,
-         'Seconds between polls of the temperatures (0xD1), published on imu/temperature; '
-         '0: off.', (0.0, 3600.0)),
-    Spec('realtime_priority', INTEGER, 0,
-         'SCHED_FIFO priority of the thread that reads the port and publishes; 0: normal '
-         'scheduling. Where the system refuses it (no rtprio limit) one warning is logged and '
-         'the thread runs as usual.', (0, MAX_PRIORITY),
+    Spec(CALIBRATION_FILE, TEXT, '', 'An accepted ~/capture_gyro_bias writes its bias to this '
+         "YAML parameter file (gyro_bias under the node's name, overwritten), to load at the "
+         "next start; '': off.", empty_ok=True, feeds='node'),
+    Spec('temperature_period', DOUBLE, 0.0, 'Seconds between polls of the temperatures (0xD1), '
+         'published on imu/temperature; 0: off.', (0.0, 3600.0)),
+    Spec('realtime_priority', INTEGER, 0, 'SCHED_FIFO priority of the thread that reads the port '
+         'and publishes; 0: normal scheduling. Where the system refuses it (no rtprio limit) one '
+         'warning is logged and the thread runs as usual.', (0, MAX_PRIORITY),
          feeds='device.thread_policy', convert=ThreadPolicy),
-    Spec('capture_file', TEXT, '',
-         'Write every byte read from the port, with its receive time, to this capture file '
-         "(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '': off.",
-         empty_ok=True),
+    Spec('capture_file', TEXT, '', 'Write every byte read from the port, with its receive time, '
+         'to this capture file (GX2CAP format, overwritten; replay with '
+         "i3dmgx2_driver.tools.replay); '': off.", empty_ok=True),
     # The fault capture (capture/fault_capture.py FaultCapture): the last seconds, kept always.
     Spec('fault_capture_dir', TEXT, '~/.ros/i3dmgx2_captures',
          'Keep the last fault_capture_seconds of bytes read from the port in memory, and '
