@@ -40,10 +40,9 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
-from .diagnostic_statuses import (
-    calibration_status, connection_status, device_status, lifecycle_status, parser_status,
-    radio_status, Status, stream_status, StreamPeriod, time_status, to_message,
-)
+from .diagnostic_statuses import (calibration_status, connection_status, device_status,
+                                  lifecycle_status, parser_status, radio_status, Status,
+                                  stream_status, StreamPeriod, time_status, to_message)
 from .mag_calibration import is_loaded
 from .publishers import create_publisher
 from ..device.record_rate import RateMeter
@@ -145,10 +144,9 @@ class DiagnosticsPublisher:
         # Disconnected: show the last link's numbers.
         radio = device.radio if device.radio is not None else last_radio
         seen = StreamPeriod(
-            label=core.stream.label,
+            label=core.stream.label, received=published - last_published, period=period,
             measured_hz=self._rate.update(published, stats.last_time,
                                           device.state is State.STREAMING),
-            received=published - last_published, period=period,
             silent_for=time.time() - stats.last_time if stats.last_time else None,
             published=published, lost=lost, lost_in_period=lost - last_lost,
             device_resets=stats.device_resets, other_records=device.other_records,

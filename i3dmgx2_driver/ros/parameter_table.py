@@ -99,8 +99,8 @@ class Kind(NamedTuple):
     also: tuple[Parameter.Type, Callable[[Any], Any]] | None = None
 
 
-def _code_text(code: int) -> str:
-    return f'0x{code:02X}'
+#: A command byte as people write it: 194 -> '0xC2'.
+_code_text = '0x{:02X}'.format
 
 
 BOOL = Kind(Parameter.Type.BOOL, 'true or false', 'true or false')
@@ -114,11 +114,10 @@ CODE = TEXT._replace(also=(Parameter.Type.INTEGER, _code_text))
 INTEGERS = Kind(Parameter.Type.INTEGER_ARRAY, 'a list of integers, e.g. [17, 95]')
 #: ``-p data_rates:=[100, 50]`` is a list of integers, meant as doubles.
 DOUBLES = Kind(Parameter.Type.DOUBLE_ARRAY, 'a list of numbers, e.g. [100.0, 50.0]',
-               also=(Parameter.Type.INTEGER_ARRAY, lambda values: [float(v) for v in values]))
+               also=(Parameter.Type.INTEGER_ARRAY, lambda values: list(map(float, values))))
 NAMES = Kind(Parameter.Type.STRING_ARRAY, 'a list of names, e.g. [left, right]')
 #: Names or command bytes, as :data:`CODE`.
-CODES = NAMES._replace(also=(Parameter.Type.INTEGER_ARRAY,
-                             lambda codes: [_code_text(c) for c in codes]))
+CODES = NAMES._replace(also=(Parameter.Type.INTEGER_ARRAY, lambda c: list(map(_code_text, c))))
 
 
 class Spec(NamedTuple):

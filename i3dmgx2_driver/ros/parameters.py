@@ -165,7 +165,6 @@ def _warn_deprecated(node: Node, spec: Spec) -> None:
 
 
 def _declare(node: Node, spec: Spec) -> Any:
-    problem = f'parameter {spec.name!r} must be {spec.valid_range()}'
     given = None
     try:
         if not node.has_parameter(spec.name):  # else a managed node configured again: read it
@@ -180,7 +179,7 @@ def _declare(node: Node, spec: Spec) -> Any:
                 # The override was read above and is given here, converted.
                 node.declare_parameter(spec.name, value, _descriptor(spec),
                                        ignore_override=True)
-        value = node.get_parameter(spec.name).value
+        return node.get_parameter(spec.name).value
     except ParameterUninitializedException:
         if spec.default is not REQUIRED:
             return list(spec.default)
@@ -190,8 +189,8 @@ def _declare(node: Node, spec: Spec) -> Any:
                              f'-p {spec.name}:=<value> ({spec.valid_range()})') from None
     except InvalidParameterValueException:
         # Out of the descriptor's range: rclpy refused what was given.
-        raise ParameterError(f'{problem}, got {given!r}') from None
-    return value
+        raise ParameterError(f'parameter {spec.name!r} must be {spec.valid_range()}, '
+                             f'got {given!r}') from None
 
 
 def _is_set(node: Node, name: str) -> bool:
@@ -253,9 +252,8 @@ def driver_config(values: Mapping[str, Any]) -> DriverConfig:
     for spec in SPECS:
         config, _, field = spec.feeds.partition('.')
         if config in fed:
-            value = values[spec.name]
-            fed[config][field or spec.name] = (value if spec.convert is None
-                                               else spec.convert(value))
+            convert = spec.convert or (lambda value: value)
+            fed[config][field or spec.name] = convert(values[spec.name])
     first = sensors[0]
     config = DriverConfig(
         device=DeviceConfig(address=first.address, data_rate_hz=first.data_rate_hz,

@@ -166,8 +166,7 @@ def applied_file(path: str) -> tuple[list[float], list[float]]:
     if HARD_IRON not in values and SOFT_IRON not in values:
         raise ValueError(f'{path}: no {HARD_IRON} or {SOFT_IRON} in it')
     # rclpy's reader gives a list with a number like 5e-06 back as its text.
-    return tuple([float(v) for v in (ast.literal_eval(given) if isinstance(given, str)
-                                     else given)]
+    return tuple([float(v) for v in (ast.literal_eval(given) if isinstance(given, str) else given)]
                  for given in (values.get(HARD_IRON, ZERO), values.get(SOFT_IRON, IDENTITY)))
 
 
