@@ -106,8 +106,7 @@ class DiagnosticsPublisher:
             except Exception:  # noqa: BLE001 - said once; the stream goes on without it
                 if not failed:
                     failed = True
-                    self.node.get_logger().error(
-                        f'diagnostics failed:\n{traceback.format_exc()}')
+                    self.node.get_logger().error(f'diagnostics failed:\n{traceback.format_exc()}')
 
     def _forget(self) -> None:
         """Start the per-period comparisons afresh (a new core counts from zero)."""

@@ -59,7 +59,6 @@ from ..codec.orientation import CONVENTIONS
 from ..device.realtime import MAX_PRIORITY, ThreadPolicy
 from ..device.settings import DeviceConfig
 
-TIME_SOURCES = ('device', 'host')
 #: Default standard deviations, per axis. No noise density of the 3DM-GX2 was
 #: found in a source we can cite, so these are the per-sample figures the ROS 1
 #: driver for this very sensor uses (ros-drivers/microstrain_3dmgx2_imu,
@@ -71,7 +70,6 @@ ANGULAR_VELOCITY_STDDEV = 0.012
 LINEAR_ACCELERATION_STDDEV = 0.098
 #: Largest ``time_offset`` (s) either way: far beyond any radio's latency.
 TIME_OFFSET_LIMIT = 10.0
-RELIABILITIES = ('reliable', 'best_effort')
 #: The default of a parameter that has none: it must be given.
 REQUIRED = object()
 #: The names of the parameters read where they are used (``feeds='node'``, and the
@@ -191,14 +189,17 @@ def _one_for_all(single: str) -> str:
 _ONE_NAME_EACH = '[] (the default), or one distinct name per address'
 
 
-#: Several sensors behind one base station, served by one driver (ros/sensor_set.py).
-SENSOR_SET_SPECS = (
-    Spec('addresses', INTEGERS, [],
-         'Node addresses of several sensors behind the one base station, served by this '
-         "driver (instead of 'address'); each gets its topics under its name (see Several "
-         'sensors).',
-         valid=f"[] (then 'address'), or distinct addresses {MIN_ADDRESS}..{MAX_ADDRESS}",
-         feeds='sensors'),
+SPECS: list[Spec] = [
+    Spec('port', TEXT, '/dev/ttyUSB0', 'Serial port of the base station (or wired sensor).',
+         feeds='device.port'),
+    Spec('address', INTEGER, REQUIRED, 'Node address of the sensor (factory: last two digits of '
+         'its serial number).', (MIN_ADDRESS, MAX_ADDRESS), unless='addresses', feeds='sensors'),
+    # Several sensors behind one base station, served by one driver (ros/sensor_set.py):
+    # the defaults, empty, leave the one sensor of 'address' as it always was.
+    Spec('addresses', INTEGERS, [], 'Node addresses of several sensors behind the one base '
+         "station, served by this driver (instead of 'address'); each gets its topics under its "
+         'name (see Several sensors).', feeds='sensors',
+         valid=f"[] (then 'address'), or distinct addresses {MIN_ADDRESS}..{MAX_ADDRESS}"),
     Spec('sensor_names', NAMES, [], "With addresses: each sensor's name, the prefix of its "
          "topics (<name>/raw_data); default imu_<address>. For one sensor: 'imu'.",
          valid=_ONE_NAME_EACH, feeds='sensors'),
@@ -209,17 +210,6 @@ SENSOR_SET_SPECS = (
     Spec('data_rates', DOUBLES, [], "With addresses: each sensor's data rate (Hz; or one for "
          'all; 0: as the device is); default: data_rate for all. Together they must fit the '
          'serial line.', valid=_one_for_all('data_rate'), feeds='sensors'),
-)
-
-
-SPECS: list[Spec] = [
-    Spec('port', TEXT, '/dev/ttyUSB0', 'Serial port of the base station (or wired sensor).',
-         feeds='device.port'),
-    Spec('address', INTEGER, REQUIRED, 'Node address of the sensor (factory: last two digits of '
-         'its serial number).', (MIN_ADDRESS, MAX_ADDRESS), unless='addresses', feeds='sensors'),
-    # Several sensors behind one base station (ros/sensor_set.py): the defaults,
-    # empty, leave the one sensor of 'address' as it always was.
-    *SENSOR_SET_SPECS,
     _device_setting('baud', INTEGER, 'Serial baud rate.', (9600, 921600)),
     _device_setting('wireless', BOOL, 'True: through a wireless base station (packets, '
                     'ACK/NACK); false: wired sensor.'),
@@ -256,14 +246,14 @@ SPECS: list[Spec] = [
          'Measured by magcal.', valid='a symmetric (within 1e-6 relative), positive-definite '
          '3x3 matrix, row-major (9 numbers), or 9 per sensor', accepts=is_matrix_list),
     Spec('time_source', TEXT, 'device', 'device: sample time from the sensor timer aligned to '
-         'the host clock; host: time the packet was read.', choices=TIME_SOURCES),
+         'the host clock; host: time the packet was read.', choices=('device', 'host')),
     Spec('time_offset', DOUBLE, 0.0, 'Seconds added to every stamp (imu/raw_data, imu/mag, '
          "imu/temperature), for the radio's latency the host cannot see; shown on /diagnostics "
          '(status time).', (-TIME_OFFSET_LIMIT, TIME_OFFSET_LIMIT)),
     Spec('qos_reliability', TEXT, 'reliable', 'Deprecated (removed in the next release): use '
          'qos_overrides./imu/raw_data.publisher.reliability. QoS reliability of the data '
-         'publishers (best_effort does not match reliable subscribers).', choices=RELIABILITIES,
-         replaced_by='reliability'),
+         'publishers (best_effort does not match reliable subscribers).',
+         choices=('reliable', 'best_effort'), replaced_by='reliability'),
     Spec('qos_depth', INTEGER, 10, 'Deprecated (removed in the next release): use '
          'qos_overrides./imu/raw_data.publisher.depth. QoS history depth of the data publishers.',
          (1, 1000), replaced_by='depth'),
@@ -289,14 +279,13 @@ SPECS: list[Spec] = [
                     'before the full dialogue.', (1, 20)),
     Spec('publish_mag', BOOL, True,
          'Publish sensor_msgs/MagneticField on imu/mag (NaN readings are skipped).'),
-    Spec('data_rate', DOUBLE, 0.0,
-         f'Data rate (Hz) to write to the device (EEPROM 0xFCA2, persists); 0: leave the '
-         f'device as it is; otherwise {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f}, and the stream '
-         f'must fit the serial line at that rate (see Choosing a stream).',
-         (0.0, round(MAX_RATE_HZ, 1)),
+    Spec('data_rate', DOUBLE, 0.0, 'Data rate (Hz) to write to the device (EEPROM 0xFCA2, '
+         f'persists); 0: leave the device as it is; otherwise {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f}, '
+         'and the stream must fit the serial line at that rate (see Choosing a stream).',
+         (0.0, round(MAX_RATE_HZ, 1)), feeds='sensors',
          valid=f'0 (leave the device as it is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz',
          # 0 leaves the device's rate; any other must be one its divider can give.
-         accepts=lambda rate: not rate or MIN_RATE_HZ <= rate <= MAX_RATE_HZ, feeds='sensors'),
+         accepts=lambda rate: not rate or MIN_RATE_HZ <= rate <= MAX_RATE_HZ),
     _device_setting('low_latency', BOOL, 'Put the serial port in Linux low-latency mode (USB '
                     'adapters) when it supports it.'),
     Spec(GYRO_BIAS_SAMPLING_MS, INTEGER, 10000, 'Sampling time (ms) of ~/capture_gyro_bias '

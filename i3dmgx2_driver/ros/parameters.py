@@ -61,8 +61,7 @@ from ..device.settings import DeviceConfig
 
 #: How alike two names must be (difflib's ratio) for "did you mean".
 CLOSE_ENOUGH = 0.6
-_ARRAYS = (Parameter.Type.INTEGER_ARRAY, Parameter.Type.DOUBLE_ARRAY,
-           Parameter.Type.STRING_ARRAY)
+_ARRAYS = (Parameter.Type.INTEGER_ARRAY, Parameter.Type.DOUBLE_ARRAY, Parameter.Type.STRING_ARRAY)
 #: The descriptor's range of a number parameter: its field, its type, its bounds' type, its step.
 _RANGES = {Parameter.Type.INTEGER: ('integer_range', IntegerRange, int, 1),
            Parameter.Type.DOUBLE: ('floating_point_range', FloatingPointRange, float, 0.0)}
