@@ -156,11 +156,10 @@ def _warn_deprecated(node: Node, spec: Spec) -> None:
     """Name the standard parameter that replaces a deprecated one the user gave."""
     topic = node.resolve_topic_name('imu/raw_data')
     node.get_logger().warning(
-        f"parameter '{spec.name}' is deprecated and will be removed in the next release: "
-        f"use 'qos_overrides.{topic}.publisher.{spec.replaced_by}' instead (rclpy's "
-        f'standard QoS parameters; likewise for imu/mag, imu/temperature and the other '
-        f'topics). Until then it still sets the data topics (imu/raw_data, imu/mag, '
-        f'imu/temperature).')
+        f"parameter '{spec.name}' is deprecated and will be removed in the next release: use "
+        f"'qos_overrides.{topic}.publisher.{spec.replaced_by}' instead (rclpy's standard QoS "
+        'parameters; likewise for imu/mag, imu/temperature and the other topics). Until then '
+        'it still sets the data topics (imu/raw_data, imu/mag, imu/temperature).')
 
 
 def _declare(node: Node, spec: Spec) -> Any:
