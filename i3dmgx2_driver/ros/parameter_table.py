@@ -174,7 +174,7 @@ def _device_setting(name: str, kind: Kind, description: str,
 def _bias(name: str, what: str, unit: str, command: str) -> Spec:
     """Return the row of a bias written to the sensor at every start ([]: the sensor's own)."""
     return Spec(name, DOUBLES, [], f"{what} bias [x, y, z] ({unit}, the sensor's axes and units) "
-                f"written to the sensor at every start ({command}) and checked against its echo; "
+                f'written to the sensor at every start ({command}) and checked against its echo; '
                 "[]: leave the sensor's own. One sensor only (not with addresses).",
                 valid=f'[] (as the sensor is), or three finite numbers [x, y, z] in {unit}',
                 accepts=lambda v: not v or (len(v) == 3 and all(map(math.isfinite, v))),
