@@ -40,10 +40,9 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
-from .diagnostic_statuses import (
-    calibration_status, connection_status, device_status, lifecycle_status, parser_status,
-    radio_status, Status, stream_status, StreamPeriod, time_status, to_message,
-)
+from .diagnostic_statuses import (calibration_status, connection_status, device_status,
+                                  lifecycle_status, parser_status, radio_status, Status,
+                                  stream_status, StreamPeriod, time_status, to_message)
 from .mag_calibration import is_loaded
 from .publishers import create_publisher
 from ..device.record_rate import RateMeter
@@ -107,17 +106,14 @@ class DiagnosticsPublisher:
             except Exception:  # noqa: BLE001 - said once; the stream goes on without it
                 if not failed:
                     failed = True
-                    self.node.get_logger().error(
-                        f'diagnostics failed:\n{traceback.format_exc()}')
+                    self.node.get_logger().error(f'diagnostics failed:\n{traceback.format_exc()}')
 
     def _forget(self) -> None:
         """Start the per-period comparisons afresh (a new core counts from zero)."""
         self._rate = RateMeter()
-        self._last_published = 0
-        self._last_lost = 0
-        self._last_parser: dict[str, int] | None = None
-        self._last_good_frames = 0
-        self._last_radio: RadioStats | None = None
+        #: What the last tick saw: records published and lost, good frames, parser, radio.
+        self._last: tuple[int, int, int, dict[str, int] | None, RadioStats | None] = (
+            0, 0, 0, None, None)
 
     def collect(self, device: DeviceStatus | None = None) -> list[Status]:
         """
@@ -137,57 +133,38 @@ class DiagnosticsPublisher:
         if core is not self._core():
             self._core = weakref.ref(core) if core is not None else (lambda: None)
             self._forget()
-        if core is None or device is None:
-            self._last_tick = time.monotonic()
-            return statuses
-        cfg = core.config
-        stats = core.records.stats
         now = time.monotonic()
-        period = now - self._last_tick
-        self._last_tick = now
-        published = stats.published
+        period, self._last_tick = now - self._last_tick, now
+        if core is None or device is None:
+            return statuses
+        cfg, stats, parser = core.config, core.records.stats, device.parser
+        published, lost, good_frames = stats.published, stats.lost, parser.get('good_frames', 0)
+        last_published, last_lost, last_good_frames, last_parser, last_radio = self._last
+        # Disconnected: show the last link's numbers.
+        radio = device.radio if device.radio is not None else last_radio
         seen = StreamPeriod(
-            label=core.stream.label,
+            label=core.stream.label, received=published - last_published, period=period,
             measured_hz=self._rate.update(published, stats.last_time,
                                           device.state is State.STREAMING),
-            received=published - self._last_published, period=period,
             silent_for=time.time() - stats.last_time if stats.last_time else None,
-            published=published, lost=stats.lost, lost_in_period=stats.lost - self._last_lost,
+            published=published, lost=lost, lost_in_period=lost - last_lost,
             device_resets=stats.device_resets, other_records=device.other_records,
             mag_published=stats.published_on.get('mag', 0),
             operation=core.device_services.operation)
-        self._last_published = published
-        self._last_lost = stats.lost
-        parser = device.parser
-        fresh = parser.get('good_frames', 0) > self._last_good_frames
-        self._last_good_frames = parser.get('good_frames', 0)
-        radio = device.radio
-        if radio is None:
-            radio = self._last_radio  # disconnected: show the last link's numbers
-        self._last_radio = radio
-        services = core.device_services
-        last, good = services.calibration()
-        statuses += [
-            connection_status(device, core.raw_capture.describe(),
-                              core.fault_capture.describe()),
-            stream_status(device, seen),
-            radio_status(device.wireless, radio, fresh),
-            parser_status(parser, self._last_parser, device.strays),
-            device_status(device, core.sensor.address, core.temperature.latest,
-                          core.temperature.unavailable),
-            time_status(cfg.time_source, core.records.clock_status(), now,
-                        time_offset=cfg.time_offset),
-            calibration_status(last, good, time.time(),
-                               is_loaded(cfg.messages_for(core.sensor))),
-        ]
-        self._last_parser = parser
-        return statuses
-
-    @staticmethod
-    def hardware_id(device: DeviceStatus | None) -> str:
-        """Return the device's serial number once known, else ''."""
-        info = device.info if device is not None else None
-        return info.serial_number if info is not None and info.serial_number else ''
+        self._last = (published, lost, good_frames, parser, radio)
+        last, good = core.device_services.calibration()
+        return [*statuses,
+                connection_status(device, core.raw_capture.describe(),
+                                  core.fault_capture.describe()),
+                stream_status(device, seen),
+                radio_status(device.wireless, radio, good_frames > last_good_frames),
+                parser_status(parser, last_parser, device.strays),
+                device_status(device, core.sensor.address, core.temperature.latest,
+                              core.temperature.unavailable),
+                time_status(cfg.time_source, core.records.clock_status(), now,
+                            time_offset=cfg.time_offset),
+                calibration_status(last, good, time.time(),
+                                   is_loaded(cfg.messages_for(core.sensor)))]
 
     def tick(self) -> None:
         """Build and publish one DiagnosticArray (the timer callback)."""
@@ -195,7 +172,10 @@ class DiagnosticsPublisher:
         array.header.stamp = self.node.get_clock().now().to_msg()
         core = self._driver()
         device = core.supervisor.status() if core is not None else None
-        array.status = to_message(self.collect(device), self.hardware_id(device), self.prefix)
+        info = device.info if device is not None else None
+        # The hardware id: the device's serial number once known.
+        serial = info.serial_number if info is not None and info.serial_number else ''
+        array.status = to_message(self.collect(device), serial, self.prefix)
         try:
             self.publisher.publish(array)
         except RCLError:

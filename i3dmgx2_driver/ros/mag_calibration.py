@@ -69,10 +69,9 @@ def is_matrix_list(values: Sequence[float]) -> bool:
     for k in range(0, len(values), 9):
         a, b, c, d, e, f, g, h, i = values[k:k + 9]
         tolerance = SYMMETRY * max(abs(v) for v in values[k:k + 9])
-        if abs(b - d) > tolerance or abs(c - g) > tolerance or abs(f - h) > tolerance:
-            return False
+        symmetric = abs(b - d) <= tolerance and abs(c - g) <= tolerance and abs(f - h) <= tolerance
         # Sylvester: every leading minor positive (NaN fails every comparison).
-        if not (a > 0 and a * e - b * d > 0
+        if not (symmetric and a > 0 and a * e - b * d > 0
                 and a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) > 0):
             return False
     return True

@@ -43,7 +43,7 @@ The QoS of the publishers is not here: rclpy declares its standard
 and ``qos_depth`` remain for one release, warned about when given.
 """
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import fields
 import math
 from typing import Any, NamedTuple
@@ -57,9 +57,8 @@ from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 from ..codec.orientation import CONVENTIONS
 from ..device.realtime import MAX_PRIORITY, ThreadPolicy
-from ..device.settings import DeviceConfig, Vector3
+from ..device.settings import DeviceConfig
 
-TIME_SOURCES = ('device', 'host')
 #: Default standard deviations, per axis. No noise density of the 3DM-GX2 was
 #: found in a source we can cite, so these are the per-sample figures the ROS 1
 #: driver for this very sensor uses (ros-drivers/microstrain_3dmgx2_imu,
@@ -71,7 +70,6 @@ ANGULAR_VELOCITY_STDDEV = 0.012
 LINEAR_ACCELERATION_STDDEV = 0.098
 #: Largest ``time_offset`` (s) either way: far beyond any radio's latency.
 TIME_OFFSET_LIMIT = 10.0
-RELIABILITIES = ('reliable', 'best_effort')
 #: The default of a parameter that has none: it must be given.
 REQUIRED = object()
 #: The names of the parameters read where they are used (``feeds='node'``, and the
@@ -99,8 +97,8 @@ class Kind(NamedTuple):
     also: tuple[Parameter.Type, Callable[[Any], Any]] | None = None
 
 
-def _code_text(code: int) -> str:
-    return f'0x{code:02X}'
+#: A command byte as people write it: 194 -> '0xC2'.
+_code_text = '0x{:02X}'.format
 
 
 BOOL = Kind(Parameter.Type.BOOL, 'true or false', 'true or false')
@@ -114,11 +112,10 @@ CODE = TEXT._replace(also=(Parameter.Type.INTEGER, _code_text))
 INTEGERS = Kind(Parameter.Type.INTEGER_ARRAY, 'a list of integers, e.g. [17, 95]')
 #: ``-p data_rates:=[100, 50]`` is a list of integers, meant as doubles.
 DOUBLES = Kind(Parameter.Type.DOUBLE_ARRAY, 'a list of numbers, e.g. [100.0, 50.0]',
-               also=(Parameter.Type.INTEGER_ARRAY, lambda values: [float(v) for v in values]))
+               also=(Parameter.Type.INTEGER_ARRAY, lambda values: list(map(float, values))))
 NAMES = Kind(Parameter.Type.STRING_ARRAY, 'a list of names, e.g. [left, right]')
 #: Names or command bytes, as :data:`CODE`.
-CODES = NAMES._replace(also=(Parameter.Type.INTEGER_ARRAY,
-                             lambda codes: [_code_text(c) for c in codes]))
+CODES = NAMES._replace(also=(Parameter.Type.INTEGER_ARRAY, lambda c: list(map(_code_text, c))))
 
 
 class Spec(NamedTuple):
@@ -153,15 +150,10 @@ class Spec(NamedTuple):
     def valid_range(self) -> str:
         """Return what is valid, as its refusals and ``ros2 param describe`` say it."""
         if self.choices:
-            return 'one of ' + ', '.join(repr(c) for c in self.choices)
-        if self.valid:
-            return self.valid
-        if self.empty_ok:
-            return "a string, or '' (off)"
-        if self.limits is not None:
-            low, high = self.limits
-            return f'{low:g}..{high:g}'
-        return self.kind.valid
+            return 'one of ' + ', '.join(map(repr, self.choices))
+        if self.valid or self.empty_ok or self.limits is None:
+            return self.valid or ("a string, or '' (off)" if self.empty_ok else self.kind.valid)
+        return f'{self.limits[0]:g}..{self.limits[1]:g}'
 
 
 def _names_a_stream(text: str) -> bool:
@@ -172,32 +164,21 @@ def _names_a_stream(text: str) -> bool:
         return False
 
 
-def _off_or_a_rate(rate: float) -> bool:
-    """0 leaves the device's rate; any other must be one its divider can give."""
-    return not rate or MIN_RATE_HZ <= rate <= MAX_RATE_HZ
-
-
-def _bias_valid(unit: str) -> str:
-    return f'[] (as the sensor is), or three finite numbers [x, y, z] in {unit}'
-
-
-def _is_bias(value: Sequence[float]) -> bool:
-    return not value or (len(value) == 3 and all(math.isfinite(v) for v in value))
-
-
-def _bias_vector(value: Sequence[float]) -> Vector3 | None:
-    """Return a bias parameter's three values, or None when it is [] (left to the sensor)."""
-    if not value:
-        return None
-    x, y, z = value
-    return float(x), float(y), float(z)
-
-
 def _device_setting(name: str, kind: Kind, description: str,
-                    limits: tuple[float, float] | None = None) -> Spec:
-    """Return the row of a parameter that sets the ``DeviceConfig`` field of its name."""
-    return Spec(name, kind, DEVICE_DEFAULTS[name], description, limits,
-                feeds=f'device.{name}')
+                    limits: tuple[float, float] | None = None, field: str = '') -> Spec:
+    """Return the row of a parameter that sets a ``DeviceConfig`` field (of its name)."""
+    field = field or name
+    return Spec(name, kind, DEVICE_DEFAULTS[field], description, limits, feeds=f'device.{field}')
+
+
+def _bias(name: str, what: str, unit: str, command: str) -> Spec:
+    """Return the row of a bias written to the sensor at every start ([]: the sensor's own)."""
+    return Spec(name, DOUBLES, [], f"{what} bias [x, y, z] ({unit}, the sensor's axes and units) "
+                f'written to the sensor at every start ({command}) and checked against its echo; '
+                "[]: leave the sensor's own. One sensor only (not with addresses).",
+                valid=f'[] (as the sensor is), or three finite numbers [x, y, z] in {unit}',
+                accepts=lambda v: not v or (len(v) == 3 and all(map(math.isfinite, v))),
+                feeds=f'device.{name}', convert=lambda v: tuple(map(float, v)) or None)
 
 
 def _one_for_all(single: str) -> str:
@@ -208,185 +189,136 @@ def _one_for_all(single: str) -> str:
 _ONE_NAME_EACH = '[] (the default), or one distinct name per address'
 
 
-#: Several sensors behind one base station, served by one driver (ros/sensor_set.py).
-SENSOR_SET_SPECS = (
-    Spec('addresses', INTEGERS, [],
-         'Node addresses of several sensors behind the one base station, served by this '
-         "driver (instead of 'address'); each gets its topics under its name (see Several "
-         'sensors).',
-         valid=f"[] (then 'address'), or distinct addresses {MIN_ADDRESS}..{MAX_ADDRESS}",
-         feeds='sensors'),
-    Spec('sensor_names', NAMES, [],
-         "With addresses: each sensor's name, the prefix of its topics (<name>/raw_data); "
-         "default imu_<address>. For one sensor: 'imu'.", valid=_ONE_NAME_EACH,
-         feeds='sensors'),
-    Spec('frame_ids', NAMES, [],
-         "With addresses: each sensor's frame; default <name>_link (frame_id is one "
-         "sensor's).", valid=_ONE_NAME_EACH, feeds='sensors'),
-    Spec('streams', CODES, [],
-         "With addresses: each sensor's stream (or one for all); default: stream for all.",
-         valid=_one_for_all('stream'), feeds='sensors'),
-    Spec('data_rates', DOUBLES, [],
-         "With addresses: each sensor's data rate (Hz; or one for all; 0: as the device "
-         'is); default: data_rate for all. Together they must fit the serial line.',
-         valid=_one_for_all('data_rate'), feeds='sensors'),
-)
-
-
 SPECS: list[Spec] = [
-    Spec('port', TEXT, '/dev/ttyUSB0',
-         'Serial port of the base station (or wired sensor).', feeds='device.port'),
-    Spec('address', INTEGER, REQUIRED,
-         'Node address of the sensor (factory: last two digits of its serial number).',
-         (MIN_ADDRESS, MAX_ADDRESS), unless='addresses', feeds='sensors'),
-    # Several sensors behind one base station (ros/sensor_set.py): the defaults,
-    # empty, leave the one sensor of 'address' as it always was.
-    *SENSOR_SET_SPECS,
-    Spec('baud', INTEGER, DEVICE_DEFAULTS['baud'], 'Serial baud rate.',
-         (9600, 921600),
-         feeds='device.baud'),
-    Spec('wireless', BOOL, DEVICE_DEFAULTS['wireless'],
-         'True: through a wireless base station (packets, ACK/NACK); false: wired sensor.',
-         feeds='device.wireless'),
-    Spec('stream', CODE, streams.DEFAULT.name,
-         'What the sensor streams: a stream name, or the command byte of its record as '
-         "text (e.g. '0xC2'); see Choosing a stream. With data_rate it must fit the "
-         'serial line, or the node refuses to start.',
+    Spec('port', TEXT, '/dev/ttyUSB0', 'Serial port of the base station (or wired sensor).',
+         feeds='device.port'),
+    Spec('address', INTEGER, REQUIRED, 'Node address of the sensor (factory: last two digits of '
+         'its serial number).', (MIN_ADDRESS, MAX_ADDRESS), unless='addresses', feeds='sensors'),
+    # Several sensors behind one base station, served by one driver (ros/sensor_set.py):
+    # the defaults, empty, leave the one sensor of 'address' as it always was.
+    Spec('addresses', INTEGERS, [], 'Node addresses of several sensors behind the one base '
+         "station, served by this driver (instead of 'address'); each gets its topics under its "
+         'name (see Several sensors).', feeds='sensors',
+         valid=f"[] (then 'address'), or distinct addresses {MIN_ADDRESS}..{MAX_ADDRESS}"),
+    Spec('sensor_names', NAMES, [], "With addresses: each sensor's name, the prefix of its "
+         "topics (<name>/raw_data); default imu_<address>. For one sensor: 'imu'.",
+         valid=_ONE_NAME_EACH, feeds='sensors'),
+    Spec('frame_ids', NAMES, [], "With addresses: each sensor's frame; default <name>_link "
+         "(frame_id is one sensor's).", valid=_ONE_NAME_EACH, feeds='sensors'),
+    Spec('streams', CODES, [], "With addresses: each sensor's stream (or one for all); default: "
+         'stream for all.', valid=_one_for_all('stream'), feeds='sensors'),
+    Spec('data_rates', DOUBLES, [], "With addresses: each sensor's data rate (Hz; or one for "
+         'all; 0: as the device is); default: data_rate for all. Together they must fit the '
+         'serial line.', valid=_one_for_all('data_rate'), feeds='sensors'),
+    _device_setting('baud', INTEGER, 'Serial baud rate.', (9600, 921600)),
+    _device_setting('wireless', BOOL, 'True: through a wireless base station (packets, '
+                    'ACK/NACK); false: wired sensor.'),
+    Spec('stream', CODE, streams.DEFAULT.name, 'What the sensor streams: a stream name, or the '
+         "command byte of its record as text (e.g. '0xC2'); see Choosing a stream. With "
+         'data_rate it must fit the serial line, or the node refuses to start.',
          valid=streams.valid_text(), accepts=_names_a_stream, feeds='sensors'),
-    Spec('frame_id', TEXT, 'imu_link',
-         'Frame of the published messages (_ned is appended in the ned convention).',
-         feeds='sensors'),
-    Spec('frame_convention', TEXT, 'enu',
-         'enu: REP-103 (ENU world, x-forward/y-left/z-up body); ned: device axes '
-         '(NED world, x-forward/y-right/z-down body).', choices=CONVENTIONS,
+    Spec('frame_id', TEXT, 'imu_link', 'Frame of the published messages (_ned is appended in the '
+         'ned convention).', feeds='sensors'),
+    Spec('frame_convention', TEXT, 'enu', 'enu: REP-103 (ENU world, x-forward/y-left/z-up body); '
+         'ned: device axes (NED world, x-forward/y-right/z-down body).', choices=CONVENTIONS,
          feeds='messages.frame_convention'),
     Spec('orientation_stddev', DOUBLE, ORIENTATION_STDDEV,
          'Orientation standard deviation (rad); 0: unknown. Default: 2.0 degrees, the '
          "3DM-GX2 datasheet's dynamic orientation accuracy (0.5 degrees static), as the ROS 1 "
          'microstrain_3dmgx2_imu driver.', (0.0, 10.0), feeds='messages.orientation_stddev'),
-    Spec('angular_velocity_stddev', DOUBLE, ANGULAR_VELOCITY_STDDEV,
-         'Angular velocity standard deviation (rad/s); 0: unknown. Default: the ROS 1 '
-         "microstrain_3dmgx2_imu driver's figure for this sensor.", (0.0, 10.0),
-         feeds='messages.angular_velocity_stddev'),
+    Spec('angular_velocity_stddev', DOUBLE, ANGULAR_VELOCITY_STDDEV, 'Angular velocity standard '
+         "deviation (rad/s); 0: unknown. Default: the ROS 1 microstrain_3dmgx2_imu driver's "
+         'figure for this sensor.', (0.0, 10.0), feeds='messages.angular_velocity_stddev'),
     Spec('linear_acceleration_stddev', DOUBLE, LINEAR_ACCELERATION_STDDEV,
          'Linear acceleration standard deviation (m/s^2); 0: unknown. Default: the ROS 1 '
          "microstrain_3dmgx2_imu driver's figure for this sensor (10 mg).", (0.0, 100.0),
          feeds='messages.linear_acceleration_stddev'),
-    Spec('magnetic_field_stddev', DOUBLE, 0.0,
-         'Magnetic field standard deviation (T); 0: unknown (no published figure).',
-         (0.0, 1.0), feeds='messages.magnetic_field_stddev'),
+    Spec('magnetic_field_stddev', DOUBLE, 0.0, 'Magnetic field standard deviation (T); 0: '
+         'unknown (no published figure).', (0.0, 1.0), feeds='messages.magnetic_field_stddev'),
     # The field's calibration (ros/mag_calibration.py), measured by magcal (docs/magcal.md).
-    Spec(HARD_IRON, DOUBLES, list(ZERO),
-         "Hard-iron offset [x, y, z] (T, the sensor's own axes: x forward, y right, z down) "
-         'taken off the field before it is published (imu/mag); with addresses, 3 for all '
-         'or 3 per sensor. Measured by magcal.', valid='3 finite numbers (T), or 3 per sensor',
-         accepts=is_offset_list),
+    Spec(HARD_IRON, DOUBLES, list(ZERO), "Hard-iron offset [x, y, z] (T, the sensor's own axes: "
+         'x forward, y right, z down) taken off the field before it is published (imu/mag); with '
+         'addresses, 3 for all or 3 per sensor. Measured by magcal.',
+         valid='3 finite numbers (T), or 3 per sensor', accepts=is_offset_list),
     Spec(SOFT_IRON, DOUBLES, list(IDENTITY),
          'Soft-iron matrix (row-major, 9 values) the field is multiplied by once the hard '
          'iron is off, in the same axes; with addresses, 9 for all or 9 per sensor. '
-         'Measured by magcal.',
-         valid='a symmetric (within 1e-6 relative), positive-definite 3x3 matrix, row-major '
-               '(9 numbers), or 9 per sensor', accepts=is_matrix_list),
-    Spec('time_source', TEXT, 'device',
-         'device: sample time from the sensor timer aligned to the host clock; '
-         'host: time the packet was read.', choices=TIME_SOURCES),
-    Spec('time_offset', DOUBLE, 0.0,
-         'Seconds added to every stamp (imu/raw_data, imu/mag, imu/temperature), for the '
-         "radio's latency the host cannot see; shown on /diagnostics (status time).",
-         (-TIME_OFFSET_LIMIT, TIME_OFFSET_LIMIT)),
-    Spec('qos_reliability', TEXT, 'reliable',
-         'Deprecated (removed in the next release): use '
+         'Measured by magcal.', valid='a symmetric (within 1e-6 relative), positive-definite '
+         '3x3 matrix, row-major (9 numbers), or 9 per sensor', accepts=is_matrix_list),
+    Spec('time_source', TEXT, 'device', 'device: sample time from the sensor timer aligned to '
+         'the host clock; host: time the packet was read.', choices=('device', 'host')),
+    Spec('time_offset', DOUBLE, 0.0, 'Seconds added to every stamp (imu/raw_data, imu/mag, '
+         "imu/temperature), for the radio's latency the host cannot see; shown on /diagnostics "
+         '(status time).', (-TIME_OFFSET_LIMIT, TIME_OFFSET_LIMIT)),
+    Spec('qos_reliability', TEXT, 'reliable', 'Deprecated (removed in the next release): use '
          'qos_overrides./imu/raw_data.publisher.reliability. QoS reliability of the data '
          'publishers (best_effort does not match reliable subscribers).',
-         choices=RELIABILITIES, replaced_by='reliability'),
-    Spec('qos_depth', INTEGER, 10,
-         'Deprecated (removed in the next release): use '
-         'qos_overrides./imu/raw_data.publisher.depth. QoS history depth of the data '
-         'publishers.', (1, 1000), replaced_by='depth'),
-    Spec('read_timeout', DOUBLE, DEVICE_DEFAULTS['stall_timeout'],
-         'Seconds without data before the stream counts as stalled.', (0.1, 60.0),
-         feeds='device.stall_timeout'),
-    Spec('reconnect_interval', DOUBLE, DEVICE_DEFAULTS['reconnect_interval'],
-         'Seconds between attempts to reopen a lost port.', (0.1, 60.0),
-         feeds='device.reconnect_interval'),
+         choices=('reliable', 'best_effort'), replaced_by='reliability'),
+    Spec('qos_depth', INTEGER, 10, 'Deprecated (removed in the next release): use '
+         'qos_overrides./imu/raw_data.publisher.depth. QoS history depth of the data publishers.',
+         (1, 1000), replaced_by='depth'),
+    _device_setting('read_timeout', DOUBLE, 'Seconds without data before the stream counts '
+                    'as stalled.', (0.1, 60.0), field='stall_timeout'),
+    _device_setting('reconnect_interval', DOUBLE,
+                    'Seconds between attempts to reopen a lost port.', (0.1, 60.0)),
     # How patient the dialogue is (device/timeouts.py has each default and why).
     _device_setting('request_timeout', DOUBLE,
                     "Seconds to wait for a command's reply, per try (a slow radio link may "
                     'need more; bringup measures the round trips).', (0.05, 10.0)),
     _device_setting('request_retries', INTEGER,
                     'Tries of a command before the sensor counts as not answering.', (1, 20)),
-    _device_setting('continuous_retries', INTEGER,
-                    'Tries of the continuous-mode request before the stream counts as not '
-                    'started.', (1, 20)),
+    _device_setting('continuous_retries', INTEGER, 'Tries of the continuous-mode request before '
+                    'the stream counts as not started.', (1, 20)),
     _device_setting('fast_reconnect', BOOL,
                     'After a reconnect, confirm the sensor already identified with one '
                     'serial-number read; false: the full start-up dialogue every time.'),
     _device_setting('resume_timeout', DOUBLE,
                     "Seconds per try of a fast reconnect's serial-number read (short: a reply "
                     'lost in a stall is asked again soon after the radio is back).', (0.02, 5.0)),
-    _device_setting('resume_retries', INTEGER,
-                    "Tries of a fast reconnect's serial-number read before the full dialogue.",
-                    (1, 20)),
+    _device_setting('resume_retries', INTEGER, "Tries of a fast reconnect's serial-number read "
+                    'before the full dialogue.', (1, 20)),
     Spec('publish_mag', BOOL, True,
          'Publish sensor_msgs/MagneticField on imu/mag (NaN readings are skipped).'),
-    Spec('data_rate', DOUBLE, 0.0,
-         f'Data rate (Hz) to write to the device (EEPROM 0xFCA2, persists); 0: leave the '
-         f'device as it is; otherwise {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f}, and the stream '
-         f'must fit the serial line at that rate (see Choosing a stream).',
-         (0.0, round(MAX_RATE_HZ, 1)),
+    Spec('data_rate', DOUBLE, 0.0, 'Data rate (Hz) to write to the device (EEPROM 0xFCA2, '
+         f'persists); 0: leave the device as it is; otherwise {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f}, '
+         'and the stream must fit the serial line at that rate (see Choosing a stream).',
+         (0.0, round(MAX_RATE_HZ, 1)), feeds='sensors',
          valid=f'0 (leave the device as it is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz',
-         accepts=_off_or_a_rate, feeds='sensors'),
-    Spec('low_latency', BOOL, DEVICE_DEFAULTS['low_latency'],
-         'Put the serial port in Linux low-latency mode (USB adapters) when it supports it.',
-         feeds='device.low_latency'),
-    Spec(GYRO_BIAS_SAMPLING_MS, INTEGER, 10000,
-         'Sampling time (ms) of ~/capture_gyro_bias (0xCD); the sensor must stay still that '
-         'long. The protocol advises 10000..30000; down to 100 is accepted for tests and the '
-         'simulator, at the cost of a noisier bias.',
+         # 0 leaves the device's rate; any other must be one its divider can give.
+         accepts=lambda rate: not rate or MIN_RATE_HZ <= rate <= MAX_RATE_HZ),
+    _device_setting('low_latency', BOOL, 'Put the serial port in Linux low-latency mode (USB '
+                    'adapters) when it supports it.'),
+    Spec(GYRO_BIAS_SAMPLING_MS, INTEGER, 10000, 'Sampling time (ms) of ~/capture_gyro_bias '
+         '(0xCD); the sensor must stay still that long. The protocol advises 10000..30000; down '
+         'to 100 is accepted for tests and the simulator, at the cost of a noisier bias.',
          (100, 30000), read_only=False, feeds='node'),
-    Spec('capture_gyro_bias_on_start', BOOL, False,
-         'Capture the gyro bias once, right after streaming first starts (the sensor must '
-         'be still then).'),
+    Spec('capture_gyro_bias_on_start', BOOL, False, 'Capture the gyro bias once, right after '
+         'streaming first starts (the sensor must be still then).'),
     # A calibration that lasts (README, Calibration): known biases written at every
     # start, and where a capture writes its result for the next start.
-    Spec(GYRO_BIAS, DOUBLES, [],
-         "Gyro bias [x, y, z] (rad/s, the sensor's axes and units) written to the sensor "
-         "at every start (0xCA) and checked against its echo; []: leave the sensor's own. "
-         'One sensor only (not with addresses).', valid=_bias_valid('rad/s'), accepts=_is_bias,
-         feeds='device.gyro_bias', convert=_bias_vector),
-    Spec(ACCEL_BIAS, DOUBLES, [],
-         "Accelerometer bias [x, y, z] (g, the sensor's axes and units) written to the "
-         "sensor at every start (0xC9) and checked against its echo; []: leave the sensor's "
-         'own. One sensor only (not with addresses).', valid=_bias_valid('g'), accepts=_is_bias,
-         feeds='device.accel_bias', convert=_bias_vector),
-    Spec(CALIBRATION_FILE, TEXT, '',
-         'An accepted ~/capture_gyro_bias writes its bias to this YAML parameter file '
-         "(gyro_bias under the node's name, overwritten), to load at the next start; "
-         "'': off.", empty_ok=True, feeds='node'),
-    Spec('temperature_period', DOUBLE, 0.0,
-         'Seconds between polls of the temperatures (0xD1), published on imu/temperature; '
-         '0: off.', (0.0, 3600.0)),
-    Spec('realtime_priority', INTEGER, 0,
-         'SCHED_FIFO priority of the thread that reads the port and publishes; 0: normal '
-         'scheduling. Where the system refuses it (no rtprio limit) one warning is logged and '
-         'the thread runs as usual.', (0, MAX_PRIORITY),
+    _bias(GYRO_BIAS, 'Gyro', 'rad/s', '0xCA'),
+    _bias(ACCEL_BIAS, 'Accelerometer', 'g', '0xC9'),
+    Spec(CALIBRATION_FILE, TEXT, '', 'An accepted ~/capture_gyro_bias writes its bias to this '
+         "YAML parameter file (gyro_bias under the node's name, overwritten), to load at the "
+         "next start; '': off.", empty_ok=True, feeds='node'),
+    Spec('temperature_period', DOUBLE, 0.0, 'Seconds between polls of the temperatures (0xD1), '
+         'published on imu/temperature; 0: off.', (0.0, 3600.0)),
+    Spec('realtime_priority', INTEGER, 0, 'SCHED_FIFO priority of the thread that reads the port '
+         'and publishes; 0: normal scheduling. Where the system refuses it (no rtprio limit) one '
+         'warning is logged and the thread runs as usual.', (0, MAX_PRIORITY),
          feeds='device.thread_policy', convert=ThreadPolicy),
-    Spec('capture_file', TEXT, '',
-         'Write every byte read from the port, with its receive time, to this capture file '
-         '(GX2CAP format, overwritten; replay with i3dmgx2_driver.tools.replay); '
-         "'': off.",
-         empty_ok=True),
+    Spec('capture_file', TEXT, '', 'Write every byte read from the port, with its receive time, '
+         'to this capture file (GX2CAP format, overwritten; replay with '
+         "i3dmgx2_driver.tools.replay); '': off.", empty_ok=True),
     # The fault capture (capture/fault_capture.py FaultCapture): the last seconds, kept always.
     Spec('fault_capture_dir', TEXT, '~/.ros/i3dmgx2_captures',
          'Keep the last fault_capture_seconds of bytes read from the port in memory, and '
          'write them to a capture file in this directory (named by UTC time and cause) on a '
          'stall, a disconnect, a device reset, a burst of corrupted packets, a refused '
-         "command, or a ~/save_capture call; '': off.",
-         empty_ok=True),
+         "command, or a ~/save_capture call; '': off.", empty_ok=True),
     Spec('fault_capture_seconds', DOUBLE, 30.0,
          'Seconds of the port kept in memory for a fault capture (also the least time '
          'between two of its files: faults closer together share one).', (1.0, 600.0)),
     Spec('fault_captures_kept', INTEGER, 20,
-         'Fault capture files kept in fault_capture_dir; the oldest are deleted.',
-         (1, 10000)),
+         'Fault capture files kept in fault_capture_dir; the oldest are deleted.', (1, 10000)),
 ]

@@ -61,8 +61,10 @@ from ..device.settings import DeviceConfig
 
 #: How alike two names must be (difflib's ratio) for "did you mean".
 CLOSE_ENOUGH = 0.6
-_ARRAYS = (Parameter.Type.INTEGER_ARRAY, Parameter.Type.DOUBLE_ARRAY,
-           Parameter.Type.STRING_ARRAY)
+_ARRAYS = (Parameter.Type.INTEGER_ARRAY, Parameter.Type.DOUBLE_ARRAY, Parameter.Type.STRING_ARRAY)
+#: The descriptor's range of a number parameter: its field, its type, its bounds' type, its step.
+_RANGES = {Parameter.Type.INTEGER: ('integer_range', IntegerRange, int, 1),
+           Parameter.Type.DOUBLE: ('floating_point_range', FloatingPointRange, float, 0.0)}
 
 
 class ParameterError(ValueError):
@@ -102,7 +104,8 @@ class DriverConfig:
 
     def device_for(self, sensor: SensorSetting) -> DeviceConfig:
         """Return how the device side reaches and treats ``sensor``."""
-        return _sensor_device(self.device, sensor)
+        return replace(self.device, address=sensor.address, data_rate_hz=sensor.data_rate_hz,
+                       stream=sensor.stream_choice.code)
 
     def messages_for(self, sensor: SensorSetting) -> MessageSettings:
         """Return how ``sensor``'s records become messages (its frame, stream, calibration)."""
@@ -112,22 +115,14 @@ class DriverConfig:
                        mag_soft_iron=one_sensors(self.mag_soft_iron, 9, index))
 
 
-def _sensor_device(device: DeviceConfig, sensor: SensorSetting) -> DeviceConfig:
-    return replace(device, address=sensor.address, data_rate_hz=sensor.data_rate_hz,
-                   stream=sensor.stream_choice.code)
-
-
 def _descriptor(spec: Spec) -> ParameterDescriptor:
-    descriptor = ParameterDescriptor(
-        description=spec.description, read_only=spec.read_only,
-        additional_constraints=f'valid: {spec.valid_range()}')
-    if spec.limits is not None and spec.kind.type_ == Parameter.Type.INTEGER:
-        descriptor.integer_range = [IntegerRange(
-            from_value=int(spec.limits[0]), to_value=int(spec.limits[1]), step=1)]
-    elif spec.limits is not None and spec.kind.type_ == Parameter.Type.DOUBLE:
-        descriptor.floating_point_range = [FloatingPointRange(
-            from_value=float(spec.limits[0]), to_value=float(spec.limits[1]), step=0.0)]
-    return descriptor
+    ranges = {}
+    if spec.limits is not None and spec.kind.type_ in _RANGES:
+        field, range_, number, step = _RANGES[spec.kind.type_]
+        low, high = map(number, spec.limits)
+        ranges[field] = [range_(from_value=low, to_value=high, step=step)]
+    return ParameterDescriptor(description=spec.description, read_only=spec.read_only,
+                               additional_constraints=f'valid: {spec.valid_range()}', **ranges)
 
 
 def given_value(node: Node, name: str) -> Any:
@@ -161,20 +156,16 @@ def _warn_deprecated(node: Node, spec: Spec) -> None:
     """Name the standard parameter that replaces a deprecated one the user gave."""
     topic = node.resolve_topic_name('imu/raw_data')
     node.get_logger().warning(
-        f"parameter '{spec.name}' is deprecated and will be removed in the next release: "
-        f"use 'qos_overrides.{topic}.publisher.{spec.replaced_by}' instead (rclpy's "
-        f'standard QoS parameters; likewise for imu/mag, imu/temperature and the other '
-        f'topics). Until then it still sets the data topics (imu/raw_data, imu/mag, '
-        f'imu/temperature).')
+        f"parameter '{spec.name}' is deprecated and will be removed in the next release: use "
+        f"'qos_overrides.{topic}.publisher.{spec.replaced_by}' instead (rclpy's standard QoS "
+        'parameters; likewise for imu/mag, imu/temperature and the other topics). Until then '
+        'it still sets the data topics (imu/raw_data, imu/mag, imu/temperature).')
 
 
 def _declare(node: Node, spec: Spec) -> Any:
-    problem = f'parameter {spec.name!r} must be {spec.valid_range()}'
     given = None
     try:
-        if node.has_parameter(spec.name):
-            pass  # a managed node configured again: read what is there
-        else:
+        if not node.has_parameter(spec.name):  # else a managed node configured again: read it
             given = given_value(node, spec.name)
             if given is not None and spec.replaced_by:
                 _warn_deprecated(node, spec)
@@ -186,7 +177,7 @@ def _declare(node: Node, spec: Spec) -> Any:
                 # The override was read above and is given here, converted.
                 node.declare_parameter(spec.name, value, _descriptor(spec),
                                        ignore_override=True)
-        value = node.get_parameter(spec.name).value
+        return node.get_parameter(spec.name).value
     except ParameterUninitializedException:
         if spec.default is not REQUIRED:
             return list(spec.default)
@@ -196,8 +187,8 @@ def _declare(node: Node, spec: Spec) -> Any:
                              f'-p {spec.name}:=<value> ({spec.valid_range()})') from None
     except InvalidParameterValueException:
         # Out of the descriptor's range: rclpy refused what was given.
-        raise ParameterError(f'{problem}, got {given!r}') from None
-    return value
+        raise ParameterError(f'parameter {spec.name!r} must be {spec.valid_range()}, '
+                             f'got {given!r}') from None
 
 
 def _is_set(node: Node, name: str) -> bool:
@@ -213,16 +204,12 @@ def _is_set(node: Node, name: str) -> bool:
 def _fits(spec: Spec, value: Any) -> bool:
     """Whether ``value`` is what the row allows: its choices, range, kind and ``accepts``."""
     declared = spec.kind.type_
-    if spec.choices and value not in spec.choices:
-        return False
-    if declared == Parameter.Type.STRING and not value and not spec.empty_ok:
-        return False
-    if declared == Parameter.Type.DOUBLE and not math.isfinite(value):
-        return False
-    if spec.limits is not None and declared in (Parameter.Type.INTEGER, Parameter.Type.DOUBLE) \
-            and not spec.limits[0] <= value <= spec.limits[1]:
-        return False
-    return spec.accepts is None or spec.accepts(value)
+    refused = ((spec.choices and value not in spec.choices)
+               or (declared == Parameter.Type.STRING and not value and not spec.empty_ok)
+               or (declared == Parameter.Type.DOUBLE and not math.isfinite(value))
+               or (spec.limits is not None and declared in _RANGES
+                   and not spec.limits[0] <= value <= spec.limits[1]))
+    return not refused and (spec.accepts is None or spec.accepts(value))
 
 
 def _check(spec: Spec, value: Any) -> Any:
@@ -246,10 +233,7 @@ def declare_parameters(node: Node) -> dict[str, Any]:
     last configure of a managed node) are read, not declared again, and
     checked all the same: the same bad value gives the same message.
     """
-    values = {}
-    for spec in SPECS:
-        values[spec.name] = _check(spec, _declare(node, spec))
-    return values
+    return {spec.name: _check(spec, _declare(node, spec)) for spec in SPECS}
 
 
 def driver_config(values: Mapping[str, Any]) -> DriverConfig:
@@ -266,19 +250,17 @@ def driver_config(values: Mapping[str, Any]) -> DriverConfig:
     for spec in SPECS:
         config, _, field = spec.feeds.partition('.')
         if config in fed:
-            value = values[spec.name]
-            fed[config][field or spec.name] = (value if spec.convert is None
-                                               else spec.convert(value))
+            convert = spec.convert or (lambda value: value)
+            fed[config][field or spec.name] = convert(values[spec.name])
     first = sensors[0]
     config = DriverConfig(
-        device=_sensor_device(DeviceConfig(address=first.address, **fed['device']), first),
+        device=DeviceConfig(address=first.address, data_rate_hz=first.data_rate_hz,
+                            stream=first.stream_choice.code, **fed['device']),
         messages=MessageSettings(frame_id=first.frame_id, stream=first.stream_choice,
                                  **fed['messages']),
         sensors=sensors, **fed['driver'])
-    for rule in RULES:
-        refusal = rule(config)
-        if refusal:
-            raise ParameterError(refusal)
+    for refusal in filter(None, (rule(config) for rule in RULES)):
+        raise ParameterError(refusal)
     return config
 
 
@@ -293,11 +275,9 @@ def _shared_line_budget(config: DriverConfig) -> str | None:
 
 def _one_sensors_bias(config: DriverConfig) -> str | None:
     """Refuse a bias given with several sensors: it is one sensor's, and whose is a guess."""
-    if len(config.sensors) == 1:
-        return None
     for name, bias in ((GYRO_BIAS, config.device.gyro_bias),
                        (ACCEL_BIAS, config.device.accel_bias)):
-        if bias is not None:
+        if bias is not None and len(config.sensors) > 1:
             return (f"parameter {name!r} is one sensor's bias: it cannot be given with "
                     f'addresses (several sensors)')
     return None
@@ -323,14 +303,11 @@ def _line_budget(config: DriverConfig) -> str | None:
             f'{stream.name!r}: ' + streams.advice(stream, budget))
 
 
-def _calibration_per_sensor(config: DriverConfig) -> str | None:
-    """Refuse a field calibration that is neither one for all sensors nor one each."""
-    return per_sensor_problem(config.mag_hard_iron, config.mag_soft_iron, len(config.sensors))
-
-
-#: The rules between parameters, each a refusal or None, applied in this order.
+#: The rules between parameters, each a refusal or None, applied in this order; the last
+#: refuses a field calibration that is neither one for all sensors nor one each.
 RULES: tuple[Callable[[DriverConfig], str | None], ...] = (
-    _shared_line_budget, _one_sensors_bias, _line_budget, _calibration_per_sensor)
+    _shared_line_budget, _one_sensors_bias, _line_budget,
+    lambda c: per_sensor_problem(c.mag_hard_iron, c.mag_soft_iron, len(c.sensors)))
 
 
 def unknown_names(given: Iterable[str], known: Iterable[str]) -> list[tuple[str, str | None]]:
@@ -340,11 +317,8 @@ def unknown_names(given: Iterable[str], known: Iterable[str]) -> list[tuple[str,
     Pure, sorted by name, so that messages come in a stable order.
     """
     known = sorted(set(known))
-    out = []
-    for name in sorted(set(given) - set(known)):
-        close = difflib.get_close_matches(name, known, n=1, cutoff=CLOSE_ENOUGH)
-        out.append((name, close[0] if close else None))
-    return out
+    return [(name, (difflib.get_close_matches(name, known, 1, CLOSE_ENOUGH) or [None])[0])
+            for name in sorted(set(given) - set(known))]
 
 
 def unknown_message(name: str, closest: str | None) -> str:

@@ -166,8 +166,7 @@ def applied_file(path: str) -> tuple[list[float], list[float]]:
     if HARD_IRON not in values and SOFT_IRON not in values:
         raise ValueError(f'{path}: no {HARD_IRON} or {SOFT_IRON} in it')
     # rclpy's reader gives a list with a number like 5e-06 back as its text.
-    return tuple([float(v) for v in (ast.literal_eval(given) if isinstance(given, str)
-                                     else given)]
+    return tuple([float(v) for v in (ast.literal_eval(given) if isinstance(given, str) else given)]
                  for given in (values.get(HARD_IRON, ZERO), values.get(SOFT_IRON, IDENTITY)))
 
 
@@ -255,13 +254,11 @@ def fit(sweep: Sweep, planar: bool) -> Fit:
     problem = coverage_problem(sweep, planar)
     if problem:
         raise ValueError(f'{sweep.source}: {problem}')
-    field, warnings = sweep.field, []
+    field, rot = sweep.field, level(sweep.down)
     hard_iron, soft_iron = _solve(sweep, planar)
-    rot = level(sweep.down)
-    if planar:
-        warnings.append('a yaw-only fit sees neither the vertical offset nor the vertical '
-                        'scale, nor iron that turns vertical field into horizontal (it goes '
-                        'into the offset): left 0 and 1; tumble the sensor for a 3-D fit')
+    warnings = ['a yaw-only fit sees neither the vertical offset nor the vertical scale, nor '
+                'iron that turns vertical field into horizontal (it goes into the offset): '
+                'left 0 and 1; tumble the sensor for a 3-D fit'] if planar else []
     corrected = (field - hard_iron) @ soft_iron.T
     before, after = (np.linalg.norm(v @ rot.T[:, :2] if planar else v, axis=1)
                      for v in (field, corrected))
@@ -291,15 +288,13 @@ def fit(sweep: Sweep, planar: bool) -> Fit:
         f'{math.degrees(np.std(residual) / flat):.2f} deg rms after (the residual)']
     if sweep.heading is not None:
         own = _wrap_deg(sweep.heading - truth)
-        lines.append("the sensor's own orientation's heading against the corrected field: "
-                     + _spread(own))
-        lines.append(
-            'advice: the sensor computes its heading from the uncorrected field (it takes no '
-            'correction): move it away from the iron, or fuse the corrected imu/mag with the '
-            'rates in your own filter rather than use its orientation'
-            if np.abs(own).max() > OWN_HEADING_DEG else
-            "advice: the sensor's own orientation is within "
-            f'{OWN_HEADING_DEG:g} deg here: usable as it is')
+        lines += ["the sensor's own orientation's heading against the corrected field: "
+                  + _spread(own),
+                  'advice: the sensor computes its heading from the uncorrected field (it takes '
+                  'no correction): move it away from the iron, or fuse the corrected imu/mag '
+                  'with the rates in your own filter rather than use its orientation'
+                  if np.abs(own).max() > OWN_HEADING_DEG else "advice: the sensor's own "
+                  f'orientation is within {OWN_HEADING_DEG:g} deg here: usable as it is']
     return Fit(hard_iron, soft_iron, planar, lines, warnings)
 
 
@@ -337,9 +332,7 @@ def draw(sweep: Sweep, result: Fit, path: str) -> None:
             ax.plot(points[:, i] * 1e6, points[:, j] * 1e6, '.', ms=2, label=label)
         if k == 0 or not result.planar:
             ax.plot(radius * np.cos(circle), radius * np.sin(circle), 'k-', lw=0.8, label='fit')
-        ax.set_xlabel(f'{"xyz"[i]} (µT)')
-        ax.set_ylabel(f'{"xyz"[j]} (µT)')
-        ax.set_aspect('equal')
+        ax.set(xlabel=f'{"xyz"[i]} (µT)', ylabel=f'{"xyz"[j]} (µT)', aspect='equal')
         ax.grid(True, alpha=0.3)
     fig.axes[0].legend(fontsize=8)
     fig.tight_layout()
@@ -360,8 +353,7 @@ def write_outputs(sweep: Sweep, result: Fit, directory: str) -> list[str]:
     for name, text in (('magcal.yaml', params_yaml(result, sweep.source)),
                        ('magcal.json', json.dumps(document, indent=2) + '\n')):
         written.append(os.path.join(directory, name))
-        with open(written[-1], 'w', encoding='utf-8') as f:
-            f.write(text)
+        Path(written[-1]).write_text(text, encoding='utf-8')
     try:
         draw(sweep, result, os.path.join(directory, 'magcal.png'))
         written.append(os.path.join(directory, 'magcal.png'))
@@ -394,10 +386,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 sweep = undo(sweep, *applied_file(args.applied))
         else:
             from .magcal_live import listen
-
-            def lacks(pairs: list) -> str | None:
-                return coverage_problem(from_messages(pairs, 'live'), args.planar)
-            pairs, applied = listen(args.topic, args.node, args.minutes * 60.0, lacks)
+            pairs, applied = listen(args.topic, args.node, args.minutes * 60.0, lambda pairs:
+                                    coverage_problem(from_messages(pairs, 'live'), args.planar))
             sweep = undo(from_messages(pairs, f'{args.topic} (live)'), *applied)
         result = fit(sweep, args.planar)
         print('\n'.join(result.lines + [f'warning: {w}' for w in result.warnings]))

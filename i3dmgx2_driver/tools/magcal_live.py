@@ -25,7 +25,6 @@ fit is made on the raw field whatever the node applies.
 
 from collections.abc import Callable
 import sys
-import threading
 import time
 
 from rcl_interfaces.srv import GetParameters
@@ -42,30 +41,17 @@ PARAMETERS_S = 10.0
 
 
 class Listener(Node):
-    """Keep each Imu message by stamp, and the fields paired with one."""
+    """Keep each Imu message by stamp and each field; pair them when asked."""
 
     def __init__(self, topic: str) -> None:
         super().__init__('i3dmgx2_magcal')
-        self.pairs: list[tuple[Imu, MagneticField]] = []
-        #: Each topic's messages not yet paired, by stamp (the topics arrive in any order).
-        self._waiting: tuple[dict, dict] = ({}, {})
-        self._lock = threading.Lock()
-        self.create_subscription(Imu, topic, lambda m: self._arrived(m, 0),
+        # The topics arrive in any order: a field finds its Imu when the pairs are asked for.
+        self._imu: dict[tuple[int, int], Imu] = {}
+        self._fields: list[MagneticField] = []
+        self.create_subscription(Imu, topic, lambda m: self._imu.update({_stamp(m): m}),
                                  qos_profile_sensor_data)
         self.create_subscription(MagneticField, topic.rsplit('/', 1)[0] + '/mag',
-                                 lambda m: self._arrived(m, 1), qos_profile_sensor_data)
-
-    def _arrived(self, msg: Imu | MagneticField, side: int) -> None:
-        stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
-        with self._lock:
-            other = self._waiting[1 - side].pop(stamp, None)
-            if other is None:
-                waiting = self._waiting[side]
-                if len(waiting) > 1000:  # an Imu of a record without a field (NaN)
-                    waiting.clear()
-                waiting[stamp] = msg
-            else:
-                self.pairs.append((other, msg) if side else (msg, other))
+                                 self._fields.append, qos_profile_sensor_data)
 
     def calibration(self, node: str) -> list[list[float]]:
         """Return ``node``'s mag_hard_iron and mag_soft_iron; ValueError when it does not say."""
@@ -83,9 +69,13 @@ class Listener(Node):
         return [list(parameter_value_to_python(v)) for v in values]
 
     def paired(self) -> list[tuple[Imu, MagneticField]]:
-        """Return the pairs that came so far."""
-        with self._lock:
-            return list(self.pairs)
+        """Return the pairs that came so far (copies: the spinner thread adds to them)."""
+        imu = self._imu
+        return [(imu[stamp], m) for m in self._fields[:] if (stamp := _stamp(m)) in imu]
+
+
+def _stamp(msg: Imu | MagneticField) -> tuple[int, int]:
+    return msg.header.stamp.sec, msg.header.stamp.nanosec
 
 
 def listen(topic: str, node_name: str, seconds: float,
