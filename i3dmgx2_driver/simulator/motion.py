@@ -210,12 +210,9 @@ class Motion:
     def state(self, t: float) -> TrueState:
         """Return the exact state at ``t`` (seconds since power-up)."""
         (roll, pitch, yaw), (droll, dpitch, dyaw) = self._angles(t)
-        sr, cr = math.sin(roll), math.cos(roll)
-        sp, cp = math.sin(pitch), math.cos(pitch)
+        sr, cr, sp, cp = math.sin(roll), math.cos(roll), math.sin(pitch), math.cos(pitch)
         # ZYX kinematics: body rates from the Euler angle rates.
-        rate = (droll - dyaw * sp,
-                dpitch * cr + dyaw * sr * cp,
-                -dpitch * sr + dyaw * cr * cp)
+        rate = (droll - dyaw * sp, dpitch * cr + dyaw * sr * cp, -dpitch * sr + dyaw * cr * cp)
         m = matrix_from_euler(roll, pitch, yaw)
         # The accelerometer feels the reaction to gravity: -1 g along earth down.
         accel = (-m[2], -m[5], -m[8])

@@ -35,8 +35,8 @@ capture holds them: a tool or a test writes them with ``capture.file_format``
 """
 
 from collections.abc import Iterator, Sequence
+import dataclasses
 import math
-from typing import NamedTuple
 
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
@@ -57,23 +57,6 @@ TILT_S = 1.0
 #: A knock: a ringing at this frequency (Hz) under a Gaussian of this width (s), of this
 #: amplitude on the accelerometer (g) and the gyro (rad/s): no mean left in a second's.
 KNOCK_HZ, KNOCK_S, KNOCK_G, KNOCK_RAD_S = 40.0, 0.05, 0.3, 0.2
-
-
-class StillTruth(NamedTuple):
-    """What the still sensor reads without noise, in the device's units."""
-
-    accel: tuple[float, float, float]
-    angular_rate: tuple[float, float, float]
-    mag: tuple[float, float, float]
-    matrix: tuple[float, ...]
-
-
-def still_truth(motion: MotionConfig) -> StillTruth:
-    """Return the readings of a sensor at rest in ``motion``'s resting pose, biases included."""
-    state = Motion(MotionConfig(**{**motion.__dict__, 'static': True})).state(0.0)
-    accel = tuple(state.accel[i] + motion.accel_bias[i] for i in range(3))
-    rate = tuple(motion.gyro_bias)
-    return StillTruth(accel, rate, state.mag, state.matrix)
 
 
 def _still(layout: lay.Layout) -> bool:
@@ -160,7 +143,10 @@ def still_chunks(seconds: float, rate_hz: float, code: int = lay.ACCEL_ANG_RATE,
                          f'{rate_hz!r}, {seconds!r}, {per_read!r}')
     dtype = record_dtype(code)
     motion = motion if motion is not None else MotionConfig()
-    truth = still_truth(motion)
+    # What the sensor reads at its resting pose without noise, biases included.
+    truth = Motion(dataclasses.replace(motion, static=True)).state(0.0)
+    gyro_truth = np.asarray(motion.gyro_bias)
+    accel_truth = np.asarray(truth.accel) + motion.accel_bias
     model = NoiseModel(noise, seed)
     ticks = round(TICKS_PER_SECOND / rate_hz)
     dt = ticks / TICKS_PER_SECOND
@@ -173,8 +159,8 @@ def still_chunks(seconds: float, rate_hz: float, code: int = lay.ACCEL_ANG_RATE,
         records['echo'] = code
         errors = model.draw(n, dt)
         errors[:, list(dead)] = 0.0
-        gyro = np.asarray(truth.angular_rate) + errors[:, :3]
-        accel = np.asarray(truth.accel) + errors[:, 3:]
+        gyro = gyro_truth + errors[:, :3]
+        accel = accel_truth + errors[:, 3:]
         disturb(index * dt, gyro, accel, tilts, knocks)
         for name, value in (('angular_rate', gyro), ('accel', accel), ('matrix', truth.matrix)):
             if name in dtype.names:

@@ -134,10 +134,8 @@ def overlapping_adev(y: np.ndarray, dt: float,
         y = y[:, None]
     stretches = stretches or [(0, y.shape[0])]
     ms = octave_taus(max((stop - start for start, stop in stretches), default=0))
-    total = np.zeros((ms.size, y.shape[1]))
-    count = np.zeros(ms.size)
-    clusters = np.zeros(ms.size, dtype=np.int64)
-    samples = np.zeros(ms.size, dtype=np.int64)
+    total, count = np.zeros((ms.size, y.shape[1])), np.zeros(ms.size)
+    clusters, samples = np.zeros(ms.size, dtype=np.int64), np.zeros(ms.size, dtype=np.int64)
     for start, stop in stretches:
         part = y[start:stop]
         theta = np.zeros((part.shape[0] + 1, y.shape[1]))
@@ -169,8 +167,7 @@ def _edf(m: np.ndarray, n: np.ndarray) -> np.ndarray:
 
 def _nonnegative_fit(basis: np.ndarray, avar: np.ndarray, var: np.ndarray) -> np.ndarray:
     """Return the coefficients >= 0 of ``basis @ coef ~ avar`` weighted by 1 / ``var``."""
-    a_matrix = basis / np.sqrt(var)[:, None]
-    target = avar / np.sqrt(var)
+    a_matrix, target = basis / np.sqrt(var)[:, None], avar / np.sqrt(var)
     best, best_cost = np.zeros(3), math.inf
     for mask in range(1, 8):
         cols = [j for j in range(3) if mask >> j & 1]
@@ -243,9 +240,9 @@ def read_terms(dev: Deviation, duration: float) -> list[AxisNoise]:
     for axis in range(dev.adev.shape[1]):
         sigma = dev.adev[usable, axis]
         if usable.sum() < 3 or not np.all(sigma > 0):
-            why = ('dead: its readings never change' if sigma.size and not np.any(sigma > 0)
-                   else 'too short to fit')
-            nothing = Term(math.nan, 0, Short(why, None if 'dead' in why else 60.0))
+            nothing = Term(math.nan, 0, Short('dead: its readings never change', None)
+                           if sigma.size and not np.any(sigma > 0) else
+                           Short('too short to fit', 60.0))
             out.append(AxisNoise(nothing, nothing, math.nan, nothing))
             continue
         coef, error = fit(dev, axis)

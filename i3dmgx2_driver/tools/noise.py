@@ -198,16 +198,13 @@ def as_json(report: Report) -> dict[str, Any]:
 
 def params_yaml(report: Report) -> str:
     """Return noise.yaml: the covariance parameters as a params file the node takes."""
-    notes = {figure(report.terms[name], 'white')[1] for name in UNITS}
-    lines = [
-        '# Measured by `ros2 run i3dmgx2_driver noise` at rest from',
-        f'# {report.samples.source}: {report.duration_s / 60:.1f} min at {report.rate_hz:.4g} Hz.',
-        f'# The white noise of one sample (N * sqrt(rate)), {" / ".join(sorted(notes))}. Load',
-        "# it after the driver's own file: --params-file config/i3dmgx2.yaml --params-file "
-        'noise.yaml',
-        '/**:',
-        '  ros__parameters:',
-    ]
+    notes = ' / '.join(sorted({figure(report.terms[name], 'white')[1] for name in UNITS}))
+    lines = ['# Measured by `ros2 run i3dmgx2_driver noise` at rest from',
+             f'# {report.samples.source}: {report.duration_s / 60:.1f} min at '
+             f'{report.rate_hz:.4g} Hz.',
+             f'# The white noise of one sample (N * sqrt(rate)), {notes}. Load',
+             "# it after the driver's own file: --params-file config/i3dmgx2.yaml --params-file "
+             'noise.yaml', '/**:', '  ros__parameters:']
     lines += [f'    {name}: {yaml_float(value)}' for name, value in parameters(report).items()]
     return '\n'.join(lines) + '\n'
 
@@ -259,10 +256,9 @@ def table(report: Report) -> str:
         for label, axis in zip('xyz', terms, strict=True):
             shorts = [(LABELS[p], getattr(axis, p).short) for p in allan.TERMS
                       if getattr(axis, p).short is not None]
-            if shorts and shorts[0][1].why.startswith('dead'):
-                lines.append(f'  {name} {label}: {shorts[0][1]}')
-                continue
-            lines += [f'  {name} {label}: {term} {short}' for term, short in shorts]
+            dead = shorts and shorts[0][1].why.startswith('dead')   # one line says it all
+            lines += ([f'  {name} {label}: {shorts[0][1]}'] if dead else
+                      [f'  {name} {label}: {term} {short}' for term, short in shorts])
     lines += [f'warning: {w}' for w in report.warnings]
     return '\n'.join(lines)
 
@@ -386,8 +382,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         except Unbounded as exc:
             print(f'noise: no files written: {exc}', file=sys.stderr)
             return 1
-        for path in written:
-            print(f'wrote {path}')
+        print('\n'.join(f'wrote {path}' for path in written))
     if report.trusted():
         return 0
     print(f'noise: not every figure is trusted (the * and warnings above): exit {MARKED}',

@@ -98,9 +98,7 @@ def listen(topic: str, seconds: float) -> Samples:
         source = f'{node.resolve_topic_name(topic)} (live)'
         start = time.monotonic()
         estimate, next_estimate = '', start + ESTIMATE_S
-        while (elapsed := time.monotonic() - start) < seconds:
-            if stopped.wait(PROGRESS_S):
-                break
+        while (elapsed := time.monotonic() - start) < seconds and not stopped.wait(PROGRESS_S):
             if time.monotonic() >= next_estimate:
                 estimate = _estimate(node.samples(source))
                 next_estimate += ESTIMATE_S
