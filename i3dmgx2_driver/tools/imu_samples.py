@@ -143,33 +143,28 @@ def from_bag(path: str, topic: str = DEFAULT_TOPIC, mag_topic: str | None = None
     sqlite3 or MCAP, through rosbags (an optional extra). The mag topic
     defaults to the Imu topic's sibling ``mag``, as the driver names them.
     """
-    if mag_topic is None:
-        mag_topic = topic.rsplit('/', 1)[0] + '/mag'
+    mag_topic = topic.rsplit('/', 1)[0] + '/mag' if mag_topic is None else mag_topic
+    rows, mag = [], []
     try:
-        return _read_bag(path, topic, mag_topic)
+        with bag_reader(Path(path)) as reader:
+            known = {c.topic: c.msgtype for c in reader.connections}
+            if topic not in known:
+                imu_topics = sorted(t for t, kind in known.items() if kind.endswith('/Imu'))
+                raise ValueError(f'{path}: no topic {topic!r}; its Imu topics: '
+                                 f'{", ".join(imu_topics) or "none"}')
+            wanted = [c for c in reader.connections if c.topic in (topic, mag_topic)]
+            decode = deserializer(reader)
+            for connection, _, raw in reader.messages(connections=wanted):
+                msg = decode(raw, connection.msgtype)
+                if connection.topic == topic:
+                    rows.append(imu_row(msg))
+                else:
+                    field = msg.magnetic_field
+                    mag.append((field.x, field.y, field.z))
     except Exception as exc:     # rosbags' own errors (AnyReaderError...): a message, no trace
         if not type(exc).__module__.startswith('rosbags'):
             raise
         raise ValueError(f'{path}: not a readable bag ({type(exc).__name__}: {exc})') from None
-
-
-def _read_bag(path: str, topic: str, mag_topic: str) -> Samples:
-    rows, mag = [], []
-    with bag_reader(Path(path)) as reader:
-        known = {c.topic: c.msgtype for c in reader.connections}
-        if topic not in known:
-            imu_topics = sorted(t for t, kind in known.items() if kind.endswith('/Imu'))
-            raise ValueError(f'{path}: no topic {topic!r}; its Imu topics: '
-                             f'{", ".join(imu_topics) or "none"}')
-        wanted = [c for c in reader.connections if c.topic in (topic, mag_topic)]
-        decode = deserializer(reader)
-        for connection, _, raw in reader.messages(connections=wanted):
-            msg = decode(raw, connection.msgtype)
-            if connection.topic == topic:
-                rows.append(imu_row(msg))
-            else:
-                field = msg.magnetic_field
-                mag.append((field.x, field.y, field.z))
     if not rows:
         raise ValueError(f'{path}: no message on {topic}')
     return from_rows(rows, np.array(mag) if mag else None, f'{path} ({topic})')

@@ -279,9 +279,7 @@ def draw(report: Report, path: str) -> Any:
         fitted = dev.clusters >= allan.MIN_CLUSTERS
         error = np.array([allan.uncertainty(int(c)) for c in dev.clusters])
         shown = [dev.adev[dev.adev > 0]]
-        for axis, colour in enumerate(colours):
-            t = terms[axis]
-            adev = dev.adev[:, axis]
+        for t, adev, colour in zip(terms, dev.adev.T, colours, strict=True):
             ax.errorbar(dev.tau[fitted], adev[fitted], yerr=adev[fitted] * error[fitted],
                         fmt='o-', color=colour, ms=3, lw=1, capsize=2)
             ax.loglog(dev.tau[~fitted], adev[~fitted], 'o', mfc='none', color=colour, ms=4)
