@@ -72,9 +72,7 @@ class BiasCorrections:
 
     def restore(self) -> None:
         """Take the corrections from non-volatile memory (power-up)."""
-        self.accel = self._nv_accel
-        self.gyro = self._nv_gyro
-        self._pending_gyro = None
+        self.accel, self.gyro, self._pending_gyro = self._nv_accel, self._nv_gyro, None
 
     def forget_capture(self) -> None:
         """Drop a gyro capture still running (power lost)."""
@@ -225,10 +223,7 @@ class RecordMaker:
 
     def __init__(self, motion: Motion, rng: random.Random, temperature_c: float,
                  biases: BiasCorrections) -> None:
-        self.motion = motion
-        self.rng = rng
-        self.temperature_c = temperature_c
-        self.biases = biases
+        self.motion, self.rng, self.temperature_c, self.biases = motion, rng, temperature_c, biases
 
     def record(self, code: int, rel: float, timer: int, dt: float) -> Any:
         """Build the record ``code`` of the cycle at ``rel`` (timer ``timer``, ``dt`` s long)."""

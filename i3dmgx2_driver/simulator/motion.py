@@ -203,9 +203,8 @@ class Motion:
         sway = [(base + amp * math.sin(omega * tau), amp * omega * math.cos(omega * tau))
                 for base, amp, omega in zip(self._base, self._amp, self._omega, strict=True)]
         (roll, droll), (pitch, dpitch), (yaw, dyaw) = sway
-        if frozen:
-            return (roll, pitch, yaw + self._yaw_rate * tau), _ZERO
-        return (roll, pitch, yaw + self._yaw_rate * tau), (droll, dpitch, dyaw + self._yaw_rate)
+        angles = (roll, pitch, yaw + self._yaw_rate * tau)
+        return angles, _ZERO if frozen else (droll, dpitch, dyaw + self._yaw_rate)
 
     def state(self, t: float) -> TrueState:
         """Return the exact state at ``t`` (seconds since power-up)."""

@@ -250,9 +250,8 @@ def read_terms(dev: Deviation, duration: float) -> list[AxisNoise]:
         terms = []
         # Clusters behind each: at N's tau, at B's, at the longest the walk is fitted to.
         behind = (N_TAU, tau_b, float(dev.tau[usable][-1]))
-        for j, (name, tau, scale) in enumerate(zip(TERMS, behind,
-                                                   (1.0, 1.0 / FLICKER_FLOOR ** 2, 3.0),
-                                                   strict=True)):
+        scales = (1.0, 1.0 / FLICKER_FLOOR ** 2, 3.0)   # from each coefficient to its term^2
+        for j, (name, tau, scale) in enumerate(zip(TERMS, behind, scales, strict=True)):
             # sqrt of a coefficient: half its relative error.
             rel = error[j] / (2.0 * coef[j]) if coef[j] > 0 else math.inf
             short = None

@@ -121,9 +121,9 @@ def yaml_float(value: float) -> str:
     return mantissa + e + exponent
 
 
-def _axes(terms: list[allan.AxisNoise], part: str) -> list[float | None]:
-    """Return a term's measured figure per axis, None where there is none (JSON has no NaN)."""
-    return [_number(getattr(axis, part).value) for axis in terms]
+def _axes(terms: list[allan.AxisNoise], part: str, what: str = 'value') -> list[float | None]:
+    """Return ``what`` of a term (its figure) per axis, None where there is none (JSON: no NaN)."""
+    return [_number(getattr(getattr(axis, part), what)) for axis in terms]
 
 
 def _number(value: float) -> float | None:
@@ -179,10 +179,8 @@ def as_json(report: Report) -> dict[str, Any]:
             'random_walk': _axes(terms, 'random_walk'),
             'bias_instability': _axes(terms, 'bias_instability'),
             'bias_instability_tau_s': [_number(axis.bias_tau) for axis in terms],
-            'clusters': {part: [getattr(axis, part).clusters for axis in terms]
-                         for part in allan.TERMS},
-            'one_sigma': {part: [_number(getattr(axis, part).error) for axis in terms]
-                          for part in allan.TERMS},
+            'clusters': {part: _axes(terms, part, 'clusters') for part in allan.TERMS},
+            'one_sigma': {part: _axes(terms, part, 'error') for part in allan.TERMS},
             'too_short': [{'axis': label, 'term': LABELS[part], 'why': term.short.why,
                            'record_s': term.short.record_s, 'upper_bound': _number(term.bound)}
                           for label, axis in zip('xyz', terms, strict=True)

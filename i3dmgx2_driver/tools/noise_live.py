@@ -77,8 +77,7 @@ def progress(elapsed: float, total: float, count: int, estimate: str) -> str:
     done = min(1.0, elapsed / total) if total > 0 else 1.0
     left = max(0.0, total - elapsed)
     bar = '#' * round(done * BAR) + '-' * (BAR - round(done * BAR))
-    return (f'\r[{bar}] {int(left // 60):3d}:{int(left % 60):02d} left, {count} samples'
-            f'{estimate}')
+    return f'\r[{bar}] {int(left // 60):3d}:{int(left % 60):02d} left, {count} samples{estimate}'
 
 
 def _estimate(samples: Samples | None) -> str:
