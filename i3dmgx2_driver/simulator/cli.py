@@ -25,8 +25,11 @@ own, which a closed terminal does not reach).
 """
 
 import argparse
+from collections.abc import Callable
+import dataclasses
 import math
 import time
+from typing import Any
 
 from i3dmgx2_driver.codec import command_firmware as firmware, framing
 from i3dmgx2_driver.codec.data_rate import MAX_DIVIDER, MIN_DIVIDER
@@ -48,29 +51,28 @@ _address = in_range(lambda text: int(text, 0), framing.MIN_ADDRESS, framing.MAX_
                     'node address')
 
 
-def _divider(text: str) -> int:
+def _code(text: str, valid: Callable[[int], bool], wrong: str) -> int:
+    """Return ``text`` as an integer (0x... too) that is ``valid``, else the error ``wrong``."""
     try:
         value = int(text, 0)
     except ValueError:
         value = None
-    if value is None or not MIN_DIVIDER <= value <= MAX_DIVIDER:
-        raise argparse.ArgumentTypeError(
-            f'the data-rate divider is an integer in {MIN_DIVIDER}..{MAX_DIVIDER} '
-            f'(rate 51200/N Hz: {51200 / MIN_DIVIDER:.1f}..{51200 / MAX_DIVIDER:g} Hz), '
-            f'got {text}')
+    if value is None or not valid(value):
+        raise argparse.ArgumentTypeError(wrong)
     return value
+
+
+def _divider(text: str) -> int:
+    return _code(text, lambda value: MIN_DIVIDER <= value <= MAX_DIVIDER,
+                 f'the data-rate divider is an integer in {MIN_DIVIDER}..{MAX_DIVIDER} '
+                 f'(rate 51200/N Hz: {51200 / MIN_DIVIDER:.1f}..{51200 / MAX_DIVIDER:g} Hz), '
+                 f'got {text}')
 
 
 def _streamable(text: str) -> int:
-    valid = ', '.join(f'0x{code:02X}' for code in sorted(STREAMABLE))
-    try:
-        value = int(text, 0)
-    except ValueError:
-        value = None
-    if value not in STREAMABLE:
-        raise argparse.ArgumentTypeError(
-            f'{text} is not a record the sensor can stream; streamable: {valid}')
-    return value
+    return _code(text, STREAMABLE.__contains__,
+                 f'{text} is not a record the sensor can stream; streamable: '
+                 + ', '.join(f'0x{code:02X}' for code in sorted(STREAMABLE)))
 
 
 def _firmware(text: str) -> tuple[int | None, int]:
@@ -83,7 +85,7 @@ def _firmware(text: str) -> tuple[int | None, int]:
 
 
 #: The faults drawn by chance, in the order of ``--help``: flag, the ``FaultConfig``
-#: field it sets, and its help.
+#: field it sets (its dest, as every option's is the field it sets), and its help.
 _CHANCES = (
     ('--garbage', 'garbage_probability', 'chance of random garbage bytes before a packet'),
     ('--corrupt-checksum', 'corrupt_checksum_probability',
@@ -98,11 +100,6 @@ _CHANCES = (
 )
 
 
-def _dest(flag: str) -> str:
-    """Return the attribute argparse stores ``flag`` under."""
-    return flag.lstrip('-').replace('-', '_')
-
-
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser (separate so that docs and tests can use it)."""
     parser = argparse.ArgumentParser(
@@ -110,164 +107,147 @@ def build_parser() -> argparse.ArgumentParser:
         description='Simulated MicroStrain 3DM-GX2 with its wireless base station (or, '
                     'with --wired, a wired 3DM-GX2) on a pseudo-terminal. Prints '
                     '"port: PATH" first; open PATH like a serial port at 115200 baud.')
-    device = parser.add_argument_group('device')
-    device.add_argument('--address', type=_address, action='append', metavar='N',
-                        help='node address of the sensor (default: 95); given again, '
-                             'several sensors behind the one base station, each with its '
-                             'own motion, clock and serial number (e.g. --address 17 '
-                             '--address 95)')
-    device.add_argument('--wired', action='store_true',
-                        help='a wired sensor on the port, no base station: raw commands in, '
-                             'wired records (echo, data, checksum) out, no ACK/NACK, no ping')
-    device.add_argument('--divider', type=_divider, metavar='N',
-                        help=f'EEPROM data-rate divider at power-up, {MIN_DIVIDER}..'
-                             f'{MAX_DIVIDER} (rate 51200/N Hz; factory: 512, 100 Hz)')
-    device.add_argument('--stream', type=_streamable, metavar='CODE',
-                        help='stream this record from power-up (EEPROM auto-start), e.g. '
-                             '0xC2; one of ' + ', '.join(f'0x{c:02X}' for c in sorted(STREAMABLE)))
-    device.add_argument('--firmware', type=_firmware, action='append', metavar='VERSION',
-                        help='firmware the sensor reports (0xE9), e.g. 2.1.03: commands newer '
-                             'than it go unanswered (default '
-                             f'{firmware.text(DEFAULT_FIRMWARE)}, which has them all); '
-                             'N=VERSION for the sensor at address N alone')
-    device.add_argument('--serial', default='3095', help='serial number (default: 3095)')
-    device.add_argument('--rate', type=_positive, metavar='HZ',
-                        help='calculation rate overriding the EEPROM divider (benchmarks)')
-    device.add_argument('--static', action='store_true', help='sensor at rest')
-    device.add_argument('--honest-noise', action='store_true',
-                        help='gyro and accelerometer noise term by term (white noise, bias '
-                             'instability, rate random walk per axis, from the real records: '
-                             'simulator/noise_model.py) instead of white noise alone')
-    device.add_argument('--nan-mag', action='store_true',
-                        help='no magnetometer: every field reading is NaN (Inertia-Link)')
-    device.add_argument('--mag-nan-probability', type=_probability, default=0.0, metavar='P',
-                        help='share of cycles without a new magnetometer reading')
-    device.add_argument('--motion', choices=tuple(MOTIONS), default='sway',
-                        help='sway (default); tumble: through every attitude; yaw: level, '
-                             'turning in yaw alone (a magnetometer calibration, docs/magcal.md)')
-    device.add_argument('--hard-iron', type=float, nargs=3, default=(0.0, 0.0, 0.0),
-                        metavar=('X', 'Y', 'Z'), help='offset added to the field (Gauss, the '
-                        "sensor's axes)")
-    device.add_argument('--soft-iron', type=float, nargs=9, metavar='M',
-                        default=MotionConfig.soft_iron,
-                        help='matrix the field is multiplied by (row-major), before the offset')
-    device.add_argument('--ppm', type=float, default=40.0,
-                        help='clock error of the sensor timer in ppm (default: 40)')
-    device.add_argument('--timer-start', type=lambda s: int(s, 0), metavar='TICKS',
-                        help='timer at power-up (default: 5 s before the rollover)')
-    device.add_argument('--latency-ms', type=_non_negative, default=2.0,
-                        help='radio latency (default: 2 ms)')
-    device.add_argument('--wire-baud', type=int, default=115200,
-                        help='serial line baud: each packet arrives its wire time late '
-                             '(default: 115200; 0: at once)')
-    device.add_argument('--line-rate-limit', action='store_true',
-                        help='skip streamed cycles a 115200-baud line could not carry')
-    device.add_argument('--line-queue', action='store_true',
-                        help="the base station's line carries one packet at a time: packets "
-                             'queue behind each other, garbage and foreign packets take their '
-                             'time on it too (one sensor)')
-    device.add_argument('--radio-hold-ms', type=_non_negative, default=0.0, metavar='N',
-                        help='with --line-queue: the first packet after a gap of 0.1 s or more '
-                             'reaches the line N ms late, the rest queue behind it')
-    device.add_argument('--seed', type=int, help='seed for reproducible noise and faults')
+    # Each option's dest is the SimulatorConfig (or MotionConfig, FaultConfig) field it sets.
+    add = parser.add_argument_group('device').add_argument
+    add('--address', type=_address, action='append', metavar='N',
+        help='node address of the sensor (default: 95); given again, several sensors behind '
+             'the one base station, each with its own motion, clock and serial number (e.g. '
+             '--address 17 --address 95)')
+    add('--wired', action='store_false', dest='wireless',
+        help='a wired sensor on the port, no base station: raw commands in, wired records '
+             '(echo, data, checksum) out, no ACK/NACK, no ping')
+    add('--divider', type=_divider, metavar='N',
+        help=f'EEPROM data-rate divider at power-up, {MIN_DIVIDER}..{MAX_DIVIDER} (rate '
+             '51200/N Hz; factory: 512, 100 Hz)')
+    add('--stream', type=_streamable, metavar='CODE', dest='streaming_at_start', default=False,
+        help='stream this record from power-up (EEPROM auto-start), e.g. 0xC2; one of '
+             + ', '.join(f'0x{c:02X}' for c in sorted(STREAMABLE)))
+    add('--firmware', type=_firmware, action='append', metavar='VERSION',
+        help='firmware the sensor reports (0xE9), e.g. 2.1.03: commands newer than it go '
+             f'unanswered (default {firmware.text(DEFAULT_FIRMWARE)}, which has them all); '
+             'N=VERSION for the sensor at address N alone')
+    add('--serial', default='3095', dest='serial_number', metavar='SERIAL',
+        help='serial number (default: 3095)')
+    add('--rate', type=_positive, metavar='HZ', dest='rate_hz',
+        help='calculation rate overriding the EEPROM divider (benchmarks)')
+    add('--static', action='store_true', help='sensor at rest')
+    add('--honest-noise', action='store_true',
+        help='gyro and accelerometer noise term by term (white noise, bias instability, rate '
+             'random walk per axis, from the real records: simulator/noise_model.py) instead '
+             'of white noise alone')
+    add('--nan-mag', action='store_true',
+        help='no magnetometer: every field reading is NaN (Inertia-Link)')
+    add('--mag-nan-probability', type=_probability, default=0.0, metavar='P',
+        help='share of cycles without a new magnetometer reading')
+    add('--motion', choices=tuple(MOTIONS), default='sway',
+        help='sway (default); tumble: through every attitude; yaw: level, turning in yaw alone '
+             '(a magnetometer calibration, docs/magcal.md)')
+    add('--hard-iron', type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=('X', 'Y', 'Z'),
+        help="offset added to the field (Gauss, the sensor's axes)")
+    add('--soft-iron', type=float, nargs=9, metavar='M', default=MotionConfig.soft_iron,
+        help='matrix the field is multiplied by (row-major), before the offset')
+    add('--ppm', type=float, default=40.0, dest='clock_ppm', metavar='PPM',
+        help='clock error of the sensor timer in ppm (default: 40)')
+    add('--timer-start', type=lambda s: int(s, 0), metavar='TICKS',
+        help='timer at power-up (default: 5 s before the rollover)')
+    add('--latency-ms', type=_non_negative, default=2.0, help='radio latency (default: 2 ms)')
+    add('--wire-baud', type=int, default=115200,
+        help='serial line baud: each packet arrives its wire time late (default: 115200; 0: '
+             'at once)')
+    add('--line-rate-limit', action='store_true', dest='limit_to_line_rate',
+        help='skip streamed cycles a 115200-baud line could not carry')
+    add('--line-queue', action='store_true',
+        help="the base station's line carries one packet at a time: packets queue behind each "
+             'other, garbage and foreign packets take their time on it too (one sensor)')
+    add('--radio-hold-ms', type=_non_negative, default=0.0, metavar='N',
+        help='with --line-queue: the first packet after a gap of 0.1 s or more reaches the '
+             'line N ms late, the rest queue behind it')
+    add('--seed', type=int, help='seed for reproducible noise and faults')
 
-    faults = parser.add_argument_group('faults')
-    for flag, _, text in _CHANCES:
-        faults.add_argument(flag, type=_probability, default=0.0, metavar='P', help=text)
+    add = parser.add_argument_group('faults').add_argument
+    for flag, field, text in _CHANCES:
+        add(flag, type=_probability, default=0.0, metavar='P', dest=field, help=text)
         if flag == '--garbage':
-            faults.add_argument('--garbage-any', action='store_true',
-                                help='garbage may contain 0xAA/0x21/0x02 (spurious ACK/NACK)')
-    faults.add_argument('--already-streaming', action='store_true',
-                        help='the sensor streams 0xCC from power-up')
-    faults.add_argument('--ignore-first-continuous', action='store_true',
-                        help='the first request to stream is ignored')
-    faults.add_argument('--needs-polled-first', action='store_true',
-                        help='a request to stream is ignored unless a polled request came '
-                             'first since the port was opened')
-    faults.add_argument('--jitter-ms', type=_non_negative, default=0.0, metavar='N',
-                        help='random 0..N ms extra delay before each packet is written')
-    faults.add_argument('--stall-at', type=_non_negative, metavar='T',
-                        help='radio silence starting T seconds after start')
-    faults.add_argument('--stall-for', type=_non_negative, default=2.0, metavar='S',
-                        help='length of that silence (default: 2 s)')
-    faults.add_argument('--power-cycle-at', type=_non_negative, metavar='T',
-                        help='switch the sensor off T seconds after start')
-    faults.add_argument('--power-off-for', type=_non_negative, default=1.0, metavar='S',
-                        help='how long it stays off (default: 1 s)')
-    faults.add_argument('--fault-address', type=_address, metavar='N',
-                        help='with several sensors: the one --stall-at and --power-cycle-at '
-                             'hit, the others streaming on (default: a stall silences the '
-                             'base station, a power cycle hits the first sensor)')
-    faults.add_argument('--unplug-at', type=_non_negative, metavar='T',
-                        help='unplug the base station T seconds after start')
-    faults.add_argument('--unplug-for', type=_non_negative, default=2.0, metavar='S',
-                        help='how long it stays unplugged (default: 2 s)')
+            add('--garbage-any', action='store_false', dest='garbage_safe',
+                help='garbage may contain 0xAA/0x21/0x02 (spurious ACK/NACK)')
+    add('--already-streaming', action='store_true', help='the sensor streams 0xCC from power-up')
+    add('--ignore-first-continuous', action='store_true',
+        help='the first request to stream is ignored')
+    add('--needs-polled-first', action='store_true',
+        help='a request to stream is ignored unless a polled request came first since the '
+             'port was opened')
+    add('--jitter-ms', type=_non_negative, default=0.0, metavar='N',
+        help='random 0..N ms extra delay before each packet is written')
+    add('--stall-at', type=_non_negative, metavar='T',
+        help='radio silence starting T seconds after start')
+    add('--stall-for', type=_non_negative, default=2.0, metavar='S', dest='stall_seconds',
+        help='length of that silence (default: 2 s)')
+    add('--power-cycle-at', type=_non_negative, metavar='T',
+        help='switch the sensor off T seconds after start')
+    add('--power-off-for', type=_non_negative, default=1.0, metavar='S',
+        dest='power_off_seconds', help='how long it stays off (default: 1 s)')
+    add('--fault-address', type=_address, metavar='N',
+        help='with several sensors: the one --stall-at and --power-cycle-at hit, the others '
+             'streaming on (default: a stall silences the base station, a power cycle hits '
+             'the first sensor)')
+    add('--unplug-at', type=_non_negative, metavar='T',
+        help='unplug the base station T seconds after start')
+    add('--unplug-for', type=_non_negative, default=2.0, metavar='S', dest='unplug_seconds',
+        help='how long it stays unplugged (default: 2 s)')
 
-    run = parser.add_argument_group('run')
-    run.add_argument('--duration', type=_positive, metavar='S',
-                     help='exit after S seconds (default: run until SIGINT/SIGTERM)')
-    run.add_argument('--symlink', metavar='PATH',
-                     help='fixed path for the port symlink (default: a temporary directory)')
-    run.add_argument('--status-interval', type=_positive, default=5.0, metavar='S',
-                     help='seconds between status lines (default: 5)')
-    run.add_argument('--quiet', action='store_true', help='print the port line only')
+    add = parser.add_argument_group('run').add_argument
+    add('--duration', type=_positive, metavar='S',
+        help='exit after S seconds (default: run until SIGINT/SIGTERM)')
+    add('--symlink', metavar='PATH',
+        help='fixed path for the port symlink (default: a temporary directory)')
+    add('--status-interval', type=_positive, default=5.0, metavar='S',
+        help='seconds between status lines (default: 5)')
+    add('--quiet', action='store_true', help='print the port line only')
     return parser
+
+
+def _fields(kind: type, args: argparse.Namespace) -> dict[str, Any]:
+    """Return the fields of the dataclass ``kind`` that options set: those of the same dest."""
+    given = vars(args)
+    return {f.name: given[f.name] for f in dataclasses.fields(kind) if f.name in given}
 
 
 def config_from_args(args: argparse.Namespace) -> SimulatorConfig:
     """Turn parsed arguments into a simulator configuration."""
-    faults = FaultConfig(
-        **{field: getattr(args, _dest(flag)) for flag, field, _ in _CHANCES},
-        garbage_safe=not args.garbage_any,
-        already_streaming=args.already_streaming,
-        ignore_first_continuous=args.ignore_first_continuous,
-        needs_polled_first=args.needs_polled_first, jitter_ms=args.jitter_ms,
-        stall_at=args.stall_at, stall_seconds=args.stall_for,
-        power_cycle_at=args.power_cycle_at, power_off_seconds=args.power_off_for,
-        unplug_at=args.unplug_at, unplug_seconds=args.unplug_for)
     addresses = tuple(args.address or (95,))
     versions = dict(args.firmware or ())
-    return SimulatorConfig(
-        firmware_version=versions.pop(None, DEFAULT_FIRMWARE), firmware_versions=versions,
-        address=addresses[0], addresses=addresses if len(addresses) > 1 else (),
-        fault_address=args.fault_address, wireless=not args.wired, divider=args.divider,
-        streaming_at_start=args.stream or False,
-        serial_number=args.serial, rate_hz=args.rate, seed=args.seed,
-        motion=MotionConfig(static=args.static,
-                            noise=NoiseConfig() if args.honest_noise else None,
-                            hard_iron=tuple(args.hard_iron), soft_iron=tuple(args.soft_iron),
-                            **MOTIONS[args.motion]),
-        faults=faults, nan_mag=args.nan_mag,
-        mag_nan_probability=args.mag_nan_probability, clock_ppm=args.ppm,
-        timer_start=args.timer_start, latency_s=args.latency_ms / 1000.0,
-        wire_baud=args.wire_baud or None,
-        symlink=args.symlink, limit_to_line_rate=args.line_rate_limit,
-        line_queue=args.line_queue, radio_hold_s=args.radio_hold_ms / 1000.0,
+    return SimulatorConfig(**{
+        **_fields(SimulatorConfig, args),
+        'firmware_version': versions.pop(None, DEFAULT_FIRMWARE), 'firmware_versions': versions,
+        'address': addresses[0], 'addresses': addresses if len(addresses) > 1 else (),
+        'motion': MotionConfig(static=args.static,
+                               noise=NoiseConfig() if args.honest_noise else None,
+                               hard_iron=tuple(args.hard_iron), soft_iron=tuple(args.soft_iron),
+                               **MOTIONS[args.motion]),
+        'faults': FaultConfig(**_fields(FaultConfig, args)),
+        'latency_s': args.latency_ms / 1000.0, 'wire_baud': args.wire_baud or None,
+        'radio_hold_s': args.radio_hold_ms / 1000.0,
         # A demo may run for hours: keep no ground truth, only the counters.
-        truth_limit=0)
+        'truth_limit': 0})
 
 
 def status_line(sim: PtySimulator, elapsed: float) -> str:
     """One line on what the simulator has done so far."""
     stats = sim.stats
-    streaming = f'0x{sim.streaming:02X}' if sim.streaming else 'no'
-    if len(sim.addresses) > 1:
-        streaming = ','.join(f'{a}:' + (f'0x{sim.streaming_of(a):02X}' if sim.streaming_of(a)
-                                        else 'no') for a in sim.addresses)
-    link = (f'acks={stats.acks} nacks={stats.nacks}' if sim.config.wireless
-            else 'wired')
+
+    def named(code: int) -> str:
+        return f'0x{code:02X}' if code else 'no'
+    streaming = (','.join(f'{a}:{named(sim.streaming_of(a))}' for a in sim.addresses)
+                 if len(sim.addresses) > 1 else named(sim.streaming))
+    link = f'acks={stats.acks} nacks={stats.nacks}' if sim.config.wireless else 'wired'
     plugged = 'plugged' if sim.pty.plugged.is_set() else 'unplugged'
-    line = (f'[{elapsed:8.1f} s] records={stats.records_sent} replies={stats.replies_sent} '
-            f'commands={stats.commands_received} {link} '
-            f'streaming={streaming} rate={sim.sensor.rate_hz:g}Hz '
-            f'port={plugged} opens={stats.port_opens}')
-    extra = {name: value for name, value in stats.as_dict().items() if value and name in (
+    extra = ''.join(f' {k}={v}' for k, v in stats.as_dict().items() if v and k in (
         'garbage_bytes', 'corrupted_checksum', 'corrupted_length', 'foreign', 'dropped',
         'stalled', 'unplugged_lost', 'overflow_packets', 'commands_lost', 'commands_ignored',
-        'line_rate_skipped', 'late_skipped', 'host_bytes_ignored')}
-    if extra:
-        line += ' ' + ' '.join(f'{k}={v}' for k, v in extra.items())
-    return line
+        'line_rate_skipped', 'late_skipped', 'host_bytes_ignored'))
+    return (f'[{elapsed:8.1f} s] records={stats.records_sent} replies={stats.replies_sent} '
+            f'commands={stats.commands_received} {link} streaming={streaming} '
+            f'rate={sim.sensor.rate_hz:g}Hz port={plugged} opens={stats.port_opens}{extra}')
 
 
 def _say(text: str) -> None:
@@ -292,15 +272,10 @@ def main(argv: list[str] | None = None) -> int:
         with PtySimulator(config) as sim:
             _say(f'port: {sim.port}')
             start = time.monotonic()
-            deadline = start + args.duration if args.duration else None
+            deadline = start + (args.duration or math.inf)
             next_status = start + args.status_interval
-            while not stop.is_set():
-                now = time.monotonic()
-                if deadline is not None and now >= deadline:
-                    break
-                wake = next_status if deadline is None else min(next_status, deadline)
-                if stop.wait(max(wake - now, 0.0)):
-                    break
+            while (now := time.monotonic()) < deadline and not stop.wait(
+                    max(min(next_status, deadline) - now, 0.0)):
                 if time.monotonic() >= next_status:
                     next_status += args.status_interval
                     if not args.quiet:

@@ -66,17 +66,13 @@ class BiasCorrections:
     """
 
     def __init__(self) -> None:
-        self.accel: Vector3 = _ZERO
-        self.gyro: Vector3 = _ZERO
-        self._nv_accel: Vector3 = _ZERO
-        self._nv_gyro: Vector3 = _ZERO
+        # In effect (accel, gyro), and in non-volatile memory.
+        self.accel = self.gyro = self._nv_accel = self._nv_gyro = _ZERO
         self._pending_gyro: tuple[float, Vector3] | None = None
 
     def restore(self) -> None:
         """Take the corrections from non-volatile memory (power-up)."""
-        self.accel = self._nv_accel
-        self.gyro = self._nv_gyro
-        self._pending_gyro = None
+        self.accel, self.gyro, self._pending_gyro = self._nv_accel, self._nv_gyro, None
 
     def forget_capture(self) -> None:
         """Drop a gyro capture still running (power lost)."""
@@ -125,12 +121,8 @@ class Cycle:
 
     def __init__(self, maker: 'RecordMaker', rel: float, timer: int, dt: float,
                  inertial: bool) -> None:
-        self._maker = maker
-        self._rel = rel
-        self._dt = dt
-        self.timer = timer
-        self._meas: Measurement | None = (
-            maker.motion.measure(rel, maker.rng) if inertial else None)
+        self._maker, self._rel, self._dt, self.timer = maker, rel, dt, timer
+        self._meas = maker.motion.measure(rel, maker.rng) if inertial else None
 
     @property
     def _measured(self) -> Measurement:
@@ -187,33 +179,21 @@ class Cycle:
     def _euler(self) -> Vector3:
         return euler_from_matrix(self.matrix)
 
-    @property
-    def roll(self) -> float:
-        """Roll (rad) of M."""
-        return self._euler[0]
-
-    @property
-    def pitch(self) -> float:
-        """Pitch (rad) of M."""
-        return self._euler[1]
-
-    @property
-    def yaw(self) -> float:
-        """Yaw (rad) of M."""
-        return self._euler[2]
+    roll = property(lambda self: self._euler[0], doc='Roll (rad) of M.')
+    pitch = property(lambda self: self._euler[1], doc='Pitch (rad) of M.')
+    yaw = property(lambda self: self._euler[2], doc='Yaw (rad) of M.')
 
     @functools.cached_property
     def stabilised_accel(self) -> Vector3:
         """Gyro-stabilised acceleration: the filter's estimate, smooth, biased alike."""
-        bias = self._maker.motion.config.accel_bias
-        truth = self._measured.truth.accel
-        return _sub(tuple(truth[i] + bias[i] for i in range(3)), self._maker.biases.accel)
+        truth, bias = self._measured.truth.accel, self._maker.motion.config.accel_bias
+        return _sub(tuple(t + b for t, b in zip(truth, bias, strict=True)),
+                    self._maker.biases.accel)
 
     @property
     def stabilised_mag(self) -> Vector3:
         """Gyro-stabilised field: smooth, NaN as the magnetometer is."""
-        mag = self.mag
-        return mag if math.isnan(mag[0]) else self._measured.truth.mag
+        return self.mag if math.isnan(self.mag[0]) else self._measured.truth.mag
 
     def _temperature_code(self, above: float) -> int:
         """A/D code of a temperature sensor ``above`` C over ~25 C, warming up slowly."""
@@ -243,10 +223,7 @@ class RecordMaker:
 
     def __init__(self, motion: Motion, rng: random.Random, temperature_c: float,
                  biases: BiasCorrections) -> None:
-        self.motion = motion
-        self.rng = rng
-        self.temperature_c = temperature_c
-        self.biases = biases
+        self.motion, self.rng, self.temperature_c, self.biases = motion, rng, temperature_c, biases
 
     def record(self, code: int, rel: float, timer: int, dt: float) -> Any:
         """Build the record ``code`` of the cycle at ``rel`` (timer ``timer``, ``dt`` s long)."""

@@ -44,6 +44,7 @@ Vector3 = tuple[float, float, float]
 Matrix3 = tuple[float, float, float, float, float, float, float, float, float]
 
 _NAN = float('nan')
+_ZERO: Vector3 = (0.0, 0.0, 0.0)
 _TWO_PI = 2.0 * math.pi
 
 
@@ -171,8 +172,7 @@ class Motion:
         self._amp = tuple(math.radians(a) for a in c.sway_amplitude_deg)
         self._omega = tuple(_TWO_PI / p if p > 0 else 0.0 for p in c.sway_period_s)
         self._yaw_rate = math.radians(c.yaw_rate_dps)
-        inc = math.radians(c.inclination_deg)
-        dec = math.radians(c.declination_deg)
+        inc, dec = math.radians(c.inclination_deg), math.radians(c.declination_deg)
         self.earth_field: Vector3 = (c.field_strength * math.cos(inc) * math.cos(dec),
                                      c.field_strength * math.cos(inc) * math.sin(dec),
                                      c.field_strength * math.sin(inc))
@@ -200,27 +200,18 @@ class Motion:
         """Return the Euler angles and their time derivatives at ``t``."""
         frozen = self._frozen_tau is not None
         tau = self._frozen_tau if frozen else t - self._offset
-        angles = []
-        rates = []
-        for axis in range(3):
-            phase = self._omega[axis] * tau
-            angles.append(self._base[axis] + self._amp[axis] * math.sin(phase))
-            rates.append(self._amp[axis] * self._omega[axis] * math.cos(phase))
-        angles[2] += self._yaw_rate * tau
-        rates[2] += self._yaw_rate
-        if frozen:
-            rates = [0.0, 0.0, 0.0]
-        return (angles[0], angles[1], angles[2]), (rates[0], rates[1], rates[2])
+        sway = [(base + amp * math.sin(omega * tau), amp * omega * math.cos(omega * tau))
+                for base, amp, omega in zip(self._base, self._amp, self._omega, strict=True)]
+        (roll, droll), (pitch, dpitch), (yaw, dyaw) = sway
+        angles = (roll, pitch, yaw + self._yaw_rate * tau)
+        return angles, _ZERO if frozen else (droll, dpitch, dyaw + self._yaw_rate)
 
     def state(self, t: float) -> TrueState:
         """Return the exact state at ``t`` (seconds since power-up)."""
         (roll, pitch, yaw), (droll, dpitch, dyaw) = self._angles(t)
-        sr, cr = math.sin(roll), math.cos(roll)
-        sp, cp = math.sin(pitch), math.cos(pitch)
+        sr, cr, sp, cp = math.sin(roll), math.cos(roll), math.sin(pitch), math.cos(pitch)
         # ZYX kinematics: body rates from the Euler angle rates.
-        rate = (droll - dyaw * sp,
-                dpitch * cr + dyaw * sr * cp,
-                -dpitch * sr + dyaw * cr * cp)
+        rate = (droll - dyaw * sp, dpitch * cr + dyaw * sr * cp, -dpitch * sr + dyaw * cr * cp)
         m = matrix_from_euler(roll, pitch, yaw)
         # The accelerometer feels the reaction to gravity: -1 g along earth down.
         accel = (-m[2], -m[5], -m[8])
@@ -236,30 +227,24 @@ class Motion:
         """Return the true body rate averaged over [t0, t1] (for a bias capture)."""
         if t1 <= t0 or points < 2:
             return self.state(t0).angular_rate
-        total = [0.0, 0.0, 0.0]
-        for k in range(points):
-            rate = self.state(t0 + (t1 - t0) * k / (points - 1)).angular_rate
-            for i in range(3):
-                total[i] += rate[i]
-        return (total[0] / points, total[1] / points, total[2] / points)
+        rates = [self.state(t0 + (t1 - t0) * k / (points - 1)).angular_rate
+                 for k in range(points)]
+        return tuple(sum(axis) / points for axis in zip(*rates, strict=True))
 
     def measure(self, t: float, rng: random.Random) -> Measurement:
         """Return what the raw sensors read at ``t``: truth, biases and noise."""
         c = self.config
         truth = self.state(t)
         gauss = rng.gauss
-        if c.noise is None:
-            accel = tuple(truth.accel[i] + c.accel_bias[i] + gauss(0.0, c.accel_noise)
-                          for i in range(3))
-            rate = tuple(truth.angular_rate[i] + c.gyro_bias[i] + gauss(0.0, c.gyro_noise)
-                         for i in range(3))
+        if c.noise is None:   # white alone, the accelerometer's drawn first
+            accel_error = [gauss(0.0, c.accel_noise) for _ in range(3)]
+            gyro_error = [gauss(0.0, c.gyro_noise) for _ in range(3)]
         else:
             if self._noise is None:  # seeded from the sensor's noise source: a seed repeats
                 self._noise = NoiseStream(c.noise, rng.getrandbits(63))
             gyro_error, accel_error = self._noise.sample(t)
-            accel = tuple(truth.accel[i] + c.accel_bias[i] + accel_error[i] for i in range(3))
-            rate = tuple(truth.angular_rate[i] + c.gyro_bias[i] + gyro_error[i]
-                         for i in range(3))
+        accel = tuple(truth.accel[i] + c.accel_bias[i] + accel_error[i] for i in range(3))
+        rate = tuple(truth.angular_rate[i] + c.gyro_bias[i] + gyro_error[i] for i in range(3))
         field, matrix = truth.mag, truth.matrix
         if self._iron:
             soft = mat_vec(c.soft_iron, field)
@@ -267,8 +252,7 @@ class Motion:
             # As the sensor's filter: tilt from gravity, magnetic heading from the field read.
             roll, pitch, _ = truth.euler
             matrix = matrix_from_euler(roll, pitch, tilted_heading(field, roll, pitch))
-        if c.nan_mag or (c.mag_nan_probability > 0.0
-                         and rng.random() < c.mag_nan_probability):
+        if c.nan_mag or (c.mag_nan_probability > 0.0 and rng.random() < c.mag_nan_probability):
             mag = (_NAN, _NAN, _NAN)
         else:
             mag = tuple(field[i] + gauss(0.0, c.mag_noise) for i in range(3))

@@ -192,8 +192,8 @@ class NoiseStream:
 
     def __init__(self, config: NoiseConfig, seed: int | None = None) -> None:
         self.model = NoiseModel(config, seed)
-        self._block = np.zeros((0, 6))
-        self._next = 0
+        self._block, self._next = np.zeros((0, 6)), 0
+        #: When the last sample was asked for, and the step between the last two asks.
         self._last: float | None = None
         self._dt = 0.01
 

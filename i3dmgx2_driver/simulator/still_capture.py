@@ -35,8 +35,8 @@ capture holds them: a tool or a test writes them with ``capture.file_format``
 """
 
 from collections.abc import Iterator, Sequence
+import dataclasses
 import math
-from typing import NamedTuple
 
 from i3dmgx2_driver.codec import framing
 from i3dmgx2_driver.codec import layouts as lay
@@ -59,43 +59,23 @@ TILT_S = 1.0
 KNOCK_HZ, KNOCK_S, KNOCK_G, KNOCK_RAD_S = 40.0, 0.05, 0.3, 0.2
 
 
-class StillTruth(NamedTuple):
-    """What the still sensor reads without noise, in the device's units."""
-
-    accel: tuple[float, float, float]
-    angular_rate: tuple[float, float, float]
-    mag: tuple[float, float, float]
-    matrix: tuple[float, ...]
-
-
-def still_truth(motion: MotionConfig) -> StillTruth:
-    """Return the readings of a sensor at rest in ``motion``'s resting pose, biases included."""
-    state = Motion(MotionConfig(**{**motion.__dict__, 'static': True})).state(0.0)
-    accel = tuple(state.accel[i] + motion.accel_bias[i] for i in range(3))
-    rate = tuple(motion.gyro_bias)
-    return StillTruth(accel, rate, state.mag, state.matrix)
+def _still(layout: lay.Layout) -> bool:
+    """Whether a still capture makes every field of ``layout``: still quantities, timer last."""
+    names = [field.name for field in layout.reply or ()]
+    return bool(names) and names[-1] == 'timer' and set(names) <= set(_STILL_FIELDS)
 
 
 def record_dtype(code: int) -> np.dtype:
     """Return the numpy layout of record ``code`` (echo byte first), from the codec's table."""
     layout = lay.LAYOUTS[code]
-    names = [field.name for field in layout.reply or ()]
-    if not layout.reply or names[-1] != 'timer' or not set(names) <= set(_STILL_FIELDS):
-        usable = sorted(f'0x{c:02X}' for c, lo in lay.LAYOUTS.items() if lo.reply
-                        and lo.reply[-1].name == 'timer'
-                        and {f.name for f in lo.reply} <= set(_STILL_FIELDS))
+    if not _still(layout):
+        usable = sorted(f'0x{c:02X}' for c, other in lay.LAYOUTS.items() if _still(other))
         raise ValueError(f'stream 0x{code:02X} has fields a still capture does not make; '
                          f'one of {", ".join(usable)}')
     kinds = {'f': '>f4', 'I': '>u4'}
-    fields = [('echo', 'u1')]
-    for field in layout.reply:
-        shape = (field.count,) if field.count > 1 else ()
-        fields.append((field.name, kinds[field.code], shape))
-    dtype = np.dtype(fields)
-    if dtype.itemsize != layout.record_size:  # pragma: no cover - the table's own check
-        raise ValueError(f'0x{code:02X}: {dtype.itemsize} bytes, the table says '
-                         f'{layout.record_size}')
-    return dtype
+    return np.dtype([('echo', 'u1')] + [(field.name, kinds[field.code],
+                                         (field.count,) if field.count > 1 else ())
+                                        for field in layout.reply])
 
 
 def _checksums(data: np.ndarray) -> np.ndarray:
@@ -162,12 +142,15 @@ def still_chunks(seconds: float, rate_hz: float, code: int = lay.ACCEL_ANG_RATE,
         raise ValueError(f'rate_hz and seconds must be positive and per_read >= 1, got '
                          f'{rate_hz!r}, {seconds!r}, {per_read!r}')
     dtype = record_dtype(code)
-    truth = still_truth(motion if motion is not None else MotionConfig())
+    motion = motion if motion is not None else MotionConfig()
+    # What the sensor reads at its resting pose without noise, biases included.
+    truth = Motion(dataclasses.replace(motion, static=True)).state(0.0)
+    gyro_truth = np.asarray(motion.gyro_bias)
+    accel_truth = np.asarray(truth.accel) + motion.accel_bias
     model = NoiseModel(noise, seed)
     ticks = round(TICKS_PER_SECOND / rate_hz)
     dt = ticks / TICKS_PER_SECOND
     total = math.floor(seconds / dt)
-    mag_noise = (motion or MotionConfig()).mag_noise
     rng = np.random.default_rng(None if seed is None else seed + 1)
     for begin in range(0, total, BLOCK):
         n = min(BLOCK, total - begin)
@@ -176,23 +159,16 @@ def still_chunks(seconds: float, rate_hz: float, code: int = lay.ACCEL_ANG_RATE,
         records['echo'] = code
         errors = model.draw(n, dt)
         errors[:, list(dead)] = 0.0
-        gyro = np.asarray(truth.angular_rate) + errors[:, :3]
-        accel = np.asarray(truth.accel) + errors[:, 3:]
+        gyro = gyro_truth + errors[:, :3]
+        accel = accel_truth + errors[:, 3:]
         disturb(index * dt, gyro, accel, tilts, knocks)
-        names = dtype.names
-        if 'angular_rate' in names:
-            records['angular_rate'] = gyro
-        if 'accel' in names:
-            records['accel'] = accel
-        if 'mag' in names:
-            records['mag'] = np.asarray(truth.mag) + rng.normal(0.0, mag_noise, (n, 3))
-        if 'matrix' in names:
-            records['matrix'] = np.asarray(truth.matrix)
+        for name, value in (('angular_rate', gyro), ('accel', accel), ('matrix', truth.matrix)):
+            if name in dtype.names:
+                records[name] = value
+        if 'mag' in dtype.names:
+            records['mag'] = np.asarray(truth.mag) + rng.normal(0.0, motion.mag_noise, (n, 3))
         records['timer'] = (timer_start + index * ticks) % TIMER_MODULUS
         rows = frame(records.view(np.uint8).reshape(n, dtype.itemsize), wireless, address)
-        times = start_time + (index + 1) * dt
-        width = rows.shape[1]
-        flat = rows.tobytes()
         for first in range(0, n, per_read):
             last = min(first + per_read, n)
-            yield float(times[last - 1]), flat[first * width:last * width]
+            yield start_time + (begin + last) * dt, rows[first:last].tobytes()

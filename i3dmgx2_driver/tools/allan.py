@@ -134,10 +134,8 @@ def overlapping_adev(y: np.ndarray, dt: float,
         y = y[:, None]
     stretches = stretches or [(0, y.shape[0])]
     ms = octave_taus(max((stop - start for start, stop in stretches), default=0))
-    total = np.zeros((ms.size, y.shape[1]))
-    count = np.zeros(ms.size)
-    clusters = np.zeros(ms.size, dtype=np.int64)
-    samples = np.zeros(ms.size, dtype=np.int64)
+    total, count = np.zeros((ms.size, y.shape[1])), np.zeros(ms.size)
+    clusters, samples = np.zeros(ms.size, dtype=np.int64), np.zeros(ms.size, dtype=np.int64)
     for start, stop in stretches:
         part = y[start:stop]
         theta = np.zeros((part.shape[0] + 1, y.shape[1]))
@@ -169,8 +167,7 @@ def _edf(m: np.ndarray, n: np.ndarray) -> np.ndarray:
 
 def _nonnegative_fit(basis: np.ndarray, avar: np.ndarray, var: np.ndarray) -> np.ndarray:
     """Return the coefficients >= 0 of ``basis @ coef ~ avar`` weighted by 1 / ``var``."""
-    a_matrix = basis / np.sqrt(var)[:, None]
-    target = avar / np.sqrt(var)
+    a_matrix, target = basis / np.sqrt(var)[:, None], avar / np.sqrt(var)
     best, best_cost = np.zeros(3), math.inf
     for mask in range(1, 8):
         cols = [j for j in range(3) if mask >> j & 1]
@@ -185,6 +182,13 @@ def _nonnegative_fit(basis: np.ndarray, avar: np.ndarray, var: np.ndarray) -> np
     return best
 
 
+def _fitted(dev: Deviation, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the taus fitted (clusters enough), their Allan variance and degrees of freedom."""
+    usable = dev.clusters >= MIN_CLUSTERS
+    m, n = np.round(dev.tau[usable] / dev.tau[0]), dev.samples[usable].astype(float)
+    return dev.tau[usable], dev.adev[usable, axis] ** 2, _edf(m, n)
+
+
 def fit(dev: Deviation, axis: int) -> tuple[np.ndarray, np.ndarray]:
     """
     Return (a, f, c) of ``avar ~ a / tau + f + c tau``, all >= 0, and their 1-sigma.
@@ -193,10 +197,7 @@ def fit(dev: Deviation, axis: int) -> tuple[np.ndarray, np.ndarray]:
     (three rounds: the weights follow the fit), the sigma from the fit's
     covariance at the last weights.
     """
-    usable = dev.clusters >= MIN_CLUSTERS
-    tau, avar = dev.tau[usable], dev.adev[usable, axis] ** 2
-    m = np.round(tau / dev.tau[0])
-    edf = _edf(m, dev.samples[usable].astype(float))
+    tau, avar, edf = _fitted(dev, axis)
     basis = np.stack([1.0 / tau, np.ones_like(tau), tau], axis=1)
     var = avar ** 2 * 2.0 / edf[0]
     for _ in range(3):
@@ -217,11 +218,9 @@ def upper_bound(dev: Deviation, axis: int, term: str) -> float:
     2-sigma low quantile of a chi-square of the term's degrees of freedom
     (Wilson and Hilferty's cube); the least of those over the fitted taus.
     """
-    usable = dev.clusters >= MIN_CLUSTERS
-    tau, avar = dev.tau[usable], dev.adev[usable, axis] ** 2
+    tau, avar, edf = _fitted(dev, axis)
     j = TERMS.index(term)
-    edf = _edf(np.round(tau / dev.tau[0]), dev.samples[usable].astype(float))[j]
-    low = np.maximum(1.0 - 2.0 / (9.0 * edf) - 2.0 * np.sqrt(2.0 / (9.0 * edf)), 0.05) ** 3
+    low = np.maximum(1.0 - 2.0 / (9.0 * edf[j]) - 2.0 * np.sqrt(2.0 / (9.0 * edf[j])), 0.05) ** 3
     shape = (1.0 / tau, np.full(tau.shape, FLICKER_FLOOR ** 2), tau / K_TAU)[j]
     room = np.sqrt(avar / low / shape)
     return float(room.min()) if room.size else math.nan
@@ -241,9 +240,9 @@ def read_terms(dev: Deviation, duration: float) -> list[AxisNoise]:
     for axis in range(dev.adev.shape[1]):
         sigma = dev.adev[usable, axis]
         if usable.sum() < 3 or not np.all(sigma > 0):
-            why = ('dead: its readings never change' if sigma.size and not np.any(sigma > 0)
-                   else 'too short to fit')
-            nothing = Term(math.nan, 0, Short(why, None if 'dead' in why else 60.0))
+            nothing = Term(math.nan, 0, Short('dead: its readings never change', None)
+                           if sigma.size and not np.any(sigma > 0) else
+                           Short('too short to fit', 60.0))
             out.append(AxisNoise(nothing, nothing, math.nan, nothing))
             continue
         coef, error = fit(dev, axis)
@@ -251,9 +250,8 @@ def read_terms(dev: Deviation, duration: float) -> list[AxisNoise]:
         terms = []
         # Clusters behind each: at N's tau, at B's, at the longest the walk is fitted to.
         behind = (N_TAU, tau_b, float(dev.tau[usable][-1]))
-        for j, (name, tau, scale) in enumerate(zip(TERMS, behind,
-                                                   (1.0, 1.0 / FLICKER_FLOOR ** 2, 3.0),
-                                                   strict=True)):
+        scales = (1.0, 1.0 / FLICKER_FLOOR ** 2, 3.0)   # from each coefficient to its term^2
+        for j, (name, tau, scale) in enumerate(zip(TERMS, behind, scales, strict=True)):
             # sqrt of a coefficient: half its relative error.
             rel = error[j] / (2.0 * coef[j]) if coef[j] > 0 else math.inf
             short = None
@@ -325,15 +323,13 @@ def movement(time: np.ndarray, values: np.ndarray, labels: list[str], rate: floa
     typical = np.median(var, axis=0)
     knock = np.where(typical > 0, (var / np.where(typical > 0, typical, 1.0) - 1.0)
                      / np.sqrt(2.0 / pairs)[:, None], 0.0)
-    flagged = np.zeros(means.shape[0], dtype=bool)
-    flagged[:-1] |= jump.max(axis=1) > STEP_SIGMA
-    flagged[1:] |= jump.max(axis=1) > STEP_SIGMA
-    flagged |= knock.max(axis=1) > KNOCK_SIGMA
+    # A window's step score: the larger of the steps to its neighbours.
+    near = np.maximum(np.pad(jump, ((1, 0), (0, 0))), np.pad(jump, ((0, 1), (0, 0))))
+    scores = np.concatenate([near, knock], axis=1)
+    flagged = (near.max(axis=1) > STEP_SIGMA) | (knock.max(axis=1) > KNOCK_SIGMA)
     spread_out = flagged | np.roll(flagged, 1) | np.roll(flagged, -1)
     start = np.nonzero(seen)[0] * window
     moved, stretches = [], []
-    scores = np.concatenate([np.maximum(np.pad(jump, ((1, 0), (0, 0))),
-                                        np.pad(jump, ((0, 1), (0, 0)))), knock], axis=1)
     for index in np.nonzero(flagged)[0]:
         j = int(np.argmax(scores[index]))
         what = (scores[index, j], f'{labels[j % len(labels)]} '

@@ -26,9 +26,10 @@ messages' stamps (a bag).
 """
 
 from collections import Counter
+from collections.abc import Sequence
 import os
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 import warnings
 
 import numpy as np
@@ -103,8 +104,7 @@ def from_capture(path: str) -> Samples:
         for receive_time, data in chunks:
             for event in parser.feed(data):
                 record = getattr(event, 'record', None)
-                if record is not None and hasattr(record, 'angular_rate') \
-                        and hasattr(record, 'accel') and hasattr(record, 'timer'):
+                if all(hasattr(record, name) for name in ('angular_rate', 'accel', 'timer')):
                     rows.append((receive_time, record))
     if not rows:
         raise ValueError(f'{path}: no record with acceleration and angular rate '
@@ -123,8 +123,17 @@ def from_capture(path: str) -> Samples:
     return Samples(unwrap_timer(timers, host), gyro, accel, mag, path, notes)
 
 
-def _vector(v) -> tuple[float, float, float]:
-    return (v.x, v.y, v.z)
+def imu_row(msg: Any) -> tuple[float, ...]:
+    """Return an Imu message's stamp (s), angular velocity and acceleration, as one row."""
+    s, w, a = msg.header.stamp, msg.angular_velocity, msg.linear_acceleration
+    return (s.sec + s.nanosec * 1e-9, w.x, w.y, w.z, a.x, a.y, a.z)
+
+
+def from_rows(rows: Sequence[tuple[float, ...]], mag: np.ndarray | None, source: str) -> Samples:
+    """Return the samples of ``imu_row`` rows (of any order, one at least) in stamp order."""
+    rows = np.array(rows)
+    rows = rows[np.argsort(rows[:, 0], kind='stable')]
+    return Samples(rows[:, 0] - rows[0, 0], rows[:, 1:4], rows[:, 4:7], mag, source)
 
 
 def from_bag(path: str, topic: str = DEFAULT_TOPIC, mag_topic: str | None = None) -> Samples:
@@ -134,38 +143,28 @@ def from_bag(path: str, topic: str = DEFAULT_TOPIC, mag_topic: str | None = None
     sqlite3 or MCAP, through rosbags (an optional extra). The mag topic
     defaults to the Imu topic's sibling ``mag``, as the driver names them.
     """
-    if mag_topic is None:
-        mag_topic = topic.rsplit('/', 1)[0] + '/mag'
+    mag_topic = topic.rsplit('/', 1)[0] + '/mag' if mag_topic is None else mag_topic
+    rows, mag = [], []
     try:
-        return _read_bag(path, topic, mag_topic)
+        with bag_reader(Path(path)) as reader:
+            known = {c.topic: c.msgtype for c in reader.connections}
+            if topic not in known:
+                imu_topics = sorted(t for t, kind in known.items() if kind.endswith('/Imu'))
+                raise ValueError(f'{path}: no topic {topic!r}; its Imu topics: '
+                                 f'{", ".join(imu_topics) or "none"}')
+            wanted = [c for c in reader.connections if c.topic in (topic, mag_topic)]
+            decode = deserializer(reader)
+            for connection, _, raw in reader.messages(connections=wanted):
+                msg = decode(raw, connection.msgtype)
+                if connection.topic == topic:
+                    rows.append(imu_row(msg))
+                else:
+                    field = msg.magnetic_field
+                    mag.append((field.x, field.y, field.z))
     except Exception as exc:     # rosbags' own errors (AnyReaderError...): a message, no trace
         if not type(exc).__module__.startswith('rosbags'):
             raise
         raise ValueError(f'{path}: not a readable bag ({type(exc).__name__}: {exc})') from None
-
-
-def _read_bag(path: str, topic: str, mag_topic: str) -> Samples:
-    stamps, gyro, accel, mag = [], [], [], []
-    with bag_reader(Path(path)) as reader:
-        known = {c.topic: c.msgtype for c in reader.connections}
-        if topic not in known:
-            imu_topics = sorted(t for t, kind in known.items() if kind.endswith('/Imu'))
-            raise ValueError(f'{path}: no topic {topic!r}; its Imu topics: '
-                             f'{", ".join(imu_topics) or "none"}')
-        wanted = [c for c in reader.connections if c.topic in (topic, mag_topic)]
-        decode = deserializer(reader)
-        for connection, _, raw in reader.messages(connections=wanted):
-            msg = decode(raw, connection.msgtype)
-            if connection.topic == topic:
-                stamps.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
-                gyro.append(_vector(msg.angular_velocity))
-                accel.append(_vector(msg.linear_acceleration))
-            else:
-                mag.append(_vector(msg.magnetic_field))
-    if not stamps:
+    if not rows:
         raise ValueError(f'{path}: no message on {topic}')
-    time = np.array(stamps)
-    order = np.argsort(time, kind='stable')
-    return Samples(time[order] - time[order[0]], np.array(gyro)[order],
-                   np.array(accel)[order], np.array(mag) if mag else None,
-                   f'{path} ({topic})')
+    return from_rows(rows, np.array(mag) if mag else None, f'{path} ({topic})')

@@ -29,6 +29,7 @@ from collections.abc import Sequence
 import json
 import math
 import os
+from pathlib import Path
 import sys
 import time
 from typing import Any, NamedTuple
@@ -71,8 +72,7 @@ class Report(NamedTuple):
 
 def analyse(samples: Samples) -> Report:
     """Take the Allan deviation of both sensors' still stretches and read the terms."""
-    n = samples.time.size
-    rate = samples.rate_hz
+    n, rate = samples.time.size, samples.rate_hz
     duration = n / rate if rate > 0 else 0.0
     if duration < allan.MIN_STILL_S:
         raise ValueError(f'{samples.source}: {n} samples over {duration:.3g} s: too short for '
@@ -101,16 +101,14 @@ def analyse(samples: Samples) -> Report:
         still_s = sum(stop - start for start, stop in still.stretches) / rate
         warnings.append(f'analysed {len(still.stretches)} still stretches ({still_s:.0f} s of '
                         f'{duration:.0f} s), their Allan variances combined')
-    deviation, terms = {}, {}
-    for j, name in enumerate(UNITS):
-        deviation[name] = allan.overlapping_adev(values[:, 3 * j:3 * j + 3], 1.0 / rate,
-                                                 still.stretches if still.moved else None)
-        terms[name] = allan.read_terms(deviation[name], still_s)
-    mag = None
-    if samples.mag is not None and samples.mag.shape[0] > 2:
-        # The field's white noise a reading: the scatter of steps over sqrt(2) (a slow
-        # drift or an offset does not enter it).
-        mag = float(np.max(np.std(np.diff(samples.mag, axis=0), axis=0)) / math.sqrt(2.0))
+    deviation = {name: allan.overlapping_adev(values[:, 3 * j:3 * j + 3], 1.0 / rate,
+                                              still.stretches if still.moved else None)
+                 for j, name in enumerate(UNITS)}
+    terms = {name: allan.read_terms(dev, still_s) for name, dev in deviation.items()}
+    # The field's white noise a reading: the scatter of steps over sqrt(2) (a slow drift or
+    # an offset does not enter it).
+    mag = (float(np.max(np.std(np.diff(samples.mag, axis=0), axis=0)) / math.sqrt(2.0))
+           if samples.mag is not None and samples.mag.shape[0] > 2 else None)
     return Report(samples, rate, duration, deviation, terms, warnings, mag)
 
 
@@ -123,9 +121,9 @@ def yaml_float(value: float) -> str:
     return mantissa + e + exponent
 
 
-def _axes(terms: list[allan.AxisNoise], part: str) -> list[float | None]:
-    """Return a term's measured figure per axis, None where there is none (JSON has no NaN)."""
-    return [_number(getattr(axis, part).value) for axis in terms]
+def _axes(terms: list[allan.AxisNoise], part: str, what: str = 'value') -> list[float | None]:
+    """Return ``what`` of a term (its figure) per axis, None where there is none (JSON: no NaN)."""
+    return [_number(getattr(getattr(axis, part), what)) for axis in terms]
 
 
 def _number(value: float) -> float | None:
@@ -181,10 +179,8 @@ def as_json(report: Report) -> dict[str, Any]:
             'random_walk': _axes(terms, 'random_walk'),
             'bias_instability': _axes(terms, 'bias_instability'),
             'bias_instability_tau_s': [_number(axis.bias_tau) for axis in terms],
-            'clusters': {part: [getattr(axis, part).clusters for axis in terms]
-                         for part in allan.TERMS},
-            'one_sigma': {part: [_number(getattr(axis, part).error) for axis in terms]
-                          for part in allan.TERMS},
+            'clusters': {part: _axes(terms, part, 'clusters') for part in allan.TERMS},
+            'one_sigma': {part: _axes(terms, part, 'error') for part in allan.TERMS},
             'too_short': [{'axis': label, 'term': LABELS[part], 'why': term.short.why,
                            'record_s': term.short.record_s, 'upper_bound': _number(term.bound)}
                           for label, axis in zip('xyz', terms, strict=True)
@@ -200,16 +196,13 @@ def as_json(report: Report) -> dict[str, Any]:
 
 def params_yaml(report: Report) -> str:
     """Return noise.yaml: the covariance parameters as a params file the node takes."""
-    notes = {figure(report.terms[name], 'white')[1] for name in UNITS}
-    lines = [
-        '# Measured by `ros2 run i3dmgx2_driver noise` at rest from',
-        f'# {report.samples.source}: {report.duration_s / 60:.1f} min at {report.rate_hz:.4g} Hz.',
-        f'# The white noise of one sample (N * sqrt(rate)), {" / ".join(sorted(notes))}. Load',
-        "# it after the driver's own file: --params-file config/i3dmgx2.yaml --params-file "
-        'noise.yaml',
-        '/**:',
-        '  ros__parameters:',
-    ]
+    notes = ' / '.join(sorted({figure(report.terms[name], 'white')[1] for name in UNITS}))
+    lines = ['# Measured by `ros2 run i3dmgx2_driver noise` at rest from',
+             f'# {report.samples.source}: {report.duration_s / 60:.1f} min at '
+             f'{report.rate_hz:.4g} Hz.',
+             f'# The white noise of one sample (N * sqrt(rate)), {notes}. Load',
+             "# it after the driver's own file: --params-file config/i3dmgx2.yaml --params-file "
+             'noise.yaml', '/**:', '  ros__parameters:']
     lines += [f'    {name}: {yaml_float(value)}' for name, value in parameters(report).items()]
     return '\n'.join(lines) + '\n'
 
@@ -251,10 +244,9 @@ def table(report: Report) -> str:
              f'{report.duration_s / 60:.1f} min at {report.rate_hz:.4g} Hz']
     for name, terms in report.terms.items():
         n_unit, b_unit, k_unit = UNITS[name]
-        lines.append(f'{name}: N {n_unit}, B {b_unit}, K {k_unit}; ± the 1-sigma of each '
-                     'after the fit (clusters behind it); * not trusted, see below')
-        lines.append(f'  {"axis":4} {"N":>10} {"":15} {"B":>10} {"(tau)":>9} {"":15} '
-                     f'{"K":>10}')
+        lines += [f'{name}: N {n_unit}, B {b_unit}, K {k_unit}; ± the 1-sigma of each after '
+                  'the fit (clusters behind it); * not trusted, see below',
+                  f'  {"axis":4} {"N":>10} {"":15} {"B":>10} {"(tau)":>9} {"":15} {"K":>10}']
         for label, axis in zip('xyz', terms, strict=True):
             lines.append(f'  {label:4} {_cell(axis.white)} {_cell(axis.bias_instability)[:10]} '
                          f'{f"({axis.bias_tau:.3g} s)":>9} {_cell(axis.bias_instability)[11:]} '
@@ -262,10 +254,9 @@ def table(report: Report) -> str:
         for label, axis in zip('xyz', terms, strict=True):
             shorts = [(LABELS[p], getattr(axis, p).short) for p in allan.TERMS
                       if getattr(axis, p).short is not None]
-            if shorts and shorts[0][1].why.startswith('dead'):
-                lines.append(f'  {name} {label}: {shorts[0][1]}')
-                continue
-            lines += [f'  {name} {label}: {term} {short}' for term, short in shorts]
+            dead = shorts and shorts[0][1].why.startswith('dead')   # one line says it all
+            lines += ([f'  {name} {label}: {shorts[0][1]}'] if dead else
+                      [f'  {name} {label}: {term} {short}' for term, short in shorts])
     lines += [f'warning: {w}' for w in report.warnings]
     return '\n'.join(lines)
 
@@ -286,9 +277,7 @@ def draw(report: Report, path: str) -> Any:
         fitted = dev.clusters >= allan.MIN_CLUSTERS
         error = np.array([allan.uncertainty(int(c)) for c in dev.clusters])
         shown = [dev.adev[dev.adev > 0]]
-        for axis, colour in enumerate(colours):
-            t = terms[axis]
-            adev = dev.adev[:, axis]
+        for t, adev, colour in zip(terms, dev.adev.T, colours, strict=True):
             ax.errorbar(dev.tau[fitted], adev[fitted], yerr=adev[fitted] * error[fitted],
                         fmt='o-', color=colour, ms=3, lw=1, capsize=2)
             ax.loglog(dev.tau[~fitted], adev[~fitted], 'o', mfc='none', color=colour, ms=4)
@@ -306,9 +295,8 @@ def draw(report: Report, path: str) -> Any:
                         mfc=colour if term.short is None else 'none')
                 shown.append(np.array([level * scale]))
         low, high = (float(f(np.concatenate(shown))) for f in (np.min, np.max))
-        ax.set_ylim(low / 2, high * 2)
-        ax.set_xscale('log')
-        ax.set_yscale('log')
+        ax.set(xscale='log', yscale='log', ylim=(low / 2, high * 2),
+               ylabel=f'Allan deviation ({UNITS[name][1]})')
         key = [Line2D([], [], color=c, marker='o', ms=3, label=f'{label} (±1 sigma)')
                for label, c in zip('xyz', colours, strict=True)]
         key += [Line2D([], [], color='k', ls=ls, lw=0.8, label=label) for ls, label in
@@ -319,7 +307,6 @@ def draw(report: Report, path: str) -> Any:
         ax.legend(handles=key, fontsize=7, ncol=2, loc='lower left')
         ax.set_title(f'{name}: the overlapping Allan deviation and the terms read off it',
                      fontsize=9)
-        ax.set_ylabel(f'Allan deviation ({UNITS[name][1]})')
         ax.grid(True, which='both', alpha=0.3)
     fig.axes[-1].set_xlabel('tau (s)')
     fig.tight_layout()
@@ -334,12 +321,9 @@ def write_outputs(report: Report, directory: str, topic: str,
              ('noise.yaml', params_yaml(report)),
              ('imu.yaml', kalibr_yaml(report, topic, inflate)))    # all made before any write
     os.makedirs(directory, exist_ok=True)
-    written = []
-    for name, text in texts:
-        path = os.path.join(directory, name)
-        with open(path, 'w', encoding='utf-8') as f:
-            f.write(text)
-        written.append(path)
+    written = [os.path.join(directory, name) for name, _ in texts]
+    for path, (_, text) in zip(written, texts, strict=True):
+        Path(path).write_text(text, encoding='utf-8')
     png = os.path.join(directory, 'allan.png')
     try:
         draw(report, png)
@@ -394,8 +378,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         except Unbounded as exc:
             print(f'noise: no files written: {exc}', file=sys.stderr)
             return 1
-        for path in written:
-            print(f'wrote {path}')
+        print('\n'.join(f'wrote {path}' for path in written))
     if report.trusted():
         return 0
     print(f'noise: not every figure is trusted (the * and warnings above): exit {MARKED}',

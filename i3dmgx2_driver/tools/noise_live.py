@@ -33,7 +33,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Imu, MagneticField
 
 from . import allan
-from .imu_samples import Samples
+from .imu_samples import from_rows, imu_row, Samples
 from .sources import listening
 
 #: Seconds between two updates of the progress bar, and of its estimate.
@@ -55,9 +55,9 @@ class Listener(Node):
                                  qos_profile_sensor_data)
 
     def _imu(self, msg: Imu) -> None:
-        w, a, s = msg.angular_velocity, msg.linear_acceleration, msg.header.stamp
+        row = imu_row(msg)
         with self._lock:
-            self.rows.append((s.sec + s.nanosec * 1e-9, w.x, w.y, w.z, a.x, a.y, a.z))
+            self.rows.append(row)
 
     def _mag(self, msg: MagneticField) -> None:
         f = msg.magnetic_field
@@ -67,13 +67,9 @@ class Listener(Node):
     def samples(self, source: str) -> Samples | None:
         """Return the messages that came so far, or None before the second one."""
         with self._lock:
-            rows, mag = np.array(self.rows), np.array(self.mag)
-        if rows.shape[0] < 2:
-            return None
-        order = np.argsort(rows[:, 0], kind='stable')
-        rows = rows[order]
-        return Samples(rows[:, 0] - rows[0, 0], rows[:, 1:4], rows[:, 4:7],
-                       mag if mag.shape[0] > 2 else None, source)
+            rows, mag = list(self.rows), np.array(self.mag)
+        return (from_rows(rows, mag if mag.shape[0] > 2 else None, source)
+                if len(rows) > 1 else None)
 
 
 def progress(elapsed: float, total: float, count: int, estimate: str) -> str:
@@ -81,8 +77,7 @@ def progress(elapsed: float, total: float, count: int, estimate: str) -> str:
     done = min(1.0, elapsed / total) if total > 0 else 1.0
     left = max(0.0, total - elapsed)
     bar = '#' * round(done * BAR) + '-' * (BAR - round(done * BAR))
-    return (f'\r[{bar}] {int(left // 60):3d}:{int(left % 60):02d} left, {count} samples'
-            f'{estimate}')
+    return f'\r[{bar}] {int(left // 60):3d}:{int(left % 60):02d} left, {count} samples{estimate}'
 
 
 def _estimate(samples: Samples | None) -> str:
@@ -102,9 +97,7 @@ def listen(topic: str, seconds: float) -> Samples:
         source = f'{node.resolve_topic_name(topic)} (live)'
         start = time.monotonic()
         estimate, next_estimate = '', start + ESTIMATE_S
-        while (elapsed := time.monotonic() - start) < seconds:
-            if stopped.wait(PROGRESS_S):
-                break
+        while (elapsed := time.monotonic() - start) < seconds and not stopped.wait(PROGRESS_S):
             if time.monotonic() >= next_estimate:
                 estimate = _estimate(node.samples(source))
                 next_estimate += ESTIMATE_S

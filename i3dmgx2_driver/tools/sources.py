@@ -24,7 +24,7 @@ is analysed. Which messages a tool keeps and what it makes of them are its own.
 
 import argparse
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 import sys
 import threading
 from typing import Any
@@ -88,7 +88,5 @@ def listening(make_node: Callable[[], Node]) -> Iterator[tuple[Any, lifetime.Sto
 
 
 def _spin(executor: SingleThreadedExecutor) -> None:
-    try:
+    with suppress(ExternalShutdownException):
         executor.spin()
-    except ExternalShutdownException:
-        pass
