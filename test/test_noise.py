@@ -301,6 +301,20 @@ def test_a_knock_the_means_average_out_is_found(tmp_path, capsys):
     assert result['warnings'][0] == 'the sensor moved: 30-31 s, accelerometer y shakes (a knock)'
 
 
+def test_a_thin_first_window_is_not_taken_for_movement():
+    # A live listener's first second may hold two samples (the rest lost while it matched
+    # the publisher): 6 sigma apart, a knock by a chi-square of one pair, and no movement.
+    rng = np.random.default_rng(5)
+    time = np.concatenate([[0.0, 0.5], np.arange(100, 3000) / 100.0])
+    values = rng.normal(0.0, 1.0, (time.size, 3))
+    values[1] = values[0] + 6.0
+    found = allan.movement(time, values, ['x', 'y', 'z'], 100.0)
+    assert found.moved == [] and found.stretches == [(0, time.size)]
+    values[1500:1600] *= 4.0        # a real knock in the middle is still found
+    assert [m[2] for m in allan.movement(time, values, ['x', 'y', 'z'], 100.0).moved] == [
+        'x shakes (a knock)']
+
+
 def test_a_sensor_that_never_keeps_still_is_told_so_and_no_file_is_written(tmp_path, capsys):
     path = write_still(tmp_path / 'moving.gx2cap', 74.0, knocks=list(np.arange(2.0, 74.0, 6.0)))
     status, out, result = run(tmp_path, capsys, '--capture', path)

@@ -323,6 +323,11 @@ def movement(time: np.ndarray, values: np.ndarray, labels: list[str], rate: floa
     typical = np.median(var, axis=0)
     knock = np.where(typical > 0, (var / np.where(typical > 0, typical, 1.0) - 1.0)
                      / np.sqrt(2.0 / pairs)[:, None], 0.0)
+    # A window of less than half the usual samples (the first one a live listener heard,
+    # one cut by a gap) is not judged: its mean and variance are too loose for the tests.
+    thin = count[seen] < 0.5 * np.median(count[seen])
+    jump[thin[:-1] | thin[1:]] = 0.0
+    knock[thin] = 0.0
     # A window's step score: the larger of the steps to its neighbours.
     near = np.maximum(np.pad(jump, ((1, 0), (0, 0))), np.pad(jump, ((0, 1), (0, 0))))
     scores = np.concatenate([near, knock], axis=1)
