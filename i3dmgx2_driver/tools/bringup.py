@@ -101,12 +101,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--baud', type=int, default=115200, help='baud rate (default 115200)')
     parser.add_argument('--output-dir', default='.', metavar='DIR',
                         help='where the report folder is made (default: here)')
-    parser.add_argument('--pings', type=_count, default=20, metavar='N',
-                        help='pings to time (default 20)')
-    parser.add_argument('--commands', type=_count, default=20, metavar='N',
-                        help='short commands (0xE9) to time (default 20)')
-    parser.add_argument('--cycles', type=_count, default=5, metavar='N',
-                        help='continuous-mode starts and stops to time (default 5)')
+    for flag, default, what in (('pings', 20, 'pings'), ('commands', 20, 'short commands (0xE9)'),
+                                ('cycles', 5, 'continuous-mode starts and stops')):
+        parser.add_argument(f'--{flag}', type=_count, default=default, metavar='N',
+                            help=f'{what} to time (default {default})')
     parser.add_argument('--stream-seconds', type=_seconds, default=5.0, metavar='S',
                         help='how long each stream runs (default 5)')
     parser.add_argument('--listen', type=_seconds, default=1.0, metavar='S',
@@ -200,14 +198,12 @@ class Bringup:
                      f'at the end)')
         self.steps.stop_until_quiet(link, period_of_divider(None))
         if not self.found_stream:
-            answer = None
             for _ in range(3):
-                answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
-                if answer:
+                if answer := link.ping_once(link.address, MEASURE_TIMEOUT):
                     break
             if not answer:
                 self.report['error'] = (
-                    f'node {self.link.address} does not answer on {self.link.port.path}: ' + (
+                    f'node {link.address} does not answer on {link.port.path}: ' + (
                         'the base station answered the pings, the sensor did not (is it on? '
                         'its address?)' if answer is False else
                         'nothing answered the pings (no base station on this port?)')
@@ -215,16 +211,11 @@ class Bringup:
                 return False
         self.say('reading identity and data rate')
         info = read_identity(link, self.steps.timeout, self.steps.retries)
-        self.report['identity'] = info._asdict()
-        self.report['identity']['answered'] = any(info)
         self.firmware = fw.version_of(info.firmware)
-        self.report['identity']['firmware_lacks'] = fw.lacks(self.firmware)
+        self.report['identity'] = {**info._asdict(), 'answered': any(info),
+                                   'firmware_lacks': fw.lacks(self.firmware)}
         self.say(fw.summary(self.firmware))
-        try:
-            self.found_divider = self.steps.read_divider(link)
-        except DeviceError:
-            self.found_divider = None
-        self.divider = self.found_divider
+        self.divider = self.found_divider = self._read_divider()
         self.report['as_found'] = {
             'streaming': f'0x{self.found_stream:02X}' if self.found_stream else None,
             'rate_divider': self.found_divider,
@@ -232,6 +223,13 @@ class Bringup:
             if self.found_divider else None,
         }
         return True
+
+    def _read_divider(self) -> int | None:
+        """Read the rate divider from EEPROM; None if the sensor does not say."""
+        try:
+            return self.steps.read_divider(self.link)
+        except DeviceError:
+            return None
 
     def _write_divider(self, divider: int) -> bool:
         """Write the rate divider to EEPROM (once, read back); True if it holds."""
@@ -248,21 +246,17 @@ class Bringup:
         out: dict[str, Any] = {'stream': stream.label, 'code': f'0x{stream.code:02X}'}
         lacking = fw.stream_refusal(stream, self.firmware)
         if lacking:
-            out['skipped'] = lacking
             self.say(f'skipping {stream.label}: {lacking}')
-            return out
+            return {**out, 'skipped': lacking}
         rate = line_budget.max_rate(stream.code, self.args.baud, True)
         if rate is None:
-            out['error'] = 'no rate fits the line'
-            return out
+            return {**out, 'error': 'no rate fits the line'}
         divider = divider_for_rate(rate)
-        out['divider'] = divider
-        out['rate_asked_hz'] = round(rate_of_divider(divider), 2)
+        out.update(divider=divider, rate_asked_hz=round(rate_of_divider(divider), 2))
         self.say(f'streaming {stream.label} at {rate_of_divider(divider):.1f} Hz for '
                  f'{self.args.stream_seconds:g} s')
         if divider != self.divider and not self._write_divider(divider):
-            out['error'] = f'could not set the rate divider to {divider}'
-            return out
+            return {**out, 'error': f'could not set the rate divider to {divider}'}
         period = period_of_divider(divider)
         self.log.start()
         try:
@@ -283,43 +277,32 @@ class Bringup:
 
     def restore(self) -> dict[str, Any]:
         """Put divider and stream back as found; say how it went."""
-        out: dict[str, Any] = {}
-        link, steps = self.link, self.steps
+        link, steps, found = self.link, self.steps, self.found_divider
         steps.stop_until_quiet(link, period_of_divider(self.divider))
-        if self.found_divider is not None:
-            ok = self.divider == self.found_divider or self._write_divider(self.found_divider)
-            try:
-                readback = steps.read_divider(link)
-            except DeviceError:
-                readback = None
-            out['rate_divider'] = readback
-            out['rate_divider_restored'] = bool(ok and readback == self.found_divider)
-        else:
-            out['rate_divider'] = None
-            out['rate_divider_restored'] = self.divider is None
+        readback, divider_restored = None, self.divider is None
+        if found is not None:
+            ok = self.divider == found or self._write_divider(found)
+            readback = self._read_divider()
+            divider_restored = bool(ok and readback == found)
+        restarted = True
         if self.found_stream:
             try:
                 restarted = steps.start_stream(link, self.found_stream,
                                                period_of_divider(self.divider))
             except DeviceError:
                 restarted = False
-            out['streaming'] = f'0x{self.found_stream:02X}' if restarted else None
-            out['stream_restored'] = restarted
-        else:
-            out['streaming'] = None
-            out['stream_restored'] = True
-        out['as_found'] = out['rate_divider_restored'] and out['stream_restored']
-        out['eeprom_writes'] = steps.eeprom_writes
-        return out
+        return {'rate_divider': readback, 'rate_divider_restored': divider_restored,
+                'streaming': f'0x{self.found_stream:02X}'
+                if self.found_stream and restarted else None,
+                'stream_restored': restarted, 'as_found': divider_restored and restarted,
+                'eeprom_writes': steps.eeprom_writes}
 
 
 def stream_figures(log: Sequence[Entry], divider: int, wire_time: float) -> dict[str, Any]:
     """Rate, records lost by the timer, LQI/RSSI and clock drift of one stream's records."""
-    out: dict[str, Any] = {'records': len(log)}
     if len(log) < 2:
-        out.update({'rate_hz': None, 'lost': None, 'lqi': spread([]), 'rssi': spread([]),
-                    'drift_ppm': None, 'longest_gap_ms': None})
-        return out
+        return {'records': len(log), 'rate_hz': None, 'lost': None, 'lqi': spread([]),
+                'rssi': spread([]), 'drift_ppm': None, 'longest_gap_ms': None}
     expected = ticks_per_cycle(divider)
     lost = 0
     ticks = [0]
@@ -336,7 +319,8 @@ def stream_figures(log: Sequence[Entry], divider: int, wire_time: float) -> dict
     gaps = [b[0] - a[0] for a, b in itertools.pairwise(log)]
     lqi = [e[3] for e in log if e[3] is not None]
     rssi = [e[4] for e in log if e[4] is not None]
-    out.update({
+    return {
+        'records': len(log),
         'rate_hz': round((len(log) - 1) / host_span, 2) if host_span > 0 else None,
         'device_rate_hz': round((len(log) - 1 + lost) / span, 2) if span > 0 else None,
         'lost': lost,
@@ -344,8 +328,7 @@ def stream_figures(log: Sequence[Entry], divider: int, wire_time: float) -> dict
         'lqi': spread(lqi, digits=0), 'rssi': spread(rssi, digits=0),
         'drift_ppm': round(clock.drift_ppm, 1) if host_span >= 1.0 else None,
         'longest_gap_ms': round(max(gaps) * 1e3, 1),
-    })
-    return out
+    }
 
 
 # -- the report ------------------------------------------------------------------------
@@ -413,12 +396,10 @@ def format_report(report: dict[str, Any]) -> str:
         for s in report['streams']:
             if 'skipped' in s:  # the whole reason was said, and is in report.json
                 least = fw.text(fw.needs(int(s['code'], 16)))
-                rows.append([s['stream'], '-', f'skipped: needs firmware {least}', '', '', '',
-                             '', '', ''])
+                rows.append([s['stream'], '-', f'skipped: needs firmware {least}'] + [''] * 6)
                 continue
             if 'error' in s and not s.get('records'):
-                rows.append([s['stream'], _cell(s.get('rate_asked_hz')), s['error'], '', '',
-                             '', '', '', ''])
+                rows.append([s['stream'], _cell(s.get('rate_asked_hz')), s['error']] + [''] * 6)
                 continue
             rows.append([s['stream'], _cell(s.get('rate_asked_hz')), _cell(s.get('rate_hz')),
                          str(s['records']), _cell(s.get('lost')),
@@ -485,7 +466,8 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         report['error'] = str(exc)
         _write(folder, report, out)
         return EXIT_FAILED
-    report['port']['low_latency_as_found'] = _on_off(port.low_latency_flag())
+    report['port']['low_latency_as_found'] = {
+        True: 'on', False: 'off', None: 'unknown (not a USB-serial port)'}[port.low_latency_flag()]
     report['port']['low_latency'] = port.enable_low_latency()
     report['port']['latency_timer_ms'] = latency_timer_ms(args.port)
     capture = CaptureWriter(os.path.join(folder, 'session.gx2cap'), default_header(
@@ -533,10 +515,6 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
                          'chunks': capture.chunks, 'bytes': capture.bytes}
     _write(folder, report, out)
     return status
-
-
-def _on_off(flag: bool | None) -> str:
-    return {True: 'on', False: 'off', None: 'unknown (not a USB-serial port)'}[flag]
 
 
 def _write(folder: str, report: dict[str, Any], out: TextIO) -> None:
