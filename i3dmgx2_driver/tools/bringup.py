@@ -160,10 +160,7 @@ class Bringup:
 
     def __init__(self, link: DeviceLink, log: RecordLog, args: argparse.Namespace,
                  say: Callable[[str], None]) -> None:
-        self.link = link
-        self.log = log
-        self.args = args
-        self.say = say
+        self.link, self.log, self.args, self.say = link, log, args, say
         self.report: dict[str, Any] = {}
         self.found_stream = 0
         self.found_divider: int | None = None
@@ -191,8 +188,7 @@ class Bringup:
         while time.monotonic() < deadline and not link.records:
             time.sleep(0.02)
         time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
-        if link.records:
-            self.found_stream = link.last_code or 0
+        self.found_stream = (link.last_code or 0) if link.records else 0
         if self.found_stream:
             self.say(f'the sensor streams 0x{self.found_stream:02X}: stopping it (restarted '
                      f'at the end)')
@@ -244,12 +240,10 @@ class Bringup:
 
     def run_stream(self, stream: streams.Stream) -> dict[str, Any]:
         out: dict[str, Any] = {'stream': stream.label, 'code': f'0x{stream.code:02X}'}
-        lacking = fw.stream_refusal(stream, self.firmware)
-        if lacking:
+        if lacking := fw.stream_refusal(stream, self.firmware):
             self.say(f'skipping {stream.label}: {lacking}')
             return {**out, 'skipped': lacking}
-        rate = line_budget.max_rate(stream.code, self.args.baud, True)
-        if rate is None:
+        if (rate := line_budget.max_rate(stream.code, self.args.baud, True)) is None:
             return {**out, 'error': 'no rate fits the line'}
         divider = divider_for_rate(rate)
         out.update(divider=divider, rate_asked_hz=round(rate_of_divider(divider), 2))
@@ -303,9 +297,7 @@ def stream_figures(log: Sequence[Entry], divider: int, wire_time: float) -> dict
     if len(log) < 2:
         return {'records': len(log), 'rate_hz': None, 'lost': None, 'lqi': spread([]),
                 'rssi': spread([]), 'drift_ppm': None, 'longest_gap_ms': None}
-    expected = ticks_per_cycle(divider)
-    lost = 0
-    ticks = [0]
+    expected, lost, ticks = ticks_per_cycle(divider), 0, [0]
     for previous, entry in itertools.pairwise(log):
         step = (entry[2] - previous[2]) % TIMER_MODULUS
         ticks.append(ticks[-1] + step)
@@ -316,18 +308,15 @@ def stream_figures(log: Sequence[Entry], divider: int, wire_time: float) -> dict
     clock = DeviceClock(window=max(span / 10, 0.05), history=20)
     for tick, entry in zip(ticks, log, strict=True):
         clock.stamp(tick, entry[0], wire_time)
-    gaps = [b[0] - a[0] for a, b in itertools.pairwise(log)]
-    lqi = [e[3] for e in log if e[3] is not None]
-    rssi = [e[4] for e in log if e[4] is not None]
     return {
         'records': len(log),
         'rate_hz': round((len(log) - 1) / host_span, 2) if host_span > 0 else None,
         'device_rate_hz': round((len(log) - 1 + lost) / span, 2) if span > 0 else None,
-        'lost': lost,
-        'lost_share': round(lost / (len(log) + lost), 4),
-        'lqi': spread(lqi, digits=0), 'rssi': spread(rssi, digits=0),
+        'lost': lost, 'lost_share': round(lost / (len(log) + lost), 4),
+        'lqi': spread([e[3] for e in log if e[3] is not None], digits=0),
+        'rssi': spread([e[4] for e in log if e[4] is not None], digits=0),
         'drift_ppm': round(clock.drift_ppm, 1) if host_span >= 1.0 else None,
-        'longest_gap_ms': round(max(gaps) * 1e3, 1),
+        'longest_gap_ms': round(max(b[0] - a[0] for a, b in itertools.pairwise(log)) * 1e3, 1),
     }
 
 
@@ -339,9 +328,8 @@ def _cell(value: Any) -> str:
 
 
 def _timer(value: int | None) -> str:
-    if value is None:
-        return 'none (not an FTDI USB-serial port)'
-    return f'{value} ms' + (' (the udev rule sets 1 ms)' if value > 1 else '')
+    return ('none (not an FTDI USB-serial port)' if value is None
+            else f'{value} ms' + (' (the udev rule sets 1 ms)' if value > 1 else ''))
 
 
 def _table(rows: list[list[str]]) -> list[str]:
@@ -374,21 +362,18 @@ def format_report(report: dict[str, Any]) -> str:
         ['group', f'{_cell(port.get("group"))}'
                   f'{"" if port.get("in_group", True) else " (you are not in it)"}'],
     ])
-    trips = report.get('round_trips', {})
-    if trips:
+    if trips := report.get('round_trips', {}):
         lines += ['', 'Round trips (ms):']
         rows = [['', 'count', 'min', 'median', 'max', 'lost', 'nacked']]
         for name, key in (('ping', 'ping'), ('short command (0xE9)', 'command'),
                           ('continuous start (to 1st record)', 'continuous_start'),
                           ('continuous stop (to last record)', 'continuous_stop')):
-            t = trips.get(key)
-            if t is not None:
+            if (t := trips.get(key)) is not None:
                 rows.append([name, str(t['count']), _cell(t['min']), _cell(t['median']),
                              _cell(t['max']), _cell(t.get('lost')), _cell(t.get('nacked'))])
         lines += _table(rows)
-        if trips.get('ping', {}).get('not_answered_by_sensor'):
-            lines.append(f'  pings the base station answered 0x21 (sensor silent): '
-                         f'{trips["ping"]["not_answered_by_sensor"]}')
+        if silent := trips.get('ping', {}).get('not_answered_by_sensor'):
+            lines.append(f'  pings the base station answered 0x21 (sensor silent): {silent}')
     if report.get('streams'):
         lines += ['', 'Streams, each at the highest rate the line allows:']
         rows = [['stream', 'asked Hz', 'got Hz', 'records', 'lost', 'LQI min/med',
@@ -397,21 +382,19 @@ def format_report(report: dict[str, Any]) -> str:
             if 'skipped' in s:  # the whole reason was said, and is in report.json
                 least = fw.text(fw.needs(int(s['code'], 16)))
                 rows.append([s['stream'], '-', f'skipped: needs firmware {least}'] + [''] * 6)
-                continue
-            if 'error' in s and not s.get('records'):
+            elif 'error' in s and not s.get('records'):
                 rows.append([s['stream'], _cell(s.get('rate_asked_hz')), s['error']] + [''] * 6)
-                continue
-            rows.append([s['stream'], _cell(s.get('rate_asked_hz')), _cell(s.get('rate_hz')),
-                         str(s['records']), _cell(s.get('lost')),
-                         f'{_cell(s["lqi"]["min"])}/{_cell(s["lqi"]["median"])}',
-                         f'{_cell(s["rssi"]["min"])}/{_cell(s["rssi"]["median"])}',
-                         _cell(s.get('drift_ppm')), _cell(s.get('longest_gap_ms'))])
+            else:
+                rows.append([s['stream'], _cell(s.get('rate_asked_hz')), _cell(s.get('rate_hz')),
+                             str(s['records']), _cell(s.get('lost')),
+                             f'{_cell(s["lqi"]["min"])}/{_cell(s["lqi"]["median"])}',
+                             f'{_cell(s["rssi"]["min"])}/{_cell(s["rssi"]["median"])}',
+                             _cell(s.get('drift_ppm')), _cell(s.get('longest_gap_ms'))])
         lines += _table(rows)
     if report.get('close_calls'):
         lines += ['', 'Timeouts a round trip comes close to:']
         lines += [f'  - {text}' for text in report['close_calls']]
-    left = report.get('left')
-    if left is not None:
+    if (left := report.get('left')) is not None:
         lines += ['', 'Left as found: ' + ('yes' if left['as_found'] else 'NO') + ': '
                   f'rate divider {_cell(left["rate_divider"])} in EEPROM (read back after '
                   f'{left["eeprom_writes"]} writes of the rate divider, the only EEPROM '
@@ -426,12 +409,11 @@ def format_report(report: dict[str, Any]) -> str:
 
 
 def _folder(base: str) -> str:
-    stamp = time.strftime('%Y%m%d-%H%M%S')
-    path = os.path.join(base, f'bringup-{stamp}')
-    suffix = 1
+    stamp = os.path.join(base, 'bringup-' + time.strftime('%Y%m%d-%H%M%S'))
+    path, suffix = stamp, 1
     while os.path.exists(path):
         suffix += 1
-        path = os.path.join(base, f'bringup-{stamp}-{suffix}')
+        path = f'{stamp}-{suffix}'
     os.makedirs(path)
     return path
 
@@ -474,12 +456,10 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         port=args.port, address=args.address, baud=args.baud, wireless=True,
         notes='bringup session'))
     log = RecordLog()
-    link = DeviceLink(port, args.address, log,
-                      LinkOptions.listening(True, capture.write))
+    link = DeviceLink(port, args.address, log, LinkOptions.listening(True, capture.write))
     session = Bringup(link, log, args, say)
     session.report = report
     trips = session.round_trips
-    restored = False
     try:
         link.start()
         if not session.find_state():
@@ -496,14 +476,13 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
                 report['streams'].append(session.run_stream(stream))
         say('putting the sensor back as found')
         report['left'] = session.restore()
-        restored = True
         report['close_calls'] = close_calls(session.longest)
         if report['left']['as_found'] and 'error' not in report:
             status = EXIT_OK
     except KeyboardInterrupt:
         report['error'] = 'interrupted'
         status = EXIT_INTERRUPTED
-        if not restored:
+        if 'left' not in report:
             report['left'] = session.restore()
     except (PortError, DeviceError) as exc:
         report['error'] = str(exc)
