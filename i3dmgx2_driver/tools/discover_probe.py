@@ -156,8 +156,7 @@ class _Prober:
 
     def __init__(self, port: SerialPort, config: ProbeConfig,
                  progress: Progress | None) -> None:
-        self.port = port
-        self.config = config
+        self.port, self.config = port, config
         self.steps = SensorSteps(config.request_timeout, config.request_retries)
         self._progress = progress or (lambda stage, done, total: None)
         self._heard: dict[int | None, _Heard] = {}
@@ -165,8 +164,7 @@ class _Prober:
         self._wired_parser: SensorStreamParser | None = None
         self.link: DeviceLink | None = None
         self.base_station: bool | None = None
-        self.pinged = 0
-        self.ping_seconds = 0.0
+        self.pinged, self.ping_seconds = 0, 0.0
 
     # -- what the reader thread sees ------------------------------------
 
