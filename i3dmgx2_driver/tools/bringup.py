@@ -211,13 +211,11 @@ class Bringup:
         self.report['identity'] = {**info._asdict(), 'answered': any(info),
                                    'firmware_lacks': fw.lacks(self.firmware)}
         self.say(fw.summary(self.firmware))
-        self.divider = self.found_divider = self._read_divider()
+        divider = self.divider = self.found_divider = self._read_divider()
         self.report['as_found'] = {
             'streaming': f'0x{self.found_stream:02X}' if self.found_stream else None,
-            'rate_divider': self.found_divider,
-            'rate_hz': round(rate_of_divider(self.found_divider), 3)
-            if self.found_divider else None,
-        }
+            'rate_divider': divider,
+            'rate_hz': round(rate_of_divider(divider), 3) if divider else None}
         return True
 
     def _read_divider(self) -> int | None:

@@ -193,8 +193,7 @@ class _Prober:
     # -- links -----------------------------------------------------------
 
     def _open_link(self, wireless: bool) -> DeviceLink:
-        if self.link is not None:
-            self.link.stop()
+        self.close()
         # No address yet: a listening link takes packets from every node.
         self.link = DeviceLink(self.port, None, self._on_record,
                                LinkOptions.listening(wireless, self._on_bytes))
