@@ -47,7 +47,7 @@ from ..codec.parser import SensorStreamParser
 from ..device.sample_clock import SampleClock
 from ..ros.conversions import set_stamp
 from ..ros.parameter_table import SPECS
-from ..ros.parameters import driver_config, DriverConfig
+from ..ros.parameters import driver_config
 from ..ros.publishers import RECORD_TOPICS, SensorTopics
 from ..ros.record_publisher import RecordPath, Stamping
 from ..ros.sensor_set import SINGLE_NAME
@@ -105,12 +105,6 @@ class BagMessage(NamedTuple):
     data: bytes
 
 
-def node_config(stream: streams.Stream, address: int = MIN_ADDRESS) -> DriverConfig:
-    """Return the configuration of a node at its parameters' defaults, streaming ``stream``."""
-    return driver_config({**{spec.name: spec.default for spec in SPECS},
-                          'stream': stream.name, 'address': address})
-
-
 def stream_of(codes: Iterable[int]) -> streams.Stream:
     """Return the stream most of a capture's data records (their codes) belong to."""
     for code, _ in Counter(codes).most_common():
@@ -135,7 +129,9 @@ def capture_messages(chunks: Iterable[tuple[float, bytes]], header: dict,
     events = [(t, event) for t, data in chunks for event in parser.feed(data)
               if isinstance(event, DataPacket)]
     stream = stream_of(event.code for _, event in events)
-    config = node_config(stream, address if isinstance(address, int) else MIN_ADDRESS)
+    # A node at its parameters' defaults, streaming ``stream``.
+    config = driver_config({**{spec.name: spec.default for spec in SPECS}, 'stream': stream.name,
+                            'address': address if isinstance(address, int) else MIN_ADDRESS})
     sensor = config.sensors[0]
     topics = SensorTopics.of(SINGLE_NAME, several=False)
     # The node's own table: each topic the sensor publishes with its parameters' defaults.
@@ -169,14 +165,12 @@ def write_bag(path: Path, messages: Iterable[BagMessage]) -> int:
     """Write ``messages`` as a rosbag2 bag with MCAP storage at ``path``; return how many."""
     rosbag2 = _rosbags().rosbag2
     store = typestore()
-    count = 0
+    count, connections = 0, {}
     with rosbag2.Writer(path, version=9, storage_plugin=rosbag2.StoragePlugin.MCAP) as writer:
-        connections: dict[str, Any] = {}
         for message in messages:
-            connection = connections.get(message.topic)
-            if connection is None:
-                connection = connections[message.topic] = writer.add_connection(
+            if message.topic not in connections:
+                connections[message.topic] = writer.add_connection(
                     message.topic, message.msgtype, typestore=store)
-            writer.write(connection, message.time_ns, message.data)
+            writer.write(connections[message.topic], message.time_ns, message.data)
             count += 1
     return count

@@ -101,12 +101,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--baud', type=int, default=115200, help='baud rate (default 115200)')
     parser.add_argument('--output-dir', default='.', metavar='DIR',
                         help='where the report folder is made (default: here)')
-    parser.add_argument('--pings', type=_count, default=20, metavar='N',
-                        help='pings to time (default 20)')
-    parser.add_argument('--commands', type=_count, default=20, metavar='N',
-                        help='short commands (0xE9) to time (default 20)')
-    parser.add_argument('--cycles', type=_count, default=5, metavar='N',
-                        help='continuous-mode starts and stops to time (default 5)')
+    for flag, default, what in (('pings', 20, 'pings'), ('commands', 20, 'short commands (0xE9)'),
+                                ('cycles', 5, 'continuous-mode starts and stops')):
+        parser.add_argument(f'--{flag}', type=_count, default=default, metavar='N',
+                            help=f'{what} to time (default {default})')
     parser.add_argument('--stream-seconds', type=_seconds, default=5.0, metavar='S',
                         help='how long each stream runs (default 5)')
     parser.add_argument('--listen', type=_seconds, default=1.0, metavar='S',
@@ -162,10 +160,7 @@ class Bringup:
 
     def __init__(self, link: DeviceLink, log: RecordLog, args: argparse.Namespace,
                  say: Callable[[str], None]) -> None:
-        self.link = link
-        self.log = log
-        self.args = args
-        self.say = say
+        self.link, self.log, self.args, self.say = link, log, args, say
         self.report: dict[str, Any] = {}
         self.found_stream = 0
         self.found_divider: int | None = None
@@ -193,21 +188,18 @@ class Bringup:
         while time.monotonic() < deadline and not link.records:
             time.sleep(0.02)
         time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
-        if link.records:
-            self.found_stream = link.last_code or 0
+        self.found_stream = (link.last_code or 0) if link.records else 0
         if self.found_stream:
             self.say(f'the sensor streams 0x{self.found_stream:02X}: stopping it (restarted '
                      f'at the end)')
         self.steps.stop_until_quiet(link, period_of_divider(None))
         if not self.found_stream:
-            answer = None
             for _ in range(3):
-                answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
-                if answer:
+                if answer := link.ping_once(link.address, MEASURE_TIMEOUT):
                     break
             if not answer:
                 self.report['error'] = (
-                    f'node {self.link.address} does not answer on {self.link.port.path}: ' + (
+                    f'node {link.address} does not answer on {link.port.path}: ' + (
                         'the base station answered the pings, the sensor did not (is it on? '
                         'its address?)' if answer is False else
                         'nothing answered the pings (no base station on this port?)')
@@ -215,23 +207,23 @@ class Bringup:
                 return False
         self.say('reading identity and data rate')
         info = read_identity(link, self.steps.timeout, self.steps.retries)
-        self.report['identity'] = info._asdict()
-        self.report['identity']['answered'] = any(info)
         self.firmware = fw.version_of(info.firmware)
-        self.report['identity']['firmware_lacks'] = fw.lacks(self.firmware)
+        self.report['identity'] = {**info._asdict(), 'answered': any(info),
+                                   'firmware_lacks': fw.lacks(self.firmware)}
         self.say(fw.summary(self.firmware))
-        try:
-            self.found_divider = self.steps.read_divider(link)
-        except DeviceError:
-            self.found_divider = None
-        self.divider = self.found_divider
+        divider = self.divider = self.found_divider = self._read_divider()
         self.report['as_found'] = {
             'streaming': f'0x{self.found_stream:02X}' if self.found_stream else None,
-            'rate_divider': self.found_divider,
-            'rate_hz': round(rate_of_divider(self.found_divider), 3)
-            if self.found_divider else None,
-        }
+            'rate_divider': divider,
+            'rate_hz': round(rate_of_divider(divider), 3) if divider else None}
         return True
+
+    def _read_divider(self) -> int | None:
+        """Read the rate divider from EEPROM; None if the sensor does not say."""
+        try:
+            return self.steps.read_divider(self.link)
+        except DeviceError:
+            return None
 
     def _write_divider(self, divider: int) -> bool:
         """Write the rate divider to EEPROM (once, read back); True if it holds."""
@@ -246,23 +238,17 @@ class Bringup:
 
     def run_stream(self, stream: streams.Stream) -> dict[str, Any]:
         out: dict[str, Any] = {'stream': stream.label, 'code': f'0x{stream.code:02X}'}
-        lacking = fw.stream_refusal(stream, self.firmware)
-        if lacking:
-            out['skipped'] = lacking
+        if lacking := fw.stream_refusal(stream, self.firmware):
             self.say(f'skipping {stream.label}: {lacking}')
-            return out
-        rate = line_budget.max_rate(stream.code, self.args.baud, True)
-        if rate is None:
-            out['error'] = 'no rate fits the line'
-            return out
+            return {**out, 'skipped': lacking}
+        if (rate := line_budget.max_rate(stream.code, self.args.baud, True)) is None:
+            return {**out, 'error': 'no rate fits the line'}
         divider = divider_for_rate(rate)
-        out['divider'] = divider
-        out['rate_asked_hz'] = round(rate_of_divider(divider), 2)
+        out.update(divider=divider, rate_asked_hz=round(rate_of_divider(divider), 2))
         self.say(f'streaming {stream.label} at {rate_of_divider(divider):.1f} Hz for '
                  f'{self.args.stream_seconds:g} s')
         if divider != self.divider and not self._write_divider(divider):
-            out['error'] = f'could not set the rate divider to {divider}'
-            return out
+            return {**out, 'error': f'could not set the rate divider to {divider}'}
         period = period_of_divider(divider)
         self.log.start()
         try:
@@ -283,46 +269,33 @@ class Bringup:
 
     def restore(self) -> dict[str, Any]:
         """Put divider and stream back as found; say how it went."""
-        out: dict[str, Any] = {}
-        link, steps = self.link, self.steps
+        link, steps, found = self.link, self.steps, self.found_divider
         steps.stop_until_quiet(link, period_of_divider(self.divider))
-        if self.found_divider is not None:
-            ok = self.divider == self.found_divider or self._write_divider(self.found_divider)
-            try:
-                readback = steps.read_divider(link)
-            except DeviceError:
-                readback = None
-            out['rate_divider'] = readback
-            out['rate_divider_restored'] = bool(ok and readback == self.found_divider)
-        else:
-            out['rate_divider'] = None
-            out['rate_divider_restored'] = self.divider is None
+        readback, divider_restored = None, self.divider is None
+        if found is not None:
+            ok = self.divider == found or self._write_divider(found)
+            readback = self._read_divider()
+            divider_restored = bool(ok and readback == found)
+        restarted = True
         if self.found_stream:
             try:
                 restarted = steps.start_stream(link, self.found_stream,
                                                period_of_divider(self.divider))
             except DeviceError:
                 restarted = False
-            out['streaming'] = f'0x{self.found_stream:02X}' if restarted else None
-            out['stream_restored'] = restarted
-        else:
-            out['streaming'] = None
-            out['stream_restored'] = True
-        out['as_found'] = out['rate_divider_restored'] and out['stream_restored']
-        out['eeprom_writes'] = steps.eeprom_writes
-        return out
+        return {'rate_divider': readback, 'rate_divider_restored': divider_restored,
+                'streaming': f'0x{self.found_stream:02X}'
+                if self.found_stream and restarted else None,
+                'stream_restored': restarted, 'as_found': divider_restored and restarted,
+                'eeprom_writes': steps.eeprom_writes}
 
 
 def stream_figures(log: Sequence[Entry], divider: int, wire_time: float) -> dict[str, Any]:
     """Rate, records lost by the timer, LQI/RSSI and clock drift of one stream's records."""
-    out: dict[str, Any] = {'records': len(log)}
     if len(log) < 2:
-        out.update({'rate_hz': None, 'lost': None, 'lqi': spread([]), 'rssi': spread([]),
-                    'drift_ppm': None, 'longest_gap_ms': None})
-        return out
-    expected = ticks_per_cycle(divider)
-    lost = 0
-    ticks = [0]
+        return {'records': len(log), 'rate_hz': None, 'lost': None, 'lqi': spread([]),
+                'rssi': spread([]), 'drift_ppm': None, 'longest_gap_ms': None}
+    expected, lost, ticks = ticks_per_cycle(divider), 0, [0]
     for previous, entry in itertools.pairwise(log):
         step = (entry[2] - previous[2]) % TIMER_MODULUS
         ticks.append(ticks[-1] + step)
@@ -333,19 +306,16 @@ def stream_figures(log: Sequence[Entry], divider: int, wire_time: float) -> dict
     clock = DeviceClock(window=max(span / 10, 0.05), history=20)
     for tick, entry in zip(ticks, log, strict=True):
         clock.stamp(tick, entry[0], wire_time)
-    gaps = [b[0] - a[0] for a, b in itertools.pairwise(log)]
-    lqi = [e[3] for e in log if e[3] is not None]
-    rssi = [e[4] for e in log if e[4] is not None]
-    out.update({
+    return {
+        'records': len(log),
         'rate_hz': round((len(log) - 1) / host_span, 2) if host_span > 0 else None,
         'device_rate_hz': round((len(log) - 1 + lost) / span, 2) if span > 0 else None,
-        'lost': lost,
-        'lost_share': round(lost / (len(log) + lost), 4),
-        'lqi': spread(lqi, digits=0), 'rssi': spread(rssi, digits=0),
+        'lost': lost, 'lost_share': round(lost / (len(log) + lost), 4),
+        'lqi': spread([e[3] for e in log if e[3] is not None], digits=0),
+        'rssi': spread([e[4] for e in log if e[4] is not None], digits=0),
         'drift_ppm': round(clock.drift_ppm, 1) if host_span >= 1.0 else None,
-        'longest_gap_ms': round(max(gaps) * 1e3, 1),
-    })
-    return out
+        'longest_gap_ms': round(max(b[0] - a[0] for a, b in itertools.pairwise(log)) * 1e3, 1),
+    }
 
 
 # -- the report ------------------------------------------------------------------------
@@ -356,9 +326,8 @@ def _cell(value: Any) -> str:
 
 
 def _timer(value: int | None) -> str:
-    if value is None:
-        return 'none (not an FTDI USB-serial port)'
-    return f'{value} ms' + (' (the udev rule sets 1 ms)' if value > 1 else '')
+    return ('none (not an FTDI USB-serial port)' if value is None
+            else f'{value} ms' + (' (the udev rule sets 1 ms)' if value > 1 else ''))
 
 
 def _table(rows: list[list[str]]) -> list[str]:
@@ -391,21 +360,18 @@ def format_report(report: dict[str, Any]) -> str:
         ['group', f'{_cell(port.get("group"))}'
                   f'{"" if port.get("in_group", True) else " (you are not in it)"}'],
     ])
-    trips = report.get('round_trips', {})
-    if trips:
+    if trips := report.get('round_trips', {}):
         lines += ['', 'Round trips (ms):']
         rows = [['', 'count', 'min', 'median', 'max', 'lost', 'nacked']]
         for name, key in (('ping', 'ping'), ('short command (0xE9)', 'command'),
                           ('continuous start (to 1st record)', 'continuous_start'),
                           ('continuous stop (to last record)', 'continuous_stop')):
-            t = trips.get(key)
-            if t is not None:
+            if (t := trips.get(key)) is not None:
                 rows.append([name, str(t['count']), _cell(t['min']), _cell(t['median']),
                              _cell(t['max']), _cell(t.get('lost')), _cell(t.get('nacked'))])
         lines += _table(rows)
-        if trips.get('ping', {}).get('not_answered_by_sensor'):
-            lines.append(f'  pings the base station answered 0x21 (sensor silent): '
-                         f'{trips["ping"]["not_answered_by_sensor"]}')
+        if silent := trips.get('ping', {}).get('not_answered_by_sensor'):
+            lines.append(f'  pings the base station answered 0x21 (sensor silent): {silent}')
     if report.get('streams'):
         lines += ['', 'Streams, each at the highest rate the line allows:']
         rows = [['stream', 'asked Hz', 'got Hz', 'records', 'lost', 'LQI min/med',
@@ -413,24 +379,20 @@ def format_report(report: dict[str, Any]) -> str:
         for s in report['streams']:
             if 'skipped' in s:  # the whole reason was said, and is in report.json
                 least = fw.text(fw.needs(int(s['code'], 16)))
-                rows.append([s['stream'], '-', f'skipped: needs firmware {least}', '', '', '',
-                             '', '', ''])
-                continue
-            if 'error' in s and not s.get('records'):
-                rows.append([s['stream'], _cell(s.get('rate_asked_hz')), s['error'], '', '',
-                             '', '', '', ''])
-                continue
-            rows.append([s['stream'], _cell(s.get('rate_asked_hz')), _cell(s.get('rate_hz')),
-                         str(s['records']), _cell(s.get('lost')),
-                         f'{_cell(s["lqi"]["min"])}/{_cell(s["lqi"]["median"])}',
-                         f'{_cell(s["rssi"]["min"])}/{_cell(s["rssi"]["median"])}',
-                         _cell(s.get('drift_ppm')), _cell(s.get('longest_gap_ms'))])
+                rows.append([s['stream'], '-', f'skipped: needs firmware {least}'] + [''] * 6)
+            elif 'error' in s and not s.get('records'):
+                rows.append([s['stream'], _cell(s.get('rate_asked_hz')), s['error']] + [''] * 6)
+            else:
+                rows.append([s['stream'], _cell(s.get('rate_asked_hz')), _cell(s.get('rate_hz')),
+                             str(s['records']), _cell(s.get('lost')),
+                             f'{_cell(s["lqi"]["min"])}/{_cell(s["lqi"]["median"])}',
+                             f'{_cell(s["rssi"]["min"])}/{_cell(s["rssi"]["median"])}',
+                             _cell(s.get('drift_ppm')), _cell(s.get('longest_gap_ms'))])
         lines += _table(rows)
     if report.get('close_calls'):
         lines += ['', 'Timeouts a round trip comes close to:']
         lines += [f'  - {text}' for text in report['close_calls']]
-    left = report.get('left')
-    if left is not None:
+    if (left := report.get('left')) is not None:
         lines += ['', 'Left as found: ' + ('yes' if left['as_found'] else 'NO') + ': '
                   f'rate divider {_cell(left["rate_divider"])} in EEPROM (read back after '
                   f'{left["eeprom_writes"]} writes of the rate divider, the only EEPROM '
@@ -445,12 +407,11 @@ def format_report(report: dict[str, Any]) -> str:
 
 
 def _folder(base: str) -> str:
-    stamp = time.strftime('%Y%m%d-%H%M%S')
-    path = os.path.join(base, f'bringup-{stamp}')
-    suffix = 1
+    stamp = os.path.join(base, 'bringup-' + time.strftime('%Y%m%d-%H%M%S'))
+    path, suffix = stamp, 1
     while os.path.exists(path):
         suffix += 1
-        path = os.path.join(base, f'bringup-{stamp}-{suffix}')
+        path = f'{stamp}-{suffix}'
     os.makedirs(path)
     return path
 
@@ -485,19 +446,18 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         report['error'] = str(exc)
         _write(folder, report, out)
         return EXIT_FAILED
-    report['port']['low_latency_as_found'] = _on_off(port.low_latency_flag())
+    report['port']['low_latency_as_found'] = {
+        True: 'on', False: 'off', None: 'unknown (not a USB-serial port)'}[port.low_latency_flag()]
     report['port']['low_latency'] = port.enable_low_latency()
     report['port']['latency_timer_ms'] = latency_timer_ms(args.port)
     capture = CaptureWriter(os.path.join(folder, 'session.gx2cap'), default_header(
         port=args.port, address=args.address, baud=args.baud, wireless=True,
         notes='bringup session'))
     log = RecordLog()
-    link = DeviceLink(port, args.address, log,
-                      LinkOptions.listening(True, capture.write))
+    link = DeviceLink(port, args.address, log, LinkOptions.listening(True, capture.write))
     session = Bringup(link, log, args, say)
     session.report = report
     trips = session.round_trips
-    restored = False
     try:
         link.start()
         if not session.find_state():
@@ -514,14 +474,13 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
                 report['streams'].append(session.run_stream(stream))
         say('putting the sensor back as found')
         report['left'] = session.restore()
-        restored = True
         report['close_calls'] = close_calls(session.longest)
         if report['left']['as_found'] and 'error' not in report:
             status = EXIT_OK
     except KeyboardInterrupt:
         report['error'] = 'interrupted'
         status = EXIT_INTERRUPTED
-        if not restored:
+        if 'left' not in report:
             report['left'] = session.restore()
     except (PortError, DeviceError) as exc:
         report['error'] = str(exc)
@@ -533,10 +492,6 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
                          'chunks': capture.chunks, 'bytes': capture.bytes}
     _write(folder, report, out)
     return status
-
-
-def _on_off(flag: bool | None) -> str:
-    return {True: 'on', False: 'off', None: 'unknown (not a USB-serial port)'}[flag]
 
 
 def _write(folder: str, report: dict[str, Any], out: TextIO) -> None:

@@ -141,16 +141,14 @@ class PortProbe(NamedTuple):
     seconds: float
 
 
+@dataclass(slots=True)
 class _Heard:
     """What streamed from one address (None: a wired sensor)."""
 
-    __slots__ = ('code', 'count', 'lqi', 'rssi')
-
-    def __init__(self) -> None:
-        self.code = 0
-        self.count = 0
-        self.lqi: int | None = None
-        self.rssi: int | None = None
+    code: int = 0
+    count: int = 0
+    lqi: int | None = None
+    rssi: int | None = None
 
 
 class _Prober:
@@ -158,8 +156,7 @@ class _Prober:
 
     def __init__(self, port: SerialPort, config: ProbeConfig,
                  progress: Progress | None) -> None:
-        self.port = port
-        self.config = config
+        self.port, self.config = port, config
         self.steps = SensorSteps(config.request_timeout, config.request_retries)
         self._progress = progress or (lambda stage, done, total: None)
         self._heard: dict[int | None, _Heard] = {}
@@ -167,16 +164,14 @@ class _Prober:
         self._wired_parser: SensorStreamParser | None = None
         self.link: DeviceLink | None = None
         self.base_station: bool | None = None
-        self.pinged = 0
-        self.ping_seconds = 0.0
+        self.pinged, self.ping_seconds = 0, 0.0
 
     # -- what the reader thread sees ------------------------------------
 
     def _on_record(self, packet: DataPacket, now: float, mono: float = 0.0) -> None:
-        code = packet.code
         with self._heard_lock:
             heard = self._heard.setdefault(packet.address, _Heard())
-            heard.code = code
+            heard.code = packet.code
             heard.count += 1
             heard.lqi, heard.rssi = packet.lqi, packet.rssi
 
@@ -192,14 +187,13 @@ class _Prober:
     def heard(self, address: int | None) -> tuple[int, int]:
         """Return (record code, packets) streamed from ``address`` so far."""
         with self._heard_lock:
-            heard = self._heard.get(address)
-            return (heard.code, heard.count) if heard is not None else (0, 0)
+            heard = self._heard.get(address) or _Heard()
+            return heard.code, heard.count
 
     # -- links -----------------------------------------------------------
 
     def _open_link(self, wireless: bool) -> DeviceLink:
-        if self.link is not None:
-            self.link.stop()
+        self.close()
         # No address yet: a listening link takes packets from every node.
         self.link = DeviceLink(self.port, None, self._on_record,
                                LinkOptions.listening(wireless, self._on_bytes))
@@ -255,72 +249,66 @@ class _Prober:
 
     def _sweep(self, link: DeviceLink, addresses: list[int]) -> list[int]:
         """Ping each address; return those whose sensor answered."""
-        start = time.monotonic()
+        cfg, start = self.config, time.monotonic()
+        answered, silent = [], 0
         try:
-            return self._ping_each(link, addresses)
+            for index, address in enumerate(addresses):
+                self._progress('ping', index, len(addresses))
+                # A base station answers every ping, if slowly for a node that is
+                # not there: once one has answered, a missing answer is waited for.
+                timeout = cfg.answer_timeout if self.base_station else cfg.ping_timeout
+                answer = link.ping_once(address, timeout)
+                self.pinged += 1
+                if answer is None:
+                    silent += 1
+                    if not self.base_station and silent >= cfg.silent_pings:
+                        self.base_station = False
+                        return []
+                    # An answer that comes late must not pass for the next one's.
+                    time.sleep(cfg.ping_timeout)
+                    continue
+                self.base_station = True
+                if answer:
+                    answered.append(address)
+            self._progress('ping', len(addresses), len(addresses))
+            return answered
         finally:
             self.ping_seconds += time.monotonic() - start
-
-    def _ping_each(self, link: DeviceLink, addresses: list[int]) -> list[int]:
-        cfg = self.config
-        answered = []
-        silent = 0
-        for index, address in enumerate(addresses):
-            self._progress('ping', index, len(addresses))
-            # A base station answers every ping, if slowly for a node that is
-            # not there: once one has answered, a missing answer is waited for.
-            timeout = cfg.answer_timeout if self.base_station else cfg.ping_timeout
-            answer = link.ping_once(address, timeout)
-            self.pinged += 1
-            if answer is None:
-                silent += 1
-                if not self.base_station and silent >= cfg.silent_pings:
-                    self.base_station = False
-                    return []
-                # An answer that comes late must not pass for the next one's.
-                time.sleep(cfg.ping_timeout)
-                continue
-            self.base_station = True
-            if answer:
-                answered.append(address)
-        self._progress('ping', len(addresses), len(addresses))
-        return answered
 
     def _wired(self, link: DeviceLink, found_by: str) -> list[SensorFound]:
         """Return the sensor on the line itself, if one answers, as a list of 0 or 1."""
         self._progress('identify', 0, 1)
         sensor = self._identify(link, None, found_by)
         self._progress('identify', 1, 1)
-        if sensor.info is None and not sensor.streaming:
-            return []
-        return [sensor]
+        return [sensor] if sensor.info is not None or sensor.streaming else []
 
     # -- one sensor ------------------------------------------------------
 
     def _identify(self, link: DeviceLink, address: int | None, found_by: str) -> SensorFound:
-        cfg = self.config
         link.retarget(address)
         code, _ = self.heard(address)
         info = divider = None
-        if not (code and cfg.stop_streams):
+        if not (code and self.config.stop_streams):
             info, divider = self._read(link)
         code, _ = self.heard(address)  # a slow stream may show itself only now
-        restarted = False
-        note = ''
+        restarted, note = False, ''
         if info is None and code:
             # Combined mode failed (or was not wanted): quiet it, read, restart.
             if self.steps.stop_until_quiet(link, period_of_divider(divider)):
                 info, divider = self._read(link)
-                restarted = self._restart(link, code, divider)
+                try:  # stream ``code`` again, as it was; True once its records flow
+                    restarted = self.steps.start_stream(link, code, period_of_divider(divider))
+                except DeviceError:
+                    restarted = False
                 if not restarted:
                     note = (f'its 0x{code:02X} stream was stopped to read it and did not '
                             f'restart: power-cycle the sensor or run the node')
             else:
                 note = 'streams but answers no request'
         with self._heard_lock:
-            heard = self._heard.get(address)
+            heard = self._heard.get(address) or _Heard()
         return SensorFound(address, found_by, info, divider, code, restarted,
-                           heard.lqi if heard else None, heard.rssi if heard else None, note)
+                           heard.lqi, heard.rssi, note)
 
     def _read(self, link: DeviceLink) -> tuple[DeviceInfo | None, int | None]:
         """Return the identity and rate divider; (None, None) if it answers nothing."""
@@ -333,19 +321,11 @@ class _Prober:
             return None, None
         return read_identity(link, steps.timeout, steps.retries), divider
 
-    def _restart(self, link: DeviceLink, code: int, divider: int | None) -> bool:
-        """Stream ``code`` again, as it was; True once its records flow."""
-        try:
-            return self.steps.start_stream(link, code, period_of_divider(divider))
-        except DeviceError:
-            return False
-
 
 def probe_port(path: str, config: ProbeConfig | None = None,
                progress: Progress | None = None) -> PortProbe:
     """Open ``path`` exclusively and find the sensors behind it; never raises PortError."""
-    cfg = config or ProbeConfig()
-    start = time.monotonic()
+    cfg, start = config or ProbeConfig(), time.monotonic()
     try:
         port = SerialPort(path, cfg.baud, low_latency=cfg.low_latency)
     except PortError as exc:
