@@ -29,7 +29,7 @@ from typing import Any, NamedTuple
 
 from .errors import DecodeError, EncodeError, LengthError, UnknownCommandError
 from .layouts import (
-    BUILT_IN_TEST, CAPTURE_GYRO_BIAS, DEVICE_IDENTIFIER, Field, Layout, LAYOUTS, PING,
+    BUILT_IN_TEST, CAPTURE_GYRO_BIAS, DEVICE_IDENTIFIER, Field, field_plan, Layout, LAYOUTS, PING,
     READ_EEPROM, SET_CONTINUOUS, STOP_CONTINUOUS, STREAMABLE, TRANSFER_TO_NON_VOLATILE,
     WRITE_ACCEL_BIAS, WRITE_EEPROM, WRITE_GYRO_BIAS,
 )
@@ -103,18 +103,6 @@ def encode_command(code: int, *args: Any) -> bytes:
     return bytes((code,)) + layout.confirm + layout.request_struct.pack(*flat)
 
 
-def _group(values: tuple[Any, ...], fields: tuple[Field, ...]) -> tuple:
-    grouped = []
-    index = 0
-    for field in fields:
-        if field.count == 1:
-            grouped.append(values[index])
-        else:
-            grouped.append(tuple(values[index:index + field.count]))
-        index += field.count
-    return tuple(grouped)
-
-
 def decode_command(data: bytes) -> Command:
     """Decode command bytes as the sensor receives them."""
     if not data:
@@ -127,7 +115,7 @@ def decode_command(data: bytes) -> Command:
     if bytes(data[1:confirm_end]) != layout.confirm:
         raise DecodeError(f'{layout.name}: wrong confirmation bytes')
     values = layout.request_struct.unpack_from(data, confirm_end)
-    return Command(layout.code, _group(values, layout.request))
+    return Command(layout.code, tuple(values[at] for at in field_plan(layout.request)))
 
 
 def _builder(layout: Layout) -> Callable[[tuple], Any]:

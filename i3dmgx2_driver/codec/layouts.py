@@ -82,7 +82,8 @@ def _struct(fields: tuple[Field, ...]) -> struct.Struct:
     return struct.Struct('>' + ''.join(f.code * f.count for f in fields))
 
 
-def _plan(fields: tuple[Field, ...]) -> tuple[object, ...]:
+def field_plan(fields: tuple[Field, ...]) -> tuple[object, ...]:
+    """Return where each of ``fields`` sits in their unpacked tuple: an index, or a slice."""
     plan = []
     index = 0
     for field in fields:
@@ -104,7 +105,7 @@ def _layout(code: int, name: str, reply: tuple[Field, ...] | None,
         request_size=1 + len(confirm) + request_struct.size,
         record_size=record_size,
         wired_size=record_size + 2 if record_size else 0,
-        plan=_plan(reply) if reply is not None else (),
+        plan=field_plan(reply) if reply is not None else (),
         firmware=firmware,
     )
 

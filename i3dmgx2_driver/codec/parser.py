@@ -68,26 +68,12 @@ Event = DataPacket | Ack | Nack | PingReply
 class ParserStats:
     """Counters of what a parser saw, for diagnostics and tests."""
 
-    __slots__ = (
-        'acks',
-        'bytes_in',
-        'bytes_skipped',
-        'checksum_failures',
-        'foreign_frames',
-        'good_frames',
-        'length_failures',
-        'nacks',
-    )
+    __slots__ = ('acks', 'bytes_in', 'bytes_skipped', 'checksum_failures', 'foreign_frames',
+                 'good_frames', 'length_failures', 'nacks')
 
     def __init__(self) -> None:
-        self.good_frames = 0
-        self.checksum_failures = 0
-        self.length_failures = 0
-        self.bytes_skipped = 0
-        self.foreign_frames = 0
-        self.acks = 0
-        self.nacks = 0
-        self.bytes_in = 0
+        for name in self.__slots__:
+            setattr(self, name, 0)
 
     def as_dict(self) -> dict:
         """Return the counters by name."""
@@ -342,11 +328,9 @@ class SensorStreamParser:
             code = buf[i]
             entry = _FRAMES.get(code)
             if entry is None:
-                if self._lone_byte(code, out):
-                    i += 1
-                else:
+                if not self._lone_byte(code, out):
                     stats.bytes_skipped += 1
-                    i += 1
+                i += 1
                 continue
             end = i + entry.size
             if end + 2 > n:
