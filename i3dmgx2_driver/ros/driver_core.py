@@ -233,16 +233,15 @@ class DriverSet:
         self.config = config
         publishers = publishers or [create_publishers(node, config, sensor=sensor)
                                     for sensor in sensors]
+        # What both captures record of the port they capture.
+        port = {'port': device.port, 'address': sensors[0].address, 'baud': device.baud,
+                'wireless': device.wireless, 'node': node.get_fully_qualified_name()}
         #: The port's one raw capture, for every sensor on it; closed after them all.
-        self._capture = capture = RawCapture(
-            config.capture_file, node.get_logger(), port=device.port,
-            address=sensors[0].address, baud=device.baud, wireless=device.wireless,
-            node=node.get_fully_qualified_name())
+        self._capture = capture = RawCapture(config.capture_file, node.get_logger(), **port)
         #: The port's last seconds, kept always, written when a fault is seen or on request.
         self.fault_capture = faults = FaultCapture(
             config.fault_capture_dir, config.fault_capture_seconds, config.fault_captures_kept,
-            node.get_logger(), port=device.port, address=sensors[0].address, baud=device.baud,
-            wireless=device.wireless, node=node.get_fully_qualified_name())
+            node.get_logger(), **port)
         self.shared: SharedPort | None = None
         if len(sensors) > 1:
             self.shared = SharedPort(
