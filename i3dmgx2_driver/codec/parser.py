@@ -40,6 +40,9 @@ ByteString = bytes | bytearray | memoryview
 
 #: Single bytes the base station answers with (ACK, NACK, ping answers).
 _ANSWER_BYTES = frozenset((ACK, NACK, PING))
+#: What a frame or an answer may start with where garbage ends (a ping's answer, the last,
+#: only while one is awaited); a wired stream has none.
+_MARKERS = (b'\xaa', b'\x21', b'\x02')
 #: Largest frame either parser ever waits for; bounds the carried-over buffer.
 MAX_FRAME_SIZE = HEADER_SIZE + MAX_RECORD_SIZE + DATA_TRAILER_SIZE
 
@@ -245,18 +248,12 @@ class SensorStreamParser:
     def _skip_garbage(self, buf: bytearray, i: int, n: int) -> int:
         """Return where the next possible frame starts after position ``i``."""
         nxt = n
-        for marker in self._markers():
+        for marker in _MARKERS[:3 if self._ping_pending else 2] if self.wireless else ():
             j = buf.find(marker, i + 1)
             if 0 <= j < nxt:
                 nxt = j
         self.stats.bytes_skipped += nxt - i
         return nxt
-
-    def _markers(self) -> tuple:
-        if not self.wireless:
-            return ()
-        markers = (b'\xaa', b'\x21')
-        return (*markers, b'\x02') if self._ping_pending else markers
 
     def _parse_wireless(self, buf: bytearray):
         out: list[Event] = []
