@@ -172,12 +172,10 @@ class DriverCore:
             node, self.supervisor.streaming_link, frame_id,
             cfg.temperature_period, self.publishers.temperature, cfg.time_offset,
             firmware=self.supervisor.firmware)
-        convention = cfg.messages.frame_convention
         node.get_logger().info(
             f'i3dmgx2_driver: port {cfg.device.port}, node address {sensor.address}, '
             + (f'topics {sensor.name}/..., ' if shared is not None else '')
-            + f'stream {self.stream.label}, frame {frame_id} '
-            f'({convention}), '
+            + f'stream {self.stream.label}, frame {frame_id} ({cfg.messages.frame_convention}), '
             f'time source {cfg.time_source}'
             + (f', time offset {cfg.time_offset:+g} s' if cfg.time_offset else ''))
 
