@@ -141,10 +141,9 @@ def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
     for i, value in enumerate(listed):
         name = names[i] if names else (default_name(value) if several else SINGLE_NAME)
         frame = frame_ids[i] if frame_ids else (f'{name}_link' if several else given['frame_id'])
-        text = (stream_texts[i if len(stream_texts) > 1 else 0] if stream_texts
-                else given['stream'])
-        rate = (data_rates[i if len(data_rates) > 1 else 0] if data_rates
-                else given['data_rate'])
+        # One value each, or one for all (checked above): the i-th, or the one.
+        text = stream_texts[i % len(stream_texts)] if stream_texts else given['stream']
+        rate = data_rates[i % len(data_rates)] if data_rates else given['data_rate']
         out.append(SensorSetting(value, name, frame, text, float(rate)))
     return out
 
