@@ -23,13 +23,14 @@ implementation and every layout can be tested by a round trip.
 """
 
 from collections.abc import Callable
+from functools import partial
 import math
 from operator import itemgetter
 from typing import Any, NamedTuple
 
 from .errors import DecodeError, EncodeError, LengthError, UnknownCommandError
 from .layouts import (
-    BUILT_IN_TEST, CAPTURE_GYRO_BIAS, DEVICE_IDENTIFIER, Field, Layout, LAYOUTS, PING,
+    BUILT_IN_TEST, CAPTURE_GYRO_BIAS, DEVICE_IDENTIFIER, Field, field_plan, Layout, LAYOUTS, PING,
     READ_EEPROM, SET_CONTINUOUS, STOP_CONTINUOUS, STREAMABLE, TRANSFER_TO_NON_VOLATILE,
     WRITE_ACCEL_BIAS, WRITE_EEPROM, WRITE_GYRO_BIAS,
 )
@@ -103,18 +104,6 @@ def encode_command(code: int, *args: Any) -> bytes:
     return bytes((code,)) + layout.confirm + layout.request_struct.pack(*flat)
 
 
-def _group(values: tuple[Any, ...], fields: tuple[Field, ...]) -> tuple:
-    grouped = []
-    index = 0
-    for field in fields:
-        if field.count == 1:
-            grouped.append(values[index])
-        else:
-            grouped.append(tuple(values[index:index + field.count]))
-        index += field.count
-    return tuple(grouped)
-
-
 def decode_command(data: bytes) -> Command:
     """Decode command bytes as the sensor receives them."""
     if not data:
@@ -127,7 +116,7 @@ def decode_command(data: bytes) -> Command:
     if bytes(data[1:confirm_end]) != layout.confirm:
         raise DecodeError(f'{layout.name}: wrong confirmation bytes')
     values = layout.request_struct.unpack_from(data, confirm_end)
-    return Command(layout.code, _group(values, layout.request))
+    return Command(layout.code, tuple(values[at] for at in field_plan(layout.request)))
 
 
 def _builder(layout: Layout) -> Callable[[tuple], Any]:
@@ -180,11 +169,6 @@ def encode_record(record: Any) -> bytes:
 # Builders for the commands the driver uses by name: they read better at the
 # call site than encode_command with a bare code, and check their arguments.
 
-def ping(address: int) -> bytes:
-    """Return the base-station ping for a node address (sent unframed)."""
-    return encode_command(PING, address)
-
-
 def set_continuous(command: int) -> bytes:
     """
     Return the 0xC4 request to stream ``command`` (0 stops streaming).
@@ -199,46 +183,20 @@ def set_continuous(command: int) -> bytes:
     return encode_command(SET_CONTINUOUS, command)
 
 
-def stop_continuous() -> bytes:
-    """Return 0xFA, the stop that needs no reply."""
-    return encode_command(STOP_CONTINUOUS)
-
-
-def read_eeprom(address: int) -> bytes:
-    """Return the request for the EEPROM word at ``address``."""
-    return encode_command(READ_EEPROM, address)
-
-
-def write_eeprom(address: int, value: int) -> bytes:
-    """Return the request that writes ``value`` to the EEPROM word at ``address``."""
-    return encode_command(WRITE_EEPROM, address, value)
-
-
-def capture_gyro_bias(sampling_time_ms: int) -> bytes:
-    """Return the 0xCD request; the sensor must stay still for that long."""
-    return encode_command(CAPTURE_GYRO_BIAS, sampling_time_ms)
-
-
-def write_accel_bias(bias: tuple[float, float, float]) -> bytes:
-    """Return the 0xC9 request that sets the accelerometer bias (g)."""
-    return encode_command(WRITE_ACCEL_BIAS, tuple(bias))
-
-
-def write_gyro_bias(bias: tuple[float, float, float]) -> bytes:
-    """Return the 0xCA request that sets the gyro bias (rad/s)."""
-    return encode_command(WRITE_GYRO_BIAS, tuple(bias))
-
-
-def transfer_to_non_volatile(quantity: int) -> bytes:
-    """Return the 0xD0 request (1: accel bias, 2: gyro bias)."""
-    return encode_command(TRANSFER_TO_NON_VOLATILE, quantity)
-
-
-def device_identifier(selector: int) -> bytes:
-    """Return the 0xEA request (0 model number, 1 serial, 2 name, 3 options)."""
-    return encode_command(DEVICE_IDENTIFIER, selector)
-
-
-def built_in_test(config: int) -> bytes:
-    """Return the 0xFB request with its configuration bits."""
-    return encode_command(BUILT_IN_TEST, config)
+# The requests that take their arguments as the table lists them, nothing checked beyond it:
+# ping(address), the base station's (sent unframed); stop_continuous(), 0xFA, which needs
+# no reply; read_eeprom(address); write_eeprom(address, value); capture_gyro_bias(ms), for
+# which the sensor must stay still; write_accel_bias((x, y, z)) in g and
+# write_gyro_bias((x, y, z)) in rad/s; transfer_to_non_volatile(quantity) (1: accel bias,
+# 2: gyro bias); device_identifier(selector) (0 model number, 1 serial, 2 name, 3 options);
+# built_in_test(config bits).
+ping = partial(encode_command, PING)
+stop_continuous = partial(encode_command, STOP_CONTINUOUS)
+read_eeprom = partial(encode_command, READ_EEPROM)
+write_eeprom = partial(encode_command, WRITE_EEPROM)
+capture_gyro_bias = partial(encode_command, CAPTURE_GYRO_BIAS)
+write_accel_bias = partial(encode_command, WRITE_ACCEL_BIAS)
+write_gyro_bias = partial(encode_command, WRITE_GYRO_BIAS)
+transfer_to_non_volatile = partial(encode_command, TRANSFER_TO_NON_VOLATILE)
+device_identifier = partial(encode_command, DEVICE_IDENTIFIER)
+built_in_test = partial(encode_command, BUILT_IN_TEST)

@@ -82,7 +82,8 @@ def _struct(fields: tuple[Field, ...]) -> struct.Struct:
     return struct.Struct('>' + ''.join(f.code * f.count for f in fields))
 
 
-def _plan(fields: tuple[Field, ...]) -> tuple[object, ...]:
+def field_plan(fields: tuple[Field, ...]) -> tuple[object, ...]:
+    """Return where each of ``fields`` sits in their unpacked tuple: an index, or a slice."""
     plan = []
     index = 0
     for field in fields:
@@ -97,16 +98,11 @@ def _layout(code: int, name: str, reply: tuple[Field, ...] | None,
     request_struct = _struct(request)
     reply_struct = _struct(reply) if reply is not None else None
     record_size = 1 + reply_struct.size if reply_struct is not None else 0
-    return Layout(
-        code=code, name=name, confirm=confirm, request=request, reply=reply,
-        record_type=record_type, request_struct=request_struct,
-        reply_struct=reply_struct,
-        request_size=1 + len(confirm) + request_struct.size,
-        record_size=record_size,
-        wired_size=record_size + 2 if record_size else 0,
-        plan=_plan(reply) if reply is not None else (),
-        firmware=firmware,
-    )
+    return Layout(code=code, name=name, confirm=confirm, request=request, reply=reply,
+                  record_type=record_type, request_struct=request_struct,
+                  reply_struct=reply_struct, request_size=1 + len(confirm) + request_struct.size,
+                  record_size=record_size, wired_size=record_size + 2 if record_size else 0,
+                  plan=field_plan(reply) if reply is not None else (), firmware=firmware)
 
 
 _ACCEL = Field('accel', 'f', _V3)

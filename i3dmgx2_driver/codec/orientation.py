@@ -107,6 +107,12 @@ def quaternion(m: Sequence[float], at: int = 0, convention: str = '') -> tuple:
 _NAN4 = (math.nan,) * 4
 
 
+def _checked(convention: str) -> str:
+    if convention not in CONVENTIONS:
+        raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
+    return convention
+
+
 def shepperd(m: Sequence[float]) -> Quaternion:
     """Convert a row-major 3x3 rotation matrix to a unit quaternion (:func:`quaternion`)."""
     return Quaternion(*quaternion(m))
@@ -114,9 +120,7 @@ def shepperd(m: Sequence[float]) -> Quaternion:
 
 def orientation(m: Sequence[float], convention: str) -> Quaternion:
     """Quaternion of the sensor attitude in the named convention."""
-    if convention not in CONVENTIONS:
-        raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
-    return Quaternion(*quaternion(m, 0, convention))
+    return Quaternion(*quaternion(m, 0, _checked(convention)))
 
 
 def body_vector(v: Sequence[float], convention: str) -> Vector3:
@@ -125,11 +129,7 @@ def body_vector(v: Sequence[float], convention: str) -> Vector3:
 
     FRD to FLU negates y and z; NED keeps the device's axes.
     """
-    if convention == ENU:
-        return (v[0], -v[1], -v[2])
-    if convention == NED:
-        return (v[0], v[1], v[2])
-    raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
+    return (v[0], -v[1], -v[2]) if _checked(convention) == ENU else (v[0], v[1], v[2])
 
 
 def matrix_from_quaternion(q: Quaternion) -> Matrix3:
@@ -142,10 +142,8 @@ def matrix_from_quaternion(q: Quaternion) -> Matrix3:
 
 def euler_from_matrix(m: Sequence[float]) -> Vector3:
     """Roll, pitch, yaw (rad) from M as docs/protocol.md §9 defines them."""
-    pitch = math.asin(max(-1.0, min(1.0, -m[2])))
-    roll = math.atan2(m[5], m[8])
-    yaw = math.atan2(m[1], m[0])
-    return (roll, pitch, yaw)
+    return (math.atan2(m[5], m[8]), math.asin(max(-1.0, min(1.0, -m[2]))),
+            math.atan2(m[1], m[0]))
 
 
 def matrix_from_euler(roll: float, pitch: float, yaw: float) -> Matrix3:

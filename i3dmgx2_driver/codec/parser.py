@@ -40,6 +40,9 @@ ByteString = bytes | bytearray | memoryview
 
 #: Single bytes the base station answers with (ACK, NACK, ping answers).
 _ANSWER_BYTES = frozenset((ACK, NACK, PING))
+#: What a frame or an answer may start with where garbage ends (a ping's answer, the last,
+#: only while one is awaited); a wired stream has none.
+_MARKERS = (b'\xaa', b'\x21', b'\x02')
 #: Largest frame either parser ever waits for; bounds the carried-over buffer.
 MAX_FRAME_SIZE = HEADER_SIZE + MAX_RECORD_SIZE + DATA_TRAILER_SIZE
 
@@ -68,26 +71,12 @@ Event = DataPacket | Ack | Nack | PingReply
 class ParserStats:
     """Counters of what a parser saw, for diagnostics and tests."""
 
-    __slots__ = (
-        'acks',
-        'bytes_in',
-        'bytes_skipped',
-        'checksum_failures',
-        'foreign_frames',
-        'good_frames',
-        'length_failures',
-        'nacks',
-    )
+    __slots__ = ('acks', 'bytes_in', 'bytes_skipped', 'checksum_failures', 'foreign_frames',
+                 'good_frames', 'length_failures', 'nacks')
 
     def __init__(self) -> None:
-        self.good_frames = 0
-        self.checksum_failures = 0
-        self.length_failures = 0
-        self.bytes_skipped = 0
-        self.foreign_frames = 0
-        self.acks = 0
-        self.nacks = 0
-        self.bytes_in = 0
+        for name in self.__slots__:
+            setattr(self, name, 0)
 
     def as_dict(self) -> dict:
         """Return the counters by name."""
@@ -259,18 +248,12 @@ class SensorStreamParser:
     def _skip_garbage(self, buf: bytearray, i: int, n: int) -> int:
         """Return where the next possible frame starts after position ``i``."""
         nxt = n
-        for marker in self._markers():
+        for marker in _MARKERS[:3 if self._ping_pending else 2] if self.wireless else ():
             j = buf.find(marker, i + 1)
             if 0 <= j < nxt:
                 nxt = j
         self.stats.bytes_skipped += nxt - i
         return nxt
-
-    def _markers(self) -> tuple:
-        if not self.wireless:
-            return ()
-        markers = (b'\xaa', b'\x21')
-        return (*markers, b'\x02') if self._ping_pending else markers
 
     def _parse_wireless(self, buf: bytearray):
         out: list[Event] = []
@@ -342,11 +325,9 @@ class SensorStreamParser:
             code = buf[i]
             entry = _FRAMES.get(code)
             if entry is None:
-                if self._lone_byte(code, out):
-                    i += 1
-                else:
+                if not self._lone_byte(code, out):
                     stats.bytes_skipped += 1
-                    i += 1
+                i += 1
                 continue
             end = i + entry.size
             if end + 2 > n:

@@ -73,9 +73,8 @@ def _stream(name: str, code: int, summary: str) -> Stream:
     else:
         attitude = None
     return Stream(name, code, lay.LAYOUTS[code].record_type, summary,
-                  'accel' if 'accel' in fields else None,
-                  'angular_rate' if 'angular_rate' in fields else None,
-                  'mag' if 'mag' in fields else None, attitude)
+                  *(key if key in fields else None for key in ('accel', 'angular_rate', 'mag')),
+                  attitude)
 
 
 #: Every stream the driver offers, the default first.

@@ -148,8 +148,8 @@ class MessageFactory:
         convention = self.convention
         # Header, then orientation (4 float64) and its covariance, angular velocity (3)
         # and its covariance, linear acceleration (3) and its covariance.
-        frame, pack = _layout(self.frame_id, '4d72s3d72s3d72s')
-        flen = len(frame)
+        layout = StampedDoubles(self.frame_id, '4d72s3d72s3d72s')
+        frame, flen, pack = layout.frame, len(layout.frame), layout.struct.pack
         matrix = at.get('matrix') if stream.orientation == streams.MATRIX else None
         roll = at.get('roll') if stream.orientation == streams.EULER else None
         rate = at.get(stream.angular_rate) if stream.angular_rate else None
@@ -192,8 +192,8 @@ class MessageFactory:
 
     def _mag(self, settings: MessageSettings) -> Packer:
         """Return the MagneticField packer (tesla): None for a field of NaN, no new reading."""
-        frame, pack = _layout(self.frame_id, '3d72s')
-        flen = len(frame)
+        layout = StampedDoubles(self.frame_id, '3d72s')
+        frame, flen, pack = layout.frame, len(layout.frame), layout.struct.pack
         cov = _COVARIANCE.pack(*diagonal_covariance(settings.magnetic_field_stddev))
         field, enu, t = self._at[self.stream.mag], self.convention == ENU, TESLA_PER_GAUSS
         isnan = math.isnan
@@ -210,9 +210,3 @@ class MessageFactory:
                 y, z = -y, -z
             return pack(CDR_LE, sec, nanosec, flen, frame, x * t, y * t, z * t, cov)
         return mag_cdr
-
-
-def _layout(frame_id: str, doubles: str) -> tuple[bytes, Callable[..., bytes]]:
-    """Return the frame as it goes on the wire and the pack of a message of ``doubles``."""
-    layout = StampedDoubles(frame_id, doubles)
-    return layout.frame, layout.struct.pack

@@ -105,7 +105,9 @@ class DriverCore:
     (plain ones, or a managed node's lifecycle publishers: see
     :func:`create_publishers`); ``raw_capture`` the port's capture (its
     :class:`DriverSet` closes it), ``fault_capture`` the port's last seconds
-    (None: off; its :class:`DriverSet` starts and closes it). What the owning node decides:
+    (its :class:`DriverSet` starts and closes it), ``on_bytes`` where the
+    port's bytes go for both (a core that opens its own port: see
+    ``shared``). What the owning node decides:
     ``publishing`` False: records are counted, not published, until the
     owner turns publishing on (``records.set_publishing``); ``refusal``
     tells the services why they must refuse now ('' to serve). ``shared``:
@@ -122,8 +124,8 @@ class DriverCore:
     def __init__(self, node: Node, config: DriverConfig, sensor: SensorSetting,
                  publishers: Publishers, raw_capture: RawCapture, *,
                  publishing: bool = True, refusal: Callable[[], str] | None = None,
-                 shared: SharedPort | None = None,
-                 fault_capture: FaultCapture | None = None,
+                 shared: SharedPort | None = None, fault_capture: FaultCapture,
+                 on_bytes: Callable[[bytes, float], None] | None = None,
                  on_fatal: Callable[[], None] | None = None) -> None:
         self.node = node
         self._told_fatal = on_fatal
@@ -145,17 +147,13 @@ class DriverCore:
         #: How the device side reaches and treats the sensor.
         self.device_config = cfg.device_for(sensor)
         #: The port's last seconds, written when a fault is seen (shown on diagnostics).
-        self.fault_capture = fault_capture or FaultCapture(None, 1.0, 1, node.get_logger())
-        capture = None
-        if shared is None:
-            capture = bytes_sink(raw_capture.on_bytes if raw_capture.active else None,
-                                 self.fault_capture.on_bytes)
+        self.fault_capture = fault_capture
         self.supervisor = DeviceSupervisor(
             self.device_config,
             on_record=self.records.on_record, log=node.get_logger(),
             on_connect=self.records.link_changed, on_stream_known=self.records.stream_known,
             on_fatal=self._on_fatal,
-            on_bytes=capture, shared=shared,
+            on_bytes=on_bytes, shared=shared,
             on_gyro_bias=lambda: self.records.announce_calibrated(True))
         self.records.announce_calibrated(False)
         self.device_services = DeviceServices(
@@ -172,12 +170,10 @@ class DriverCore:
             node, self.supervisor.streaming_link, frame_id,
             cfg.temperature_period, self.publishers.temperature, cfg.time_offset,
             firmware=self.supervisor.firmware)
-        convention = cfg.messages.frame_convention
         node.get_logger().info(
             f'i3dmgx2_driver: port {cfg.device.port}, node address {sensor.address}, '
             + (f'topics {sensor.name}/..., ' if shared is not None else '')
-            + f'stream {self.stream.label}, frame {frame_id} '
-            f'({convention}), '
+            + f'stream {self.stream.label}, frame {frame_id} ({cfg.messages.frame_convention}), '
             f'time source {cfg.time_source}'
             + (f', time offset {cfg.time_offset:+g} s' if cfg.time_offset else ''))
 
@@ -233,25 +229,23 @@ class DriverSet:
         self.config = config
         publishers = publishers or [create_publishers(node, config, sensor=sensor)
                                     for sensor in sensors]
+        # What both captures record of the port they capture.
+        port = {'port': device.port, 'address': sensors[0].address, 'baud': device.baud,
+                'wireless': device.wireless, 'node': node.get_fully_qualified_name()}
         #: The port's one raw capture, for every sensor on it; closed after them all.
-        self._capture = capture = RawCapture(
-            config.capture_file, node.get_logger(), port=device.port,
-            address=sensors[0].address, baud=device.baud, wireless=device.wireless,
-            node=node.get_fully_qualified_name())
+        self._capture = capture = RawCapture(config.capture_file, node.get_logger(), **port)
         #: The port's last seconds, kept always, written when a fault is seen or on request.
         self.fault_capture = faults = FaultCapture(
             config.fault_capture_dir, config.fault_capture_seconds, config.fault_captures_kept,
-            node.get_logger(), port=device.port, address=sensors[0].address, baud=device.baud,
-            wireless=device.wireless, node=node.get_fully_qualified_name())
-        self.shared: SharedPort | None = None
-        if len(sensors) > 1:
-            self.shared = SharedPort(
-                device, node.get_logger(),
-                bytes_sink(capture.on_bytes if capture.active else None, faults.on_bytes))
+            node.get_logger(), **port)
+        # Every byte of the port to both captures: from the shared port's reader, or the core's.
+        sink = bytes_sink(capture.on_bytes if capture.active else None, faults.on_bytes)
+        self.shared = SharedPort(device, node.get_logger(), sink) if len(sensors) > 1 else None
         self.cores = [
             DriverCore(node, config, sensor, sensor_publishers, capture,
                        publishing=publishing, refusal=refusal, shared=self.shared,
-                       fault_capture=faults, on_fatal=on_fatal)
+                       fault_capture=faults, on_fatal=on_fatal,
+                       on_bytes=None if self.shared else sink)
             for sensor, sensor_publishers in zip(sensors, publishers, strict=True)]
         self.save_capture = SaveCaptureService(node, faults)
         if faults.active:

@@ -165,8 +165,7 @@ class RecordPublisher:
         self._publish_imu: Callable[[bytes], None] = imu.publish
         #: The other topics of each record: publish, the suffix its count is under.
         self._also = tuple((publisher.publish, row.suffix) for row, publisher in others)
-        for _, suffix in self._also:
-            self.stats.published_on[suffix] = 0
+        self.stats.published_on.update((suffix, 0) for _, suffix in self._also)
         self.sample_clock = path.clock
         if hot_path.timings is not None:
             self._time(hot_path.timings)

@@ -119,10 +119,9 @@ def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
     if count > 1 and not wireless:
         raise ValueError(f"parameter 'addresses' lists {count} sensors, but 'wireless' is "
                          f'false: several sensors share a port only behind a base station')
-    _per_sensor('sensor_names', names, count, 'name')
-    _per_sensor('frame_ids', frame_ids, count, 'frame')
-    _per_sensor('streams', stream_texts, count, 'stream', one_for_all=True)
-    _per_sensor('data_rates', data_rates, count, 'rate', one_for_all=True)
+    for name, what, one_for_all in (('sensor_names', 'name', False), ('frame_ids', 'frame', False),
+                                    ('streams', 'stream', True), ('data_rates', 'rate', True)):
+        _per_sensor(name, given[name], count, what, one_for_all)
     _names('sensor_names', names)
     if len(set(frame_ids)) != len(frame_ids) or not all(frame_ids):
         raise ValueError(f"parameter 'frame_ids' must name each sensor's frame, each "
@@ -142,10 +141,9 @@ def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
     for i, value in enumerate(listed):
         name = names[i] if names else (default_name(value) if several else SINGLE_NAME)
         frame = frame_ids[i] if frame_ids else (f'{name}_link' if several else given['frame_id'])
-        text = (stream_texts[i if len(stream_texts) > 1 else 0] if stream_texts
-                else given['stream'])
-        rate = (data_rates[i if len(data_rates) > 1 else 0] if data_rates
-                else given['data_rate'])
+        # One value each, or one for all (checked above): the i-th, or the one.
+        text = stream_texts[i % len(stream_texts)] if stream_texts else given['stream']
+        rate = data_rates[i % len(data_rates)] if data_rates else given['data_rate']
         out.append(SensorSetting(value, name, frame, text, float(rate)))
     return out
 
