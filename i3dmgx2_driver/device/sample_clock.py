@@ -487,11 +487,9 @@ class SampleClock:
         replaced.fit.keep_after(self.fit)
         self.fit = replaced.fit
         self.ticks += replaced.shift
-        resyncs = self._restarts.get(Restart.RESYNC.value, 0) - 1
-        if resyncs > 0:
-            self._restarts[Restart.RESYNC.value] = resyncs
-        else:
-            self._restarts.pop(Restart.RESYNC.value, None)
+        self._restarts[Restart.RESYNC] -= 1  # counted by the restart this undoes
+        if not self._restarts[Restart.RESYNC]:
+            del self._restarts[Restart.RESYNC]
         self.last_restart = replaced.last_restart
         self.gaps += 1
         self._probation_end = (device_time + PROBATION_S if fall is None
@@ -500,19 +498,13 @@ class SampleClock:
 
     def _restart(self, reason: Restart, raw: int, host: float = 0.0,
                  since: int | None = None) -> None:
+        self.clear()  # the record's raw timer and host time are kept by stamp()
         self.fit.reset()
-        self.ticks = raw
-        self.ticks_since_last = since
-        self.restarted = True
+        self.ticks, self.ticks_since_last, self.restarted = raw, since, True
         self.last_restart = reason.value
         self._restarts[reason.value] = self._restarts.get(reason.value, 0) + 1
         if reason is Restart.RESET:
             self._last_reset_at = host
-        self._pending = Restart.START
-        self._check_next = False
-        self._probation_end = None
-        self._replaced = None
-        self._trail.clear()
 
     def status(self) -> ClockStatus:
         """Return a snapshot of the clock's state (safe to hand to another thread)."""
