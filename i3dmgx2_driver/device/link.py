@@ -209,10 +209,7 @@ class PortReader:
         self._awaited = 0
         #: Guards the port's wake size against a request that begins meanwhile.
         self._wake_lock = threading.Lock()
-        self._on_bytes = options.on_bytes
-        self._observer = options.observer
-        self._read_timeout = options.select_timeout
-        self._thread_policy = options.thread_policy
+        self._options = options
         self._stop = threading.Event()
         self._started = False
         self._start_lock = threading.Lock()
@@ -315,10 +312,7 @@ class PortReader:
             self.port.write(data)
 
     def _links(self) -> list['DeviceLink']:
-        links = list(self._routes.values())
-        if self._fallback is not None:
-            links.append(self._fallback)
-        return links
+        return [*self._routes.values(), *filter(None, [self._fallback])]
 
     # -- the thread ----------------------------------------------------------
 
@@ -332,7 +326,7 @@ class PortReader:
         with self._start_lock:
             if not self._started:
                 self._started = True
-                READERS.run(self._run, self._thread_policy, self._finished)
+                READERS.run(self._run, self._options.thread_policy, self._finished)
 
     def stop(self) -> None:
         """Stop reading and wait for it (a read times out quickly)."""
@@ -377,13 +371,14 @@ class PortReader:
         read, feed = self.port.read_some, parser.feed
         if hot_path.timings is not None:  # the hot path timed (hot_path.py): off by default
             read, feed = hot_path.timed_read(read), hot_path.marked(feed, 'parsed')
-        observer = self._observer
+        observer, on_bytes = self._options.observer, self._options.on_bytes
+        read_timeout = self._options.select_timeout
         routes = self._routes
         port = self.port
         data = b''
         while not self._stop.is_set():
             pending = len(held)
-            timeout = timeouts.LONE_BYTE_WAIT_S if pending == 1 else self._read_timeout
+            timeout = timeouts.LONE_BYTE_WAIT_S if pending == 1 else read_timeout
             # While the stream flows, a whole packet, or the rest of the one the parser
             # holds the start of (a late reader that caught the next packet's first pieces
             # is back in step with the stream at its end); any byte after a silence.
@@ -401,8 +396,8 @@ class PortReader:
                 return
             now = time.time()
             mono = time.monotonic()
-            if data and self._on_bytes is not None:
-                self._on_bytes(data, now)
+            if data and on_bytes is not None:
+                on_bytes(data, now)
             if observer is not None and observer.active and self._fallback is not None \
                     and mono - self._fallback.last_data_mono > QUIET_AFTER:
                 observer.feed(data, mono, self._fallback.last_data_mono)
@@ -633,20 +628,13 @@ class DeviceLink:
             nacks = 0
             for _ in range(retries):
                 self._check_cancelled()
-                pending = Pending(reply_code)
-                self._pending = pending
-                try:
-                    with self.reader.awaiting_answer():
-                        if self.shared:
-                            self._exchange_shared(command, pending, timeout)
-                        else:
-                            with self.reader.holding(self):
-                                self.send(command)
-                                self._wait(pending, timeout)
-                finally:
-                    self._pending = None
-                self._check_port()
-                self._check_cancelled()
+                with self._awaiting(reply_code) as pending:
+                    if self.shared:
+                        self._exchange_shared(command, pending, timeout)
+                    else:
+                        with self.reader.holding(self):
+                            self.send(command)
+                            self._wait(pending, timeout)
                 if pending.done.is_set():
                     return pending.reply
                 if pending.nacked.is_set():
@@ -655,6 +643,18 @@ class DeviceLink:
             if nacks == retries:
                 raise DeviceNack(f'{name}: the base station rejected it {retries} times')
             raise DeviceTimeout(f'{name}: no reply after {retries} tries')
+
+    @contextlib.contextmanager
+    def _awaiting(self, code: int | None) -> Iterator[Pending]:
+        """Wait for a reply of ``code``; then raise if the port died or it was cancelled."""
+        pending = self._pending = Pending(code)
+        try:
+            with self.reader.awaiting_answer():
+                yield pending
+        finally:
+            self._pending = None
+        self._check_port()
+        self._check_cancelled()
 
     def _exchange_shared(self, command: bytes, pending: Pending, timeout: float) -> None:
         """
@@ -708,17 +708,10 @@ class DeviceLink:
         with self._lock, self.reader.holding(self):
             for _ in range(2):
                 skipped = parser.stats.bytes_skipped
-                pending = Pending(layouts.PING)
-                self._pending = pending
-                try:
-                    with self.reader.awaiting_answer():
-                        parser.expect_ping()
-                        self.reader.write(commands.ping(address))
-                        self._wait(pending, timeout, nack_ends=False)
-                finally:
-                    self._pending = None
-                self._check_port()
-                self._check_cancelled()
+                with self._awaiting(layouts.PING) as pending:
+                    parser.expect_ping()
+                    self.reader.write(commands.ping(address))
+                    self._wait(pending, timeout, nack_ends=False)
                 # The answer is one byte, 0x02 or 0x21, found between frames. While
                 # the parser skips garbage (the tail of another node's packet cut by
                 # a flush) a byte of that garbage can pass for it; the parser is in
