@@ -280,7 +280,8 @@ class DeviceClock:
         # Plain loops, once a window: a generator would be a call per point.
         weighted = []
         total = sum_t = sum_e = 0.0
-        for age, (t, e) in enumerate(reversed(points)):
+        for index, (t, e) in enumerate(points):
+            age = n - 1 - index
             w = 1.0 if age < fading else (self.history - age) / TAPER
             above = e - (centre + drift * t)
             off = abs(above)
@@ -289,8 +290,6 @@ class DeviceClock:
             if off > limit:
                 w *= (limit / off) ** 4
             weighted.append((w, t, e))
-        weighted.reverse()
-        for w, t, e in weighted:
             total += w
             sum_t += w * t
             sum_e += w * e

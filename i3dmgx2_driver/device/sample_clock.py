@@ -245,17 +245,16 @@ class _Trail:
 
     def __init__(self) -> None:
         self._points: deque[tuple[float, float]] = deque(maxlen=QUEUE_WATCH)
-        #: Records added since the trail was last cleared (when to take the robust slope).
-        self._added = 0
-        #: When the last record added was read (monotonic s).
-        self._last_read = float('-inf')
+        self.clear()
 
     def __len__(self) -> int:
         return len(self._points)
 
     def clear(self) -> None:
         self._points.clear()
+        #: Records added since the trail was last cleared (when to take the robust slope).
         self._added = 0
+        #: When the last record added was read (monotonic s).
         self._last_read = float('-inf')
 
     def add(self, device_time: float, residual: float, read_time: float,
