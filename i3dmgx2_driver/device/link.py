@@ -448,9 +448,7 @@ class DeviceLink:
         #: The node address requests go to (:meth:`retarget` changes it).
         self.address = address
         self.shared = reader is not None
-        if reader is None:
-            reader = PortReader(port, address, options, fallback=self)
-        self.reader = reader
+        self.reader = reader = reader or PortReader(port, address, options, fallback=self)
         self.parser = reader.parser
         self.disconnected = reader.disconnected
         #: Why the port was lost (None while it works).

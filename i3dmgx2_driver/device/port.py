@@ -272,11 +272,10 @@ def _classify(path: str, exc: Exception) -> PortError:
         return PortBusy(f'serial port {path} is in use by another process')
     if code in (errno.ENOTTY, errno.EISDIR) or 'Inappropriate ioctl' in text:
         # What check_port_path could not tell (no list of terminal drivers).
-        try:
+        what = None
+        with contextlib.suppress(OSError):
             info = os.stat(path)
             what = describe_non_terminal(info.st_mode, info.st_rdev, ranges=[])
-        except OSError:
-            what = None
         return PortNotSerial(_not_serial_message(path, what or 'no terminal device'))
     return PortError(f'cannot open serial port {path}: {text}')
 
