@@ -161,19 +161,9 @@ class DeviceClock:
         self.samples = 0
 
     @property
-    def offset(self) -> float:
-        """Host time minus device time at the device-time origin (s)."""
-        return self._offset
-
-    @property
     def drift_ppm(self) -> float:
         """How much faster the host clock runs than the device's, in ppm."""
         return self._drift * 1e6
-
-    @property
-    def started(self) -> bool:
-        """Whether a sample has been stamped since the last reset (there is a line)."""
-        return self._origin is not None
 
     @property
     def near(self) -> float:
@@ -193,7 +183,7 @@ class DeviceClock:
 
         Zero or a little above for a sample of the device the line was fitted
         to (its delay is at least the envelope's); far off either way for a
-        timer that restarted. Only meaningful once :attr:`started`.
+        timer that restarted. Only meaningful once a sample was stamped since the reset.
         """
         device = ticks / TICKS_PER_SECOND
         t = device - (self._origin if self._origin is not None else device)

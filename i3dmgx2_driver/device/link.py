@@ -247,11 +247,6 @@ class PortReader:
         if self.error is not None:
             link.port_lost(self.error)
 
-    def listen_to(self, address: int | None) -> None:
-        """Take the data packets of ``address`` alone from now on (None: every node's)."""
-        if self.wireless:
-            self.parser.listen_to(address)
-
     def unroute(self, address: int | None, link: 'DeviceLink') -> None:
         """Stop handing ``address``'s packets to ``link`` (if they still go to it)."""
         if self._routes.get(address) is link:
@@ -727,4 +722,5 @@ class DeviceLink:
         already stream); requests need an address again before they are sent.
         """
         self.address = address
-        self.reader.listen_to(address)
+        if self.reader.wireless:  # the parser takes that address's packets alone (None: all)
+            self.parser.listen_to(address)
