@@ -145,12 +145,10 @@ class DeviceClock:
         self._bucket: int | None = None
         self._bucket_min: tuple[float, float] = (0.0, 0.0)
         self._origin: float | None = None
-        self._offset = 0.0
-        self._drift = 0.0
-        #: The last fit's weighted mean line (offset at t = 0) and the windows' scatter
-        #: about it: what the next fit weighs the windows by (None: no fit yet).
-        self._centre: float | None = None
-        self._scatter = 0.0
+        #: The line's offset and drift; the windows' scatter about the last fit's weighted
+        #: mean line (offset at t = 0, ``_centre``): what the next fit weighs them by.
+        self._offset = self._drift = self._scatter = 0.0
+        self._centre: float | None = None  # None: no fit yet
         self._last_stamp = float('-inf')
         #: Whether the last sample came in under the line.
         self._under = False

@@ -324,8 +324,7 @@ class SampleClock:
         self._system_offset = offset
         self.fit = fit or DeviceClock()
         self._restarts: dict[str, int] = {}
-        self.rollovers = 0
-        self.gaps = 0
+        self.rollovers = self.gaps = 0
         self.last_restart = ''
         self._last_reset_at: float | None = None
         self.clear()
@@ -333,20 +332,18 @@ class SampleClock:
     def clear(self, reason: Restart = Restart.START) -> None:
         """Start the next record afresh, for ``reason`` (a new configuration, another sensor)."""
         self._pending = reason
-        self._check_next = False
+        self._check_next = self.restarted = False
         self._last_raw: int | None = None
-        self._last_host = 0.0
+        self._last_host = self._probation_best = 0.0
         #: The device time (s, the fit's ticks) at which a probation ends: counted in the
         #: records' time, not the host's, so that a reader away longer than a probation
         #: (a busy host) does not run it out before the records it then reads are judged.
         self._probation_end: float | None = None
-        self._probation_best = 0.0
         #: The records since the last gap: whether they fall as a queue's do.
         self._trail = _Trail()
         self._replaced: _Replaced | None = None
         self.ticks = 0
         self.ticks_since_last: int | None = None
-        self.restarted = False
 
     def link_changed(self, same_device: bool = True) -> None:
         """
