@@ -147,9 +147,7 @@ class RadioMeter:
     def stats(self) -> RadioStats | None:
         """Return the quality so far, or None before the first packet."""
         r = self.counts
-        if not r[6]:
-            return None
-        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
+        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6]) if r[6] else None
 
 
 class Pending:
@@ -186,7 +184,7 @@ class PortReader:
     def __init__(self, port: SerialPort, address: int | None,
                  options: LinkOptions | None = None,
                  fallback: 'DeviceLink | None' = None) -> None:
-        options = options if options is not None else LinkOptions()
+        self._options = options = options if options is not None else LinkOptions()
         self.port = port
         self.wireless = options.wireless
         self.parser = SensorStreamParser(address=address if self.wireless else None,
@@ -197,8 +195,7 @@ class PortReader:
         self._requester: DeviceLink | None = None
         #: Packets of addresses no link routes, by address (a port shared by several).
         self.strays: dict[int, int] = {}
-        self._request_lock = threading.Lock()
-        self._write_lock = threading.Lock()
+        self._request_lock, self._write_lock = threading.Lock(), threading.Lock()
         #: The packet size of each link's stream (:meth:`streams`), and the bytes a
         #: wait for data may wait for while every link streams: the smallest of
         #: those (0: any byte, as it must while a link streams nothing).
@@ -209,7 +206,6 @@ class PortReader:
         self._awaited = 0
         #: Guards the port's wake size against a request that begins meanwhile.
         self._wake_lock = threading.Lock()
-        self._options = options
         self._stop = threading.Event()
         self._started = False
         self._start_lock = threading.Lock()
@@ -453,9 +449,8 @@ class DeviceLink:
         #: Set once the link receives its packets (its own reader runs, or its
         #: address is routed on a shared one that runs).
         self.running = threading.Event()
-        self._on_record = on_record
-        self._records_of = options.records_of
-        self._on_lost = options.on_lost
+        self._on_record, self._records_of, self._on_lost = (
+            on_record, options.records_of, options.on_lost)
         self._cancel = options.cancel if options.cancel is not None else threading.Event()
         #: One exchange at a time with this sensor.
         self._lock = threading.Lock()

@@ -454,7 +454,5 @@ class SerialPort:
 
     def close(self) -> None:
         """Close the port; closing twice or after an unplug is harmless."""
-        try:
+        with contextlib.suppress(OSError, serial.SerialException):
             self._serial.close()
-        except (OSError, serial.SerialException):
-            pass

@@ -390,7 +390,7 @@ class SampleClock:
         elapsed = host - self._last_host
         wraps = max(0, round((elapsed * TICKS_PER_SECOND - step) / TIMER_MODULUS))
         ticks = self.ticks + step + wraps * TIMER_MODULUS
-        rolled = wraps > 0 or raw < self._last_raw
+        turns = wraps + (raw < self._last_raw)  # the rollovers in between
         # A gap in device time (a stall, a pause), or host time lost beyond what a busy
         # host delays a read by (a restart whose timer happened to continue): a reader
         # that was merely late sees the next tick count and needs no check.
@@ -399,9 +399,9 @@ class SampleClock:
         # A rollover between two records that follow each other is one: only one across
         # host time (a restart whose timer landed just past the old one's wrap) is checked,
         # so that a record late behind a queue as the timer wraps restarts nothing.
-        checked = gap or self._check_next or (rolled and elapsed > GAP_S)
-        if rolled and not checked:
-            self.rollovers += wraps + (raw < self._last_raw)
+        checked = gap or self._check_next or (turns > 0 and elapsed > GAP_S)
+        if not checked:
+            self.rollovers += turns
         if checked:
             self._replaced = None
             off = self.fit.residual(ticks, read_time, wire_time)
@@ -431,8 +431,7 @@ class SampleClock:
                 self._trail.clear()
                 self._trail.add(ticks / TICKS_PER_SECOND, off, read_time, wire_time)
             self._check_next = False
-            if rolled:
-                self.rollovers += wraps + (raw < self._last_raw)
+            self.rollovers += turns
         elif self._replaced is not None:
             replaced = self._replaced
             on_old = ticks + replaced.shift
