@@ -134,8 +134,7 @@ class DeviceClock:
     """
 
     def __init__(self, window: float = 1.0, history: int = HISTORY) -> None:
-        self.window = window
-        self.history = history
+        self.window, self.history = window, history
         self._points: deque[tuple[float, float]] = deque(maxlen=history)
         self.reset()
 

@@ -88,8 +88,7 @@ class TimingsRecorder:
     """
 
     def __init__(self, clock: Any = time.time, cpu_clock: Any = time.thread_time) -> None:
-        self._clock = clock
-        self._cpu_clock = cpu_clock
+        self._clock, self._cpu_clock = clock, cpu_clock
         #: One row per published message (:data:`ROW_FIELDS`).
         self.rows: list[tuple] = []
         #: Every garbage collection: (generation, start, duration).

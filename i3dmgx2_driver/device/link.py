@@ -155,10 +155,8 @@ class Pending:
 
     def __init__(self, code: int | None) -> None:
         self.code = code
-        self.done = threading.Event()
         self.reply: Any = None
-        self.acked = threading.Event()
-        self.nacked = threading.Event()
+        self.done, self.acked, self.nacked = (threading.Event() for _ in range(3))
 
     def fulfil(self, reply: Any) -> None:
         """Hand the waiting request its reply (reader thread)."""
@@ -364,9 +362,7 @@ class PortReader:
             read, feed = hot_path.timed_read(read), hot_path.marked(feed, 'parsed')
         observer, on_bytes = self._options.observer, self._options.on_bytes
         read_timeout = self._options.select_timeout
-        routes = self._routes
-        port = self.port
-        data = b''
+        routes, port, data = self._routes, self.port, b''
         while not self._stop.is_set():
             pending = len(held)
             timeout = timeouts.LONE_BYTE_WAIT_S if pending == 1 else read_timeout

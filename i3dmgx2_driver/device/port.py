@@ -261,8 +261,7 @@ def _permission_message(path: str) -> str:
 
 
 def _classify(path: str, exc: Exception) -> PortError:
-    code = getattr(exc, 'errno', None)
-    text = str(exc)
+    code, text = getattr(exc, 'errno', None), str(exc)
     if code == errno.ENOENT or 'No such file' in text:
         return PortMissing(f'serial port {path} does not exist: is the base station '
                            f'plugged in, and is the path right? {port_hint()}')
