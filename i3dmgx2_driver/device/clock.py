@@ -134,8 +134,7 @@ class DeviceClock:
     """
 
     def __init__(self, window: float = 1.0, history: int = HISTORY) -> None:
-        self.window = window
-        self.history = history
+        self.window, self.history = window, history
         self._points: deque[tuple[float, float]] = deque(maxlen=history)
         self.reset()
 
@@ -145,12 +144,10 @@ class DeviceClock:
         self._bucket: int | None = None
         self._bucket_min: tuple[float, float] = (0.0, 0.0)
         self._origin: float | None = None
-        self._offset = 0.0
-        self._drift = 0.0
-        #: The last fit's weighted mean line (offset at t = 0) and the windows' scatter
-        #: about it: what the next fit weighs the windows by (None: no fit yet).
-        self._centre: float | None = None
-        self._scatter = 0.0
+        #: The line's offset and drift; the windows' scatter about the last fit's weighted
+        #: mean line (offset at t = 0, ``_centre``): what the next fit weighs them by.
+        self._offset = self._drift = self._scatter = 0.0
+        self._centre: float | None = None  # None: no fit yet
         self._last_stamp = float('-inf')
         #: Whether the last sample came in under the line.
         self._under = False
@@ -161,19 +158,9 @@ class DeviceClock:
         self.samples = 0
 
     @property
-    def offset(self) -> float:
-        """Host time minus device time at the device-time origin (s)."""
-        return self._offset
-
-    @property
     def drift_ppm(self) -> float:
         """How much faster the host clock runs than the device's, in ppm."""
         return self._drift * 1e6
-
-    @property
-    def started(self) -> bool:
-        """Whether a sample has been stamped since the last reset (there is a line)."""
-        return self._origin is not None
 
     @property
     def near(self) -> float:
@@ -193,7 +180,7 @@ class DeviceClock:
 
         Zero or a little above for a sample of the device the line was fitted
         to (its delay is at least the envelope's); far off either way for a
-        timer that restarted. Only meaningful once :attr:`started`.
+        timer that restarted. Only meaningful once a sample was stamped since the reset.
         """
         device = ticks / TICKS_PER_SECOND
         t = device - (self._origin if self._origin is not None else device)
@@ -280,7 +267,8 @@ class DeviceClock:
         # Plain loops, once a window: a generator would be a call per point.
         weighted = []
         total = sum_t = sum_e = 0.0
-        for age, (t, e) in enumerate(reversed(points)):
+        for index, (t, e) in enumerate(points):
+            age = n - 1 - index
             w = 1.0 if age < fading else (self.history - age) / TAPER
             above = e - (centre + drift * t)
             off = abs(above)
@@ -289,8 +277,6 @@ class DeviceClock:
             if off > limit:
                 w *= (limit / off) ** 4
             weighted.append((w, t, e))
-        weighted.reverse()
-        for w, t, e in weighted:
             total += w
             sum_t += w * t
             sum_e += w * e

@@ -88,8 +88,7 @@ class TimingsRecorder:
     """
 
     def __init__(self, clock: Any = time.time, cpu_clock: Any = time.thread_time) -> None:
-        self._clock = clock
-        self._cpu_clock = cpu_clock
+        self._clock, self._cpu_clock = clock, cpu_clock
         #: One row per published message (:data:`ROW_FIELDS`).
         self.rows: list[tuple] = []
         #: Every garbage collection: (generation, start, duration).
@@ -104,9 +103,7 @@ class TimingsRecorder:
 
     def read(self, nbytes: int, read_time: float) -> None:
         """Note the read's time and the thread's CPU time."""
-        marks = self._marks
-        marks[0] = read_time
-        marks[4] = self._cpu_clock()
+        self._marks[0], self._marks[4] = read_time, self._cpu_clock()
         if not self.reader:
             self.reader = {'policy': os.sched_getscheduler(0),
                            'priority': os.sched_getparam(0).sched_priority,
@@ -122,8 +119,7 @@ class TimingsRecorder:
 
     def packed(self, timer: int) -> None:
         """Note the pack's end, and the record's timer."""
-        self._marks[3] = self._clock()
-        self._marks[5] = timer
+        self._marks[3], self._marks[5] = self._clock(), timer
 
     def published(self, stamp: float) -> None:
         """Add the row of this message."""
@@ -201,8 +197,7 @@ def recorder_from_environment() -> tuple[TimingsRecorder | None, str]:
     Without the variable: (None, '') and the observer is left as it is.
     """
     path = os.environ.get(TIMINGS_ENV, '')
-    if not path:
-        return None, path
-    recorder = TimingsRecorder()
-    observe(recorder)
+    recorder = TimingsRecorder() if path else None
+    if recorder is not None:
+        observe(recorder)
     return recorder, path

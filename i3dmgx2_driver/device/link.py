@@ -147,9 +147,7 @@ class RadioMeter:
     def stats(self) -> RadioStats | None:
         """Return the quality so far, or None before the first packet."""
         r = self.counts
-        if not r[6]:
-            return None
-        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6])
+        return RadioStats(r[0], r[1], r[2], r[3], r[4] / r[6], r[5] / r[6]) if r[6] else None
 
 
 class Pending:
@@ -157,10 +155,8 @@ class Pending:
 
     def __init__(self, code: int | None) -> None:
         self.code = code
-        self.done = threading.Event()
         self.reply: Any = None
-        self.acked = threading.Event()
-        self.nacked = threading.Event()
+        self.done, self.acked, self.nacked = (threading.Event() for _ in range(3))
 
     def fulfil(self, reply: Any) -> None:
         """Hand the waiting request its reply (reader thread)."""
@@ -186,7 +182,7 @@ class PortReader:
     def __init__(self, port: SerialPort, address: int | None,
                  options: LinkOptions | None = None,
                  fallback: 'DeviceLink | None' = None) -> None:
-        options = options if options is not None else LinkOptions()
+        self._options = options = options if options is not None else LinkOptions()
         self.port = port
         self.wireless = options.wireless
         self.parser = SensorStreamParser(address=address if self.wireless else None,
@@ -197,8 +193,7 @@ class PortReader:
         self._requester: DeviceLink | None = None
         #: Packets of addresses no link routes, by address (a port shared by several).
         self.strays: dict[int, int] = {}
-        self._request_lock = threading.Lock()
-        self._write_lock = threading.Lock()
+        self._request_lock, self._write_lock = threading.Lock(), threading.Lock()
         #: The packet size of each link's stream (:meth:`streams`), and the bytes a
         #: wait for data may wait for while every link streams: the smallest of
         #: those (0: any byte, as it must while a link streams nothing).
@@ -209,10 +204,6 @@ class PortReader:
         self._awaited = 0
         #: Guards the port's wake size against a request that begins meanwhile.
         self._wake_lock = threading.Lock()
-        self._on_bytes = options.on_bytes
-        self._observer = options.observer
-        self._read_timeout = options.select_timeout
-        self._thread_policy = options.thread_policy
         self._stop = threading.Event()
         self._started = False
         self._start_lock = threading.Lock()
@@ -249,11 +240,6 @@ class PortReader:
             link.reader_started(self.policy_outcome)
         if self.error is not None:
             link.port_lost(self.error)
-
-    def listen_to(self, address: int | None) -> None:
-        """Take the data packets of ``address`` alone from now on (None: every node's)."""
-        if self.wireless:
-            self.parser.listen_to(address)
 
     def unroute(self, address: int | None, link: 'DeviceLink') -> None:
         """Stop handing ``address``'s packets to ``link`` (if they still go to it)."""
@@ -315,10 +301,7 @@ class PortReader:
             self.port.write(data)
 
     def _links(self) -> list['DeviceLink']:
-        links = list(self._routes.values())
-        if self._fallback is not None:
-            links.append(self._fallback)
-        return links
+        return [*self._routes.values(), *filter(None, [self._fallback])]
 
     # -- the thread ----------------------------------------------------------
 
@@ -332,7 +315,7 @@ class PortReader:
         with self._start_lock:
             if not self._started:
                 self._started = True
-                READERS.run(self._run, self._thread_policy, self._finished)
+                READERS.run(self._run, self._options.thread_policy, self._finished)
 
     def stop(self) -> None:
         """Stop reading and wait for it (a read times out quickly)."""
@@ -377,13 +360,12 @@ class PortReader:
         read, feed = self.port.read_some, parser.feed
         if hot_path.timings is not None:  # the hot path timed (hot_path.py): off by default
             read, feed = hot_path.timed_read(read), hot_path.marked(feed, 'parsed')
-        observer = self._observer
-        routes = self._routes
-        port = self.port
-        data = b''
+        observer, on_bytes = self._options.observer, self._options.on_bytes
+        read_timeout = self._options.select_timeout
+        routes, port, data = self._routes, self.port, b''
         while not self._stop.is_set():
             pending = len(held)
-            timeout = timeouts.LONE_BYTE_WAIT_S if pending == 1 else self._read_timeout
+            timeout = timeouts.LONE_BYTE_WAIT_S if pending == 1 else read_timeout
             # While the stream flows, a whole packet, or the rest of the one the parser
             # holds the start of (a late reader that caught the next packet's first pieces
             # is back in step with the stream at its end); any byte after a silence.
@@ -401,8 +383,8 @@ class PortReader:
                 return
             now = time.time()
             mono = time.monotonic()
-            if data and self._on_bytes is not None:
-                self._on_bytes(data, now)
+            if data and on_bytes is not None:
+                on_bytes(data, now)
             if observer is not None and observer.active and self._fallback is not None \
                     and mono - self._fallback.last_data_mono > QUIET_AFTER:
                 observer.feed(data, mono, self._fallback.last_data_mono)
@@ -453,9 +435,7 @@ class DeviceLink:
         #: The node address requests go to (:meth:`retarget` changes it).
         self.address = address
         self.shared = reader is not None
-        if reader is None:
-            reader = PortReader(port, address, options, fallback=self)
-        self.reader = reader
+        self.reader = reader = reader or PortReader(port, address, options, fallback=self)
         self.parser = reader.parser
         self.disconnected = reader.disconnected
         #: Why the port was lost (None while it works).
@@ -465,9 +445,8 @@ class DeviceLink:
         #: Set once the link receives its packets (its own reader runs, or its
         #: address is routed on a shared one that runs).
         self.running = threading.Event()
-        self._on_record = on_record
-        self._records_of = options.records_of
-        self._on_lost = options.on_lost
+        self._on_record, self._records_of, self._on_lost = (
+            on_record, options.records_of, options.on_lost)
         self._cancel = options.cancel if options.cancel is not None else threading.Event()
         #: One exchange at a time with this sensor.
         self._lock = threading.Lock()
@@ -633,20 +612,13 @@ class DeviceLink:
             nacks = 0
             for _ in range(retries):
                 self._check_cancelled()
-                pending = Pending(reply_code)
-                self._pending = pending
-                try:
-                    with self.reader.awaiting_answer():
-                        if self.shared:
-                            self._exchange_shared(command, pending, timeout)
-                        else:
-                            with self.reader.holding(self):
-                                self.send(command)
-                                self._wait(pending, timeout)
-                finally:
-                    self._pending = None
-                self._check_port()
-                self._check_cancelled()
+                with self._awaiting(reply_code) as pending:
+                    if self.shared:
+                        self._exchange_shared(command, pending, timeout)
+                    else:
+                        with self.reader.holding(self):
+                            self.send(command)
+                            self._wait(pending, timeout)
                 if pending.done.is_set():
                     return pending.reply
                 if pending.nacked.is_set():
@@ -655,6 +627,18 @@ class DeviceLink:
             if nacks == retries:
                 raise DeviceNack(f'{name}: the base station rejected it {retries} times')
             raise DeviceTimeout(f'{name}: no reply after {retries} tries')
+
+    @contextlib.contextmanager
+    def _awaiting(self, code: int | None) -> Iterator[Pending]:
+        """Wait for a reply of ``code``; then raise if the port died or it was cancelled."""
+        pending = self._pending = Pending(code)
+        try:
+            with self.reader.awaiting_answer():
+                yield pending
+        finally:
+            self._pending = None
+        self._check_port()
+        self._check_cancelled()
 
     def _exchange_shared(self, command: bytes, pending: Pending, timeout: float) -> None:
         """
@@ -708,17 +692,10 @@ class DeviceLink:
         with self._lock, self.reader.holding(self):
             for _ in range(2):
                 skipped = parser.stats.bytes_skipped
-                pending = Pending(layouts.PING)
-                self._pending = pending
-                try:
-                    with self.reader.awaiting_answer():
-                        parser.expect_ping()
-                        self.reader.write(commands.ping(address))
-                        self._wait(pending, timeout, nack_ends=False)
-                finally:
-                    self._pending = None
-                self._check_port()
-                self._check_cancelled()
+                with self._awaiting(layouts.PING) as pending:
+                    parser.expect_ping()
+                    self.reader.write(commands.ping(address))
+                    self._wait(pending, timeout, nack_ends=False)
                 # The answer is one byte, 0x02 or 0x21, found between frames. While
                 # the parser skips garbage (the tail of another node's packet cut by
                 # a flush) a byte of that garbage can pass for it; the parser is in
@@ -736,4 +713,5 @@ class DeviceLink:
         already stream); requests need an address again before they are sent.
         """
         self.address = address
-        self.reader.listen_to(address)
+        if self.reader.wireless:  # the parser takes that address's packets alone (None: all)
+            self.parser.listen_to(address)

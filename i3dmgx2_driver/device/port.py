@@ -142,24 +142,17 @@ def terminal_majors(drivers: str | None = None) -> list[tuple[int, int, int]] | 
     except OSError:
         return None
     ranges = []
-    for line in lines:
-        fields = line.split()
-        if len(fields) < 5:
-            continue
-        try:
-            major = int(fields[-3])
-            low, _, high = fields[-2].partition('-')
-            ranges.append((major, int(low), int(high or low)))
-        except ValueError:
-            continue
+    for fields in (line.split() for line in lines):
+        if len(fields) >= 5:
+            with contextlib.suppress(ValueError):
+                low, _, high = fields[-2].partition('-')
+                ranges.append((int(fields[-3]), int(low), int(high or low)))
     return ranges
 
 
-def _is_terminal(rdev: int, ranges: list[tuple[int, int, int]] | None) -> bool | None:
-    if ranges is None:
-        return None
-    major, minor = os.major(rdev), os.minor(rdev)
-    return any(m == major and low <= minor <= high for m, low, high in ranges)
+#: What a file is, by its ``st_mode``, when it is surely no terminal whatever its numbers.
+_NOT_TERMINALS = ((stat.S_ISREG, 'a regular file'), (stat.S_ISDIR, 'a directory'),
+                  (stat.S_ISFIFO, 'a named pipe (FIFO)'), (stat.S_ISSOCK, 'a socket'))
 
 
 def describe_non_terminal(mode: int, rdev: int = 0,
@@ -173,19 +166,14 @@ def describe_non_terminal(mode: int, rdev: int = 0,
     watchdog, whose mere opening has effects) is ever opened to find out.
     Without the list a character device is given the benefit of the doubt.
     """
-    if stat.S_ISREG(mode):
-        return 'a regular file'
-    if stat.S_ISDIR(mode):
-        return 'a directory'
-    if stat.S_ISFIFO(mode):
-        return 'a named pipe (FIFO)'
-    if stat.S_ISSOCK(mode):
-        return 'a socket'
+    what = next((what for test, what in _NOT_TERMINALS if test(mode)), None)
+    major, minor = os.major(rdev), os.minor(rdev)
     if stat.S_ISBLK(mode):
-        return f'a block device ({os.major(rdev)}:{os.minor(rdev)}, a disk)'
-    if stat.S_ISCHR(mode) and _is_terminal(rdev, ranges) is False:
-        return f'a character device ({os.major(rdev)}:{os.minor(rdev)}) that is not a terminal'
-    return None
+        what = f'a block device ({major}:{minor}, a disk)'
+    elif stat.S_ISCHR(mode) and ranges is not None and not any(
+            m == major and low <= minor <= high for m, low, high in ranges):
+        what = f'a character device ({major}:{minor}) that is not a terminal'
+    return what
 
 
 def check_port_path(path: str, drivers: str | None = None) -> None:
@@ -209,10 +197,8 @@ def check_port_path(path: str, drivers: str | None = None) -> None:
 
 
 def _not_serial_message(path: str, what: str) -> str:
-    shown = path
     real = os.path.realpath(path)
-    if real != os.path.abspath(path):
-        shown = f'{path} (a link to {real})'
+    shown = path if real == os.path.abspath(path) else f'{path} (a link to {real})'
     return (f"parameter 'port': {shown} is {what}, not a serial port, so it can never work. "
             f'{port_hint()}')
 
@@ -223,11 +209,9 @@ def _owning_group(path: str) -> tuple[str, int] | None:
         info = os.stat(path)
     except OSError:
         return None
-    try:
-        name = grp.getgrgid(info.st_gid).gr_name
-    except KeyError:
-        name = str(info.st_gid)
-    return name, info.st_mode
+    with contextlib.suppress(KeyError):
+        return grp.getgrgid(info.st_gid).gr_name, info.st_mode
+    return str(info.st_gid), info.st_mode
 
 
 def _in_group_database(group: str) -> bool:
@@ -251,12 +235,9 @@ def serial_group(group: str, path: str = '') -> bool:
     whose members may do far more than open a serial port.
     """
     name = group.lower()
-    if name in SERIAL_GROUPS:
-        return True
-    if any(word in name for word in DEVICE_GROUP_WORDS):
-        return True
     names = {os.path.basename(p).lower() for p in (path, os.path.realpath(path)) if p}
-    return any(len(n) >= 4 and (n == name or n in name) for n in names)
+    return (name in SERIAL_GROUPS or any(word in name for word in DEVICE_GROUP_WORDS)
+            or any(len(n) >= 4 and n in name for n in names))
 
 
 def _permission_message(path: str) -> str:
@@ -280,8 +261,7 @@ def _permission_message(path: str) -> str:
 
 
 def _classify(path: str, exc: Exception) -> PortError:
-    code = getattr(exc, 'errno', None)
-    text = str(exc)
+    code, text = getattr(exc, 'errno', None), str(exc)
     if code == errno.ENOENT or 'No such file' in text:
         return PortMissing(f'serial port {path} does not exist: is the base station '
                            f'plugged in, and is the path right? {port_hint()}')
@@ -291,11 +271,10 @@ def _classify(path: str, exc: Exception) -> PortError:
         return PortBusy(f'serial port {path} is in use by another process')
     if code in (errno.ENOTTY, errno.EISDIR) or 'Inappropriate ioctl' in text:
         # What check_port_path could not tell (no list of terminal drivers).
-        try:
+        what = None
+        with contextlib.suppress(OSError):
             info = os.stat(path)
             what = describe_non_terminal(info.st_mode, info.st_rdev, ranges=[])
-        except OSError:
-            what = None
         return PortNotSerial(_not_serial_message(path, what or 'no terminal device'))
     return PortError(f'cannot open serial port {path}: {text}')
 
@@ -324,14 +303,11 @@ class SerialPort:
             raise _classify(path, exc) from exc
         self.low_latency_state = 'off'
         if low_latency:
-            self.low_latency_state = self._enable_low_latency()
-        try:
-            self._fd: int | None = self._serial.fileno()
-        except (AttributeError, OSError, serial.SerialException):
-            self._fd = None
-        if self._fd is not None:
-            with contextlib.suppress(OSError):
-                os.set_blocking(self._fd, False)  # pyserial's is already; read_some() needs it
+            self.enable_low_latency()
+        self._fd: int | None = None
+        with contextlib.suppress(AttributeError, OSError, serial.SerialException):
+            self._fd = self._serial.fileno()
+            os.set_blocking(self._fd, False)  # pyserial's is already; read_some() needs it
         #: Bytes a wait for data waits for (:meth:`wake_for`): 1, any byte.
         self.wakes_for = 1
 
@@ -353,18 +329,14 @@ class SerialPort:
 
     def enable_low_latency(self) -> str:
         """Ask for low-latency mode now; return and keep 'on' or why it is not."""
-        self.low_latency_state = self._enable_low_latency()
-        return self.low_latency_state
-
-    def _enable_low_latency(self) -> str:
-        """Ask for low-latency mode; return 'on' or why it is not."""
         try:
             self._serial.set_low_latency_mode(True)
+            self.low_latency_state = 'on'
         except (NotImplementedError, AttributeError):
-            return 'not supported on this platform'
+            self.low_latency_state = 'not supported on this platform'
         except (OSError, ValueError, serial.SerialException) as exc:
-            return f'refused by the port ({exc.__class__.__name__})'
-        return 'on'
+            self.low_latency_state = f'refused by the port ({exc.__class__.__name__})'
+        return self.low_latency_state
 
     def read_some(self, timeout: float) -> bytes:
         """
@@ -481,7 +453,5 @@ class SerialPort:
 
     def close(self) -> None:
         """Close the port; closing twice or after an unplug is harmless."""
-        try:
+        with contextlib.suppress(OSError, serial.SerialException):
             self._serial.close()
-        except (OSError, serial.SerialException):
-            pass

@@ -61,8 +61,7 @@ class ReaderThreads:
         with self._lock:
             idle = self._idle.get(policy)
             work = idle.pop() if idle else None  # the most recently idle first
-            if work is None:
-                self.started += 1
+            self.started += work is None
         if work is None:
             work = queue.SimpleQueue()
             threading.Thread(target=self._serve, args=(policy, work), name=self._name,

@@ -245,17 +245,16 @@ class _Trail:
 
     def __init__(self) -> None:
         self._points: deque[tuple[float, float]] = deque(maxlen=QUEUE_WATCH)
-        #: Records added since the trail was last cleared (when to take the robust slope).
-        self._added = 0
-        #: When the last record added was read (monotonic s).
-        self._last_read = float('-inf')
+        self.clear()
 
     def __len__(self) -> int:
         return len(self._points)
 
     def clear(self) -> None:
         self._points.clear()
+        #: Records added since the trail was last cleared (when to take the robust slope).
         self._added = 0
+        #: When the last record added was read (monotonic s).
         self._last_read = float('-inf')
 
     def add(self, device_time: float, residual: float, read_time: float,
@@ -325,8 +324,7 @@ class SampleClock:
         self._system_offset = offset
         self.fit = fit or DeviceClock()
         self._restarts: dict[str, int] = {}
-        self.rollovers = 0
-        self.gaps = 0
+        self.rollovers = self.gaps = 0
         self.last_restart = ''
         self._last_reset_at: float | None = None
         self.clear()
@@ -334,20 +332,18 @@ class SampleClock:
     def clear(self, reason: Restart = Restart.START) -> None:
         """Start the next record afresh, for ``reason`` (a new configuration, another sensor)."""
         self._pending = reason
-        self._check_next = False
+        self._check_next = self.restarted = False
         self._last_raw: int | None = None
-        self._last_host = 0.0
+        self._last_host = self._probation_best = 0.0
         #: The device time (s, the fit's ticks) at which a probation ends: counted in the
         #: records' time, not the host's, so that a reader away longer than a probation
         #: (a busy host) does not run it out before the records it then reads are judged.
         self._probation_end: float | None = None
-        self._probation_best = 0.0
         #: The records since the last gap: whether they fall as a queue's do.
         self._trail = _Trail()
         self._replaced: _Replaced | None = None
         self.ticks = 0
         self.ticks_since_last: int | None = None
-        self.restarted = False
 
     def link_changed(self, same_device: bool = True) -> None:
         """
@@ -394,7 +390,7 @@ class SampleClock:
         elapsed = host - self._last_host
         wraps = max(0, round((elapsed * TICKS_PER_SECOND - step) / TIMER_MODULUS))
         ticks = self.ticks + step + wraps * TIMER_MODULUS
-        rolled = wraps > 0 or raw < self._last_raw
+        turns = wraps + (raw < self._last_raw)  # the rollovers in between
         # A gap in device time (a stall, a pause), or host time lost beyond what a busy
         # host delays a read by (a restart whose timer happened to continue): a reader
         # that was merely late sees the next tick count and needs no check.
@@ -403,9 +399,9 @@ class SampleClock:
         # A rollover between two records that follow each other is one: only one across
         # host time (a restart whose timer landed just past the old one's wrap) is checked,
         # so that a record late behind a queue as the timer wraps restarts nothing.
-        checked = gap or self._check_next or (rolled and elapsed > GAP_S)
-        if rolled and not checked:
-            self.rollovers += wraps + (raw < self._last_raw)
+        checked = gap or self._check_next or (turns > 0 and elapsed > GAP_S)
+        if not checked:
+            self.rollovers += turns
         if checked:
             self._replaced = None
             off = self.fit.residual(ticks, read_time, wire_time)
@@ -435,8 +431,7 @@ class SampleClock:
                 self._trail.clear()
                 self._trail.add(ticks / TICKS_PER_SECOND, off, read_time, wire_time)
             self._check_next = False
-            if rolled:
-                self.rollovers += wraps + (raw < self._last_raw)
+            self.rollovers += turns
         elif self._replaced is not None:
             replaced = self._replaced
             on_old = ticks + replaced.shift
@@ -487,11 +482,9 @@ class SampleClock:
         replaced.fit.keep_after(self.fit)
         self.fit = replaced.fit
         self.ticks += replaced.shift
-        resyncs = self._restarts.get(Restart.RESYNC.value, 0) - 1
-        if resyncs > 0:
-            self._restarts[Restart.RESYNC.value] = resyncs
-        else:
-            self._restarts.pop(Restart.RESYNC.value, None)
+        self._restarts[Restart.RESYNC] -= 1  # counted by the restart this undoes
+        if not self._restarts[Restart.RESYNC]:
+            del self._restarts[Restart.RESYNC]
         self.last_restart = replaced.last_restart
         self.gaps += 1
         self._probation_end = (device_time + PROBATION_S if fall is None
@@ -500,19 +493,13 @@ class SampleClock:
 
     def _restart(self, reason: Restart, raw: int, host: float = 0.0,
                  since: int | None = None) -> None:
+        self.clear()  # the record's raw timer and host time are kept by stamp()
         self.fit.reset()
-        self.ticks = raw
-        self.ticks_since_last = since
-        self.restarted = True
+        self.ticks, self.ticks_since_last, self.restarted = raw, since, True
         self.last_restart = reason.value
         self._restarts[reason.value] = self._restarts.get(reason.value, 0) + 1
         if reason is Restart.RESET:
             self._last_reset_at = host
-        self._pending = Restart.START
-        self._check_next = False
-        self._probation_end = None
-        self._replaced = None
-        self._trail.clear()
 
     def status(self) -> ClockStatus:
         """Return a snapshot of the clock's state (safe to hand to another thread)."""
