@@ -34,6 +34,7 @@ from i3dmgx2_driver.codec import (
     RawCommand, SensorStreamParser, UnknownCommandError,
 )
 from i3dmgx2_driver.codec import commands, records
+from i3dmgx2_driver.codec.checksum import checksum16, EXACT_SUM_BYTES
 from i3dmgx2_driver.codec.layouts import LAYOUTS, RECORD_SIZES
 import pytest
 
@@ -491,3 +492,15 @@ def test_command_accessors():
     assert command == Command(0xE4, (0xFCA6, 0x80CC))
     assert command.name == 'write_eeprom_word'
     assert decode_command(b'\xc2').args == ()
+
+
+@given(st.binary(max_size=600))
+def test_the_checksum_is_the_sum_of_the_bytes_modulo_65536(data):
+    # Adler-32's first half below EXACT_SUM_BYTES, sum() above: either way the protocol's sum.
+    assert checksum16(data) == sum(data) % 65536
+    assert checksum16(bytearray(data)) == checksum16(memoryview(data)) == checksum16(data)
+
+
+def test_the_checksum_at_the_edge_of_the_exact_sum():
+    for size in (EXACT_SUM_BYTES - 1, EXACT_SUM_BYTES, EXACT_SUM_BYTES + 1, 2 * EXACT_SUM_BYTES):
+        assert checksum16(b'\xff' * size) == (255 * size) % 65536, size
