@@ -27,7 +27,12 @@ starts a process:
   own thread held, for good: the node hung once in about a hundred stops
   (SIGINT right after the first record, the main thread in ``stop.wait``).
   :class:`StopSignal` takes no lock in the handler: a flag and one byte
-  written to a pipe the waiter selects on.
+  written to a pipe the waiter selects on. The pipe is the interpreter's
+  wakeup fd as well: a process's signal may be delivered to any of its
+  threads (a DDS thread, the reader), and then the main thread, asleep in
+  ``select()``, was never woken to run the handler: the stop was lost, the
+  node ran on (seen once, the demo under load). The C handler writes the
+  wakeup fd from whichever thread the signal reached.
 - **The parent's death**: :func:`die_with_parent` asks Linux to send SIGTERM
   when the process that started this one ends (``PR_SET_PDEATHSIG``), so
   that a script killed outright, or a terminal closed under a process in
@@ -88,6 +93,7 @@ class StopSignal:
         #: The signal that set the flag (None: not a signal, or not yet).
         self.signum: int | None = None
         self._previous: dict[int, Any] = {}
+        self._wakeup: int | None = None
 
     def install(self, signals: tuple[int, ...] = STOP_SIGNALS) -> 'StopSignal':
         """Have ``signals`` set the flag (from the main thread; elsewhere nothing changes)."""
@@ -95,6 +101,7 @@ class StopSignal:
             return self
         for signum in _stop_signals(signals):
             self._previous[signum] = signal.signal(signum, self._on_signal)
+        self._wakeup = signal.set_wakeup_fd(self._write, warn_on_full_buffer=False)
         return self
 
     def restore(self) -> None:
@@ -102,6 +109,9 @@ class StopSignal:
         for signum, handler in self._previous.items():
             signal.signal(signum, handler)
         self._previous.clear()
+        if self._wakeup is not None:
+            signal.set_wakeup_fd(self._wakeup)
+            self._wakeup = None
 
     def _on_signal(self, signum: int, frame: object) -> None:
         # The main thread, between two bytecodes of whatever it was doing: no lock here.

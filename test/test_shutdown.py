@@ -206,3 +206,27 @@ def test_the_stop_signal_is_set_by_each_signal_and_wakes_a_waiter_at_once(signum
         stop.restore()
         restored = signal.signal(signum, inherited)
     assert restored is signal.SIG_DFL  # what install() found, put back
+
+
+_SIGNAL_TO_ANOTHER_THREAD = """
+import signal, threading
+from i3dmgx2_driver.lifetime import StopSignal
+
+stop = StopSignal().install()
+asleep = threading.Event()
+beside = threading.Thread(target=lambda: (asleep.set(), threading.Event().wait(60)), daemon=True)
+beside.start()
+asleep.wait()
+# Delivered to that thread, as the kernel may deliver a process's signal to any of its
+# threads; the main thread is asleep in the wait, with no timeout to wake it.
+threading.Timer(0.2, signal.pthread_kill, (beside.ident, signal.SIGTERM)).start()
+print('stopped', stop.wait(), stop.signum == signal.SIGTERM, flush=True)
+"""
+
+
+@pytest.mark.slow
+def test_a_signal_delivered_to_another_thread_still_ends_the_wait():
+    # Before the pipe was the interpreter's wakeup fd, this waited for ever: the demo's node,
+    # under load, went on after the script's SIGTERM.
+    code, out = _finish(_python(_SIGNAL_TO_ANOTHER_THREAD), timeout=60.0)
+    assert (code, out.strip()) == (0, 'stopped True True'), out

@@ -138,6 +138,25 @@ class RecordPath:
             messages.append(pack(values, sec, nanosec))
         return messages
 
+    def expect(self, ticks: int | None) -> None:
+        """Count loss from here on against ``ticks`` between two records (None: unknown)."""
+        self.expected_ticks = ticks
+
+    def pause(self) -> None:
+        """Let the next record start afresh: a new link or a deliberate pause is no loss."""
+        self.counting = False
+
+    def time(self, timings: hot_path.HotPathObserver) -> None:
+        """Tell ``timings`` each record's stamp and Imu pack (hot_path.py): off by default."""
+        self._stamp = hot_path.marked(self._stamp, 'stamped')
+        imu = self.packers[0]
+
+        def packed(values: tuple, sec: int, nanosec: int) -> bytes:
+            message = imu(values, sec, nanosec)
+            timings.packed(values[-1])
+            return message
+        self.packers = (packed, *self.packers[1:])
+
 
 class RecordPublisher:
     """
@@ -180,19 +199,12 @@ class RecordPublisher:
 
     def _time(self, timings: hot_path.HotPathObserver) -> None:
         """Tell ``timings`` each record's stamp, pack and publish (hot_path.py): off by default."""
-        path = self.path
-        path._stamp = hot_path.marked(path._stamp, 'stamped')
-        imu, publish = path.packers[0], self._publish_imu
-
-        def packed(values: tuple, sec: int, nanosec: int) -> bytes:
-            message = imu(values, sec, nanosec)
-            timings.packed(values[-1])
-            return message
+        path, publish = self.path, self._publish_imu
+        path.time(timings)
 
         def published(message: bytes) -> None:
             publish(message)
             timings.published(path.stamp)
-        path.packers = (packed, *path.packers[1:])
         self._publish_imu = published
 
     def announce_calibrated(self, calibrated: bool) -> None:
@@ -214,7 +226,7 @@ class RecordPublisher:
     def stream_known(self, expected_ticks: int | None, bias_kept: bool) -> None:
         """Take what the device side learned: the ticks between records, whether a bias is kept."""
         with self._publish_lock:
-            self.path.expected_ticks = expected_ticks
+            self.path.expect(expected_ticks)
             self._bias_kept = bias_kept
 
     def link_changed(self) -> None:
@@ -228,7 +240,7 @@ class RecordPublisher:
         """
         with self._publish_lock:
             self.sample_clock.link_changed()
-            self.path.counting = False
+            self.path.pause()
 
     def clock_status(self) -> ClockStatus:
         """Return a snapshot of the stamping clock (from any thread)."""
@@ -253,7 +265,7 @@ class RecordPublisher:
     def forget_last_sample(self) -> None:
         """Let the next record start afresh: a deliberate pause is no packet loss."""
         with self._publish_lock:
-            self.path.counting = False
+            self.path.pause()
 
     def on_record(self, packet: DataPacket, read_time: float, read_mono: float) -> None:
         """
