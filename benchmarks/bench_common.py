@@ -227,14 +227,16 @@ class TimedNodeProcess(NodeProcess):
     collection took at the end (s). ``observed``: the node runs as
     ``harness/instrumented_node.py`` runs it, and ``opens`` holds the time of
     every open of the port, as that observer of the rig's noted it.
-    Not ``timed``: the node alone, nothing recorded (its CPU is all a run
-    reads), returned once it streams; ``tree``: the driver of another checkout.
+    ``stages``: its parse and stamp marked too (hot_path.STAGES_ENV). Not
+    ``timed``: the node alone, nothing recorded (its CPU is all a run reads),
+    returned once it streams; ``tree``: the driver of another checkout.
     """
 
     def __init__(self, port: str, script: str = '', timed: bool = True,
-                 tree: Path | None = None, observed: bool = False, **params: Any) -> None:
+                 tree: Path | None = None, observed: bool = False, stages: bool = False,
+                 **params: Any) -> None:
         from harness.instrumented_node import STATS_ENV
-        from i3dmgx2_driver.device.hot_path import TIMINGS_ENV
+        from i3dmgx2_driver.device.hot_path import STAGES_ENV, TIMINGS_ENV
 
         params = {'port': port, 'address': ADDRESS, **params}
         command = [sys.executable, str(BENCH_DIR / script)] if script else None
@@ -244,6 +246,8 @@ class TimedNodeProcess(NodeProcess):
             handle, self.out_path = tempfile.mkstemp(prefix='i3dmgx2-bench-', suffix='.json')
             os.close(handle)
             env[TIMINGS_ENV] = self.out_path
+            if stages:
+                env[STAGES_ENV] = '1'
         if observed:
             command = [sys.executable, '-m', 'harness.instrumented_node']
             handle, self.stats_path = tempfile.mkstemp(prefix='i3dmgx2-stats-', suffix='.json')

@@ -24,7 +24,10 @@ reports its own stage times, nothing of it is replaced). The figures:
   packet's last byte, to right after ``publish()`` returned in the node;
 - kernel: that write to the driver's ``read()`` returned (pty wake-up);
 - driver (its share): ``read()`` returned to ``publish()`` returned, and
-  its stages (parsed, stamped, packed, published; the time off the CPU);
+  the time off the CPU; ``stages`` (a configuration) has the parse and the
+  stamp marked too, for the time of each stage (parsed, stamped, packed,
+  published): two marks more a record than the floor carries, so the
+  ratios to the floor are ``default``'s;
 - subscriber: the write to the callback of a subscriber in another process;
 - the node's CPU (% of one core), its garbage collections in the window.
 
@@ -101,10 +104,12 @@ class Config(NamedTuple):
     subscribed: bool = True
     timed: bool = True
     tree: Path | None = None
+    stages: bool = False
 
 
 CONFIGS = {
     'default': Config('the driver as shipped'),
+    'stages': Config('the driver, its parse and stamp marked too (the stage table)', stages=True),
     'fifo': Config('reader thread SCHED_FIFO 50', params=(('realtime_priority', 50),)),
     'unsubscribed': Config('the driver as shipped, nobody subscribed', subscribed=False),
     'floor': Config('a process that only reads and publishes fixed bytes',
@@ -149,7 +154,7 @@ def run_once(config: Config, seconds: float, rate_hz: float, line: str = 'pty') 
     node = None
     try:
         node = TimedNodeProcess(sim.port, config.script, config.timed, config.tree,
-                                **dict(config.params))
+                                stages=config.stages, **dict(config.params))
         time.sleep(WARM_UP_S)
         switches0 = thread_switches(node.pid)
         t0, cpu0 = time.time(), process_cpu_seconds(node.pid)
@@ -170,9 +175,10 @@ def run_once(config: Config, seconds: float, rate_hz: float, line: str = 'pty') 
     kernel = [r[read] - written[r[timer]] for r in rows]
     driver = [r[published] - r[read] for r in rows]
     stages: dict[str, list[float]] = {}
-    if config.timed and not floor:
+    if config.stages:
         for label, start, end in STAGES:
             stages[label] = [r[_F[end]] - r[_F[start]] for r in rows]
+    if config.timed and not floor:
         stages[OFF_CPU] = [(r[published] - r[read])
                            - (r[_F['cpu_published']] - r[_F['cpu_read']]) for r in rows]
     # The floor publishes one fixed stamp: only the driver's messages can be matched.
@@ -240,8 +246,8 @@ def tables(configs: dict[str, Config], results: dict[str, list[RunResult]],
             f'{by_generation} ({longest * 1e3:.2f}) | {full * 1e3:.2f} | '
             f'{_reader_policy(runs[-1].reader)} |')
     stage_rows = [(name, label, summarise([v for r in runs for v in r.stages[label]]))
-                  for name, runs in results.items() if runs[0].stages
-                  for label in (*(s[0] for s in STAGES), OFF_CPU)]
+                  for name, runs in results.items()
+                  for label in (*(s[0] for s in STAGES), OFF_CPU) if label in runs[0].stages]
     if stage_rows:
         lines += ['', '| stage of one sample | p50 / p99 / max (ms) | mean (ms) |',
                   '|---|---|---|']

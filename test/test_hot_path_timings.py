@@ -35,7 +35,7 @@ from fake_ports import FakePort
 from harness.processes import isolate_ros_domain, NodeProcess, ros_env
 from i3dmgx2_driver.device import hot_path
 from i3dmgx2_driver.device.hot_path import (
-    recorder_from_environment, ROW_FIELDS, TIMINGS_ENV, TimingsRecorder,
+    recorder_from_environment, ROW_FIELDS, STAGES_ENV, TIMINGS_ENV, TimingsRecorder,
 )
 from i3dmgx2_driver.device.link import DeviceLink, PortReader
 from i3dmgx2_driver.device.port import PortDisconnected
@@ -66,8 +66,9 @@ def test_off_nothing_of_the_observer_runs_for_a_record():
 class _Calls:
     """An observer that lists the calls it gets."""
 
-    def __init__(self) -> None:
+    def __init__(self, stages: bool = True) -> None:
         self.calls: list[str] = []
+        self.stages = stages
 
     def __getattr__(self, name: str):
         if name not in STAGES:
@@ -105,6 +106,15 @@ def test_the_link_reports_each_read_then_its_parse(monkeypatch):
     assert timings.calls == ['read', 'parsed', 'read', 'parsed', 'record', 'record', 'read']
 
 
+def test_without_its_stages_the_observer_hears_the_read_alone(monkeypatch):
+    # The floor's marks and no more (hot_path.HotPathObserver.stages): no parse marked.
+    timings = _Calls(stages=False)
+    monkeypatch.setattr(hot_path, 'timings', timings)
+    port = _CannedPort([FIXTURE_DATA_PACKET])
+    DeviceLink(port, ADDRESS, lambda p, t, m: timings.calls.append('record')).reader._run()
+    assert timings.calls == ['read', 'record']
+
+
 def test_without_an_observer_the_link_runs_as_before():
     assert hot_path.timings is None  # off unless installed
     records = []
@@ -119,7 +129,7 @@ def test_the_node_records_ordered_stage_times_for_every_message(tmp_path):
     out = tmp_path / 'timings.json'
     with PtySimulator(SimulatorConfig(address=ADDRESS, seed=83)) as sim:
         node = NodeProcess({'port': sim.port, 'address': ADDRESS},
-                           env=ros_env({TIMINGS_ENV: str(out)}))
+                           env=ros_env({TIMINGS_ENV: str(out), STAGES_ENV: '1'}))
         with node:
             assert node.wait_for_output('start-up heap frozen', 30), node.output()
             # A second of records after start-up (100 Hz), then the node stops.
@@ -165,7 +175,7 @@ def test_the_environment_installs_its_recorder_as_the_one_observer(monkeypatch, 
 
 def test_the_recorder_keeps_one_row_per_published_message(tmp_path):
     times = iter(float(t) for t in range(100))
-    recorder = TimingsRecorder(clock=lambda: next(times), cpu_clock=lambda: 0.5)
+    recorder = TimingsRecorder(clock=lambda: next(times), cpu_clock=lambda: 0.5, stages=True)
     try:
         recorder.read(88, 10.5)
         recorder.parsed()
@@ -177,5 +187,19 @@ def test_the_recorder_keeps_one_row_per_published_message(tmp_path):
         recorder.save(str(tmp_path / 'timings.json'))
     assert recorder.rows == [(7, 0.7, 10.5, 0.0, 1.0, 2.0, 3.0, 0.5, 0.5),
                              (8, 0.8, 10.5, 0.0, 4.0, 5.0, 6.0, 0.5, 0.5)]
+    saved = json.loads((tmp_path / 'timings.json').read_text())
+    assert saved['rows'] == [list(row) for row in recorder.rows]
+
+
+def test_a_recorder_without_stages_leaves_the_parse_and_stamp_unmarked(tmp_path):
+    times = iter(float(t) for t in range(100))
+    recorder = TimingsRecorder(clock=lambda: next(times), cpu_clock=lambda: 0.5)
+    try:
+        recorder.read(88, 10.5)
+        recorder.packed(7)
+        recorder.published(0.7)
+    finally:
+        recorder.save(str(tmp_path / 'timings.json'))
+    assert recorder.rows == [(7, 0.7, 10.5, None, None, 0.0, 1.0, 0.5, 0.5)]
     saved = json.loads((tmp_path / 'timings.json').read_text())
     assert saved['rows'] == [list(row) for row in recorder.rows]

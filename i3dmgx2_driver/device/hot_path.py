@@ -43,6 +43,8 @@ from typing import Any, Protocol
 
 #: Environment variable naming the JSON file the node writes its hot-path timings to.
 TIMINGS_ENV = 'I3DMGX2_TIMINGS'
+#: Set to 1, the parse and the stamp are marked too (:attr:`HotPathObserver.stages`).
+STAGES_ENV = 'I3DMGX2_TIMINGS_STAGES'
 
 
 class HotPathObserver(Protocol):
@@ -52,7 +54,15 @@ class HotPathObserver(Protocol):
     Each method must return at once and must not raise: it runs on the
     latency path. Several records parsed from one read share the read and
     the parse; each then gets its own stamp, pack and publish.
+
+    The read, the pack and the publish are told always; the parse and the
+    stamp only when :attr:`stages` is true: two marks more a record, which
+    the floor (benchmarks/floor_node.py) does not carry, so that a CPU
+    compared with the floor's carries the floor's marks alone.
     """
+
+    #: Whether :meth:`parsed` and :meth:`stamped` are told.
+    stages: bool
 
     def read(self, nbytes: int, read_time: float) -> None:
         """Note that a read returned ``nbytes`` bytes, at ``read_time`` (system clock)."""
@@ -80,22 +90,26 @@ class TimingsRecorder:
     A :class:`HotPathObserver` that keeps every sample's stage times, for benchmarks.
 
     Each published Imu message adds one row (:data:`ROW_FIELDS`): the record's
-    timer and its message's stamp, the system-clock time of its read, of its parse, stamp, pack and
-    ``publish()`` returned, and the reader thread's CPU time at the read and
-    after the publish (their difference against the wall clock's is the time
-    the thread did not run). It also notes every garbage collection and the
-    reader thread's scheduling; :meth:`save` writes it all as JSON.
+    timer and its message's stamp, the system-clock time of its read, of its
+    parse and stamp (None unless ``stages``), pack and ``publish()`` returned,
+    and the reader thread's CPU time at the read and after the publish (their
+    difference against the wall clock's is the time the thread did not run).
+    It also notes every garbage collection and the reader thread's
+    scheduling; :meth:`save` writes it all as JSON.
     """
 
-    def __init__(self, clock: Any = time.time, cpu_clock: Any = time.thread_time) -> None:
+    def __init__(self, clock: Any = time.time, cpu_clock: Any = time.thread_time,
+                 stages: bool = False) -> None:
         self._clock, self._cpu_clock = clock, cpu_clock
+        self.stages = stages
         #: One row per published message (:data:`ROW_FIELDS`).
         self.rows: list[tuple] = []
         #: Every garbage collection: (generation, start, duration).
         self.collections: list[tuple[int, float, float]] = []
         #: The reader thread's scheduling, noted at its first read: policy, priority, CPUs.
         self.reader: dict[str, Any] = {}
-        self._marks = [0.0] * 6
+        self._marks: list[Any] = [0.0, 0.0 if stages else None, 0.0 if stages else None,
+                                  0.0, 0.0, 0]
         self._gc_start = 0.0
         gc.callbacks.append(self._on_gc)
 
@@ -194,10 +208,11 @@ def recorder_from_environment() -> tuple[TimingsRecorder | None, str]:
     """
     Return a recorder, installed as the observer, and its file if :data:`TIMINGS_ENV` names one.
 
-    Without the variable: (None, '') and the observer is left as it is.
+    It marks the parse and the stamp too when :data:`STAGES_ENV` is 1. Without
+    the variable: (None, '') and the observer is left as it is.
     """
     path = os.environ.get(TIMINGS_ENV, '')
-    recorder = TimingsRecorder() if path else None
+    recorder = TimingsRecorder(stages=os.environ.get(STAGES_ENV) == '1') if path else None
     if recorder is not None:
         observe(recorder)
     return recorder, path

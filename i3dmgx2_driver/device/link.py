@@ -359,7 +359,9 @@ class PortReader:
         held = parser.buffer
         read, feed = self.port.read_some, parser.feed
         if hot_path.timings is not None:  # the hot path timed (hot_path.py): off by default
-            read, feed = hot_path.timed_read(read), hot_path.marked(feed, 'parsed')
+            read = hot_path.timed_read(read)
+            if hot_path.timings.stages:
+                feed = hot_path.marked(feed, 'parsed')
         observer, on_bytes = self._options.observer, self._options.on_bytes
         read_timeout = self._options.select_timeout
         routes, port, data = self._routes, self.port, b''

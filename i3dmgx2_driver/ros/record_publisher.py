@@ -147,8 +147,9 @@ class RecordPath:
         self.counting = False
 
     def time(self, timings: hot_path.HotPathObserver) -> None:
-        """Tell ``timings`` each record's stamp and Imu pack (hot_path.py): off by default."""
-        self._stamp = hot_path.marked(self._stamp, 'stamped')
+        """Tell ``timings`` each record's Imu pack, and its stamp if it marks stages."""
+        if timings.stages:
+            self._stamp = hot_path.marked(self._stamp, 'stamped')
         imu = self.packers[0]
 
         def packed(values: tuple, sec: int, nanosec: int) -> bytes:
