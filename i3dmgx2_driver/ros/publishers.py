@@ -20,10 +20,10 @@ Named once, so that the node's publishers and its check of the
 that the core that publishes and the managed node that keeps its publishers
 across configure/cleanup (lifecycle_node.py) make them the same way.
 
-Every publisher the driver makes is created with
-:func:`overriding_options`, so that rclpy declares the read-only parameters
-``qos_overrides.<topic>.publisher.<policy>`` that every ROS user knows from
-other nodes (``-p qos_overrides./imu/raw_data.publisher.reliability:=
+Every publisher the driver makes is created with rclpy's
+``QoSOverridingOptions`` for :data:`POLICIES`, so that rclpy declares the
+read-only parameters ``qos_overrides.<topic>.publisher.<policy>`` that every
+ROS user knows from other nodes (``-p qos_overrides./imu/raw_data.publisher.reliability:=
 best_effort``), and applies them on top of the profile the driver asks for.
 The topic in the name is the resolved one: under a namespace or a remapping
 it is the name the topic really has (``/robot1/imu/raw_data``).
@@ -36,7 +36,7 @@ one with a traceback; :func:`create_publisher` turns that into the
 
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -60,11 +60,6 @@ CHOICES = {kind: tuple(member.name.lower() for member in enum if member.name != 
                               (QoSPolicyKind.DURABILITY, DurabilityPolicy))}
 #: Largest history depth rmw takes (DDS holds it in a signed 32-bit integer).
 MAX_DEPTH = 2 ** 31 - 1
-
-
-def overriding_options() -> QoSOverridingOptions:
-    """Return the options every publisher of the driver is created with."""
-    return QoSOverridingOptions(POLICIES)
 
 
 def override_name(topic: str, policy: QoSPolicyKind) -> str:
@@ -100,19 +95,7 @@ def create_publisher(node: Node, msg_type: type, topic: str, qos: QoSProfile | i
     if problem is not None:
         raise ParameterError(problem)
     make = make or node.create_publisher
-    return make(msg_type, topic, qos, qos_overriding_options=overriding_options())
-
-
-def _valid(policy: QoSPolicyKind) -> str:
-    if policy == QoSPolicyKind.DEPTH:
-        return f'0..{MAX_DEPTH} (0: the system default)'
-    return 'one of ' + ', '.join(repr(choice) for choice in CHOICES[policy])
-
-
-def _is_valid(policy: QoSPolicyKind, value: Any) -> bool:
-    if policy == QoSPolicyKind.DEPTH:
-        return type(value) is int and 0 <= value <= MAX_DEPTH
-    return isinstance(value, str) and value.lower() in CHOICES[policy]
+    return make(msg_type, topic, qos, qos_overriding_options=QoSOverridingOptions(POLICIES))
 
 
 def bad_override(node: Node, topic: str) -> str | None:
@@ -126,8 +109,14 @@ def bad_override(node: Node, topic: str) -> str | None:
         name = override_name(topic, policy)
         value = (node.get_parameter(name).value if node.has_parameter(name)
                  else given_value(node, name))
-        if value is not None and not _is_valid(policy, value):
-            return f'parameter {name!r} must be {_valid(policy)}, got {value!r}'
+        if policy == QoSPolicyKind.DEPTH:
+            valid = f'0..{MAX_DEPTH} (0: the system default)'
+            fine = type(value) is int and 0 <= value <= MAX_DEPTH
+        else:
+            valid = 'one of ' + ', '.join(map(repr, CHOICES[policy]))
+            fine = isinstance(value, str) and value.lower() in CHOICES[policy]
+        if value is not None and not fine:
+            return f'parameter {name!r} must be {valid}, got {value!r}'
     return None
 
 

@@ -148,9 +148,10 @@ def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
     return out
 
 
-def check_shared_budget(sensors: Sequence[SensorSetting], baud: int, wireless: bool) -> None:
+def shared_budget_refusal(sensors: Sequence[SensorSetting], baud: int, wireless: bool
+                          ) -> str | None:
     """
-    Refuse streams that do not fit the line together; ValueError says what fits per sensor.
+    Refuse streams that do not fit the line together: say what fits per sensor, else None.
 
     The sensors behind one base station share its serial line, so the sum
     of their packets a second must fit it, with the same margin as one
@@ -160,6 +161,6 @@ def check_shared_budget(sensors: Sequence[SensorSetting], baud: int, wireless: b
     known = [(s.address, s.stream_choice, s.data_rate) for s in sensors if s.data_rate]
     if len(known) < 2 or streams.shared_line_fits([(st, r) for _, st, r in known], baud,
                                                   wireless):
-        return
-    raise ValueError("parameters 'data_rate'/'data_rates' and 'stream'/'streams' do not fit "
-                     'the line: ' + streams.shared_advice(known, baud, wireless))
+        return None
+    return ("parameters 'data_rate'/'data_rates' and 'stream'/'streams' do not fit the line: "
+            + streams.shared_advice(known, baud, wireless))

@@ -42,15 +42,15 @@ from typing import Any
 
 from diagnostic_msgs.srv import SelfTest
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from .calibration_file import write_calibration_file
 from .diagnostic_statuses import ERROR, OK, Status, to_message
 from .parameter_table import CALIBRATION_FILE, GYRO_BIAS, GYRO_BIAS_SAMPLING_MS
+from .parameters import declared_value
 from ..capture.fault_capture import FaultCapture
-from ..device.gyro_bias import Calibration, GyroBiasCapture
+from ..device.gyro_bias import GyroBiasCapture
 from ..device.operation import Device
 from ..device.self_test import format_report, SelfTestRun, Step
 from ..device.status import State
@@ -116,7 +116,7 @@ class DeviceServices:
                 ('diagnostic_self_test', SelfTest, self._on_diagnostic_self_test))]
         #: One sensor's node: the calibration file and a known bias are its (parameters.py).
         self._single = prefix == '~/'
-        if self._single and self._parameter(GYRO_BIAS):
+        if self._single and declared_value(self.node, GYRO_BIAS):
             self._calibrated(True)
         if capture_on_start:
             threading.Thread(target=self._capture_on_start, name='gx2-bias-on-start',
@@ -143,10 +143,6 @@ class DeviceServices:
             self._busy.release()
         return idle
 
-    def calibration(self) -> tuple[Calibration | None, Calibration | None]:
-        """Return the last capture attempt and the last accepted capture (diagnostics)."""
-        return self.gyro_bias.last_capture, self.gyro_bias.good_capture
-
     # -- service callbacks (executor) ---------------------------------------
 
     def _on_diagnostic_self_test(self, request: SelfTest.Request,
@@ -163,7 +159,7 @@ class DeviceServices:
 
     # -- operations -----------------------------------------------------------
 
-    def _exclusive(self, name: str, body: Callable[[], tuple[bool, str]]) -> tuple[bool, str]:
+    def _exclusive(self, name: str, body: Callable[[], tuple[bool, Any]]) -> tuple[bool, Any]:
         """Run one operation at a time; refuse at once when another runs."""
         if refusal := self._refusal():
             return False, f'refused: {refusal}'
@@ -180,18 +176,9 @@ class DeviceServices:
         """Capture the gyro bias (0xCD) with the stream paused; return (success, message)."""
         return self._exclusive('gyro bias capture', self._capture)
 
-    def _parameter(self, name: str) -> Any:
-        """Return a parameter's value; None when the node does not declare it or it is unset."""
-        if not self.node.has_parameter(name):
-            return None
-        try:
-            return self.node.get_parameter(name).value
-        except ParameterUninitializedException:
-            return None  # an empty array (the bias left to the sensor) is declared unset
-
     def _capture(self) -> tuple[bool, str]:
-        ok, message = self.gyro_bias.run(int(self._parameter(GYRO_BIAS_SAMPLING_MS)))
-        path = self._parameter(CALIBRATION_FILE) if self._single else ''
+        ok, message = self.gyro_bias.run(int(declared_value(self.node, GYRO_BIAS_SAMPLING_MS)))
+        path = declared_value(self.node, CALIBRATION_FILE) if self._single else ''
         if ok and path:
             bias = self.gyro_bias.good_capture.bias
             try:
@@ -225,14 +212,8 @@ class DeviceServices:
 
     def self_test_steps(self) -> list[Step]:
         """Run the self test; return its steps (one failed step when it is refused)."""
-        steps: list[Step] = []
-
-        def run() -> tuple[bool, str]:
-            steps.extend(self.self_test_run.steps())
-            return True, ''
-
-        _, refusal = self._exclusive('self test', run)
-        return steps or [Step('self test', False, refusal)]
+        ran, steps = self._exclusive('self test', lambda: (True, self.self_test_run.steps()))
+        return steps if ran else [Step('self test', False, steps)]
 
     def _self_test(self) -> tuple[bool, str]:
         steps = self.self_test_run.steps()
