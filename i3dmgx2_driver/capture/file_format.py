@@ -163,12 +163,6 @@ class CaptureWriter:
             self.chunks += 1
             self.bytes += len(data)
 
-    def flush(self) -> None:
-        """Push buffered chunks to the OS now."""
-        with self._lock:
-            if not self._closed:
-                self._flush_locked()
-
     def close(self) -> None:
         """Flush, stop the flusher thread and close the file; idempotent."""
         with self._lock:

@@ -40,8 +40,3 @@ def checksum16(data: ByteString) -> int:
     if len(data) <= EXACT_SUM_BYTES:
         return adler32(data, 0) & 0xFFFF
     return sum(data) & 0xFFFF
-
-
-def append_checksum(data: ByteString) -> bytes:
-    """Return ``data`` followed by its big-endian 16-bit checksum."""
-    return bytes(data) + checksum16(data).to_bytes(2, 'big')

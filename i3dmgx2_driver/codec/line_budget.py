@@ -77,12 +77,6 @@ def wire_time(code: int, baud: int, wireless: bool) -> float:
     return packet_size(code, wireless) * BITS_PER_BYTE / baud
 
 
-def fits(code: int, rate_hz: float, baud: int, wireless: bool,
-         margin: float = MARGIN) -> bool:
-    """Tell whether ``code`` at ``rate_hz`` fits the line with the margin kept free."""
-    return bytes_per_second(code, rate_hz, wireless) <= usable_bytes_per_second(baud, margin)
-
-
 def max_rate(code: int, baud: int, wireless: bool, margin: float = MARGIN) -> float | None:
     """
     Return the highest rate the device can run at (51200 / x) that fits, or None.

@@ -65,15 +65,10 @@ class Stream(NamedTuple):
 
 
 def _stream(name: str, code: int, summary: str) -> Stream:
-    fields = {field.name for field in lay.LAYOUTS[code].reply}
-    if MATRIX in fields:
-        attitude = MATRIX
-    elif {'roll', 'pitch', 'yaw'} <= fields:
-        attitude = EULER
-    else:
-        attitude = None
+    names = {field.name for field in lay.LAYOUTS[code].reply}
+    attitude = MATRIX if MATRIX in names else EULER if {'roll', 'pitch', 'yaw'} <= names else None
     return Stream(name, code, lay.LAYOUTS[code].record_type, summary,
-                  *(key if key in fields else None for key in ('accel', 'angular_rate', 'mag')),
+                  *(key if key in names else None for key in ('accel', 'angular_rate', 'mag')),
                   attitude)
 
 
@@ -156,10 +151,7 @@ def advice(stream: Stream, b: Budget, knob: str = 'data_rate') -> str:
     text = (f'{stream.label} at {_hz(b.rate_hz)} Hz needs {b.needed:,.0f} bytes/s; '
             f'{b.baud} baud carries {b.capacity:,.0f} ({b.usable:,.0f} with the '
             f'{1 - b.usable / b.capacity:.0%} margin kept free): ')
-    if b.max_rate_hz:
-        text += f'choose {knob} \u2264 {_limit(b)}'
-    else:
-        text += 'no data rate fits'
+    text += f'choose {knob} \u2264 {_limit(b)}' if b.max_rate_hz else 'no data rate fits'
     if fitting:
         text += ', or stream ' + ', '.join(f"'{o.name}' (\u2264 {_limit(ob)})"
                                            for o, ob in fitting)

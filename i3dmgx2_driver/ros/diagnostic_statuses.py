@@ -171,8 +171,7 @@ def stream_status(device: DeviceStatus, seen: StreamPeriod) -> Status:
     whenever the device's rate is more than the line carries for the stream
     (``line_warning``): records are being skipped, whatever the rate shows.
     """
-    state, line_warning, expected_hz = device.state, device.line_warning, \
-        device.expected_rate_hz
+    state, line_warning, expected_hz = device.state, device.line_warning, device.expected_rate_hz
     if line_warning and state is not State.PAUSED:
         level, message = WARN, line_warning
     elif state is State.PAUSED:
@@ -329,22 +328,19 @@ def calibration_status(last: Calibration | None, good: Calibration | None,
     ``last`` is the last attempt, ``good`` the last accepted one;
     ``mag_calibrated``: whether mag_hard_iron or mag_soft_iron correct the field.
     """
-    values: list[tuple[str, str]] = [('gyro bias captured', 'yes' if good else 'no'),
-                                     ('magnetometer calibration',
-                                      'loaded' if mag_calibrated else 'none')]
+    values = (('gyro bias captured', 'yes' if good else 'no'),
+              ('magnetometer calibration', 'loaded' if mag_calibrated else 'none'))
     if good is not None and good.bias is not None:
-        values += [('gyro bias (rad/s)', format_vector(good.bias)),
+        values += (('gyro bias (rad/s)', format_vector(good.bias)),
                    ('captured (s ago)', f'{now - good.time:.0f}'),
-                   ('sampling time (ms)', str(good.sampling_ms))]
+                   ('sampling time (ms)', str(good.sampling_ms)))
     if last is not None and not last.accepted:
-        values.append(('last attempt', last.summary))
         return Status(WARN, 'calibration', f'last gyro bias capture failed: {last.summary}',
-                      tuple(values))
+                      (*values, ('last attempt', last.summary)))
     if good is None:
         return Status(OK, 'calibration', 'no gyro bias captured in this session: the device '
-                                         'uses its stored bias', tuple(values))
-    return Status(OK, 'calibration', f'gyro bias captured {now - good.time:.0f} s ago',
-                  tuple(values))
+                                         'uses its stored bias', values)
+    return Status(OK, 'calibration', f'gyro bias captured {now - good.time:.0f} s ago', values)
 
 
 def lifecycle_status(label: str, state: State | None) -> Status:

@@ -90,8 +90,7 @@ def load_config(node: Node) -> DriverConfig:
     try:
         config = driver_config(declare_parameters(node))
     finally:
-        topics = (SensorTopics.of_every_sensor(config) if config is not None
-                  else ALONE_TOPICS)
+        topics = SensorTopics.of_every_sensor(config) if config is not None else ALONE_TOPICS
         warn_unknown_parameters(node, [*(spec.name for spec in SPECS),
                                        *override_names(node, topics)])
     return config

@@ -50,8 +50,7 @@ from typing import Any, NamedTuple
 
 from rclpy.parameter import Parameter
 
-from .mag_calibration import (HARD_IRON, IDENTITY, is_matrix_list, is_offset_list, SOFT_IRON,
-                              ZERO)
+from .mag_calibration import HARD_IRON, IDENTITY, is_matrix_list, is_offset_list, SOFT_IRON, ZERO
 from ..codec import streams
 from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS

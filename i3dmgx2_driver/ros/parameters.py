@@ -135,8 +135,7 @@ def given_value(node: Node, name: str) -> Any:
     integer, ``-p stream:=0xC2`` the integer 194), without the type error a
     statically typed declaration would raise.
     """
-    value = node.declare_parameter(
-        name, None, ParameterDescriptor(dynamic_typing=True)).value
+    value = node.declare_parameter(name, None, ParameterDescriptor(dynamic_typing=True)).value
     node.undeclare_parameter(name)
     return value
 
@@ -175,8 +174,7 @@ def _declare(node: Node, spec: Spec) -> Any:
                 node.declare_parameter(spec.name, spec.kind.type_, _descriptor(spec))
             else:
                 # The override was read above and is given here, converted.
-                node.declare_parameter(spec.name, value, _descriptor(spec),
-                                       ignore_override=True)
+                node.declare_parameter(spec.name, value, _descriptor(spec), ignore_override=True)
         return node.get_parameter(spec.name).value
     except ParameterUninitializedException:
         if spec.default is not REQUIRED:

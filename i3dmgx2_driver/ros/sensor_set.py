@@ -79,16 +79,6 @@ def _per_sensor(name: str, given: Sequence, count: int, what: str,
                      f'{count} addresses, got {len(given)} ({list(given)})')
 
 
-def _names(name: str, given: Sequence[str]) -> None:
-    for text in given:
-        if not _NAME.fullmatch(text):
-            raise ValueError(f'parameter {name!r} must hold names of letters, digits and _, '
-                             f'starting with a letter, got {text!r}')
-    if len(set(given)) != len(given):
-        raise ValueError(f'parameter {name!r} must not name two sensors alike, got '
-                         f'{list(given)}')
-
-
 def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
     """
     Return the sensors the parameters ``given`` ask for, each with its name, frame and stream.
@@ -122,7 +112,13 @@ def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
     for name, what, one_for_all in (('sensor_names', 'name', False), ('frame_ids', 'frame', False),
                                     ('streams', 'stream', True), ('data_rates', 'rate', True)):
         _per_sensor(name, given[name], count, what, one_for_all)
-    _names('sensor_names', names)
+    for text in names:
+        if not _NAME.fullmatch(text):
+            raise ValueError("parameter 'sensor_names' must hold names of letters, digits and _, "
+                             f'starting with a letter, got {text!r}')
+    if len(set(names)) != len(names):
+        raise ValueError(f"parameter 'sensor_names' must not name two sensors alike, got "
+                         f'{list(names)}')
     if len(set(frame_ids)) != len(frame_ids) or not all(frame_ids):
         raise ValueError(f"parameter 'frame_ids' must name each sensor's frame, each "
                          f'another, got {list(frame_ids)}')
