@@ -91,9 +91,7 @@ def offered(version: int | None) -> list[streams.Stream]:
 def stream_refusal(stream: streams.Stream, version: int | None) -> str:
     """Say why ``stream`` cannot be streamed, and what can; '' when it can."""
     why = refusal(stream.name, stream.code, version)
-    if not why:
-        return ''
-    return why + '; it offers ' + ', '.join(s.name for s in offered(version))
+    return f'{why}; it offers {", ".join(s.name for s in offered(version))}' if why else ''
 
 
 def lacks(version: int | None) -> list[str]:

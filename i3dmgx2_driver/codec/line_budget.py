@@ -105,8 +105,7 @@ def max_shared_rate(codes: Sequence[int], baud: int, wireless: bool,
     divider = max(MIN_DIVIDER, math.ceil(rate_of_divider(1) / limit - 1e-9))
     if divider > MAX_DIVIDER:
         return None
-    while not shared_fits([(c, rate_of_divider(divider)) for c in codes], baud, wireless,
-                          margin):
+    while not shared_fits([(c, rate_of_divider(divider)) for c in codes], baud, wireless, margin):
         divider += 1  # float rounding at the boundary: at most one step
     return rate_of_divider(divider)
 
@@ -138,8 +137,7 @@ class Budget(NamedTuple):
         return self.needed / self.capacity
 
 
-def budget(code: int, rate_hz: float, baud: int, wireless: bool,
-           margin: float = MARGIN) -> Budget:
+def budget(code: int, rate_hz: float, baud: int, wireless: bool, margin: float = MARGIN) -> Budget:
     """Return the line budget of ``code`` streamed at ``rate_hz``."""
     return Budget(code, rate_hz, baud, wireless, packet_size(code, wireless),
                   bytes_per_second(code, rate_hz, wireless), line_bytes_per_second(baud),

@@ -113,6 +113,15 @@ def parse(text: str) -> Stream:
     raise ValueError(f'unknown stream {text!r}: {valid_text()}')
 
 
+def names_a_stream(text: str) -> bool:
+    """Whether ``text`` is a stream's name or command byte, as :func:`parse` takes it."""
+    try:
+        parse(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _hz(rate: float) -> str:
     return f'{rate:.1f}'.removesuffix('.0')
 
@@ -164,8 +173,7 @@ def shared_line_fits(chosen: Sequence[tuple[Stream, float]], baud: int, wireless
                         for stream, rate in chosen], baud, wireless)
 
 
-def shared_advice(chosen: Sequence[tuple[int, Stream, float]], baud: int,
-                  wireless: bool) -> str:
+def shared_advice(chosen: Sequence[tuple[int, Stream, float]], baud: int, wireless: bool) -> str:
     """
     Say why several sensors' streams do not fit one line together, and what fits per sensor.
 

@@ -160,8 +160,7 @@ class SensorTopics:
     @classmethod
     def of(cls, name: str, several: bool) -> 'SensorTopics':
         """Return the topics of the sensor called ``name`` (sensor_set.py: ``imu`` alone)."""
-        return cls(tuple(f'{name}/{row.suffix}' for row in RECORD_TOPICS),
-                   f'{name}/temperature',
+        return cls(tuple(f'{name}/{row.suffix}' for row in RECORD_TOPICS), f'{name}/temperature',
                    f'~/{name}/is_calibrated' if several else '~/is_calibrated')
 
     def __iter__(self) -> Iterator[str]:
@@ -205,10 +204,8 @@ def publisher_qos(config: DriverConfig) -> QoSProfile:
     The deprecated ``qos_reliability`` and ``qos_depth`` still set it (for
     one release); a ``qos_overrides`` parameter wins over them.
     """
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=config.qos_depth,
-        reliability=(ReliabilityPolicy.RELIABLE if config.qos_reliability == 'reliable'
-                     else ReliabilityPolicy.BEST_EFFORT))
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=config.qos_depth,
+                      reliability=ReliabilityPolicy[config.qos_reliability.upper()])
 
 
 def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False,
@@ -239,6 +236,5 @@ def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False,
         tuple((row, create(row.msg_type, topic))
               for row, topic in zip(RECORD_TOPICS, topics.records, strict=True)
               if row.wanted(config, sensor)),
-        create(Temperature, topics.temperature) if config.temperature_period > 0
-        else None,
+        create(Temperature, topics.temperature) if config.temperature_period > 0 else None,
         create_publisher(node, Bool, topics.is_calibrated, calibrated_qos()))

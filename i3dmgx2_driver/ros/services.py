@@ -58,10 +58,11 @@ from ..device.status import State
 
 # -- the device operations' services -----------------------------------------------
 
-def _trigger(answer: Callable[[], tuple[bool, str]]) -> Callable[..., Trigger.Response]:
-    """Serve ``answer()``, a (success, message), as a std_srvs/Trigger callback."""
+def _trigger(answer: Callable[..., tuple[bool, str]], *args: Any
+             ) -> Callable[..., Trigger.Response]:
+    """Serve ``answer(*args)``, a (success, message), as a std_srvs/Trigger callback."""
     def callback(request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        response.success, response.message = answer()
+        response.success, response.message = answer(*args)
         return response
     return callback
 
@@ -106,14 +107,19 @@ class DeviceServices:
         self.self_test_run = SelfTestRun(device, published, forget_last_sample, self._stop,
                                          self._log)
         group = MutuallyExclusiveCallbackGroup()
-        #: Every service made, so that destroy() removes what was made, whatever it is.
+        #: Every service made, so that destroy() removes what was made, whatever it is. Each
+        #: Trigger runs its operation one at a time: the gyro bias capture (0xCD, the stream
+        #: paused), the store of the last accepted one on the sensor (0xD0), the self test
+        #: (all steps passed, one line per step).
         self.services = [
-            node.create_service(kind, f'{prefix}{name}', callback, callback_group=group)
-            for name, kind, callback in (
-                ('capture_gyro_bias', Trigger, _trigger(self.capture_gyro_bias)),
-                ('store_gyro_bias', Trigger, _trigger(self.store_gyro_bias)),
-                ('self_test', Trigger, _trigger(self.self_test)),
-                ('diagnostic_self_test', SelfTest, self._on_diagnostic_self_test))]
+            node.create_service(Trigger, f'{prefix}{name}', _trigger(self._exclusive, what, body),
+                                callback_group=group)
+            for name, what, body in (('capture_gyro_bias', 'gyro bias capture', self._capture),
+                                     ('store_gyro_bias', 'gyro bias store', self.gyro_bias.store),
+                                     ('self_test', 'self test', self._self_test))]
+        self.services.append(node.create_service(
+            SelfTest, f'{prefix}diagnostic_self_test', self._on_diagnostic_self_test,
+            callback_group=group))
         #: One sensor's node: the calibration file and a known bias are its (parameters.py).
         self._single = prefix == '~/'
         if self._single and declared_value(self.node, GYRO_BIAS):
@@ -147,7 +153,8 @@ class DeviceServices:
 
     def _on_diagnostic_self_test(self, request: SelfTest.Request,
                                  response: SelfTest.Response) -> SelfTest.Response:
-        steps = self.self_test_steps()
+        ran, steps = self._exclusive('self test', lambda: (True, self.self_test_run.steps()))
+        steps = steps if ran else [Step('self test', False, steps)]  # refused: one failed step
         info = self._device.status().info
         response.id = info.serial_number if info is not None and info.serial_number else ''
         response.passed = bytes((all(step.passed for step in steps),))
@@ -172,10 +179,6 @@ class DeviceServices:
             self.operation = ''
             self._busy.release()
 
-    def capture_gyro_bias(self) -> tuple[bool, str]:
-        """Capture the gyro bias (0xCD) with the stream paused; return (success, message)."""
-        return self._exclusive('gyro bias capture', self._capture)
-
     def _capture(self) -> tuple[bool, str]:
         ok, message = self.gyro_bias.run(int(declared_value(self.node, GYRO_BIAS_SAMPLING_MS)))
         path = declared_value(self.node, CALIBRATION_FILE) if self._single else ''
@@ -193,27 +196,14 @@ class DeviceServices:
             message = f'{message}; {note}'
         return ok, message
 
-    def store_gyro_bias(self) -> tuple[bool, str]:
-        """Store the last accepted capture on the sensor (0xD0); return (success, message)."""
-        return self._exclusive('gyro bias store', self.gyro_bias.store)
-
     def _capture_on_start(self) -> None:
         """Wait for the first streaming start, then capture once (own thread)."""
         while self._device.status().state is not State.STREAMING:
             if self._stop.wait(0.1):
                 return
-        ok, message = self.capture_gyro_bias()
+        ok, message = self._exclusive('gyro bias capture', self._capture)
         if not ok:
             self._log.warning(f'capture_gyro_bias_on_start: {message}')
-
-    def self_test(self) -> tuple[bool, str]:
-        """Run the self test; return (all steps passed, one line per step)."""
-        return self._exclusive('self test', self._self_test)
-
-    def self_test_steps(self) -> list[Step]:
-        """Run the self test; return its steps (one failed step when it is refused)."""
-        ran, steps = self._exclusive('self test', lambda: (True, self.self_test_run.steps()))
-        return steps if ran else [Step('self test', False, steps)]
 
     def _self_test(self) -> tuple[bool, str]:
         steps = self.self_test_run.steps()
