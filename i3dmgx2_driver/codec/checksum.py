@@ -37,6 +37,4 @@ def checksum16(data: ByteString) -> int:
     microseconds where Python's ``sum()`` over its bytes, on the cold cache of
     the reader thread between two records, cost 23 (docs/cpu.md).
     """
-    if len(data) <= EXACT_SUM_BYTES:
-        return adler32(data, 0) & 0xFFFF
-    return sum(data) & 0xFFFF
+    return adler32(data, 0) & 0xFFFF if len(data) <= EXACT_SUM_BYTES else sum(data) & 0xFFFF

@@ -77,10 +77,9 @@ def has(version: int | None, code: int) -> bool:
 
 def refusal(what: str, code: int, version: int | None) -> str:
     """Say why ``what`` (command ``code``) cannot be asked of ``version``; '' when it can."""
-    if has(version, code):
-        return ''
-    return (f'{what} (0x{code:02X}) needs firmware {text(needs(code))}; this sensor has '
-            f'{text(version)}')
+    return '' if has(version, code) else (
+        f'{what} (0x{code:02X}) needs firmware {text(needs(code))}; this sensor has '
+        f'{text(version)}')
 
 
 def offered(version: int | None) -> list[streams.Stream]:

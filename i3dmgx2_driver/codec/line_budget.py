@@ -52,9 +52,7 @@ def packet_size(code: int, wireless: bool) -> int:
     layout = LAYOUTS[code]
     if not layout.record_size:
         raise ValueError(f'0x{code:02X} has no reply record')
-    if wireless:
-        return HEADER_SIZE + layout.record_size + DATA_TRAILER_SIZE
-    return layout.wired_size
+    return HEADER_SIZE + layout.record_size + DATA_TRAILER_SIZE if wireless else layout.wired_size
 
 
 def line_bytes_per_second(baud: int) -> float:

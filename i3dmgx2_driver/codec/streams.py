@@ -151,8 +151,7 @@ def advice(stream: Stream, b: Budget, knob: str = 'data_rate') -> str:
     """
     others = [(other, line_budget(other, b.rate_hz, b.baud, b.wireless))
               for other in STREAMS if other.code != stream.code]
-    faster = [(o, ob) for o, ob in others
-              if ob.max_rate_hz and (ob.max_rate_hz or 0) > (b.max_rate_hz or 0)]
+    faster = [(o, ob) for o, ob in others if (ob.max_rate_hz or 0) > (b.max_rate_hz or 0)]
     fitting = [(o, ob) for o, ob in faster if ob.fits]
     if not fitting and faster:
         best = max(ob.max_rate_hz for _, ob in faster)

@@ -214,9 +214,8 @@ class LifecycleDriverNode(LifecycleNode):
         """Enable the publishers, start the stream; fail if no record comes."""
         start = time.monotonic()
         drivers = self.drivers
-        if self._stopping.is_set():
-            return FAILURE  # a signal stopped the device meanwhile: it stays stopped
-        if super().on_activate(state) != SUCCESS or drivers is None:
+        # After a signal stopped the device meanwhile, it stays stopped.
+        if self._stopping.is_set() or super().on_activate(state) != SUCCESS or drivers is None:
             return FAILURE
         for core in drivers.cores:
             core.records.forget_last_sample()  # the pause since the last activation is no loss

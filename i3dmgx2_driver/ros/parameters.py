@@ -292,10 +292,9 @@ def _line_budget(config: DriverConfig) -> str | None:
         return None  # several sensors: their budget together (the first rule)
     stream, rate = sensors[0].stream_choice, sensors[0].data_rate
     budget = streams.line_budget(stream, rate, config.device.baud, config.device.wireless)
-    if budget.fits:
-        return None
-    return (f"parameter 'data_rate' ({rate:g} Hz) does not fit the line with stream "
-            f'{stream.name!r}: ' + streams.advice(stream, budget))
+    return None if budget.fits else (
+        f"parameter 'data_rate' ({rate:g} Hz) does not fit the line with stream "
+        f'{stream.name!r}: ' + streams.advice(stream, budget))
 
 
 #: The rules between parameters, each a refusal or None, applied in this order: streams of

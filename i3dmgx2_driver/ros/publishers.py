@@ -91,8 +91,7 @@ def create_publisher(node: Node, msg_type: type, topic: str, qos: QoSProfile | i
     a bad one raises ParameterError naming the parameter, what was given and
     what is valid, and the node stops as for any bad parameter.
     """
-    problem = bad_override(node, node.resolve_topic_name(topic))
-    if problem is not None:
+    if (problem := bad_override(node, node.resolve_topic_name(topic))) is not None:
         raise ParameterError(problem)
     make = make or node.create_publisher
     return make(msg_type, topic, qos, qos_overriding_options=QoSOverridingOptions(POLICIES))

@@ -77,15 +77,6 @@ def default_name(address: int) -> str:
     return f'{SINGLE_NAME}_{address}'
 
 
-def _per_sensor(name: str, given: Sequence, count: int, what: str,
-                one_for_all: bool = False) -> None:
-    if not given or len(given) == count or (one_for_all and len(given) == 1):
-        return
-    one = ' (or one for all)' if one_for_all else ''
-    raise ValueError(f'parameter {name!r} must give one {what} per sensor{one}: '
-                     f'{count} addresses, got {len(given)} ({list(given)})')
-
-
 def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
     """
     Return the sensors the parameters ``given`` ask for, each with its name, frame and stream.
@@ -114,7 +105,11 @@ def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
                          f'false: several sensors share a port only behind a base station')
     for name, what, one_for_all in (('sensor_names', 'name', False), ('frame_ids', 'frame', False),
                                     ('streams', 'stream', True), ('data_rates', 'rate', True)):
-        _per_sensor(name, given[name], count, what, one_for_all)
+        values = given[name]
+        if values and len(values) != count and not (one_for_all and len(values) == 1):
+            one = ' (or one for all)' if one_for_all else ''
+            raise ValueError(f'parameter {name!r} must give one {what} per sensor{one}: '
+                             f'{count} addresses, got {len(values)} ({list(values)})')
     for name, values, holds, must in (
             ('addresses', listed, lambda a: MIN_ADDRESS <= a <= MAX_ADDRESS,
              f'node addresses {MIN_ADDRESS}..{MAX_ADDRESS}'),

@@ -226,9 +226,8 @@ class SaveCaptureService:
     def __init__(self, node: Node, capture: FaultCapture) -> None:
         self._node = node
         self._capture = capture
-        self.service = node.create_service(
-            Trigger, '~/save_capture', _trigger(self._save),
-            callback_group=MutuallyExclusiveCallbackGroup())
+        self.service = node.create_service(Trigger, '~/save_capture', _trigger(self._save),
+                                           callback_group=MutuallyExclusiveCallbackGroup())
 
     def _save(self) -> tuple[bool, str]:
         try:
