@@ -74,12 +74,9 @@ class TruncatedCaptureWarning(UserWarning):
 
 def default_header(**overrides: Any) -> dict[str, Any]:
     """Return a header with every standard key, updated with ``overrides``."""
-    header: dict[str, Any] = {
-        'port': None, 'address': None, 'baud': DEFAULT_BAUD, 'wireless': True,
-        'start_time': time.time(), 'tool_version': f'i3dmgx2_driver {__version__}', 'notes': '',
-    }
-    header.update(overrides)
-    return header
+    return {'port': None, 'address': None, 'baud': DEFAULT_BAUD, 'wireless': True,
+            'start_time': time.time(), 'tool_version': f'i3dmgx2_driver {__version__}',
+            'notes': '', **overrides}
 
 
 def _header_line(header: dict[str, Any]) -> bytes:
