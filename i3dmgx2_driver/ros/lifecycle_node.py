@@ -175,9 +175,8 @@ class LifecycleDriverNode(LifecycleNode):
             config = driver_config(declare_parameters(self))
             check_port_path(config.device.port)  # the words of the plain node's exit 2
             if self._data_publishers is None:  # (a bad qos_overrides parameter raises)
-                self._data_publishers = [
-                    create_publishers(self, config, lifecycle=True, sensor=s)
-                    for s in config.sensors]
+                self._data_publishers = [create_publishers(self, config, lifecycle=True, sensor=s)
+                                         for s in config.sensors]
         except (ParameterError, PortUnusable) as exc:
             log.error(f'configure failed: {exc}')
             return FAILURE
