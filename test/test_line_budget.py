@@ -58,11 +58,11 @@ def test_max_rate_is_the_highest_divider_rate_that_fits(stream, wireless, baud):
     divider = round(data_rate.RATE_BASE_HZ / limit)
     assert data_rate.rate_of_divider(divider) == limit
     assert size * limit <= usable
-    assert line_budget.fits(stream.code, limit, baud, wireless)
+    assert line_budget.shared_fits([(stream.code, limit)], baud, wireless)
     if divider > data_rate.MIN_DIVIDER:
         faster = data_rate.rate_of_divider(divider - 1)
         assert size * faster > usable
-        assert not line_budget.fits(stream.code, faster, baud, wireless)
+        assert not line_budget.shared_fits([(stream.code, faster)], baud, wireless)
 
 
 @pytest.mark.parametrize('name, wireless, limit', [

@@ -36,6 +36,7 @@ from typing import Any
 
 from .file_format import CaptureWriter, Chunk, DEFAULT_BAUD, default_header
 from .. import __version__
+from ..codec.line_budget import line_bytes_per_second
 
 #: What one kept read costs in memory beyond its bytes (the tuple, the float, the
 #: bytes object's header, the deque's slot), counted against the ring's cap.
@@ -144,15 +145,14 @@ class FaultCapture:
         self._log = log
         self._header = dict(header, baud=baud)
         #: The ring (None when off).
-        self.ring = RecentBytes(seconds, int(seconds * baud / 10 * RING_BUDGET_FACTOR)) \
-            if self.directory else None
+        budget = int(seconds * line_bytes_per_second(baud) * RING_BUDGET_FACTOR)
+        self.ring = RecentBytes(seconds, budget) if self.directory else None
         #: Files written so far, the last one's path and cause; why the last write failed.
         self.written, self.last_path, self.last_cause, self.error = 0, '', '', ''
         self._lock, self._write_lock = threading.Lock(), threading.Lock()
         self._causes: list[str] = []
         self._due: float | None = None
         self._last_write = -math.inf
-        self._watch: Callable[[], Iterable[str]] = list
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -170,8 +170,8 @@ class FaultCapture:
         """Start the writer thread, which asks ``watch`` what went wrong (once; when on)."""
         if self.ring is None or self._thread is not None:
             return
-        self._watch = watch
-        self._thread = threading.Thread(target=self._run, name='gx2-fault-capture', daemon=True)
+        self._thread = threading.Thread(target=self._run, args=(watch,), name='gx2-fault-capture',
+                                        daemon=True)
         self._thread.start()
 
     def trigger(self, cause: str, now: float | None = None) -> None:
@@ -233,11 +233,11 @@ class FaultCapture:
         if thread is not None and thread is not threading.current_thread():
             thread.join(2.0)
 
-    def _run(self) -> None:
+    def _run(self, watch: Callable[[], Iterable[str]]) -> None:
         watch_failed = False
         while not self._stop.wait(self._poll):
             try:
-                for cause in self._watch():
+                for cause in watch():
                     self.trigger(cause)
             except Exception as exc:  # noqa: BLE001 - a convenience must not end its thread
                 if not watch_failed:

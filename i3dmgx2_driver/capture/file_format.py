@@ -74,12 +74,9 @@ class TruncatedCaptureWarning(UserWarning):
 
 def default_header(**overrides: Any) -> dict[str, Any]:
     """Return a header with every standard key, updated with ``overrides``."""
-    header: dict[str, Any] = {
-        'port': None, 'address': None, 'baud': DEFAULT_BAUD, 'wireless': True,
-        'start_time': time.time(), 'tool_version': f'i3dmgx2_driver {__version__}', 'notes': '',
-    }
-    header.update(overrides)
-    return header
+    return {'port': None, 'address': None, 'baud': DEFAULT_BAUD, 'wireless': True,
+            'start_time': time.time(), 'tool_version': f'i3dmgx2_driver {__version__}',
+            'notes': '', **overrides}
 
 
 def _header_line(header: dict[str, Any]) -> bytes:
@@ -162,12 +159,6 @@ class CaptureWriter:
             self._dirty = True
             self.chunks += 1
             self.bytes += len(data)
-
-    def flush(self) -> None:
-        """Push buffered chunks to the OS now."""
-        with self._lock:
-            if not self._closed:
-                self._flush_locked()
 
     def close(self) -> None:
         """Flush, stop the flusher thread and close the file; idempotent."""

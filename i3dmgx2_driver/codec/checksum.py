@@ -37,11 +37,4 @@ def checksum16(data: ByteString) -> int:
     microseconds where Python's ``sum()`` over its bytes, on the cold cache of
     the reader thread between two records, cost 23 (docs/cpu.md).
     """
-    if len(data) <= EXACT_SUM_BYTES:
-        return adler32(data, 0) & 0xFFFF
-    return sum(data) & 0xFFFF
-
-
-def append_checksum(data: ByteString) -> bytes:
-    """Return ``data`` followed by its big-endian 16-bit checksum."""
-    return bytes(data) + checksum16(data).to_bytes(2, 'big')
+    return adler32(data, 0) & 0xFFFF if len(data) <= EXACT_SUM_BYTES else sum(data) & 0xFFFF

@@ -77,10 +77,9 @@ def has(version: int | None, code: int) -> bool:
 
 def refusal(what: str, code: int, version: int | None) -> str:
     """Say why ``what`` (command ``code``) cannot be asked of ``version``; '' when it can."""
-    if has(version, code):
-        return ''
-    return (f'{what} (0x{code:02X}) needs firmware {text(needs(code))}; this sensor has '
-            f'{text(version)}')
+    return '' if has(version, code) else (
+        f'{what} (0x{code:02X}) needs firmware {text(needs(code))}; this sensor has '
+        f'{text(version)}')
 
 
 def offered(version: int | None) -> list[streams.Stream]:
@@ -91,9 +90,7 @@ def offered(version: int | None) -> list[streams.Stream]:
 def stream_refusal(stream: streams.Stream, version: int | None) -> str:
     """Say why ``stream`` cannot be streamed, and what can; '' when it can."""
     why = refusal(stream.name, stream.code, version)
-    if not why:
-        return ''
-    return why + '; it offers ' + ', '.join(s.name for s in offered(version))
+    return f'{why}; it offers {", ".join(s.name for s in offered(version))}' if why else ''
 
 
 def lacks(version: int | None) -> list[str]:

@@ -77,12 +77,10 @@ def _flatten(fields: tuple[Field, ...], values: tuple[Any, ...], what: str) -> l
         if len(items) != field.count:
             raise EncodeError(f'{what}: {field.name} needs {field.count} values')
         for item in items:
-            if field.code in _INT_RANGES:
-                if isinstance(item, bool) or not isinstance(item, int) \
-                        or not 0 <= item <= _INT_RANGES[field.code]:
+            if (top := _INT_RANGES.get(field.code)) is not None:
+                if isinstance(item, bool) or not isinstance(item, int) or not 0 <= item <= top:
                     raise EncodeError(
-                        f'{what}: {field.name} must be an integer in '
-                        f'0..{_INT_RANGES[field.code]}, got {item!r}')
+                        f'{what}: {field.name} must be an integer in 0..{top}, got {item!r}')
             elif field.code == 'f':
                 if not isinstance(item, (int, float)) or isinstance(item, bool):
                     raise EncodeError(f'{what}: {field.name} must be a number')
@@ -110,8 +108,7 @@ def decode_command(data: bytes) -> Command:
         raise LengthError('empty command')
     layout = layout_of(data[0])
     if len(data) != layout.request_size:
-        raise LengthError(
-            f'{layout.name} is {layout.request_size} bytes, got {len(data)}')
+        raise LengthError(f'{layout.name} is {layout.request_size} bytes, got {len(data)}')
     confirm_end = 1 + len(layout.confirm)
     if bytes(data[1:confirm_end]) != layout.confirm:
         raise DecodeError(f'{layout.name}: wrong confirmation bytes')
@@ -152,8 +149,7 @@ def decode_record(data: bytes) -> Any:
         raise UnknownCommandError(
             f'no record starts with 0x{data[0]:02X}' if data else 'empty record')
     if len(data) != layout.record_size:
-        raise LengthError(
-            f'{layout.name} record is {layout.record_size} bytes, got {len(data)}')
+        raise LengthError(f'{layout.name} record is {layout.record_size} bytes, got {len(data)}')
     return record_of(layout.code, layout.reply_struct.unpack_from(data, 1))
 
 

@@ -23,7 +23,7 @@ start byte, LQI and RSSI.
 
 from typing import Any, NamedTuple
 
-from .checksum import append_checksum, checksum16
+from .checksum import checksum16
 from .commands import record_of
 from .errors import EncodeError
 
@@ -81,8 +81,7 @@ class CommandPacket(NamedTuple):
 def _check_address(address: int) -> None:
     if isinstance(address, bool) or not isinstance(address, int) \
             or not MIN_ADDRESS <= address <= MAX_ADDRESS:
-        raise EncodeError(
-            f'node address must be in {MIN_ADDRESS}..{MAX_ADDRESS}, got {address!r}')
+        raise EncodeError(f'node address must be in {MIN_ADDRESS}..{MAX_ADDRESS}, got {address!r}')
 
 
 def _header(flags: int, address: int, payload_size: int) -> bytes:
@@ -108,5 +107,5 @@ def encode_data_packet(address: int, record: bytes, lqi: int, rssi: int) -> byte
 
 
 def encode_wired_record(record: bytes) -> bytes:
-    """Append the wired checksum to record bytes."""
-    return append_checksum(record)
+    """Append the wired checksum (big-endian, of the record itself) to record bytes."""
+    return bytes(record) + checksum16(record).to_bytes(2, 'big')

@@ -71,8 +71,6 @@ class Layout(NamedTuple):
     firmware: int
 
 
-_V3 = 3
-_M9 = 9
 _TIMER = Field('timer', 'I')
 #: Least firmware of the commands the manual gives no other one for: 2.1.00.
 FIRMWARE_BASE = 2100
@@ -105,11 +103,13 @@ def _layout(code: int, name: str, reply: tuple[Field, ...] | None,
                   plan=field_plan(reply) if reply is not None else (), firmware=firmware)
 
 
-_ACCEL = Field('accel', 'f', _V3)
-_RATE = Field('angular_rate', 'f', _V3)
-_MAG = Field('mag', 'f', _V3)
-_MATRIX = Field('matrix', 'f', _M9)
-_BIAS = Field('bias', 'f', _V3)
+_ACCEL = Field('accel', 'f', 3)
+_RATE = Field('angular_rate', 'f', 3)
+_MAG = Field('mag', 'f', 3)
+_MATRIX = Field('matrix', 'f', 9)
+_BIAS = Field('bias', 'f', 3)
+_EULER = (Field('roll', 'f'), Field('pitch', 'f'), Field('yaw', 'f'))
+_DELTA = (Field('delta_angle', 'f', 3), Field('delta_velocity', 'f', 3))
 _CONFIRM = b'\xC1\x29'
 
 #: Command codes with a name, for readable call sites.
@@ -146,17 +146,15 @@ LAYOUTS: dict[int, Layout] = {layout.code: layout for layout in (
     # echoed record nor checksummed, so it has no record layout here.
     _layout(PING, 'wireless_ping', None, r.PingReply, request=(Field('address', 'H'),)),
     _layout(RAW_ACCEL_ANG_RATE, 'raw_accel_ang_rate',
-            (Field('accel_raw', 'f', _V3), Field('angular_rate_raw', 'f', _V3), _TIMER),
+            (Field('accel_raw', 'f', 3), Field('angular_rate_raw', 'f', 3), _TIMER),
             r.RawAccelAngRate),
     _layout(ACCEL_ANG_RATE, 'accel_ang_rate', (_ACCEL, _RATE, _TIMER), r.AccelAngRate),
-    _layout(DELTA_ANGLE_VELOCITY, 'delta_angle_velocity',
-            (Field('delta_angle', 'f', _V3), Field('delta_velocity', 'f', _V3), _TIMER),
-            r.DeltaAngleVelocity),
+    _layout(DELTA_ANGLE_VELOCITY, 'delta_angle_velocity', (*_DELTA, _TIMER), r.DeltaAngleVelocity),
     _layout(SET_CONTINUOUS, 'set_continuous_mode', (Field('command', 'B'), _TIMER),
             r.ContinuousModeReply, _CONFIRM, (Field('command', 'B'),)),
     _layout(ORIENTATION_MATRIX, 'orientation_matrix', (_MATRIX, _TIMER), r.OrientationMatrix),
     _layout(ORIENTATION_UPDATE_MATRIX, 'orientation_update_matrix',
-            (Field('matrix', 'f', _M9, 'update_matrix'), _TIMER), r.OrientationUpdateMatrix),
+            (Field('matrix', 'f', 9, 'update_matrix'), _TIMER), r.OrientationUpdateMatrix),
     _layout(MAGNETOMETER, 'magnetometer', (_MAG, _TIMER), r.Magnetometer),
     _layout(ACCEL_ANG_RATE_ORIENTATION, 'accel_ang_rate_orientation',
             (_ACCEL, _RATE, _MATRIX, _TIMER), r.AccelAngRateOrientation),
@@ -170,24 +168,20 @@ LAYOUTS: dict[int, Layout] = {layout.code: layout for layout in (
             (_ACCEL, _RATE, _MAG, _MATRIX, _TIMER), r.AccelAngRateMagOrientation),
     _layout(CAPTURE_GYRO_BIAS, 'capture_gyro_bias', (_BIAS, _TIMER), r.CapturedGyroBias,
             _CONFIRM, (Field('sampling_time_ms', 'H'),)),
-    _layout(EULER_ANGLES, 'euler_angles',
-            (Field('roll', 'f'), Field('pitch', 'f'), Field('yaw', 'f'), _TIMER),
-            r.EulerAngles),
-    _layout(EULER_ANGLES_ANG_RATE, 'euler_angles_ang_rate',
-            (Field('roll', 'f'), Field('pitch', 'f'), Field('yaw', 'f'), _RATE, _TIMER),
+    _layout(EULER_ANGLES, 'euler_angles', (*_EULER, _TIMER), r.EulerAngles),
+    _layout(EULER_ANGLES_ANG_RATE, 'euler_angles_ang_rate', (*_EULER, _RATE, _TIMER),
             r.EulerAnglesAngRate, firmware=2105),
     _layout(TRANSFER_TO_NON_VOLATILE, 'transfer_to_non_volatile',
             (Field('quantity', 'H'), _TIMER), r.TransferToNonVolatile,
             _CONFIRM, (Field('quantity', 'H'),), firmware=2112),
     _layout(TEMPERATURES, 'temperatures',
-            (Field('accel_code', 'H'), Field('gyro_codes', 'H', _V3), _TIMER), r.Temperatures,
+            (Field('accel_code', 'H'), Field('gyro_codes', 'H', 3), _TIMER), r.Temperatures,
             firmware=2112),
     _layout(STABILISED_ACCEL_ANG_RATE_MAG, 'stabilised_accel_ang_rate_mag',
-            (Field('accel', 'f', _V3, 'stabilised_accel'), _RATE,
-             Field('mag', 'f', _V3, 'stabilised_mag'), _TIMER), r.StabilisedAccelAngRateMag,
+            (Field('accel', 'f', 3, 'stabilised_accel'), _RATE,
+             Field('mag', 'f', 3, 'stabilised_mag'), _TIMER), r.StabilisedAccelAngRateMag,
             firmware=2112),
-    _layout(DELTA_ANGLE_VELOCITY_MAG, 'delta_angle_velocity_mag',
-            (Field('delta_angle', 'f', _V3), Field('delta_velocity', 'f', _V3), _MAG, _TIMER),
+    _layout(DELTA_ANGLE_VELOCITY_MAG, 'delta_angle_velocity_mag', (*_DELTA, _MAG, _TIMER),
             r.DeltaAngleVelocityMag, firmware=2113),
     _layout(WRITE_EEPROM, 'write_eeprom_word', (Field('value', 'H'),), r.EepromWritten,
             _CONFIRM + b'\x00', (Field('address', 'H'), Field('value', 'H'))),

@@ -52,9 +52,7 @@ def packet_size(code: int, wireless: bool) -> int:
     layout = LAYOUTS[code]
     if not layout.record_size:
         raise ValueError(f'0x{code:02X} has no reply record')
-    if wireless:
-        return HEADER_SIZE + layout.record_size + DATA_TRAILER_SIZE
-    return layout.wired_size
+    return HEADER_SIZE + layout.record_size + DATA_TRAILER_SIZE if wireless else layout.wired_size
 
 
 def line_bytes_per_second(baud: int) -> float:
@@ -75,12 +73,6 @@ def bytes_per_second(code: int, rate_hz: float, wireless: bool) -> float:
 def wire_time(code: int, baud: int, wireless: bool) -> float:
     """Return the seconds one packet of ``code`` takes on the line, first bit to last."""
     return packet_size(code, wireless) * BITS_PER_BYTE / baud
-
-
-def fits(code: int, rate_hz: float, baud: int, wireless: bool,
-         margin: float = MARGIN) -> bool:
-    """Tell whether ``code`` at ``rate_hz`` fits the line with the margin kept free."""
-    return bytes_per_second(code, rate_hz, wireless) <= usable_bytes_per_second(baud, margin)
 
 
 def max_rate(code: int, baud: int, wireless: bool, margin: float = MARGIN) -> float | None:
@@ -111,8 +103,7 @@ def max_shared_rate(codes: Sequence[int], baud: int, wireless: bool,
     divider = max(MIN_DIVIDER, math.ceil(rate_of_divider(1) / limit - 1e-9))
     if divider > MAX_DIVIDER:
         return None
-    while not shared_fits([(c, rate_of_divider(divider)) for c in codes], baud, wireless,
-                          margin):
+    while not shared_fits([(c, rate_of_divider(divider)) for c in codes], baud, wireless, margin):
         divider += 1  # float rounding at the boundary: at most one step
     return rate_of_divider(divider)
 
@@ -144,8 +135,7 @@ class Budget(NamedTuple):
         return self.needed / self.capacity
 
 
-def budget(code: int, rate_hz: float, baud: int, wireless: bool,
-           margin: float = MARGIN) -> Budget:
+def budget(code: int, rate_hz: float, baud: int, wireless: bool, margin: float = MARGIN) -> Budget:
     """Return the line budget of ``code`` streamed at ``rate_hz``."""
     return Budget(code, rate_hz, baud, wireless, packet_size(code, wireless),
                   bytes_per_second(code, rate_hz, wireless), line_bytes_per_second(baud),

@@ -65,15 +65,10 @@ class Stream(NamedTuple):
 
 
 def _stream(name: str, code: int, summary: str) -> Stream:
-    fields = {field.name for field in lay.LAYOUTS[code].reply}
-    if MATRIX in fields:
-        attitude = MATRIX
-    elif {'roll', 'pitch', 'yaw'} <= fields:
-        attitude = EULER
-    else:
-        attitude = None
+    names = {field.name for field in lay.LAYOUTS[code].reply}
+    attitude = MATRIX if MATRIX in names else EULER if {'roll', 'pitch', 'yaw'} <= names else None
     return Stream(name, code, lay.LAYOUTS[code].record_type, summary,
-                  *(key if key in fields else None for key in ('accel', 'angular_rate', 'mag')),
+                  *(key if key in names else None for key in ('accel', 'angular_rate', 'mag')),
                   attitude)
 
 
@@ -118,6 +113,15 @@ def parse(text: str) -> Stream:
     raise ValueError(f'unknown stream {text!r}: {valid_text()}')
 
 
+def names_a_stream(text: str) -> bool:
+    """Whether ``text`` is a stream's name or command byte, as :func:`parse` takes it."""
+    try:
+        parse(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _hz(rate: float) -> str:
     return f'{rate:.1f}'.removesuffix('.0')
 
@@ -147,8 +151,7 @@ def advice(stream: Stream, b: Budget, knob: str = 'data_rate') -> str:
     """
     others = [(other, line_budget(other, b.rate_hz, b.baud, b.wireless))
               for other in STREAMS if other.code != stream.code]
-    faster = [(o, ob) for o, ob in others
-              if ob.max_rate_hz and (ob.max_rate_hz or 0) > (b.max_rate_hz or 0)]
+    faster = [(o, ob) for o, ob in others if (ob.max_rate_hz or 0) > (b.max_rate_hz or 0)]
     fitting = [(o, ob) for o, ob in faster if ob.fits]
     if not fitting and faster:
         best = max(ob.max_rate_hz for _, ob in faster)
@@ -156,10 +159,7 @@ def advice(stream: Stream, b: Budget, knob: str = 'data_rate') -> str:
     text = (f'{stream.label} at {_hz(b.rate_hz)} Hz needs {b.needed:,.0f} bytes/s; '
             f'{b.baud} baud carries {b.capacity:,.0f} ({b.usable:,.0f} with the '
             f'{1 - b.usable / b.capacity:.0%} margin kept free): ')
-    if b.max_rate_hz:
-        text += f'choose {knob} \u2264 {_limit(b)}'
-    else:
-        text += 'no data rate fits'
+    text += f'choose {knob} \u2264 {_limit(b)}' if b.max_rate_hz else 'no data rate fits'
     if fitting:
         text += ', or stream ' + ', '.join(f"'{o.name}' (\u2264 {_limit(ob)})"
                                            for o, ob in fitting)
@@ -172,8 +172,7 @@ def shared_line_fits(chosen: Sequence[tuple[Stream, float]], baud: int, wireless
                         for stream, rate in chosen], baud, wireless)
 
 
-def shared_advice(chosen: Sequence[tuple[int, Stream, float]], baud: int,
-                  wireless: bool) -> str:
+def shared_advice(chosen: Sequence[tuple[int, Stream, float]], baud: int, wireless: bool) -> str:
     """
     Say why several sensors' streams do not fit one line together, and what fits per sensor.
 

@@ -55,6 +55,10 @@ MAX_DRIFT_PPM = 600.0
 #: How long (s) the time status stays WARN after the sensor's timer was found restarted.
 RESET_WARNING_S = 60.0
 
+#: The states the connection is well in whatever else is seen, and what it says of each.
+_WELL = {State.STREAMING: 'streaming',
+         State.READY: 'port open, device quiet: not streaming (node inactive)',
+         State.PAUSED: 'stream paused for a device operation'}
 #: Parser counters that mean a damaged frame, and when they grow, a WARN.
 PARSER_FAILURES = ('checksum_failures', 'length_failures')
 #: Parser counters shown, with their labels.
@@ -95,14 +99,9 @@ def connection_status(device: DeviceStatus, capture: str, fault_capture: str = '
     ``fault_capture`` what the fault capture keeps and where it last wrote
     ('' leaves its line out).
     """
-    state, advice, last_error, wireless = device.state, device.advice, device.last_error, \
-        device.wireless
-    if state is State.STREAMING:
-        level, message = OK, 'streaming'
-    elif state is State.READY:
-        level, message = OK, 'port open, device quiet: not streaming (node inactive)'
-    elif state is State.PAUSED:
-        level, message = OK, 'stream paused for a device operation'
+    state, advice, last_error = device.state, device.advice, device.last_error
+    if state in _WELL:
+        level, message = OK, _WELL[state]
     elif advice:
         level, message = ERROR, f'no records: {advice}'
     elif state is State.STALLED:
@@ -118,12 +117,12 @@ def connection_status(device: DeviceStatus, capture: str, fault_capture: str = '
         level, message = ERROR, f'disconnected: {last_error or "port lost"}'
     return Status(level, 'connection', message, (
         ('port', device.port), ('node address', str(device.address)),
-        ('link', 'wireless' if wireless else 'wired'), ('state', state.value),
+        ('link', 'wireless' if device.wireless else 'wired'), ('state', state.value),
         ('connections', str(device.connections)), ('reconnects', str(device.reconnects)),
         ('stalls', str(device.stalls)), ('last error', last_error or '-'),
         ('low-latency mode', device.low_latency_state or 'not opened yet'),
         ('base station ping', {None: 'not tried', True: 'ok', False: 'no answer'}[
-            device.ping_ok] if wireless else 'n/a (wired)'),
+            device.ping_ok] if device.wireless else 'n/a (wired)'),
         ('raw capture', capture), *((('fault capture', fault_capture),) if fault_capture else ()),
         ('observed on the line', advice or '-')))
 
@@ -137,9 +136,8 @@ def rate_level(measured_hz: float | None, expected_hz: float | None,
         return WARN, f'{measured_hz:.1f} Hz; configured rate unknown'
     error = measured_hz / expected_hz - 1.0
     text = f'{measured_hz:.1f} Hz (configured {expected_hz:.1f} Hz, {error:+.1%})'
-    if abs(error) <= tolerance:
-        return OK, text
-    return WARN, f'rate off by more than {tolerance:.0%}: {text}'
+    return (OK, text) if abs(error) <= tolerance else (
+        WARN, f'rate off by more than {tolerance:.0%}: {text}')
 
 
 class StreamPeriod(NamedTuple):
@@ -171,8 +169,7 @@ def stream_status(device: DeviceStatus, seen: StreamPeriod) -> Status:
     whenever the device's rate is more than the line carries for the stream
     (``line_warning``): records are being skipped, whatever the rate shows.
     """
-    state, line_warning, expected_hz = device.state, device.line_warning, \
-        device.expected_rate_hz
+    state, line_warning, expected_hz = device.state, device.line_warning, device.expected_rate_hz
     if line_warning and state is not State.PAUSED:
         level, message = WARN, line_warning
     elif state is State.PAUSED:
@@ -329,22 +326,19 @@ def calibration_status(last: Calibration | None, good: Calibration | None,
     ``last`` is the last attempt, ``good`` the last accepted one;
     ``mag_calibrated``: whether mag_hard_iron or mag_soft_iron correct the field.
     """
-    values: list[tuple[str, str]] = [('gyro bias captured', 'yes' if good else 'no'),
-                                     ('magnetometer calibration',
-                                      'loaded' if mag_calibrated else 'none')]
+    values = (('gyro bias captured', 'yes' if good else 'no'),
+              ('magnetometer calibration', 'loaded' if mag_calibrated else 'none'))
     if good is not None and good.bias is not None:
-        values += [('gyro bias (rad/s)', format_vector(good.bias)),
+        values += (('gyro bias (rad/s)', format_vector(good.bias)),
                    ('captured (s ago)', f'{now - good.time:.0f}'),
-                   ('sampling time (ms)', str(good.sampling_ms))]
+                   ('sampling time (ms)', str(good.sampling_ms)))
     if last is not None and not last.accepted:
-        values.append(('last attempt', last.summary))
         return Status(WARN, 'calibration', f'last gyro bias capture failed: {last.summary}',
-                      tuple(values))
+                      (*values, ('last attempt', last.summary)))
     if good is None:
         return Status(OK, 'calibration', 'no gyro bias captured in this session: the device '
-                                         'uses its stored bias', tuple(values))
-    return Status(OK, 'calibration', f'gyro bias captured {now - good.time:.0f} s ago',
-                  tuple(values))
+                                         'uses its stored bias', values)
+    return Status(OK, 'calibration', f'gyro bias captured {now - good.time:.0f} s ago', values)
 
 
 def lifecycle_status(label: str, state: State | None) -> Status:

@@ -152,7 +152,7 @@ class DiagnosticsPublisher:
             mag_published=stats.published_on.get('mag', 0),
             operation=core.device_services.operation)
         self._last = (published, lost, good_frames, parser, radio)
-        last, good = core.device_services.calibration()
+        bias = core.device_services.gyro_bias
         return [*statuses,
                 connection_status(device, core.raw_capture.describe(),
                                   core.fault_capture.describe()),
@@ -163,7 +163,7 @@ class DiagnosticsPublisher:
                               core.temperature.unavailable),
                 time_status(cfg.time_source, core.records.clock_status(), now,
                             time_offset=cfg.time_offset),
-                calibration_status(last, good, time.time(),
+                calibration_status(bias.last_capture, bias.good_capture, time.time(),
                                    is_loaded(cfg.messages_for(core.sensor)))]
 
     def tick(self) -> None:

@@ -71,6 +71,7 @@ from .services import DeviceServices, SaveCaptureService
 from .temperature import TemperaturePoller
 from ..capture.fault_capture import FaultCapture
 from ..capture.raw_capture import bytes_sink, RawCapture
+from ..device.link import DeviceError
 from ..device.port import check_port_path, PortError
 from ..device.shared_port import SharedPort
 from ..device.supervisor import DeviceSupervisor
@@ -89,8 +90,7 @@ def load_config(node: Node) -> DriverConfig:
     try:
         config = driver_config(declare_parameters(node))
     finally:
-        topics = (SensorTopics.of_every_sensor(config) if config is not None
-                  else ALONE_TOPICS)
+        topics = SensorTopics.of_every_sensor(config) if config is not None else ALONE_TOPICS
         warn_unknown_parameters(node, [*(spec.name for spec in SPECS),
                                        *override_names(node, topics)])
     return config
@@ -128,48 +128,40 @@ class DriverCore:
                  on_bytes: Callable[[bytes, float], None] | None = None,
                  on_fatal: Callable[[], None] | None = None) -> None:
         self.node = node
-        self._told_fatal = on_fatal
+        self._told_fatal = on_fatal or (lambda: None)
         self.config = cfg = config
         #: The sensor this core serves: address, name (topic prefix), frame, stream.
         self.sensor = sensor
         #: Why the port can never work, once the supervisor found out.
         self.fatal_error: PortError | None = None
         self.stream = sensor.stream_choice
-        self.publishers = publishers
         #: Stamping, counting and publishing of each record, in the reader thread.
-        self.records = RecordPublisher(
-            self.publishers, cfg.messages_for(sensor), Stamping.of(cfg, self.stream),
+        self.records = records = RecordPublisher(
+            publishers, cfg.messages_for(sensor), Stamping.of(cfg, self.stream),
             node.get_logger(), publishing)
         #: Whether this core's sensor shares its port with others.
         self._shared = shared is not None
-        #: The port's raw capture (shown on diagnostics).
-        self.raw_capture = raw_capture
-        #: How the device side reaches and treats the sensor.
-        self.device_config = cfg.device_for(sensor)
-        #: The port's last seconds, written when a fault is seen (shown on diagnostics).
-        self.fault_capture = fault_capture
+        #: The port's raw capture and its last seconds (written when a fault is seen),
+        #: shown on diagnostics.
+        self.raw_capture, self.fault_capture = raw_capture, fault_capture
         self.supervisor = DeviceSupervisor(
-            self.device_config,
-            on_record=self.records.on_record, log=node.get_logger(),
-            on_connect=self.records.link_changed, on_stream_known=self.records.stream_known,
-            on_fatal=self._on_fatal,
-            on_bytes=on_bytes, shared=shared,
-            on_gyro_bias=lambda: self.records.announce_calibrated(True))
-        self.records.announce_calibrated(False)
+            cfg.device_for(sensor), on_record=records.on_record, log=node.get_logger(),
+            on_connect=records.link_changed, on_stream_known=records.stream_known,
+            on_fatal=self._on_fatal, on_bytes=on_bytes, shared=shared,
+            on_gyro_bias=lambda: records.announce_calibrated(True))
+        records.announce_calibrated(False)
         self.device_services = DeviceServices(
-            node, self.supervisor, self.records.published, self.records.forget_last_sample,
+            node, self.supervisor, records.published, records.forget_last_sample,
             capture_on_start=cfg.capture_gyro_bias_on_start, refusal=refusal,
-            calibrated=self.records.announce_calibrated,
+            calibrated=records.announce_calibrated,
             prefix='~/' if shared is None else f'~/{sensor.name}/')
         #: The faults of this sensor the fault capture is written for.
-        self.fault_watch = FaultWatch(self.supervisor.status,
-                                      lambda: self.records.stats.device_resets,
+        self.fault_watch = FaultWatch(self.supervisor.status, lambda: records.stats.device_resets,
                                       prefix='' if shared is None else f'{sensor.name}-')
-        frame_id = self.records.messages.frame_id
+        frame_id = records.messages.frame_id
         self.temperature = TemperaturePoller(
-            node, self.supervisor.streaming_link, frame_id,
-            cfg.temperature_period, self.publishers.temperature, cfg.time_offset,
-            firmware=self.supervisor.firmware)
+            node, self.supervisor.streaming_link, frame_id, cfg.temperature_period,
+            publishers.temperature, cfg.time_offset, firmware=self.supervisor.firmware)
         node.get_logger().info(
             f'i3dmgx2_driver: port {cfg.device.port}, node address {sensor.address}, '
             + (f'topics {sensor.name}/..., ' if shared is not None else '')
@@ -186,8 +178,7 @@ class DriverCore:
         """
         self.fatal_error = error
         self.node.get_logger().fatal(str(error))
-        if self._told_fatal is not None:
-            self._told_fatal()
+        self._told_fatal()
 
     def shutdown(self, report: bool = True) -> None:
         """Stop the device stream (bounded in time); log it if ``report``."""
@@ -223,12 +214,9 @@ class DriverSet:
                  publishers: list[Publishers] | None = None, publishing: bool = True,
                  refusal: Callable[[], str] | None = None,
                  on_fatal: Callable[[], None] | None = None) -> None:
-        device = config.device
+        device, sensors = config.device, config.sensors
         check_port_path(device.port)
-        sensors = config.sensors
-        self.config = config
-        publishers = publishers or [create_publishers(node, config, sensor=sensor)
-                                    for sensor in sensors]
+        publishers = publishers or [create_publishers(node, config, sensor=s) for s in sensors]
         # What both captures record of the port they capture.
         port = {'port': device.port, 'address': sensors[0].address, 'baud': device.baud,
                 'wireless': device.wireless, 'node': node.get_fully_qualified_name()}
@@ -279,22 +267,42 @@ class DriverSet:
         for core in self.cores:
             core.records.set_publishing(on)
 
-    def shutdown(self, report: bool = True) -> None:
-        """Stop every stream and close the port, the sensors at once (bounded in time)."""
-        self.fault_capture.close()  # our own stop is no fault
+    def each(self, step: Callable[[DriverCore], None], timeout: float | None = None,
+             name: str = 'gx2-transition') -> list[tuple[DriverCore, Exception]]:
+        """
+        Take ``step`` for every core at once (one thread each if several); return who failed.
+
+        With several sensors a silent one would otherwise hold up the others by
+        its timeouts; one core takes its step in the calling thread, as always.
+        Only the device's or the port's errors count as failures; others raise.
+        ``timeout`` bounds the wait for the threads (daemons) altogether: a step
+        still running then is left to the process's deadline (lifetime.py).
+        ``name`` names each thread (``{}``: the sensor's address).
+        """
+        failed: list[tuple[DriverCore, Exception]] = []
+
+        def take(core: DriverCore) -> None:
+            try:
+                step(core)
+            except (PortError, DeviceError) as exc:  # the device's or the port's doing
+                failed.append((core, exc))
+
         if len(self.cores) == 1:
-            self.cores[0].shutdown(report)
-        else:
-            # Daemons, waited for 5 s altogether: a stop that hangs is left to the
-            # process's deadline (lifetime.py) instead of holding up its exit.
-            threads = [threading.Thread(target=core.shutdown, args=(report,),
-                                        name=f'gx2-stop-{core.sensor.address}', daemon=True)
-                       for core in self.cores]
-            for thread in threads:
-                thread.start()
-            end = time.monotonic() + 5.0
-            for thread in threads:
-                thread.join(max(end - time.monotonic(), 0.0))
+            take(self.cores[0])
+            return failed
+        threads = [threading.Thread(target=take, args=(core,), daemon=True,
+                                    name=name.format(core.sensor.address)) for core in self.cores]
+        for thread in threads:
+            thread.start()
+        end = None if timeout is None else time.monotonic() + timeout
+        for thread in threads:
+            thread.join(None if end is None else max(end - time.monotonic(), 0.0))
+        return sorted(failed, key=lambda pair: self.cores.index(pair[0]))
+
+    def shutdown(self, report: bool = True) -> None:
+        """Stop every stream and close the port, the sensors at once (within 5 s)."""
+        self.fault_capture.close()  # our own stop is no fault
+        self.each(lambda core: core.shutdown(report), timeout=5.0, name='gx2-stop-{}')
         self._capture.close()
 
     def destroy(self) -> None:

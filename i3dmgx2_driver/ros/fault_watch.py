@@ -31,6 +31,7 @@ the delay (at most one poll) is far inside the seconds kept after a fault.
 from collections import deque
 from collections.abc import Callable
 
+from .diagnostic_statuses import PARSER_FAILURES
 from ..device.status import DeviceStatus, State
 
 #: Corrupted packets (checksum or length failures) within CORRUPT_WINDOW s that make a
@@ -42,11 +43,6 @@ _RUNNING = (State.STREAMING, State.STALLED, State.PAUSED)
 #: States in which a NACK refused a command the driver needed (not one of the bring-up's
 #: tries, which a sensor that is still waking up may refuse).
 _SERVING = (State.STREAMING, State.PAUSED)
-
-
-def corrupted(parser: dict[str, int]) -> int:
-    """Return the corrupted packets among a parser's counters."""
-    return parser.get('checksum_failures', 0) + parser.get('length_failures', 0)
 
 
 class FaultWatch:
@@ -70,7 +66,7 @@ class FaultWatch:
     def look(self, now: float) -> list[str]:
         """Return the causes seen since the one before, ``now`` in monotonic seconds."""
         device, resets = self._status(), self._resets()
-        bad = corrupted(device.parser)
+        bad = sum(device.parser.get(key, 0) for key in PARSER_FAILURES)  # corrupted packets
         self._corrupt.append((now, bad))
         while now - self._corrupt[0][0] > CORRUPT_WINDOW:
             self._corrupt.popleft()

@@ -53,10 +53,8 @@ class ImuDriverNode(Node):
     def _fatal(self) -> None:
         self.on_done()  # whatever run() set it to since
 
-    @property
-    def finished(self) -> bool:
-        """Whether the node is done by itself: never (it runs until a signal)."""
-        return False
+    #: Whether the node is done by itself: never (it runs until a signal).
+    finished = False
 
     @property
     def fatal_error(self) -> PortError | None:

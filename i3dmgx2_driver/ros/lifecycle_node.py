@@ -67,8 +67,7 @@ from .main import run
 from .parameters import declare_parameters, driver_config, ParameterError
 from .publishers import create_publishers, Publishers
 from .. import lifetime
-from ..device.link import DeviceError
-from ..device.port import check_port_path, PortError, PortUnusable
+from ..device.port import check_port_path, PortUnusable
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
@@ -176,9 +175,8 @@ class LifecycleDriverNode(LifecycleNode):
             config = driver_config(declare_parameters(self))
             check_port_path(config.device.port)  # the words of the plain node's exit 2
             if self._data_publishers is None:  # (a bad qos_overrides parameter raises)
-                self._data_publishers = [
-                    create_publishers(self, config, lifecycle=True, sensor=s)
-                    for s in config.sensors]
+                self._data_publishers = [create_publishers(self, config, lifecycle=True, sensor=s)
+                                         for s in config.sensors]
         except (ParameterError, PortUnusable) as exc:
             log.error(f'configure failed: {exc}')
             return FAILURE
@@ -188,7 +186,7 @@ class LifecycleDriverNode(LifecycleNode):
             # A signal came while the set was made, before shutdown() could see it.
             self._release()
             return FAILURE
-        failed = _each(drivers.cores, lambda core: core.supervisor.connect())
+        failed = drivers.each(lambda core: core.supervisor.connect())
         # A sensor that can never give what is asked (its firmware lacks the stream):
         # the words of the plain node's exit 2, whatever the other sensors answered.
         never = [exc for _, exc in failed if isinstance(exc, PortUnusable)]
@@ -215,18 +213,17 @@ class LifecycleDriverNode(LifecycleNode):
         """Enable the publishers, start the stream; fail if no record comes."""
         start = time.monotonic()
         drivers = self.drivers
-        if self._stopping.is_set():
-            return FAILURE  # a signal stopped the device meanwhile: it stays stopped
-        if super().on_activate(state) != SUCCESS or drivers is None:
+        # After a signal stopped the device meanwhile, it stays stopped.
+        if self._stopping.is_set() or super().on_activate(state) != SUCCESS or drivers is None:
             return FAILURE
         for core in drivers.cores:
             core.records.forget_last_sample()  # the pause since the last activation is no loss
         drivers.set_publishing(True)
-        failed = _each(drivers.cores, lambda core: core.supervisor.start_streaming())
+        failed = drivers.each(lambda core: core.supervisor.start_streaming())
         if len(failed) == len(drivers.cores):
             drivers.set_publishing(False)
             if drivers.several:
-                _each(drivers.cores, lambda core: core.supervisor.stop_streaming())
+                drivers.each(lambda core: core.supervisor.stop_streaming())
             super().on_deactivate(state)
             self.get_logger().error('activate failed: ' + '; '.join(
                 (f'node {core.sensor.address}: ' if drivers.several else '') + str(exc)
@@ -251,7 +248,7 @@ class LifecycleDriverNode(LifecycleNode):
             drivers.set_publishing(False)
         super().on_deactivate(state)
         if drivers is not None:
-            _each(drivers.cores, lambda core: core.supervisor.stop_streaming())
+            drivers.each(lambda core: core.supervisor.stop_streaming())
             for core in drivers.cores:
                 core.device_services.wait_idle(1.0)
         self.get_logger().info(f'deactivate: stream stopped (0xFA), port kept open '
@@ -321,7 +318,7 @@ class LifecycleDriverNode(LifecycleNode):
         drivers = self.drivers
         if drivers is not None:
             drivers.set_publishing(False)
-            _each(drivers.cores, lambda core: core.supervisor.stop(), timeout=STOP_WAIT)
+            drivers.each(lambda core: core.supervisor.stop(), timeout=STOP_WAIT)
         if self._transition_lock.acquire(timeout=TRANSITION_WAIT):
             try:
                 if not self._finished.is_set():
@@ -335,38 +332,6 @@ class LifecycleDriverNode(LifecycleNode):
             self._release('shutdown')
             self._finished.set()
             self.on_done()
-
-
-def _each(cores: list[DriverCore], step: Callable[[DriverCore], None],
-          timeout: float | None = None) -> list[tuple[DriverCore, Exception]]:
-    """
-    Take ``step`` for every core at once (one thread each if several); return who failed.
-
-    With several sensors a silent one would otherwise hold up the others by
-    its timeouts; one core takes its step in the calling thread, as always.
-    Only the device's or the port's errors count as failures; others raise.
-    ``timeout`` bounds the wait for the threads altogether (the stop on a
-    signal: a step still running then is left to the process's deadline).
-    """
-    failed: list[tuple[DriverCore, Exception]] = []
-
-    def take(core: DriverCore) -> None:
-        try:
-            step(core)
-        except (PortError, DeviceError) as exc:  # the device's or the port's doing
-            failed.append((core, exc))
-
-    if len(cores) == 1:
-        take(cores[0])
-        return failed
-    threads = [threading.Thread(target=take, args=(core,), name='gx2-transition', daemon=True)
-               for core in cores]
-    for thread in threads:
-        thread.start()
-    end = None if timeout is None else time.monotonic() + timeout
-    for thread in threads:
-        thread.join(None if end is None else max(end - time.monotonic(), 0.0))
-    return sorted(failed, key=lambda pair: cores.index(pair[0]))
 
 
 def main(args: list[str] | None = None) -> int:

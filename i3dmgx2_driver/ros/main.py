@@ -142,8 +142,7 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
         # rcl's own words name the argument it could not parse.
         print(f'[FATAL] [i3dmgx2_driver]: invalid ROS arguments: {exc}', file=sys.stderr)
         return EXIT_BAD_PARAMETER
-    node = None
-    spinner = None
+    node = spinner = None
     # Several threads, so that a long service call (a 30 s gyro bias capture)
     # holds only its own callback group: diagnostics keep ticking, parameters
     # answer, and a signal is acted on at once rather than after the call.

@@ -50,8 +50,8 @@ from typing import Any, NamedTuple
 
 from rclpy.parameter import Parameter
 
-from .mag_calibration import (HARD_IRON, IDENTITY, is_matrix_list, is_offset_list, SOFT_IRON,
-                              ZERO)
+from .mag_calibration import HARD_IRON, IDENTITY, is_matrix_list, is_offset_list, SOFT_IRON, ZERO
+from .sensor_set import RATE_VALID, settable_rate
 from ..codec import streams
 from ..codec.data_rate import MAX_RATE_HZ, MIN_RATE_HZ
 from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
@@ -156,14 +156,6 @@ class Spec(NamedTuple):
         return f'{self.limits[0]:g}..{self.limits[1]:g}'
 
 
-def _names_a_stream(text: str) -> bool:
-    """Whether ``text`` is a stream's name or command byte (codec/streams.py decides)."""
-    try:
-        return isinstance(streams.parse(text), streams.Stream)
-    except ValueError:
-        return False
-
-
 def _device_setting(name: str, kind: Kind, description: str,
                     limits: tuple[float, float] | None = None, field: str = '') -> Spec:
     """Return the row of a parameter that sets a ``DeviceConfig`` field (of its name)."""
@@ -216,7 +208,7 @@ SPECS: list[Spec] = [
     Spec('stream', CODE, streams.DEFAULT.name, 'What the sensor streams: a stream name, or the '
          "command byte of its record as text (e.g. '0xC2'); see Choosing a stream. With "
          'data_rate it must fit the serial line, or the node refuses to start.',
-         valid=streams.valid_text(), accepts=_names_a_stream, feeds='sensors'),
+         valid=streams.valid_text(), accepts=streams.names_a_stream, feeds='sensors'),
     Spec('frame_id', TEXT, 'imu_link', 'Frame of the published messages (_ned is appended in the '
          'ned convention).', feeds='sensors'),
     Spec('frame_convention', TEXT, 'enu', 'enu: REP-103 (ENU world, x-forward/y-left/z-up body); '
@@ -282,10 +274,7 @@ SPECS: list[Spec] = [
     Spec('data_rate', DOUBLE, 0.0, 'Data rate (Hz) to write to the device (EEPROM 0xFCA2, '
          f'persists); 0: leave the device as it is; otherwise {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f}, '
          'and the stream must fit the serial line at that rate (see Choosing a stream).',
-         (0.0, round(MAX_RATE_HZ, 1)), feeds='sensors',
-         valid=f'0 (leave the device as it is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz',
-         # 0 leaves the device's rate; any other must be one its divider can give.
-         accepts=lambda rate: not rate or MIN_RATE_HZ <= rate <= MAX_RATE_HZ),
+         (0.0, round(MAX_RATE_HZ, 1)), feeds='sensors', valid=RATE_VALID, accepts=settable_rate),
     _device_setting('low_latency', BOOL, 'Put the serial port in Linux low-latency mode (USB '
                     'adapters) when it supports it.'),
     Spec(GYRO_BIAS_SAMPLING_MS, INTEGER, 10000, 'Sampling time (ms) of ~/capture_gyro_bias '

@@ -55,7 +55,7 @@ from rclpy.parameter import Parameter
 from .conversions import MessageSettings
 from .mag_calibration import one_sensors, per_sensor_problem
 from .parameter_table import ACCEL_BIAS, GYRO_BIAS, REQUIRED, Spec, SPECS
-from .sensor_set import check_shared_budget, sensor_settings, SensorSetting
+from .sensor_set import sensor_settings, SensorSetting, shared_budget_refusal
 from ..codec import streams
 from ..device.settings import DeviceConfig
 
@@ -135,8 +135,7 @@ def given_value(node: Node, name: str) -> Any:
     integer, ``-p stream:=0xC2`` the integer 194), without the type error a
     statically typed declaration would raise.
     """
-    value = node.declare_parameter(
-        name, None, ParameterDescriptor(dynamic_typing=True)).value
+    value = node.declare_parameter(name, None, ParameterDescriptor(dynamic_typing=True)).value
     node.undeclare_parameter(name)
     return value
 
@@ -175,8 +174,7 @@ def _declare(node: Node, spec: Spec) -> Any:
                 node.declare_parameter(spec.name, spec.kind.type_, _descriptor(spec))
             else:
                 # The override was read above and is given here, converted.
-                node.declare_parameter(spec.name, value, _descriptor(spec),
-                                       ignore_override=True)
+                node.declare_parameter(spec.name, value, _descriptor(spec), ignore_override=True)
         return node.get_parameter(spec.name).value
     except ParameterUninitializedException:
         if spec.default is not REQUIRED:
@@ -191,14 +189,20 @@ def _declare(node: Node, spec: Spec) -> Any:
                              f'got {given!r}') from None
 
 
+def declared_value(node: Node, name: str) -> Any:
+    """Return parameter ``name``'s value; None when ``node`` does not declare it or it is unset."""
+    if not node.has_parameter(name):
+        return None
+    try:
+        return node.get_parameter(name).value
+    except ParameterUninitializedException:
+        return None  # an empty array (a bias left to the sensor) is declared unset
+
+
 def _is_set(node: Node, name: str) -> bool:
     """Whether parameter ``name`` was given something (declared already, or not yet)."""
-    if node.has_parameter(name):
-        try:
-            return bool(node.get_parameter(name).value)
-        except ParameterUninitializedException:
-            return False
-    return bool(given_value(node, name))
+    return bool(declared_value(node, name) if node.has_parameter(name)
+                else given_value(node, name))
 
 
 def _fits(spec: Spec, value: Any) -> bool:
@@ -264,15 +268,6 @@ def driver_config(values: Mapping[str, Any]) -> DriverConfig:
     return config
 
 
-def _shared_line_budget(config: DriverConfig) -> str | None:
-    """Refuse streams of several sensors that do not fit the base station's line together."""
-    try:
-        check_shared_budget(config.sensors, config.device.baud, config.device.wireless)
-    except ValueError as exc:
-        return str(exc)
-    return None
-
-
 def _one_sensors_bias(config: DriverConfig) -> str | None:
     """Refuse a bias given with several sensors: it is one sensor's, and whose is a guess."""
     for name, bias in ((GYRO_BIAS, config.device.gyro_bias),
@@ -294,19 +289,20 @@ def _line_budget(config: DriverConfig) -> str | None:
     """
     sensors = config.sensors
     if len(sensors) > 1 or sensors[0].data_rate_hz is None:
-        return None  # several sensors: their budget together (_shared_line_budget)
+        return None  # several sensors: their budget together (the first rule)
     stream, rate = sensors[0].stream_choice, sensors[0].data_rate
     budget = streams.line_budget(stream, rate, config.device.baud, config.device.wireless)
-    if budget.fits:
-        return None
-    return (f"parameter 'data_rate' ({rate:g} Hz) does not fit the line with stream "
-            f'{stream.name!r}: ' + streams.advice(stream, budget))
+    return None if budget.fits else (
+        f"parameter 'data_rate' ({rate:g} Hz) does not fit the line with stream "
+        f'{stream.name!r}: ' + streams.advice(stream, budget))
 
 
-#: The rules between parameters, each a refusal or None, applied in this order; the last
-#: refuses a field calibration that is neither one for all sensors nor one each.
+#: The rules between parameters, each a refusal or None, applied in this order: streams of
+#: several sensors that do not fit the base station's line together, a bias given with several
+#: sensors, one stream that does not fit, a field calibration neither one for all nor one each.
 RULES: tuple[Callable[[DriverConfig], str | None], ...] = (
-    _shared_line_budget, _one_sensors_bias, _line_budget,
+    lambda c: shared_budget_refusal(c.sensors, c.device.baud, c.device.wireless),
+    _one_sensors_bias, _line_budget,
     lambda c: per_sensor_problem(c.mag_hard_iron, c.mag_soft_iron, len(c.sensors)))
 
 

@@ -20,10 +20,10 @@ Named once, so that the node's publishers and its check of the
 that the core that publishes and the managed node that keeps its publishers
 across configure/cleanup (lifecycle_node.py) make them the same way.
 
-Every publisher the driver makes is created with
-:func:`overriding_options`, so that rclpy declares the read-only parameters
-``qos_overrides.<topic>.publisher.<policy>`` that every ROS user knows from
-other nodes (``-p qos_overrides./imu/raw_data.publisher.reliability:=
+Every publisher the driver makes is created with rclpy's
+``QoSOverridingOptions`` for :data:`POLICIES`, so that rclpy declares the
+read-only parameters ``qos_overrides.<topic>.publisher.<policy>`` that every
+ROS user knows from other nodes (``-p qos_overrides./imu/raw_data.publisher.reliability:=
 best_effort``), and applies them on top of the profile the driver asks for.
 The topic in the name is the resolved one: under a namespace or a remapping
 it is the name the topic really has (``/robot1/imu/raw_data``).
@@ -36,7 +36,7 @@ one with a traceback; :func:`create_publisher` turns that into the
 
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -60,11 +60,6 @@ CHOICES = {kind: tuple(member.name.lower() for member in enum if member.name != 
                               (QoSPolicyKind.DURABILITY, DurabilityPolicy))}
 #: Largest history depth rmw takes (DDS holds it in a signed 32-bit integer).
 MAX_DEPTH = 2 ** 31 - 1
-
-
-def overriding_options() -> QoSOverridingOptions:
-    """Return the options every publisher of the driver is created with."""
-    return QoSOverridingOptions(POLICIES)
 
 
 def override_name(topic: str, policy: QoSPolicyKind) -> str:
@@ -96,23 +91,10 @@ def create_publisher(node: Node, msg_type: type, topic: str, qos: QoSProfile | i
     a bad one raises ParameterError naming the parameter, what was given and
     what is valid, and the node stops as for any bad parameter.
     """
-    problem = bad_override(node, node.resolve_topic_name(topic))
-    if problem is not None:
+    if (problem := bad_override(node, node.resolve_topic_name(topic))) is not None:
         raise ParameterError(problem)
     make = make or node.create_publisher
-    return make(msg_type, topic, qos, qos_overriding_options=overriding_options())
-
-
-def _valid(policy: QoSPolicyKind) -> str:
-    if policy == QoSPolicyKind.DEPTH:
-        return f'0..{MAX_DEPTH} (0: the system default)'
-    return 'one of ' + ', '.join(repr(choice) for choice in CHOICES[policy])
-
-
-def _is_valid(policy: QoSPolicyKind, value: Any) -> bool:
-    if policy == QoSPolicyKind.DEPTH:
-        return type(value) is int and 0 <= value <= MAX_DEPTH
-    return isinstance(value, str) and value.lower() in CHOICES[policy]
+    return make(msg_type, topic, qos, qos_overriding_options=QoSOverridingOptions(POLICIES))
 
 
 def bad_override(node: Node, topic: str) -> str | None:
@@ -126,8 +108,14 @@ def bad_override(node: Node, topic: str) -> str | None:
         name = override_name(topic, policy)
         value = (node.get_parameter(name).value if node.has_parameter(name)
                  else given_value(node, name))
-        if value is not None and not _is_valid(policy, value):
-            return f'parameter {name!r} must be {_valid(policy)}, got {value!r}'
+        if policy == QoSPolicyKind.DEPTH:
+            valid = f'0..{MAX_DEPTH} (0: the system default)'
+            fine = type(value) is int and 0 <= value <= MAX_DEPTH
+        else:
+            valid = 'one of ' + ', '.join(map(repr, CHOICES[policy]))
+            fine = isinstance(value, str) and value.lower() in CHOICES[policy]
+        if value is not None and not fine:
+            return f'parameter {name!r} must be {valid}, got {value!r}'
     return None
 
 
@@ -171,8 +159,7 @@ class SensorTopics:
     @classmethod
     def of(cls, name: str, several: bool) -> 'SensorTopics':
         """Return the topics of the sensor called ``name`` (sensor_set.py: ``imu`` alone)."""
-        return cls(tuple(f'{name}/{row.suffix}' for row in RECORD_TOPICS),
-                   f'{name}/temperature',
+        return cls(tuple(f'{name}/{row.suffix}' for row in RECORD_TOPICS), f'{name}/temperature',
                    f'~/{name}/is_calibrated' if several else '~/is_calibrated')
 
     def __iter__(self) -> Iterator[str]:
@@ -216,10 +203,8 @@ def publisher_qos(config: DriverConfig) -> QoSProfile:
     The deprecated ``qos_reliability`` and ``qos_depth`` still set it (for
     one release); a ``qos_overrides`` parameter wins over them.
     """
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=config.qos_depth,
-        reliability=(ReliabilityPolicy.RELIABLE if config.qos_reliability == 'reliable'
-                     else ReliabilityPolicy.BEST_EFFORT))
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=config.qos_depth,
+                      reliability=ReliabilityPolicy[config.qos_reliability.upper()])
 
 
 def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False,
@@ -250,6 +235,5 @@ def create_publishers(node: Node, config: DriverConfig, lifecycle: bool = False,
         tuple((row, create(row.msg_type, topic))
               for row, topic in zip(RECORD_TOPICS, topics.records, strict=True)
               if row.wanted(config, sensor)),
-        create(Temperature, topics.temperature) if config.temperature_period > 0
-        else None,
+        create(Temperature, topics.temperature) if config.temperature_period > 0 else None,
         create_publisher(node, Bool, topics.is_calibrated, calibrated_qos()))

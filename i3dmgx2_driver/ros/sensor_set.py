@@ -43,6 +43,13 @@ from ..codec.framing import MAX_ADDRESS, MIN_ADDRESS
 SINGLE_NAME = 'imu'
 #: A sensor name: one ROS name token (it prefixes topics and service names).
 _NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
+#: What a data rate may be: 0 leaves the device's own, any other is one its divider can give.
+RATE_VALID = f'0 (leave the device as it is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz'
+
+
+def settable_rate(rate: float) -> bool:
+    """Whether ``rate`` is 0 (leave the device as it is) or a rate its divider can give."""
+    return not rate or MIN_RATE_HZ <= rate <= MAX_RATE_HZ
 
 
 class SensorSetting(NamedTuple):
@@ -70,25 +77,6 @@ def default_name(address: int) -> str:
     return f'{SINGLE_NAME}_{address}'
 
 
-def _per_sensor(name: str, given: Sequence, count: int, what: str,
-                one_for_all: bool = False) -> None:
-    if not given or len(given) == count or (one_for_all and len(given) == 1):
-        return
-    one = ' (or one for all)' if one_for_all else ''
-    raise ValueError(f'parameter {name!r} must give one {what} per sensor{one}: '
-                     f'{count} addresses, got {len(given)} ({list(given)})')
-
-
-def _names(name: str, given: Sequence[str]) -> None:
-    for text in given:
-        if not _NAME.fullmatch(text):
-            raise ValueError(f'parameter {name!r} must hold names of letters, digits and _, '
-                             f'starting with a letter, got {text!r}')
-    if len(set(given)) != len(given):
-        raise ValueError(f'parameter {name!r} must not name two sensors alike, got '
-                         f'{list(given)}')
-
-
 def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
     """
     Return the sensors the parameters ``given`` ask for, each with its name, frame and stream.
@@ -109,10 +97,6 @@ def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
                          f'({list(addresses)}) both given: give one (address for one '
                          f'sensor, addresses for several on one base station)')
     listed = list(addresses) or [address]
-    for value in listed:
-        if not MIN_ADDRESS <= value <= MAX_ADDRESS:
-            raise ValueError(f"parameter 'addresses' must hold node addresses "
-                             f'{MIN_ADDRESS}..{MAX_ADDRESS}, got {value}')
     if len(set(listed)) != len(listed):
         raise ValueError(f"parameter 'addresses' must not list a sensor twice, got {listed}")
     count = len(listed)
@@ -121,21 +105,27 @@ def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
                          f'false: several sensors share a port only behind a base station')
     for name, what, one_for_all in (('sensor_names', 'name', False), ('frame_ids', 'frame', False),
                                     ('streams', 'stream', True), ('data_rates', 'rate', True)):
-        _per_sensor(name, given[name], count, what, one_for_all)
-    _names('sensor_names', names)
+        values = given[name]
+        if values and len(values) != count and not (one_for_all and len(values) == 1):
+            one = ' (or one for all)' if one_for_all else ''
+            raise ValueError(f'parameter {name!r} must give one {what} per sensor{one}: '
+                             f'{count} addresses, got {len(values)} ({list(values)})')
+    for name, values, holds, must in (
+            ('addresses', listed, lambda a: MIN_ADDRESS <= a <= MAX_ADDRESS,
+             f'node addresses {MIN_ADDRESS}..{MAX_ADDRESS}'),
+            ('sensor_names', names, _NAME.fullmatch,
+             'names of letters, digits and _, starting with a letter'),
+            ('streams', stream_texts, streams.names_a_stream, streams.valid_text()),
+            ('data_rates', data_rates, settable_rate, RATE_VALID)):
+        for value in values:
+            if not holds(value):
+                raise ValueError(f'parameter {name!r} must hold {must}, got {value!r}')
+    if len(set(names)) != len(names):
+        raise ValueError(f"parameter 'sensor_names' must not name two sensors alike, got "
+                         f'{list(names)}')
     if len(set(frame_ids)) != len(frame_ids) or not all(frame_ids):
         raise ValueError(f"parameter 'frame_ids' must name each sensor's frame, each "
                          f'another, got {list(frame_ids)}')
-    for text in stream_texts:
-        try:
-            streams.parse(text)
-        except ValueError:
-            raise ValueError(f"parameter 'streams' must hold {streams.valid_text()}, got "
-                             f'{text!r}') from None
-    for rate in data_rates:
-        if rate and not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
-            raise ValueError(f"parameter 'data_rates' must hold 0 (leave the device as it "
-                             f'is) or {MIN_RATE_HZ:g}..{MAX_RATE_HZ:.1f} Hz, got {rate:g}')
     several = count > 1 or bool(names)
     out = []
     for i, value in enumerate(listed):
@@ -148,9 +138,10 @@ def sensor_settings(given: Mapping[str, Any]) -> list[SensorSetting]:
     return out
 
 
-def check_shared_budget(sensors: Sequence[SensorSetting], baud: int, wireless: bool) -> None:
+def shared_budget_refusal(sensors: Sequence[SensorSetting], baud: int, wireless: bool
+                          ) -> str | None:
     """
-    Refuse streams that do not fit the line together; ValueError says what fits per sensor.
+    Refuse streams that do not fit the line together: say what fits per sensor, else None.
 
     The sensors behind one base station share its serial line, so the sum
     of their packets a second must fit it, with the same margin as one
@@ -158,8 +149,7 @@ def check_shared_budget(sensors: Sequence[SensorSetting], baud: int, wireless: b
     only once connected: they are left out here.
     """
     known = [(s.address, s.stream_choice, s.data_rate) for s in sensors if s.data_rate]
-    if len(known) < 2 or streams.shared_line_fits([(st, r) for _, st, r in known], baud,
-                                                  wireless):
-        return
-    raise ValueError("parameters 'data_rate'/'data_rates' and 'stream'/'streams' do not fit "
-                     'the line: ' + streams.shared_advice(known, baud, wireless))
+    if len(known) < 2 or streams.shared_line_fits([(st, r) for _, st, r in known], baud, wireless):
+        return None
+    return ("parameters 'data_rate'/'data_rates' and 'stream'/'streams' do not fit the line: "
+            + streams.shared_advice(known, baud, wireless))

@@ -42,15 +42,15 @@ from typing import Any
 
 from diagnostic_msgs.srv import SelfTest
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from .calibration_file import write_calibration_file
 from .diagnostic_statuses import ERROR, OK, Status, to_message
 from .parameter_table import CALIBRATION_FILE, GYRO_BIAS, GYRO_BIAS_SAMPLING_MS
+from .parameters import declared_value
 from ..capture.fault_capture import FaultCapture
-from ..device.gyro_bias import Calibration, GyroBiasCapture
+from ..device.gyro_bias import GyroBiasCapture
 from ..device.operation import Device
 from ..device.self_test import format_report, SelfTestRun, Step
 from ..device.status import State
@@ -58,10 +58,11 @@ from ..device.status import State
 
 # -- the device operations' services -----------------------------------------------
 
-def _trigger(answer: Callable[[], tuple[bool, str]]) -> Callable[..., Trigger.Response]:
-    """Serve ``answer()``, a (success, message), as a std_srvs/Trigger callback."""
+def _trigger(answer: Callable[..., tuple[bool, str]], *args: Any
+             ) -> Callable[..., Trigger.Response]:
+    """Serve ``answer(*args)``, a (success, message), as a std_srvs/Trigger callback."""
     def callback(request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        response.success, response.message = answer()
+        response.success, response.message = answer(*args)
         return response
     return callback
 
@@ -106,17 +107,22 @@ class DeviceServices:
         self.self_test_run = SelfTestRun(device, published, forget_last_sample, self._stop,
                                          self._log)
         group = MutuallyExclusiveCallbackGroup()
-        #: Every service made, so that destroy() removes what was made, whatever it is.
+        #: Every service made, so that destroy() removes what was made, whatever it is. Each
+        #: Trigger runs its operation one at a time: the gyro bias capture (0xCD, the stream
+        #: paused), the store of the last accepted one on the sensor (0xD0), the self test
+        #: (all steps passed, one line per step).
         self.services = [
-            node.create_service(kind, f'{prefix}{name}', callback, callback_group=group)
-            for name, kind, callback in (
-                ('capture_gyro_bias', Trigger, _trigger(self.capture_gyro_bias)),
-                ('store_gyro_bias', Trigger, _trigger(self.store_gyro_bias)),
-                ('self_test', Trigger, _trigger(self.self_test)),
-                ('diagnostic_self_test', SelfTest, self._on_diagnostic_self_test))]
+            node.create_service(Trigger, f'{prefix}{name}', _trigger(self._exclusive, what, body),
+                                callback_group=group)
+            for name, what, body in (('capture_gyro_bias', 'gyro bias capture', self._capture),
+                                     ('store_gyro_bias', 'gyro bias store', self.gyro_bias.store),
+                                     ('self_test', 'self test', self._self_test))]
+        self.services.append(node.create_service(
+            SelfTest, f'{prefix}diagnostic_self_test', self._on_diagnostic_self_test,
+            callback_group=group))
         #: One sensor's node: the calibration file and a known bias are its (parameters.py).
         self._single = prefix == '~/'
-        if self._single and self._parameter(GYRO_BIAS):
+        if self._single and declared_value(self.node, GYRO_BIAS):
             self._calibrated(True)
         if capture_on_start:
             threading.Thread(target=self._capture_on_start, name='gx2-bias-on-start',
@@ -143,15 +149,12 @@ class DeviceServices:
             self._busy.release()
         return idle
 
-    def calibration(self) -> tuple[Calibration | None, Calibration | None]:
-        """Return the last capture attempt and the last accepted capture (diagnostics)."""
-        return self.gyro_bias.last_capture, self.gyro_bias.good_capture
-
     # -- service callbacks (executor) ---------------------------------------
 
     def _on_diagnostic_self_test(self, request: SelfTest.Request,
                                  response: SelfTest.Response) -> SelfTest.Response:
-        steps = self.self_test_steps()
+        ran, steps = self._exclusive('self test', lambda: (True, self.self_test_run.steps()))
+        steps = steps if ran else [Step('self test', False, steps)]  # refused: one failed step
         info = self._device.status().info
         response.id = info.serial_number if info is not None and info.serial_number else ''
         response.passed = bytes((all(step.passed for step in steps),))
@@ -163,7 +166,7 @@ class DeviceServices:
 
     # -- operations -----------------------------------------------------------
 
-    def _exclusive(self, name: str, body: Callable[[], tuple[bool, str]]) -> tuple[bool, str]:
+    def _exclusive(self, name: str, body: Callable[[], tuple[bool, Any]]) -> tuple[bool, Any]:
         """Run one operation at a time; refuse at once when another runs."""
         if refusal := self._refusal():
             return False, f'refused: {refusal}'
@@ -176,22 +179,9 @@ class DeviceServices:
             self.operation = ''
             self._busy.release()
 
-    def capture_gyro_bias(self) -> tuple[bool, str]:
-        """Capture the gyro bias (0xCD) with the stream paused; return (success, message)."""
-        return self._exclusive('gyro bias capture', self._capture)
-
-    def _parameter(self, name: str) -> Any:
-        """Return a parameter's value; None when the node does not declare it or it is unset."""
-        if not self.node.has_parameter(name):
-            return None
-        try:
-            return self.node.get_parameter(name).value
-        except ParameterUninitializedException:
-            return None  # an empty array (the bias left to the sensor) is declared unset
-
     def _capture(self) -> tuple[bool, str]:
-        ok, message = self.gyro_bias.run(int(self._parameter(GYRO_BIAS_SAMPLING_MS)))
-        path = self._parameter(CALIBRATION_FILE) if self._single else ''
+        ok, message = self.gyro_bias.run(int(declared_value(self.node, GYRO_BIAS_SAMPLING_MS)))
+        path = declared_value(self.node, CALIBRATION_FILE) if self._single else ''
         if ok and path:
             bias = self.gyro_bias.good_capture.bias
             try:
@@ -206,33 +196,14 @@ class DeviceServices:
             message = f'{message}; {note}'
         return ok, message
 
-    def store_gyro_bias(self) -> tuple[bool, str]:
-        """Store the last accepted capture on the sensor (0xD0); return (success, message)."""
-        return self._exclusive('gyro bias store', self.gyro_bias.store)
-
     def _capture_on_start(self) -> None:
         """Wait for the first streaming start, then capture once (own thread)."""
         while self._device.status().state is not State.STREAMING:
             if self._stop.wait(0.1):
                 return
-        ok, message = self.capture_gyro_bias()
+        ok, message = self._exclusive('gyro bias capture', self._capture)
         if not ok:
             self._log.warning(f'capture_gyro_bias_on_start: {message}')
-
-    def self_test(self) -> tuple[bool, str]:
-        """Run the self test; return (all steps passed, one line per step)."""
-        return self._exclusive('self test', self._self_test)
-
-    def self_test_steps(self) -> list[Step]:
-        """Run the self test; return its steps (one failed step when it is refused)."""
-        steps: list[Step] = []
-
-        def run() -> tuple[bool, str]:
-            steps.extend(self.self_test_run.steps())
-            return True, ''
-
-        _, refusal = self._exclusive('self test', run)
-        return steps or [Step('self test', False, refusal)]
 
     def _self_test(self) -> tuple[bool, str]:
         steps = self.self_test_run.steps()
@@ -255,9 +226,8 @@ class SaveCaptureService:
     def __init__(self, node: Node, capture: FaultCapture) -> None:
         self._node = node
         self._capture = capture
-        self.service = node.create_service(
-            Trigger, '~/save_capture', _trigger(self._save),
-            callback_group=MutuallyExclusiveCallbackGroup())
+        self.service = node.create_service(Trigger, '~/save_capture', _trigger(self._save),
+                                           callback_group=MutuallyExclusiveCallbackGroup())
 
     def _save(self) -> tuple[bool, str]:
         try:

@@ -73,7 +73,6 @@ class TemperaturePoller:
         self._time_offset = time_offset
         self._streaming_link = streaming_link
         self.period = period
-        self.published = 0
         #: The last temperature read (deg C), None before the first.
         self.latest: float | None = None
         self._stop = threading.Event()
@@ -127,5 +126,4 @@ class TemperaturePoller:
             self.publisher.publish(self._msg)
         except RCLError:
             return False  # ROS is shutting down
-        self.published += 1
         return True
