@@ -85,6 +85,15 @@ _address = whole_number(MIN_ADDRESS, MAX_ADDRESS, 'node address')
 _seconds = seconds(0.2, 600.0)
 
 
+def _streams(text: str) -> list[streams.Stream]:
+    if text == 'all':
+        return list(streams.STREAMS)
+    try:
+        return [streams.parse(item.strip()) for item in text.split(',') if item.strip()]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the command line of ``bringup``."""
     parser = argparse.ArgumentParser(
@@ -110,16 +119,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--listen', type=_seconds, default=1.0, metavar='S',
                         help='how long to listen first for a stream already running '
                              '(default 1)')
-    parser.add_argument('--streams', default='all', metavar='LIST',
+    parser.add_argument('--streams', type=_streams, default='all', metavar='LIST',
                         help='streams to run, e.g. full,inertial or 0xCC,0xC2 '
                              '(default: all)')
     return parser
-
-
-def _streams(text: str) -> list[streams.Stream]:
-    if text == 'all':
-        return list(streams.STREAMS)
-    return [streams.parse(item.strip()) for item in text.split(',') if item.strip()]
 
 
 class RecordLog:
@@ -418,7 +421,6 @@ def _folder(base: str) -> str:
 
 def run(args: argparse.Namespace, out: TextIO) -> int:
     """Run a bring-up session as ``args`` say; write the folder; return the exit status."""
-    chosen = _streams(args.streams)
     folder = _folder(args.output_dir)
 
     def say(text: str) -> None:
@@ -426,14 +428,13 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
         out.flush()
 
     say(f'writing to {folder}')
-    owner = port_group(args.port)
+    group, in_group = port_group(args.port) or (None, None)
     report: dict[str, Any] = {
         'started': time.strftime('%Y-%m-%d %H:%M:%S %z'), 'folder': folder,
         'address': args.address, 'baud': args.baud,
         'port': {'path': args.port, 'real_path': os.path.realpath(args.port),
                  'latency_timer_ms_as_found': latency_timer_ms(args.port),
-                 'group': owner[0] if owner else None,
-                 'in_group': owner[1] if owner else None},
+                 'group': group, 'in_group': in_group},
         'settings': {'pings': args.pings, 'commands': args.commands, 'cycles': args.cycles,
                      'stream_seconds': args.stream_seconds},
         'timeouts': [t._asdict() for t in radio_timeouts()],
@@ -470,7 +471,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
             report['round_trips'].update(trips.command())
             report['round_trips'].update(trips.continuous(
                 session.found_stream or streams.DEFAULT.code, period_of_divider(session.divider)))
-            for stream in chosen:
+            for stream in args.streams:
                 report['streams'].append(session.run_stream(stream))
         say('putting the sensor back as found')
         report['left'] = session.restore()
@@ -507,15 +508,10 @@ def _write(folder: str, report: dict[str, Any], out: TextIO) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``bringup``; return the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)
     # A closed terminal, SIGTERM or its parent's end take Ctrl-C's way out: the sensor is
     # left as found.
     lifetime.interrupt_on_stop_signals()
-    try:
-        _streams(args.streams)
-    except ValueError as exc:
-        parser.error(f'--streams: {exc}')
     try:
         return run(args, sys.stdout)
     except KeyboardInterrupt:

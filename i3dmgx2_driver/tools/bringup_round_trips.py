@@ -96,15 +96,11 @@ def close_calls(measured: dict[str, float], factor: float = 2.0) -> list[str]:
     ``measured`` maps PING, COMMAND, CONTINUOUS_START, RECORD_GAP to the
     longest time seen (s); one sentence per timeout it comes close to.
     """
-    said = []
-    for timeout in radio_timeouts():
-        seen = measured.get(timeout.measured)
-        if seen is None or seen * factor < timeout.seconds:
-            continue
-        said.append(f'{timeout.measured} took up to {seen * 1e3:.0f} ms, within a factor '
-                    f'{factor:g} of {timeout.name} = {timeout.seconds:g} s ({timeout.waits}): '
-                    f'raise {timeout.setting}')
-    return said
+    return [f'{timeout.measured} took up to {seen * 1e3:.0f} ms, within a factor {factor:g} '
+            f'of {timeout.name} = {timeout.seconds:g} s ({timeout.waits}): '
+            f'raise {timeout.setting}' for timeout in radio_timeouts()
+            if (seen := measured.get(timeout.measured)) is not None
+            and seen * factor >= timeout.seconds]
 
 
 def spread(values: Sequence[float], scale: float = 1.0,
@@ -136,11 +132,17 @@ class RoundTrips:
 
     def __init__(self, link: DeviceLink, steps: SensorSteps, args: argparse.Namespace,
                  say: Callable[[str], None], longest: dict[str, float]) -> None:
-        self.link = link
-        self.steps = steps
-        self.args = args
-        self.say = say
-        self.longest = longest
+        self.link, self.steps, self.args, self.say, self.longest = link, steps, args, say, longest
+
+    def _request(self, command: bytes, code: int) -> str | None:
+        """Send ``command`` once; return the failure's name ('nacked', 'lost') or None."""
+        try:
+            self.link.request(command, code, MEASURE_TIMEOUT, 1)
+        except DeviceNack:
+            return 'nacked'
+        except DeviceError:
+            return 'lost'
+        return None
 
     def _timed(self, kind: str, count: int, failures: tuple[str, ...],
                attempt: Callable[[], str | None]) -> dict[str, Any]:
@@ -169,16 +171,8 @@ class RoundTrips:
     def command(self) -> dict[str, Any]:
         """Time the short command's request and reply."""
         self.say(f'timing {self.args.commands} short commands (0x{SHORT_COMMAND:02X})')
-
-        def once() -> str | None:
-            try:
-                self.link.request(bytes((SHORT_COMMAND,)), SHORT_COMMAND, MEASURE_TIMEOUT, 1)
-            except DeviceNack:
-                return 'nacked'
-            except DeviceError:
-                return 'lost'
-            return None
-        return self._timed(COMMAND, self.args.commands, ('lost', 'nacked'), once)
+        return self._timed(COMMAND, self.args.commands, ('lost', 'nacked'),
+                           lambda: self._request(bytes((SHORT_COMMAND,)), SHORT_COMMAND))
 
     def continuous(self, code: int, period: float) -> dict[str, Any]:
         """
@@ -189,23 +183,20 @@ class RoundTrips:
         self.say(f'timing {self.args.cycles} continuous-mode starts and stops (0x{code:02X})')
         link, steps = self.link, self.steps
         starts, stops, replies = [], [], []
-        lost = nacked = failed = 0
+        failed = dict.fromkeys(('lost', 'nacked', 'no_records'), 0)
         for _ in range(self.args.cycles):
             before = link.records
             start = time.monotonic()
-            try:
-                link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
-                             MEASURE_TIMEOUT, 1)
+            if (failure := self._request(commands.set_continuous(code),
+                                         layouts.SET_CONTINUOUS)) is None:
                 replies.append(time.monotonic() - start)
-            except DeviceNack:
-                nacked += 1
-            except DeviceError:
-                lost += 1
+            else:
+                failed[failure] += 1
             deadline = start + MEASURE_TIMEOUT + timeouts.RECORD_PERIODS * period
             while link.records <= before and time.monotonic() < deadline:
                 time.sleep(0.002)
             if link.records <= before:
-                failed += 1
+                failed['no_records'] += 1
                 continue
             starts.append(link.last_data_mono - start)
             time.sleep(0.2)
@@ -214,11 +205,11 @@ class RoundTrips:
             link.send(commands.stop_continuous())
             last = steps.wait_quiet(link, stop_sent, period, MEASURE_TIMEOUT)
             if last is None:
-                lost += 1  # the stop was lost: stop it the sure way
+                failed['lost'] += 1  # the stop was lost: stop it the sure way
                 steps.stop_until_quiet(link, period)
                 continue
             stops.append(max(0.0, last - stop_sent))
         note_longest(self.longest, CONTINUOUS_START, starts)
         return {'continuous_start': {**spread(starts, 1e3), 'reply': spread(replies, 1e3),
-                                     'lost': lost, 'nacked': nacked, 'no_records': failed},
+                                     **failed},
                 'continuous_stop': spread(stops, 1e3)}

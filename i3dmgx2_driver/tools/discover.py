@@ -39,8 +39,7 @@ from typing import Any, TextIO
 from .discover_probe import FACTORY_ADDRESSES, PortProbe, probe_port, ProbeConfig, SensorFound
 from .port_listing import (
     BY_ID_DIR, DEFAULT_LATENCY_TIMER_MS, describe_path, latency_timer_ms, list_ports, port_group,
-    PortInfo,
-    SYS_CLASS_TTY,
+    PortInfo, SYS_CLASS_TTY,
 )
 from .. import lifetime
 from ..arguments import seconds
@@ -238,8 +237,7 @@ def print_ports(ports: Sequence[PortInfo], probing: set[str], out: TextIO) -> No
 def _state(sensor: SensorFound) -> str:
     if not sensor.streaming:
         return 'polled'
-    state = f'streaming 0x{sensor.streaming:02X}'
-    return state + ' (restarted)' if sensor.restarted else state
+    return f'streaming 0x{sensor.streaming:02X}' + (' (restarted)' if sensor.restarted else '')
 
 
 def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) -> None:
@@ -287,9 +285,9 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
         for sensor in sensors:
             if sensor.note:
                 out.write(f'    note: {sensor.note}\n')
-            if _firmware_note(sensor):
+            if firmware := _firmware_note(sensor):
                 who = f'node {sensor.address}' if sensor.wireless else 'the wired sensor'
-                out.write(f'    {who}: {_firmware_note(sensor)}\n')
+                out.write(f'    {who}: {firmware}\n')
 
 
 def print_hints(results: Sequence[tuple[PortInfo, PortProbe]], config: ProbeConfig,
@@ -314,10 +312,7 @@ class _ProgressLine:
     """One self-overwriting status line on a terminal; silent elsewhere."""
 
     def __init__(self, out: TextIO, enabled: bool) -> None:
-        self.out = out
-        self.enabled = enabled
-        self.port = ''
-        self._last = 0.0
+        self.out, self.enabled, self.port, self._last = out, enabled, '', 0.0
 
     def __call__(self, stage: str, done: int, total: int) -> None:
         now = time.monotonic()

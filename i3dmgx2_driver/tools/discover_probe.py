@@ -41,7 +41,7 @@ are this module's. What is found is printed by discover.py.
 """
 
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import threading
 import time
 from typing import NamedTuple
@@ -154,8 +154,7 @@ class _Heard:
 class _Prober:
     """The dialogue with one open port; see the module docstring for the order."""
 
-    def __init__(self, port: SerialPort, config: ProbeConfig,
-                 progress: Progress | None) -> None:
+    def __init__(self, port: SerialPort, config: ProbeConfig, progress: Progress | None) -> None:
         self.port, self.config = port, config
         self.steps = SensorSteps(config.request_timeout, config.request_retries)
         self._progress = progress or (lambda stage, done, total: None)
@@ -184,11 +183,10 @@ class _Prober:
                 if isinstance(event, DataPacket):
                     self._on_record(event, now)
 
-    def heard(self, address: int | None) -> tuple[int, int]:
-        """Return (record code, packets) streamed from ``address`` so far."""
+    def heard(self, address: int | None) -> _Heard:
+        """Return (a copy of) what streamed from ``address`` so far."""
         with self._heard_lock:
-            heard = self._heard.get(address) or _Heard()
-            return heard.code, heard.count
+            return replace(self._heard.get(address) or _Heard())
 
     # -- links -----------------------------------------------------------
 
@@ -286,11 +284,11 @@ class _Prober:
 
     def _identify(self, link: DeviceLink, address: int | None, found_by: str) -> SensorFound:
         link.retarget(address)
-        code, _ = self.heard(address)
+        code = self.heard(address).code
         info = divider = None
         if not (code and self.config.stop_streams):
             info, divider = self._read(link)
-        code, _ = self.heard(address)  # a slow stream may show itself only now
+        code = self.heard(address).code  # a slow stream may show itself only now
         restarted, note = False, ''
         if info is None and code:
             # Combined mode failed (or was not wanted): quiet it, read, restart.
@@ -305,8 +303,7 @@ class _Prober:
                             f'restart: power-cycle the sensor or run the node')
             else:
                 note = 'streams but answers no request'
-        with self._heard_lock:
-            heard = self._heard.get(address) or _Heard()
+        heard = self.heard(address)
         return SensorFound(address, found_by, info, divider, code, restarted,
                            heard.lqi, heard.rssi, note)
 

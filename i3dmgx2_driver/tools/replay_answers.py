@@ -68,11 +68,8 @@ class BaseStationAnswers:
 
     def __init__(self, pty: ReplayPty, stats: ReplayStats, wireless: bool,
                  wake: threading.Event, stop: threading.Event) -> None:
-        self._pty = pty
-        self._stats = stats
-        self._wireless = wireless
-        self._wake = wake
-        self._stop = stop
+        self._pty, self._stats, self._wireless, self._wake, self._stop = (
+            pty, stats, wireless, wake, stop)
         self.host_seen, self.stream_asked = threading.Event(), threading.Event()
         self._answers: list[bytes] = []
         self._answers_lock = threading.Lock()
