@@ -63,17 +63,13 @@ def bag_type(msg_type: type) -> str:
     return f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
 
 
-class RosbagsMissing(ImportError):
-    """rosbags is not installed; the message says how to install it."""
-
-
 def _rosbags() -> Any:
     try:
         import rosbags.highlevel
         import rosbags.rosbag2
         import rosbags.typesys
     except ImportError as exc:
-        raise RosbagsMissing(ROSBAGS_HINT) from exc
+        raise ImportError(ROSBAGS_HINT) from exc
     return rosbags
 
 

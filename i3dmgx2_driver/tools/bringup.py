@@ -458,7 +458,6 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
     link = DeviceLink(port, args.address, log, LinkOptions.listening(True, capture.write))
     session = Bringup(link, log, args, say)
     session.report = report
-    trips = session.round_trips
     try:
         link.start()
         if not session.find_state():
@@ -467,9 +466,9 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
             report['error'] = (f'node {args.address} on {args.port} answered nothing: '
                                f'discover finds the port and address')
         else:
-            report['round_trips'].update(trips.ping())
-            report['round_trips'].update(trips.command())
-            report['round_trips'].update(trips.continuous(
+            report['round_trips'].update(session.round_trips.ping())
+            report['round_trips'].update(session.round_trips.command())
+            report['round_trips'].update(session.round_trips.continuous(
                 session.found_stream or streams.DEFAULT.code, period_of_divider(session.divider)))
             for stream in args.streams:
                 report['streams'].append(session.run_stream(stream))

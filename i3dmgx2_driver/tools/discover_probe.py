@@ -41,7 +41,7 @@ are this module's. What is found is printed by discover.py.
 """
 
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import threading
 import time
 from typing import NamedTuple
@@ -141,9 +141,8 @@ class PortProbe(NamedTuple):
     seconds: float
 
 
-@dataclass(slots=True)
-class _Heard:
-    """What streamed from one address (None: a wired sensor)."""
+class _Heard(NamedTuple):
+    """What streamed from one address (None: a wired sensor): its latest record's."""
 
     code: int = 0
     count: int = 0
@@ -169,10 +168,8 @@ class _Prober:
 
     def _on_record(self, packet: DataPacket, now: float, mono: float = 0.0) -> None:
         with self._heard_lock:
-            heard = self._heard.setdefault(packet.address, _Heard())
-            heard.code = packet.code
-            heard.count += 1
-            heard.lqi, heard.rssi = packet.lqi, packet.rssi
+            count = self._heard.get(packet.address, _Heard()).count + 1
+            self._heard[packet.address] = _Heard(packet.code, count, packet.lqi, packet.rssi)
 
     def _on_bytes(self, data: bytes, now: float) -> None:
         # While listening, the same bytes also go through a wired parser: a
@@ -184,9 +181,9 @@ class _Prober:
                     self._on_record(event, now)
 
     def heard(self, address: int | None) -> _Heard:
-        """Return (a copy of) what streamed from ``address`` so far."""
+        """Return what streamed from ``address`` so far."""
         with self._heard_lock:
-            return replace(self._heard.get(address) or _Heard())
+            return self._heard.get(address) or _Heard()
 
     # -- links -----------------------------------------------------------
 

@@ -44,9 +44,8 @@ import threading
 import time
 from typing import Any
 
-from .replay_answers import ACK_HOLD, BaseStationAnswers
+from .replay_answers import ACK_HOLD, BaseStationAnswers, ReplayStats
 from .replay_pty import POLL, ReplayPty
-from .replay_stats import ReplayStats
 from .. import lifetime
 from ..capture.file_format import read_capture
 from ..capture.fixtures import FIXTURE_ADDRESS, fixture_chunks
