@@ -50,14 +50,15 @@ import time
 from typing import Any, TextIO
 
 from .bringup_round_trips import (
-    close_calls, MEASURE_TIMEOUT, note_longest, radio_timeouts, RECORD_GAP, RoundTrips, spread,
+    close_calls, COMMAND, CONTINUOUS_START, MEASURE_TIMEOUT, note_longest, PING, radio_timeouts,
+    RECORD_GAP, SHORT_COMMAND, spread,
 )
 from .port_listing import latency_timer_ms, port_group
 from .. import lifetime
 from ..arguments import seconds, whole_number
 from ..capture.file_format import CaptureWriter, default_header
 from ..codec import command_firmware as fw
-from ..codec import line_budget, streams
+from ..codec import commands, layouts, line_budget, streams
 from ..codec.data_rate import (
     divider_for_rate, period_of_divider, rate_of_divider, ticks_per_cycle,
 )
@@ -68,7 +69,7 @@ from ..codec.timer import TIMER_MODULUS
 from ..device import timeouts
 from ..device.clock import DeviceClock
 from ..device.identity import read_identity
-from ..device.link import DeviceError, DeviceLink, LinkOptions
+from ..device.link import DeviceError, DeviceLink, DeviceNack, LinkOptions
 from ..device.port import PortError, SerialPort
 from ..device.sample_clock import records_lost
 from ..device.sensor_steps import SensorSteps
@@ -156,9 +157,11 @@ class Bringup:
 
     What is said to the sensor, and when a stream counts as started or
     stopped, are the steps every tool and the node take (:attr:`steps`,
-    device/sensor_steps.py); the round trips are :attr:`round_trips`'
-    (bringup_round_trips.py); here: the sensor as found, every stream
-    measured, and the sensor as found again.
+    device/sensor_steps.py); here: the sensor as found, the round trips
+    (each ``time_*`` returns its entries of the report's ``round_trips`` and
+    notes its longest in :attr:`longest`, held against the timeouts by
+    bringup_round_trips.py), every stream measured, and the sensor as found
+    again.
     """
 
     def __init__(self, link: DeviceLink, log: RecordLog, args: argparse.Namespace,
@@ -174,7 +177,6 @@ class Bringup:
         #: Longest round trip of each kind (s), for the timeouts' check.
         self.longest: dict[str, float] = {}
         self.steps = SensorSteps()
-        self.round_trips = RoundTrips(link, self.steps, args, say, self.longest)
 
     # -- the sensor as found --------------------------------------------------------
 
@@ -236,6 +238,88 @@ class Bringup:
             self.divider = None  # written or not: unknown
             return False
         return True
+
+    # -- the round trips ----------------------------------------------------------------
+
+    def _request(self, command: bytes, code: int) -> str | None:
+        """Send ``command`` once; return the failure's name ('nacked', 'lost') or None."""
+        try:
+            self.link.request(command, code, MEASURE_TIMEOUT, 1)
+        except DeviceNack:
+            return 'nacked'
+        except DeviceError:
+            return 'lost'
+        return None
+
+    def _timed(self, kind: str, count: int, failures: tuple[str, ...],
+               attempt: Callable[[], str | None]) -> dict[str, Any]:
+        """Time ``count`` tries of ``attempt`` (it returns the failure's name, or None)."""
+        times, failed = [], dict.fromkeys(failures, 0)
+        for _ in range(count):
+            start = time.monotonic()
+            failure = attempt()
+            if failure is None:
+                times.append(time.monotonic() - start)
+            else:
+                failed[failure] += 1
+        note_longest(self.longest, kind, times)
+        return {kind: {**spread(times, 1e3), **failed}}
+
+    def time_pings(self) -> dict[str, Any]:
+        """Time pings through the base station (no answer: lost; 0x21: not the sensor's)."""
+        self.say(f'timing {self.args.pings} pings')
+
+        def once() -> str | None:
+            answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
+            # Falsy: the base station answered, the sensor did not (0x21).
+            return 'lost' if answer is None else None if answer else 'not_answered_by_sensor'
+        return self._timed(PING, self.args.pings, ('lost', 'not_answered_by_sensor'), once)
+
+    def time_commands(self) -> dict[str, Any]:
+        """Time the short command's request and reply."""
+        self.say(f'timing {self.args.commands} short commands (0x{SHORT_COMMAND:02X})')
+        return self._timed(COMMAND, self.args.commands, ('lost', 'nacked'),
+                           lambda: self._request(bytes((SHORT_COMMAND,)), SHORT_COMMAND))
+
+    def time_continuous(self, code: int, period: float) -> dict[str, Any]:
+        """
+        Time continuous mode ``code``: reply and first record, then the stop's last record.
+
+        ``period`` is the time between records at the sensor's rate.
+        """
+        self.say(f'timing {self.args.cycles} continuous-mode starts and stops (0x{code:02X})')
+        link, steps = self.link, self.steps
+        starts, stops, replies = [], [], []
+        failed = dict.fromkeys(('lost', 'nacked', 'no_records'), 0)
+        for _ in range(self.args.cycles):
+            before = link.records
+            start = time.monotonic()
+            if (failure := self._request(commands.set_continuous(code),
+                                         layouts.SET_CONTINUOUS)) is None:
+                replies.append(time.monotonic() - start)
+            else:
+                failed[failure] += 1
+            deadline = start + MEASURE_TIMEOUT + timeouts.RECORD_PERIODS * period
+            while link.records <= before and time.monotonic() < deadline:
+                time.sleep(0.002)
+            if link.records <= before:
+                failed['no_records'] += 1
+                continue
+            starts.append(link.last_data_mono - start)
+            time.sleep(0.2)
+            # Once, no retry: the stop's round trip is measured.
+            stop_sent = time.monotonic()
+            link.send(commands.stop_continuous())
+            last = steps.wait_quiet(link, stop_sent, period, MEASURE_TIMEOUT)
+            if last is None:
+                failed['lost'] += 1  # the stop was lost: stop it the sure way
+                steps.stop_until_quiet(link, period)
+                continue
+            stops.append(max(0.0, last - stop_sent))
+        note_longest(self.longest, CONTINUOUS_START, starts)
+        return {'continuous_start': {**spread(starts, 1e3), 'reply': spread(replies, 1e3),
+                                     **failed},
+                'continuous_stop': spread(stops, 1e3)}
 
     # -- every stream --------------------------------------------------------------------
 
@@ -466,9 +550,9 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
             report['error'] = (f'node {args.address} on {args.port} answered nothing: '
                                f'discover finds the port and address')
         else:
-            report['round_trips'].update(session.round_trips.ping())
-            report['round_trips'].update(session.round_trips.command())
-            report['round_trips'].update(session.round_trips.continuous(
+            report['round_trips'].update(session.time_pings())
+            report['round_trips'].update(session.time_commands())
+            report['round_trips'].update(session.time_continuous(
                 session.found_stream or streams.DEFAULT.code, period_of_divider(session.divider)))
             for stream in args.streams:
                 report['streams'].append(session.run_stream(stream))
