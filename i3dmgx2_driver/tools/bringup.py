@@ -59,9 +59,7 @@ from ..arguments import seconds, whole_number
 from ..capture.file_format import CaptureWriter, default_header
 from ..codec import command_firmware as fw
 from ..codec import commands, layouts, line_budget, streams
-from ..codec.data_rate import (
-    divider_for_rate, period_of_divider, rate_of_divider, ticks_per_cycle,
-)
+from ..codec.data_rate import divider_for_rate, period_of_divider, rate_of_divider, ticks_per_cycle
 from ..codec.framing import DataPacket, MAX_ADDRESS, MIN_ADDRESS
 from ..codec.layouts import STREAMABLE
 from ..codec.records import TICKS_PER_SECOND

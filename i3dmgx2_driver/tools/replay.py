@@ -87,9 +87,8 @@ class Replayer:
     """
 
     def __init__(self, chunks: Iterable[Chunk], speed: float = 1.0, loop: bool = False,
-                 link: str | None = None, wireless: bool = True,
-                 max_gap: float | None = None, wait_for_host: bool = False,
-                 wait_for_stream: bool = False) -> None:
+                 link: str | None = None, wireless: bool = True, max_gap: float | None = None,
+                 wait_for_host: bool = False, wait_for_stream: bool = False) -> None:
         if not speed >= 0:
             raise ValueError(f'speed must be >= 0 (0: as fast as possible), got {speed!r}')
         if max_gap is not None and not max_gap >= 0:
