@@ -44,6 +44,7 @@ from collections.abc import Callable, Sequence
 import itertools
 import json
 import os
+from pathlib import Path
 import sys
 import threading
 import time
@@ -116,11 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--stream-seconds', type=_seconds, default=5.0, metavar='S',
                         help='how long each stream runs (default 5)')
     parser.add_argument('--listen', type=_seconds, default=1.0, metavar='S',
-                        help='how long to listen first for a stream already running '
-                             '(default 1)')
+                        help='how long to listen first for a stream already running (default 1)')
     parser.add_argument('--streams', type=_streams, default='all', metavar='LIST',
-                        help='streams to run, e.g. full,inertial or 0xCC,0xC2 '
-                             '(default: all)')
+                        help='streams to run, e.g. full,inertial or 0xCC,0xC2 (default: all)')
     return parser
 
 
@@ -435,8 +434,7 @@ def format_report(report: dict[str, Any]) -> str:
         ['firmware', _cell(ident.get('firmware'))
          + (': no ' + ', '.join(ident['firmware_lacks']) if ident.get('firmware_lacks') else '')],
         ['options', _cell(ident.get('options'))],
-        ['rate divider', f'{_cell(found.get("rate_divider"))} '
-                         f'({_cell(found.get("rate_hz"))} Hz)'],
+        ['rate divider', f'{_cell(found.get("rate_divider"))} ({_cell(found.get("rate_hz"))} Hz)'],
         ['streaming as found', _cell(found.get('streaming')) if found else '-'],
         ['low-latency mode as found', _cell(port.get('low_latency_as_found'))],
         ['low-latency mode now', _cell(port.get('low_latency'))],
@@ -506,8 +504,7 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
     folder = _folder(args.output_dir)
 
     def say(text: str) -> None:
-        out.write(f'bringup: {text}\n')
-        out.flush()
+        print(f'bringup: {text}', file=out, flush=True)
 
     say(f'writing to {folder}')
     group, in_group = port_group(args.port) or (None, None)
@@ -578,13 +575,9 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
 
 def _write(folder: str, report: dict[str, Any], out: TextIO) -> None:
     text = format_report(report)
-    with open(os.path.join(folder, 'report.txt'), 'w') as handle:
-        handle.write(text)
-    with open(os.path.join(folder, 'report.json'), 'w') as handle:
-        json.dump(report, handle, indent=2)
-        handle.write('\n')
-    out.write('\n' + text)
-    out.flush()
+    Path(folder, 'report.txt').write_text(text)
+    Path(folder, 'report.json').write_text(json.dumps(report, indent=2) + '\n')
+    print('\n' + text, end='', file=out, flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -321,13 +321,11 @@ class _ProgressLine:
         self._last = now
         text = {'listen': 'listening for streams', 'ping': f'pinging {done}/{total}',
                 'identify': f'reading sensor {min(done + 1, total)}/{total}'}[stage]
-        self.out.write(f'\r\x1b[K{self.port}: {text}')
-        self.out.flush()
+        print(f'\r\x1b[K{self.port}: {text}', end='', file=self.out, flush=True)
 
     def clear(self) -> None:
         if self.enabled:
-            self.out.write('\r\x1b[K')
-            self.out.flush()
+            print('\r\x1b[K', end='', file=self.out, flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
