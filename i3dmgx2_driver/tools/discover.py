@@ -182,17 +182,15 @@ def _firmware_note(sensor: SensorFound) -> str:
 
 def _sensor_dict(sensor: SensorFound, command: str | None) -> dict[str, Any]:
     info = sensor.info
-    return {
-        'address': sensor.address, 'link': 'wireless' if sensor.wireless else 'wired',
-        'found_by': sensor.found_by,
-        **(info._asdict() if info else dict.fromkeys(DeviceInfo._fields)),
-        'firmware_lacks': fw.lacks(fw.version_of(info.firmware)) if info else None,
-        'firmware_note': _firmware_note(sensor) or None, 'rate_divider': sensor.divider,
-        'rate_hz': round(sensor.rate_hz, 3) if sensor.rate_hz else None,
-        'streaming': f'0x{sensor.streaming:02X}' if sensor.streaming else None,
-        'stream_restarted': sensor.restarted, 'lqi': sensor.lqi, 'rssi': sensor.rssi,
-        'note': sensor.note or None, 'command': command,
-    }
+    return {'address': sensor.address, 'link': 'wireless' if sensor.wireless else 'wired',
+            'found_by': sensor.found_by,
+            **(info._asdict() if info else dict.fromkeys(DeviceInfo._fields)),
+            'firmware_lacks': fw.lacks(fw.version_of(info.firmware)) if info else None,
+            'firmware_note': _firmware_note(sensor) or None, 'rate_divider': sensor.divider,
+            'rate_hz': round(sensor.rate_hz, 3) if sensor.rate_hz else None,
+            'streaming': f'0x{sensor.streaming:02X}' if sensor.streaming else None,
+            'stream_restarted': sensor.restarted, 'lqi': sensor.lqi, 'rssi': sensor.rssi,
+            'note': sensor.note or None, 'command': command}
 
 
 def _port_dict(port: PortInfo, probe: PortProbe | None) -> dict[str, Any]:
@@ -205,12 +203,10 @@ def _port_dict(port: PortInfo, probe: PortProbe | None) -> dict[str, Any]:
     }
     if probe is not None:
         command = port_command(port.stable_path, probe.sensors) if probe.sensors else None
-        out.update({
-            'message': probe.message or None, 'base_station': probe.base_station,
-            'pinged': probe.pinged, 'ping_seconds': round(probe.ping_seconds, 3),
-            'seconds': round(probe.seconds, 3),
-            'sensors': [_sensor_dict(s, command) for s in probe.sensors], 'command': command,
-        })
+        out.update(message=probe.message or None, base_station=probe.base_station,
+                   pinged=probe.pinged, ping_seconds=round(probe.ping_seconds, 3),
+                   seconds=round(probe.seconds, 3),
+                   sensors=[_sensor_dict(s, command) for s in probe.sensors], command=command)
     return out
 
 
