@@ -63,17 +63,13 @@ def bag_type(msg_type: type) -> str:
     return f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
 
 
-class RosbagsMissing(ImportError):
-    """rosbags is not installed; the message says how to install it."""
-
-
 def _rosbags() -> Any:
     try:
         import rosbags.highlevel
         import rosbags.rosbag2
         import rosbags.typesys
     except ImportError as exc:
-        raise RosbagsMissing(ROSBAGS_HINT) from exc
+        raise ImportError(ROSBAGS_HINT) from exc
     return rosbags
 
 
@@ -123,26 +119,24 @@ def capture_messages(chunks: Iterable[tuple[float, bytes]], header: dict,
     node's record path, stamped from their timers and their reads' receive
     times (the node's ``time_source`` device).
     """
-    address = header.get('address')
+    address = header.get('address') if isinstance(header.get('address'), int) else None
     wireless = bool(header.get('wireless', True))
-    parser = SensorStreamParser(address if isinstance(address, int) else None, wireless)
+    parser = SensorStreamParser(address, wireless)
     events = [(t, event) for t, data in chunks for event in parser.feed(data)
               if isinstance(event, DataPacket)]
     stream = stream_of(event.code for _, event in events)
     # A node at its parameters' defaults, streaming ``stream``.
     config = driver_config({**{spec.name: spec.default for spec in SPECS}, 'stream': stream.name,
-                            'address': address if isinstance(address, int) else MIN_ADDRESS})
+                            'address': MIN_ADDRESS if address is None else address})
     sensor = config.sensors[0]
     topics = SensorTopics.of(SINGLE_NAME, several=False)
     # The node's own table: each topic the sensor publishes with its parameters' defaults.
     rows = [(row, '/' + topic) for row, topic in zip(RECORD_TOPICS, topics.records, strict=True)
             if row.wanted(config, sensor)]
-    wire = line_budget.wire_time(stream.code, baud or int(header.get('baud') or 115200),
-                                 wireless)
+    wire = line_budget.wire_time(stream.code, baud or int(header.get('baud') or 115200), wireless)
     path = RecordPath(config.messages_for(sensor), Stamping(True, 0.0, wire),
                       [row for row, _ in rows], SampleClock(offset=lambda: 0.0))
     names = [(topic, bag_type(row.msg_type)) for row, topic in rows]
-    temperature_type = bag_type(Temperature)
     temperature = Temperature()
     temperature.header.frame_id = path.factory.frame_id
     out = []
@@ -156,7 +150,7 @@ def capture_messages(chunks: Iterable[tuple[float, bytes]], header: dict,
         elif event.code == layouts.TEMPERATURES:
             temperature.temperature = event.record.accel_celsius
             set_stamp(temperature.header, receive_time)
-            out.append(BagMessage('/' + topics.temperature, temperature_type, time_ns,
+            out.append(BagMessage('/' + topics.temperature, bag_type(Temperature), time_ns,
                                   serialize_message(temperature)))
     return out
 

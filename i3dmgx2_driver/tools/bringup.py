@@ -44,23 +44,23 @@ from collections.abc import Callable, Sequence
 import itertools
 import json
 import os
+from pathlib import Path
 import sys
 import threading
 import time
 from typing import Any, TextIO
 
 from .bringup_round_trips import (
-    close_calls, MEASURE_TIMEOUT, note_longest, radio_timeouts, RECORD_GAP, RoundTrips, spread,
+    close_calls, COMMAND, CONTINUOUS_START, MEASURE_TIMEOUT, note_longest, PING, radio_timeouts,
+    RECORD_GAP, SHORT_COMMAND, spread,
 )
 from .port_listing import latency_timer_ms, port_group
 from .. import lifetime
 from ..arguments import seconds, whole_number
 from ..capture.file_format import CaptureWriter, default_header
 from ..codec import command_firmware as fw
-from ..codec import line_budget, streams
-from ..codec.data_rate import (
-    divider_for_rate, period_of_divider, rate_of_divider, ticks_per_cycle,
-)
+from ..codec import commands, layouts, line_budget, streams
+from ..codec.data_rate import divider_for_rate, period_of_divider, rate_of_divider, ticks_per_cycle
 from ..codec.framing import DataPacket, MAX_ADDRESS, MIN_ADDRESS
 from ..codec.layouts import STREAMABLE
 from ..codec.records import TICKS_PER_SECOND
@@ -68,7 +68,7 @@ from ..codec.timer import TIMER_MODULUS
 from ..device import timeouts
 from ..device.clock import DeviceClock
 from ..device.identity import read_identity
-from ..device.link import DeviceError, DeviceLink, LinkOptions
+from ..device.link import DeviceError, DeviceLink, DeviceNack, LinkOptions
 from ..device.port import PortError, SerialPort
 from ..device.sample_clock import records_lost
 from ..device.sensor_steps import SensorSteps
@@ -83,6 +83,15 @@ EXIT_INTERRUPTED = 130
 _count = whole_number(1, 1000, 'count')
 _address = whole_number(MIN_ADDRESS, MAX_ADDRESS, 'node address')
 _seconds = seconds(0.2, 600.0)
+
+
+def _streams(text: str) -> list[streams.Stream]:
+    if text == 'all':
+        return list(streams.STREAMS)
+    try:
+        return [streams.parse(item.strip()) for item in text.split(',') if item.strip()]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -108,18 +117,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--stream-seconds', type=_seconds, default=5.0, metavar='S',
                         help='how long each stream runs (default 5)')
     parser.add_argument('--listen', type=_seconds, default=1.0, metavar='S',
-                        help='how long to listen first for a stream already running '
-                             '(default 1)')
-    parser.add_argument('--streams', default='all', metavar='LIST',
-                        help='streams to run, e.g. full,inertial or 0xCC,0xC2 '
-                             '(default: all)')
+                        help='how long to listen first for a stream already running (default 1)')
+    parser.add_argument('--streams', type=_streams, default='all', metavar='LIST',
+                        help='streams to run, e.g. full,inertial or 0xCC,0xC2 (default: all)')
     return parser
-
-
-def _streams(text: str) -> list[streams.Stream]:
-    if text == 'all':
-        return list(streams.STREAMS)
-    return [streams.parse(item.strip()) for item in text.split(',') if item.strip()]
 
 
 class RecordLog:
@@ -153,9 +154,11 @@ class Bringup:
 
     What is said to the sensor, and when a stream counts as started or
     stopped, are the steps every tool and the node take (:attr:`steps`,
-    device/sensor_steps.py); the round trips are :attr:`round_trips`'
-    (bringup_round_trips.py); here: the sensor as found, every stream
-    measured, and the sensor as found again.
+    device/sensor_steps.py); here: the sensor as found, the round trips
+    (each ``time_*`` returns its entries of the report's ``round_trips`` and
+    notes its longest in :attr:`longest`, held against the timeouts by
+    bringup_round_trips.py), every stream measured, and the sensor as found
+    again.
     """
 
     def __init__(self, link: DeviceLink, log: RecordLog, args: argparse.Namespace,
@@ -171,7 +174,6 @@ class Bringup:
         #: Longest round trip of each kind (s), for the timeouts' check.
         self.longest: dict[str, float] = {}
         self.steps = SensorSteps()
-        self.round_trips = RoundTrips(link, self.steps, args, say, self.longest)
 
     # -- the sensor as found --------------------------------------------------------
 
@@ -233,6 +235,88 @@ class Bringup:
             self.divider = None  # written or not: unknown
             return False
         return True
+
+    # -- the round trips ----------------------------------------------------------------
+
+    def _request(self, command: bytes, code: int) -> str | None:
+        """Send ``command`` once; return the failure's name ('nacked', 'lost') or None."""
+        try:
+            self.link.request(command, code, MEASURE_TIMEOUT, 1)
+        except DeviceNack:
+            return 'nacked'
+        except DeviceError:
+            return 'lost'
+        return None
+
+    def _timed(self, kind: str, count: int, failures: tuple[str, ...],
+               attempt: Callable[[], str | None]) -> dict[str, Any]:
+        """Time ``count`` tries of ``attempt`` (it returns the failure's name, or None)."""
+        times, failed = [], dict.fromkeys(failures, 0)
+        for _ in range(count):
+            start = time.monotonic()
+            failure = attempt()
+            if failure is None:
+                times.append(time.monotonic() - start)
+            else:
+                failed[failure] += 1
+        note_longest(self.longest, kind, times)
+        return {kind: {**spread(times, 1e3), **failed}}
+
+    def time_pings(self) -> dict[str, Any]:
+        """Time pings through the base station (no answer: lost; 0x21: not the sensor's)."""
+        self.say(f'timing {self.args.pings} pings')
+
+        def once() -> str | None:
+            answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
+            # Falsy: the base station answered, the sensor did not (0x21).
+            return 'lost' if answer is None else None if answer else 'not_answered_by_sensor'
+        return self._timed(PING, self.args.pings, ('lost', 'not_answered_by_sensor'), once)
+
+    def time_commands(self) -> dict[str, Any]:
+        """Time the short command's request and reply."""
+        self.say(f'timing {self.args.commands} short commands (0x{SHORT_COMMAND:02X})')
+        return self._timed(COMMAND, self.args.commands, ('lost', 'nacked'),
+                           lambda: self._request(bytes((SHORT_COMMAND,)), SHORT_COMMAND))
+
+    def time_continuous(self, code: int, period: float) -> dict[str, Any]:
+        """
+        Time continuous mode ``code``: reply and first record, then the stop's last record.
+
+        ``period`` is the time between records at the sensor's rate.
+        """
+        self.say(f'timing {self.args.cycles} continuous-mode starts and stops (0x{code:02X})')
+        link, steps = self.link, self.steps
+        starts, stops, replies = [], [], []
+        failed = dict.fromkeys(('lost', 'nacked', 'no_records'), 0)
+        for _ in range(self.args.cycles):
+            before = link.records
+            start = time.monotonic()
+            if (failure := self._request(commands.set_continuous(code),
+                                         layouts.SET_CONTINUOUS)) is None:
+                replies.append(time.monotonic() - start)
+            else:
+                failed[failure] += 1
+            deadline = start + MEASURE_TIMEOUT + timeouts.RECORD_PERIODS * period
+            while link.records <= before and time.monotonic() < deadline:
+                time.sleep(0.002)
+            if link.records <= before:
+                failed['no_records'] += 1
+                continue
+            starts.append(link.last_data_mono - start)
+            time.sleep(0.2)
+            # Once, no retry: the stop's round trip is measured.
+            stop_sent = time.monotonic()
+            link.send(commands.stop_continuous())
+            last = steps.wait_quiet(link, stop_sent, period, MEASURE_TIMEOUT)
+            if last is None:
+                failed['lost'] += 1  # the stop was lost: stop it the sure way
+                steps.stop_until_quiet(link, period)
+                continue
+            stops.append(max(0.0, last - stop_sent))
+        note_longest(self.longest, CONTINUOUS_START, starts)
+        return {'continuous_start': {**spread(starts, 1e3), 'reply': spread(replies, 1e3),
+                                     **failed},
+                'continuous_stop': spread(stops, 1e3)}
 
     # -- every stream --------------------------------------------------------------------
 
@@ -350,8 +434,7 @@ def format_report(report: dict[str, Any]) -> str:
         ['firmware', _cell(ident.get('firmware'))
          + (': no ' + ', '.join(ident['firmware_lacks']) if ident.get('firmware_lacks') else '')],
         ['options', _cell(ident.get('options'))],
-        ['rate divider', f'{_cell(found.get("rate_divider"))} '
-                         f'({_cell(found.get("rate_hz"))} Hz)'],
+        ['rate divider', f'{_cell(found.get("rate_divider"))} ({_cell(found.get("rate_hz"))} Hz)'],
         ['streaming as found', _cell(found.get('streaming')) if found else '-'],
         ['low-latency mode as found', _cell(port.get('low_latency_as_found'))],
         ['low-latency mode now', _cell(port.get('low_latency'))],
@@ -418,22 +501,19 @@ def _folder(base: str) -> str:
 
 def run(args: argparse.Namespace, out: TextIO) -> int:
     """Run a bring-up session as ``args`` say; write the folder; return the exit status."""
-    chosen = _streams(args.streams)
     folder = _folder(args.output_dir)
 
     def say(text: str) -> None:
-        out.write(f'bringup: {text}\n')
-        out.flush()
+        print(f'bringup: {text}', file=out, flush=True)
 
     say(f'writing to {folder}')
-    owner = port_group(args.port)
+    group, in_group = port_group(args.port) or (None, None)
     report: dict[str, Any] = {
         'started': time.strftime('%Y-%m-%d %H:%M:%S %z'), 'folder': folder,
         'address': args.address, 'baud': args.baud,
         'port': {'path': args.port, 'real_path': os.path.realpath(args.port),
                  'latency_timer_ms_as_found': latency_timer_ms(args.port),
-                 'group': owner[0] if owner else None,
-                 'in_group': owner[1] if owner else None},
+                 'group': group, 'in_group': in_group},
         'settings': {'pings': args.pings, 'commands': args.commands, 'cycles': args.cycles,
                      'stream_seconds': args.stream_seconds},
         'timeouts': [t._asdict() for t in radio_timeouts()],
@@ -457,7 +537,6 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
     link = DeviceLink(port, args.address, log, LinkOptions.listening(True, capture.write))
     session = Bringup(link, log, args, say)
     session.report = report
-    trips = session.round_trips
     try:
         link.start()
         if not session.find_state():
@@ -466,11 +545,11 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
             report['error'] = (f'node {args.address} on {args.port} answered nothing: '
                                f'discover finds the port and address')
         else:
-            report['round_trips'].update(trips.ping())
-            report['round_trips'].update(trips.command())
-            report['round_trips'].update(trips.continuous(
+            report['round_trips'].update(session.time_pings())
+            report['round_trips'].update(session.time_commands())
+            report['round_trips'].update(session.time_continuous(
                 session.found_stream or streams.DEFAULT.code, period_of_divider(session.divider)))
-            for stream in chosen:
+            for stream in args.streams:
                 report['streams'].append(session.run_stream(stream))
         say('putting the sensor back as found')
         report['left'] = session.restore()
@@ -496,26 +575,17 @@ def run(args: argparse.Namespace, out: TextIO) -> int:
 
 def _write(folder: str, report: dict[str, Any], out: TextIO) -> None:
     text = format_report(report)
-    with open(os.path.join(folder, 'report.txt'), 'w') as handle:
-        handle.write(text)
-    with open(os.path.join(folder, 'report.json'), 'w') as handle:
-        json.dump(report, handle, indent=2)
-        handle.write('\n')
-    out.write('\n' + text)
-    out.flush()
+    Path(folder, 'report.txt').write_text(text)
+    Path(folder, 'report.json').write_text(json.dumps(report, indent=2) + '\n')
+    print('\n' + text, end='', file=out, flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``bringup``; return the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)
     # A closed terminal, SIGTERM or its parent's end take Ctrl-C's way out: the sensor is
     # left as found.
     lifetime.interrupt_on_stop_signals()
-    try:
-        _streams(args.streams)
-    except ValueError as exc:
-        parser.error(f'--streams: {exc}')
     try:
         return run(args, sys.stdout)
     except KeyboardInterrupt:

@@ -13,25 +13,22 @@
 # limitations under the License.
 
 """
-The round trips a bring-up measures: ping, a short command, continuous mode's start and stop.
+The round trips a bring-up measures, and the driver's timeouts each is held against.
 
-Each is timed with :data:`MEASURE_TIMEOUT`, far beyond the driver's own
-timeouts, so that a slow round trip is measured rather than counted lost;
-the longest of each kind is noted for the check of the driver's timeouts
-(:func:`close_calls`). When a stream is stopped is told
-as every tool and the node tell it (``device/sensor_steps.py``).
+The round trips: a ping, a short command, continuous mode's start and stop,
+the gap between records. Each is timed (bringup.py's ``Bringup``) with
+:data:`MEASURE_TIMEOUT`, far beyond the driver's own timeouts, so that a slow
+round trip is measured rather than counted lost; the longest of each kind
+(:func:`note_longest`) is held against the timeouts of device/timeouts.py
+(:func:`close_calls`).
 """
 
-import argparse
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 import statistics
-import time
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
-from ..codec import commands, layouts
+from ..codec import layouts
 from ..device import timeouts
-from ..device.link import DeviceError, DeviceLink, DeviceNack
-from ..device.sensor_steps import SensorSteps
 from ..ros.parameter_table import SPECS
 
 #: How long a single measured exchange may take (s): far beyond every timeout the
@@ -96,15 +93,11 @@ def close_calls(measured: dict[str, float], factor: float = 2.0) -> list[str]:
     ``measured`` maps PING, COMMAND, CONTINUOUS_START, RECORD_GAP to the
     longest time seen (s); one sentence per timeout it comes close to.
     """
-    said = []
-    for timeout in radio_timeouts():
-        seen = measured.get(timeout.measured)
-        if seen is None or seen * factor < timeout.seconds:
-            continue
-        said.append(f'{timeout.measured} took up to {seen * 1e3:.0f} ms, within a factor '
-                    f'{factor:g} of {timeout.name} = {timeout.seconds:g} s ({timeout.waits}): '
-                    f'raise {timeout.setting}')
-    return said
+    return [f'{timeout.measured} took up to {seen * 1e3:.0f} ms, within a factor {factor:g} '
+            f'of {timeout.name} = {timeout.seconds:g} s ({timeout.waits}): '
+            f'raise {timeout.setting}' for timeout in radio_timeouts()
+            if (seen := measured.get(timeout.measured)) is not None
+            and seen * factor >= timeout.seconds]
 
 
 def spread(values: Sequence[float], scale: float = 1.0,
@@ -123,102 +116,3 @@ def note_longest(longest: dict[str, float], kind: str, values: Sequence[float]) 
     """Keep in ``longest`` the longest of ``values`` (s) for ``kind``, if longer."""
     if values:
         longest[kind] = max(longest.get(kind, 0.0), *values)
-
-
-class RoundTrips:
-    """
-    Time the round trips over ``link`` as many times as ``args`` say.
-
-    Each method returns its entries of the report's ``round_trips`` and
-    notes the longest round trip of its kind in ``longest``. ``steps`` tell
-    when a stream has stopped, and stop one for sure.
-    """
-
-    def __init__(self, link: DeviceLink, steps: SensorSteps, args: argparse.Namespace,
-                 say: Callable[[str], None], longest: dict[str, float]) -> None:
-        self.link = link
-        self.steps = steps
-        self.args = args
-        self.say = say
-        self.longest = longest
-
-    def _timed(self, kind: str, count: int, failures: tuple[str, ...],
-               attempt: Callable[[], str | None]) -> dict[str, Any]:
-        """Time ``count`` tries of ``attempt`` (it returns the failure's name, or None)."""
-        times, failed = [], dict.fromkeys(failures, 0)
-        for _ in range(count):
-            start = time.monotonic()
-            failure = attempt()
-            if failure is None:
-                times.append(time.monotonic() - start)
-            else:
-                failed[failure] += 1
-        note_longest(self.longest, kind, times)
-        return {kind: {**spread(times, 1e3), **failed}}
-
-    def ping(self) -> dict[str, Any]:
-        """Time pings through the base station (no answer: lost; 0x21: not the sensor's)."""
-        self.say(f'timing {self.args.pings} pings')
-
-        def once() -> str | None:
-            answer = self.link.ping_once(self.link.address, MEASURE_TIMEOUT)
-            # Falsy: the base station answered, the sensor did not (0x21).
-            return 'lost' if answer is None else None if answer else 'not_answered_by_sensor'
-        return self._timed(PING, self.args.pings, ('lost', 'not_answered_by_sensor'), once)
-
-    def command(self) -> dict[str, Any]:
-        """Time the short command's request and reply."""
-        self.say(f'timing {self.args.commands} short commands (0x{SHORT_COMMAND:02X})')
-
-        def once() -> str | None:
-            try:
-                self.link.request(bytes((SHORT_COMMAND,)), SHORT_COMMAND, MEASURE_TIMEOUT, 1)
-            except DeviceNack:
-                return 'nacked'
-            except DeviceError:
-                return 'lost'
-            return None
-        return self._timed(COMMAND, self.args.commands, ('lost', 'nacked'), once)
-
-    def continuous(self, code: int, period: float) -> dict[str, Any]:
-        """
-        Time continuous mode ``code``: reply and first record, then the stop's last record.
-
-        ``period`` is the time between records at the sensor's rate.
-        """
-        self.say(f'timing {self.args.cycles} continuous-mode starts and stops (0x{code:02X})')
-        link, steps = self.link, self.steps
-        starts, stops, replies = [], [], []
-        lost = nacked = failed = 0
-        for _ in range(self.args.cycles):
-            before = link.records
-            start = time.monotonic()
-            try:
-                link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
-                             MEASURE_TIMEOUT, 1)
-                replies.append(time.monotonic() - start)
-            except DeviceNack:
-                nacked += 1
-            except DeviceError:
-                lost += 1
-            deadline = start + MEASURE_TIMEOUT + timeouts.RECORD_PERIODS * period
-            while link.records <= before and time.monotonic() < deadline:
-                time.sleep(0.002)
-            if link.records <= before:
-                failed += 1
-                continue
-            starts.append(link.last_data_mono - start)
-            time.sleep(0.2)
-            # Once, no retry: the stop's round trip is measured.
-            stop_sent = time.monotonic()
-            link.send(commands.stop_continuous())
-            last = steps.wait_quiet(link, stop_sent, period, MEASURE_TIMEOUT)
-            if last is None:
-                lost += 1  # the stop was lost: stop it the sure way
-                steps.stop_until_quiet(link, period)
-                continue
-            stops.append(max(0.0, last - stop_sent))
-        note_longest(self.longest, CONTINUOUS_START, starts)
-        return {'continuous_start': {**spread(starts, 1e3), 'reply': spread(replies, 1e3),
-                                     'lost': lost, 'nacked': nacked, 'no_records': failed},
-                'continuous_stop': spread(stops, 1e3)}

@@ -39,8 +39,7 @@ from typing import Any, TextIO
 from .discover_probe import FACTORY_ADDRESSES, PortProbe, probe_port, ProbeConfig, SensorFound
 from .port_listing import (
     BY_ID_DIR, DEFAULT_LATENCY_TIMER_MS, describe_path, latency_timer_ms, list_ports, port_group,
-    PortInfo,
-    SYS_CLASS_TTY,
+    PortInfo, SYS_CLASS_TTY,
 )
 from .. import lifetime
 from ..arguments import seconds
@@ -183,17 +182,15 @@ def _firmware_note(sensor: SensorFound) -> str:
 
 def _sensor_dict(sensor: SensorFound, command: str | None) -> dict[str, Any]:
     info = sensor.info
-    return {
-        'address': sensor.address, 'link': 'wireless' if sensor.wireless else 'wired',
-        'found_by': sensor.found_by,
-        **(info._asdict() if info else dict.fromkeys(DeviceInfo._fields)),
-        'firmware_lacks': fw.lacks(fw.version_of(info.firmware)) if info else None,
-        'firmware_note': _firmware_note(sensor) or None, 'rate_divider': sensor.divider,
-        'rate_hz': round(sensor.rate_hz, 3) if sensor.rate_hz else None,
-        'streaming': f'0x{sensor.streaming:02X}' if sensor.streaming else None,
-        'stream_restarted': sensor.restarted, 'lqi': sensor.lqi, 'rssi': sensor.rssi,
-        'note': sensor.note or None, 'command': command,
-    }
+    return {'address': sensor.address, 'link': 'wireless' if sensor.wireless else 'wired',
+            'found_by': sensor.found_by,
+            **(info._asdict() if info else dict.fromkeys(DeviceInfo._fields)),
+            'firmware_lacks': fw.lacks(fw.version_of(info.firmware)) if info else None,
+            'firmware_note': _firmware_note(sensor) or None, 'rate_divider': sensor.divider,
+            'rate_hz': round(sensor.rate_hz, 3) if sensor.rate_hz else None,
+            'streaming': f'0x{sensor.streaming:02X}' if sensor.streaming else None,
+            'stream_restarted': sensor.restarted, 'lqi': sensor.lqi, 'rssi': sensor.rssi,
+            'note': sensor.note or None, 'command': command}
 
 
 def _port_dict(port: PortInfo, probe: PortProbe | None) -> dict[str, Any]:
@@ -206,12 +203,10 @@ def _port_dict(port: PortInfo, probe: PortProbe | None) -> dict[str, Any]:
     }
     if probe is not None:
         command = port_command(port.stable_path, probe.sensors) if probe.sensors else None
-        out.update({
-            'message': probe.message or None, 'base_station': probe.base_station,
-            'pinged': probe.pinged, 'ping_seconds': round(probe.ping_seconds, 3),
-            'seconds': round(probe.seconds, 3),
-            'sensors': [_sensor_dict(s, command) for s in probe.sensors], 'command': command,
-        })
+        out.update(message=probe.message or None, base_station=probe.base_station,
+                   pinged=probe.pinged, ping_seconds=round(probe.ping_seconds, 3),
+                   seconds=round(probe.seconds, 3),
+                   sensors=[_sensor_dict(s, command) for s in probe.sensors], command=command)
     return out
 
 
@@ -238,8 +233,7 @@ def print_ports(ports: Sequence[PortInfo], probing: set[str], out: TextIO) -> No
 def _state(sensor: SensorFound) -> str:
     if not sensor.streaming:
         return 'polled'
-    state = f'streaming 0x{sensor.streaming:02X}'
-    return state + ' (restarted)' if sensor.restarted else state
+    return f'streaming 0x{sensor.streaming:02X}' + (' (restarted)' if sensor.restarted else '')
 
 
 def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) -> None:
@@ -287,9 +281,9 @@ def print_results(results: Sequence[tuple[PortInfo, PortProbe]], out: TextIO) ->
         for sensor in sensors:
             if sensor.note:
                 out.write(f'    note: {sensor.note}\n')
-            if _firmware_note(sensor):
+            if firmware := _firmware_note(sensor):
                 who = f'node {sensor.address}' if sensor.wireless else 'the wired sensor'
-                out.write(f'    {who}: {_firmware_note(sensor)}\n')
+                out.write(f'    {who}: {firmware}\n')
 
 
 def print_hints(results: Sequence[tuple[PortInfo, PortProbe]], config: ProbeConfig,
@@ -314,10 +308,7 @@ class _ProgressLine:
     """One self-overwriting status line on a terminal; silent elsewhere."""
 
     def __init__(self, out: TextIO, enabled: bool) -> None:
-        self.out = out
-        self.enabled = enabled
-        self.port = ''
-        self._last = 0.0
+        self.out, self.enabled, self.port, self._last = out, enabled, '', 0.0
 
     def __call__(self, stage: str, done: int, total: int) -> None:
         now = time.monotonic()
@@ -326,13 +317,11 @@ class _ProgressLine:
         self._last = now
         text = {'listen': 'listening for streams', 'ping': f'pinging {done}/{total}',
                 'identify': f'reading sensor {min(done + 1, total)}/{total}'}[stage]
-        self.out.write(f'\r\x1b[K{self.port}: {text}')
-        self.out.flush()
+        print(f'\r\x1b[K{self.port}: {text}', end='', file=self.out, flush=True)
 
     def clear(self) -> None:
         if self.enabled:
-            self.out.write('\r\x1b[K')
-            self.out.flush()
+            print('\r\x1b[K', end='', file=self.out, flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -141,9 +141,8 @@ class PortProbe(NamedTuple):
     seconds: float
 
 
-@dataclass(slots=True)
-class _Heard:
-    """What streamed from one address (None: a wired sensor)."""
+class _Heard(NamedTuple):
+    """What streamed from one address (None: a wired sensor): its latest record's."""
 
     code: int = 0
     count: int = 0
@@ -154,8 +153,7 @@ class _Heard:
 class _Prober:
     """The dialogue with one open port; see the module docstring for the order."""
 
-    def __init__(self, port: SerialPort, config: ProbeConfig,
-                 progress: Progress | None) -> None:
+    def __init__(self, port: SerialPort, config: ProbeConfig, progress: Progress | None) -> None:
         self.port, self.config = port, config
         self.steps = SensorSteps(config.request_timeout, config.request_retries)
         self._progress = progress or (lambda stage, done, total: None)
@@ -170,10 +168,8 @@ class _Prober:
 
     def _on_record(self, packet: DataPacket, now: float, mono: float = 0.0) -> None:
         with self._heard_lock:
-            heard = self._heard.setdefault(packet.address, _Heard())
-            heard.code = packet.code
-            heard.count += 1
-            heard.lqi, heard.rssi = packet.lqi, packet.rssi
+            count = self._heard.get(packet.address, _Heard()).count + 1
+            self._heard[packet.address] = _Heard(packet.code, count, packet.lqi, packet.rssi)
 
     def _on_bytes(self, data: bytes, now: float) -> None:
         # While listening, the same bytes also go through a wired parser: a
@@ -184,11 +180,10 @@ class _Prober:
                 if isinstance(event, DataPacket):
                     self._on_record(event, now)
 
-    def heard(self, address: int | None) -> tuple[int, int]:
-        """Return (record code, packets) streamed from ``address`` so far."""
+    def heard(self, address: int | None) -> _Heard:
+        """Return what streamed from ``address`` so far."""
         with self._heard_lock:
-            heard = self._heard.get(address) or _Heard()
-            return heard.code, heard.count
+            return self._heard.get(address) or _Heard()
 
     # -- links -----------------------------------------------------------
 
@@ -286,11 +281,11 @@ class _Prober:
 
     def _identify(self, link: DeviceLink, address: int | None, found_by: str) -> SensorFound:
         link.retarget(address)
-        code, _ = self.heard(address)
+        code = self.heard(address).code
         info = divider = None
         if not (code and self.config.stop_streams):
             info, divider = self._read(link)
-        code, _ = self.heard(address)  # a slow stream may show itself only now
+        code = self.heard(address).code  # a slow stream may show itself only now
         restarted, note = False, ''
         if info is None and code:
             # Combined mode failed (or was not wanted): quiet it, read, restart.
@@ -305,8 +300,7 @@ class _Prober:
                             f'restart: power-cycle the sensor or run the node')
             else:
                 note = 'streams but answers no request'
-        with self._heard_lock:
-            heard = self._heard.get(address) or _Heard()
+        heard = self.heard(address)
         return SensorFound(address, found_by, info, divider, code, restarted,
                            heard.lqi, heard.rssi, note)
 

@@ -58,28 +58,24 @@ def describe(msg: Imu, rate: float, now: float) -> str:
 
 
 class Monitor(Node):
-    """Subscribe to the IMU topic and keep the latest message and the rate."""
+    """
+    Subscribe to the IMU topic and keep the latest message and how many came.
+
+    Only the spinning thread writes them (one reference, one count), so the
+    printing loop reads them without a lock.
+    """
 
     def __init__(self, topic: str, best_effort: bool) -> None:
         super().__init__('i3dmgx2_monitor')
         qos = qos_profile_sensor_data if best_effort else QoSProfile(depth=10)
         self.create_subscription(Imu, topic, self._store, qos)
         self.latest: Imu | None = None
-        #: Messages since the last :meth:`take`, and in all.
-        self.count = self.received = 0
-        self._lock = threading.Lock()
+        #: Messages received in all.
+        self.received = 0
 
     def _store(self, msg: Imu) -> None:
-        with self._lock:
-            self.latest = msg
-            self.count += 1
-            self.received += 1
-
-    def take(self) -> tuple[Imu | None, int]:
-        """Return the latest message and how many arrived since the last call."""
-        with self._lock:
-            count, self.count = self.count, 0
-            return self.latest, count
+        self.latest = msg
+        self.received += 1
 
 
 def _spin(executor: SingleThreadedExecutor, stopped: lifetime.StopSignal) -> None:
@@ -120,16 +116,17 @@ def main(argv: list[str] | None = None) -> int:
     spinner = threading.Thread(target=_spin, args=(executor, stopped), daemon=True)
     spinner.start()
     start = last = time.monotonic()
+    seen = 0
     try:
         with contextlib.suppress(KeyboardInterrupt, ExternalShutdownException):
             while not args.duration or time.monotonic() - start < args.duration:
                 if stopped.wait(args.period):
                     break
-                msg, count = node.take()
-                now = time.monotonic()
+                now, msg, received = time.monotonic(), node.latest, node.received
+                rate = (received - seen) / (now - last)
                 print(f'waiting for {node.resolve_topic_name(args.topic)} ...' if msg is None
-                      else describe(msg, count / (now - last), time.time()), flush=True)
-                last = now
+                      else describe(msg, rate, time.time()), flush=True)
+                last, seen = now, received
     finally:
         # The spinning thread must be out of rclpy's C++ before the interpreter
         # exits, or the process aborts ("terminate called without an active

@@ -44,9 +44,8 @@ import threading
 import time
 from typing import Any
 
-from .replay_answers import ACK_HOLD, BaseStationAnswers
+from .replay_answers import ACK_HOLD, BaseStationAnswers, ReplayStats
 from .replay_pty import POLL, ReplayPty
-from .replay_stats import ReplayStats
 from .. import lifetime
 from ..capture.file_format import read_capture
 from ..capture.fixtures import FIXTURE_ADDRESS, fixture_chunks
@@ -88,19 +87,14 @@ class Replayer:
     """
 
     def __init__(self, chunks: Iterable[Chunk], speed: float = 1.0, loop: bool = False,
-                 link: str | None = None, wireless: bool = True,
-                 max_gap: float | None = None, wait_for_host: bool = False,
-                 wait_for_stream: bool = False) -> None:
+                 link: str | None = None, wireless: bool = True, max_gap: float | None = None,
+                 wait_for_host: bool = False, wait_for_stream: bool = False) -> None:
         if not speed >= 0:
             raise ValueError(f'speed must be >= 0 (0: as fast as possible), got {speed!r}')
         if max_gap is not None and not max_gap >= 0:
             raise ValueError(f'max_gap must be >= 0, got {max_gap!r}')
         self.chunks: list[Chunk] = [(float(t), bytes(d)) for t, d in chunks if d]
-        self.speed = float(speed)
-        self.loop = loop
-        self.wireless = wireless
-        self.wait_for_host = wait_for_host
-        self.wait_for_stream = wait_for_stream
+        self.speed, self.loop = float(speed), loop
         self.stats = ReplayStats()
         self._offsets = schedule([t for t, _ in self.chunks], max_gap)
         self._stop, self._wake, self._finished = (threading.Event() for _ in range(3))
@@ -108,6 +102,9 @@ class Replayer:
         #: The pseudo-terminal played into: ``pty_name``, ``pending_output()``.
         self.pty = ReplayPty(link, self._stop)
         self._answers = BaseStationAnswers(self.pty, self.stats, wireless, self._wake, self._stop)
+        #: What the playback waits for first (None: nothing).
+        self._awaited = self._answers.stream_asked if wait_for_stream else \
+            self._answers.host_seen if wait_for_host else None
         self._dropping = False
         #: Path for the driver's ``port`` parameter (None before start).
         self.port: str | None = None
@@ -179,10 +176,8 @@ class Replayer:
             self._finished.set()
 
     def _play_passes(self) -> None:
-        awaited = self._answers.stream_asked if self.wait_for_stream else \
-            self._answers.host_seen if self.wait_for_host else None
-        if awaited is not None:
-            while not awaited.wait(POLL):
+        if self._awaited is not None:
+            while not self._awaited.wait(POLL):
                 if self._stop.is_set():
                     return
                 self._answers.send(force=True)

@@ -22,15 +22,16 @@ an ACK (0xAA) and a malformed one with a NACK (0x21), and leaves everything
 else unanswered. An answer waits for the end of the packet being played
 (never inside one, where it would corrupt it), but never longer than
 :data:`ACK_HOLD`. The playing (replay.py) hands it every chunk it played,
-to know where the packets end, and asks it to send what is due.
+to know where the packets end, and asks it to send what is due. Both count
+what they did in one :class:`ReplayStats`.
 """
 
+import dataclasses
 import logging
 import threading
 import time
 
 from .replay_pty import ReplayPty
-from .replay_stats import ReplayStats
 from ..codec import layouts
 from ..codec.framing import ACK, CommandPacket, NACK
 from ..codec.parser import (
@@ -40,6 +41,20 @@ from ..codec.parser import (
 _LOG = logging.getLogger('i3dmgx2_driver.replay')
 #: An ACK waits for the end of the packet being sent, but never longer than this.
 ACK_HOLD = 0.5
+
+
+@dataclasses.dataclass(slots=True)
+class ReplayStats:
+    """What a replay did, for the log and for tests: the playing's counts and the answers'."""
+
+    acks_sent: int = 0
+    bytes_dropped: int = 0
+    bytes_sent: int = 0
+    chunks_sent: int = 0
+    commands: int = 0
+    host_bytes: int = 0
+    nacks_sent: int = 0
+    passes: int = 0
 
 
 def _asks_for_stream(event: HostEvent) -> bool:
@@ -68,11 +83,8 @@ class BaseStationAnswers:
 
     def __init__(self, pty: ReplayPty, stats: ReplayStats, wireless: bool,
                  wake: threading.Event, stop: threading.Event) -> None:
-        self._pty = pty
-        self._stats = stats
-        self._wireless = wireless
-        self._wake = wake
-        self._stop = stop
+        self._pty, self._stats, self._wireless, self._wake, self._stop = (
+            pty, stats, wireless, wake, stop)
         self.host_seen, self.stream_asked = threading.Event(), threading.Event()
         self._answers: list[bytes] = []
         self._answers_lock = threading.Lock()
