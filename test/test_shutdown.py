@@ -230,3 +230,28 @@ def test_a_signal_delivered_to_another_thread_still_ends_the_wait():
     # under load, went on after the script's SIGTERM.
     code, out = _finish(_python(_SIGNAL_TO_ANOTHER_THREAD), timeout=60.0)
     assert (code, out.strip()) == (0, 'stopped True True'), out
+
+
+def test_a_sensor_that_fails_its_stop_is_said_and_the_others_still_stop(capsys):
+    from types import SimpleNamespace
+
+    from i3dmgx2_driver.device.link import DeviceTimeout
+    from i3dmgx2_driver.ros.driver_core import DriverSet
+
+    stopped = []
+
+    def core(address: int, fails: bool) -> SimpleNamespace:
+        def shutdown(report: bool) -> None:
+            if fails:
+                raise DeviceTimeout('no answer to the stop')
+            stopped.append(address)
+        return SimpleNamespace(sensor=SimpleNamespace(address=address), shutdown=shutdown)
+
+    closed = []
+    drivers = SimpleNamespace(cores=[core(95, True), core(96, False)],
+                              fault_capture=SimpleNamespace(close=lambda: closed.append('fault')),
+                              _capture=SimpleNamespace(close=lambda: closed.append('raw')))
+    drivers.each = DriverSet.each.__get__(drivers)
+    DriverSet.shutdown(drivers)
+    assert stopped == [96] and closed == ['fault', 'raw']
+    assert '[i3dmgx2_driver] stopping node 95: no answer to the stop' in capsys.readouterr().err

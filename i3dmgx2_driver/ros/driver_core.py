@@ -302,7 +302,11 @@ class DriverSet:
     def shutdown(self, report: bool = True) -> None:
         """Stop every stream and close the port, the sensors at once (within 5 s)."""
         self.fault_capture.close()  # our own stop is no fault
-        self.each(lambda core: core.shutdown(report), timeout=5.0, name='gx2-stop-{}')
+        for core, exc in self.each(lambda core: core.shutdown(report), timeout=5.0,
+                                   name='gx2-stop-{}'):
+            # Said, not raised: the other sensors and the port are still to be let go.
+            print(f'[i3dmgx2_driver] stopping node {core.sensor.address}: {exc}',
+                  file=sys.stderr, flush=True)
         self._capture.close()
 
     def destroy(self) -> None:
