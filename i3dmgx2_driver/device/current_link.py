@@ -27,6 +27,7 @@ low-latency mode. What to do with the link is the supervisor's.
 """
 
 from collections.abc import Callable
+import contextlib
 import threading
 from typing import Any
 
@@ -34,10 +35,9 @@ from . import timeouts
 from .link import DeviceLink, RecordCallback
 from .observer import Finding, LineObserver
 from .port import PortDisconnected, PortError
-from .port_opener import PortOpener
 from .sensor_steps import say_stop
 from .settings import DeviceConfig
-from .shared_port import SharedPort
+from .shared_port import PortOpener, SharedPort
 
 
 class CurrentLink:
@@ -67,8 +67,6 @@ class CurrentLink:
         self._observer: LineObserver | None = None
         #: Links opened so far (all but the first were reconnections).
         self.connections = 0
-        #: What the port last granted of low-latency mode.
-        self.low_latency_state = ''
         self._parser_totals: dict[str, int] = {}
         #: Records of closed links that were neither a reply nor of the stream.
         self._other_records = 0
@@ -82,12 +80,9 @@ class CurrentLink:
         """Open the port and make it the current link (reader not started); raise PortError."""
         cfg = self._config
         if self._shared is not None:
-            link = self._shared.attach(cfg.address, self._on_record, self._cancel, cfg.stream,
-                                       self._on_lost)
-            self.low_latency_state = self._shared.low_latency_state
-            return self._own(link)
+            return self._own(self._shared.attach(cfg.address, self._on_record, self._cancel,
+                                                 cfg.stream, self._on_lost))
         port = self._opener.open_port()
-        self.low_latency_state = self._opener.low_latency_state
         observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
                                                  cfg.baud, self._on_finding)
         link = DeviceLink(port, cfg.address, self._on_record,
@@ -114,10 +109,8 @@ class CurrentLink:
             return
         link.stop()
         if send_stop:
-            try:
+            with contextlib.suppress(PortError):
                 say_stop(link, timeouts.STOP_REPEATS_AT_EXIT, timeouts.STOP_GAP_AT_EXIT_S)
-            except PortError:
-                pass
         self._close(link)
         self._other_records += link.other_records
         if self._shared is None:
@@ -138,22 +131,17 @@ class CurrentLink:
         port's), the records neither a reply nor of the stream, the packets
         of addresses no sensor on a shared port has, the radio of the link.
         """
-        link = self._link
-        if self._shared is not None:
-            parser = self._shared.parser_stats()
-        else:
-            parser = dict(self._parser_totals)
-            if link is not None:
-                _add_counts(parser, link)
-        return {
-            'parser': parser,
-            'strays': self._shared.strays() if self._shared is not None else {},
-            'other_records': self._other_records + (link.other_records if link is not None
-                                                    else 0),
-            'radio': link.radio.stats if link is not None else None,
-            'connected': link is not None,
-            'connections': self.connections, 'reconnects': max(self.connections - 1, 0),
-            'low_latency_state': self.low_latency_state}
+        link, shared = self._link, self._shared
+        parser = shared.parser_stats() if shared is not None else dict(self._parser_totals)
+        if shared is None and link is not None:
+            _add_counts(parser, link)
+        return {'parser': parser, 'strays': shared.strays() if shared is not None else {},
+                'other_records': self._other_records + (link.other_records if link else 0),
+                'radio': link.radio.stats if link else None, 'connected': link is not None,
+                'connections': self.connections, 'reconnects': max(self.connections - 1, 0),
+                # What the port last granted this sensor's links (a shared one: its opens).
+                'low_latency_state': (shared or self._opener).low_latency_state
+                if self.connections else ''}
 
     def observe(self, on: bool) -> None:
         """Resume or pause the line observer: silence is a symptom only while we ask."""

@@ -100,8 +100,7 @@ class LinkOptions:
     @classmethod
     def listening(cls, wireless: bool, on_bytes: BytesCallback | None) -> 'LinkOptions':
         """Return a tool's options: every read's bytes to ``on_bytes``, a short wait."""
-        return cls(wireless=wireless, select_timeout=timeouts.TOOL_READ_TIMEOUT,
-                   on_bytes=on_bytes)
+        return cls(wireless=wireless, select_timeout=timeouts.TOOL_READ_TIMEOUT, on_bytes=on_bytes)
 
 
 class DeviceError(Exception):
@@ -193,7 +192,9 @@ class PortReader:
         self._requester: DeviceLink | None = None
         #: Packets of addresses no link routes, by address (a port shared by several).
         self.strays: dict[int, int] = {}
-        self._request_lock, self._write_lock = threading.Lock(), threading.Lock()
+        #: ``_wake_lock`` guards the port's wake size against a request that begins meanwhile.
+        self._request_lock, self._write_lock, self._wake_lock, self._start_lock = (
+            threading.Lock() for _ in range(4))
         #: The packet size of each link's stream (:meth:`streams`), and the bytes a
         #: wait for data may wait for while every link streams: the smallest of
         #: those (0: any byte, as it must while a link streams nothing).
@@ -202,11 +203,8 @@ class PortReader:
         #: Requests waiting for an answer (:meth:`awaiting_answer`): an ACK is one
         #: byte, a reply shorter than a record, so no wait waits for a whole packet.
         self._awaited = 0
-        #: Guards the port's wake size against a request that begins meanwhile.
-        self._wake_lock = threading.Lock()
         self._stop = threading.Event()
         self._started = False
-        self._start_lock = threading.Lock()
         #: The thread reading the port now (None before and after the reading).
         self._thread: threading.Thread | None = None
         #: Set once the reading has returned and its thread is idle again.

@@ -80,10 +80,9 @@ from .current_link import CurrentLink
 from .dialogue import SensorDialogue
 from .link import BytesCallback, DeviceError, DeviceLink, RecordCallback, RequestCancelled
 from .port import PortDisconnected, PortError, PortUnusable
-from .port_opener import PortOpener
 from .realtime import PolicyOutcome
 from .settings import DeviceConfig
-from .shared_port import SharedPort
+from .shared_port import PortOpener, SharedPort
 from .status import DeviceReport, DeviceStatus, State
 from .throttle import EVENT_PERIOD
 from .watchdog import ReopenWait, StallWatch
