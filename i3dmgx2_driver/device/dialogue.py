@@ -59,6 +59,7 @@ temperature poller and the bias store what this sensor answers.
 """
 
 from collections.abc import Callable
+import contextlib
 import struct
 import threading
 import time
@@ -117,8 +118,7 @@ class SensorDialogue(SensorSteps):
                  on_gyro_bias: Callable[[], None] | None = None) -> None:
         super().__init__(config.request_timeout, config.request_retries, cancel)
         self.config = config
-        self._log = log
-        self._warn = warn
+        self._log, self._warn = log, warn
         self._throttle = Throttle()
         #: The device's identity, once read.
         self.info: DeviceInfo | None = None
@@ -133,10 +133,11 @@ class SensorDialogue(SensorSteps):
         self._divider_written: set[int] = set()
         #: The stream's use of the line at the device's rate (once the rate is known),
         #: and, when it does not fit, what to do about it ('' when it fits).
-        self.line_use = ''
-        self.line_warning = ''
+        self.line_use = self.line_warning = ''
         #: The biases written at every start, resume and stall recovery: the
-        #: parameters' at first; an accepted capture replaces the gyro bias.
+        #: parameters' at first; an accepted capture replaces the gyro bias (the
+        #: sensor holds it in RAM already; a power cycle loses it, and the next
+        #: stall recovery, resume or start writes it back).
         self.gyro_bias: tuple[float, float, float] | None = config.gyro_bias
         self.accel_bias: tuple[float, float, float] | None = config.accel_bias
         #: Told each time a kept gyro bias was written and echoed (``~/is_calibrated``).
@@ -197,11 +198,9 @@ class SensorDialogue(SensorSteps):
         # command: a couple of polled requests first make it dependable.
         code = first_poll_code(cfg.stream)
         for _ in range(2):
-            try:
+            with contextlib.suppress(DeviceError):
                 link.request(bytes((code,)), code, cfg.request_timeout,
                              timeouts.FIRST_POLL_RETRIES)
-            except DeviceError:
-                pass
         if require_answer and not self.ping_ok and not link.heard:
             silent = (f'node {cfg.address} is silent: no answer to the base station '
                       f'ping or to polled requests (check it is powered, its address and the '
@@ -272,15 +271,6 @@ class SensorDialogue(SensorSteps):
             f'0xFCA2: {current} -> {wanted}); this persists across power cycles')
 
     # -- biases -------------------------------------------------------------------------
-
-    def keep_gyro_bias(self, bias: tuple[float, float, float]) -> None:
-        """
-        Keep an accepted capture's gyro bias: the one written from now on.
-
-        The sensor holds it in RAM already (it captured it); a power cycle
-        loses it, and the next stall recovery, resume or start writes it back.
-        """
-        self.gyro_bias = bias
 
     def write_biases(self, link: DeviceLink) -> None:
         """
@@ -405,17 +395,3 @@ class SensorDialogue(SensorSteps):
     def can_resume(self) -> bool:
         """Whether a reconnect may try :meth:`resume` (a known sensor, and allowed to)."""
         return bool(self.config.fast_reconnect and self._serial_number())
-
-    # -- exclusive operations -----------------------------------------------------------
-
-    def run_exclusive(self, link: DeviceLink, operation: Callable[[DeviceLink], Any]) -> Any:
-        """
-        Stop the stream and run ``operation(link)``; the caller starts the stream again.
-
-        For services that need the device's full attention (gyro bias
-        capture, built-in test). Paused, a polled record of the streamed code
-        (a self test's 0xC2, with the built-in test skewing it) is a reply
-        only, never a sample. Raises PortError or DeviceTimeout.
-        """
-        self.stop(link)
-        return operation(link)

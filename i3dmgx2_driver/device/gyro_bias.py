@@ -158,7 +158,7 @@ class GyroBiasCapture:
         self.last_capture = calibration
         if calibration.accepted:
             self.good_capture = calibration
-            self._device.dialogue.keep_gyro_bias(calibration.bias)
+            self._device.dialogue.gyro_bias = calibration.bias
         self._calibrated(calibration.accepted)
 
     # -- keeping it ----------------------------------------------------------

@@ -611,12 +611,7 @@ class DeviceLink:
             for _ in range(retries):
                 self._check_cancelled()
                 with self._awaiting(reply_code) as pending:
-                    if self.shared:
-                        self._exchange_shared(command, pending, timeout)
-                    else:
-                        with self.reader.holding(self):
-                            self.send(command)
-                            self._wait(pending, timeout)
+                    self._exchange(command, pending, timeout)
                 if pending.done.is_set():
                     return pending.reply
                 if pending.nacked.is_set():
@@ -635,20 +630,24 @@ class DeviceLink:
                 yield pending
         finally:
             self._pending = None
-        self._check_port()
+        self.check_port()
         self._check_cancelled()
 
-    def _exchange_shared(self, command: bytes, pending: Pending, timeout: float) -> None:
+    def _exchange(self, command: bytes, pending: Pending, timeout: float) -> None:
         """
-        Send on a shared port: hold it until the ACK or NACK, then wait for the reply alone.
+        Send ``command`` and wait for its reply, holding the port; a shared one until the ACK.
 
-        The reply is a data packet with this sensor's address, routed to this
-        link whoever else streams or asks meanwhile; only the base station's
-        one-byte answer must not be mistaken for another sensor's.
+        On a shared port the reply is a data packet with this sensor's address,
+        routed to this link whoever else streams or asks meanwhile; only the
+        base station's one-byte answer must not be mistaken for another
+        sensor's, so the port is held until the ACK or NACK alone.
         """
         deadline = time.monotonic() + timeout
         with self.reader.holding(self):
             self.send(command)
+            if not self.shared:
+                self._wait(pending, timeout)
+                return
             ack_deadline = time.monotonic() + min(timeouts.ACK_TIMEOUT, timeout)
             while not (pending.acked.is_set() or pending.nacked.is_set()
                        or pending.done.is_set() or self._cancel.is_set()):
@@ -667,8 +666,8 @@ class DeviceLink:
             if left <= 0 or pending.done.wait(min(left, 0.02)):
                 break
 
-    def _check_port(self) -> None:
-        # The reader tells each link why (port_lost) before it sets ``disconnected``.
+    def check_port(self) -> None:
+        """Raise PortDisconnected if the port is lost (the reader tells each link first)."""
         if self.error is not None or self.disconnected.is_set():
             raise PortDisconnected(self.error or 'device disconnected')
 

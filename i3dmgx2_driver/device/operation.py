@@ -72,7 +72,7 @@ class Device(Protocol):
     #: The sensor's firmware (0xE9), asked before a gated command is sent.
     firmware: SensorFirmware
     #: The steps an operation takes on the lent link (an EEPROM write among them, each
-    #: counted), and what is written back at every start (``keep_gyro_bias``).
+    #: counted), and what is written back at every start (``gyro_bias``).
     dialogue: SensorDialogue
 
     def status(self) -> DeviceStatus:

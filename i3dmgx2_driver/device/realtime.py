@@ -37,6 +37,7 @@ docs/latency.md measures each of these levers.
   ``/proc``) tell the reader from the others.
 """
 
+import contextlib
 import ctypes
 import gc
 import os
@@ -129,7 +130,5 @@ def name_os_threads() -> None:
 def _name_and_forget(frame: Any, event: str, arg: Any) -> None:
     sys.setprofile(None)
     name = threading.current_thread().name.encode(errors='replace')[:15]
-    try:
+    with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None).prctl(_PR_SET_NAME, ctypes.c_char_p(name), 0, 0, 0)
-    except (OSError, AttributeError):
-        pass

@@ -304,7 +304,10 @@ class DeviceSupervisor:
         self._report.enter(State.PAUSED)
         self._current.observe(False)  # a long operation (a 30 s bias capture) is quiet
         try:
-            return self.dialogue.run_exclusive(link, operation)
+            # Stopped, a polled record of the streamed code (a self test's 0xC2, with the
+            # built-in test skewing it) is a reply only, never a sample.
+            self.dialogue.stop(link)
+            return operation(link)
         finally:
             try:
                 self._current.observe(True)
@@ -474,8 +477,7 @@ class DeviceSupervisor:
             self._attention.clear()  # what set it is looked at below
             if self._cancel.is_set():
                 return
-            if link.disconnected.is_set():
-                raise PortDisconnected(link.error or 'device disconnected')
+            link.check_port()
             if self._paused.is_set():
                 continue
             if not watch.stalled(link.last_data_mono):
