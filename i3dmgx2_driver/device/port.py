@@ -294,11 +294,9 @@ class SerialPort:
         self.path = path
         check_port_path(path)
         try:
-            self._serial = serial_factory(
-                port=path, baudrate=baud, bytesize=serial.EIGHTBITS,
-                parity=serial.PARITY_NONE, stopbits=serial.STOPBITS_ONE,
-                xonxoff=False, rtscts=False, dsrdtr=False, timeout=0,
-                write_timeout=1.0, exclusive=True)
+            # 8N1 without flow control, pyserial's defaults; reads never block.
+            self._serial = serial_factory(port=path, baudrate=baud, timeout=0,
+                                          write_timeout=1.0, exclusive=True)
         except (serial.SerialException, OSError) as exc:
             raise _classify(path, exc) from exc
         self.low_latency_state = 'off'

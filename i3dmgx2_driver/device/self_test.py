@@ -19,7 +19,7 @@ The sensor's data polled (accel and rate, magnetometer, temperatures),
 gravity judged at rest, each built-in test (0xFB) switched on and echoed,
 then off again, and the data rate measured once the stream resumed. A step
 whose command the sensor's firmware lacks is skipped with the reason
-(:func:`firmware_skip`), not failed: the sensor is not at fault. Each judgement is a pure
+(:func:`temperature_step`), not failed: the sensor is not at fault. Each judgement is a pure
 function of the numbers, tested without a device. The report is one line
 per step for std_srvs/Trigger (:func:`format_report`) and one
 DiagnosticStatus per step for diagnostic_msgs/SelfTest (ros/services.py),
@@ -78,14 +78,6 @@ def format_report(steps: Sequence[Step]) -> str:
     return '\n'.join(lines)
 
 
-def firmware_skip(name: str, code: int, firmware: SensorFirmware) -> Step | None:
-    """Return step ``name`` skipped when ``firmware`` lacks its command ``code``, else None."""
-    if fw.has(firmware.version, code):
-        return None
-    return Step(name, True, f'skipped: 0x{code:02X} needs firmware {fw.text(fw.needs(code))}; '
-                            f'this sensor has {fw.text(firmware.version)}', skipped=True)
-
-
 def _answered(name: str, ask: Callable[[], str]) -> Step:
     """Step ``name``: passed with what ``ask()`` says, failed with the DeviceError it raises."""
     try:
@@ -101,9 +93,12 @@ def _poll(link: DeviceLink, code: int) -> Any:
 
 def temperature_step(link: DeviceLink, firmware: SensorFirmware) -> Step:
     """Poll the temperatures (0xD1) once; skipped on a firmware without them."""
-    name = 'temperatures respond (0xD1)'
-    return firmware_skip(name, layouts.TEMPERATURES, firmware) or _answered(
-        name, lambda: f'accelerometer {_poll(link, layouts.TEMPERATURES).accel_celsius:.1f} C')
+    name, code = 'temperatures respond (0xD1)', layouts.TEMPERATURES
+    if not fw.has(firmware.version, code):
+        return Step(name, True, f'skipped: 0x{code:02X} needs firmware '
+                                f'{fw.text(fw.needs(code))}; this sensor has '
+                                f'{fw.text(firmware.version)}', skipped=True)
+    return _answered(name, lambda: f'accelerometer {_poll(link, code).accel_celsius:.1f} C')
 
 
 def gravity_step(accel: Vector3, tolerance: float = GRAVITY_TOLERANCE) -> Step:

@@ -133,8 +133,7 @@ class DeviceReport:
         #: The port can never work (a path that is no serial port): why.
         self.fatal_error = ''
         #: How the last connection got streaming: 'full' (the whole dialogue) or 'resumed'.
-        self.last_start = ''
-        self.resumes = 0
+        self.last_start, self.resumes = '', 0
 
     def enter(self, state: State) -> None:
         """Say what the supervisor does now (never STREAMING: see :meth:`streaming`)."""
@@ -182,8 +181,7 @@ class DeviceReport:
     def failed(self, error: PortError) -> None:
         """Keep why the port can never work; the supervisor stops."""
         with self._lock:
-            self.fatal_error = str(error)
-            self.last_error = str(error)
+            self.fatal_error = self.last_error = str(error)
             self.state = State.STOPPED
 
     def fields(self) -> dict[str, Any]:

@@ -108,11 +108,10 @@ class DeviceSupervisor:
     it; no line observer watches it.
     """
 
-    def __init__(self, config: DeviceConfig, on_record: RecordCallback,
-                 log: Any = None, on_connect: Callable[[], None] | None = None,
+    def __init__(self, config: DeviceConfig, on_record: RecordCallback, log: Any = None,
+                 on_connect: Callable[[], None] | None = None,
                  on_fatal: Callable[[PortError], None] | None = None,
-                 on_bytes: BytesCallback | None = None,
-                 shared: SharedPort | None = None,
+                 on_bytes: BytesCallback | None = None, shared: SharedPort | None = None,
                  on_gyro_bias: Callable[[], None] | None = None,
                  on_stream_known: Callable[[int | None, bool], None] | None = None) -> None:
         self.config = config
@@ -124,11 +123,11 @@ class DeviceSupervisor:
         #: it; whoever set it decides what becomes of the port: stop() closes it,
         #: stop_streaming() keeps it.
         self._cancel = threading.Event()
-        #: Set while a service's operation has the sensor: the stream is quiet on purpose.
-        self._paused = threading.Event()
-        #: Set when the watch must look before its stall deadline: a cancel, a lost port,
-        #: the end of a pause. Between them it sleeps (idle costs nothing, docs/cpu.md).
-        self._attention = threading.Event()
+        #: ``_paused`` is set while a service's operation has the sensor: the stream is
+        #: quiet on purpose. ``_attention``, when the watch must look before its stall
+        #: deadline: a cancel, a lost port, the end of a pause. Between them it sleeps
+        #: (idle costs nothing, docs/cpu.md).
+        self._paused, self._attention = threading.Event(), threading.Event()
         self._report = DeviceReport(log)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
         self.dialogue = SensorDialogue(config, log, self._report.warn, self._cancel, on_gyro_bias)
@@ -155,12 +154,11 @@ class DeviceSupervisor:
         if self._shared is not None and dialogue.divider and not line_warning:
             line_warning = self._shared.line_warning(cfg.address, cfg.stream,
                                                      dialogue.expected_rate_hz)
+        learned = ('ping_ok', 'info', 'divider', 'expected_rate_hz', 'eeprom_writes', 'line_use')
         return DeviceStatus(
-            **self._report.fields(), **self._current.totals(), port=cfg.port,
-            address=cfg.address, wireless=cfg.wireless, ping_ok=dialogue.ping_ok,
-            info=dialogue.info, divider=dialogue.divider,
-            expected_rate_hz=dialogue.expected_rate_hz, eeprom_writes=dialogue.eeprom_writes,
-            line_use=dialogue.line_use, line_warning=line_warning)
+            **self._report.fields(), **self._current.totals(),
+            **{name: getattr(dialogue, name) for name in learned}, port=cfg.port,
+            address=cfg.address, wireless=cfg.wireless, line_warning=line_warning)
 
     @property
     def link(self) -> DeviceLink | None:
@@ -296,8 +294,7 @@ class DeviceSupervisor:
         unless the device streams (or has stalled); PortError or
         DeviceError from the operation or the restart.
         """
-        link = self._current.link
-        state = self._report.state
+        link, state = self._current.link, self._report.state
         if link is None or state not in (State.STREAMING, State.STALLED):
             raise DeviceUnavailable(f'device not streaming (state: {state.value})')
         self._paused.set()
@@ -450,9 +447,8 @@ class DeviceSupervisor:
     def _say(self, exc: PortError | DeviceError) -> None:
         """Say why this attempt failed, and that the loop goes on."""
         if isinstance(exc, DeviceError):
-            self._report.warn('timeout', f'device not answering: {exc} (wrong port or '
-                                         f'address? ros2 run i3dmgx2_driver discover '
-                                         f'finds sensors)')
+            self._report.warn('timeout', f'device not answering: {exc} (wrong port or address? '
+                                         f'ros2 run i3dmgx2_driver discover finds sensors)')
             return
         # An unplug is an event; a port that stays missing is a condition.
         period = EVENT_PERIOD if isinstance(exc, PortDisconnected) else None
