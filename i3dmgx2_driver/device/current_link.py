@@ -54,13 +54,9 @@ class CurrentLink:
     def __init__(self, config: DeviceConfig, opener: PortOpener, on_record: RecordCallback,
                  cancel: threading.Event, on_lost: Callable[[], None],
                  on_finding: Callable[[Finding], None], shared: SharedPort | None = None) -> None:
-        self._config = config
-        self._opener = opener
-        self._on_record = on_record
+        self._config, self._opener, self._shared = config, opener, shared
+        self._on_record, self._on_lost, self._on_finding = on_record, on_lost, on_finding
         self._cancel = cancel
-        self._on_lost = on_lost
-        self._on_finding = on_finding
-        self._shared = shared
         self._link: DeviceLink | None = None
         #: Guards who owns ``_link``: the thread opening one, or a caller releasing it.
         self._lock = threading.Lock()

@@ -230,10 +230,9 @@ class SensorDialogue(SensorSteps):
                                    f'and the bias store; they are asked for all the same', None)
         if info != self._info_logged:
             self._info_logged = info
-            self._log.info(f'device: model {info.model_name or "?"} '
-                           f'({info.model_number or "?"}), serial {info.serial_number or "?"}, '
-                           f'firmware {info.firmware or "?"}, options {info.options or "-"}, '
-                           f'node {cfg.address}')
+            self._log.info(f'device: model {info.model_name or "?"} ({info.model_number or "?"}), '
+                           f'serial {info.serial_number or "?"}, firmware {info.firmware or "?"}, '
+                           f'options {info.options or "-"}, node {cfg.address}')
 
     def _configure_rate(self, link: DeviceLink) -> None:
         """Read the divider; write the one ``config.data_rate_hz`` asks for, if it differs."""

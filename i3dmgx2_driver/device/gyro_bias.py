@@ -96,10 +96,8 @@ class GyroBiasCapture:
 
     def __init__(self, device: Device, forget_last_sample: Callable[[], None],
                  calibrated: Callable[[bool], None], log: Any) -> None:
-        self._device = device
-        self._forget = forget_last_sample
-        self._calibrated = calibrated
-        self._log = log
+        self._device, self._log = device, log
+        self._forget, self._calibrated = forget_last_sample, calibrated
         #: The last capture attempt and the last accepted one.
         self.last_capture: Calibration | None = None
         self.good_capture: Calibration | None = None

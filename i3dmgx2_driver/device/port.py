@@ -92,9 +92,8 @@ class PortNotSerial(PortUnusable):
 UDEV_RULE_NAME = '99-i3dmgx2.rules'
 #: The commands that install it, on one line.
 UDEV_RULE_INSTALL = (
-    'sudo cp "$(ros2 pkg prefix i3dmgx2_driver)/share/i3dmgx2_driver/udev/'
-    f'{UDEV_RULE_NAME}" /etc/udev/rules.d/ && sudo udevadm control --reload-rules '
-    '&& sudo udevadm trigger')
+    f'sudo cp "$(ros2 pkg prefix i3dmgx2_driver)/share/i3dmgx2_driver/udev/{UDEV_RULE_NAME}" '
+    '/etc/udev/rules.d/ && sudo udevadm control --reload-rules && sudo udevadm trigger')
 #: What the rule does, and how to install it.
 UDEV_RULE_ADVICE = (
     "install the udev rule that comes with the driver, which gives the base station's port "

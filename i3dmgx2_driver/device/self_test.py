@@ -95,9 +95,8 @@ def temperature_step(link: DeviceLink, firmware: SensorFirmware) -> Step:
     """Poll the temperatures (0xD1) once; skipped on a firmware without them."""
     name, code = 'temperatures respond (0xD1)', layouts.TEMPERATURES
     if not fw.has(firmware.version, code):
-        return Step(name, True, f'skipped: 0x{code:02X} needs firmware '
-                                f'{fw.text(fw.needs(code))}; this sensor has '
-                                f'{fw.text(firmware.version)}', skipped=True)
+        return Step(name, True, f'skipped: 0x{code:02X} needs firmware {fw.text(fw.needs(code))};'
+                                f' this sensor has {fw.text(firmware.version)}', skipped=True)
     return _answered(name, lambda: f'accelerometer {_poll(link, code).accel_celsius:.1f} C')
 
 
@@ -137,11 +136,8 @@ class SelfTestRun:
     def __init__(self, device: Device, published: Callable[[], tuple[int, float]],
                  forget_last_sample: Callable[[], None], stop: threading.Event,
                  log: Any) -> None:
-        self._device = device
-        self._published = published
-        self._forget = forget_last_sample
-        self._stop = stop
-        self._log = log
+        self._device, self._log = device, log
+        self._published, self._forget, self._stop = published, forget_last_sample, stop
 
     def steps(self) -> list[Step]:
         """Run every step of the self test and log the report; return the steps."""

@@ -95,18 +95,14 @@ class SharedPort(PortOpener):
                  on_bytes: BytesCallback | None = None) -> None:
         super().__init__(config, log, on_bytes)
         self._lock = threading.Lock()
-        self._reader: PortReader | None = None
+        #: The reader of the open port (None while closed); only this class sets it.
+        self.reader: PortReader | None = None
         self._links: set[DeviceLink] = set()
         #: Each sensor's stream and the rate its device runs at, once known.
         self._streams: dict[int, tuple[int, float]] = {}
         self._warned = ''
         #: Times the port was opened.
         self.opens = 0
-
-    @property
-    def reader(self) -> PortReader | None:
-        """Return the reader of the open port (None while closed)."""
-        return self._reader
 
     def attach(self, address: int, on_record: RecordCallback,
                cancel: threading.Event, records_of: int | None = None,
@@ -121,11 +117,11 @@ class SharedPort(PortOpener):
         Raises PortError when the port cannot be opened.
         """
         with self._lock:
-            reader = self._reader
+            reader = self.reader
             if reader is None or reader.disconnected.is_set():
                 if reader is not None:
                     self._close(reader)
-                reader = self._reader = PortReader(self.open_port(), None, self.reader_options())
+                reader = self.reader = PortReader(self.open_port(), None, self.reader_options())
                 self.opens += 1
             link = DeviceLink(reader.port, address, on_record,
                               self.reader_options(cancel=cancel, records_of=records_of,
@@ -143,8 +139,8 @@ class SharedPort(PortOpener):
             if any(other.reader is reader for other in self._links):
                 return
             self._close(reader)
-            if reader is self._reader:
-                self._reader = None
+            if reader is self.reader:
+                self.reader = None
 
     def line_warning(self, address: int, code: int, rate_hz: float) -> str:
         """
@@ -172,12 +168,12 @@ class SharedPort(PortOpener):
 
     def parser_stats(self) -> dict[str, int]:
         """Return the counters of the open port's parser (empty while closed)."""
-        reader = self._reader
+        reader = self.reader
         return reader.parser.stats.as_dict() if reader is not None else {}
 
     def strays(self) -> dict[int, int]:
         """Return the packets of unlisted addresses on the open port, by address."""
-        reader = self._reader
+        reader = self.reader
         return dict(reader.strays) if reader is not None else {}
 
     @staticmethod
