@@ -26,6 +26,7 @@ were not the stream's summed over all of them, what the port granted of
 low-latency mode. What to do with the link is the supervisor's.
 """
 
+from collections import Counter
 from collections.abc import Callable
 import contextlib
 import threading
@@ -63,7 +64,7 @@ class CurrentLink:
         self._observer: LineObserver | None = None
         #: Links opened so far (all but the first were reconnections).
         self.connections = 0
-        self._parser_totals: dict[str, int] = {}
+        self._parser_totals: Counter[str] = Counter()
         #: Records of closed links that were neither a reply nor of the stream.
         self._other_records = 0
 
@@ -110,7 +111,7 @@ class CurrentLink:
         self._close(link)
         self._other_records += link.other_records
         if self._shared is None:
-            _add_counts(self._parser_totals, link)
+            self._parser_totals.update(link.parser.stats.as_dict())
 
     def _close(self, link: DeviceLink) -> None:
         """Close the link's port, or hand the link back to the shared one."""
@@ -128,10 +129,10 @@ class CurrentLink:
         of addresses no sensor on a shared port has, the radio of the link.
         """
         link, shared = self._link, self._shared
-        parser = shared.parser_stats() if shared is not None else dict(self._parser_totals)
+        parser = shared.parser_stats() if shared is not None else Counter(self._parser_totals)
         if shared is None and link is not None:
-            _add_counts(parser, link)
-        return {'parser': parser, 'strays': shared.strays() if shared is not None else {},
+            parser.update(link.parser.stats.as_dict())
+        return {'parser': dict(parser), 'strays': shared.strays() if shared is not None else {},
                 'other_records': self._other_records + (link.other_records if link else 0),
                 'radio': link.radio.stats if link else None, 'connected': link is not None,
                 'connections': self.connections, 'reconnects': max(self.connections - 1, 0),
@@ -149,9 +150,3 @@ class CurrentLink:
         """Say what the line observer last found on this link ('' if nothing)."""
         seen = self._observer.last_finding if self._observer is not None else None
         return seen.message if seen is not None else ''
-
-
-def _add_counts(totals: dict[str, int], link: DeviceLink) -> None:
-    """Add ``link``'s parser counters to ``totals``."""
-    for key, value in link.parser.stats.as_dict().items():
-        totals[key] = totals.get(key, 0) + value

@@ -456,10 +456,9 @@ class DeviceLink:
         #: (:meth:`set_streamed`): a polled reply of that code is then both the
         #: reply and a record of the stream.
         self._streamed: int | None = None
-        #: Records of the stream (of any code while none is streamed) received so far.
-        self.records = 0
-        #: Records neither a reply nor handed to the consumer (not of ``records_of``).
-        self.other_records = 0
+        #: Records of the stream (of any code while none is streamed) received so far,
+        #: and those neither a reply nor handed to the consumer (not of ``records_of``).
+        self.records = self.other_records = 0
         #: The command byte of the last record handed on (None before one).
         self.last_code: int | None = None
         #: The monotonic time the stream was last heard, for stall detection.
@@ -648,22 +647,19 @@ class DeviceLink:
             if not self.shared:
                 self._wait(pending, timeout)
                 return
-            ack_deadline = time.monotonic() + min(timeouts.ACK_TIMEOUT, timeout)
-            while not (pending.acked.is_set() or pending.nacked.is_set()
-                       or pending.done.is_set() or self._cancel.is_set()):
-                left = ack_deadline - time.monotonic()
-                if left <= 0:
-                    break
-                pending.acked.wait(min(left, 0.01))
+            self._wait(pending, min(timeouts.ACK_TIMEOUT, timeout), until=pending.acked, step=0.01)
         if not pending.nacked.is_set():
             self._wait(pending, deadline - time.monotonic())
 
-    def _wait(self, pending: Pending, timeout: float, nack_ends: bool = True) -> None:
-        """Wait for a reply, a NACK (if ``nack_ends``), a cancel or the timeout."""
+    def _wait(self, pending: Pending, timeout: float, nack_ends: bool = True,
+              until: threading.Event | None = None, step: float = 0.02) -> None:
+        """Wait for a reply (or ``until``), a NACK (if ``nack_ends``), a cancel or the timeout."""
+        until = until or pending.done
         deadline = time.monotonic() + timeout
-        while not (nack_ends and pending.nacked.is_set()) and not self._cancel.is_set():
+        while not ((nack_ends and pending.nacked.is_set()) or pending.done.is_set()
+                   or self._cancel.is_set()):
             left = deadline - time.monotonic()
-            if left <= 0 or pending.done.wait(min(left, 0.02)):
+            if left <= 0 or until.wait(min(left, step)):
                 break
 
     def check_port(self) -> None:

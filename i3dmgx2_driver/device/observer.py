@@ -155,12 +155,9 @@ class LineObserver:
         self._restart(0.0, None)  # the first feed starts the first window
 
     def _restart(self, now: float, epoch: float | None) -> None:
-        self._epoch = epoch
-        self._start = now
-        self._next_judge = now + JUDGE_EVERY
+        self._epoch, self._start, self._next_judge = epoch, now, now + JUDGE_EVERY
         self._heard.clear()
-        self._wired_records = 0
-        self._bytes = 0
+        self._wired_records = self._bytes = 0
         self._base = (self._packets.stats.bytes_skipped, self._wired.stats.bytes_skipped)
 
     def pause(self) -> None:

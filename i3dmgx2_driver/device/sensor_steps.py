@@ -71,8 +71,7 @@ class SensorSteps:
     def __init__(self, timeout: float = timeouts.REQUEST_TIMEOUT,
                  retries: int = timeouts.REQUEST_RETRIES,
                  cancel: threading.Event | None = None) -> None:
-        self.timeout = timeout
-        self.retries = retries
+        self.timeout, self.retries = timeout, retries
         self._cancel = cancel if cancel is not None else threading.Event()
         #: EEPROM write commands sent (the divider's cell, a bias stored; each may wear it).
         self.eeprom_writes = 0

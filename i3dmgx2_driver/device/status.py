@@ -125,13 +125,10 @@ class DeviceReport:
         self._lock = threading.Lock()
         self.state = State.CONNECTING
         self.stalls = 0
-        #: The last problem said (a warning's text), '' if none yet.
-        self.last_error = ''
-        #: What the line observer last found while nothing of ours arrived ('' once
-        #: records flow), for diagnostics.
-        self.advice = ''
-        #: The port can never work (a path that is no serial port): why.
-        self.fatal_error = ''
+        #: The last problem said (a warning's text), '' if none yet; what the line
+        #: observer last found while nothing of ours arrived ('' once records flow), for
+        #: diagnostics; why the port can never work (a path that is no serial port).
+        self.last_error = self.advice = self.fatal_error = ''
         #: How the last connection got streaming: 'full' (the whole dialogue) or 'resumed'.
         self.last_start, self.resumes = '', 0
 
@@ -152,10 +149,8 @@ class DeviceReport:
         with self._lock:
             self.state = State.STREAMING
             self.advice = ''
-            if start:
-                self.last_start = start
-                if start == 'resumed':
-                    self.resumes += 1
+            self.last_start = start or self.last_start
+            self.resumes += start == 'resumed'
 
     def stalled(self) -> None:
         """Count a stall: no record for longer than the stall timeout."""

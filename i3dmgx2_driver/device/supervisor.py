@@ -114,8 +114,7 @@ class DeviceSupervisor:
                  on_bytes: BytesCallback | None = None, shared: SharedPort | None = None,
                  on_gyro_bias: Callable[[], None] | None = None,
                  on_stream_known: Callable[[int | None, bool], None] | None = None) -> None:
-        self.config = config
-        self._shared = shared
+        self.config, self._shared = config, shared
         self._log = log = log or logging.getLogger('i3dmgx2_driver')
         #: Set means "no stream wanted now": the thread ends, and every request on the
         #: link gives up within a few tens of milliseconds (the link's ``cancel`` event),
