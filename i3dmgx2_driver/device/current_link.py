@@ -82,10 +82,8 @@ class CurrentLink:
         port = self._opener.open_port()
         observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
                                                  cfg.baud, self._on_finding)
-        link = DeviceLink(port, cfg.address, self._on_record,
-                          self._opener.reader_options(observer, self._cancel, cfg.stream,
-                                                      self._on_lost))
-        return self._own(link)
+        options = self._opener.reader_options(observer, self._cancel, cfg.stream, self._on_lost)
+        return self._own(DeviceLink(port, cfg.address, self._on_record, options))
 
     def _own(self, link: DeviceLink) -> DeviceLink:
         """Make ``link`` the current one, unless the driver was told to stop meanwhile."""

@@ -61,9 +61,8 @@ class Calibration(NamedTuple):
     summary: str
 
 
-def judge_capture(bias: Vector3, accel_before: Vector3, accel_after: Vector3,
-                  rate_after: Vector3, max_bias: float = MAX_GYRO_BIAS,
-                  max_residual: float = MAX_RESIDUAL_RATE,
+def judge_capture(bias: Vector3, accel_before: Vector3, accel_after: Vector3, rate_after: Vector3,
+                  max_bias: float = MAX_GYRO_BIAS, max_residual: float = MAX_RESIDUAL_RATE,
                   max_accel_change: float = MAX_ACCEL_CHANGE) -> list[str]:
     """
     Return why a captured gyro bias cannot be trusted; empty if it can.

@@ -178,8 +178,7 @@ class PortReader:
     counted by address in ``strays``.
     """
 
-    def __init__(self, port: SerialPort, address: int | None,
-                 options: LinkOptions | None = None,
+    def __init__(self, port: SerialPort, address: int | None, options: LinkOptions | None = None,
                  fallback: 'DeviceLink | None' = None) -> None:
         self._options = options = options if options is not None else LinkOptions()
         self.port = port
@@ -203,19 +202,18 @@ class PortReader:
         #: Requests waiting for an answer (:meth:`awaiting_answer`): an ACK is one
         #: byte, a reply shorter than a record, so no wait waits for a whole packet.
         self._awaited = 0
-        self._stop = threading.Event()
         self._started = False
         #: The thread reading the port now (None before and after the reading).
         self._thread: threading.Thread | None = None
-        #: Set once the reading has returned and its thread is idle again.
-        self._finished = threading.Event()
-        self.disconnected = threading.Event()
+        #: ``_finished`` is set once the reading has returned and its thread is idle again;
+        #: ``running`` by the thread once its policy is applied, before its first read;
+        #: ``disconnected`` once the port is lost.
+        self._stop, self._finished, self.running, self.disconnected = (
+            threading.Event() for _ in range(4))
         #: Why the port was lost (None while it works); set before ``disconnected``.
         self.error: str | None = None
         #: What the scheduler granted the thread (set once it runs).
         self.policy_outcome = PolicyOutcome()
-        #: Set by the thread once its policy is applied, before its first read.
-        self.running = threading.Event()
 
     @property
     def stopping(self) -> bool:

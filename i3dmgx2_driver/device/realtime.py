@@ -57,11 +57,6 @@ class ThreadPolicy(NamedTuple):
     #: SCHED_FIFO priority 1..99; 0 leaves the thread under the normal policy.
     realtime_priority: int = 0
 
-    @property
-    def requested(self) -> bool:
-        """Whether anything is asked at all."""
-        return self.realtime_priority > 0
-
 
 #: Ask nothing of the scheduler.
 NORMAL_SCHEDULING = ThreadPolicy()

@@ -117,9 +117,8 @@ def rate_step(measured_hz: float | None, expected_hz: float | None,
     if not expected_hz:
         return Step('data rate', False, f'{measured_hz:.1f} Hz; configured rate unknown')
     error = measured_hz / expected_hz - 1.0
-    return Step('data rate', abs(error) <= tolerance,
-                f'{measured_hz:.2f} Hz measured, {expected_hz:.2f} Hz configured '
-                f'({error:+.1%}, tolerance ±{tolerance:.0%})')
+    return Step('data rate', abs(error) <= tolerance, f'{measured_hz:.2f} Hz measured, '
+                f'{expected_hz:.2f} Hz configured ({error:+.1%}, tolerance ±{tolerance:.0%})')
 
 
 class SelfTestRun:
@@ -134,8 +133,7 @@ class SelfTestRun:
     """
 
     def __init__(self, device: Device, published: Callable[[], tuple[int, float]],
-                 forget_last_sample: Callable[[], None], stop: threading.Event,
-                 log: Any) -> None:
+                 forget_last_sample: Callable[[], None], stop: threading.Event, log: Any) -> None:
         self._device, self._log = device, log
         self._published, self._forget, self._stop = published, forget_last_sample, stop
 

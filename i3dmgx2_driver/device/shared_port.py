@@ -75,8 +75,7 @@ class PortOpener:
         return port
 
     def reader_options(self, observer: LineObserver | None = None,
-                       cancel: threading.Event | None = None,
-                       records_of: int | None = None,
+                       cancel: threading.Event | None = None, records_of: int | None = None,
                        on_lost: Callable[[], None] | None = None) -> LinkOptions:
         """Return how the port's reader reads, whom it tells, what its link's consumer takes."""
         return LinkOptions(wireless=self.config.wireless, on_bytes=self._on_bytes,
@@ -123,10 +122,8 @@ class SharedPort(PortOpener):
                     self._close(reader)
                 reader = self.reader = PortReader(self.open_port(), None, self.reader_options())
                 self.opens += 1
-            link = DeviceLink(reader.port, address, on_record,
-                              self.reader_options(cancel=cancel, records_of=records_of,
-                                                  on_lost=on_lost),
-                              reader=reader)
+            options = self.reader_options(cancel=cancel, records_of=records_of, on_lost=on_lost)
+            link = DeviceLink(reader.port, address, on_record, options, reader=reader)
             self._links.add(link)
             return link
 

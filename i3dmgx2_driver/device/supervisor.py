@@ -154,10 +154,9 @@ class DeviceSupervisor:
             line_warning = self._shared.line_warning(cfg.address, cfg.stream,
                                                      dialogue.expected_rate_hz)
         learned = ('ping_ok', 'info', 'divider', 'expected_rate_hz', 'eeprom_writes', 'line_use')
-        return DeviceStatus(
-            **self._report.fields(), **self._current.totals(),
-            **{name: getattr(dialogue, name) for name in learned}, port=cfg.port,
-            address=cfg.address, wireless=cfg.wireless, line_warning=line_warning)
+        return DeviceStatus(**self._report.fields(), **self._current.totals(),
+                            **{name: getattr(dialogue, name) for name in learned}, port=cfg.port,
+                            address=cfg.address, wireless=cfg.wireless, line_warning=line_warning)
 
     @property
     def link(self) -> DeviceLink | None:
