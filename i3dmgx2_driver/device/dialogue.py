@@ -138,8 +138,7 @@ class SensorDialogue(SensorSteps):
         #: parameters' at first; an accepted capture replaces the gyro bias (the
         #: sensor holds it in RAM already; a power cycle loses it, and the next
         #: stall recovery, resume or start writes it back).
-        self.gyro_bias: tuple[float, float, float] | None = config.gyro_bias
-        self.accel_bias: tuple[float, float, float] | None = config.accel_bias
+        self.gyro_bias, self.accel_bias = config.gyro_bias, config.accel_bias
         #: Told each time a kept gyro bias was written and echoed (``~/is_calibrated``).
         self._on_gyro_bias = on_gyro_bias or (lambda: None)
 
@@ -292,10 +291,9 @@ class SensorDialogue(SensorSteps):
                 raise type(exc)(f'{name}: the sensor did not echo the bias written '
                                 f'(0x{code:02X}): {exc}') from None
             if tuple(echo) != float32_vector(bias):
-                raise EchoMismatch(
-                    f'{name}: wrote {_vector(bias)} {unit}, the sensor echoed '
-                    f'{_vector(echo)} {unit} (0x{code:02X}): it does not use the bias asked '
-                    f'for; check the parameter and the sensor')
+                raise EchoMismatch(f'{name}: wrote {_vector(bias)} {unit}, the sensor echoed '
+                                   f'{_vector(echo)} {unit} (0x{code:02X}): it does not use '
+                                   f'the bias asked for; check the parameter and the sensor')
             self._log.info(f'{name} {_vector(bias)} {unit} written to node {cfg.address} '
                            f'(RAM, echoed; lost at a power cycle, written again at start '
                            f'and after a stall)')

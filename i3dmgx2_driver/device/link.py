@@ -438,16 +438,15 @@ class DeviceLink:
         self.error: str | None = None
         #: What the scheduler granted the reader thread (once it runs).
         self.policy_outcome = PolicyOutcome()
-        #: Set once the link receives its packets (its own reader runs, or its
-        #: address is routed on a shared one that runs).
-        self.running = threading.Event()
+        #: ``running`` is set once the link receives its packets (its own reader runs, or
+        #: its address is routed on a shared one that runs); ``_stopped`` when the link
+        #: stops: every request gives up.
+        self.running, self._stopped = threading.Event(), threading.Event()
         self._on_record, self._records_of, self._on_lost = (
             on_record, options.records_of, options.on_lost)
         self._cancel = options.cancel if options.cancel is not None else threading.Event()
         #: One exchange at a time with this sensor.
         self._lock = threading.Lock()
-        #: Set when the link stops: every request gives up.
-        self._stopped = threading.Event()
         #: The request waiting for its reply (read by the reader thread).
         self._pending: Pending | None = None
         #: The command byte of the record being streamed, None while none is

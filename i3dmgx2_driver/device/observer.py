@@ -184,8 +184,7 @@ class LineObserver:
             self._bytes += len(data)
             self._heard.update(event.address for event in self._packets.feed(data)
                                if isinstance(event, DataPacket))
-            self._wired_records += sum(isinstance(event, DataPacket)
-                                       for event in self._wired.feed(data))
+            self._wired_records += sum(isinstance(e, DataPacket) for e in self._wired.feed(data))
         if now < self._next_judge:
             return None
         self._next_judge = now + JUDGE_EVERY

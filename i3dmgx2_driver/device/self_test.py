@@ -72,9 +72,8 @@ def format_report(steps: Sequence[Step]) -> str:
     lines = [f'{s.verdict} {s.name}: {s.detail}' for s in steps]
     failed, skipped = sum(not s.passed for s in steps), sum(s.skipped for s in steps)
     ran = len(steps) - skipped
-    lines.append(f'self test {"passed" if not failed else "FAILED"}: '
-                 f'{ran - failed}/{ran} steps passed'
-                 + (f', {skipped} skipped (the firmware lacks them)' if skipped else ''))
+    lines.append(f'self test {"passed" if not failed else "FAILED"}: {ran - failed}/{ran} steps '
+                 f'passed' + (f', {skipped} skipped (the firmware lacks them)' if skipped else ''))
     return '\n'.join(lines)
 
 
@@ -173,8 +172,7 @@ class SelfTestRun:
                  gravity_step(polled[0]) if polled
                  else Step('gravity at rest', False, 'no acceleration to judge')]
         try:
-            for bit, name, sensor in BIT_STEPS:
-                steps.append(self._bit_step(link, bit, name, sensor))
+            steps.extend(self._bit_step(link, *step) for step in BIT_STEPS)
         finally:
             steps.append(self._bit_step(link, 0x00, 'built-in test off', None))
             # While the stream is still stopped: the timer gap across the pause is
