@@ -127,6 +127,8 @@ class CurrentLink:
         of addresses no sensor on a shared port has, the radio of the link.
         """
         link, shared = self._link, self._shared
+        # What the port last granted this sensor's links (a shared one: at its last open).
+        granted = (shared or self._opener).low_latency_state if self.connections else ''
         parser = shared.parser_stats() if shared is not None else Counter(self._parser_totals)
         if shared is None and link is not None:
             parser.update(link.parser.stats.as_dict())
@@ -134,9 +136,7 @@ class CurrentLink:
                 'other_records': self._other_records + (link.other_records if link else 0),
                 'radio': link.radio.stats if link else None, 'connected': link is not None,
                 'connections': self.connections, 'reconnects': max(self.connections - 1, 0),
-                # What the port last granted this sensor's links (a shared one: its opens).
-                'low_latency_state': (shared or self._opener).low_latency_state
-                if self.connections else ''}
+                'low_latency_state': granted}
 
     def observe(self, on: bool) -> None:
         """Resume or pause the line observer: silence is a symptom only while we ask."""
