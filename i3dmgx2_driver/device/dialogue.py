@@ -48,7 +48,7 @@ error with the two values, never a silent difference. They go again after a
 stall the supervisor recovers on the same port, since a sensor power-cycled
 while the port stayed open (a battery swap) stalls and has lost them too.
 What is written is the gyro bias this dialogue keeps: the parameter's at
-first, then each capture the driver accepted (:meth:`keep_gyro_bias`), so a
+first, then each capture the driver accepted (:attr:`gyro_bias`), so a
 rewrite never undoes a calibration made while running, and after a refused
 (moved) capture a power cycle brings back the last good bias, not the moved one.
 
