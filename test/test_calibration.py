@@ -72,8 +72,8 @@ class FakeDialogue:
             raise DeviceTimeout('no reply to 0xD0')
         return quantity if self.answer == 0 else self.answer
 
-    def keep_gyro_bias(self, bias: Any) -> None:
-        """Nothing to write back to: no stream restarts here."""
+    #: Nothing writes it back: no stream restarts here.
+    gyro_bias: Any = None
 
 
 class FakeDevice:
@@ -208,7 +208,7 @@ def test_an_accepted_capture_is_the_bias_written_back_and_said_each_time():
                           on_gyro_bias=lambda: told.append(True))
     talk.write_biases(Link(sensor))
     captured = (0.001, -0.002, 0.003)
-    talk.keep_gyro_bias(captured)
+    talk.gyro_bias = captured
     link = Link(sensor)
     talk.write_biases(link)  # what a stall recovery after a power cycle does
     assert [c.args[0] for c in link.sent] == [pytest.approx(captured, abs=1e-7)]

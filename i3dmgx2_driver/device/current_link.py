@@ -26,7 +26,9 @@ were not the stream's summed over all of them, what the port granted of
 low-latency mode. What to do with the link is the supervisor's.
 """
 
+from collections import Counter
 from collections.abc import Callable
+import contextlib
 import threading
 from typing import Any
 
@@ -34,10 +36,9 @@ from . import timeouts
 from .link import DeviceLink, RecordCallback
 from .observer import Finding, LineObserver
 from .port import PortDisconnected, PortError
-from .port_opener import PortOpener
 from .sensor_steps import say_stop
 from .settings import DeviceConfig
-from .shared_port import SharedPort
+from .shared_port import PortOpener, SharedPort
 
 
 class CurrentLink:
@@ -54,22 +55,16 @@ class CurrentLink:
     def __init__(self, config: DeviceConfig, opener: PortOpener, on_record: RecordCallback,
                  cancel: threading.Event, on_lost: Callable[[], None],
                  on_finding: Callable[[Finding], None], shared: SharedPort | None = None) -> None:
-        self._config = config
-        self._opener = opener
-        self._on_record = on_record
+        self._config, self._opener, self._shared = config, opener, shared
+        self._on_record, self._on_lost, self._on_finding = on_record, on_lost, on_finding
         self._cancel = cancel
-        self._on_lost = on_lost
-        self._on_finding = on_finding
-        self._shared = shared
         self._link: DeviceLink | None = None
         #: Guards who owns ``_link``: the thread opening one, or a caller releasing it.
         self._lock = threading.Lock()
         self._observer: LineObserver | None = None
         #: Links opened so far (all but the first were reconnections).
         self.connections = 0
-        #: What the port last granted of low-latency mode.
-        self.low_latency_state = ''
-        self._parser_totals: dict[str, int] = {}
+        self._parser_totals: Counter[str] = Counter()
         #: Records of closed links that were neither a reply nor of the stream.
         self._other_records = 0
 
@@ -82,18 +77,13 @@ class CurrentLink:
         """Open the port and make it the current link (reader not started); raise PortError."""
         cfg = self._config
         if self._shared is not None:
-            link = self._shared.attach(cfg.address, self._on_record, self._cancel, cfg.stream,
-                                       self._on_lost)
-            self.low_latency_state = self._shared.low_latency_state
-            return self._own(link)
+            return self._own(self._shared.attach(cfg.address, self._on_record, self._cancel,
+                                                 cfg.stream, self._on_lost))
         port = self._opener.open_port()
-        self.low_latency_state = self._opener.low_latency_state
         observer = self._observer = LineObserver(cfg.port, cfg.address, cfg.wireless,
                                                  cfg.baud, self._on_finding)
-        link = DeviceLink(port, cfg.address, self._on_record,
-                          self._opener.reader_options(observer, self._cancel, cfg.stream,
-                                                      self._on_lost))
-        return self._own(link)
+        options = self._opener.reader_options(observer, self._cancel, cfg.stream, self._on_lost)
+        return self._own(DeviceLink(port, cfg.address, self._on_record, options))
 
     def _own(self, link: DeviceLink) -> DeviceLink:
         """Make ``link`` the current one, unless the driver was told to stop meanwhile."""
@@ -114,14 +104,12 @@ class CurrentLink:
             return
         link.stop()
         if send_stop:
-            try:
+            with contextlib.suppress(PortError):
                 say_stop(link, timeouts.STOP_REPEATS_AT_EXIT, timeouts.STOP_GAP_AT_EXIT_S)
-            except PortError:
-                pass
         self._close(link)
         self._other_records += link.other_records
         if self._shared is None:
-            _add_counts(self._parser_totals, link)
+            self._parser_totals.update(link.parser.stats.as_dict())
 
     def _close(self, link: DeviceLink) -> None:
         """Close the link's port, or hand the link back to the shared one."""
@@ -138,22 +126,17 @@ class CurrentLink:
         port's), the records neither a reply nor of the stream, the packets
         of addresses no sensor on a shared port has, the radio of the link.
         """
-        link = self._link
-        if self._shared is not None:
-            parser = self._shared.parser_stats()
-        else:
-            parser = dict(self._parser_totals)
-            if link is not None:
-                _add_counts(parser, link)
-        return {
-            'parser': parser,
-            'strays': self._shared.strays() if self._shared is not None else {},
-            'other_records': self._other_records + (link.other_records if link is not None
-                                                    else 0),
-            'radio': link.radio.stats if link is not None else None,
-            'connected': link is not None,
-            'connections': self.connections, 'reconnects': max(self.connections - 1, 0),
-            'low_latency_state': self.low_latency_state}
+        link, shared = self._link, self._shared
+        # What the port last granted this sensor's links (a shared one: at its last open).
+        granted = (shared or self._opener).low_latency_state if self.connections else ''
+        parser = shared.parser_stats() if shared is not None else Counter(self._parser_totals)
+        if shared is None and link is not None:
+            parser.update(link.parser.stats.as_dict())
+        return {'parser': dict(parser), 'strays': shared.strays() if shared is not None else {},
+                'other_records': self._other_records + (link.other_records if link else 0),
+                'radio': link.radio.stats if link else None, 'connected': link is not None,
+                'connections': self.connections, 'reconnects': max(self.connections - 1, 0),
+                'low_latency_state': granted}
 
     def observe(self, on: bool) -> None:
         """Resume or pause the line observer: silence is a symptom only while we ask."""
@@ -165,9 +148,3 @@ class CurrentLink:
         """Say what the line observer last found on this link ('' if nothing)."""
         seen = self._observer.last_finding if self._observer is not None else None
         return seen.message if seen is not None else ''
-
-
-def _add_counts(totals: dict[str, int], link: DeviceLink) -> None:
-    """Add ``link``'s parser counters to ``totals``."""
-    for key, value in link.parser.stats.as_dict().items():
-        totals[key] = totals.get(key, 0) + value

@@ -48,7 +48,7 @@ error with the two values, never a silent difference. They go again after a
 stall the supervisor recovers on the same port, since a sensor power-cycled
 while the port stayed open (a battery swap) stalls and has lost them too.
 What is written is the gyro bias this dialogue keeps: the parameter's at
-first, then each capture the driver accepted (:meth:`keep_gyro_bias`), so a
+first, then each capture the driver accepted (:attr:`gyro_bias`), so a
 rewrite never undoes a calibration made while running, and after a refused
 (moved) capture a power cycle brings back the last good bias, not the moved one.
 
@@ -59,6 +59,7 @@ temperature poller and the bias store what this sensor answers.
 """
 
 from collections.abc import Callable
+import contextlib
 import struct
 import threading
 import time
@@ -117,8 +118,7 @@ class SensorDialogue(SensorSteps):
                  on_gyro_bias: Callable[[], None] | None = None) -> None:
         super().__init__(config.request_timeout, config.request_retries, cancel)
         self.config = config
-        self._log = log
-        self._warn = warn
+        self._log, self._warn = log, warn
         self._throttle = Throttle()
         #: The device's identity, once read.
         self.info: DeviceInfo | None = None
@@ -133,12 +133,12 @@ class SensorDialogue(SensorSteps):
         self._divider_written: set[int] = set()
         #: The stream's use of the line at the device's rate (once the rate is known),
         #: and, when it does not fit, what to do about it ('' when it fits).
-        self.line_use = ''
-        self.line_warning = ''
+        self.line_use = self.line_warning = ''
         #: The biases written at every start, resume and stall recovery: the
-        #: parameters' at first; an accepted capture replaces the gyro bias.
-        self.gyro_bias: tuple[float, float, float] | None = config.gyro_bias
-        self.accel_bias: tuple[float, float, float] | None = config.accel_bias
+        #: parameters' at first; an accepted capture replaces the gyro bias (the
+        #: sensor holds it in RAM already; a power cycle loses it, and the next
+        #: stall recovery, resume or start writes it back).
+        self.gyro_bias, self.accel_bias = config.gyro_bias, config.accel_bias
         #: Told each time a kept gyro bias was written and echoed (``~/is_calibrated``).
         self._on_gyro_bias = on_gyro_bias or (lambda: None)
 
@@ -197,11 +197,9 @@ class SensorDialogue(SensorSteps):
         # command: a couple of polled requests first make it dependable.
         code = first_poll_code(cfg.stream)
         for _ in range(2):
-            try:
+            with contextlib.suppress(DeviceError):
                 link.request(bytes((code,)), code, cfg.request_timeout,
                              timeouts.FIRST_POLL_RETRIES)
-            except DeviceError:
-                pass
         if require_answer and not self.ping_ok and not link.heard:
             silent = (f'node {cfg.address} is silent: no answer to the base station '
                       f'ping or to polled requests (check it is powered, its address and the '
@@ -231,10 +229,9 @@ class SensorDialogue(SensorSteps):
                                    f'and the bias store; they are asked for all the same', None)
         if info != self._info_logged:
             self._info_logged = info
-            self._log.info(f'device: model {info.model_name or "?"} '
-                           f'({info.model_number or "?"}), serial {info.serial_number or "?"}, '
-                           f'firmware {info.firmware or "?"}, options {info.options or "-"}, '
-                           f'node {cfg.address}')
+            self._log.info(f'device: model {info.model_name or "?"} ({info.model_number or "?"}), '
+                           f'serial {info.serial_number or "?"}, firmware {info.firmware or "?"}, '
+                           f'options {info.options or "-"}, node {cfg.address}')
 
     def _configure_rate(self, link: DeviceLink) -> None:
         """Read the divider; write the one ``config.data_rate_hz`` asks for, if it differs."""
@@ -273,15 +270,6 @@ class SensorDialogue(SensorSteps):
 
     # -- biases -------------------------------------------------------------------------
 
-    def keep_gyro_bias(self, bias: tuple[float, float, float]) -> None:
-        """
-        Keep an accepted capture's gyro bias: the one written from now on.
-
-        The sensor holds it in RAM already (it captured it); a power cycle
-        loses it, and the next stall recovery, resume or start writes it back.
-        """
-        self.gyro_bias = bias
-
     def write_biases(self, link: DeviceLink) -> None:
         """
         Write the kept gyro and accel biases to the sensor's RAM; check the echoes.
@@ -303,10 +291,9 @@ class SensorDialogue(SensorSteps):
                 raise type(exc)(f'{name}: the sensor did not echo the bias written '
                                 f'(0x{code:02X}): {exc}') from None
             if tuple(echo) != float32_vector(bias):
-                raise EchoMismatch(
-                    f'{name}: wrote {_vector(bias)} {unit}, the sensor echoed '
-                    f'{_vector(echo)} {unit} (0x{code:02X}): it does not use the bias asked '
-                    f'for; check the parameter and the sensor')
+                raise EchoMismatch(f'{name}: wrote {_vector(bias)} {unit}, the sensor echoed '
+                                   f'{_vector(echo)} {unit} (0x{code:02X}): it does not use '
+                                   f'the bias asked for; check the parameter and the sensor')
             self._log.info(f'{name} {_vector(bias)} {unit} written to node {cfg.address} '
                            f'(RAM, echoed; lost at a power cycle, written again at start '
                            f'and after a stall)')
@@ -405,17 +392,3 @@ class SensorDialogue(SensorSteps):
     def can_resume(self) -> bool:
         """Whether a reconnect may try :meth:`resume` (a known sensor, and allowed to)."""
         return bool(self.config.fast_reconnect and self._serial_number())
-
-    # -- exclusive operations -----------------------------------------------------------
-
-    def run_exclusive(self, link: DeviceLink, operation: Callable[[DeviceLink], Any]) -> Any:
-        """
-        Stop the stream and run ``operation(link)``; the caller starts the stream again.
-
-        For services that need the device's full attention (gyro bias
-        capture, built-in test). Paused, a polled record of the streamed code
-        (a self test's 0xC2, with the built-in test skewing it) is a reply
-        only, never a sample. Raises PortError or DeviceTimeout.
-        """
-        self.stop(link)
-        return operation(link)

@@ -61,9 +61,8 @@ class Calibration(NamedTuple):
     summary: str
 
 
-def judge_capture(bias: Vector3, accel_before: Vector3, accel_after: Vector3,
-                  rate_after: Vector3, max_bias: float = MAX_GYRO_BIAS,
-                  max_residual: float = MAX_RESIDUAL_RATE,
+def judge_capture(bias: Vector3, accel_before: Vector3, accel_after: Vector3, rate_after: Vector3,
+                  max_bias: float = MAX_GYRO_BIAS, max_residual: float = MAX_RESIDUAL_RATE,
                   max_accel_change: float = MAX_ACCEL_CHANGE) -> list[str]:
     """
     Return why a captured gyro bias cannot be trusted; empty if it can.
@@ -96,10 +95,8 @@ class GyroBiasCapture:
 
     def __init__(self, device: Device, forget_last_sample: Callable[[], None],
                  calibrated: Callable[[bool], None], log: Any) -> None:
-        self._device = device
-        self._forget = forget_last_sample
-        self._calibrated = calibrated
-        self._log = log
+        self._device, self._log = device, log
+        self._forget, self._calibrated = forget_last_sample, calibrated
         #: The last capture attempt and the last accepted one.
         self.last_capture: Calibration | None = None
         self.good_capture: Calibration | None = None
@@ -158,7 +155,7 @@ class GyroBiasCapture:
         self.last_capture = calibration
         if calibration.accepted:
             self.good_capture = calibration
-            self._device.dialogue.keep_gyro_bias(calibration.bias)
+            self._device.dialogue.gyro_bias = calibration.bias
         self._calibrated(calibration.accepted)
 
     # -- keeping it ----------------------------------------------------------

@@ -100,8 +100,7 @@ class LinkOptions:
     @classmethod
     def listening(cls, wireless: bool, on_bytes: BytesCallback | None) -> 'LinkOptions':
         """Return a tool's options: every read's bytes to ``on_bytes``, a short wait."""
-        return cls(wireless=wireless, select_timeout=timeouts.TOOL_READ_TIMEOUT,
-                   on_bytes=on_bytes)
+        return cls(wireless=wireless, select_timeout=timeouts.TOOL_READ_TIMEOUT, on_bytes=on_bytes)
 
 
 class DeviceError(Exception):
@@ -179,8 +178,7 @@ class PortReader:
     counted by address in ``strays``.
     """
 
-    def __init__(self, port: SerialPort, address: int | None,
-                 options: LinkOptions | None = None,
+    def __init__(self, port: SerialPort, address: int | None, options: LinkOptions | None = None,
                  fallback: 'DeviceLink | None' = None) -> None:
         self._options = options = options if options is not None else LinkOptions()
         self.port = port
@@ -193,7 +191,9 @@ class PortReader:
         self._requester: DeviceLink | None = None
         #: Packets of addresses no link routes, by address (a port shared by several).
         self.strays: dict[int, int] = {}
-        self._request_lock, self._write_lock = threading.Lock(), threading.Lock()
+        #: ``_wake_lock`` guards the port's wake size against a request that begins meanwhile.
+        self._request_lock, self._write_lock, self._wake_lock, self._start_lock = (
+            threading.Lock() for _ in range(4))
         #: The packet size of each link's stream (:meth:`streams`), and the bytes a
         #: wait for data may wait for while every link streams: the smallest of
         #: those (0: any byte, as it must while a link streams nothing).
@@ -202,22 +202,18 @@ class PortReader:
         #: Requests waiting for an answer (:meth:`awaiting_answer`): an ACK is one
         #: byte, a reply shorter than a record, so no wait waits for a whole packet.
         self._awaited = 0
-        #: Guards the port's wake size against a request that begins meanwhile.
-        self._wake_lock = threading.Lock()
-        self._stop = threading.Event()
         self._started = False
-        self._start_lock = threading.Lock()
         #: The thread reading the port now (None before and after the reading).
         self._thread: threading.Thread | None = None
-        #: Set once the reading has returned and its thread is idle again.
-        self._finished = threading.Event()
-        self.disconnected = threading.Event()
+        #: ``_finished`` is set once the reading has returned and its thread is idle again;
+        #: ``running`` by the thread once its policy is applied, before its first read;
+        #: ``disconnected`` once the port is lost.
+        self._stop, self._finished, self.running, self.disconnected = (
+            threading.Event() for _ in range(4))
         #: Why the port was lost (None while it works); set before ``disconnected``.
         self.error: str | None = None
         #: What the scheduler granted the thread (set once it runs).
         self.policy_outcome = PolicyOutcome()
-        #: Set by the thread once its policy is applied, before its first read.
-        self.running = threading.Event()
 
     @property
     def stopping(self) -> bool:
@@ -444,26 +440,24 @@ class DeviceLink:
         self.error: str | None = None
         #: What the scheduler granted the reader thread (once it runs).
         self.policy_outcome = PolicyOutcome()
-        #: Set once the link receives its packets (its own reader runs, or its
-        #: address is routed on a shared one that runs).
-        self.running = threading.Event()
+        #: ``running`` is set once the link receives its packets (its own reader runs, or
+        #: its address is routed on a shared one that runs); ``_stopped`` when the link
+        #: stops: every request gives up.
+        self.running, self._stopped = threading.Event(), threading.Event()
         self._on_record, self._records_of, self._on_lost = (
             on_record, options.records_of, options.on_lost)
         self._cancel = options.cancel if options.cancel is not None else threading.Event()
         #: One exchange at a time with this sensor.
         self._lock = threading.Lock()
-        #: Set when the link stops: every request gives up.
-        self._stopped = threading.Event()
         #: The request waiting for its reply (read by the reader thread).
         self._pending: Pending | None = None
         #: The command byte of the record being streamed, None while none is
         #: (:meth:`set_streamed`): a polled reply of that code is then both the
         #: reply and a record of the stream.
         self._streamed: int | None = None
-        #: Records of the stream (of any code while none is streamed) received so far.
-        self.records = 0
-        #: Records neither a reply nor handed to the consumer (not of ``records_of``).
-        self.other_records = 0
+        #: Records of the stream (of any code while none is streamed) received so far,
+        #: and those neither a reply nor handed to the consumer (not of ``records_of``).
+        self.records = self.other_records = 0
         #: The command byte of the last record handed on (None before one).
         self.last_code: int | None = None
         #: The monotonic time the stream was last heard, for stall detection.
@@ -615,12 +609,7 @@ class DeviceLink:
             for _ in range(retries):
                 self._check_cancelled()
                 with self._awaiting(reply_code) as pending:
-                    if self.shared:
-                        self._exchange_shared(command, pending, timeout)
-                    else:
-                        with self.reader.holding(self):
-                            self.send(command)
-                            self._wait(pending, timeout)
+                    self._exchange(command, pending, timeout)
                 if pending.done.is_set():
                     return pending.reply
                 if pending.nacked.is_set():
@@ -639,40 +628,41 @@ class DeviceLink:
                 yield pending
         finally:
             self._pending = None
-        self._check_port()
+        self.check_port()
         self._check_cancelled()
 
-    def _exchange_shared(self, command: bytes, pending: Pending, timeout: float) -> None:
+    def _exchange(self, command: bytes, pending: Pending, timeout: float) -> None:
         """
-        Send on a shared port: hold it until the ACK or NACK, then wait for the reply alone.
+        Send ``command`` and wait for its reply, holding the port; a shared one until the ACK.
 
-        The reply is a data packet with this sensor's address, routed to this
-        link whoever else streams or asks meanwhile; only the base station's
-        one-byte answer must not be mistaken for another sensor's.
+        On a shared port the reply is a data packet with this sensor's address,
+        routed to this link whoever else streams or asks meanwhile; only the
+        base station's one-byte answer must not be mistaken for another
+        sensor's, so the port is held until the ACK or NACK alone.
         """
         deadline = time.monotonic() + timeout
         with self.reader.holding(self):
             self.send(command)
-            ack_deadline = time.monotonic() + min(timeouts.ACK_TIMEOUT, timeout)
-            while not (pending.acked.is_set() or pending.nacked.is_set()
-                       or pending.done.is_set() or self._cancel.is_set()):
-                left = ack_deadline - time.monotonic()
-                if left <= 0:
-                    break
-                pending.acked.wait(min(left, 0.01))
+            if not self.shared:
+                self._wait(pending, timeout)
+                return
+            self._wait(pending, min(timeouts.ACK_TIMEOUT, timeout), until=pending.acked, step=0.01)
         if not pending.nacked.is_set():
             self._wait(pending, deadline - time.monotonic())
 
-    def _wait(self, pending: Pending, timeout: float, nack_ends: bool = True) -> None:
-        """Wait for a reply, a NACK (if ``nack_ends``), a cancel or the timeout."""
+    def _wait(self, pending: Pending, timeout: float, nack_ends: bool = True,
+              until: threading.Event | None = None, step: float = 0.02) -> None:
+        """Wait for a reply (or ``until``), a NACK (if ``nack_ends``), a cancel or the timeout."""
+        until = until or pending.done
         deadline = time.monotonic() + timeout
-        while not (nack_ends and pending.nacked.is_set()) and not self._cancel.is_set():
+        while not ((nack_ends and pending.nacked.is_set()) or pending.done.is_set()
+                   or self._cancel.is_set()):
             left = deadline - time.monotonic()
-            if left <= 0 or pending.done.wait(min(left, 0.02)):
+            if left <= 0 or until.wait(min(left, step)):
                 break
 
-    def _check_port(self) -> None:
-        # The reader tells each link why (port_lost) before it sets ``disconnected``.
+    def check_port(self) -> None:
+        """Raise PortDisconnected if the port is lost (the reader tells each link first)."""
         if self.error is not None or self.disconnected.is_set():
             raise PortDisconnected(self.error or 'device disconnected')
 

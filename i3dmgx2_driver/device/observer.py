@@ -54,10 +54,7 @@ NOISE_WINDOW = 2.0
 MIN_WIRED_RECORDS = 2
 
 #: Kinds of finding, the keys a caller throttles its messages by.
-ADDRESS = 'address'
-FRAMING = 'framing'
-NOISE = 'noise'
-SILENCE = 'silence'
+ADDRESS, FRAMING, NOISE, SILENCE = 'address', 'framing', 'noise', 'silence'
 
 
 class Finding(NamedTuple):
@@ -117,9 +114,8 @@ def judge(window: Window, port: str, address: int, wireless: bool, baud: int) ->
             and not window.wired_records:
         return Finding(NOISE, (
             f'{window.bytes_in} bytes in {span:.1f} s from {port}, and not one valid 3DM-GX2 '
-            f'packet among them: check the baud rate (read at {baud} baud here, -p baud; '
-            f'the 3DM-GX2 ships set to 115200) and that the device on this port is a '
-            f'3DM-GX2'))
+            f'packet among them: check the baud rate (read at {baud} baud here, -p baud; the '
+            f'3DM-GX2 ships set to 115200) and that the device on this port is a 3DM-GX2'))
     if span >= SILENCE_AFTER and not window.bytes_in:
         if wireless:
             return Finding(SILENCE, (
@@ -128,8 +124,7 @@ def judge(window: Window, port: str, address: int, wireless: bool, baud: int) ->
                 f'sensor needs -p wireless:=false'))
         return Finding(SILENCE, (
             f'not one byte from {port} in {span:.1f} s: is the sensor powered and connected? '
-            f'A wireless base station needs -p wireless:=true (it ignores unframed '
-            f'commands)'))
+            f'A wireless base station needs -p wireless:=true (it ignores unframed commands)'))
     return None
 
 
@@ -146,10 +141,8 @@ class LineObserver:
 
     def __init__(self, port: str, address: int, wireless: bool, baud: int,
                  on_finding: Callable[[Finding], None]) -> None:
-        self.port = port
-        self.address = address
-        self.wireless = wireless
-        self.baud = baud
+        #: The line as configured, which the findings name: judge()'s arguments.
+        self._line = (port, address, wireless, baud)
         self._on_finding = on_finding
         #: The latest finding on this link, if any (kept across windows).
         self.last_finding: Finding | None = None
@@ -162,12 +155,9 @@ class LineObserver:
         self._restart(0.0, None)  # the first feed starts the first window
 
     def _restart(self, now: float, epoch: float | None) -> None:
-        self._epoch = epoch
-        self._start = now
-        self._next_judge = now + JUDGE_EVERY
+        self._epoch, self._start, self._next_judge = epoch, now, now + JUDGE_EVERY
         self._heard.clear()
-        self._wired_records = 0
-        self._bytes = 0
+        self._wired_records = self._bytes = 0
         self._base = (self._packets.stats.bytes_skipped, self._wired.stats.bytes_skipped)
 
     def pause(self) -> None:
@@ -194,12 +184,11 @@ class LineObserver:
             self._bytes += len(data)
             self._heard.update(event.address for event in self._packets.feed(data)
                                if isinstance(event, DataPacket))
-            self._wired_records += sum(isinstance(event, DataPacket)
-                                       for event in self._wired.feed(data))
+            self._wired_records += sum(isinstance(e, DataPacket) for e in self._wired.feed(data))
         if now < self._next_judge:
             return None
         self._next_judge = now + JUDGE_EVERY
-        finding = judge(self.window(now), self.port, self.address, self.wireless, self.baud)
+        finding = judge(self.window(now), *self._line)
         if finding is not None:
             self.last_finding = finding
             self._on_finding(finding)

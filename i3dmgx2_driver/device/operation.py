@@ -27,7 +27,6 @@ from collections.abc import Callable, Sequence
 import math
 from typing import Any, Protocol
 
-from . import timeouts
 from .dialogue import SensorDialogue
 from .link import DeviceError, DeviceLink
 from .port import PortError
@@ -57,12 +56,10 @@ def format_vector(v: Sequence[float], digits: int = 5) -> str:
     return '(' + ', '.join(f'{x:.{digits}f}' for x in v) + ')'
 
 
-def poll_inertial(link: DeviceLink, count: int = POLLS,
-                  timeout: float = timeouts.REQUEST_TIMEOUT,
-                  retries: int = timeouts.REQUEST_RETRIES) -> tuple[Vector3, Vector3]:
+def poll_inertial(link: DeviceLink, count: int = POLLS) -> tuple[Vector3, Vector3]:
     """Poll 0xC2 ``count`` times; return the mean acceleration (g) and rate (rad/s)."""
-    replies = [link.request(bytes((layouts.ACCEL_ANG_RATE,)), layouts.ACCEL_ANG_RATE,
-                            timeout, retries) for _ in range(count)]
+    code = layouts.ACCEL_ANG_RATE
+    replies = [link.request(bytes((code,)), code) for _ in range(count)]
     return _mean([r.accel for r in replies]), _mean([r.angular_rate for r in replies])
 
 
@@ -72,7 +69,7 @@ class Device(Protocol):
     #: The sensor's firmware (0xE9), asked before a gated command is sent.
     firmware: SensorFirmware
     #: The steps an operation takes on the lent link (an EEPROM write among them, each
-    #: counted), and what is written back at every start (``keep_gyro_bias``).
+    #: counted), and what is written back at every start (``gyro_bias``).
     dialogue: SensorDialogue
 
     def status(self) -> DeviceStatus:

@@ -92,9 +92,8 @@ class PortNotSerial(PortUnusable):
 UDEV_RULE_NAME = '99-i3dmgx2.rules'
 #: The commands that install it, on one line.
 UDEV_RULE_INSTALL = (
-    'sudo cp "$(ros2 pkg prefix i3dmgx2_driver)/share/i3dmgx2_driver/udev/'
-    f'{UDEV_RULE_NAME}" /etc/udev/rules.d/ && sudo udevadm control --reload-rules '
-    '&& sudo udevadm trigger')
+    f'sudo cp "$(ros2 pkg prefix i3dmgx2_driver)/share/i3dmgx2_driver/udev/{UDEV_RULE_NAME}" '
+    '/etc/udev/rules.d/ && sudo udevadm control --reload-rules && sudo udevadm trigger')
 #: What the rule does, and how to install it.
 UDEV_RULE_ADVICE = (
     "install the udev rule that comes with the driver, which gives the base station's port "
@@ -294,11 +293,9 @@ class SerialPort:
         self.path = path
         check_port_path(path)
         try:
-            self._serial = serial_factory(
-                port=path, baudrate=baud, bytesize=serial.EIGHTBITS,
-                parity=serial.PARITY_NONE, stopbits=serial.STOPBITS_ONE,
-                xonxoff=False, rtscts=False, dsrdtr=False, timeout=0,
-                write_timeout=1.0, exclusive=True)
+            # 8N1 without flow control, pyserial's defaults; reads never block.
+            self._serial = serial_factory(port=path, baudrate=baud, timeout=0,
+                                          write_timeout=1.0, exclusive=True)
         except (serial.SerialException, OSError) as exc:
             raise _classify(path, exc) from exc
         self.low_latency_state = 'off'

@@ -35,7 +35,7 @@ import queue
 import sys
 import threading
 
-from .realtime import apply_to_current_thread, NOTHING_GRANTED, PolicyOutcome, ThreadPolicy
+from .realtime import apply_to_current_thread, PolicyOutcome, ThreadPolicy
 
 __all__ = ['READERS', 'ReaderThreads', 'Reading']
 
@@ -70,7 +70,7 @@ class ReaderThreads:
 
     def _serve(self, policy: ThreadPolicy, work: _Work) -> None:
         """Apply ``policy`` once, then run each reading put on ``work``, forever."""
-        outcome = apply_to_current_thread(policy) if policy.requested else NOTHING_GRANTED
+        outcome = apply_to_current_thread(policy)  # nothing asked: nothing granted
         while True:
             reading, done = work.get()
             try:

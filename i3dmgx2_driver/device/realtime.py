@@ -37,6 +37,7 @@ docs/latency.md measures each of these levers.
   ``/proc``) tell the reader from the others.
 """
 
+import contextlib
 import ctypes
 import gc
 import os
@@ -55,11 +56,6 @@ class ThreadPolicy(NamedTuple):
 
     #: SCHED_FIFO priority 1..99; 0 leaves the thread under the normal policy.
     realtime_priority: int = 0
-
-    @property
-    def requested(self) -> bool:
-        """Whether anything is asked at all."""
-        return self.realtime_priority > 0
 
 
 #: Ask nothing of the scheduler.
@@ -129,7 +125,5 @@ def name_os_threads() -> None:
 def _name_and_forget(frame: Any, event: str, arg: Any) -> None:
     sys.setprofile(None)
     name = threading.current_thread().name.encode(errors='replace')[:15]
-    try:
+    with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None).prctl(_PR_SET_NAME, ctypes.c_char_p(name), 0, 0, 0)
-    except (OSError, AttributeError):
-        pass

@@ -19,7 +19,7 @@ The sensor's data polled (accel and rate, magnetometer, temperatures),
 gravity judged at rest, each built-in test (0xFB) switched on and echoed,
 then off again, and the data rate measured once the stream resumed. A step
 whose command the sensor's firmware lacks is skipped with the reason
-(:func:`firmware_skip`), not failed: the sensor is not at fault. Each judgement is a pure
+(:func:`temperature_step`), not failed: the sensor is not at fault. Each judgement is a pure
 function of the numbers, tested without a device. The report is one line
 per step for std_srvs/Trigger (:func:`format_report`) and one
 DiagnosticStatus per step for diagnostic_msgs/SelfTest (ros/services.py),
@@ -72,18 +72,9 @@ def format_report(steps: Sequence[Step]) -> str:
     lines = [f'{s.verdict} {s.name}: {s.detail}' for s in steps]
     failed, skipped = sum(not s.passed for s in steps), sum(s.skipped for s in steps)
     ran = len(steps) - skipped
-    lines.append(f'self test {"passed" if not failed else "FAILED"}: '
-                 f'{ran - failed}/{ran} steps passed'
-                 + (f', {skipped} skipped (the firmware lacks them)' if skipped else ''))
+    lines.append(f'self test {"passed" if not failed else "FAILED"}: {ran - failed}/{ran} steps '
+                 f'passed' + (f', {skipped} skipped (the firmware lacks them)' if skipped else ''))
     return '\n'.join(lines)
-
-
-def firmware_skip(name: str, code: int, firmware: SensorFirmware) -> Step | None:
-    """Return step ``name`` skipped when ``firmware`` lacks its command ``code``, else None."""
-    if fw.has(firmware.version, code):
-        return None
-    return Step(name, True, f'skipped: 0x{code:02X} needs firmware {fw.text(fw.needs(code))}; '
-                            f'this sensor has {fw.text(firmware.version)}', skipped=True)
 
 
 def _answered(name: str, ask: Callable[[], str]) -> Step:
@@ -101,9 +92,11 @@ def _poll(link: DeviceLink, code: int) -> Any:
 
 def temperature_step(link: DeviceLink, firmware: SensorFirmware) -> Step:
     """Poll the temperatures (0xD1) once; skipped on a firmware without them."""
-    name = 'temperatures respond (0xD1)'
-    return firmware_skip(name, layouts.TEMPERATURES, firmware) or _answered(
-        name, lambda: f'accelerometer {_poll(link, layouts.TEMPERATURES).accel_celsius:.1f} C')
+    name, code = 'temperatures respond (0xD1)', layouts.TEMPERATURES
+    if not fw.has(firmware.version, code):
+        return Step(name, True, f'skipped: 0x{code:02X} needs firmware {fw.text(fw.needs(code))};'
+                                f' this sensor has {fw.text(firmware.version)}', skipped=True)
+    return _answered(name, lambda: f'accelerometer {_poll(link, code).accel_celsius:.1f} C')
 
 
 def gravity_step(accel: Vector3, tolerance: float = GRAVITY_TOLERANCE) -> Step:
@@ -123,9 +116,8 @@ def rate_step(measured_hz: float | None, expected_hz: float | None,
     if not expected_hz:
         return Step('data rate', False, f'{measured_hz:.1f} Hz; configured rate unknown')
     error = measured_hz / expected_hz - 1.0
-    return Step('data rate', abs(error) <= tolerance,
-                f'{measured_hz:.2f} Hz measured, {expected_hz:.2f} Hz configured '
-                f'({error:+.1%}, tolerance ±{tolerance:.0%})')
+    return Step('data rate', abs(error) <= tolerance, f'{measured_hz:.2f} Hz measured, '
+                f'{expected_hz:.2f} Hz configured ({error:+.1%}, tolerance ±{tolerance:.0%})')
 
 
 class SelfTestRun:
@@ -140,13 +132,9 @@ class SelfTestRun:
     """
 
     def __init__(self, device: Device, published: Callable[[], tuple[int, float]],
-                 forget_last_sample: Callable[[], None], stop: threading.Event,
-                 log: Any) -> None:
-        self._device = device
-        self._published = published
-        self._forget = forget_last_sample
-        self._stop = stop
-        self._log = log
+                 forget_last_sample: Callable[[], None], stop: threading.Event, log: Any) -> None:
+        self._device, self._log = device, log
+        self._published, self._forget, self._stop = published, forget_last_sample, stop
 
     def steps(self) -> list[Step]:
         """Run every step of the self test and log the report; return the steps."""
@@ -184,8 +172,7 @@ class SelfTestRun:
                  gravity_step(polled[0]) if polled
                  else Step('gravity at rest', False, 'no acceleration to judge')]
         try:
-            for bit, name, sensor in BIT_STEPS:
-                steps.append(self._bit_step(link, bit, name, sensor))
+            steps.extend(self._bit_step(link, *step) for step in BIT_STEPS)
         finally:
             steps.append(self._bit_step(link, 0x00, 'built-in test off', None))
             # While the stream is still stopped: the timer gap across the pause is

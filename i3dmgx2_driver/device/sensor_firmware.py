@@ -58,5 +58,4 @@ def check_stream(version: int | None, code: int, address: int) -> None:
     """Raise FirmwareLacksStream when firmware ``version`` cannot stream record ``code``."""
     why = fw.stream_refusal(streams.BY_CODE[code], version)
     if why:
-        raise FirmwareLacksStream(f'node {address}: stream {why} (the stream parameter '
-                                  f'chooses)')
+        raise FirmwareLacksStream(f'node {address}: stream {why} (the stream parameter chooses)')

@@ -32,12 +32,12 @@ after it), and as stopped only once the sensor has been silent for a while
 write is never resent blindly, and every one sent is counted.
 """
 
+import contextlib
 import threading
 import time
 
 from . import timeouts
 from .link import DeviceError, DeviceLink, DeviceTimeout, EchoMismatch
-from .port import PortDisconnected
 from ..codec import commands, layouts
 from ..codec.data_rate import RATE_DIVIDER_ADDRESS
 
@@ -71,8 +71,7 @@ class SensorSteps:
     def __init__(self, timeout: float = timeouts.REQUEST_TIMEOUT,
                  retries: int = timeouts.REQUEST_RETRIES,
                  cancel: threading.Event | None = None) -> None:
-        self.timeout = timeout
-        self.retries = retries
+        self.timeout, self.retries = timeout, retries
         self._cancel = cancel if cancel is not None else threading.Event()
         #: EEPROM write commands sent (the divider's cell, a bias stored; each may wear it).
         self.eeprom_writes = 0
@@ -148,18 +147,16 @@ class SensorSteps:
         link.set_streamed(code)
         for _ in range(tries):
             before = link.records
-            try:
+            # The reply may be lost while the stream started: the records tell.
+            with contextlib.suppress(DeviceError):
                 link.request(commands.set_continuous(code), layouts.SET_CONTINUOUS,
                              self.timeout, 1)
-            except DeviceError:
-                pass  # the reply may be lost while the stream started: look for records
             deadline = time.monotonic() + max(timeouts.FIRST_RECORD_S,
                                               timeouts.RECORD_PERIODS * period)
             while time.monotonic() < deadline and not self._cancel.is_set():
                 if link.records > before:
                     return True
-                if link.disconnected.is_set():
-                    raise PortDisconnected(link.error or 'device disconnected')
+                link.check_port()
                 time.sleep(timeouts.RECORD_POLL_S)
             if self._cancel.is_set():
                 return False
@@ -186,11 +183,9 @@ class SensorSteps:
         readback = current
         for _ in range(self.retries):
             self.eeprom_writes += 1
-            try:
+            with contextlib.suppress(DeviceError):  # written or not: the read below tells
                 link.request(commands.write_eeprom(RATE_DIVIDER_ADDRESS, wanted),
                              layouts.WRITE_EEPROM, self.timeout, 1)
-            except DeviceError:
-                pass  # written or not: the read below tells
             readback = self.read_divider(link)
             if readback != current:
                 break

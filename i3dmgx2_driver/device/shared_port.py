@@ -13,7 +13,13 @@
 # limitations under the License.
 
 """
-One port, one reader thread, several sensors: a base station shared by all of them.
+How a sensor's port is opened, and one port with one reader shared by several sensors.
+
+A connection that opens its own port and the port several sensors share open
+it the same way: the configured path, baud rate and low-latency mode, the
+low-latency mode logged when it changes, and the reader made with the same
+raw capture and scheduling. :class:`PortOpener` does it, once for both;
+:class:`SharedPort` is the one that shares.
 
 The node opens the port exclusively, as it must: two readers would split the
 byte stream. With several sensors behind one base station, each sensor still
@@ -36,13 +42,48 @@ from collections.abc import Callable
 import threading
 from typing import Any
 
-from .link import BytesCallback, DeviceLink, PortReader, RecordCallback
-from .port_opener import PortOpener
+from .link import BytesCallback, DeviceLink, LinkOptions, PortReader, RecordCallback
+from .observer import LineObserver
+from .port import SerialPort
 from .settings import DeviceConfig
 from ..codec import streams
 
 
-class SharedPort:
+class PortOpener:
+    """
+    Open the port at ``config.port``; log a change of its low-latency mode.
+
+    ``on_bytes``, if given, receives every read's raw bytes (a raw capture)
+    from the reader of each port opened.
+    """
+
+    def __init__(self, config: DeviceConfig, log: Any,
+                 on_bytes: BytesCallback | None = None) -> None:
+        self.config = config
+        self._on_bytes = on_bytes
+        self._log = log
+        #: What the last port opened granted of low-latency mode ('' before one).
+        self.low_latency_state = ''
+
+    def open_port(self) -> SerialPort:
+        """Open the port (raises PortError); log a new low-latency mode."""
+        cfg = self.config
+        port = SerialPort(cfg.port, cfg.baud, low_latency=cfg.low_latency)
+        if port.low_latency_state != self.low_latency_state:
+            self.low_latency_state = port.low_latency_state
+            self._log.info(f'{cfg.port}: low-latency mode {port.low_latency_state}')
+        return port
+
+    def reader_options(self, observer: LineObserver | None = None,
+                       cancel: threading.Event | None = None, records_of: int | None = None,
+                       on_lost: Callable[[], None] | None = None) -> LinkOptions:
+        """Return how the port's reader reads, whom it tells, what its link's consumer takes."""
+        return LinkOptions(wireless=self.config.wireless, on_bytes=self._on_bytes,
+                           observer=observer, cancel=cancel, records_of=records_of,
+                           thread_policy=self.config.thread_policy, on_lost=on_lost)
+
+
+class SharedPort(PortOpener):
     """
     The port at ``config.port``, shared by the sensors behind its base station.
 
@@ -51,23 +92,16 @@ class SharedPort:
 
     def __init__(self, config: DeviceConfig, log: Any,
                  on_bytes: BytesCallback | None = None) -> None:
-        self.config = config
-        self._log = log
-        self._opener = PortOpener(config, log, on_bytes)
+        super().__init__(config, log, on_bytes)
         self._lock = threading.Lock()
-        self._reader: PortReader | None = None
+        #: The reader of the open port (None while closed); only this class sets it.
+        self.reader: PortReader | None = None
         self._links: set[DeviceLink] = set()
         #: Each sensor's stream and the rate its device runs at, once known.
         self._streams: dict[int, tuple[int, float]] = {}
         self._warned = ''
-        #: Times the port was opened, and what it granted of low-latency mode.
+        #: Times the port was opened.
         self.opens = 0
-        self.low_latency_state = ''
-
-    @property
-    def reader(self) -> PortReader | None:
-        """Return the reader of the open port (None while closed)."""
-        return self._reader
 
     def attach(self, address: int, on_record: RecordCallback,
                cancel: threading.Event, records_of: int | None = None,
@@ -82,18 +116,14 @@ class SharedPort:
         Raises PortError when the port cannot be opened.
         """
         with self._lock:
-            reader = self._reader
+            reader = self.reader
             if reader is None or reader.disconnected.is_set():
                 if reader is not None:
                     self._close(reader)
-                port = self._opener.open_port()
-                self.low_latency_state = self._opener.low_latency_state
-                reader = self._reader = PortReader(port, None, self._opener.reader_options())
+                reader = self.reader = PortReader(self.open_port(), None, self.reader_options())
                 self.opens += 1
-            link = DeviceLink(reader.port, address, on_record,
-                              self._opener.reader_options(cancel=cancel, records_of=records_of,
-                                                          on_lost=on_lost),
-                              reader=reader)
+            options = self.reader_options(cancel=cancel, records_of=records_of, on_lost=on_lost)
+            link = DeviceLink(reader.port, address, on_record, options, reader=reader)
             self._links.add(link)
             return link
 
@@ -106,8 +136,8 @@ class SharedPort:
             if any(other.reader is reader for other in self._links):
                 return
             self._close(reader)
-            if reader is self._reader:
-                self._reader = None
+            if reader is self.reader:
+                self.reader = None
 
     def line_warning(self, address: int, code: int, rate_hz: float) -> str:
         """
@@ -135,12 +165,12 @@ class SharedPort:
 
     def parser_stats(self) -> dict[str, int]:
         """Return the counters of the open port's parser (empty while closed)."""
-        reader = self._reader
+        reader = self.reader
         return reader.parser.stats.as_dict() if reader is not None else {}
 
     def strays(self) -> dict[int, int]:
         """Return the packets of unlisted addresses on the open port, by address."""
-        reader = self._reader
+        reader = self.reader
         return dict(reader.strays) if reader is not None else {}
 
     @staticmethod

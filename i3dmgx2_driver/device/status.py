@@ -125,16 +125,12 @@ class DeviceReport:
         self._lock = threading.Lock()
         self.state = State.CONNECTING
         self.stalls = 0
-        #: The last problem said (a warning's text), '' if none yet.
-        self.last_error = ''
-        #: What the line observer last found while nothing of ours arrived ('' once
-        #: records flow), for diagnostics.
-        self.advice = ''
-        #: The port can never work (a path that is no serial port): why.
-        self.fatal_error = ''
+        #: The last problem said (a warning's text), '' if none yet; what the line
+        #: observer last found while nothing of ours arrived ('' once records flow), for
+        #: diagnostics; why the port can never work (a path that is no serial port).
+        self.last_error = self.advice = self.fatal_error = ''
         #: How the last connection got streaming: 'full' (the whole dialogue) or 'resumed'.
-        self.last_start = ''
-        self.resumes = 0
+        self.last_start, self.resumes = '', 0
 
     def enter(self, state: State) -> None:
         """Say what the supervisor does now (never STREAMING: see :meth:`streaming`)."""
@@ -153,10 +149,8 @@ class DeviceReport:
         with self._lock:
             self.state = State.STREAMING
             self.advice = ''
-            if start:
-                self.last_start = start
-                if start == 'resumed':
-                    self.resumes += 1
+            self.last_start = start or self.last_start
+            self.resumes += start == 'resumed'
 
     def stalled(self) -> None:
         """Count a stall: no record for longer than the stall timeout."""
@@ -182,8 +176,7 @@ class DeviceReport:
     def failed(self, error: PortError) -> None:
         """Keep why the port can never work; the supervisor stops."""
         with self._lock:
-            self.fatal_error = str(error)
-            self.last_error = str(error)
+            self.fatal_error = self.last_error = str(error)
             self.state = State.STOPPED
 
     def fields(self) -> dict[str, Any]:

@@ -80,10 +80,9 @@ from .current_link import CurrentLink
 from .dialogue import SensorDialogue
 from .link import BytesCallback, DeviceError, DeviceLink, RecordCallback, RequestCancelled
 from .port import PortDisconnected, PortError, PortUnusable
-from .port_opener import PortOpener
 from .realtime import PolicyOutcome
 from .settings import DeviceConfig
-from .shared_port import SharedPort
+from .shared_port import PortOpener, SharedPort
 from .status import DeviceReport, DeviceStatus, State
 from .throttle import EVENT_PERIOD
 from .watchdog import ReopenWait, StallWatch
@@ -109,15 +108,13 @@ class DeviceSupervisor:
     it; no line observer watches it.
     """
 
-    def __init__(self, config: DeviceConfig, on_record: RecordCallback,
-                 log: Any = None, on_connect: Callable[[], None] | None = None,
+    def __init__(self, config: DeviceConfig, on_record: RecordCallback, log: Any = None,
+                 on_connect: Callable[[], None] | None = None,
                  on_fatal: Callable[[PortError], None] | None = None,
-                 on_bytes: BytesCallback | None = None,
-                 shared: SharedPort | None = None,
+                 on_bytes: BytesCallback | None = None, shared: SharedPort | None = None,
                  on_gyro_bias: Callable[[], None] | None = None,
                  on_stream_known: Callable[[int | None, bool], None] | None = None) -> None:
-        self.config = config
-        self._shared = shared
+        self.config, self._shared = config, shared
         self._log = log = log or logging.getLogger('i3dmgx2_driver')
         #: Set means "no stream wanted now": the thread ends, and every request on the
         #: link gives up within a few tens of milliseconds (the link's ``cancel`` event),
@@ -125,11 +122,11 @@ class DeviceSupervisor:
         #: it; whoever set it decides what becomes of the port: stop() closes it,
         #: stop_streaming() keeps it.
         self._cancel = threading.Event()
-        #: Set while a service's operation has the sensor: the stream is quiet on purpose.
-        self._paused = threading.Event()
-        #: Set when the watch must look before its stall deadline: a cancel, a lost port,
-        #: the end of a pause. Between them it sleeps (idle costs nothing, docs/cpu.md).
-        self._attention = threading.Event()
+        #: ``_paused`` is set while a service's operation has the sensor: the stream is
+        #: quiet on purpose. ``_attention``, when the watch must look before its stall
+        #: deadline: a cancel, a lost port, the end of a pause. Between them it sleeps
+        #: (idle costs nothing, docs/cpu.md).
+        self._paused, self._attention = threading.Event(), threading.Event()
         self._report = DeviceReport(log)
         #: What to say to the sensor; it keeps what it learns (identity, divider).
         self.dialogue = SensorDialogue(config, log, self._report.warn, self._cancel, on_gyro_bias)
@@ -156,12 +153,10 @@ class DeviceSupervisor:
         if self._shared is not None and dialogue.divider and not line_warning:
             line_warning = self._shared.line_warning(cfg.address, cfg.stream,
                                                      dialogue.expected_rate_hz)
-        return DeviceStatus(
-            **self._report.fields(), **self._current.totals(), port=cfg.port,
-            address=cfg.address, wireless=cfg.wireless, ping_ok=dialogue.ping_ok,
-            info=dialogue.info, divider=dialogue.divider,
-            expected_rate_hz=dialogue.expected_rate_hz, eeprom_writes=dialogue.eeprom_writes,
-            line_use=dialogue.line_use, line_warning=line_warning)
+        learned = ('ping_ok', 'info', 'divider', 'expected_rate_hz', 'eeprom_writes', 'line_use')
+        return DeviceStatus(**self._report.fields(), **self._current.totals(),
+                            **{name: getattr(dialogue, name) for name in learned}, port=cfg.port,
+                            address=cfg.address, wireless=cfg.wireless, line_warning=line_warning)
 
     @property
     def link(self) -> DeviceLink | None:
@@ -297,15 +292,17 @@ class DeviceSupervisor:
         unless the device streams (or has stalled); PortError or
         DeviceError from the operation or the restart.
         """
-        link = self._current.link
-        state = self._report.state
+        link, state = self._current.link, self._report.state
         if link is None or state not in (State.STREAMING, State.STALLED):
             raise DeviceUnavailable(f'device not streaming (state: {state.value})')
         self._paused.set()
         self._report.enter(State.PAUSED)
         self._current.observe(False)  # a long operation (a 30 s bias capture) is quiet
         try:
-            return self.dialogue.run_exclusive(link, operation)
+            # Stopped, a polled record of the streamed code (a self test's 0xC2, with the
+            # built-in test skewing it) is a reply only, never a sample.
+            self.dialogue.stop(link)
+            return operation(link)
         finally:
             try:
                 self._current.observe(True)
@@ -448,9 +445,8 @@ class DeviceSupervisor:
     def _say(self, exc: PortError | DeviceError) -> None:
         """Say why this attempt failed, and that the loop goes on."""
         if isinstance(exc, DeviceError):
-            self._report.warn('timeout', f'device not answering: {exc} (wrong port or '
-                                         f'address? ros2 run i3dmgx2_driver discover '
-                                         f'finds sensors)')
+            self._report.warn('timeout', f'device not answering: {exc} (wrong port or address? '
+                                         f'ros2 run i3dmgx2_driver discover finds sensors)')
             return
         # An unplug is an event; a port that stays missing is a condition.
         period = EVENT_PERIOD if isinstance(exc, PortDisconnected) else None
@@ -475,8 +471,7 @@ class DeviceSupervisor:
             self._attention.clear()  # what set it is looked at below
             if self._cancel.is_set():
                 return
-            if link.disconnected.is_set():
-                raise PortDisconnected(link.error or 'device disconnected')
+            link.check_port()
             if self._paused.is_set():
                 continue
             if not watch.stalled(link.last_data_mono):

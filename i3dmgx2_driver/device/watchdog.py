@@ -74,11 +74,8 @@ class ReopenWait:
     def __init__(self, path: str, interval: float, wait: Callable[[float], bool],
                  exists: Callable[[str], bool] = os.path.exists,
                  clock: Callable[[], float] = time.monotonic) -> None:
-        self.path = path
-        self.interval = interval
-        self._wait = wait
-        self._exists = exists
-        self._clock = clock
+        self.path, self.interval = path, interval
+        self._wait, self._exists, self._clock = wait, exists, clock
 
     @property
     def promise(self) -> str:
