@@ -26,6 +26,7 @@ own, which a closed terminal does not reach).
 
 import argparse
 from collections.abc import Callable
+import contextlib
 import dataclasses
 import math
 import time
@@ -53,13 +54,10 @@ _address = in_range(lambda text: int(text, 0), framing.MIN_ADDRESS, framing.MAX_
 
 def _code(text: str, valid: Callable[[int], bool], wrong: str) -> int:
     """Return ``text`` as an integer (0x... too) that is ``valid``, else the error ``wrong``."""
-    try:
-        value = int(text, 0)
-    except ValueError:
-        value = None
-    if value is None or not valid(value):
-        raise argparse.ArgumentTypeError(wrong)
-    return value
+    with contextlib.suppress(ValueError):
+        if valid(value := int(text, 0)):
+            return value
+    raise argparse.ArgumentTypeError(wrong)
 
 
 def _divider(text: str) -> int:
@@ -251,10 +249,8 @@ def status_line(sim: PtySimulator, elapsed: float) -> str:
 
 
 def _say(text: str) -> None:
-    try:
-        print(text, flush=True)
-    except (BrokenPipeError, ValueError):
-        pass  # nobody listens any more; keep simulating until told to stop
+    with contextlib.suppress(BrokenPipeError, ValueError):  # nobody listens any more:
+        print(text, flush=True)  # keep simulating until told to stop
 
 
 def main(argv: list[str] | None = None) -> int:

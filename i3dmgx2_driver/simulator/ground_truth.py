@@ -98,9 +98,8 @@ class SimulatorStats:
 
     __slots__ = (
         'acks', 'bytes_read', 'bytes_written', 'commands_ignored', 'commands_lost',
-        'commands_other_address', 'commands_received', 'corrupted_checksum',
-        'corrupted_length', 'dropped', 'foreign', 'garbage_bursts', 'garbage_bytes',
-        'host_bytes_ignored',
+        'commands_other_address', 'commands_received', 'corrupted_checksum', 'corrupted_length',
+        'dropped', 'foreign', 'garbage_bursts', 'garbage_bytes', 'host_bytes_ignored',
         'late_skipped', 'line_rate_skipped', 'nacks', 'overflow_bytes', 'overflow_packets',
         'packets_written', 'pings', 'port_opens', 'records_sent', 'replies_sent', 'stalled',
         'unplugged_lost', 'unplugs')
@@ -124,15 +123,10 @@ class SimulatorStats:
 
 #: Counter of each way a data packet can fail.
 FAULT_COUNTERS = {
-    flt.FAULT_CHECKSUM: 'corrupted_checksum',
-    flt.FAULT_LENGTH: 'corrupted_length',
-    flt.FAULT_FOREIGN: 'foreign',
-    flt.FAULT_DROPPED: 'dropped',
-    flt.FAULT_STALL: 'stalled',
-    flt.FAULT_UNPLUGGED: 'unplugged_lost',
-    flt.FAULT_OVERFLOW: 'overflow_packets',
-    flt.FAULT_LINE_RATE: 'line_rate_skipped',
-}
+    flt.FAULT_CHECKSUM: 'corrupted_checksum', flt.FAULT_LENGTH: 'corrupted_length',
+    flt.FAULT_FOREIGN: 'foreign', flt.FAULT_DROPPED: 'dropped', flt.FAULT_STALL: 'stalled',
+    flt.FAULT_UNPLUGGED: 'unplugged_lost', flt.FAULT_OVERFLOW: 'overflow_packets',
+    flt.FAULT_LINE_RATE: 'line_rate_skipped'}
 
 
 class GroundTruth:
@@ -198,6 +192,14 @@ class GroundTruth:
         self._changed.notify_all()
 
 
+def _copied(name: str) -> Any:
+    """Return a property: a copy of the ground truth's list ``name``, taken under the lock."""
+    def get(self: 'TruthQueries') -> list[Any]:
+        with self._changed:
+            return list(getattr(self._record, name) or ())
+    return property(get)
+
+
 class TruthQueries:
     """
     The ground truth as copies, and waits until it shows something; thread-safe.
@@ -213,42 +215,24 @@ class TruthQueries:
         self._record = record
         self._changed = changed
 
-    @property
-    def truth(self) -> list[SentRecord]:
-        """Every data packet produced so far, in order (a copy)."""
-        with self._changed:
-            return list(self._record.truth or ())
-
-    @property
-    def commands(self) -> list[tuple[float, Command]]:
-        """(time, command) of every command the sensor received (a copy)."""
-        with self._changed:
-            return list(self._record.commands)
-
-    @property
-    def host_log(self) -> list[HostCommand]:
-        """Everything the host sent, with what became of it (a copy)."""
-        with self._changed:
-            return list(self._record.host_log)
+    #: Every data packet produced so far, in order (a copy).
+    truth: list[SentRecord] = _copied('truth')
+    #: (time, command) of every command the sensor received (a copy).
+    commands: list[tuple[float, Command]] = _copied('commands')
+    #: Everything the host sent, with what became of it (a copy).
+    host_log: list[HostCommand] = _copied('host_log')
+    #: (time, command byte or 0) each time the sensor's stream changed (a copy).
+    #: The first entry is the power-up state. A start, stop or change of
+    #: stream (0xC4, 0xFA, power cycle, unplugging a wired sensor) adds one;
+    #: asking for the record already streamed adds none. A test proves that
+    #: an interrupted stream was restarted by finding a 0 followed by a code.
+    stream_changes: list[tuple[float, int]] = _copied('stream_changes')
 
     @property
     def stats(self) -> SimulatorStats:
         """Return a snapshot of the counters."""
         with self._changed:
             return self._record.stats.copy()
-
-    @property
-    def stream_changes(self) -> list[tuple[float, int]]:
-        """
-        (time, command byte or 0) each time the sensor's stream changed (a copy).
-
-        The first entry is the power-up state. A start, stop or change of
-        stream (0xC4, 0xFA, power cycle, unplugging a wired sensor) adds one;
-        asking for the record already streamed adds none. A test proves that
-        an interrupted stream was restarted by finding a 0 followed by a code.
-        """
-        with self._changed:
-            return list(self._record.stream_changes)
 
     def commands_of(self, *codes: int) -> list[tuple[float, Command]]:
         """(time, command) of the commands with these command bytes the sensor received."""
@@ -269,10 +253,6 @@ class TruthQueries:
         """Wait until ``condition()`` is true (checked on every change); return it."""
         deadline = time.monotonic() + timeout
         with self._changed:
-            while True:
-                if condition():
-                    return True
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return False
+            while not (met := condition()) and (remaining := deadline - time.monotonic()) > 0:
                 self._changed.wait(min(remaining, 0.05))
+            return bool(met)

@@ -35,6 +35,7 @@ Design points, each for a reason:
   bytes are lost, as on a real line, and the caller counts them.
 """
 
+import contextlib
 import fcntl
 import os
 import shutil
@@ -133,10 +134,8 @@ class PtyPort:
             self.master = self.slave = self.device = self.link_target = None
         self.plugged.clear()
         if self.path and os.path.islink(self.path) and os.readlink(self.path) == target:
-            try:
+            with contextlib.suppress(FileNotFoundError):
                 os.unlink(self.path)
-            except FileNotFoundError:
-                pass
 
     def write_chunks(self, chunks: list[bytes],
                      gap: float) -> tuple[int, float | None, float | None]:
