@@ -130,8 +130,7 @@ class PtySimulator(TruthQueries):
                        timer_start=seeds.getrandbits(32)),
             Motion(MotionConfig(static=True)), seed=seeds.getrandbits(64))
         self._fault_rng = random.Random(seeds.getrandbits(64))
-        command_rng = random.Random(seeds.getrandbits(64))
-        chunk_rng = random.Random(seeds.getrandbits(64))
+        command_rng, chunk_rng = (random.Random(seeds.getrandbits(64)) for _ in range(2))
         #: Guards the sensor, the queues and the ground truth. Lock order: ``lock``
         #: may be held while taking the port's ``io_lock``, never the reverse.
         self.lock = threading.RLock()
@@ -162,11 +161,10 @@ class PtySimulator(TruthQueries):
                 config, spec, motion, seed, rng,
                 station_faults if i == 0 else FaultState(config.faults), end, writer, shared,
                 self._foreign, record, self._wake, self.host_reader.post)
-        first = unit_at(self.units, None)
-        #: The device model of the first sensor; touch it only while holding ``sim.lock``.
-        self.sensor = first.sensor
         #: The first sensor: its faults in effect are every sensor's configuration.
-        self._first = first
+        self._first = unit_at(self.units, None)
+        #: The device model of the first sensor; touch it only while holding ``sim.lock``.
+        self.sensor = self._first.sensor
         self._threads: list[threading.Thread] = []
         #: Path to open: a symlink that survives unplug and replug (None before start).
         self.port: str | None = None
