@@ -28,11 +28,8 @@ import collections.abc
 import random
 from typing import Any
 
-from i3dmgx2_driver.codec import framing
-from i3dmgx2_driver.codec import layouts as lay
-from i3dmgx2_driver.codec.parser import (
-    CommandStreamParser, HostEvent, RawCommand, RejectedPacket,
-)
+from i3dmgx2_driver.codec import framing, layouts as lay
+from i3dmgx2_driver.codec.parser import CommandStreamParser, HostEvent, RawCommand, RejectedPacket
 
 from . import faults as flt
 from .faults import FaultState

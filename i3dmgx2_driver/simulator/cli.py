@@ -37,6 +37,7 @@ from i3dmgx2_driver.codec.data_rate import MAX_DIVIDER, MIN_DIVIDER
 
 from .config import SimulatorConfig
 from .faults import FaultConfig
+from .ground_truth import FAULT_COUNTERS
 from .motion import MotionConfig, MOTIONS
 from .noise_model import NoiseConfig
 from .pty_link import PtySimulator
@@ -239,10 +240,9 @@ def status_line(sim: PtySimulator, elapsed: float) -> str:
                  if len(sim.addresses) > 1 else named(sim.streaming))
     link = f'acks={stats.acks} nacks={stats.nacks}' if sim.config.wireless else 'wired'
     plugged = 'plugged' if sim.pty.plugged.is_set() else 'unplugged'
-    extra = ''.join(f' {k}={v}' for k, v in stats.as_dict().items() if v and k in (
-        'garbage_bytes', 'corrupted_checksum', 'corrupted_length', 'foreign', 'dropped',
-        'stalled', 'unplugged_lost', 'overflow_packets', 'commands_lost', 'commands_ignored',
-        'line_rate_skipped', 'late_skipped', 'host_bytes_ignored'))
+    extra = ''.join(f' {k}={v}' for k, v in stats.as_dict().items() if v and k in {
+        *FAULT_COUNTERS.values(), 'garbage_bytes', 'commands_lost', 'commands_ignored',
+        'late_skipped', 'host_bytes_ignored'})
     return (f'[{elapsed:8.1f} s] records={stats.records_sent} replies={stats.replies_sent} '
             f'commands={stats.commands_received} {link} streaming={streaming} '
             f'rate={sim.sensor.rate_hz:g}Hz port={plugged} opens={stats.port_opens}{extra}')

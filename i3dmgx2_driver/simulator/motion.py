@@ -233,9 +233,7 @@ class Motion:
 
     def measure(self, t: float, rng: random.Random) -> Measurement:
         """Return what the raw sensors read at ``t``: truth, biases and noise."""
-        c = self.config
-        truth = self.state(t)
-        gauss = rng.gauss
+        c, truth, gauss = self.config, self.state(t), rng.gauss
         if c.noise is None:   # white alone, the accelerometer's drawn first
             accel_error = [gauss(0.0, c.accel_noise) for _ in range(3)]
             gyro_error = [gauss(0.0, c.gyro_noise) for _ in range(3)]

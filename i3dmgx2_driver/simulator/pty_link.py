@@ -70,7 +70,6 @@ import dataclasses
 import random
 import threading
 import time
-import typing
 from typing import Any
 
 from .base_station import BaseStation
@@ -84,9 +83,6 @@ from .sensor import SensorSpec, SimulatedSensor
 from .sensor_unit import foreign_address, SensorUnit, unit_at, unit_specs
 from .transmitter import LineWriter, SharedLine
 from .wired_line import WiredLine
-
-if typing.TYPE_CHECKING:  # typing.Self is new in Python 3.11; Jazzy allows 3.10
-    from typing import Self
 
 __all__ = ['PtySimulator']
 
@@ -227,7 +223,7 @@ class PtySimulator(TruthQueries):
         self.started = False
         atexit.unregister(self.stop)
 
-    def __enter__(self) -> 'Self':
+    def __enter__(self) -> 'PtySimulator':
         """Start (if not yet started) for a ``with`` block."""
         if not self.started:
             self.start()

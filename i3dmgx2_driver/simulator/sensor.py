@@ -38,14 +38,8 @@ import random
 from typing import Any, ClassVar, NamedTuple
 
 from i3dmgx2_driver.codec import command_firmware as firmware, framing
-from i3dmgx2_driver.codec import layouts as lay
-from i3dmgx2_driver.codec import records as rec
-from i3dmgx2_driver.codec.commands import (
-    Command,
-    decode_command,
-    decode_record,
-    encode_record,
-)
+from i3dmgx2_driver.codec import layouts as lay, records as rec
+from i3dmgx2_driver.codec.commands import Command, decode_command, decode_record, encode_record
 from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 
@@ -173,8 +167,7 @@ class SimulatedSensor:
         #: The motion the sensor goes through.
         self.motion = motion if motion is not None else Motion()
         self._maker = RecordMaker(self.motion, self.rng, spec.temperature_c, self.biases)
-        self._lqi = 230.0
-        self._rssi = 170.0
+        self._lqi, self._rssi = 230.0, 170.0
         #: Commands received but not understood or not allowed (counted, not answered).
         self.ignored = 0
         self.power_up(power_up_time)
@@ -192,10 +185,9 @@ class SimulatedSensor:
         """
         self.biases.restore()
         self.clock.restart(t, self.rate_hz, timer_start)
-        autostart = self.settings.autostart
         #: Command byte being streamed, 0 when polled.
         self.streaming = 0
-        if autostart in STREAMABLE:
+        if (autostart := self.settings.autostart) in STREAMABLE:
             self.start_streaming(autostart, t)
 
     def power_off(self) -> None:
@@ -311,11 +303,9 @@ class SimulatedSensor:
     def _capture_gyro_bias(self, seconds: float, now: float) -> Reply:
         # The device averages its raw gyros over the sampling time: the true
         # bias if it is still, the bias plus the mean rotation if it is not.
-        rel = self.clock.rel(now)
-        motion = self.motion
+        rel, motion = self.clock.rel(now), self.motion
         mean = motion.mean_rate(rel, rel + seconds)
-        cycles = max(1.0, seconds * self.rate_hz)
-        noise = motion.config.gyro_noise / math.sqrt(cycles)
+        noise = motion.config.gyro_noise / math.sqrt(max(1.0, seconds * self.rate_hz))
         bias = float32(tuple(mean[i] + motion.config.gyro_bias[i]
                              + self.rng.gauss(0.0, noise) for i in range(3)))
         self.biases.capture_gyro(rel + seconds, bias)
@@ -323,7 +313,7 @@ class SimulatedSensor:
                            now + seconds, now + seconds)
 
     def _write_accel_bias(self, args, now, timer):
-        self.biases.set_accel(float32(args[0]))
+        self.biases.accel = float32(args[0])
         return rec.AccelBias(self.biases.accel, timer)
 
     def _write_gyro_bias(self, args, now, timer):

@@ -37,8 +37,7 @@ import random
 import threading
 import time
 
-from i3dmgx2_driver.codec import framing
-from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec import framing, layouts as lay
 from i3dmgx2_driver.codec.commands import Command
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 
