@@ -52,8 +52,6 @@ class BaseStation:
 
     #: Bytes that "safe" garbage avoids on this line (see faults.SIGNIFICANT_BYTES).
     significant_bytes = flt.SIGNIFICANT_BYTES
-    #: Bytes on the line beside a record's own (echo and data): header and trailer.
-    frame_overhead = framing.HEADER_SIZE + framing.DATA_TRAILER_SIZE
 
     def __init__(self, units: collections.abc.Mapping[int, Any], record: GroundTruth,
                  port: PtyPort, faults: FaultState, rng: random.Random) -> None:

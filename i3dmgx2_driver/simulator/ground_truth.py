@@ -178,9 +178,8 @@ class GroundTruth:
             first_write_time: float | None = None) -> None:
         """Record one data packet and count it."""
         entry = SentRecord(self.truth_index, reply.sample_time, write_time,
-                           getattr(reply.record, 'timer', None), reply.record, packet,
-                           address, valid, fault, source,
-                           first_write_time if write_time is not None else None)
+                           getattr(reply.record, 'timer', None), reply.record, packet, address,
+                           valid, fault, source, first_write_time)
         self.truth_index += 1
         if self.truth is not None:
             self.truth.append(entry)

@@ -166,8 +166,7 @@ class Motion:
     """
 
     def __init__(self, config: MotionConfig | None = None) -> None:
-        self.config = config if config is not None else MotionConfig()
-        c = self.config
+        self.config = c = config if config is not None else MotionConfig()
         self._base = tuple(math.radians(a) for a in c.initial_attitude_deg)
         self._amp = tuple(math.radians(a) for a in c.sway_amplitude_deg)
         self._omega = tuple(_TWO_PI / p if p > 0 else 0.0 for p in c.sway_period_s)

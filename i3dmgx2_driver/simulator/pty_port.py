@@ -70,9 +70,7 @@ class PtyPort:
 
     def __init__(self, symlink: str | None = None, link_via_proc: bool = True,
                  prefix: str = 'i3dmgx2-sim-') -> None:
-        self._symlink = symlink
-        self._prefix = prefix
-        self._link_via_proc = link_via_proc
+        self._symlink, self._prefix, self._link_via_proc = symlink, prefix, link_via_proc
         self._dir: str | None = None
         self.io_lock = threading.Lock()
         #: Set while the pty exists (cleared between unplug and replug).
@@ -122,8 +120,7 @@ class PtyPort:
         os.symlink(target, temporary)
         os.replace(temporary, self.path)
         with self.io_lock:
-            self.master, self.slave, self.device = master, slave, device
-            self.link_target = target
+            self.master, self.slave, self.device, self.link_target = master, slave, device, target
         self.plugged.set()
 
     def pull_out(self) -> None:

@@ -226,9 +226,7 @@ class SimulatedSensor:
 
     def stream_sample(self) -> Reply:
         """Take the next streamed cycle (call when :attr:`next_sample_time` is due)."""
-        rel = self.clock.take()
-        t = self.clock.power_up_time + rel
-        return self._reply(self._record(self.streaming, rel), t, t)
+        return self._sample(self.streaming, self.clock.take())
 
     # -- commands ---------------------------------------------------------------------------
 
@@ -248,8 +246,7 @@ class SimulatedSensor:
         """Return the data record ``code`` of the calculation cycle at or before ``t``."""
         if code not in STREAMABLE:
             raise ValueError(f'0x{code:02X} is not a data record')
-        rel = self.clock.latest_cycle_rel(self.clock.rel(t))
-        return self._reply(self._record(code, rel), t, self.clock.power_up_time + rel)
+        return self._sample(code, self.clock.latest_cycle_rel(self.clock.rel(t)), t)
 
     def handle(self, command: bytes | Command, now: float) -> list[Reply]:
         """
@@ -276,9 +273,7 @@ class SimulatedSensor:
         if code in STREAMABLE:
             # A polled record is the one the next calculation cycle computes,
             # sent when that cycle completes.
-            polled = self.clock.next_cycle_rel(rel)
-            polled_time = self.clock.power_up_time + polled
-            return [self._reply(self._record(code, polled), polled_time, polled_time)]
+            return [self._sample(code, self.clock.next_cycle_rel(rel))]
         if code == lay.SET_CONTINUOUS:
             target = args[0]
             if target == 0:
@@ -323,9 +318,9 @@ class SimulatedSensor:
     def _transfer(self, args, now, timer):
         # The RAM corrections go to non-volatile memory, which a power-up loads;
         # unless the memory refuses (then nothing is stored, and 0xFFFF says so).
-        if self.settings.refuse_bias_store:
-            return rec.TransferToNonVolatile(rec.INVALID_QUANTITY, timer)
-        return rec.TransferToNonVolatile(self.biases.store(args[0], self.clock.rel(now)), timer)
+        return rec.TransferToNonVolatile(rec.INVALID_QUANTITY if self.settings.refuse_bias_store
+                                         else self.biases.store(args[0], self.clock.rel(now)),
+                                         timer)
 
     def _write_eeprom(self, args, now, timer):
         address, value = args
@@ -348,10 +343,12 @@ class SimulatedSensor:
 
     # -- records ----------------------------------------------------------------------------
 
-    def _record(self, code: int, rel: float) -> Any:
-        """Build the record ``code`` for the calculation cycle at ``rel``."""
+    def _sample(self, code: int, rel: float, due: float | None = None) -> Reply:
+        """Return the record ``code`` of the calculation cycle at ``rel``, sent then or ``due``."""
         self.biases.apply_capture(rel)
-        return self._maker.record(code, rel, self.clock.timer_rel(rel), self.clock.period)
+        record = self._maker.record(code, rel, self.clock.timer_rel(rel), self.clock.period)
+        sample_time = self.clock.power_up_time + rel
+        return self._reply(record, sample_time if due is None else due, sample_time)
 
     def _reply(self, record: Any, due: float, sample_time: float) -> Reply:
         """Encode through the codec, and keep the record as the host will decode it."""

@@ -50,7 +50,7 @@ import threading
 import time
 from typing import NamedTuple
 
-from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec import layouts as lay, line_budget
 
 from . import faults as flt
 from .base_station import BaseStation
@@ -62,7 +62,7 @@ from .sensor import Reply, SimulatedSensor, STREAMABLE
 from .wired_line import WiredLine
 
 #: Bytes per second of a 115200-baud 8N1 line.
-LINE_BYTES_PER_SECOND = 11520
+LINE_BYTES_PER_SECOND = line_budget.line_bytes_per_second(115200)
 #: Longest sleep of the thread, so that stop() never waits long.
 POLL_S = 0.25
 #: How long (s) before its due time a record is taken from the queue and framed.
@@ -165,7 +165,7 @@ class Transmitter:
     def enqueue(self, reply: Reply, source: str) -> None:
         """Queue a record the sensor sends at ``reply.due`` ('stream' or 'reply')."""
         config = self._config
-        wire = ((len(reply.data) + self._end.frame_overhead) * 10.0 / config.wire_baud
+        wire = (line_budget.wire_time(reply.code, config.wire_baud, config.wireless)
                 if config.wire_baud else 0.0)
         line, overflow = self._line, False
         if line is None:
@@ -255,7 +255,7 @@ class Transmitter:
         queue: it leaves one wire time after the packet ahead of it.
         """
         config, last = self._config, self._uart_last_send
-        byte_s = 10.0 / config.wire_baud
+        byte_s = line_budget.BITS_PER_BYTE / config.wire_baud
         ready = item.write_at - size * byte_s
         if last is not None and item.send - last >= GAP_S:
             ready += config.radio_hold_s
