@@ -41,7 +41,7 @@ from .ground_truth import FAULT_COUNTERS
 from .motion import MotionConfig, MOTIONS
 from .noise_model import NoiseConfig
 from .pty_link import PtySimulator
-from .sensor import DEFAULT_FIRMWARE, STREAMABLE
+from .sensor import DEFAULT_FIRMWARE, STREAMABLE, STREAMABLE_TEXT
 from .. import lifetime
 from ..arguments import in_range
 
@@ -70,8 +70,7 @@ def _divider(text: str) -> int:
 
 def _streamable(text: str) -> int:
     return _code(text, STREAMABLE.__contains__,
-                 f'{text} is not a record the sensor can stream; streamable: '
-                 + ', '.join(f'0x{code:02X}' for code in sorted(STREAMABLE)))
+                 f'{text} is not a record the sensor can stream; streamable: {STREAMABLE_TEXT}')
 
 
 def _firmware(text: str) -> tuple[int | None, int]:
@@ -119,8 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
         help=f'EEPROM data-rate divider at power-up, {MIN_DIVIDER}..{MAX_DIVIDER} (rate '
              '51200/N Hz; factory: 512, 100 Hz)')
     add('--stream', type=_streamable, metavar='CODE', dest='streaming_at_start', default=False,
-        help='stream this record from power-up (EEPROM auto-start), e.g. 0xC2; one of '
-             + ', '.join(f'0x{c:02X}' for c in sorted(STREAMABLE)))
+        help=f'stream this record from power-up (EEPROM auto-start), e.g. 0xC2; one of '
+             f'{STREAMABLE_TEXT}')
     add('--firmware', type=_firmware, action='append', metavar='VERSION',
         help='firmware the sensor reports (0xE9), e.g. 2.1.03: commands newer than it go '
              f'unanswered (default {firmware.text(DEFAULT_FIRMWARE)}, which has them all); '

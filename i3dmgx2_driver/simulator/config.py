@@ -153,11 +153,9 @@ class SimulatorConfig:
             if not (0 <= address <= 0xFFFF and 0 <= value <= 0xFFFF):
                 raise ValueError(f'eeprom words are uint16 at uint16 addresses, got '
                                  f'{address!r}: {value!r}')
-        code = self.start_stream
-        if code and code not in sns.STREAMABLE:
-            valid = ', '.join(f'0x{c:02X}' for c in sorted(sns.STREAMABLE))
+        if (code := self.start_stream) and code not in sns.STREAMABLE:
             raise ValueError(f'streaming_at_start: 0x{code:02X} cannot be streamed; '
-                             f'streamable records: {valid}')
+                             f'streamable records: {sns.STREAMABLE_TEXT}')
         if not self.wireless:
             self.faults.check_wired()
 

@@ -112,10 +112,6 @@ class SimulatorStats:
         """Return the counters by name."""
         return {name: getattr(self, name) for name in self.__slots__}
 
-    def copy(self) -> 'SimulatorStats':
-        """Return a snapshot that later counting does not change."""
-        return copy.copy(self)
-
     def __repr__(self) -> str:
         fields_ = ', '.join(f'{k}={v}' for k, v in self.as_dict().items() if v)
         return f'SimulatorStats({fields_})'
@@ -138,9 +134,8 @@ class GroundTruth:
     """
 
     def __init__(self, truth_limit: int | None, changed: threading.Condition) -> None:
-        #: Data packets produced, in order (None when ``truth_limit`` is 0).
-        self.truth: collections.deque[SentRecord] | None = (
-            None if truth_limit == 0 else collections.deque(maxlen=truth_limit))
+        #: Data packets produced, in order (none kept when ``truth_limit`` is 0).
+        self.truth: collections.deque[SentRecord] = collections.deque(maxlen=truth_limit)
         #: How many data packets were produced (kept or not).
         self.truth_index = 0
         #: (time, command) of every command the sensor received and decoded.
@@ -181,8 +176,7 @@ class GroundTruth:
                            getattr(reply.record, 'timer', None), reply.record, packet, address,
                            valid, fault, source, first_write_time)
         self.truth_index += 1
-        if self.truth is not None:
-            self.truth.append(entry)
+        self.truth.append(entry)
         self.count(packets_written=int(write_time is not None),
                    records_sent=int(valid and source == 'stream'),
                    replies_sent=int(valid and source != 'stream'))
@@ -191,11 +185,11 @@ class GroundTruth:
         self._changed.notify_all()
 
 
-def _copied(name: str) -> Any:
-    """Return a property: a copy of the ground truth's list ``name``, taken under the lock."""
-    def get(self: 'TruthQueries') -> list[Any]:
+def _copied(name: str, copy_of: collections.abc.Callable[[Any], Any] = list) -> Any:
+    """Return a property: a copy (``copy_of``) of the ground truth's ``name``, under the lock."""
+    def get(self: 'TruthQueries') -> Any:
         with self._changed:
-            return list(getattr(self._record, name) or ())
+            return copy_of(getattr(self._record, name))
     return property(get)
 
 
@@ -211,8 +205,7 @@ class TruthQueries:
     """
 
     def __init__(self, record: GroundTruth, changed: threading.Condition) -> None:
-        self._record = record
-        self._changed = changed
+        self._record, self._changed = record, changed
 
     #: Every data packet produced so far, in order (a copy).
     truth: list[SentRecord] = _copied('truth')
@@ -226,12 +219,8 @@ class TruthQueries:
     #: asking for the record already streamed adds none. A test proves that
     #: an interrupted stream was restarted by finding a 0 followed by a code.
     stream_changes: list[tuple[float, int]] = _copied('stream_changes')
-
-    @property
-    def stats(self) -> SimulatorStats:
-        """Return a snapshot of the counters."""
-        with self._changed:
-            return self._record.stats.copy()
+    #: A snapshot of the counters, which later counting does not change.
+    stats: SimulatorStats = _copied('stats', copy.copy)
 
     def commands_of(self, *codes: int) -> list[tuple[float, Command]]:
         """(time, command) of the commands with these command bytes the sensor received."""

@@ -54,6 +54,8 @@ from .motion import Motion
 DEFAULT_TIMER_START = TIMER_MODULUS - 5 * rec.TICKS_PER_SECOND
 #: Data records: these can be polled and streamed (the codec's table says which).
 STREAMABLE = lay.STREAMABLE
+#: Their codes as a message lists them.
+STREAMABLE_TEXT = ', '.join(f'0x{code:02X}' for code in sorted(STREAMABLE))
 #: Firmware of a simulated sensor unless told: one that answers every command.
 DEFAULT_FIRMWARE = firmware.NEWEST
 

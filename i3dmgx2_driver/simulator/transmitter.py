@@ -272,10 +272,9 @@ class Transmitter:
 
     def _lost(self, send: float) -> str | None:
         """Return why a packet sent at ``send`` never arrives (stall, drop), or None."""
-        faults = self._faults.config
         if self._faults.silent(send):
             return flt.FAULT_STALL
-        if faults.drop_probability and self._rng.random() < faults.drop_probability:
+        if (chance := self._faults.config.drop_probability) and self._rng.random() < chance:
             return flt.FAULT_DROPPED
         return None
 
