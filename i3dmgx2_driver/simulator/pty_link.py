@@ -67,6 +67,7 @@ address, or the first sensor.
 import atexit
 import collections.abc
 import dataclasses
+import functools
 import random
 import threading
 import time
@@ -250,8 +251,7 @@ class PtySimulator(TruthQueries):
         if faults.stall_at is not None and asked('stall_at', 'stall_seconds'):
             self._stall(now + faults.stall_at, faults.stall_seconds, address)
         if faults.unplug_at is not None and asked('unplug_at', 'unplug_seconds'):
-            seconds = faults.unplug_seconds
-            post(faults.unplug_at, lambda: self._pull_cable(seconds))
+            post(faults.unplug_at, functools.partial(self._pull_cable, faults.unplug_seconds))
         if faults.power_cycle_at is not None and asked(
                 'power_cycle_at', 'power_off_seconds', 'power_up_timer'):
             unit = unit_at(self.units, address)

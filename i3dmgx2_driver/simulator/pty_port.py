@@ -151,11 +151,10 @@ class PtyPort:
         """
         written = 0
         with self.io_lock:
-            master = self.master
-            if master is None:
+            if (master := self.master) is None:
                 return 0, None, None
             first_write = last_write = time.time()
-            try:
+            with contextlib.suppress(OSError):  # the buffer is full (nobody reads): rest lost
                 for index, chunk in enumerate(chunks):
                     if index and gap:
                         time.sleep(gap)
@@ -165,8 +164,6 @@ class PtyPort:
                         count = os.write(master, view)
                         written += count
                         view = view[count:]
-            except OSError:
-                pass  # the buffer is full (nobody reads): the rest is lost
             return written, first_write, last_write
 
     def write(self, data: bytes) -> int | None:

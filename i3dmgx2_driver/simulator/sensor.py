@@ -153,8 +153,7 @@ class SimulatedSensor:
     def __init__(self, spec: SensorSpec | None = None, motion: Motion | None = None, *,
                  seed: int | None = None, power_up_time: float = 0.0) -> None:
         spec = spec if spec is not None else SensorSpec()
-        self.address = spec.address
-        self.firmware_version = spec.firmware_version
+        self.address, self.firmware_version = spec.address, spec.firmware_version
         self.identifiers = spec.identifiers
         #: The EEPROM and the settings it holds; it persists across power cycles.
         self.settings = SensorEeprom(spec.eeprom, spec.rate_hz)

@@ -89,14 +89,13 @@ class LineWriter:
 
     def write(self, data: bytes) -> tuple[str | None, float | None, float | None]:
         """Write one frame in chunks; return (fault or None, time of its first and last write)."""
-        written, first_write, write_time = self._port.write_chunks(self._split(data),
-                                                                   self._gap_s)
-        if write_time is None:
+        written, first, last = self._port.write_chunks(self._split(data), self._gap_s)
+        if last is None:
             return flt.FAULT_UNPLUGGED, None, None
         self._record.written(len(data), written)
         if written < len(data):
             return flt.FAULT_OVERFLOW, None, None
-        return None, first_write, write_time
+        return None, first, last
 
     def _split(self, data: bytes) -> list[bytes]:
         count = min(self._rng.randint(*self._chunks), len(data))
