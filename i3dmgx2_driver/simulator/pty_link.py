@@ -185,9 +185,8 @@ class PtySimulator(TruthQueries):
         self.port = self.pty.create()
         self.host_reader.open_pipe()
         self.host_reader.plug_in()
-        now = time.time()
         with self._wake:
-            self.start_time = now
+            self.start_time = now = time.time()
             # Every sensor up, then the stranger's clock somewhere; the timed faults from now.
             for unit in self.units.values():
                 unit.sensor.power_up(now)

@@ -269,8 +269,7 @@ class SimulatedSensor:
         code, args = command.code, command.args
         rel = self.clock.rel(now)
         cycle = self.clock.latest_cycle_rel(rel)
-        cycle_time = self.clock.power_up_time + cycle
-        timer = self.clock.timer_rel(cycle)
+        cycle_time, timer = self.clock.power_up_time + cycle, self.clock.timer_rel(cycle)
         if code in STREAMABLE:
             # A polled record is the one the next calculation cycle computes,
             # sent when that cycle completes.
