@@ -248,8 +248,9 @@ def status_line(sim: PtySimulator, elapsed: float) -> str:
 
 
 def _say(text: str) -> None:
-    with contextlib.suppress(BrokenPipeError, ValueError):  # nobody listens any more:
-        print(text, flush=True)  # keep simulating until told to stop
+    # Nobody listens any more: keep simulating until told to stop.
+    with contextlib.suppress(BrokenPipeError, ValueError):
+        print(text, flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:

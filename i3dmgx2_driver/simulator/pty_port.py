@@ -154,7 +154,8 @@ class PtyPort:
             if (master := self.master) is None:
                 return 0, None, None
             first_write = last_write = time.time()
-            with contextlib.suppress(OSError):  # the buffer is full (nobody reads): rest lost
+            # The buffer is full (nobody reads): the rest is lost.
+            with contextlib.suppress(OSError):
                 for index, chunk in enumerate(chunks):
                     if index and gap:
                         time.sleep(gap)
