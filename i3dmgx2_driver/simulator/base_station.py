@@ -28,11 +28,8 @@ import collections.abc
 import random
 from typing import Any
 
-from i3dmgx2_driver.codec import framing
-from i3dmgx2_driver.codec import layouts as lay
-from i3dmgx2_driver.codec.parser import (
-    CommandStreamParser, HostEvent, RawCommand, RejectedPacket,
-)
+from i3dmgx2_driver.codec import framing, layouts as lay
+from i3dmgx2_driver.codec.parser import CommandStreamParser, HostEvent, RawCommand, RejectedPacket
 
 from . import faults as flt
 from .faults import FaultState
@@ -55,16 +52,11 @@ class BaseStation:
 
     #: Bytes that "safe" garbage avoids on this line (see faults.SIGNIFICANT_BYTES).
     significant_bytes = flt.SIGNIFICANT_BYTES
-    #: Bytes on the line beside a record's own (echo and data): header and trailer.
-    frame_overhead = framing.HEADER_SIZE + framing.DATA_TRAILER_SIZE
 
     def __init__(self, units: collections.abc.Mapping[int, Any], record: GroundTruth,
                  port: PtyPort, faults: FaultState, rng: random.Random) -> None:
-        self._units = units
-        self._record = record
-        self._port = port
-        self._faults = faults
-        self._rng = rng
+        self._units, self._record, self._port = units, record, port
+        self._faults, self._rng = faults, rng
 
     #: Returns a reader of the host's bytes: command packets and pings.
     new_parser = CommandStreamParser
@@ -85,14 +77,12 @@ class BaseStation:
         command = decoded(raw)
         if command is None or command.code != lay.PING:
             return
-        unit = self._units.get(command.args[0])
-        if unit is None or unit.faults.silent(now):
-            answer = _PING_FAILED
-        else:
-            answer = unit.sensor.ping_reply(command.args[0])
+        address = command.args[0]
+        unit = self._units.get(address)
+        answer = (_PING_FAILED if unit is None or unit.faults.silent(now)
+                  else unit.sensor.ping_reply(address))
         outcome = 'ping ok' if answer != _PING_FAILED else 'ping failed'
-        self._record.log(HostCommand(now, 'ping', command.args[0], command, raw, outcome),
-                         pings=1)
+        self._record.log(HostCommand(now, 'ping', address, command, raw, outcome), pings=1)
         self._write(answer)
 
     def _on_command_packet(self, packet: framing.CommandPacket, now: float) -> None:

@@ -26,6 +26,7 @@ own, which a closed terminal does not reach).
 
 import argparse
 from collections.abc import Callable
+import contextlib
 import dataclasses
 import math
 import time
@@ -36,10 +37,11 @@ from i3dmgx2_driver.codec.data_rate import MAX_DIVIDER, MIN_DIVIDER
 
 from .config import SimulatorConfig
 from .faults import FaultConfig
+from .ground_truth import FAULT_COUNTERS
 from .motion import MotionConfig, MOTIONS
 from .noise_model import NoiseConfig
 from .pty_link import PtySimulator
-from .sensor import DEFAULT_FIRMWARE, STREAMABLE
+from .sensor import DEFAULT_FIRMWARE, STREAMABLE, STREAMABLE_TEXT
 from .. import lifetime
 from ..arguments import in_range
 
@@ -53,13 +55,10 @@ _address = in_range(lambda text: int(text, 0), framing.MIN_ADDRESS, framing.MAX_
 
 def _code(text: str, valid: Callable[[int], bool], wrong: str) -> int:
     """Return ``text`` as an integer (0x... too) that is ``valid``, else the error ``wrong``."""
-    try:
-        value = int(text, 0)
-    except ValueError:
-        value = None
-    if value is None or not valid(value):
-        raise argparse.ArgumentTypeError(wrong)
-    return value
+    with contextlib.suppress(ValueError):
+        if valid(value := int(text, 0)):
+            return value
+    raise argparse.ArgumentTypeError(wrong)
 
 
 def _divider(text: str) -> int:
@@ -71,8 +70,7 @@ def _divider(text: str) -> int:
 
 def _streamable(text: str) -> int:
     return _code(text, STREAMABLE.__contains__,
-                 f'{text} is not a record the sensor can stream; streamable: '
-                 + ', '.join(f'0x{code:02X}' for code in sorted(STREAMABLE)))
+                 f'{text} is not a record the sensor can stream; streamable: {STREAMABLE_TEXT}')
 
 
 def _firmware(text: str) -> tuple[int | None, int]:
@@ -120,8 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
         help=f'EEPROM data-rate divider at power-up, {MIN_DIVIDER}..{MAX_DIVIDER} (rate '
              '51200/N Hz; factory: 512, 100 Hz)')
     add('--stream', type=_streamable, metavar='CODE', dest='streaming_at_start', default=False,
-        help='stream this record from power-up (EEPROM auto-start), e.g. 0xC2; one of '
-             + ', '.join(f'0x{c:02X}' for c in sorted(STREAMABLE)))
+        help=f'stream this record from power-up (EEPROM auto-start), e.g. 0xC2; one of '
+             f'{STREAMABLE_TEXT}')
     add('--firmware', type=_firmware, action='append', metavar='VERSION',
         help='firmware the sensor reports (0xE9), e.g. 2.1.03: commands newer than it go '
              f'unanswered (default {firmware.text(DEFAULT_FIRMWARE)}, which has them all); '
@@ -241,20 +239,18 @@ def status_line(sim: PtySimulator, elapsed: float) -> str:
                  if len(sim.addresses) > 1 else named(sim.streaming))
     link = f'acks={stats.acks} nacks={stats.nacks}' if sim.config.wireless else 'wired'
     plugged = 'plugged' if sim.pty.plugged.is_set() else 'unplugged'
-    extra = ''.join(f' {k}={v}' for k, v in stats.as_dict().items() if v and k in (
-        'garbage_bytes', 'corrupted_checksum', 'corrupted_length', 'foreign', 'dropped',
-        'stalled', 'unplugged_lost', 'overflow_packets', 'commands_lost', 'commands_ignored',
-        'line_rate_skipped', 'late_skipped', 'host_bytes_ignored'))
+    extra = ''.join(f' {k}={v}' for k, v in stats.as_dict().items() if v and k in {
+        *FAULT_COUNTERS.values(), 'garbage_bytes', 'commands_lost', 'commands_ignored',
+        'late_skipped', 'host_bytes_ignored'})
     return (f'[{elapsed:8.1f} s] records={stats.records_sent} replies={stats.replies_sent} '
             f'commands={stats.commands_received} {link} streaming={streaming} '
             f'rate={sim.sensor.rate_hz:g}Hz port={plugged} opens={stats.port_opens}{extra}')
 
 
 def _say(text: str) -> None:
-    try:
+    # Nobody listens any more: keep simulating until told to stop.
+    with contextlib.suppress(BrokenPipeError, ValueError):
         print(text, flush=True)
-    except (BrokenPipeError, ValueError):
-        pass  # nobody listens any more; keep simulating until told to stop
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -137,8 +137,7 @@ class SimulatorConfig:
         if self.fault_address is not None and self.fault_address not in self.all_addresses:
             raise ValueError(f'fault_address {self.fault_address} is none of the sensors '
                              f'{self.all_addresses}')
-        low, high = self.chunks
-        if not 1 <= low <= high:
+        if not 1 <= self.chunks[0] <= self.chunks[1]:
             raise ValueError(f'chunks must be (min, max) with 1 <= min <= max, got {self.chunks}')
         if self.latency_s < 0 or self.chunk_gap_s < 0 or self.radio_hold_s < 0:
             raise ValueError('latency_s, chunk_gap_s and radio_hold_s must not be negative')
@@ -154,11 +153,9 @@ class SimulatorConfig:
             if not (0 <= address <= 0xFFFF and 0 <= value <= 0xFFFF):
                 raise ValueError(f'eeprom words are uint16 at uint16 addresses, got '
                                  f'{address!r}: {value!r}')
-        code = self.start_stream
-        if code and code not in sns.STREAMABLE:
-            valid = ', '.join(f'0x{c:02X}' for c in sorted(sns.STREAMABLE))
+        if (code := self.start_stream) and code not in sns.STREAMABLE:
             raise ValueError(f'streaming_at_start: 0x{code:02X} cannot be streamed; '
-                             f'streamable records: {valid}')
+                             f'streamable records: {sns.STREAMABLE_TEXT}')
         if not self.wireless:
             self.faults.check_wired()
 

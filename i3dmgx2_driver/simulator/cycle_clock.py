@@ -106,6 +106,5 @@ class CycleClock:
         """Skip the cycles to stream before ``t``; return how many."""
         rel = t - self.power_up_time
         target = max(math.ceil((rel - self._grid_origin) / self.period), self._next_index)
-        skipped = target - self._next_index
-        self._next_index = target
+        skipped, self._next_index = target - self._next_index, target
         return skipped

@@ -29,8 +29,7 @@ import random
 import struct
 from typing import Any
 
-from i3dmgx2_driver.codec import layouts as lay
-from i3dmgx2_driver.codec import records as rec
+from i3dmgx2_driver.codec import layouts as lay, records as rec
 from i3dmgx2_driver.codec.orientation import euler_from_matrix
 
 from .motion import Matrix3, Measurement, Motion, Vector3
@@ -77,10 +76,6 @@ class BiasCorrections:
     def forget_capture(self) -> None:
         """Drop a gyro capture still running (power lost)."""
         self._pending_gyro = None
-
-    def set_accel(self, accel: Vector3) -> None:
-        """Use this accelerometer correction from now (0xC9)."""
-        self.accel = accel
 
     def set_gyro(self, gyro: Vector3) -> None:
         """Use this gyro correction from now (a capture still running is dropped)."""

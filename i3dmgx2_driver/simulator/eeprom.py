@@ -56,9 +56,7 @@ class SensorEeprom:
                  rate_override: float | None = None) -> None:
         #: The words (address -> value); the sensor shows this dict as ``eeprom``.
         self.words: dict[int, int] = {RATE_DIVIDER_ADDRESS: FACTORY_DIVIDER,
-                                      AUTOSTART_ADDRESS: 0x0000}
-        if presets:
-            self.words.update(presets)
+                                      AUTOSTART_ADDRESS: 0x0000, **(presets or {})}
         #: A rate (Hz) calculated at whatever the divider says (None: the divider's).
         self.rate_override = rate_override
         #: Refuse every 0xD0 transfer (answer 0xFFFF, store nothing).

@@ -143,13 +143,11 @@ class FaultState:
     def __init__(self, config: FaultConfig) -> None:
         #: The fault configuration in effect.
         self.config = config
-        self._stall_start = 0.0
-        self._stall_end = 0.0
+        self._stall_start = self._stall_end = 0.0
 
     def stall(self, start: float, seconds: float) -> None:
         """Be silent from ``start`` for ``seconds``."""
-        self._stall_start = start
-        self._stall_end = start + seconds
+        self._stall_start, self._stall_end = start, start + seconds
 
     def silent(self, t: float) -> bool:
         """Whether time ``t`` falls in the silence."""

@@ -98,9 +98,8 @@ class SimulatorStats:
 
     __slots__ = (
         'acks', 'bytes_read', 'bytes_written', 'commands_ignored', 'commands_lost',
-        'commands_other_address', 'commands_received', 'corrupted_checksum',
-        'corrupted_length', 'dropped', 'foreign', 'garbage_bursts', 'garbage_bytes',
-        'host_bytes_ignored',
+        'commands_other_address', 'commands_received', 'corrupted_checksum', 'corrupted_length',
+        'dropped', 'foreign', 'garbage_bursts', 'garbage_bytes', 'host_bytes_ignored',
         'late_skipped', 'line_rate_skipped', 'nacks', 'overflow_bytes', 'overflow_packets',
         'packets_written', 'pings', 'port_opens', 'records_sent', 'replies_sent', 'stalled',
         'unplugged_lost', 'unplugs')
@@ -113,10 +112,6 @@ class SimulatorStats:
         """Return the counters by name."""
         return {name: getattr(self, name) for name in self.__slots__}
 
-    def copy(self) -> 'SimulatorStats':
-        """Return a snapshot that later counting does not change."""
-        return copy.copy(self)
-
     def __repr__(self) -> str:
         fields_ = ', '.join(f'{k}={v}' for k, v in self.as_dict().items() if v)
         return f'SimulatorStats({fields_})'
@@ -124,15 +119,10 @@ class SimulatorStats:
 
 #: Counter of each way a data packet can fail.
 FAULT_COUNTERS = {
-    flt.FAULT_CHECKSUM: 'corrupted_checksum',
-    flt.FAULT_LENGTH: 'corrupted_length',
-    flt.FAULT_FOREIGN: 'foreign',
-    flt.FAULT_DROPPED: 'dropped',
-    flt.FAULT_STALL: 'stalled',
-    flt.FAULT_UNPLUGGED: 'unplugged_lost',
-    flt.FAULT_OVERFLOW: 'overflow_packets',
-    flt.FAULT_LINE_RATE: 'line_rate_skipped',
-}
+    flt.FAULT_CHECKSUM: 'corrupted_checksum', flt.FAULT_LENGTH: 'corrupted_length',
+    flt.FAULT_FOREIGN: 'foreign', flt.FAULT_DROPPED: 'dropped', flt.FAULT_STALL: 'stalled',
+    flt.FAULT_UNPLUGGED: 'unplugged_lost', flt.FAULT_OVERFLOW: 'overflow_packets',
+    flt.FAULT_LINE_RATE: 'line_rate_skipped'}
 
 
 class GroundTruth:
@@ -144,9 +134,8 @@ class GroundTruth:
     """
 
     def __init__(self, truth_limit: int | None, changed: threading.Condition) -> None:
-        #: Data packets produced, in order (None when ``truth_limit`` is 0).
-        self.truth: collections.deque[SentRecord] | None = (
-            None if truth_limit == 0 else collections.deque(maxlen=truth_limit))
+        #: Data packets produced, in order (none kept when ``truth_limit`` is 0).
+        self.truth: collections.deque[SentRecord] = collections.deque(maxlen=truth_limit)
         #: How many data packets were produced (kept or not).
         self.truth_index = 0
         #: (time, command) of every command the sensor received and decoded.
@@ -184,18 +173,24 @@ class GroundTruth:
             first_write_time: float | None = None) -> None:
         """Record one data packet and count it."""
         entry = SentRecord(self.truth_index, reply.sample_time, write_time,
-                           getattr(reply.record, 'timer', None), reply.record, packet,
-                           address, valid, fault, source,
-                           first_write_time if write_time is not None else None)
+                           getattr(reply.record, 'timer', None), reply.record, packet, address,
+                           valid, fault, source, first_write_time)
         self.truth_index += 1
-        if self.truth is not None:
-            self.truth.append(entry)
+        self.truth.append(entry)
         self.count(packets_written=int(write_time is not None),
                    records_sent=int(valid and source == 'stream'),
                    replies_sent=int(valid and source != 'stream'))
         if fault in FAULT_COUNTERS:
             self.count(**{FAULT_COUNTERS[fault]: 1})
         self._changed.notify_all()
+
+
+def _copied(name: str, copy_of: collections.abc.Callable[[Any], Any] = list) -> Any:
+    """Return a property: a copy (``copy_of``) of the ground truth's ``name``, under the lock."""
+    def get(self: 'TruthQueries') -> Any:
+        with self._changed:
+            return copy_of(getattr(self._record, name))
+    return property(get)
 
 
 class TruthQueries:
@@ -210,45 +205,22 @@ class TruthQueries:
     """
 
     def __init__(self, record: GroundTruth, changed: threading.Condition) -> None:
-        self._record = record
-        self._changed = changed
+        self._record, self._changed = record, changed
 
-    @property
-    def truth(self) -> list[SentRecord]:
-        """Every data packet produced so far, in order (a copy)."""
-        with self._changed:
-            return list(self._record.truth or ())
-
-    @property
-    def commands(self) -> list[tuple[float, Command]]:
-        """(time, command) of every command the sensor received (a copy)."""
-        with self._changed:
-            return list(self._record.commands)
-
-    @property
-    def host_log(self) -> list[HostCommand]:
-        """Everything the host sent, with what became of it (a copy)."""
-        with self._changed:
-            return list(self._record.host_log)
-
-    @property
-    def stats(self) -> SimulatorStats:
-        """Return a snapshot of the counters."""
-        with self._changed:
-            return self._record.stats.copy()
-
-    @property
-    def stream_changes(self) -> list[tuple[float, int]]:
-        """
-        (time, command byte or 0) each time the sensor's stream changed (a copy).
-
-        The first entry is the power-up state. A start, stop or change of
-        stream (0xC4, 0xFA, power cycle, unplugging a wired sensor) adds one;
-        asking for the record already streamed adds none. A test proves that
-        an interrupted stream was restarted by finding a 0 followed by a code.
-        """
-        with self._changed:
-            return list(self._record.stream_changes)
+    #: Every data packet produced so far, in order (a copy).
+    truth: list[SentRecord] = _copied('truth')
+    #: (time, command) of every command the sensor received (a copy).
+    commands: list[tuple[float, Command]] = _copied('commands')
+    #: Everything the host sent, with what became of it (a copy).
+    host_log: list[HostCommand] = _copied('host_log')
+    #: (time, command byte or 0) each time the sensor's stream changed (a copy).
+    #: The first entry is the power-up state. A start, stop or change of
+    #: stream (0xC4, 0xFA, power cycle, unplugging a wired sensor) adds one;
+    #: asking for the record already streamed adds none. A test proves that
+    #: an interrupted stream was restarted by finding a 0 followed by a code.
+    stream_changes: list[tuple[float, int]] = _copied('stream_changes')
+    #: A snapshot of the counters, which later counting does not change.
+    stats: SimulatorStats = _copied('stats', copy.copy)
 
     def commands_of(self, *codes: int) -> list[tuple[float, Command]]:
         """(time, command) of the commands with these command bytes the sensor received."""
@@ -269,10 +241,6 @@ class TruthQueries:
         """Wait until ``condition()`` is true (checked on every change); return it."""
         deadline = time.monotonic() + timeout
         with self._changed:
-            while True:
-                if condition():
-                    return True
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return False
+            while not (met := condition()) and (remaining := deadline - time.monotonic()) > 0:
                 self._changed.wait(min(remaining, 0.05))
+            return bool(met)

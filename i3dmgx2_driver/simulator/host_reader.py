@@ -25,6 +25,7 @@ command.
 """
 
 import collections.abc
+import contextlib
 import heapq
 import os
 import select
@@ -54,11 +55,8 @@ class HostReader:
     def __init__(self, port: PtyPort, end: BaseStation | WiredLine, record: GroundTruth,
                  port_opened: collections.abc.Callable[[], None],
                  changed: threading.Condition) -> None:
-        self._port = port
-        self._end = end
-        self._record = record
-        self._port_opened = port_opened
-        self._changed = changed
+        self._port, self._end, self._record = port, end, record
+        self._port_opened, self._changed = port_opened, changed
         self._parser = end.new_parser()
         self._actions: list[tuple[float, int, collections.abc.Callable[[], None]]] = []
         self._seq = 0
@@ -81,10 +79,8 @@ class HostReader:
 
     def wake(self) -> None:
         """Wake the thread up (a new action, or stop)."""
-        try:
+        with contextlib.suppress(OSError):
             os.write(self._wake_w, b'!')
-        except OSError:
-            pass
 
     def post(self, delay: float, action: collections.abc.Callable[[], None]) -> None:
         """Run ``action`` on the reader thread after ``delay`` seconds."""
@@ -104,10 +100,8 @@ class HostReader:
             except (OSError, ValueError):
                 continue
             if self._wake_r in ready:
-                try:
+                with contextlib.suppress(OSError):
                     os.read(self._wake_r, 512)
-                except OSError:
-                    pass
             if master is not None and master in ready:
                 try:
                     data = os.read(master, _READ_SIZE)

@@ -166,8 +166,7 @@ class Motion:
     """
 
     def __init__(self, config: MotionConfig | None = None) -> None:
-        self.config = config if config is not None else MotionConfig()
-        c = self.config
+        self.config = c = config if config is not None else MotionConfig()
         self._base = tuple(math.radians(a) for a in c.initial_attitude_deg)
         self._amp = tuple(math.radians(a) for a in c.sway_amplitude_deg)
         self._omega = tuple(_TWO_PI / p if p > 0 else 0.0 for p in c.sway_period_s)
@@ -233,9 +232,7 @@ class Motion:
 
     def measure(self, t: float, rng: random.Random) -> Measurement:
         """Return what the raw sensors read at ``t``: truth, biases and noise."""
-        c = self.config
-        truth = self.state(t)
-        gauss = rng.gauss
+        c, truth, gauss = self.config, self.state(t), rng.gauss
         if c.noise is None:   # white alone, the accelerometer's drawn first
             accel_error = [gauss(0.0, c.accel_noise) for _ in range(3)]
             gyro_error = [gauss(0.0, c.gyro_noise) for _ in range(3)]

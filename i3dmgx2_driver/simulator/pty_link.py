@@ -67,10 +67,10 @@ address, or the first sensor.
 import atexit
 import collections.abc
 import dataclasses
+import functools
 import random
 import threading
 import time
-import typing
 from typing import Any
 
 from .base_station import BaseStation
@@ -84,9 +84,6 @@ from .sensor import SensorSpec, SimulatedSensor
 from .sensor_unit import foreign_address, SensorUnit, unit_at, unit_specs
 from .transmitter import LineWriter, SharedLine
 from .wired_line import WiredLine
-
-if typing.TYPE_CHECKING:  # typing.Self is new in Python 3.11; Jazzy allows 3.10
-    from typing import Self
 
 __all__ = ['PtySimulator']
 
@@ -130,8 +127,7 @@ class PtySimulator(TruthQueries):
                        timer_start=seeds.getrandbits(32)),
             Motion(MotionConfig(static=True)), seed=seeds.getrandbits(64))
         self._fault_rng = random.Random(seeds.getrandbits(64))
-        command_rng = random.Random(seeds.getrandbits(64))
-        chunk_rng = random.Random(seeds.getrandbits(64))
+        command_rng, chunk_rng = (random.Random(seeds.getrandbits(64)) for _ in range(2))
         #: Guards the sensor, the queues and the ground truth. Lock order: ``lock``
         #: may be held while taking the port's ``io_lock``, never the reverse.
         self.lock = threading.RLock()
@@ -162,11 +158,10 @@ class PtySimulator(TruthQueries):
                 config, spec, motion, seed, rng,
                 station_faults if i == 0 else FaultState(config.faults), end, writer, shared,
                 self._foreign, record, self._wake, self.host_reader.post)
-        first = unit_at(self.units, None)
-        #: The device model of the first sensor; touch it only while holding ``sim.lock``.
-        self.sensor = first.sensor
         #: The first sensor: its faults in effect are every sensor's configuration.
-        self._first = first
+        self._first = unit_at(self.units, None)
+        #: The device model of the first sensor; touch it only while holding ``sim.lock``.
+        self.sensor = self._first.sensor
         self._threads: list[threading.Thread] = []
         #: Path to open: a symlink that survives unplug and replug (None before start).
         self.port: str | None = None
@@ -190,9 +185,8 @@ class PtySimulator(TruthQueries):
         self.port = self.pty.create()
         self.host_reader.open_pipe()
         self.host_reader.plug_in()
-        now = time.time()
         with self._wake:
-            self.start_time = now
+            self.start_time = now = time.time()
             # Every sensor up, then the stranger's clock somewhere; the timed faults from now.
             for unit in self.units.values():
                 unit.sensor.power_up(now)
@@ -229,7 +223,7 @@ class PtySimulator(TruthQueries):
         self.started = False
         atexit.unregister(self.stop)
 
-    def __enter__(self) -> 'Self':
+    def __enter__(self) -> 'PtySimulator':
         """Start (if not yet started) for a ``with`` block."""
         if not self.started:
             self.start()
@@ -256,8 +250,7 @@ class PtySimulator(TruthQueries):
         if faults.stall_at is not None and asked('stall_at', 'stall_seconds'):
             self._stall(now + faults.stall_at, faults.stall_seconds, address)
         if faults.unplug_at is not None and asked('unplug_at', 'unplug_seconds'):
-            seconds = faults.unplug_seconds
-            post(faults.unplug_at, lambda: self._pull_cable(seconds))
+            post(faults.unplug_at, functools.partial(self._pull_cable, faults.unplug_seconds))
         if faults.power_cycle_at is not None and asked(
                 'power_cycle_at', 'power_off_seconds', 'power_up_timer'):
             unit = unit_at(self.units, address)

@@ -35,6 +35,7 @@ Design points, each for a reason:
   bytes are lost, as on a real line, and the caller counts them.
 """
 
+import contextlib
 import fcntl
 import os
 import shutil
@@ -69,9 +70,7 @@ class PtyPort:
 
     def __init__(self, symlink: str | None = None, link_via_proc: bool = True,
                  prefix: str = 'i3dmgx2-sim-') -> None:
-        self._symlink = symlink
-        self._prefix = prefix
-        self._link_via_proc = link_via_proc
+        self._symlink, self._prefix, self._link_via_proc = symlink, prefix, link_via_proc
         self._dir: str | None = None
         self.io_lock = threading.Lock()
         #: Set while the pty exists (cleared between unplug and replug).
@@ -121,8 +120,7 @@ class PtyPort:
         os.symlink(target, temporary)
         os.replace(temporary, self.path)
         with self.io_lock:
-            self.master, self.slave, self.device = master, slave, device
-            self.link_target = target
+            self.master, self.slave, self.device, self.link_target = master, slave, device, target
         self.plugged.set()
 
     def pull_out(self) -> None:
@@ -133,10 +131,8 @@ class PtyPort:
             self.master = self.slave = self.device = self.link_target = None
         self.plugged.clear()
         if self.path and os.path.islink(self.path) and os.readlink(self.path) == target:
-            try:
+            with contextlib.suppress(FileNotFoundError):
                 os.unlink(self.path)
-            except FileNotFoundError:
-                pass
 
     def write_chunks(self, chunks: list[bytes],
                      gap: float) -> tuple[int, float | None, float | None]:
@@ -155,11 +151,11 @@ class PtyPort:
         """
         written = 0
         with self.io_lock:
-            master = self.master
-            if master is None:
+            if (master := self.master) is None:
                 return 0, None, None
             first_write = last_write = time.time()
-            try:
+            # The buffer is full (nobody reads): the rest is lost.
+            with contextlib.suppress(OSError):
                 for index, chunk in enumerate(chunks):
                     if index and gap:
                         time.sleep(gap)
@@ -169,8 +165,6 @@ class PtyPort:
                         count = os.write(master, view)
                         written += count
                         view = view[count:]
-            except OSError:
-                pass  # the buffer is full (nobody reads): the rest is lost
             return written, first_write, last_write
 
     def write(self, data: bytes) -> int | None:

@@ -38,14 +38,8 @@ import random
 from typing import Any, ClassVar, NamedTuple
 
 from i3dmgx2_driver.codec import command_firmware as firmware, framing
-from i3dmgx2_driver.codec import layouts as lay
-from i3dmgx2_driver.codec import records as rec
-from i3dmgx2_driver.codec.commands import (
-    Command,
-    decode_command,
-    decode_record,
-    encode_record,
-)
+from i3dmgx2_driver.codec import layouts as lay, records as rec
+from i3dmgx2_driver.codec.commands import Command, decode_command, decode_record, encode_record
 from i3dmgx2_driver.codec.errors import CodecError
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 
@@ -60,6 +54,8 @@ from .motion import Motion
 DEFAULT_TIMER_START = TIMER_MODULUS - 5 * rec.TICKS_PER_SECOND
 #: Data records: these can be polled and streamed (the codec's table says which).
 STREAMABLE = lay.STREAMABLE
+#: Their codes as a message lists them.
+STREAMABLE_TEXT = ', '.join(f'0x{code:02X}' for code in sorted(STREAMABLE))
 #: Firmware of a simulated sensor unless told: one that answers every command.
 DEFAULT_FIRMWARE = firmware.NEWEST
 
@@ -157,8 +153,7 @@ class SimulatedSensor:
     def __init__(self, spec: SensorSpec | None = None, motion: Motion | None = None, *,
                  seed: int | None = None, power_up_time: float = 0.0) -> None:
         spec = spec if spec is not None else SensorSpec()
-        self.address = spec.address
-        self.firmware_version = spec.firmware_version
+        self.address, self.firmware_version = spec.address, spec.firmware_version
         self.identifiers = spec.identifiers
         #: The EEPROM and the settings it holds; it persists across power cycles.
         self.settings = SensorEeprom(spec.eeprom, spec.rate_hz)
@@ -173,8 +168,7 @@ class SimulatedSensor:
         #: The motion the sensor goes through.
         self.motion = motion if motion is not None else Motion()
         self._maker = RecordMaker(self.motion, self.rng, spec.temperature_c, self.biases)
-        self._lqi = 230.0
-        self._rssi = 170.0
+        self._lqi, self._rssi = 230.0, 170.0
         #: Commands received but not understood or not allowed (counted, not answered).
         self.ignored = 0
         self.power_up(power_up_time)
@@ -192,10 +186,9 @@ class SimulatedSensor:
         """
         self.biases.restore()
         self.clock.restart(t, self.rate_hz, timer_start)
-        autostart = self.settings.autostart
         #: Command byte being streamed, 0 when polled.
         self.streaming = 0
-        if autostart in STREAMABLE:
+        if (autostart := self.settings.autostart) in STREAMABLE:
             self.start_streaming(autostart, t)
 
     def power_off(self) -> None:
@@ -234,9 +227,7 @@ class SimulatedSensor:
 
     def stream_sample(self) -> Reply:
         """Take the next streamed cycle (call when :attr:`next_sample_time` is due)."""
-        rel = self.clock.take()
-        t = self.clock.power_up_time + rel
-        return self._reply(self._record(self.streaming, rel), t, t)
+        return self._sample(self.streaming, self.clock.take())
 
     # -- commands ---------------------------------------------------------------------------
 
@@ -256,8 +247,7 @@ class SimulatedSensor:
         """Return the data record ``code`` of the calculation cycle at or before ``t``."""
         if code not in STREAMABLE:
             raise ValueError(f'0x{code:02X} is not a data record')
-        rel = self.clock.latest_cycle_rel(self.clock.rel(t))
-        return self._reply(self._record(code, rel), t, self.clock.power_up_time + rel)
+        return self._sample(code, self.clock.latest_cycle_rel(self.clock.rel(t)), t)
 
     def handle(self, command: bytes | Command, now: float) -> list[Reply]:
         """
@@ -279,14 +269,11 @@ class SimulatedSensor:
         code, args = command.code, command.args
         rel = self.clock.rel(now)
         cycle = self.clock.latest_cycle_rel(rel)
-        cycle_time = self.clock.power_up_time + cycle
-        timer = self.clock.timer_rel(cycle)
+        cycle_time, timer = self.clock.power_up_time + cycle, self.clock.timer_rel(cycle)
         if code in STREAMABLE:
             # A polled record is the one the next calculation cycle computes,
             # sent when that cycle completes.
-            polled = self.clock.next_cycle_rel(rel)
-            polled_time = self.clock.power_up_time + polled
-            return [self._reply(self._record(code, polled), polled_time, polled_time)]
+            return [self._sample(code, self.clock.next_cycle_rel(rel))]
         if code == lay.SET_CONTINUOUS:
             target = args[0]
             if target == 0:
@@ -311,11 +298,9 @@ class SimulatedSensor:
     def _capture_gyro_bias(self, seconds: float, now: float) -> Reply:
         # The device averages its raw gyros over the sampling time: the true
         # bias if it is still, the bias plus the mean rotation if it is not.
-        rel = self.clock.rel(now)
-        motion = self.motion
+        rel, motion = self.clock.rel(now), self.motion
         mean = motion.mean_rate(rel, rel + seconds)
-        cycles = max(1.0, seconds * self.rate_hz)
-        noise = motion.config.gyro_noise / math.sqrt(cycles)
+        noise = motion.config.gyro_noise / math.sqrt(max(1.0, seconds * self.rate_hz))
         bias = float32(tuple(mean[i] + motion.config.gyro_bias[i]
                              + self.rng.gauss(0.0, noise) for i in range(3)))
         self.biases.capture_gyro(rel + seconds, bias)
@@ -323,7 +308,7 @@ class SimulatedSensor:
                            now + seconds, now + seconds)
 
     def _write_accel_bias(self, args, now, timer):
-        self.biases.set_accel(float32(args[0]))
+        self.biases.accel = float32(args[0])
         return rec.AccelBias(self.biases.accel, timer)
 
     def _write_gyro_bias(self, args, now, timer):
@@ -333,9 +318,9 @@ class SimulatedSensor:
     def _transfer(self, args, now, timer):
         # The RAM corrections go to non-volatile memory, which a power-up loads;
         # unless the memory refuses (then nothing is stored, and 0xFFFF says so).
-        if self.settings.refuse_bias_store:
-            return rec.TransferToNonVolatile(rec.INVALID_QUANTITY, timer)
-        return rec.TransferToNonVolatile(self.biases.store(args[0], self.clock.rel(now)), timer)
+        return rec.TransferToNonVolatile(rec.INVALID_QUANTITY if self.settings.refuse_bias_store
+                                         else self.biases.store(args[0], self.clock.rel(now)),
+                                         timer)
 
     def _write_eeprom(self, args, now, timer):
         address, value = args
@@ -358,10 +343,12 @@ class SimulatedSensor:
 
     # -- records ----------------------------------------------------------------------------
 
-    def _record(self, code: int, rel: float) -> Any:
-        """Build the record ``code`` for the calculation cycle at ``rel``."""
+    def _sample(self, code: int, rel: float, due: float | None = None) -> Reply:
+        """Return the record ``code`` of the calculation cycle at ``rel``, sent then or ``due``."""
         self.biases.apply_capture(rel)
-        return self._maker.record(code, rel, self.clock.timer_rel(rel), self.clock.period)
+        record = self._maker.record(code, rel, self.clock.timer_rel(rel), self.clock.period)
+        sample_time = self.clock.power_up_time + rel
+        return self._reply(record, sample_time if due is None else due, sample_time)
 
     def _reply(self, record: Any, due: float, sample_time: float) -> Reply:
         """Encode through the codec, and keep the record as the host will decode it."""

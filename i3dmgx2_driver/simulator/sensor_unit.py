@@ -37,8 +37,7 @@ import random
 import threading
 import time
 
-from i3dmgx2_driver.codec import framing
-from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec import framing, layouts as lay
 from i3dmgx2_driver.codec.commands import Command
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 
@@ -87,10 +86,9 @@ def unit_specs(config: SimulatorConfig,
             timer_start=seeds.getrandbits(32), firmware_version=config.firmware_of(address))
         motion = config.sensor_motion
         roll, pitch, yaw = motion.initial_attitude_deg
-        periods = motion.sway_period_s
         motion = dataclasses.replace(
             motion, initial_attitude_deg=(roll + 7.0 * i, pitch - 5.0 * i, yaw + 45.0 * i),
-            sway_period_s=tuple(p * (1.0 + 0.23 * i) for p in periods),
+            sway_period_s=tuple(p * (1.0 + 0.23 * i) for p in motion.sway_period_s),
             yaw_rate_dps=motion.yaw_rate_dps * (-1.0) ** i)
         out.append((spec, motion))
     return out
@@ -118,13 +116,10 @@ class SensorUnit:
                  foreign: SimulatedSensor, record: GroundTruth, wake: threading.Condition,
                  post: Post) -> None:
         self.sensor = SimulatedSensor(spec, Motion(motion), seed=seed)
-        self.address = spec.address
-        self.faults = faults
+        self.address, self.faults = spec.address, faults
         self.tx = Transmitter(config, self.sensor, end, record, wake, faults, rng, foreign,
                               writer, shared)
-        self._record = record
-        self._wake = wake
-        self._post = post
+        self._record, self._wake, self._post = record, wake, post
         #: Whether a polled request came since the host opened the port.
         self._polled_since_open = False
         #: Whether the next request to stream is ignored (a quirk, armed by the faults).

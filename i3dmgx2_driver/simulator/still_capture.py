@@ -38,8 +38,7 @@ from collections.abc import Iterator, Sequence
 import dataclasses
 import math
 
-from i3dmgx2_driver.codec import framing
-from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec import framing, layouts as lay
 from i3dmgx2_driver.codec.records import TICKS_PER_SECOND
 from i3dmgx2_driver.codec.timer import TIMER_MODULUS
 import numpy as np

@@ -43,13 +43,14 @@ transmitter, and their packets take the one serial line in turn
 
 import heapq
 import itertools
+import math
 import os
 import random
 import threading
 import time
 from typing import NamedTuple
 
-from i3dmgx2_driver.codec import layouts as lay
+from i3dmgx2_driver.codec import layouts as lay, line_budget
 
 from . import faults as flt
 from .base_station import BaseStation
@@ -61,7 +62,7 @@ from .sensor import Reply, SimulatedSensor, STREAMABLE
 from .wired_line import WiredLine
 
 #: Bytes per second of a 115200-baud 8N1 line.
-LINE_BYTES_PER_SECOND = 11520
+LINE_BYTES_PER_SECOND = line_budget.line_bytes_per_second(115200)
 #: Longest sleep of the thread, so that stop() never waits long.
 POLL_S = 0.25
 #: How long (s) before its due time a record is taken from the queue and framed.
@@ -83,26 +84,21 @@ class LineWriter:
 
     def __init__(self, port: PtyPort, record: GroundTruth, chunks: tuple[int, int],
                  gap_s: float, rng: random.Random) -> None:
-        self._port = port
-        self._record = record
-        self._chunks = chunks
-        self._gap_s = gap_s
-        self._rng = rng
+        self._port, self._record = port, record
+        self._chunks, self._gap_s, self._rng = chunks, gap_s, rng
 
     def write(self, data: bytes) -> tuple[str | None, float | None, float | None]:
         """Write one frame in chunks; return (fault or None, time of its first and last write)."""
-        written, first_write, write_time = self._port.write_chunks(self._split(data),
-                                                                   self._gap_s)
-        if write_time is None:
+        written, first, last = self._port.write_chunks(self._split(data), self._gap_s)
+        if last is None:
             return flt.FAULT_UNPLUGGED, None, None
         self._record.written(len(data), written)
         if written < len(data):
             return flt.FAULT_OVERFLOW, None, None
-        return None, first_write, write_time
+        return None, first, last
 
     def _split(self, data: bytes) -> list[bytes]:
-        low, high = self._chunks
-        count = min(self._rng.randint(low, high), len(data))
+        count = min(self._rng.randint(*self._chunks), len(data))
         if count <= 1:
             return [data]
         cuts = sorted(self._rng.sample(range(1, len(data)), count - 1))
@@ -152,16 +148,9 @@ class Transmitter:
                  end: BaseStation | WiredLine, record: GroundTruth, wake: threading.Condition,
                  faults: FaultState, rng: random.Random, foreign: SimulatedSensor,
                  writer: LineWriter, line: SharedLine | None = None) -> None:
-        self._config = config
-        self._line = line
-        self._sensor = sensor
-        self._end = end
-        self._record = record
-        self._wake = wake
-        self._faults = faults
-        self._rng = rng
-        self._foreign = foreign
-        self._writer = writer
+        self._config, self._sensor, self._end, self._record = config, sensor, end, record
+        self._wake, self._faults, self._rng, self._foreign = wake, faults, rng, foreign
+        self._writer, self._line = writer, line
         self._outbox: list[Outgoing] = []
         self._seq = 0
         #: When the stream's last record leaves the line, by the device's schedule.
@@ -175,21 +164,16 @@ class Transmitter:
     def enqueue(self, reply: Reply, source: str) -> None:
         """Queue a record the sensor sends at ``reply.due`` ('stream' or 'reply')."""
         config = self._config
-        wire = ((len(reply.data) + self._end.frame_overhead) * 10.0 / config.wire_baud
+        wire = (line_budget.wire_time(reply.code, config.wire_baud, config.wireless)
                 if config.wire_baud else 0.0)
-        line = self._line
-        overflow = False
+        line, overflow = self._line, False
         if line is None:
             write_at = reply.due + (config.latency_s + wire + self._jitter())
-        else:
-            # Several sensors: each packet waits for the line behind the others'.
-            ready = reply.due + config.latency_s + self._jitter()
+        else:  # several sensors: each packet waits for the line behind the others'
+            write_at = ready = reply.due + config.latency_s + self._jitter()
             overflow = line.free_at - ready > LINE_BUFFER_S
-            if overflow:
-                write_at = ready
-            else:
-                write_at = max(ready, line.free_at) + wire
-                line.free_at = write_at
+            if not overflow:
+                write_at = line.free_at = max(ready, line.free_at) + wire
         self._seq += 1
         heapq.heappush(self._outbox,
                        Outgoing(reply.due, self._seq, write_at, reply, source, overflow))
@@ -217,11 +201,9 @@ class Transmitter:
                 if self._outbox and self._outbox[0].write_at <= now + WRITE_LEAD_S:
                     item = heapq.heappop(self._outbox)
                 else:
-                    wake = now + POLL_S
-                    if next_sample is not None:
-                        wake = min(wake, next_sample)
-                    if self._outbox:
-                        wake = min(wake, self._outbox[0].write_at - WRITE_LEAD_S)
+                    wake = min(now + POLL_S, math.inf if next_sample is None else next_sample,
+                               self._outbox[0].write_at - WRITE_LEAD_S if self._outbox
+                               else math.inf)
                     self._wake.wait(max(wake - now, 0.0))
                     continue
             self._transmit(item)
@@ -253,12 +235,9 @@ class Transmitter:
                                              + len(packet) / LINE_BYTES_PER_SECOND)
             before = self._record.stats.bytes_written
             packet, fault = self._spoil(packet, reply.code, item.send)
-            if self._config.line_queue:
-                write_at = self._through_uart(item, len(packet),
-                                              self._record.stats.bytes_written - before)
-            else:
-                write_at = item.write_at
-            _wait_until(write_at)
+            _wait_until(self._through_uart(item, len(packet),
+                                           self._record.stats.bytes_written - before)
+                        if self._config.line_queue else item.write_at)
             error, first_write, write_time = self._writer.write(packet)
             valid = fault is None and error is None
             self._record.add(reply, write_time, packet, address, valid, fault or error,
@@ -274,16 +253,14 @@ class Transmitter:
         the first after a gap, ``radio_hold_s`` later. What it waited is the
         queue: it leaves one wire time after the packet ahead of it.
         """
-        config = self._config
-        byte_s = 10.0 / config.wire_baud
+        config, last = self._config, self._uart_last_send
+        byte_s = line_budget.BITS_PER_BYTE / config.wire_baud
         ready = item.write_at - size * byte_s
-        last = self._uart_last_send
         if last is not None and item.send - last >= GAP_S:
             ready += config.radio_hold_s
         self._uart_last_send = item.send
-        done = max(ready, self._uart_free_at) + (before + size) * byte_s
-        self._uart_free_at = done
-        return done
+        self._uart_free_at = max(ready, self._uart_free_at) + (before + size) * byte_s
+        return self._uart_free_at
 
     # -- what the radio and the line do to a packet on its way ------------------------------
 
@@ -294,10 +271,9 @@ class Transmitter:
 
     def _lost(self, send: float) -> str | None:
         """Return why a packet sent at ``send`` never arrives (stall, drop), or None."""
-        faults = self._faults.config
         if self._faults.silent(send):
             return flt.FAULT_STALL
-        if faults.drop_probability and self._rng.random() < faults.drop_probability:
+        if (chance := self._faults.config.drop_probability) and self._rng.random() < chance:
             return flt.FAULT_DROPPED
         return None
 
@@ -308,22 +284,19 @@ class Transmitter:
         Returns the packet to write (a bit flipped or its length byte changed,
         or as it was) and that fault (None: intact).
         """
-        faults = self._faults.config
-        rng = self._rng
+        faults, rng = self._faults.config, self._rng
         if faults.garbage_probability and rng.random() < faults.garbage_probability:
             garbage = self._garbage(faults)
             self._writer.write(garbage)
             self._record.count(garbage_bytes=len(garbage), garbage_bursts=1)
         if faults.foreign_probability and rng.random() < faults.foreign_probability:
             self._transmit_foreign(code, send)
-        if faults.corrupt_checksum_probability \
-                and rng.random() < faults.corrupt_checksum_probability:
+        if (chance := faults.corrupt_checksum_probability) and rng.random() < chance:
             # A bit the checksum covers (record data) or of the checksum itself.
             data = bytearray(packet)
             data[rng.choice(self._end.checksum_positions(len(data)))] ^= 1 << rng.randrange(8)
             return bytes(data), flt.FAULT_CHECKSUM
-        if faults.corrupt_length_probability \
-                and rng.random() < faults.corrupt_length_probability:
+        if (chance := faults.corrupt_length_probability) and rng.random() < chance:
             # The length byte of a data packet (wireless only: wired records have none).
             data = bytearray(packet)
             data[5] = (data[5] + rng.randint(1, 255)) & 0xFF
@@ -340,9 +313,7 @@ class Transmitter:
                          flt.FAULT_FOREIGN if error is None else error, 'foreign', first_write)
 
     def _garbage(self, faults: FaultConfig) -> bytes:
-        rng = self._rng
-        significant = self._end.significant_bytes
-        out = bytearray()
+        rng, significant, out = self._rng, self._end.significant_bytes, bytearray()
         for _ in range(rng.randint(1, faults.garbage_max_bytes)):
             byte = rng.randrange(256)
             while faults.garbage_safe and byte in significant:

@@ -50,8 +50,6 @@ class WiredLine:
 
     #: Bytes that "safe" garbage avoids on this line (any echo byte, ping answers).
     significant_bytes = flt.WIRED_SIGNIFICANT_BYTES
-    #: Bytes on the line beside a record's own (echo and data): its checksum.
-    frame_overhead = 2
 
     def __init__(self, units: collections.abc.Mapping[int, Any], record: GroundTruth) -> None:
         self._units = units
