@@ -41,13 +41,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from rclpy.parameter import parameter_dict_from_yaml_file, parameter_value_to_python
 
-from .bag_io import bag_reader, deserializer
 from .figures import agg_figure, MatplotlibMissing
+from .imu_samples import bag_messages, capture_records, vectors, xyz
 from .noise import yaml_float
 from .sources import add_sources, parse_args
-from ..capture.file_format import read_capture
 from ..codec.orientation import body_vector, ENU
-from ..codec.parser import SensorStreamParser
 from ..ros.conversions import TESLA_PER_GAUSS
 from ..ros.mag_calibration import HARD_IRON, IDENTITY, is_matrix_list, SOFT_IRON, ZERO
 
@@ -83,36 +81,21 @@ class Fit(NamedTuple):
     warnings: list[str]
 
 
-def _rows(vectors: Sequence) -> np.ndarray:
-    return np.array(vectors, dtype=float).reshape(-1, 3)
-
-
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 def from_capture(path: str) -> Sweep:
     """Decode the records with a field and an acceleration (0xCB, 0xCC, 0xD2) of a capture."""
-    header, chunks = read_capture(path)
-    address = header.get('address')
-    parser = SensorStreamParser(address if isinstance(address, int) else None,
-                                bool(header.get('wireless', True)))
-    field, accel, heading = [], [], []
-    for _, data in chunks:
-        for event in parser.feed(data):
-            record = getattr(event, 'record', None)
-            mag = getattr(record, 'mag', None)
-            if mag is None or math.isnan(mag[0]) or not hasattr(record, 'accel'):
-                continue
-            field.append(mag)
-            accel.append(record.accel)
-            m = getattr(record, 'matrix', None)
-            heading.append(math.atan2(m[1], m[0]) if m else getattr(record, 'yaw', math.nan))
-    if not field:
+    found, frames = capture_records(path, ('mag', 'accel'))
+    records = [record for _, record in found if not math.isnan(record.mag[0])]
+    if not records:
         raise ValueError(f'{path}: no record with a field and an acceleration (0xCB, 0xCC, '
-                         f'0xD2; {parser.stats.good_frames} frames decoded)')
-    own = np.array(heading)
-    return Sweep(_rows(field) * TESLA_PER_GAUSS, -_unit(_rows(accel)),
+                         f'0xD2; {frames} frames decoded)')
+    own = np.array([math.atan2(r.matrix[1], r.matrix[0]) if hasattr(r, 'matrix')
+                    else getattr(r, 'yaw', math.nan) for r in records])
+    return Sweep(vectors(r.mag for r in records) * TESLA_PER_GAUSS,
+                 -_unit(vectors(r.accel for r in records)),
                  None if np.isnan(own).all() else own, path)
 
 
@@ -122,12 +105,9 @@ def from_messages(pairs: Sequence[tuple[Any, Any]], source: str) -> Sweep:
         raise ValueError(f'{source}: no field (imu/mag) with an Imu message of the same stamp')
     ned = pairs[0][1].header.frame_id.endswith('_ned')
     axes = np.array((1.0, 1.0, 1.0) if ned else body_vector((1.0, 1.0, 1.0), ENU))
-    field = _rows([(m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z)
-                   for _, m in pairs]) * axes
-    accel = _rows([(i.linear_acceleration.x, i.linear_acceleration.y,
-                    i.linear_acceleration.z) for i, _ in pairs]) * axes
-    x, y, z, w = np.array([(i.orientation.x, i.orientation.y, i.orientation.z,
-                            i.orientation.w) for i, _ in pairs]).T
+    field = vectors(xyz(m.magnetic_field) for _, m in pairs) * axes
+    accel = vectors(xyz(i.linear_acceleration) for i, _ in pairs) * axes
+    x, y, z, w = np.array([(*xyz(i.orientation), i.orientation.w) for i, _ in pairs]).T
     # The body's x axis in the world (the rotation's first column): (north, east, down)
     # in NED, (east, north, up) in ENU.
     first, second = 1 - 2 * (y * y + z * z), 2 * (x * y + z * w)
@@ -138,18 +118,13 @@ def from_messages(pairs: Sequence[tuple[Any, Any]], source: str) -> Sweep:
 
 def from_bag(path: str, topic: str) -> Sweep:
     """Read the Imu topic and its sibling ``mag`` from a bag; pair them by stamp."""
-    mag_topic = topic.rsplit('/', 1)[0] + '/mag'
     imu, mag = {}, []
-    with bag_reader(Path(path)) as reader:
-        wanted = [c for c in reader.connections if c.topic in (topic, mag_topic)]
-        decode = deserializer(reader)
-        for connection, _, raw in reader.messages(connections=wanted):
-            msg = decode(raw, connection.msgtype)
-            stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
-            if connection.topic == topic:
-                imu[stamp] = msg
-            else:
-                mag.append((stamp, msg))
+    for is_imu, msg in bag_messages(path, topic):
+        stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if is_imu:
+            imu[stamp] = msg
+        else:
+            mag.append((stamp, msg))
     return from_messages([(imu[s], m) for s, m in mag if s in imu], f'{path} ({topic})')
 
 
@@ -227,11 +202,11 @@ def _quadric_fit(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         a[i, j] = a[j, i] = value
     if np.linalg.eigvalsh(a)[0] < 0:
         a, v = -a, -v
-    w, vectors = np.linalg.eigh(a)
+    w, basis = np.linalg.eigh(a)
     if w[0] <= 0:
         raise ValueError('the readings lie on no ellipsoid: the sweep or the field is wrong')
     centre = -np.linalg.solve(a, v[len(pairs):len(pairs) + k])
-    root = vectors @ np.diag(np.sqrt(w)) @ vectors.T
+    root = basis @ np.diag(np.sqrt(w)) @ basis.T
     root = (root + root.T) / 2  # symmetric to the last bit, as the node checks it
     return centre * scale + mean, root / np.linalg.det(root) ** (1.0 / k)
 

@@ -30,7 +30,6 @@ import time
 from rcl_interfaces.srv import GetParameters
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
-from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Imu, MagneticField
 
 from .sources import listening
@@ -40,38 +39,20 @@ from ..ros.mag_calibration import HARD_IRON, SOFT_IRON
 PARAMETERS_S = 10.0
 
 
-class Listener(Node):
-    """Keep each Imu message by stamp and each field; pair them when asked."""
-
-    def __init__(self, topic: str) -> None:
-        super().__init__('i3dmgx2_magcal')
-        # The topics arrive in any order: a field finds its Imu when the pairs are asked for.
-        self._imu: dict[tuple[int, int], Imu] = {}
-        self._fields: list[MagneticField] = []
-        self.create_subscription(Imu, topic, lambda m: self._imu.update({_stamp(m): m}),
-                                 qos_profile_sensor_data)
-        self.create_subscription(MagneticField, topic.rsplit('/', 1)[0] + '/mag',
-                                 self._fields.append, qos_profile_sensor_data)
-
-    def calibration(self, node: str) -> list[list[float]]:
-        """Return ``node``'s mag_hard_iron and mag_soft_iron; ValueError when it does not say."""
-        client = self.create_client(GetParameters, f'{node}/get_parameters')
-        if not client.wait_for_service(timeout_sec=PARAMETERS_S):
-            raise ValueError(f'node {node} does not answer get_parameters: is it running '
-                             '(--node names it)?')
-        future = client.call_async(GetParameters.Request(names=[HARD_IRON, SOFT_IRON]))
-        deadline = time.monotonic() + PARAMETERS_S  # the listening's thread spins
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        values = future.result().values if future.done() else []
-        if len(values) != 2:
-            raise ValueError(f'node {node} did not give {HARD_IRON} and {SOFT_IRON}')
-        return [list(parameter_value_to_python(v)) for v in values]
-
-    def paired(self) -> list[tuple[Imu, MagneticField]]:
-        """Return the pairs that came so far (copies: the spinner thread adds to them)."""
-        imu = self._imu
-        return [(imu[stamp], m) for m in self._fields[:] if (stamp := _stamp(m)) in imu]
+def calibration(node: Node, name: str) -> list[list[float]]:
+    """Return node ``name``'s mag_hard_iron and mag_soft_iron; ValueError when it does not say."""
+    client = node.create_client(GetParameters, f'{name}/get_parameters')
+    if not client.wait_for_service(timeout_sec=PARAMETERS_S):
+        raise ValueError(f'node {name} does not answer get_parameters: is it running '
+                         '(--node names it)?')
+    future = client.call_async(GetParameters.Request(names=[HARD_IRON, SOFT_IRON]))
+    deadline = time.monotonic() + PARAMETERS_S  # the listening's thread spins
+    while not future.done() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    values = future.result().values if future.done() else []
+    if len(values) != 2:
+        raise ValueError(f'node {name} did not give {HARD_IRON} and {SOFT_IRON}')
+    return [list(parameter_value_to_python(v)) for v in values]
 
 
 def _stamp(msg: Imu | MagneticField) -> tuple[int, int]:
@@ -85,18 +66,27 @@ def listen(topic: str, node_name: str, seconds: float,
 
     ``lacks`` says what the pairs so far lack (magcal's coverage check), for the display.
     """
-    with listening(lambda: Listener(topic)) as (node, stopped):
+    # The topics arrive in any order: a field finds its Imu when the pairs are asked for.
+    imu: dict[tuple[int, int], Imu] = {}
+    fields: list[MagneticField] = []
+
+    def paired() -> list[tuple[Imu, MagneticField]]:
+        # Of a copy of the fields: the spinner thread adds to them.
+        return [(imu[stamp], m) for m in fields[:] if (stamp := _stamp(m)) in imu]
+
+    with listening('i3dmgx2_magcal', topic, lambda m: imu.update({_stamp(m): m}),
+                   fields.append) as (node, stopped):
         source = f'{node.resolve_topic_name(topic)} (live)'
-        applied = node.calibration(node_name)
+        applied = calibration(node, node_name)
         start = time.monotonic()
         while time.monotonic() - start < seconds and not stopped.wait(1.0):
-            pairs = node.paired()
+            pairs = paired()
             missing = lacks(pairs) if pairs else 'nothing yet'
             left = max(0.0, seconds - (time.monotonic() - start))
             print(f'\r{left:5.0f} s left, {len(pairs)} readings: '
                   f'{missing or "enough: Ctrl-C fits them"}'[:160].ljust(160), end='',
                   file=sys.stderr, flush=True)
-    pairs = node.paired()
+    pairs = paired()
     if not pairs:
         raise ValueError(f'no field on {source} paired with an Imu message: is the driver '
                          'running, with publish_mag?')

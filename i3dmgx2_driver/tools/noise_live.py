@@ -24,52 +24,18 @@ publisher and never slows it; the field comes from the sibling ``mag``.
 
 import math
 import sys
-import threading
 import time
 
 import numpy as np
-from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import Imu, MagneticField
 
 from . import allan
-from .imu_samples import from_rows, imu_row, Samples
+from .imu_samples import from_rows, imu_row, Samples, xyz
 from .sources import listening
 
 #: Seconds between two updates of the progress bar, and of its estimate.
 PROGRESS_S = 1.0
 ESTIMATE_S = 10.0
 BAR = 30
-
-
-class Listener(Node):
-    """Keep every Imu message's stamp, rate and acceleration, and the field's readings."""
-
-    def __init__(self, topic: str) -> None:
-        super().__init__('i3dmgx2_noise')
-        self.rows: list[tuple[float, ...]] = []
-        self.mag: list[tuple[float, float, float]] = []
-        self._lock = threading.Lock()
-        self.create_subscription(Imu, topic, self._imu, qos_profile_sensor_data)
-        self.create_subscription(MagneticField, topic.rsplit('/', 1)[0] + '/mag', self._mag,
-                                 qos_profile_sensor_data)
-
-    def _imu(self, msg: Imu) -> None:
-        row = imu_row(msg)
-        with self._lock:
-            self.rows.append(row)
-
-    def _mag(self, msg: MagneticField) -> None:
-        f = msg.magnetic_field
-        with self._lock:
-            self.mag.append((f.x, f.y, f.z))
-
-    def samples(self, source: str) -> Samples | None:
-        """Return the messages that came so far, or None before the second one."""
-        with self._lock:
-            rows, mag = list(self.rows), np.array(self.mag)
-        return (from_rows(rows, mag if mag.shape[0] > 2 else None, source)
-                if len(rows) > 1 else None)
 
 
 def progress(elapsed: float, total: float, count: int, estimate: str) -> str:
@@ -93,17 +59,27 @@ def _estimate(samples: Samples | None) -> str:
 
 def listen(topic: str, seconds: float) -> Samples:
     """Listen to ``topic`` for ``seconds`` (or until Ctrl-C); return what came."""
-    with listening(lambda: Listener(topic)) as (node, stopped):
+    rows: list[tuple[float, ...]] = []
+    fields: list[tuple[float, float, float]] = []
+
+    def samples() -> Samples | None:
+        # Copies (the spinner thread appends); None before the second message.
+        got, mag = rows[:], np.array(fields[:])
+        return (from_rows(got, mag if mag.shape[0] > 2 else None, source)
+                if len(got) > 1 else None)
+
+    with listening('i3dmgx2_noise', topic, lambda msg: rows.append(imu_row(msg)),
+                   lambda msg: fields.append(xyz(msg.magnetic_field))) as (node, stopped):
         source = f'{node.resolve_topic_name(topic)} (live)'
         start = time.monotonic()
         estimate, next_estimate = '', start + ESTIMATE_S
         while (elapsed := time.monotonic() - start) < seconds and not stopped.wait(PROGRESS_S):
             if time.monotonic() >= next_estimate:
-                estimate = _estimate(node.samples(source))
+                estimate = _estimate(samples())
                 next_estimate += ESTIMATE_S
-            print(progress(elapsed, seconds, len(node.rows), estimate), end='',
+            print(progress(elapsed, seconds, len(rows), estimate), end='',
                   file=sys.stderr, flush=True)
-    samples = node.samples(source)
-    if samples is None:
+    found = samples()
+    if found is None:
         raise ValueError(f'no message on {source}: is the driver running?')
-    return samples
+    return found

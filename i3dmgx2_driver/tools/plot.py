@@ -54,22 +54,17 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .figures import agg_figure, have_matplotlib, MATPLOTLIB_HINT, patch
+from .imu_samples import decode, device_times, vectors
 from .stamp_plot import read_stamp_errors, render_stamp_errors, StampErrors
 from .. import lifetime
 from ..capture.file_format import is_capture, read_capture
 from ..capture.fixtures import FIXTURE_ADDRESS, fixture_chunks, load_fixture, timeline
-from ..codec.framing import DataPacket
 from ..codec.orientation import (
-    body_vector, CONVENTIONS, ENU, matrix_from_quaternion, orientation, Quaternion,
+    body_vector, CONVENTIONS, ENU, euler_from_matrix, matrix_from_quaternion, orientation,
+    Quaternion,
 )
-from ..codec.parser import SensorStreamParser
-from ..codec.records import TICKS_PER_SECOND
-from ..codec.timer import TIMER_MODULUS
+from ..ros.conversions import STANDARD_GRAVITY
 
-#: Standard gravity (m/s^2 per g), the factor of the device's g units (as the node uses).
-STANDARD_GRAVITY = 9.80665
-#: Period of the device timer (s): it wraps after 2^32 ticks.
-TIMER_PERIOD = TIMER_MODULUS / TICKS_PER_SECOND
 #: A gap is at least this long (s), and at least GAP_FACTOR typical intervals.
 MIN_GAP = 0.5
 GAP_FACTOR = 5.0
@@ -108,50 +103,20 @@ def euler_deg(q: Sequence[float]) -> tuple[float, float, float]:
     """
     Roll, pitch, yaw (deg) of a quaternion (x, y, z, w), aircraft ZYX set.
 
-    Taken from the attitude matrix (body to world) so that in the device's
-    convention it is exactly docs/protocol.md §9's set from M (R = M^T). A zero or
-    NaN quaternion (orientation unknown) gives NaN, not an exception.
+    Read off M = R^T (R the attitude matrix, body to world) as docs/protocol.md
+    §9 defines the set, so that in the device's convention it is exactly the
+    record's. A zero or NaN quaternion (orientation unknown) gives NaN, not an
+    exception.
     """
     x, y, z, w = q
     norm = math.sqrt(x * x + y * y + z * z + w * w)
     if not 0.0 < norm < math.inf:
         return (math.nan, math.nan, math.nan)
     r = matrix_from_quaternion(Quaternion(x / norm, y / norm, z / norm, w / norm))
-    roll = math.atan2(r[7], r[8])
-    pitch = math.asin(max(-1.0, min(1.0, -r[6])))
-    yaw = math.atan2(r[3], r[0])
-    return (math.degrees(roll), math.degrees(pitch), math.degrees(yaw))
+    return tuple(math.degrees(a) for a in euler_from_matrix(r[0::3] + r[1::3] + r[2::3]))
 
 
 # Time -----------------------------------------------------------------------------
-
-
-def device_times(timers: Sequence[int], host_times: Sequence[float],
-                 tolerance: float = 1.0) -> tuple[list[float], list[int]]:
-    """
-    Unwrap the device timer into seconds from the first record.
-
-    Each step is the timer's forward difference plus whichever number of
-    whole periods (218.45 s) brings it closest to the host's elapsed receive
-    time: that unwraps rollovers, including pauses longer than half a period
-    that a timer-only unwrapper must take for resets. When no period count
-    agrees with the host (within ``tolerance`` s plus 2 %), the timer has
-    restarted (a power cycle, or separate captures joined): the host's
-    elapsed time is used instead and the index is returned as a break.
-    """
-    times = [0.0] * min(1, len(timers))
-    breaks: list[int] = []
-    for i in range(1, len(timers)):
-        step = ((timers[i] - timers[i - 1]) % TIMER_MODULUS) / TICKS_PER_SECOND
-        host = max(0.0, host_times[i] - host_times[i - 1])
-        periods = max(0, round((host - step) / TIMER_PERIOD))
-        candidate = step + periods * TIMER_PERIOD
-        if abs(candidate - host) <= tolerance + 0.02 * host:
-            times.append(times[-1] + candidate)
-        else:
-            times.append(times[-1] + host)
-            breaks.append(i)
-    return times, breaks
 
 
 def find_gaps(time: np.ndarray, breaks: Iterable[int] = (),
@@ -176,11 +141,6 @@ def find_gaps(time: np.ndarray, breaks: Iterable[int] = (),
 # Inputs ---------------------------------------------------------------------------
 
 
-def _rows(values: Iterable[Sequence[float]]) -> np.ndarray:
-    """Return ``values`` as an (n, 3) array, (0, 3) when there are none."""
-    return np.array(list(values), dtype=float).reshape(-1, 3)
-
-
 def series_from_chunks(chunks: Iterable[tuple[float, bytes]], address: int | None = None,
                        convention: str = ENU, wireless: bool = True, source: str = '',
                        segments: Sequence[tuple[float, str]] = (),
@@ -194,22 +154,14 @@ def series_from_chunks(chunks: Iterable[tuple[float, bytes]], address: int | Non
     """
     if convention not in CONVENTIONS:
         raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
-    parser = SensorStreamParser(address=address, wireless=wireless)
-    host: list[float] = []
-    records = []
-    for receive_time, data in chunks:
-        for event in parser.feed(data):
-            if isinstance(event, DataPacket) and all(
-                    hasattr(event.record, name) for name in ('accel', 'angular_rate', 'matrix')):
-                host.append(receive_time)
-                records.append(event.record)
+    found = decode(chunks, address, wireless, ('accel', 'angular_rate', 'matrix'))[0]
+    host, records = [t for t, _ in found], [r for _, r in found]
     frame = 'ENU world / FLU body (REP-103)' if convention == ENU else \
         'NED world / FRD body (device axes)'
-    times, break_idx = device_times([r.timer for r in records], host)
-    accel = _rows(body_vector(r.accel, convention) for r in records) * STANDARD_GRAVITY
-    rate = _rows(body_vector(r.angular_rate, convention) for r in records)
-    euler = _rows(euler_deg(orientation(r.matrix, convention)) for r in records)
-    t = np.array(times, dtype=float)
+    t, break_idx = device_times([r.timer for r in records], host)
+    accel = vectors(body_vector(r.accel, convention) for r in records) * STANDARD_GRAVITY
+    rate = vectors(body_vector(r.angular_rate, convention) for r in records)
+    euler = vectors(euler_deg(orientation(r.matrix, convention)) for r in records)
     firsts = ((next((i for i, h in enumerate(host) if h >= when - 1e-6), None), text)
               for when, text in segments)
     labels = [(float(t[i]), text) for i, text in firsts if i is not None]
@@ -284,7 +236,7 @@ def series_from_csv(path: str, gap: float | None = None) -> Series:
     accel = np.column_stack([cols['ax'], cols['ay'], cols['az']])
     rate = np.column_stack([cols['wx'], cols['wy'], cols['wz']])
     quats = np.column_stack([cols['qx'], cols['qy'], cols['qz'], cols['qw']])
-    return _with_gaps(Series(t, accel, rate, _rows(euler_deg(q) for q in quats), [], [], [],
+    return _with_gaps(Series(t, accel, rate, vectors(euler_deg(q) for q in quats), [], [], [],
                              os.path.basename(path),
                              'as published (frame_convention of the recording)',
                              'from the CSV time column'), [], gap)

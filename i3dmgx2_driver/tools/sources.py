@@ -32,9 +32,11 @@ from typing import Any
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import Imu, MagneticField
 
-from .imu_samples import DEFAULT_TOPIC
+from .imu_samples import DEFAULT_TOPIC, mag_topic
 from .. import lifetime
 
 
@@ -61,15 +63,22 @@ def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> A
 
 
 @contextmanager
-def listening(make_node: Callable[[], Node]) -> Iterator[tuple[Any, lifetime.StopSignal]]:
+def listening(name: str, topic: str, on_imu: Callable[[Imu], Any],
+              on_field: Callable[[MagneticField], Any]) -> Iterator[tuple[Node, Any]]:
     """
-    Spin the node ``make_node`` returns in its own context; yield it and the stop signal.
+    Spin a node ``name`` in its own context; yield it and the stop signal.
 
-    On leaving, the line the tool kept on stderr is ended and everything shut down.
+    It hands the Imu messages of ``topic`` to ``on_imu`` and the fields of
+    its mag topic to ``on_field``, on the spinner thread. Best effort
+    (``qos_profile_sensor_data``): it matches the driver's reliable
+    publisher and never slows it. On leaving, the line the tool kept on
+    stderr is ended and everything shut down.
     """
     lifetime.die_with_parent()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = make_node()
+    node = Node(name)
+    node.create_subscription(Imu, topic, on_imu, qos_profile_sensor_data)
+    node.create_subscription(MagneticField, mag_topic(topic), on_field, qos_profile_sensor_data)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).
