@@ -13,17 +13,21 @@
 # limitations under the License.
 
 """
-matplotlib, for the plot tool only, imported when a figure is drawn.
+matplotlib, for the tools' figures, imported when a figure is drawn.
 
 matplotlib is an optional extra, not a dependency of the package: on a
 robot it would pull in a GUI stack the driver never uses. The node,
 ``discover``, ``bringup`` and every module they import never import it
 (``test/test_package_xml.py`` checks that no module imports it at load
-time, ``test/test_without_matplotlib.py`` runs them without it); the plot
-tool imports it here, when it draws, and says how to install it if it is
-missing.
+time, ``test/test_without_matplotlib.py`` runs them without it); the tools
+import it here, when they draw, and say how to install it if it is
+missing, still writing the files that need no figure (:func:`write_files`).
 """
 
+from collections.abc import Callable, Sequence
+import os
+from pathlib import Path
+import sys
 from typing import Any
 
 #: What to do when matplotlib is missing.
@@ -71,3 +75,18 @@ def have_matplotlib() -> bool:
     except ImportError:
         return False
     return True
+
+
+def write_files(tool: str, directory: str, texts: Sequence[tuple[str, str]], figure: str,
+                draw: Callable[[str], Any]) -> list[str]:
+    """Write each (name, text) into ``directory``, then ``draw`` ``figure``; return the paths."""
+    os.makedirs(directory, exist_ok=True)
+    written = [os.path.join(directory, name) for name, _ in texts]
+    for path, (_, text) in zip(written, texts, strict=True):
+        Path(path).write_text(text, encoding='utf-8')
+    try:
+        draw(os.path.join(directory, figure))
+        written.append(os.path.join(directory, figure))
+    except MatplotlibMissing as exc:
+        print(f'{tool}: {figure} not drawn: {exc}', file=sys.stderr)
+    return written

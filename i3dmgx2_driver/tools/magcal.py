@@ -33,19 +33,17 @@ import ast
 from collections.abc import Sequence
 import json
 import math
-import os
-from pathlib import Path
 import sys
 from typing import Any, NamedTuple
 
 import numpy as np
 from rclpy.parameter import parameter_dict_from_yaml_file, parameter_value_to_python
 
-from .figures import agg_figure, MatplotlibMissing
+from .figures import agg_figure, write_files
 from .imu_samples import bag_messages, capture_records, vectors, xyz
-from .noise import yaml_float
 from .sources import add_sources, parse_args
 from ..codec.orientation import body_vector, ENU
+from ..ros.calibration_file import params_file
 from ..ros.conversions import TESLA_PER_GAUSS
 from ..ros.mag_calibration import HARD_IRON, IDENTITY, is_matrix_list, SOFT_IRON, ZERO
 
@@ -283,14 +281,9 @@ def _spread(deg: np.ndarray) -> str:
 
 def params_yaml(result: Fit, source: str) -> str:
     """Return magcal.yaml: the node's parameters, a ``--params-file``."""
-    def floats(values: np.ndarray) -> str:
-        return '[' + ', '.join(yaml_float(float(v)) for v in values) + ']'
-    return '\n'.join([
-        f'# Measured by `ros2 run i3dmgx2_driver magcal` '
-        f'({"yaw-only" if result.planar else "3-D"} fit) from {source}.',
-        '/**:', '  ros__parameters:',
-        f'    {HARD_IRON}: {floats(result.hard_iron)}',
-        f'    {SOFT_IRON}: {floats(result.soft_iron.ravel())}']) + '\n'
+    return params_file([f'Measured by `ros2 run i3dmgx2_driver magcal` '
+                        f'({"yaw-only" if result.planar else "3-D"} fit) from {source}.'], '/**',
+                       {HARD_IRON: result.hard_iron, SOFT_IRON: result.soft_iron.ravel()})
 
 
 def draw(sweep: Sweep, result: Fit, path: str) -> None:
@@ -319,22 +312,13 @@ def write_outputs(sweep: Sweep, result: Fit, directory: str) -> list[str]:
     if not is_matrix_list(result.soft_iron.ravel().tolist()):
         raise ValueError('the fitted soft iron is no symmetric positive-definite matrix: '
                          'the node would refuse it; nothing written')
-    os.makedirs(directory, exist_ok=True)
     document = {'source': sweep.source, 'planar': result.planar,
-                HARD_IRON: result.hard_iron.tolist(),
-                SOFT_IRON: result.soft_iron.ravel().tolist(),
+                HARD_IRON: result.hard_iron.tolist(), SOFT_IRON: result.soft_iron.ravel().tolist(),
                 'report': result.lines, 'warnings': result.warnings}
-    written = []
-    for name, text in (('magcal.yaml', params_yaml(result, sweep.source)),
-                       ('magcal.json', json.dumps(document, indent=2) + '\n')):
-        written.append(os.path.join(directory, name))
-        Path(written[-1]).write_text(text, encoding='utf-8')
-    try:
-        draw(sweep, result, os.path.join(directory, 'magcal.png'))
-        written.append(os.path.join(directory, 'magcal.png'))
-    except MatplotlibMissing as exc:
-        print(f'magcal: magcal.png not drawn: {exc}', file=sys.stderr)
-    return written
+    texts = (('magcal.yaml', params_yaml(result, sweep.source)),
+             ('magcal.json', json.dumps(document, indent=2) + '\n'))
+    return write_files('magcal', directory, texts, 'magcal.png',
+                       lambda path: draw(sweep, result, path))
 
 
 def _parser() -> argparse.ArgumentParser:

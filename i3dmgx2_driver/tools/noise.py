@@ -28,8 +28,6 @@ import argparse
 from collections.abc import Sequence
 import json
 import math
-import os
-from pathlib import Path
 import sys
 import time
 from typing import Any, NamedTuple
@@ -37,9 +35,10 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from . import allan
-from .figures import agg_figure, MatplotlibMissing
+from .figures import agg_figure, write_files
 from .imu_samples import from_bag, from_capture, Samples
 from .sources import add_sources, parse_args
+from ..ros.calibration_file import params_file, yaml_float
 
 #: Units of each sensor's terms: N, B, K.
 UNITS = {'gyroscope': ('rad/s/√Hz', 'rad/s', 'rad/s²/√Hz'),
@@ -110,15 +109,6 @@ def analyse(samples: Samples) -> Report:
     mag = (float(np.max(np.std(np.diff(samples.mag, axis=0), axis=0)) / math.sqrt(2.0))
            if samples.mag is not None and samples.mag.shape[0] > 2 else None)
     return Report(samples, rate, duration, deviation, terms, warnings, mag)
-
-
-def yaml_float(value: float) -> str:
-    """Return ``value`` as YAML 1.1 reads a float (PyYAML, kalibr): always with a dot."""
-    text = f'{value:.6g}'
-    mantissa, e, exponent = text.partition('e')
-    if '.' not in mantissa and mantissa.lstrip('-').isdigit():
-        mantissa += '.0'
-    return mantissa + e + exponent
 
 
 def _axes(terms: list[allan.AxisNoise], part: str, what: str = 'value') -> list[float | None]:
@@ -197,14 +187,12 @@ def as_json(report: Report) -> dict[str, Any]:
 def params_yaml(report: Report) -> str:
     """Return noise.yaml: the covariance parameters as a params file the node takes."""
     notes = ' / '.join(sorted({figure(report.terms[name], 'white')[1] for name in UNITS}))
-    lines = ['# Measured by `ros2 run i3dmgx2_driver noise` at rest from',
-             f'# {report.samples.source}: {report.duration_s / 60:.1f} min at '
-             f'{report.rate_hz:.4g} Hz.',
-             f'# The white noise of one sample (N * sqrt(rate)), {notes}. Load',
-             "# it after the driver's own file: --params-file config/i3dmgx2.yaml --params-file "
-             'noise.yaml', '/**:', '  ros__parameters:']
-    lines += [f'    {name}: {yaml_float(value)}' for name, value in parameters(report).items()]
-    return '\n'.join(lines) + '\n'
+    return params_file(['Measured by `ros2 run i3dmgx2_driver noise` at rest from',
+                        f'{report.samples.source}: {report.duration_s / 60:.1f} min at '
+                        f'{report.rate_hz:.4g} Hz.',
+                        f'The white noise of one sample (N * sqrt(rate)), {notes}. Load',
+                        "it after the driver's own file: --params-file config/i3dmgx2.yaml "
+                        '--params-file noise.yaml'], '/**', parameters(report))
 
 
 #: kalibr's four noise keys: the sensor, the term, the unit.
@@ -320,17 +308,7 @@ def write_outputs(report: Report, directory: str, topic: str,
     texts = (('noise.json', json.dumps(as_json(report), indent=2) + '\n'),
              ('noise.yaml', params_yaml(report)),
              ('imu.yaml', kalibr_yaml(report, topic, inflate)))    # all made before any write
-    os.makedirs(directory, exist_ok=True)
-    written = [os.path.join(directory, name) for name, _ in texts]
-    for path, (_, text) in zip(written, texts, strict=True):
-        Path(path).write_text(text, encoding='utf-8')
-    png = os.path.join(directory, 'allan.png')
-    try:
-        draw(report, png)
-        written.append(png)
-    except MatplotlibMissing as exc:
-        print(f'noise: allan.png not drawn: {exc}', file=sys.stderr)
-    return written
+    return write_files('noise', directory, texts, 'allan.png', lambda path: draw(report, path))
 
 
 def _parser() -> argparse.ArgumentParser:
