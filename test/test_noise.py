@@ -421,6 +421,15 @@ def test_allan_png_shows_every_marker_the_legend_and_the_error_bars(minute, tmp_
         assert len(hollow) == 3 and all(len(line.get_xdata()) for line in hollow)
 
 
+def test_without_matplotlib_the_files_are_written_and_the_figure_is_said_missing(
+        minute, tmp_path, monkeypatch, capsys):
+    for module in ('matplotlib', 'matplotlib.figure', 'matplotlib.backends.backend_agg'):
+        monkeypatch.setitem(sys.modules, module, None)
+    written = noise.write_outputs(noise.analyse(minute), str(tmp_path), '/imu/raw_data')
+    assert [os.path.basename(p) for p in written] == ['noise.json', 'noise.yaml', 'imu.yaml']
+    assert 'allan.png not drawn: ' in capsys.readouterr().err
+
+
 def test_the_uncertainty_of_a_term_falls_with_its_clusters():
     assert allan.uncertainty(1) == math.inf
     assert allan.uncertainty(51) == pytest.approx(0.1)

@@ -84,8 +84,7 @@ class Short(NamedTuple):
 
     def __str__(self) -> str:
         """Return the advice as the table prints it."""
-        tail = f'; record at least {minutes(self.record_s)}' if self.record_s else ''
-        return self.why + tail
+        return self.why + (f'; record at least {minutes(self.record_s)}' if self.record_s else '')
 
 
 class Term(NamedTuple):
@@ -113,10 +112,8 @@ class AxisNoise(NamedTuple):
 
 def octave_taus(samples: int) -> np.ndarray:
     """Return 1, 2, 4... samples, up to a third of the recording (two clusters overlap)."""
-    m = [1]
-    while m[-1] * 2 <= (samples - 1) // 3:
-        m.append(m[-1] * 2)
-    return np.array(m if samples >= 4 else [], dtype=np.int64)
+    # bit_length: the count of the powers of two up to the third.
+    return 2 ** np.arange(((samples - 1) // 3).bit_length() if samples >= 4 else 0, dtype=np.int64)
 
 
 def overlapping_adev(y: np.ndarray, dt: float,

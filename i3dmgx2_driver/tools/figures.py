@@ -36,6 +36,9 @@ MATPLOTLIB_HINT = (
     'sudo apt install python3-matplotlib (with ROS), or pip install matplotlib '
     '(pip install "i3dmgx2_driver[plot]" from a source checkout)')
 
+#: Axis colours: x, y, z as the RGB convention of axes in RViz.
+COLOURS = ('tab:red', 'tab:green', 'tab:blue')
+
 
 class MatplotlibMissing(ImportError):
     """matplotlib is not installed; the message says how to install it."""
@@ -57,15 +60,6 @@ def agg_figure(**kwargs: Any) -> Any:
     fig = Figure(**kwargs)
     FigureCanvasAgg(fig)
     return fig
-
-
-def patch(**kwargs: Any) -> Any:
-    """Return a matplotlib Patch (a legend entry for a shaded span)."""
-    try:
-        from matplotlib.patches import Patch
-    except ImportError as exc:
-        raise MatplotlibMissing(MATPLOTLIB_HINT) from exc
-    return Patch(**kwargs)
 
 
 def have_matplotlib() -> bool:

@@ -41,7 +41,7 @@ from rclpy.parameter import parameter_dict_from_yaml_file, parameter_value_to_py
 
 from .figures import agg_figure, write_files
 from .imu_samples import bag_messages, capture_records, vectors, xyz
-from .sources import add_sources, parse_args
+from .sources import add_sources, paired, parse_args, stamp_of
 from ..codec.orientation import body_vector, ENU
 from ..ros.calibration_file import params_file
 from ..ros.conversions import TESLA_PER_GAUSS
@@ -116,14 +116,13 @@ def from_messages(pairs: Sequence[tuple[Any, Any]], source: str) -> Sweep:
 
 def from_bag(path: str, topic: str) -> Sweep:
     """Read the Imu topic and its sibling ``mag`` from a bag; pair them by stamp."""
-    imu, mag = {}, []
+    imu, fields = {}, []
     for is_imu, msg in bag_messages(path, topic):
-        stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
         if is_imu:
-            imu[stamp] = msg
+            imu[stamp_of(msg)] = msg
         else:
-            mag.append((stamp, msg))
-    return from_messages([(imu[s], m) for s, m in mag if s in imu], f'{path} ({topic})')
+            fields.append(msg)
+    return from_messages(paired(imu, fields), f'{path} ({topic})')
 
 
 def undo(sweep: Sweep, hard_iron: Sequence[float], soft_iron: Sequence[float]) -> Sweep:

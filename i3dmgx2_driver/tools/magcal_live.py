@@ -32,7 +32,7 @@ from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from sensor_msgs.msg import Imu, MagneticField
 
-from .sources import listening
+from .sources import listening, paired, stamp_of
 from ..ros.mag_calibration import HARD_IRON, SOFT_IRON
 
 #: Seconds to wait for the node's parameters.
@@ -55,10 +55,6 @@ def calibration(node: Node, name: str) -> list[list[float]]:
     return [list(parameter_value_to_python(v)) for v in values]
 
 
-def _stamp(msg: Imu | MagneticField) -> tuple[int, int]:
-    return msg.header.stamp.sec, msg.header.stamp.nanosec
-
-
 def listen(topic: str, node_name: str, seconds: float,
            lacks: Callable[[list], str | None]) -> tuple[list, list[list[float]]]:
     """
@@ -66,27 +62,23 @@ def listen(topic: str, node_name: str, seconds: float,
 
     ``lacks`` says what the pairs so far lack (magcal's coverage check), for the display.
     """
-    # The topics arrive in any order: a field finds its Imu when the pairs are asked for.
+    # The topics arrive in any order: a field finds its Imu when the pairs are asked for
+    # (in a copy of the fields while the spinner thread adds to them).
     imu: dict[tuple[int, int], Imu] = {}
     fields: list[MagneticField] = []
-
-    def paired() -> list[tuple[Imu, MagneticField]]:
-        # Of a copy of the fields: the spinner thread adds to them.
-        return [(imu[stamp], m) for m in fields[:] if (stamp := _stamp(m)) in imu]
-
-    with listening('i3dmgx2_magcal', topic, lambda m: imu.update({_stamp(m): m}),
+    with listening('i3dmgx2_magcal', topic, lambda m: imu.update({stamp_of(m): m}),
                    fields.append) as (node, stopped):
         source = f'{node.resolve_topic_name(topic)} (live)'
         applied = calibration(node, node_name)
         start = time.monotonic()
         while time.monotonic() - start < seconds and not stopped.wait(1.0):
-            pairs = paired()
+            pairs = paired(imu, fields[:])
             missing = lacks(pairs) if pairs else 'nothing yet'
             left = max(0.0, seconds - (time.monotonic() - start))
             print(f'\r{left:5.0f} s left, {len(pairs)} readings: '
                   f'{missing or "enough: Ctrl-C fits them"}'[:160].ljust(160), end='',
                   file=sys.stderr, flush=True)
-    pairs = paired()
+    pairs = paired(imu, fields)
     if not pairs:
         raise ValueError(f'no field on {source} paired with an Imu message: is the driver '
                          'running, with publish_mag?')

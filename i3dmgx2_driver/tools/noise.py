@@ -35,7 +35,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from . import allan
-from .figures import agg_figure, write_files
+from .figures import agg_figure, COLOURS, write_files
 from .imu_samples import from_bag, from_capture, Samples
 from .sources import add_sources, parse_args
 from ..ros.calibration_file import params_file, yaml_float
@@ -86,8 +86,8 @@ def analyse(samples: Samples) -> Report:
     values = np.concatenate([samples.gyro, samples.accel], axis=1)
     still = allan.movement(samples.time, values,
                            [f'{name} {axis}' for name in UNITS for axis in 'xyz'], rate)
-    for begin, end, what in still.moved[:5]:
-        warnings.append(f'the sensor moved: {begin:.0f}-{end:.0f} s, {what}')
+    warnings += [f'the sensor moved: {begin:.0f}-{end:.0f} s, {what}'
+                 for begin, end, what in still.moved[:5]]
     if len(still.moved) > 5:
         warnings.append(f'the sensor moved: {len(still.moved) - 5} more times')
     still_s = duration
@@ -256,16 +256,15 @@ def draw(report: Report, path: str) -> Any:
     Hollow: the points the fit leaves out (under 4 clusters) and the terms
     not trusted (at their bound); the y range holds every marker.
     """
-    from matplotlib.lines import Line2D
     fig = agg_figure(figsize=(10.0, 8.0), dpi=120)
-    colours = ('tab:red', 'tab:green', 'tab:blue')
+    from matplotlib.lines import Line2D     # there, as agg_figure found it
     for row, (name, terms) in enumerate(report.terms.items()):
         ax = fig.add_subplot(2, 1, row + 1)
         dev = report.deviation[name]
         fitted = dev.clusters >= allan.MIN_CLUSTERS
         error = np.array([allan.uncertainty(int(c)) for c in dev.clusters])
         shown = [dev.adev[dev.adev > 0]]
-        for t, adev, colour in zip(terms, dev.adev.T, colours, strict=True):
+        for t, adev, colour in zip(terms, dev.adev.T, COLOURS, strict=True):
             ax.errorbar(dev.tau[fitted], adev[fitted], yerr=adev[fitted] * error[fitted],
                         fmt='o-', color=colour, ms=3, lw=1, capsize=2)
             ax.loglog(dev.tau[~fitted], adev[~fitted], 'o', mfc='none', color=colour, ms=4)
@@ -286,7 +285,7 @@ def draw(report: Report, path: str) -> Any:
         ax.set(xscale='log', yscale='log', ylim=(low / 2, high * 2),
                ylabel=f'Allan deviation ({UNITS[name][1]})')
         key = [Line2D([], [], color=c, marker='o', ms=3, label=f'{label} (±1 sigma)')
-               for label, c in zip('xyz', colours, strict=True)]
+               for label, c in zip('xyz', COLOURS, strict=True)]
         key += [Line2D([], [], color='k', ls=ls, lw=0.8, label=label) for ls, label in
                 ((':', 'white, -1/2'), ('-.', 'floor, 0.664 B'), ('--', 'random walk, +1/2'))]
         key += [Line2D([], [], color='k', ls='', marker=m, mfc=f, label=label) for m, f, label in

@@ -53,7 +53,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .figures import agg_figure, have_matplotlib, MATPLOTLIB_HINT, patch
+from .figures import agg_figure, COLOURS, have_matplotlib, MATPLOTLIB_HINT
 from .imu_samples import decode, device_times, vectors
 from .stamp_plot import read_stamp_errors, render_stamp_errors, StampErrors
 from .. import lifetime
@@ -77,8 +77,6 @@ ECHO_CSV_COLUMNS = 40
 #: Figure size (in) and resolution (dpi) of a report-quality page figure.
 FIGSIZE = (10.0, 8.0)
 DPI = 150
-#: Axis colours: x, y, z as the RGB convention of axes in RViz.
-COLOURS = ('tab:red', 'tab:green', 'tab:blue')
 
 
 class Series(NamedTuple):
@@ -264,6 +262,7 @@ def render(series: Series, output: str, title: str | None = None) -> Any:
     figure is freed with its last reference (``figures.agg_figure``).
     """
     fig = agg_figure(figsize=FIGSIZE, layout='constrained')
+    from matplotlib.patches import Patch     # there, as agg_figure found it
     axes = fig.subplots(3, 1, sharex=True)
     t = series.time
     ends = [b for _, b in series.gaps + series.breaks]
@@ -288,7 +287,7 @@ def render(series: Series, output: str, title: str | None = None) -> Any:
         ax.margins(x=0.01)
         handles = ax.get_legend_handles_labels()[0]
         if ax is axes[0]:
-            handles += [patch(label=label, **style) for spans, style, label in shades if spans]
+            handles += [Patch(label=label, **style) for spans, style, label in shades if spans]
         ax.legend(handles=handles, loc='upper left', bbox_to_anchor=(1.01, 1.0),
                   frameon=False, fontsize='small')
     axes[2].set_yticks(np.arange(-180, 181, 90))

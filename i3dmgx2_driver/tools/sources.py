@@ -23,7 +23,7 @@ is analysed. Which messages a tool keeps and what it makes of them are its own.
 """
 
 import argparse
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager, suppress
 import sys
 import threading
@@ -60,6 +60,16 @@ def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> A
     if '--ros-args' in args:
         args = args[:args.index('--ros-args')]
     return parser.parse_args(args)
+
+
+def stamp_of(msg: Any) -> tuple[int, int]:
+    """Return a message's stamp as it came: what pairs the Imu and field of one record."""
+    return msg.header.stamp.sec, msg.header.stamp.nanosec
+
+
+def paired(imu: dict[tuple[int, int], Any], fields: Iterable[Any]) -> list[tuple[Any, Any]]:
+    """Return each field with the Imu message (``imu``, by :func:`stamp_of`) of its stamp."""
+    return [(imu[stamp], m) for m in fields if (stamp := stamp_of(m)) in imu]
 
 
 @contextmanager
