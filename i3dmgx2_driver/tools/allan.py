@@ -351,20 +351,16 @@ def movement(time: np.ndarray, values: np.ndarray, labels: list[str], rate: floa
     return Still(moved, stretches)
 
 
-class Gaps(NamedTuple):
-    """Records missing from a stream, found in its sample times."""
+def find_gaps(time: np.ndarray) -> tuple[int, float, int]:
+    """
+    Return the records missing between samples, the longest step (s) and the gaps.
 
-    missing: int
-    longest: float
-    count: int
-
-
-def find_gaps(time: np.ndarray) -> Gaps:
-    """Count the records missing between samples: steps over 1.5 periods (the median step)."""
+    A gap is a step over 1.5 periods (the median step).
+    """
     if time.size < 3:
-        return Gaps(0, 0.0, 0)
+        return 0, 0.0, 0
     steps = np.diff(time)
     period = float(np.median(steps))
     late = steps > 1.5 * period
     missing = int(np.sum(np.round(steps[late] / period) - 1)) if period > 0 else 0
-    return Gaps(missing, float(steps.max()) if late.any() else 0.0, int(late.sum()))
+    return missing, float(steps.max()) if late.any() else 0.0, int(late.sum())

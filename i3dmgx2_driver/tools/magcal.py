@@ -56,8 +56,7 @@ MAX_GAP_DEG = 45.0
 MOVED = 0.02
 #: The sensor's own heading off by more than this (deg) calls for advice.
 OWN_HEADING_DEG = 3.0
-_AXES = ('+x (front)', '-x (back)', '+y (right side)', '-y (left side)', '+z (bottom)',
-         '-z (top)')
+_AXES = ('+x (front)', '-x (back)', '+y (right side)', '-y (left side)', '+z (bottom)', '-z (top)')
 
 
 class Sweep(NamedTuple):

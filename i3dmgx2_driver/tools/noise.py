@@ -77,12 +77,11 @@ def analyse(samples: Samples) -> Report:
         raise ValueError(f'{samples.source}: {n} samples over {duration:.3g} s: too short for '
                          f'even the white noise; record at least {allan.MIN_STILL_S:.0f} s')
     warnings = list(samples.notes)
-    gaps = allan.find_gaps(samples.time)
-    if gaps.missing:
-        doubt = ('; the figures are doubtful' if gaps.missing > MISSING_SHARE * n else '')
-        warnings.append(f'{gaps.missing} records missing in {gaps.count} gaps (longest '
-                        f'{gaps.longest:.3g} s); the deviation takes the rest as '
-                        f'contiguous{doubt}')
+    missing, longest, gaps = allan.find_gaps(samples.time)
+    if missing:
+        doubt = '; the figures are doubtful' if missing > MISSING_SHARE * n else ''
+        warnings.append(f'{missing} records missing in {gaps} gaps (longest {longest:.3g} s); '
+                        f'the deviation takes the rest as contiguous{doubt}')
     values = np.concatenate([samples.gyro, samples.accel], axis=1)
     still = allan.movement(samples.time, values,
                            [f'{name} {axis}' for name in UNITS for axis in 'xyz'], rate)
@@ -179,9 +178,7 @@ def as_json(report: Report) -> dict[str, Any]:
             'allan_deviation': {'tau_s': report.deviation[name].tau.tolist(),
                                 'adev': report.deviation[name].adev.T.tolist()},
         }
-    out['parameters'] = parameters(report)
-    out['warnings'] = report.warnings
-    return out
+    return {**out, 'parameters': parameters(report), 'warnings': report.warnings}
 
 
 def params_yaml(report: Report) -> str:

@@ -230,12 +230,10 @@ def read_csv(path: str) -> dict[str, np.ndarray]:
 def series_from_csv(path: str, gap: float | None = None) -> Series:
     """Build the series of a recorded run, in the frame it was published in."""
     cols = read_csv(path)
-    t = cols['time'] - (cols['time'][0] if cols['time'].size else 0.0)
-    accel = np.column_stack([cols['ax'], cols['ay'], cols['az']])
-    rate = np.column_stack([cols['wx'], cols['wy'], cols['wz']])
-    quats = np.column_stack([cols['qx'], cols['qy'], cols['qz'], cols['qw']])
-    return _with_gaps(Series(t, accel, rate, vectors(euler_deg(q) for q in quats), [], [], [],
-                             os.path.basename(path),
+    data = np.column_stack([cols[name] for name in CSV_COLUMNS])   # time, a, w, q
+    t = data[:, 0] - (data[0, 0] if data.size else 0.0)
+    return _with_gaps(Series(t, data[:, 1:4], data[:, 4:7], vectors(map(euler_deg, data[:, 7:])),
+                             [], [], [], os.path.basename(path),
                              'as published (frame_convention of the recording)',
                              'from the CSV time column'), [], gap)
 
