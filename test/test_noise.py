@@ -47,7 +47,6 @@ from i3dmgx2_driver.simulator.noise_model import NoiseConfig, NoiseModel
 from i3dmgx2_driver.simulator.sensor import SensorSpec, SimulatedSensor
 from i3dmgx2_driver.simulator.still_capture import record_dtype, still_chunks
 from i3dmgx2_driver.tools import allan, noise
-from i3dmgx2_driver.tools import noise_live as live
 from i3dmgx2_driver.tools.bag_io import capture_messages, write_bag
 from i3dmgx2_driver.tools.imu_samples import device_times, Samples
 import numpy as np
@@ -463,7 +462,7 @@ def test_noise_listens_to_the_running_node_and_ctrl_c_keeps_what_came():
 
 
 def test_the_progress_bar_says_the_time_left_and_the_estimate():
-    line = live.progress(90.0, 600.0, 9000, ', gyro N 1.0e-04')
+    line = noise.progress(90.0, 600.0, 9000, ', gyro N 1.0e-04')
     assert line == '\r[####--------------------------]   8:30 left, 9000 samples, gyro N 1.0e-04'
 
 

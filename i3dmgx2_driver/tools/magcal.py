@@ -26,6 +26,13 @@ horizontal offset and 2x2 matrix, nothing vertical. The field is fitted
 raw: a calibration the node applies already (its parameters, or
 ``--applied FILE``) is undone first, so what is written replaces it.
 Details, and how to read the figures: docs/magcal.md.
+
+Listening, each field is paired with the Imu message of the same stamp
+(one record makes both). A line on stderr says how many readings came and
+what the sweep still lacks, with which way to turn; Ctrl-C (or SIGTERM)
+ends the listening and magcal fits what came. The node's own
+``mag_hard_iron`` and ``mag_soft_iron`` are read first (its get_parameters
+service), so that the fit is made on the raw field whatever the node applies.
 """
 
 import argparse
@@ -34,14 +41,18 @@ from collections.abc import Sequence
 import json
 import math
 import sys
+import time
 from typing import Any, NamedTuple
 
 import numpy as np
+from rcl_interfaces.srv import GetParameters
+from rclpy.node import Node
 from rclpy.parameter import parameter_dict_from_yaml_file, parameter_value_to_python
+from sensor_msgs.msg import Imu, MagneticField
 
 from .figures import agg_figure, write_files
 from .imu_samples import bag_messages, capture_records, vectors, xyz
-from .sources import add_sources, paired, parse_args, stamp_of
+from .sources import add_sources, listening, paired, parse_args, stamp_of
 from ..codec.orientation import body_vector, ENU
 from ..ros.calibration_file import params_file
 from ..ros.conversions import TESLA_PER_GAUSS
@@ -56,6 +67,8 @@ MAX_GAP_DEG = 45.0
 MOVED = 0.02
 #: The sensor's own heading off by more than this (deg) calls for advice.
 OWN_HEADING_DEG = 3.0
+#: Seconds to wait for the node's parameters.
+PARAMETERS_S = 10.0
 _AXES = ('+x (front)', '-x (back)', '+y (right side)', '-y (left side)', '+z (bottom)', '-z (top)')
 
 
@@ -319,6 +332,48 @@ def write_outputs(sweep: Sweep, result: Fit, directory: str) -> list[str]:
                        lambda path: draw(sweep, result, path))
 
 
+def calibration(node: Node, name: str) -> list[list[float]]:
+    """Return node ``name``'s mag_hard_iron and mag_soft_iron; ValueError when it does not say."""
+    client = node.create_client(GetParameters, f'{name}/get_parameters')
+    if not client.wait_for_service(timeout_sec=PARAMETERS_S):
+        raise ValueError(f'node {name} does not answer get_parameters: is it running '
+                         '(--node names it)?')
+    future = client.call_async(GetParameters.Request(names=[HARD_IRON, SOFT_IRON]))
+    deadline = time.monotonic() + PARAMETERS_S  # the listening's thread spins
+    while not future.done() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    values = future.result().values if future.done() else []
+    if len(values) != 2:
+        raise ValueError(f'node {name} did not give {HARD_IRON} and {SOFT_IRON}')
+    return [list(parameter_value_to_python(v)) for v in values]
+
+
+def listen(topic: str, node_name: str, seconds: float, planar: bool) -> Sweep:
+    """Listen for ``seconds`` (or until Ctrl-C); return the sweep, the node's own undone."""
+    # The topics arrive in any order: a field finds its Imu when the pairs are asked for
+    # (in a copy of the fields while the spinner thread adds to them).
+    imu: dict[tuple[int, int], Imu] = {}
+    fields: list[MagneticField] = []
+    with listening('i3dmgx2_magcal', topic, lambda m: imu.update({stamp_of(m): m}),
+                   fields.append) as (node, stopped):
+        source = f'{node.resolve_topic_name(topic)} (live)'
+        applied = calibration(node, node_name)
+        start = time.monotonic()
+        while time.monotonic() - start < seconds and not stopped.wait(1.0):
+            pairs = paired(imu, fields[:])
+            missing = (coverage_problem(from_messages(pairs, 'live'), planar) if pairs
+                       else 'nothing yet')
+            left = max(0.0, seconds - (time.monotonic() - start))
+            print(f'\r{left:5.0f} s left, {len(pairs)} readings: '
+                  f'{missing or "enough: Ctrl-C fits them"}'[:160].ljust(160), end='',
+                  file=sys.stderr, flush=True)
+    pairs = paired(imu, fields)
+    if not pairs:
+        raise ValueError(f'no field on {source} paired with an Imu message: is the driver '
+                         'running, with publish_mag?')
+    return undo(from_messages(pairs, f'{topic} (live)'), *applied)
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='magcal', description=__doc__.split('\n\n')[0])
     add_sources(parser, 'fits', 'magcal.yaml, magcal.json and magcal.png')
@@ -342,10 +397,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.applied:
                 sweep = undo(sweep, *applied_file(args.applied))
         else:
-            from .magcal_live import listen
-            pairs, applied = listen(args.topic, args.node, args.minutes * 60.0, lambda pairs:
-                                    coverage_problem(from_messages(pairs, 'live'), args.planar))
-            sweep = undo(from_messages(pairs, f'{args.topic} (live)'), *applied)
+            sweep = listen(args.topic, args.node, args.minutes * 60.0, args.planar)
         result = fit(sweep, args.planar)
         print('\n'.join(result.lines + [f'warning: {w}' for w in result.warnings]))
         for path in write_outputs(sweep, result, args.output) if args.output else ():

@@ -21,7 +21,11 @@ node publishes. Prints N, B (its tau) and K per axis, with the clusters
 behind each; ``-o DIR`` writes noise.json, noise.yaml (the node's
 covariance parameters, a ``--params-file``), imu.yaml (kalibr's IMU file)
 and allan.png (with matplotlib). The deviation and its reading are
-allan.py's; the sources imu_samples.py's and noise_live.py's.
+allan.py's; the samples of a capture or a bag imu_samples.py's.
+
+Listening to the node, a progress bar on stderr says the time left and
+the white noise so far (N of each gyro axis, from what came); Ctrl-C (or
+SIGTERM) ends the listening early and the tool analyses what came.
 """
 
 import argparse
@@ -36,8 +40,8 @@ import numpy as np
 
 from . import allan
 from .figures import agg_figure, COLOURS, write_files
-from .imu_samples import from_bag, from_capture, Samples
-from .sources import add_sources, parse_args
+from .imu_samples import from_bag, from_capture, from_rows, imu_row, Samples, xyz
+from .sources import add_sources, listening, parse_args
 from ..ros.calibration_file import params_file, yaml_float
 
 #: Units of each sensor's terms: N, B, K.
@@ -307,6 +311,59 @@ def write_outputs(report: Report, directory: str, topic: str,
     return write_files('noise', directory, texts, 'allan.png', lambda path: draw(report, path))
 
 
+#: Seconds between two updates of the progress bar, and of its estimate.
+PROGRESS_S = 1.0
+ESTIMATE_S = 10.0
+BAR = 30
+
+
+def progress(elapsed: float, total: float, count: int, estimate: str) -> str:
+    """Return one line of the progress bar: the bar, the time left, the estimate so far."""
+    done = min(1.0, elapsed / total) if total > 0 else 1.0
+    left = max(0.0, total - elapsed)
+    bar = '#' * round(done * BAR) + '-' * (BAR - round(done * BAR))
+    return f'\r[{bar}] {int(left // 60):3d}:{int(left % 60):02d} left, {count} samples{estimate}'
+
+
+def _estimate(samples: Samples | None) -> str:
+    """Return the gyro's white noise so far, for the progress bar."""
+    if samples is None or samples.time.size < 64:
+        return ''
+    dev = allan.overlapping_adev(samples.gyro, 1.0 / samples.rate_hz)
+    terms = allan.read_terms(dev, samples.time.size / samples.rate_hz)
+    values = ' '.join(f'{axis.white.value:.2e}' for axis in terms
+                      if math.isfinite(axis.white.value))
+    return f', gyro N {values} rad/s/√Hz' if values else ''
+
+
+def listen(topic: str, seconds: float) -> Samples:
+    """Listen to ``topic`` for ``seconds`` (or until Ctrl-C); return what came."""
+    rows: list[tuple[float, ...]] = []
+    fields: list[tuple[float, float, float]] = []
+
+    def samples() -> Samples | None:
+        # Copies (the spinner thread appends); None before the second message.
+        got, mag = rows[:], np.array(fields[:])
+        return (from_rows(got, mag if mag.shape[0] > 2 else None, source)
+                if len(got) > 1 else None)
+
+    with listening('i3dmgx2_noise', topic, lambda msg: rows.append(imu_row(msg)),
+                   lambda msg: fields.append(xyz(msg.magnetic_field))) as (node, stopped):
+        source = f'{node.resolve_topic_name(topic)} (live)'
+        start = time.monotonic()
+        estimate, next_estimate = '', start + ESTIMATE_S
+        while (elapsed := time.monotonic() - start) < seconds and not stopped.wait(PROGRESS_S):
+            if time.monotonic() >= next_estimate:
+                estimate = _estimate(samples())
+                next_estimate += ESTIMATE_S
+            print(progress(elapsed, seconds, len(rows), estimate), end='',
+                  file=sys.stderr, flush=True)
+    found = samples()
+    if found is None:
+        raise ValueError(f'no message on {source}: is the driver running?')
+    return found
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='noise', description=__doc__.split('\n\n')[0],
@@ -337,7 +394,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.bag:
             samples = from_bag(args.bag, args.topic)
         else:
-            from .noise_live import listen
             samples = listen(args.topic, args.minutes * 60.0)
         read = time.monotonic() - start
         report = analyse(samples)
