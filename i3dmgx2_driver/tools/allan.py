@@ -255,8 +255,7 @@ def read_terms(dev: Deviation, duration: float) -> list[AxisNoise]:
             if not rel <= TRUSTED:
                 seen = 'not resolved' if coef[j] <= 0 else f'±{rel:.0%} after the fit'
                 # The sigma falls about as one over the root of the length; at most 4 times.
-                need = duration * min((rel / TRUSTED) ** 2, 16.0)
-                short = Short(f'too short: {seen}', need)
+                short = Short(f'too short: {seen}', duration * min((rel / TRUSTED) ** 2, 16.0))
             if name == 'random_walk' and behind[2] < K_MIN_TAU:
                 short = Short(short.why if short else f'too short: no tau of {K_MIN_TAU:.0f} s '
                               'fitted', max(short.record_s if short else 0.0,

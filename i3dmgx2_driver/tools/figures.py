@@ -57,9 +57,7 @@ def agg_figure(**kwargs: Any) -> Any:
         from matplotlib.figure import Figure
     except ImportError as exc:
         raise MatplotlibMissing(MATPLOTLIB_HINT) from exc
-    fig = Figure(**kwargs)
-    FigureCanvasAgg(fig)
-    return fig
+    return FigureCanvasAgg(Figure(**kwargs)).figure    # the canvas attaches itself
 
 
 def have_matplotlib() -> bool:

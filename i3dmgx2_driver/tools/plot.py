@@ -132,8 +132,7 @@ def find_gaps(time: np.ndarray, breaks: Iterable[int] = (),
         median = float(np.median(positive)) if positive.size else 0.0
         threshold = max(MIN_GAP, GAP_FACTOR * median)
     starts = {int(i) + 1 for i in np.nonzero((steps > threshold) | (steps < 0))[0]}
-    starts.update(breaks)
-    return sorted(starts), threshold
+    return sorted(starts.union(breaks)), threshold
 
 
 # Inputs ---------------------------------------------------------------------------

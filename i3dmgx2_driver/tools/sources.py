@@ -57,9 +57,7 @@ def add_sources(parser: argparse.ArgumentParser, what: str, writes: str) -> None
 def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> Any:
     """Parse the tool's own arguments: those before ``--ros-args`` (``ros2 run`` adds it)."""
     args = list(sys.argv[1:] if argv is None else argv)
-    if '--ros-args' in args:
-        args = args[:args.index('--ros-args')]
-    return parser.parse_args(args)
+    return parser.parse_args(args[:args.index('--ros-args')] if '--ros-args' in args else args)
 
 
 def stamp_of(msg: Any) -> tuple[int, int]:
