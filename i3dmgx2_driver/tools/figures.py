@@ -31,10 +31,9 @@ import sys
 from typing import Any
 
 #: What to do when matplotlib is missing.
-MATPLOTLIB_HINT = (
-    'the plot tool needs matplotlib, an optional extra the driver does not install: '
-    'sudo apt install python3-matplotlib (with ROS), or pip install matplotlib '
-    '(pip install "i3dmgx2_driver[plot]" from a source checkout)')
+MATPLOTLIB_HINT = ('the plot tool needs matplotlib, an optional extra the driver does not '
+                   'install: sudo apt install python3-matplotlib (with ROS), or pip install '
+                   'matplotlib (pip install "i3dmgx2_driver[plot]" from a source checkout)')
 
 #: Axis colours: x, y, z as the RGB convention of axes in RViz.
 COLOURS = ('tab:red', 'tab:green', 'tab:blue')

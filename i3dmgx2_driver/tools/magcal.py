@@ -261,15 +261,14 @@ def fit(sweep: Sweep, planar: bool) -> Fit:
     flat = np.median(np.linalg.norm((corrected @ rot.T)[:, :2], axis=1))
     truth = headings(corrected, sweep.down)
     error = _wrap_deg(headings(field, sweep.down) - truth)
-    lines = [
-        f'{sweep.source}: {field.shape[0]} readings, {"yaw-only" if planar else "3-D"} fit',
-        f'hard iron (T): {_text(hard_iron)}',
-        f'soft iron: {_text(soft_iron[0])} / {_text(soft_iron[1])} / {_text(soft_iron[2])}',
-        f'field {"horizontal " if planar else ""}magnitude: {np.mean(before) * 1e6:.2f} µT '
-        f'± {np.std(before) / np.mean(before):.1%} before, {radius * 1e6:.2f} µT '
-        f'± {np.std(residual) / radius:.1%} after',
-        f'heading error of the distortion: {_spread(error)} before; '
-        f'{math.degrees(np.std(residual) / flat):.2f} deg rms after (the residual)']
+    lines = [f'{sweep.source}: {field.shape[0]} readings, {"yaw-only" if planar else "3-D"} fit',
+             f'hard iron (T): {_text(hard_iron)}',
+             f'soft iron: {" / ".join(map(_text, soft_iron))}',
+             f'field {"horizontal " if planar else ""}magnitude: {np.mean(before) * 1e6:.2f} µT '
+             f'± {np.std(before) / np.mean(before):.1%} before, {radius * 1e6:.2f} µT '
+             f'± {np.std(residual) / radius:.1%} after',
+             f'heading error of the distortion: {_spread(error)} before; '
+             f'{math.degrees(np.std(residual) / flat):.2f} deg rms after (the residual)']
     if sweep.heading is not None:
         own = _wrap_deg(sweep.heading - truth)
         lines += ["the sensor's own orientation's heading against the corrected field: "

@@ -59,10 +59,8 @@ from .stamp_plot import read_stamp_errors, render_stamp_errors, StampErrors
 from .. import lifetime
 from ..capture.file_format import is_capture, read_capture
 from ..capture.fixtures import FIXTURE_ADDRESS, fixture_chunks, load_fixture, timeline
-from ..codec.orientation import (
-    body_vector, CONVENTIONS, ENU, euler_from_matrix, matrix_from_quaternion, orientation,
-    Quaternion,
-)
+from ..codec.orientation import (body_vector, CONVENTIONS, ENU, euler_from_matrix,
+                                 matrix_from_quaternion, orientation, Quaternion)
 from ..ros.conversions import STANDARD_GRAVITY
 
 #: A gap is at least this long (s), and at least GAP_FACTOR typical intervals.
@@ -264,11 +262,9 @@ def render(series: Series, output: str, title: str | None = None) -> Any:
     t = series.time
     ends = [b for _, b in series.gaps + series.breaks]
     starts = sorted({int(i) for i in np.searchsorted(t, ends) if 0 < i < t.size})
-    panels = (
-        (series.accel, 'Acceleration (m/s²)', ('x', 'y', 'z'), None),
-        (series.angular_rate, 'Angular rate (rad/s)', ('x', 'y', 'z'), None),
-        (series.euler, 'Orientation (deg)', ('roll', 'pitch', 'yaw'), 180.0),
-    )
+    panels = ((series.accel, 'Acceleration (m/s²)', ('x', 'y', 'z'), None),
+              (series.angular_rate, 'Angular rate (rad/s)', ('x', 'y', 'z'), None),
+              (series.euler, 'Orientation (deg)', ('roll', 'pitch', 'yaw'), 180.0))
     shades = ((series.gaps, {'color': '0.85'}, 'no data'),
               (series.breaks, {'facecolor': '0.92', 'edgecolor': '0.6', 'hatch': '///'},
                'timer restarts\n(separate captures)'))
@@ -307,10 +303,9 @@ def render(series: Series, output: str, title: str | None = None) -> Any:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog='plot',
-        description='Plot acceleration, angular rate and orientation of a 3DM-GX2 capture, '
-                    'of the real-records fixture or of a CSV recorded run to a PNG.')
+    parser = argparse.ArgumentParser(prog='plot', description='Plot acceleration, angular rate '
+                                     'and orientation of a 3DM-GX2 capture, of the real-records '
+                                     'fixture or of a CSV recorded run to a PNG.')
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument('input', nargs='?',
                         help='capture file (GX2CAP) or CSV (time,ax,ay,az,wx,wy,wz,qx,qy,'
