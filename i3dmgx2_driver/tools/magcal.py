@@ -52,7 +52,7 @@ from sensor_msgs.msg import Imu, MagneticField
 
 from .figures import agg_figure, write_files
 from .imu_samples import bag_messages, capture_records, vectors, xyz
-from .sources import add_sources, listening, paired, parse_args, stamp_of
+from .sources import add_sources, listening, paired, parse_args, read_source, stamp_of
 from ..codec.orientation import body_vector, ENU
 from ..ros.calibration_file import params_file
 from ..ros.conversions import TESLA_PER_GAUSS
@@ -126,15 +126,16 @@ def from_messages(pairs: Sequence[tuple[Any, Any]], source: str) -> Sweep:
     return Sweep(field, -_unit(accel), heading if known else None, source)
 
 
-def from_bag(path: str, topic: str) -> Sweep:
-    """Read the Imu topic and its sibling ``mag`` from a bag; pair them by stamp."""
+def from_bag(path: str, topic: str, applied: str | None = None) -> Sweep:
+    """Read the Imu topic and its sibling ``mag`` of a bag, paired by stamp; undo ``applied``."""
     imu, fields = {}, []
     for is_imu, msg in bag_messages(path, topic):
         if is_imu:
             imu[stamp_of(msg)] = msg
         else:
             fields.append(msg)
-    return from_messages(paired(imu, fields), f'{path} ({topic})')
+    sweep = from_messages(paired(imu, fields), f'{path} ({topic})')
+    return undo(sweep, *applied_file(applied)) if applied else sweep
 
 
 def undo(sweep: Sweep, hard_iron: Sequence[float], soft_iron: Sequence[float]) -> Sweep:
@@ -389,14 +390,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run magcal; 0: fitted, 1: refused or failed, 3: fitted, but doubtful (warnings)."""
     args = parse_args(_parser(), argv)
     try:
-        if args.capture:
-            sweep = from_capture(args.capture)
-        elif args.bag:
-            sweep = from_bag(args.bag, args.topic)
-            if args.applied:
-                sweep = undo(sweep, *applied_file(args.applied))
-        else:
-            sweep = listen(args.topic, args.node, args.minutes * 60.0, args.planar)
+        sweep = read_source(args, from_capture,
+                            lambda bag, topic: from_bag(bag, topic, args.applied),
+                            lambda topic, seconds: listen(topic, args.node, seconds, args.planar))
         result = fit(sweep, args.planar)
         print('\n'.join(result.lines + [f'warning: {w}' for w in result.warnings]))
         for path in write_outputs(sweep, result, args.output) if args.output else ():

@@ -41,7 +41,7 @@ import numpy as np
 from . import allan
 from .figures import agg_figure, COLOURS, write_files
 from .imu_samples import from_bag, from_capture, from_rows, imu_row, Samples, xyz
-from .sources import add_sources, listening, parse_args
+from .sources import add_sources, listening, parse_args, read_source
 from ..ros.calibration_file import params_file, yaml_float
 
 #: Units of each sensor's terms: N, B, K.
@@ -389,12 +389,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f'--inflate must be 1 or more, got {args.inflate:g}')
     start = time.monotonic()
     try:
-        if args.capture:
-            samples = from_capture(args.capture)
-        elif args.bag:
-            samples = from_bag(args.bag, args.topic)
-        else:
-            samples = listen(args.topic, args.minutes * 60.0)
+        samples = read_source(args, from_capture, from_bag, listen)
         read = time.monotonic() - start
         report = analyse(samples)
     except (ImportError, OSError, ValueError) as exc:

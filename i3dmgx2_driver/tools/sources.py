@@ -60,6 +60,14 @@ def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> A
     return parser.parse_args(args[:args.index('--ros-args')] if '--ros-args' in args else args)
 
 
+def read_source(args: Any, from_capture: Callable[[str], Any],
+                from_bag: Callable[[str, str], Any], listen: Callable[[str, float], Any]) -> Any:
+    """Return what the source ``args`` names gives: a capture's, a bag's or the node's."""
+    if args.capture:
+        return from_capture(args.capture)
+    return from_bag(args.bag, args.topic) if args.bag else listen(args.topic, args.minutes * 60.0)
+
+
 def stamp_of(msg: Any) -> tuple[int, int]:
     """Return a message's stamp as it came: what pairs the Imu and field of one record."""
     return msg.header.stamp.sec, msg.header.stamp.nanosec
