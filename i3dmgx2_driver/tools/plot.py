@@ -99,10 +99,10 @@ def euler_deg(q: Sequence[float]) -> tuple[float, float, float]:
     """
     Roll, pitch, yaw (deg) of a quaternion (x, y, z, w), aircraft ZYX set.
 
-    Read off M = R^T (R the attitude matrix, body to world) as docs/protocol.md
-    §9 defines the set, so that in the device's convention it is exactly the
-    record's. A zero or NaN quaternion (orientation unknown) gives NaN, not an
-    exception.
+    Read off M = R^T (R the attitude matrix, body to world) as
+    docs/protocol.md §9 defines the set, so that in the device's convention it
+    is exactly the record's. A zero or NaN quaternion (orientation unknown)
+    gives NaN, not an exception.
     """
     x, y, z, w = q
     norm = math.sqrt(x * x + y * y + z * z + w * w)
