@@ -126,9 +126,7 @@ def overlapping_adev(y: np.ndarray, dt: float,
     the mean pooled over the ``stretches`` (index ranges; all of ``y`` by
     default) long enough for that tau.
     """
-    y = np.asarray(y, dtype=float)
-    if y.ndim == 1:
-        y = y[:, None]
+    y = np.atleast_2d(np.asarray(y, dtype=float).T).T     # (n,) as one axis: (n, 1)
     stretches = stretches or [(0, y.shape[0])]
     ms = octave_taus(max((stop - start for start, stop in stretches), default=0))
     total, count = np.zeros((ms.size, y.shape[1])), np.zeros(ms.size)

@@ -48,7 +48,6 @@ import numpy as np
 from rcl_interfaces.srv import GetParameters
 from rclpy.node import Node
 from rclpy.parameter import parameter_dict_from_yaml_file, parameter_value_to_python
-from sensor_msgs.msg import Imu, MagneticField
 
 from .figures import agg_figure, write_files
 from .imu_samples import bag_messages, capture_records, vectors, xyz
@@ -352,8 +351,7 @@ def listen(topic: str, node_name: str, seconds: float, planar: bool) -> Sweep:
     """Listen for ``seconds`` (or until Ctrl-C); return the sweep, the node's own undone."""
     # The topics arrive in any order: a field finds its Imu when the pairs are asked for
     # (in a copy of the fields while the spinner thread adds to them).
-    imu: dict[tuple[int, int], Imu] = {}
-    fields: list[MagneticField] = []
+    imu, fields = {}, []
     with listening('i3dmgx2_magcal', topic, lambda m: imu.update({stamp_of(m): m}),
                    fields.append) as (node, stopped):
         source = f'{node.resolve_topic_name(topic)} (live)'

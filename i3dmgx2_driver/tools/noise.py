@@ -338,8 +338,7 @@ def _estimate(samples: Samples | None) -> str:
 
 def listen(topic: str, seconds: float) -> Samples:
     """Listen to ``topic`` for ``seconds`` (or until Ctrl-C); return what came."""
-    rows: list[tuple[float, ...]] = []
-    fields: list[tuple[float, float, float]] = []
+    rows, fields = [], []
 
     def samples() -> Samples | None:
         # Copies (the spinner thread appends); None before the second message.
