@@ -21,8 +21,10 @@ field in tesla, REP-103 body axes. A capture holds the device's units (g,
 rad/s, Gauss, its FRD axes); they are converted with the node's own factors
 and axes (ros/conversions.py, codec/orientation.py), on whole arrays.
 Sample times come from the device timer (a capture: unwrapped through
-rollovers, the host's receive times telling long pauses) or from the
-messages' stamps (a bag).
+rollovers, the host's receive times telling long pauses and restarts) or
+from the messages' stamps (a bag). The readers underneath (a capture's
+records, a bag's Imu and field messages, the timer unwrapped) serve magcal
+and plot as well.
 """
 
 from collections import Counter
