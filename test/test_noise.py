@@ -47,9 +47,8 @@ from i3dmgx2_driver.simulator.noise_model import NoiseConfig, NoiseModel
 from i3dmgx2_driver.simulator.sensor import SensorSpec, SimulatedSensor
 from i3dmgx2_driver.simulator.still_capture import record_dtype, still_chunks
 from i3dmgx2_driver.tools import allan, noise
-from i3dmgx2_driver.tools import noise_live as live
 from i3dmgx2_driver.tools.bag_io import capture_messages, write_bag
-from i3dmgx2_driver.tools.imu_samples import Samples, unwrap_timer
+from i3dmgx2_driver.tools.imu_samples import device_times, Samples
 import numpy as np
 import pytest
 import yaml
@@ -158,7 +157,7 @@ def test_still_capture_bytes_are_the_codecs(code, wireless):
     assert len(events) == 100 and parser.stats.bytes_skipped == 0
     timers = np.array([e.record.timer for e in events])
     # The timer starts 5 s before its rollover, and unwraps through it.
-    assert np.allclose(np.diff(unwrap_timer(timers, np.zeros(100))), 0.01, atol=1e-7)
+    assert np.allclose(np.diff(device_times(timers, np.zeros(100))[0]), 0.01, atol=1e-7)
 
 
 def test_still_capture_refuses_a_stream_it_cannot_make():
@@ -421,6 +420,15 @@ def test_allan_png_shows_every_marker_the_legend_and_the_error_bars(minute, tmp_
         assert len(hollow) == 3 and all(len(line.get_xdata()) for line in hollow)
 
 
+def test_without_matplotlib_the_files_are_written_and_the_figure_is_said_missing(
+        minute, tmp_path, monkeypatch, capsys):
+    for module in ('matplotlib', 'matplotlib.figure', 'matplotlib.backends.backend_agg'):
+        monkeypatch.setitem(sys.modules, module, None)
+    written = noise.write_outputs(noise.analyse(minute), str(tmp_path), '/imu/raw_data')
+    assert [os.path.basename(p) for p in written] == ['noise.json', 'noise.yaml', 'imu.yaml']
+    assert 'allan.png not drawn: ' in capsys.readouterr().err
+
+
 def test_the_uncertainty_of_a_term_falls_with_its_clusters():
     assert allan.uncertainty(1) == math.inf
     assert allan.uncertainty(51) == pytest.approx(0.1)
@@ -454,7 +462,7 @@ def test_noise_listens_to_the_running_node_and_ctrl_c_keeps_what_came():
 
 
 def test_the_progress_bar_says_the_time_left_and_the_estimate():
-    line = live.progress(90.0, 600.0, 9000, ', gyro N 1.0e-04')
+    line = noise.progress(90.0, 600.0, 9000, ', gyro N 1.0e-04')
     assert line == '\r[####--------------------------]   8:30 left, 9000 samples, gyro N 1.0e-04'
 
 

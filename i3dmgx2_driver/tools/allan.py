@@ -84,8 +84,7 @@ class Short(NamedTuple):
 
     def __str__(self) -> str:
         """Return the advice as the table prints it."""
-        tail = f'; record at least {minutes(self.record_s)}' if self.record_s else ''
-        return self.why + tail
+        return self.why + (f'; record at least {minutes(self.record_s)}' if self.record_s else '')
 
 
 class Term(NamedTuple):
@@ -113,10 +112,8 @@ class AxisNoise(NamedTuple):
 
 def octave_taus(samples: int) -> np.ndarray:
     """Return 1, 2, 4... samples, up to a third of the recording (two clusters overlap)."""
-    m = [1]
-    while m[-1] * 2 <= (samples - 1) // 3:
-        m.append(m[-1] * 2)
-    return np.array(m if samples >= 4 else [], dtype=np.int64)
+    # bit_length: the count of the powers of two up to the third.
+    return 2 ** np.arange(((samples - 1) // 3).bit_length() if samples >= 4 else 0, dtype=np.int64)
 
 
 def overlapping_adev(y: np.ndarray, dt: float,
@@ -129,9 +126,7 @@ def overlapping_adev(y: np.ndarray, dt: float,
     the mean pooled over the ``stretches`` (index ranges; all of ``y`` by
     default) long enough for that tau.
     """
-    y = np.asarray(y, dtype=float)
-    if y.ndim == 1:
-        y = y[:, None]
+    y = np.atleast_2d(np.asarray(y, dtype=float).T).T     # (n,) as one axis: (n, 1)
     stretches = stretches or [(0, y.shape[0])]
     ms = octave_taus(max((stop - start for start, stop in stretches), default=0))
     total, count = np.zeros((ms.size, y.shape[1])), np.zeros(ms.size)
@@ -258,8 +253,7 @@ def read_terms(dev: Deviation, duration: float) -> list[AxisNoise]:
             if not rel <= TRUSTED:
                 seen = 'not resolved' if coef[j] <= 0 else f'±{rel:.0%} after the fit'
                 # The sigma falls about as one over the root of the length; at most 4 times.
-                need = duration * min((rel / TRUSTED) ** 2, 16.0)
-                short = Short(f'too short: {seen}', need)
+                short = Short(f'too short: {seen}', duration * min((rel / TRUSTED) ** 2, 16.0))
             if name == 'random_walk' and behind[2] < K_MIN_TAU:
                 short = Short(short.why if short else f'too short: no tau of {K_MIN_TAU:.0f} s '
                               'fitted', max(short.record_s if short else 0.0,
@@ -354,20 +348,16 @@ def movement(time: np.ndarray, values: np.ndarray, labels: list[str], rate: floa
     return Still(moved, stretches)
 
 
-class Gaps(NamedTuple):
-    """Records missing from a stream, found in its sample times."""
+def find_gaps(time: np.ndarray) -> tuple[int, float, int]:
+    """
+    Return the records missing between samples, the longest step (s) and the gaps.
 
-    missing: int
-    longest: float
-    count: int
-
-
-def find_gaps(time: np.ndarray) -> Gaps:
-    """Count the records missing between samples: steps over 1.5 periods (the median step)."""
+    A gap is a step over 1.5 periods (the median step).
+    """
     if time.size < 3:
-        return Gaps(0, 0.0, 0)
+        return 0, 0.0, 0
     steps = np.diff(time)
     period = float(np.median(steps))
     late = steps > 1.5 * period
     missing = int(np.sum(np.round(steps[late] / period) - 1)) if period > 0 else 0
-    return Gaps(missing, float(steps.max()) if late.any() else 0.0, int(late.sum()))
+    return missing, float(steps.max()) if late.any() else 0.0, int(late.sum())

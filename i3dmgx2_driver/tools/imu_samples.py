@@ -21,12 +21,14 @@ field in tesla, REP-103 body axes. A capture holds the device's units (g,
 rad/s, Gauss, its FRD axes); they are converted with the node's own factors
 and axes (ros/conversions.py, codec/orientation.py), on whole arrays.
 Sample times come from the device timer (a capture: unwrapped through
-rollovers, the host's receive times telling long pauses) or from the
-messages' stamps (a bag).
+rollovers, the host's receive times telling long pauses and restarts) or
+from the messages' stamps (a bag). The readers underneath (a capture's
+records, a bag's Imu and field messages, the timer unwrapped) serve magcal
+and plot as well.
 """
 
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 import os
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -42,7 +44,7 @@ from ..codec.records import TICKS_PER_SECOND
 from ..codec.timer import TIMER_MODULUS
 from ..ros.conversions import STANDARD_GRAVITY, TESLA_PER_GAUSS
 
-#: Period of the device timer (s).
+#: Period of the device timer (s): it wraps after 2^32 ticks.
 TIMER_PERIOD = TIMER_MODULUS / TICKS_PER_SECOND
 #: The driver's Imu topic (the one sensor's, ros/publishers.py).
 DEFAULT_TOPIC = '/imu/raw_data'
@@ -68,20 +70,55 @@ class Samples(NamedTuple):
         return 1.0 / float(np.median(steps)) if steps.size else 0.0
 
 
-def unwrap_timer(timers: np.ndarray, host: np.ndarray) -> np.ndarray:
-    """
-    Return seconds from the first record, from raw timers and host receive times.
+def vectors(values: Iterable[Sequence[float]]) -> np.ndarray:
+    """Return ``values`` as an (n, 3) array, (0, 3) when there are none."""
+    return np.array(list(values), dtype=float).reshape(-1, 3)
 
-    Each step is the timer's forward difference plus the whole periods
-    (218.45 s) that bring it nearest the host's elapsed time, as the plot
-    tool reads a capture (``plot.device_times``), on arrays.
+
+def xyz(vector: Any) -> tuple[float, float, float]:
+    """Return a message's Vector3 (or a quaternion's vector part) as a tuple."""
+    return vector.x, vector.y, vector.z
+
+
+def device_times(timers: Sequence[int], host_times: Sequence[float],
+                 tolerance: float = 1.0) -> tuple[np.ndarray, list[int]]:
     """
-    if timers.size == 0:
-        return np.zeros(0)
-    step = (np.diff(timers.astype(np.int64)) % TIMER_MODULUS) / TICKS_PER_SECOND
-    elapsed = np.maximum(np.diff(host), 0.0)
-    periods = np.maximum(np.round((elapsed - step) / TIMER_PERIOD), 0.0)
-    return np.concatenate([[0.0], np.cumsum(step + periods * TIMER_PERIOD)])
+    Unwrap the device timer into seconds from the first record; also the restarts.
+
+    Each step is the timer's forward difference plus whichever number of
+    whole periods (218.45 s) brings it closest to the host's elapsed receive
+    time: that unwraps rollovers, including pauses longer than half a period
+    that a timer-only unwrapper must take for resets. When no period count
+    agrees with the host (within ``tolerance`` s plus 2 %), the timer has
+    restarted (a power cycle, or separate captures joined): the host's
+    elapsed time is used instead and the index is returned as a break.
+    """
+    step = (np.diff(np.asarray(timers, dtype=np.int64)) % TIMER_MODULUS) / TICKS_PER_SECOND
+    host = np.maximum(np.diff(np.asarray(host_times, dtype=float)), 0.0)
+    candidate = step + np.maximum(np.round((host - step) / TIMER_PERIOD), 0.0) * TIMER_PERIOD
+    agrees = np.abs(candidate - host) <= tolerance + 0.02 * host
+    times = np.cumsum(np.concatenate([[0.0], np.where(agrees, candidate, host)]))
+    return times[:len(timers)], (np.nonzero(~agrees)[0] + 1).tolist()
+
+
+def decode(chunks: Iterable[tuple[float, bytes]], address: int | None, wireless: bool,
+           fields: Sequence[str]) -> tuple[list[tuple[float, Any]], int]:
+    """Return each (receive time, record) of ``chunks`` with all ``fields``; the frames read."""
+    parser, found = SensorStreamParser(address, wireless), []
+    for receive_time, data in chunks:
+        for event in parser.feed(data):
+            record = getattr(event, 'record', None)
+            if all(hasattr(record, name) for name in fields):
+                found.append((receive_time, record))
+    return found, parser.stats.good_frames
+
+
+def capture_records(path: str, fields: Sequence[str]) -> tuple[list[tuple[float, Any]], int]:
+    """:func:`decode` a capture, of the sensor and link its header names."""
+    header, chunks = read_capture(path)
+    address = header.get('address')
+    return decode(chunks, address if isinstance(address, int) else None,
+                  bool(header.get('wireless', True)), fields)
 
 
 def from_capture(path: str) -> Samples:
@@ -94,25 +131,15 @@ def from_capture(path: str) -> Samples:
     """
     if os.path.isfile(path) and os.path.getsize(path) == 0:
         raise ValueError(f'{path}: an empty file (0 bytes), not a capture')
-    header, chunks = read_capture(path)
-    address = header.get('address')
-    parser = SensorStreamParser(address if isinstance(address, int) else None,
-                                bool(header.get('wireless', True)))
-    rows = []
     with warnings.catch_warnings(record=True) as cut:
         warnings.simplefilter('always', TruncatedCaptureWarning)
-        for receive_time, data in chunks:
-            for event in parser.feed(data):
-                record = getattr(event, 'record', None)
-                if all(hasattr(record, name) for name in ('angular_rate', 'accel', 'timer')):
-                    rows.append((receive_time, record))
+        rows, frames = capture_records(path, ('angular_rate', 'accel', 'timer'))
     if not rows:
         raise ValueError(f'{path}: no record with acceleration and angular rate '
-                         f'({parser.stats.good_frames} frames decoded)')
+                         f'({frames} frames decoded)')
     kind = Counter(type(record) for _, record in rows).most_common(1)[0][0]
     rows = [(t, record) for t, record in rows if type(record) is kind]
-    host = np.array([t for t, _ in rows])
-    timers = np.array([record.timer for _, record in rows], dtype=np.int64)
+    times = device_times([record.timer for _, record in rows], [t for t, _ in rows])[0]
     gyro = np.array([record.angular_rate for _, record in rows]) * _ENU_SIGNS
     accel = np.array([record.accel for _, record in rows]) * (_ENU_SIGNS * STANDARD_GRAVITY)
     mag = None
@@ -120,13 +147,13 @@ def from_capture(path: str) -> Samples:
         field = np.array([record.mag for _, record in rows])
         mag = field[~np.isnan(field).any(axis=1)] * (_ENU_SIGNS * TESLA_PER_GAUSS)
     notes = tuple(f'the capture was cut: {w.message}' for w in cut)
-    return Samples(unwrap_timer(timers, host), gyro, accel, mag, path, notes)
+    return Samples(times, gyro, accel, mag, path, notes)
 
 
 def imu_row(msg: Any) -> tuple[float, ...]:
     """Return an Imu message's stamp (s), angular velocity and acceleration, as one row."""
-    s, w, a = msg.header.stamp, msg.angular_velocity, msg.linear_acceleration
-    return (s.sec + s.nanosec * 1e-9, w.x, w.y, w.z, a.x, a.y, a.z)
+    s = msg.header.stamp
+    return (s.sec + s.nanosec * 1e-9, *xyz(msg.angular_velocity), *xyz(msg.linear_acceleration))
 
 
 def from_rows(rows: Sequence[tuple[float, ...]], mag: np.ndarray | None, source: str) -> Samples:
@@ -136,15 +163,18 @@ def from_rows(rows: Sequence[tuple[float, ...]], mag: np.ndarray | None, source:
     return Samples(rows[:, 0] - rows[0, 0], rows[:, 1:4], rows[:, 4:7], mag, source)
 
 
-def from_bag(path: str, topic: str = DEFAULT_TOPIC, mag_topic: str | None = None) -> Samples:
-    """
-    Read ``topic``'s sensor_msgs/Imu (and ``mag_topic``'s field) from a rosbag2 bag.
+def mag_topic(topic: str) -> str:
+    """Return the field's topic of an Imu topic: its sibling ``mag``, as the driver names them."""
+    return topic.rsplit('/', 1)[0] + '/mag'
 
-    sqlite3 or MCAP, through rosbags (an optional extra). The mag topic
-    defaults to the Imu topic's sibling ``mag``, as the driver names them.
+
+def bag_messages(path: str, topic: str) -> Iterator[tuple[bool, Any]]:
     """
-    mag_topic = topic.rsplit('/', 1)[0] + '/mag' if mag_topic is None else mag_topic
-    rows, mag = [], []
+    Yield (whether it is an Imu message, the message) of ``topic`` and its mag topic in a bag.
+
+    sqlite3 or MCAP, through rosbags (an optional extra); a bag without
+    ``topic``, or one rosbags cannot read, is a ValueError that says so.
+    """
     try:
         with bag_reader(Path(path)) as reader:
             known = {c.topic: c.msgtype for c in reader.connections}
@@ -152,19 +182,24 @@ def from_bag(path: str, topic: str = DEFAULT_TOPIC, mag_topic: str | None = None
                 imu_topics = sorted(t for t, kind in known.items() if kind.endswith('/Imu'))
                 raise ValueError(f'{path}: no topic {topic!r}; its Imu topics: '
                                  f'{", ".join(imu_topics) or "none"}')
-            wanted = [c for c in reader.connections if c.topic in (topic, mag_topic)]
-            decode = deserializer(reader)
+            wanted = [c for c in reader.connections if c.topic in (topic, mag_topic(topic))]
+            read = deserializer(reader)
             for connection, _, raw in reader.messages(connections=wanted):
-                msg = decode(raw, connection.msgtype)
-                if connection.topic == topic:
-                    rows.append(imu_row(msg))
-                else:
-                    field = msg.magnetic_field
-                    mag.append((field.x, field.y, field.z))
+                yield connection.topic == topic, read(raw, connection.msgtype)
     except Exception as exc:     # rosbags' own errors (AnyReaderError...): a message, no trace
         if not type(exc).__module__.startswith('rosbags'):
             raise
         raise ValueError(f'{path}: not a readable bag ({type(exc).__name__}: {exc})') from None
+
+
+def from_bag(path: str, topic: str = DEFAULT_TOPIC) -> Samples:
+    """Read ``topic``'s sensor_msgs/Imu and the field of its mag topic from a rosbag2 bag."""
+    rows, mag = [], []
+    for imu, msg in bag_messages(path, topic):
+        if imu:
+            rows.append(imu_row(msg))
+        else:
+            mag.append(xyz(msg.magnetic_field))
     if not rows:
         raise ValueError(f'{path}: no message on {topic}')
     return from_rows(rows, np.array(mag) if mag else None, f'{path} ({topic})')

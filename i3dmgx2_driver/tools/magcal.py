@@ -26,6 +26,13 @@ horizontal offset and 2x2 matrix, nothing vertical. The field is fitted
 raw: a calibration the node applies already (its parameters, or
 ``--applied FILE``) is undone first, so what is written replaces it.
 Details, and how to read the figures: docs/magcal.md.
+
+Listening, each field is paired with the Imu message of the same stamp
+(one record makes both). A line on stderr says how many readings came and
+what the sweep still lacks, with which way to turn; Ctrl-C (or SIGTERM)
+ends the listening and magcal fits what came. The node's own
+``mag_hard_iron`` and ``mag_soft_iron`` are read first (its get_parameters
+service), so that the fit is made on the raw field whatever the node applies.
 """
 
 import argparse
@@ -33,21 +40,20 @@ import ast
 from collections.abc import Sequence
 import json
 import math
-import os
-from pathlib import Path
 import sys
+import time
 from typing import Any, NamedTuple
 
 import numpy as np
+from rcl_interfaces.srv import GetParameters
+from rclpy.node import Node
 from rclpy.parameter import parameter_dict_from_yaml_file, parameter_value_to_python
 
-from .bag_io import bag_reader, deserializer
-from .figures import agg_figure, MatplotlibMissing
-from .noise import yaml_float
-from .sources import add_sources, parse_args
-from ..capture.file_format import read_capture
+from .figures import agg_figure, write_files
+from .imu_samples import bag_messages, capture_records, vectors, xyz
+from .sources import add_sources, listening, paired, parse_args, read_source, stamp_of
 from ..codec.orientation import body_vector, ENU
-from ..codec.parser import SensorStreamParser
+from ..ros.calibration_file import params_file
 from ..ros.conversions import TESLA_PER_GAUSS
 from ..ros.mag_calibration import HARD_IRON, IDENTITY, is_matrix_list, SOFT_IRON, ZERO
 
@@ -60,8 +66,9 @@ MAX_GAP_DEG = 45.0
 MOVED = 0.02
 #: The sensor's own heading off by more than this (deg) calls for advice.
 OWN_HEADING_DEG = 3.0
-_AXES = ('+x (front)', '-x (back)', '+y (right side)', '-y (left side)', '+z (bottom)',
-         '-z (top)')
+#: Seconds to wait for the node's parameters.
+PARAMETERS_S = 10.0
+_AXES = ('+x (front)', '-x (back)', '+y (right side)', '-y (left side)', '+z (bottom)', '-z (top)')
 
 
 class Sweep(NamedTuple):
@@ -83,36 +90,21 @@ class Fit(NamedTuple):
     warnings: list[str]
 
 
-def _rows(vectors: Sequence) -> np.ndarray:
-    return np.array(vectors, dtype=float).reshape(-1, 3)
-
-
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 def from_capture(path: str) -> Sweep:
     """Decode the records with a field and an acceleration (0xCB, 0xCC, 0xD2) of a capture."""
-    header, chunks = read_capture(path)
-    address = header.get('address')
-    parser = SensorStreamParser(address if isinstance(address, int) else None,
-                                bool(header.get('wireless', True)))
-    field, accel, heading = [], [], []
-    for _, data in chunks:
-        for event in parser.feed(data):
-            record = getattr(event, 'record', None)
-            mag = getattr(record, 'mag', None)
-            if mag is None or math.isnan(mag[0]) or not hasattr(record, 'accel'):
-                continue
-            field.append(mag)
-            accel.append(record.accel)
-            m = getattr(record, 'matrix', None)
-            heading.append(math.atan2(m[1], m[0]) if m else getattr(record, 'yaw', math.nan))
-    if not field:
+    found, frames = capture_records(path, ('mag', 'accel'))
+    records = [record for _, record in found if not math.isnan(record.mag[0])]
+    if not records:
         raise ValueError(f'{path}: no record with a field and an acceleration (0xCB, 0xCC, '
-                         f'0xD2; {parser.stats.good_frames} frames decoded)')
-    own = np.array(heading)
-    return Sweep(_rows(field) * TESLA_PER_GAUSS, -_unit(_rows(accel)),
+                         f'0xD2; {frames} frames decoded)')
+    own = np.array([math.atan2(r.matrix[1], r.matrix[0]) if hasattr(r, 'matrix')
+                    else getattr(r, 'yaw', math.nan) for r in records])
+    return Sweep(vectors(r.mag for r in records) * TESLA_PER_GAUSS,
+                 -_unit(vectors(r.accel for r in records)),
                  None if np.isnan(own).all() else own, path)
 
 
@@ -122,12 +114,9 @@ def from_messages(pairs: Sequence[tuple[Any, Any]], source: str) -> Sweep:
         raise ValueError(f'{source}: no field (imu/mag) with an Imu message of the same stamp')
     ned = pairs[0][1].header.frame_id.endswith('_ned')
     axes = np.array((1.0, 1.0, 1.0) if ned else body_vector((1.0, 1.0, 1.0), ENU))
-    field = _rows([(m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z)
-                   for _, m in pairs]) * axes
-    accel = _rows([(i.linear_acceleration.x, i.linear_acceleration.y,
-                    i.linear_acceleration.z) for i, _ in pairs]) * axes
-    x, y, z, w = np.array([(i.orientation.x, i.orientation.y, i.orientation.z,
-                            i.orientation.w) for i, _ in pairs]).T
+    field = vectors(xyz(m.magnetic_field) for _, m in pairs) * axes
+    accel = vectors(xyz(i.linear_acceleration) for i, _ in pairs) * axes
+    x, y, z, w = np.array([(*xyz(i.orientation), i.orientation.w) for i, _ in pairs]).T
     # The body's x axis in the world (the rotation's first column): (north, east, down)
     # in NED, (east, north, up) in ENU.
     first, second = 1 - 2 * (y * y + z * z), 2 * (x * y + z * w)
@@ -136,21 +125,16 @@ def from_messages(pairs: Sequence[tuple[Any, Any]], source: str) -> Sweep:
     return Sweep(field, -_unit(accel), heading if known else None, source)
 
 
-def from_bag(path: str, topic: str) -> Sweep:
-    """Read the Imu topic and its sibling ``mag`` from a bag; pair them by stamp."""
-    mag_topic = topic.rsplit('/', 1)[0] + '/mag'
-    imu, mag = {}, []
-    with bag_reader(Path(path)) as reader:
-        wanted = [c for c in reader.connections if c.topic in (topic, mag_topic)]
-        decode = deserializer(reader)
-        for connection, _, raw in reader.messages(connections=wanted):
-            msg = decode(raw, connection.msgtype)
-            stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
-            if connection.topic == topic:
-                imu[stamp] = msg
-            else:
-                mag.append((stamp, msg))
-    return from_messages([(imu[s], m) for s, m in mag if s in imu], f'{path} ({topic})')
+def from_bag(path: str, topic: str, applied: str | None = None) -> Sweep:
+    """Read the Imu topic and its sibling ``mag`` of a bag, paired by stamp; undo ``applied``."""
+    imu, fields = {}, []
+    for is_imu, msg in bag_messages(path, topic):
+        if is_imu:
+            imu[stamp_of(msg)] = msg
+        else:
+            fields.append(msg)
+    sweep = from_messages(paired(imu, fields), f'{path} ({topic})')
+    return undo(sweep, *applied_file(applied)) if applied else sweep
 
 
 def undo(sweep: Sweep, hard_iron: Sequence[float], soft_iron: Sequence[float]) -> Sweep:
@@ -227,11 +211,11 @@ def _quadric_fit(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         a[i, j] = a[j, i] = value
     if np.linalg.eigvalsh(a)[0] < 0:
         a, v = -a, -v
-    w, vectors = np.linalg.eigh(a)
+    w, basis = np.linalg.eigh(a)
     if w[0] <= 0:
         raise ValueError('the readings lie on no ellipsoid: the sweep or the field is wrong')
     centre = -np.linalg.solve(a, v[len(pairs):len(pairs) + k])
-    root = vectors @ np.diag(np.sqrt(w)) @ vectors.T
+    root = basis @ np.diag(np.sqrt(w)) @ basis.T
     root = (root + root.T) / 2  # symmetric to the last bit, as the node checks it
     return centre * scale + mean, root / np.linalg.det(root) ** (1.0 / k)
 
@@ -277,15 +261,14 @@ def fit(sweep: Sweep, planar: bool) -> Fit:
     flat = np.median(np.linalg.norm((corrected @ rot.T)[:, :2], axis=1))
     truth = headings(corrected, sweep.down)
     error = _wrap_deg(headings(field, sweep.down) - truth)
-    lines = [
-        f'{sweep.source}: {field.shape[0]} readings, {"yaw-only" if planar else "3-D"} fit',
-        f'hard iron (T): {_text(hard_iron)}',
-        f'soft iron: {_text(soft_iron[0])} / {_text(soft_iron[1])} / {_text(soft_iron[2])}',
-        f'field {"horizontal " if planar else ""}magnitude: {np.mean(before) * 1e6:.2f} µT '
-        f'± {np.std(before) / np.mean(before):.1%} before, {radius * 1e6:.2f} µT '
-        f'± {np.std(residual) / radius:.1%} after',
-        f'heading error of the distortion: {_spread(error)} before; '
-        f'{math.degrees(np.std(residual) / flat):.2f} deg rms after (the residual)']
+    lines = [f'{sweep.source}: {field.shape[0]} readings, {"yaw-only" if planar else "3-D"} fit',
+             f'hard iron (T): {_text(hard_iron)}',
+             f'soft iron: {" / ".join(map(_text, soft_iron))}',
+             f'field {"horizontal " if planar else ""}magnitude: {np.mean(before) * 1e6:.2f} µT '
+             f'± {np.std(before) / np.mean(before):.1%} before, {radius * 1e6:.2f} µT '
+             f'± {np.std(residual) / radius:.1%} after',
+             f'heading error of the distortion: {_spread(error)} before; '
+             f'{math.degrees(np.std(residual) / flat):.2f} deg rms after (the residual)']
     if sweep.heading is not None:
         own = _wrap_deg(sweep.heading - truth)
         lines += ["the sensor's own orientation's heading against the corrected field: "
@@ -308,14 +291,9 @@ def _spread(deg: np.ndarray) -> str:
 
 def params_yaml(result: Fit, source: str) -> str:
     """Return magcal.yaml: the node's parameters, a ``--params-file``."""
-    def floats(values: np.ndarray) -> str:
-        return '[' + ', '.join(yaml_float(float(v)) for v in values) + ']'
-    return '\n'.join([
-        f'# Measured by `ros2 run i3dmgx2_driver magcal` '
-        f'({"yaw-only" if result.planar else "3-D"} fit) from {source}.',
-        '/**:', '  ros__parameters:',
-        f'    {HARD_IRON}: {floats(result.hard_iron)}',
-        f'    {SOFT_IRON}: {floats(result.soft_iron.ravel())}']) + '\n'
+    return params_file([f'Measured by `ros2 run i3dmgx2_driver magcal` '
+                        f'({"yaw-only" if result.planar else "3-D"} fit) from {source}.'], '/**',
+                       {HARD_IRON: result.hard_iron, SOFT_IRON: result.soft_iron.ravel()})
 
 
 def draw(sweep: Sweep, result: Fit, path: str) -> None:
@@ -344,22 +322,54 @@ def write_outputs(sweep: Sweep, result: Fit, directory: str) -> list[str]:
     if not is_matrix_list(result.soft_iron.ravel().tolist()):
         raise ValueError('the fitted soft iron is no symmetric positive-definite matrix: '
                          'the node would refuse it; nothing written')
-    os.makedirs(directory, exist_ok=True)
     document = {'source': sweep.source, 'planar': result.planar,
-                HARD_IRON: result.hard_iron.tolist(),
-                SOFT_IRON: result.soft_iron.ravel().tolist(),
+                HARD_IRON: result.hard_iron.tolist(), SOFT_IRON: result.soft_iron.ravel().tolist(),
                 'report': result.lines, 'warnings': result.warnings}
-    written = []
-    for name, text in (('magcal.yaml', params_yaml(result, sweep.source)),
-                       ('magcal.json', json.dumps(document, indent=2) + '\n')):
-        written.append(os.path.join(directory, name))
-        Path(written[-1]).write_text(text, encoding='utf-8')
-    try:
-        draw(sweep, result, os.path.join(directory, 'magcal.png'))
-        written.append(os.path.join(directory, 'magcal.png'))
-    except MatplotlibMissing as exc:
-        print(f'magcal: magcal.png not drawn: {exc}', file=sys.stderr)
-    return written
+    texts = (('magcal.yaml', params_yaml(result, sweep.source)),
+             ('magcal.json', json.dumps(document, indent=2) + '\n'))
+    return write_files('magcal', directory, texts, 'magcal.png',
+                       lambda path: draw(sweep, result, path))
+
+
+def calibration(node: Node, name: str) -> list[list[float]]:
+    """Return node ``name``'s mag_hard_iron and mag_soft_iron; ValueError when it does not say."""
+    client = node.create_client(GetParameters, f'{name}/get_parameters')
+    if not client.wait_for_service(timeout_sec=PARAMETERS_S):
+        raise ValueError(f'node {name} does not answer get_parameters: is it running '
+                         '(--node names it)?')
+    future = client.call_async(GetParameters.Request(names=[HARD_IRON, SOFT_IRON]))
+    deadline = time.monotonic() + PARAMETERS_S  # the listening's thread spins
+    while not future.done() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    values = future.result().values if future.done() else []
+    if len(values) != 2:
+        raise ValueError(f'node {name} did not give {HARD_IRON} and {SOFT_IRON}')
+    return [list(parameter_value_to_python(v)) for v in values]
+
+
+def listen(topic: str, node_name: str, seconds: float, planar: bool) -> Sweep:
+    """Listen for ``seconds`` (or until Ctrl-C); return the sweep, the node's own undone."""
+    # The topics arrive in any order: a field finds its Imu when the pairs are asked for
+    # (in a copy of the fields while the spinner thread adds to them).
+    imu, fields = {}, []
+    with listening('i3dmgx2_magcal', topic, lambda m: imu.update({stamp_of(m): m}),
+                   fields.append) as (node, stopped):
+        source = f'{node.resolve_topic_name(topic)} (live)'
+        applied = calibration(node, node_name)
+        start = time.monotonic()
+        while time.monotonic() - start < seconds and not stopped.wait(1.0):
+            pairs = paired(imu, fields[:])
+            missing = (coverage_problem(from_messages(pairs, 'live'), planar) if pairs
+                       else 'nothing yet')
+            left = max(0.0, seconds - (time.monotonic() - start))
+            print(f'\r{left:5.0f} s left, {len(pairs)} readings: '
+                  f'{missing or "enough: Ctrl-C fits them"}'[:160].ljust(160), end='',
+                  file=sys.stderr, flush=True)
+    pairs = paired(imu, fields)
+    if not pairs:
+        raise ValueError(f'no field on {source} paired with an Imu message: is the driver '
+                         'running, with publish_mag?')
+    return undo(from_messages(pairs, f'{topic} (live)'), *applied)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -378,17 +388,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run magcal; 0: fitted, 1: refused or failed, 3: fitted, but doubtful (warnings)."""
     args = parse_args(_parser(), argv)
     try:
-        if args.capture:
-            sweep = from_capture(args.capture)
-        elif args.bag:
-            sweep = from_bag(args.bag, args.topic)
-            if args.applied:
-                sweep = undo(sweep, *applied_file(args.applied))
-        else:
-            from .magcal_live import listen
-            pairs, applied = listen(args.topic, args.node, args.minutes * 60.0, lambda pairs:
-                                    coverage_problem(from_messages(pairs, 'live'), args.planar))
-            sweep = undo(from_messages(pairs, f'{args.topic} (live)'), *applied)
+        sweep = read_source(args, from_capture,
+                            lambda bag, topic: from_bag(bag, topic, args.applied),
+                            lambda topic, seconds: listen(topic, args.node, seconds, args.planar))
         result = fit(sweep, args.planar)
         print('\n'.join(result.lines + [f'warning: {w}' for w in result.warnings]))
         for path in write_outputs(sweep, result, args.output) if args.output else ():

@@ -21,15 +21,17 @@ node publishes. Prints N, B (its tau) and K per axis, with the clusters
 behind each; ``-o DIR`` writes noise.json, noise.yaml (the node's
 covariance parameters, a ``--params-file``), imu.yaml (kalibr's IMU file)
 and allan.png (with matplotlib). The deviation and its reading are
-allan.py's; the sources imu_samples.py's and noise_live.py's.
+allan.py's; the samples of a capture or a bag imu_samples.py's.
+
+Listening to the node, a progress bar on stderr says the time left and
+the white noise so far (N of each gyro axis, from what came); Ctrl-C (or
+SIGTERM) ends the listening early and the tool analyses what came.
 """
 
 import argparse
 from collections.abc import Sequence
 import json
 import math
-import os
-from pathlib import Path
 import sys
 import time
 from typing import Any, NamedTuple
@@ -37,9 +39,10 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from . import allan
-from .figures import agg_figure, MatplotlibMissing
-from .imu_samples import from_bag, from_capture, Samples
-from .sources import add_sources, parse_args
+from .figures import agg_figure, COLOURS, write_files
+from .imu_samples import from_bag, from_capture, from_rows, imu_row, Samples, xyz
+from .sources import add_sources, listening, parse_args, read_source
+from ..ros.calibration_file import params_file, yaml_float
 
 #: Units of each sensor's terms: N, B, K.
 UNITS = {'gyroscope': ('rad/s/√Hz', 'rad/s', 'rad/s²/√Hz'),
@@ -78,17 +81,16 @@ def analyse(samples: Samples) -> Report:
         raise ValueError(f'{samples.source}: {n} samples over {duration:.3g} s: too short for '
                          f'even the white noise; record at least {allan.MIN_STILL_S:.0f} s')
     warnings = list(samples.notes)
-    gaps = allan.find_gaps(samples.time)
-    if gaps.missing:
-        doubt = ('; the figures are doubtful' if gaps.missing > MISSING_SHARE * n else '')
-        warnings.append(f'{gaps.missing} records missing in {gaps.count} gaps (longest '
-                        f'{gaps.longest:.3g} s); the deviation takes the rest as '
-                        f'contiguous{doubt}')
+    missing, longest, gaps = allan.find_gaps(samples.time)
+    if missing:
+        doubt = '; the figures are doubtful' if missing > MISSING_SHARE * n else ''
+        warnings.append(f'{missing} records missing in {gaps} gaps (longest {longest:.3g} s); '
+                        f'the deviation takes the rest as contiguous{doubt}')
     values = np.concatenate([samples.gyro, samples.accel], axis=1)
     still = allan.movement(samples.time, values,
                            [f'{name} {axis}' for name in UNITS for axis in 'xyz'], rate)
-    for begin, end, what in still.moved[:5]:
-        warnings.append(f'the sensor moved: {begin:.0f}-{end:.0f} s, {what}')
+    warnings += [f'the sensor moved: {begin:.0f}-{end:.0f} s, {what}'
+                 for begin, end, what in still.moved[:5]]
     if len(still.moved) > 5:
         warnings.append(f'the sensor moved: {len(still.moved) - 5} more times')
     still_s = duration
@@ -110,15 +112,6 @@ def analyse(samples: Samples) -> Report:
     mag = (float(np.max(np.std(np.diff(samples.mag, axis=0), axis=0)) / math.sqrt(2.0))
            if samples.mag is not None and samples.mag.shape[0] > 2 else None)
     return Report(samples, rate, duration, deviation, terms, warnings, mag)
-
-
-def yaml_float(value: float) -> str:
-    """Return ``value`` as YAML 1.1 reads a float (PyYAML, kalibr): always with a dot."""
-    text = f'{value:.6g}'
-    mantissa, e, exponent = text.partition('e')
-    if '.' not in mantissa and mantissa.lstrip('-').isdigit():
-        mantissa += '.0'
-    return mantissa + e + exponent
 
 
 def _axes(terms: list[allan.AxisNoise], part: str, what: str = 'value') -> list[float | None]:
@@ -189,22 +182,18 @@ def as_json(report: Report) -> dict[str, Any]:
             'allan_deviation': {'tau_s': report.deviation[name].tau.tolist(),
                                 'adev': report.deviation[name].adev.T.tolist()},
         }
-    out['parameters'] = parameters(report)
-    out['warnings'] = report.warnings
-    return out
+    return {**out, 'parameters': parameters(report), 'warnings': report.warnings}
 
 
 def params_yaml(report: Report) -> str:
     """Return noise.yaml: the covariance parameters as a params file the node takes."""
     notes = ' / '.join(sorted({figure(report.terms[name], 'white')[1] for name in UNITS}))
-    lines = ['# Measured by `ros2 run i3dmgx2_driver noise` at rest from',
-             f'# {report.samples.source}: {report.duration_s / 60:.1f} min at '
-             f'{report.rate_hz:.4g} Hz.',
-             f'# The white noise of one sample (N * sqrt(rate)), {notes}. Load',
-             "# it after the driver's own file: --params-file config/i3dmgx2.yaml --params-file "
-             'noise.yaml', '/**:', '  ros__parameters:']
-    lines += [f'    {name}: {yaml_float(value)}' for name, value in parameters(report).items()]
-    return '\n'.join(lines) + '\n'
+    return params_file(['Measured by `ros2 run i3dmgx2_driver noise` at rest from',
+                        f'{report.samples.source}: {report.duration_s / 60:.1f} min at '
+                        f'{report.rate_hz:.4g} Hz.',
+                        f'The white noise of one sample (N * sqrt(rate)), {notes}. Load',
+                        "it after the driver's own file: --params-file config/i3dmgx2.yaml "
+                        '--params-file noise.yaml'], '/**', parameters(report))
 
 
 #: kalibr's four noise keys: the sensor, the term, the unit.
@@ -268,16 +257,15 @@ def draw(report: Report, path: str) -> Any:
     Hollow: the points the fit leaves out (under 4 clusters) and the terms
     not trusted (at their bound); the y range holds every marker.
     """
-    from matplotlib.lines import Line2D
     fig = agg_figure(figsize=(10.0, 8.0), dpi=120)
-    colours = ('tab:red', 'tab:green', 'tab:blue')
+    from matplotlib.lines import Line2D     # there, as agg_figure found it
     for row, (name, terms) in enumerate(report.terms.items()):
         ax = fig.add_subplot(2, 1, row + 1)
         dev = report.deviation[name]
         fitted = dev.clusters >= allan.MIN_CLUSTERS
         error = np.array([allan.uncertainty(int(c)) for c in dev.clusters])
         shown = [dev.adev[dev.adev > 0]]
-        for t, adev, colour in zip(terms, dev.adev.T, colours, strict=True):
+        for t, adev, colour in zip(terms, dev.adev.T, COLOURS, strict=True):
             ax.errorbar(dev.tau[fitted], adev[fitted], yerr=adev[fitted] * error[fitted],
                         fmt='o-', color=colour, ms=3, lw=1, capsize=2)
             ax.loglog(dev.tau[~fitted], adev[~fitted], 'o', mfc='none', color=colour, ms=4)
@@ -298,7 +286,7 @@ def draw(report: Report, path: str) -> Any:
         ax.set(xscale='log', yscale='log', ylim=(low / 2, high * 2),
                ylabel=f'Allan deviation ({UNITS[name][1]})')
         key = [Line2D([], [], color=c, marker='o', ms=3, label=f'{label} (±1 sigma)')
-               for label, c in zip('xyz', colours, strict=True)]
+               for label, c in zip('xyz', COLOURS, strict=True)]
         key += [Line2D([], [], color='k', ls=ls, lw=0.8, label=label) for ls, label in
                 ((':', 'white, -1/2'), ('-.', 'floor, 0.664 B'), ('--', 'random walk, +1/2'))]
         key += [Line2D([], [], color='k', ls='', marker=m, mfc=f, label=label) for m, f, label in
@@ -320,17 +308,59 @@ def write_outputs(report: Report, directory: str, topic: str,
     texts = (('noise.json', json.dumps(as_json(report), indent=2) + '\n'),
              ('noise.yaml', params_yaml(report)),
              ('imu.yaml', kalibr_yaml(report, topic, inflate)))    # all made before any write
-    os.makedirs(directory, exist_ok=True)
-    written = [os.path.join(directory, name) for name, _ in texts]
-    for path, (_, text) in zip(written, texts, strict=True):
-        Path(path).write_text(text, encoding='utf-8')
-    png = os.path.join(directory, 'allan.png')
-    try:
-        draw(report, png)
-        written.append(png)
-    except MatplotlibMissing as exc:
-        print(f'noise: allan.png not drawn: {exc}', file=sys.stderr)
-    return written
+    return write_files('noise', directory, texts, 'allan.png', lambda path: draw(report, path))
+
+
+#: Seconds between two updates of the progress bar, and of its estimate.
+PROGRESS_S = 1.0
+ESTIMATE_S = 10.0
+BAR = 30
+
+
+def progress(elapsed: float, total: float, count: int, estimate: str) -> str:
+    """Return one line of the progress bar: the bar, the time left, the estimate so far."""
+    done = min(1.0, elapsed / total) if total > 0 else 1.0
+    left = max(0.0, total - elapsed)
+    bar = '#' * round(done * BAR) + '-' * (BAR - round(done * BAR))
+    return f'\r[{bar}] {int(left // 60):3d}:{int(left % 60):02d} left, {count} samples{estimate}'
+
+
+def _estimate(samples: Samples | None) -> str:
+    """Return the gyro's white noise so far, for the progress bar."""
+    if samples is None or samples.time.size < 64:
+        return ''
+    dev = allan.overlapping_adev(samples.gyro, 1.0 / samples.rate_hz)
+    terms = allan.read_terms(dev, samples.time.size / samples.rate_hz)
+    values = ' '.join(f'{axis.white.value:.2e}' for axis in terms
+                      if math.isfinite(axis.white.value))
+    return f', gyro N {values} rad/s/√Hz' if values else ''
+
+
+def listen(topic: str, seconds: float) -> Samples:
+    """Listen to ``topic`` for ``seconds`` (or until Ctrl-C); return what came."""
+    rows, fields = [], []
+
+    def samples() -> Samples | None:
+        # Copies (the spinner thread appends); None before the second message.
+        got, mag = rows[:], np.array(fields[:])
+        return (from_rows(got, mag if mag.shape[0] > 2 else None, source)
+                if len(got) > 1 else None)
+
+    with listening('i3dmgx2_noise', topic, lambda msg: rows.append(imu_row(msg)),
+                   lambda msg: fields.append(xyz(msg.magnetic_field))) as (node, stopped):
+        source = f'{node.resolve_topic_name(topic)} (live)'
+        start = time.monotonic()
+        estimate, next_estimate = '', start + ESTIMATE_S
+        while (elapsed := time.monotonic() - start) < seconds and not stopped.wait(PROGRESS_S):
+            if time.monotonic() >= next_estimate:
+                estimate = _estimate(samples())
+                next_estimate += ESTIMATE_S
+            print(progress(elapsed, seconds, len(rows), estimate), end='',
+                  file=sys.stderr, flush=True)
+    found = samples()
+    if found is None:
+        raise ValueError(f'no message on {source}: is the driver running?')
+    return found
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -358,13 +388,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f'--inflate must be 1 or more, got {args.inflate:g}')
     start = time.monotonic()
     try:
-        if args.capture:
-            samples = from_capture(args.capture)
-        elif args.bag:
-            samples = from_bag(args.bag, args.topic)
-        else:
-            from .noise_live import listen
-            samples = listen(args.topic, args.minutes * 60.0)
+        samples = read_source(args, from_capture, from_bag, listen)
         read = time.monotonic() - start
         report = analyse(samples)
     except (ImportError, OSError, ValueError) as exc:

@@ -53,23 +53,16 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .figures import agg_figure, have_matplotlib, MATPLOTLIB_HINT, patch
+from .figures import agg_figure, COLOURS, have_matplotlib, MATPLOTLIB_HINT
+from .imu_samples import decode, device_times, vectors
 from .stamp_plot import read_stamp_errors, render_stamp_errors, StampErrors
 from .. import lifetime
 from ..capture.file_format import is_capture, read_capture
 from ..capture.fixtures import FIXTURE_ADDRESS, fixture_chunks, load_fixture, timeline
-from ..codec.framing import DataPacket
-from ..codec.orientation import (
-    body_vector, CONVENTIONS, ENU, matrix_from_quaternion, orientation, Quaternion,
-)
-from ..codec.parser import SensorStreamParser
-from ..codec.records import TICKS_PER_SECOND
-from ..codec.timer import TIMER_MODULUS
+from ..codec.orientation import (body_vector, CONVENTIONS, ENU, euler_from_matrix,
+                                 matrix_from_quaternion, orientation, Quaternion)
+from ..ros.conversions import STANDARD_GRAVITY
 
-#: Standard gravity (m/s^2 per g), the factor of the device's g units (as the node uses).
-STANDARD_GRAVITY = 9.80665
-#: Period of the device timer (s): it wraps after 2^32 ticks.
-TIMER_PERIOD = TIMER_MODULUS / TICKS_PER_SECOND
 #: A gap is at least this long (s), and at least GAP_FACTOR typical intervals.
 MIN_GAP = 0.5
 GAP_FACTOR = 5.0
@@ -82,8 +75,6 @@ ECHO_CSV_COLUMNS = 40
 #: Figure size (in) and resolution (dpi) of a report-quality page figure.
 FIGSIZE = (10.0, 8.0)
 DPI = 150
-#: Axis colours: x, y, z as the RGB convention of axes in RViz.
-COLOURS = ('tab:red', 'tab:green', 'tab:blue')
 
 
 class Series(NamedTuple):
@@ -108,50 +99,20 @@ def euler_deg(q: Sequence[float]) -> tuple[float, float, float]:
     """
     Roll, pitch, yaw (deg) of a quaternion (x, y, z, w), aircraft ZYX set.
 
-    Taken from the attitude matrix (body to world) so that in the device's
-    convention it is exactly docs/protocol.md §9's set from M (R = M^T). A zero or
-    NaN quaternion (orientation unknown) gives NaN, not an exception.
+    Read off M = R^T (R the attitude matrix, body to world) as
+    docs/protocol.md §9 defines the set, so that in the device's convention it
+    is exactly the record's. A zero or NaN quaternion (orientation unknown)
+    gives NaN, not an exception.
     """
     x, y, z, w = q
     norm = math.sqrt(x * x + y * y + z * z + w * w)
     if not 0.0 < norm < math.inf:
         return (math.nan, math.nan, math.nan)
     r = matrix_from_quaternion(Quaternion(x / norm, y / norm, z / norm, w / norm))
-    roll = math.atan2(r[7], r[8])
-    pitch = math.asin(max(-1.0, min(1.0, -r[6])))
-    yaw = math.atan2(r[3], r[0])
-    return (math.degrees(roll), math.degrees(pitch), math.degrees(yaw))
+    return tuple(math.degrees(a) for a in euler_from_matrix(r[0::3] + r[1::3] + r[2::3]))
 
 
 # Time -----------------------------------------------------------------------------
-
-
-def device_times(timers: Sequence[int], host_times: Sequence[float],
-                 tolerance: float = 1.0) -> tuple[list[float], list[int]]:
-    """
-    Unwrap the device timer into seconds from the first record.
-
-    Each step is the timer's forward difference plus whichever number of
-    whole periods (218.45 s) brings it closest to the host's elapsed receive
-    time: that unwraps rollovers, including pauses longer than half a period
-    that a timer-only unwrapper must take for resets. When no period count
-    agrees with the host (within ``tolerance`` s plus 2 %), the timer has
-    restarted (a power cycle, or separate captures joined): the host's
-    elapsed time is used instead and the index is returned as a break.
-    """
-    times = [0.0] * min(1, len(timers))
-    breaks: list[int] = []
-    for i in range(1, len(timers)):
-        step = ((timers[i] - timers[i - 1]) % TIMER_MODULUS) / TICKS_PER_SECOND
-        host = max(0.0, host_times[i] - host_times[i - 1])
-        periods = max(0, round((host - step) / TIMER_PERIOD))
-        candidate = step + periods * TIMER_PERIOD
-        if abs(candidate - host) <= tolerance + 0.02 * host:
-            times.append(times[-1] + candidate)
-        else:
-            times.append(times[-1] + host)
-            breaks.append(i)
-    return times, breaks
 
 
 def find_gaps(time: np.ndarray, breaks: Iterable[int] = (),
@@ -169,16 +130,10 @@ def find_gaps(time: np.ndarray, breaks: Iterable[int] = (),
         median = float(np.median(positive)) if positive.size else 0.0
         threshold = max(MIN_GAP, GAP_FACTOR * median)
     starts = {int(i) + 1 for i in np.nonzero((steps > threshold) | (steps < 0))[0]}
-    starts.update(breaks)
-    return sorted(starts), threshold
+    return sorted(starts.union(breaks)), threshold
 
 
 # Inputs ---------------------------------------------------------------------------
-
-
-def _rows(values: Iterable[Sequence[float]]) -> np.ndarray:
-    """Return ``values`` as an (n, 3) array, (0, 3) when there are none."""
-    return np.array(list(values), dtype=float).reshape(-1, 3)
 
 
 def series_from_chunks(chunks: Iterable[tuple[float, bytes]], address: int | None = None,
@@ -194,22 +149,14 @@ def series_from_chunks(chunks: Iterable[tuple[float, bytes]], address: int | Non
     """
     if convention not in CONVENTIONS:
         raise ValueError(f'convention must be one of {CONVENTIONS}, got {convention!r}')
-    parser = SensorStreamParser(address=address, wireless=wireless)
-    host: list[float] = []
-    records = []
-    for receive_time, data in chunks:
-        for event in parser.feed(data):
-            if isinstance(event, DataPacket) and all(
-                    hasattr(event.record, name) for name in ('accel', 'angular_rate', 'matrix')):
-                host.append(receive_time)
-                records.append(event.record)
+    found = decode(chunks, address, wireless, ('accel', 'angular_rate', 'matrix'))[0]
+    host, records = [t for t, _ in found], [r for _, r in found]
     frame = 'ENU world / FLU body (REP-103)' if convention == ENU else \
         'NED world / FRD body (device axes)'
-    times, break_idx = device_times([r.timer for r in records], host)
-    accel = _rows(body_vector(r.accel, convention) for r in records) * STANDARD_GRAVITY
-    rate = _rows(body_vector(r.angular_rate, convention) for r in records)
-    euler = _rows(euler_deg(orientation(r.matrix, convention)) for r in records)
-    t = np.array(times, dtype=float)
+    t, break_idx = device_times([r.timer for r in records], host)
+    accel = vectors(body_vector(r.accel, convention) for r in records) * STANDARD_GRAVITY
+    rate = vectors(body_vector(r.angular_rate, convention) for r in records)
+    euler = vectors(euler_deg(orientation(r.matrix, convention)) for r in records)
     firsts = ((next((i for i, h in enumerate(host) if h >= when - 1e-6), None), text)
               for when, text in segments)
     labels = [(float(t[i]), text) for i, text in firsts if i is not None]
@@ -280,12 +227,10 @@ def read_csv(path: str) -> dict[str, np.ndarray]:
 def series_from_csv(path: str, gap: float | None = None) -> Series:
     """Build the series of a recorded run, in the frame it was published in."""
     cols = read_csv(path)
-    t = cols['time'] - (cols['time'][0] if cols['time'].size else 0.0)
-    accel = np.column_stack([cols['ax'], cols['ay'], cols['az']])
-    rate = np.column_stack([cols['wx'], cols['wy'], cols['wz']])
-    quats = np.column_stack([cols['qx'], cols['qy'], cols['qz'], cols['qw']])
-    return _with_gaps(Series(t, accel, rate, _rows(euler_deg(q) for q in quats), [], [], [],
-                             os.path.basename(path),
+    data = np.column_stack([cols[name] for name in CSV_COLUMNS])   # time, a, w, q
+    t = data[:, 0] - (data[0, 0] if data.size else 0.0)
+    return _with_gaps(Series(t, data[:, 1:4], data[:, 4:7], vectors(map(euler_deg, data[:, 7:])),
+                             [], [], [], os.path.basename(path),
                              'as published (frame_convention of the recording)',
                              'from the CSV time column'), [], gap)
 
@@ -312,15 +257,14 @@ def render(series: Series, output: str, title: str | None = None) -> Any:
     figure is freed with its last reference (``figures.agg_figure``).
     """
     fig = agg_figure(figsize=FIGSIZE, layout='constrained')
+    from matplotlib.patches import Patch     # there, as agg_figure found it
     axes = fig.subplots(3, 1, sharex=True)
     t = series.time
     ends = [b for _, b in series.gaps + series.breaks]
     starts = sorted({int(i) for i in np.searchsorted(t, ends) if 0 < i < t.size})
-    panels = (
-        (series.accel, 'Acceleration (m/s²)', ('x', 'y', 'z'), None),
-        (series.angular_rate, 'Angular rate (rad/s)', ('x', 'y', 'z'), None),
-        (series.euler, 'Orientation (deg)', ('roll', 'pitch', 'yaw'), 180.0),
-    )
+    panels = ((series.accel, 'Acceleration (m/s²)', ('x', 'y', 'z'), None),
+              (series.angular_rate, 'Angular rate (rad/s)', ('x', 'y', 'z'), None),
+              (series.euler, 'Orientation (deg)', ('roll', 'pitch', 'yaw'), 180.0))
     shades = ((series.gaps, {'color': '0.85'}, 'no data'),
               (series.breaks, {'facecolor': '0.92', 'edgecolor': '0.6', 'hatch': '///'},
                'timer restarts\n(separate captures)'))
@@ -336,7 +280,7 @@ def render(series: Series, output: str, title: str | None = None) -> Any:
         ax.margins(x=0.01)
         handles = ax.get_legend_handles_labels()[0]
         if ax is axes[0]:
-            handles += [patch(label=label, **style) for spans, style, label in shades if spans]
+            handles += [Patch(label=label, **style) for spans, style, label in shades if spans]
         ax.legend(handles=handles, loc='upper left', bbox_to_anchor=(1.01, 1.0),
                   frameon=False, fontsize='small')
     axes[2].set_yticks(np.arange(-180, 181, 90))
@@ -359,10 +303,9 @@ def render(series: Series, output: str, title: str | None = None) -> Any:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog='plot',
-        description='Plot acceleration, angular rate and orientation of a 3DM-GX2 capture, '
-                    'of the real-records fixture or of a CSV recorded run to a PNG.')
+    parser = argparse.ArgumentParser(prog='plot', description='Plot acceleration, angular rate '
+                                     'and orientation of a 3DM-GX2 capture, of the real-records '
+                                     'fixture or of a CSV recorded run to a PNG.')
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument('input', nargs='?',
                         help='capture file (GX2CAP) or CSV (time,ax,ay,az,wx,wy,wz,qx,qy,'

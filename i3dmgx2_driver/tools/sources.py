@@ -23,7 +23,7 @@ is analysed. Which messages a tool keeps and what it makes of them are its own.
 """
 
 import argparse
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager, suppress
 import sys
 import threading
@@ -32,9 +32,11 @@ from typing import Any
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import Imu, MagneticField
 
-from .imu_samples import DEFAULT_TOPIC
+from .imu_samples import DEFAULT_TOPIC, mag_topic
 from .. import lifetime
 
 
@@ -55,21 +57,44 @@ def add_sources(parser: argparse.ArgumentParser, what: str, writes: str) -> None
 def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> Any:
     """Parse the tool's own arguments: those before ``--ros-args`` (``ros2 run`` adds it)."""
     args = list(sys.argv[1:] if argv is None else argv)
-    if '--ros-args' in args:
-        args = args[:args.index('--ros-args')]
-    return parser.parse_args(args)
+    return parser.parse_args(args[:args.index('--ros-args')] if '--ros-args' in args else args)
+
+
+def read_source(args: Any, from_capture: Callable[[str], Any],
+                from_bag: Callable[[str, str], Any], listen: Callable[[str, float], Any]) -> Any:
+    """Return what the source ``args`` names gives: a capture's, a bag's or the node's."""
+    if args.capture:
+        return from_capture(args.capture)
+    return from_bag(args.bag, args.topic) if args.bag else listen(args.topic, args.minutes * 60.0)
+
+
+def stamp_of(msg: Any) -> tuple[int, int]:
+    """Return a message's stamp as it came: what pairs the Imu and field of one record."""
+    return msg.header.stamp.sec, msg.header.stamp.nanosec
+
+
+def paired(imu: dict[tuple[int, int], Any], fields: Iterable[Any]) -> list[tuple[Any, Any]]:
+    """Return each field with the Imu message (``imu``, by :func:`stamp_of`) of its stamp."""
+    return [(imu[stamp], m) for m in fields if (stamp := stamp_of(m)) in imu]
 
 
 @contextmanager
-def listening(make_node: Callable[[], Node]) -> Iterator[tuple[Any, lifetime.StopSignal]]:
+def listening(name: str, topic: str, on_imu: Callable[[Imu], Any],
+              on_field: Callable[[MagneticField], Any]) -> Iterator[tuple[Node, Any]]:
     """
-    Spin the node ``make_node`` returns in its own context; yield it and the stop signal.
+    Spin a node ``name`` in its own context; yield it and the stop signal.
 
-    On leaving, the line the tool kept on stderr is ended and everything shut down.
+    It hands the Imu messages of ``topic`` to ``on_imu`` and the fields of
+    its mag topic to ``on_field``, on the spinner thread. Best effort
+    (``qos_profile_sensor_data``): it matches the driver's reliable
+    publisher and never slows it. On leaving, the line the tool kept on
+    stderr is ended and everything shut down.
     """
     lifetime.die_with_parent()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = make_node()
+    node = Node(name)
+    node.create_subscription(Imu, topic, on_imu, qos_profile_sensor_data)
+    node.create_subscription(MagneticField, mag_topic(topic), on_field, qos_profile_sensor_data)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     # Not a threading.Event: a signal handler may not take a lock (lifetime.py says why).

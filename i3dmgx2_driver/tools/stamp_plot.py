@@ -41,8 +41,7 @@ class StampErrors(NamedTuple):
 
 def read_stamp_errors(path: str) -> StampErrors:
     """Read a stamp-error CSV; raise ValueError naming what is wrong."""
-    times, errors, events = [], [], []
-    header = None
+    rows, events, header = [], [], None
     with open(path, newline='') as source:
         for number, raw in enumerate(source, 1):
             line = raw.strip()
@@ -58,11 +57,11 @@ def read_stamp_errors(path: str) -> StampErrors:
                                      f'(got {line!r})')
             elif line:
                 try:
-                    times.append(float(fields[0]))
-                    errors.append(float(fields[1]))
+                    rows.append((float(fields[0]), float(fields[1])))
                 except (IndexError, ValueError):
                     raise ValueError(f'{path}:{number}: not two numbers: {line!r}') from None
-    return StampErrors(np.array(times), np.array(errors), events)
+    times, errors = np.array(rows, dtype=float).reshape(-1, 2).T
+    return StampErrors(times, errors, events)
 
 
 def render_stamp_errors(series: StampErrors, output: str, title: str | None = None) -> Any:
