@@ -22,7 +22,9 @@ main.py freezes it) whose reader thread does the least any rclpy driver
 must: wait in ``select()`` until a whole packet is in (the terminal's VMIN,
 as the driver's ``SerialPort.wake_for`` sets it), read it, and publish what
 the driver publishes for 0xCC, a ready-serialized Imu and MagneticField
-message of the same sizes, with no parsing, stamping or packing. Its read()
+message of the same sizes, with no parsing, stamping or packing; and, as the
+driver does, a /diagnostics array of its size once a second, from a thread
+of its own (its 7 statuses and 60 values, about 2.65 kB serialized). Its read()
 returned -> publish() returned is what the driver's share cannot go below
 with rclpy on this machine; the rest of the driver's share is the driver's
 own Python.
@@ -60,6 +62,7 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402, I100
 from sensor_msgs.msg import Imu, MagneticField  # noqa: E402
 
 from i3dmgx2_driver.codec import layouts  # noqa: E402, I100
@@ -73,6 +76,8 @@ PACKET_SIZE = HEADER_SIZE + _LAYOUT.record_size + DATA_TRAILER_SIZE
 #: The timer: the last four bytes of the record, big-endian.
 _TIMER = struct.Struct('>I')
 _TIMER_AT = HEADER_SIZE + _LAYOUT.record_size - 4
+#: The serialized size of the driver's /diagnostics at 100 Hz 0xCC (7 statuses, 60 values).
+DIAGNOSTICS_BYTES = 2650
 
 
 class _Record(NamedTuple):
@@ -88,6 +93,18 @@ def _messages(stamp: float) -> tuple[bytes, bytes]:
         message.header.frame_id = 'imu_link'  # the driver's default frame
         message.header.stamp.sec = int(stamp)
     return serialize_message(imu), serialize_message(mag)
+
+
+def _diagnostics() -> bytes:
+    """Return a DiagnosticArray of the driver's shape at 100 Hz, serialized (2,650 bytes)."""
+    array = DiagnosticArray()
+    array.status = [DiagnosticStatus(name=f'i3dmgx2_driver: status {i}', hardware_id='3095',
+                                     message='ok', values=[KeyValue(key=f'key {j}', value='0' * 12)
+                                                           for j in range(60 // 7 + (i < 4))])
+                    for i in range(7)]
+    while len(serialize_message(array)) < DIAGNOSTICS_BYTES:
+        array.status[0].values[0].value += '0'
+    return serialize_message(array)
 
 
 def _parameters(ros_args: list[str]) -> dict[str, str]:
@@ -114,6 +131,8 @@ def main() -> int:
                      reliability=ReliabilityPolicy.RELIABLE)
     publish_imu = node.create_publisher(Imu, 'imu/raw_data', qos).publish
     publish_mag = node.create_publisher(MagneticField, 'imu/mag', qos).publish
+    publish_diagnostics = node.create_publisher(DiagnosticArray, '/diagnostics', qos).publish
+    diagnostics = _diagnostics()
     stamp = time.time()
     imu, mag = _messages(stamp)
     # Built with rclpy alone, the floor runs on another tree's package too (latency.py
@@ -158,8 +177,13 @@ def main() -> int:
                     timings.published(stamp)
                 publish_mag(mag)
 
+    def tick() -> None:
+        while not stop.wait(1.0):
+            publish_diagnostics(diagnostics)
+
     thread = threading.Thread(target=reader, name='gx2-reader', daemon=True)
     thread.start()
+    threading.Thread(target=tick, name='gx2-diagnostics', daemon=True).start()
     frozen = realtime.freeze_startup_heap()
     print(f'floor: start-up heap frozen ({frozen} objects)', flush=True)
     spinner = threading.Thread(target=executor.spin, name='gx2-executor', daemon=True)
