@@ -115,7 +115,11 @@ def test_capture_that_cannot_be_written_is_dropped_and_the_driver_runs_on(tmp_pa
             output = node.output()
     assert output.count('capture is off') == 1, output
     assert 'the driver keeps running without it' in output
-    assert 'Traceback' not in output, output
+    # Under `scripts/test.sh --cov` the node's coverage data, written at its exit, meets the
+    # same file-size limit and says so: its traceback is coverage's, not the driver's.
+    driver_output = output.split('Exception ignored in atexit callback: <bound method '
+                                 'Coverage._atexit')[0]
+    assert 'Traceback' not in driver_output, output
     assert path.stat().st_size <= 20000
     with warnings.catch_warnings():
         warnings.simplefilter('ignore', TruncatedCaptureWarning)
