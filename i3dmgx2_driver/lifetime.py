@@ -30,9 +30,9 @@ starts a process:
   written to a pipe the waiter selects on. The pipe is the interpreter's
   wakeup fd as well: a process's signal may be delivered to any of its
   threads (a DDS thread, the reader), and then the main thread, asleep in
-  ``select()``, was never woken to run the handler: the stop was lost, the
-  node ran on (seen once, the demo under load). The C handler writes the
-  wakeup fd from whichever thread the signal reached.
+  ``select()``, was never woken to run the handler: the stop was lost and
+  the node ran on (test_shutdown.py sends one to another thread). The C
+  handler writes the wakeup fd from whichever thread the signal reached.
 - **The parent's death**: :func:`die_with_parent` asks Linux to send SIGTERM
   when the process that started this one ends (``PR_SET_PDEATHSIG``), so
   that a script killed outright, or a terminal closed under a process in
