@@ -342,10 +342,8 @@ class PtySimulator(TruthQueries):
             if not self.config.wireless:
                 new.check_wired()
             for unit in self.units.values():
-                unit.faults.config = new
+                unit.take_faults(new)
             self._foreign.address = foreign_address(self.config, new)
-            if new.ignore_first_continuous and not old.ignore_first_continuous:
-                self._first.ignore_next_continuous = True
             now = time.time()
             if new.already_streaming and not old.already_streaming and self.started:
                 for unit in self.units.values():

@@ -125,6 +125,12 @@ class SensorUnit:
         #: Whether the next request to stream is ignored (a quirk, armed by the faults).
         self.ignore_next_continuous = faults.config.ignore_first_continuous
 
+    def take_faults(self, new: FaultConfig) -> None:
+        """Put ``new`` in effect; the quirk newly asked for is armed for the next request."""
+        if new.ignore_first_continuous and not self.faults.config.ignore_first_continuous:
+            self.ignore_next_continuous = True
+        self.faults.config = new
+
     # -- the inbox: a command that reached the sensor ---------------------------------------
 
     def port_opened(self) -> None:
