@@ -89,7 +89,7 @@ class LinkOptions:
     """
 
     wireless: bool = True
-    select_timeout: float = 0.2
+    select_timeout: float = timeouts.SELECT_TIMEOUT_S
     on_bytes: BytesCallback | None = None
     observer: LineObserver | None = None
     cancel: threading.Event | None = None
@@ -646,12 +646,13 @@ class DeviceLink:
             if not self.shared:
                 self._wait(pending, timeout)
                 return
-            self._wait(pending, min(timeouts.ACK_TIMEOUT, timeout), until=pending.acked, step=0.01)
+            self._wait(pending, min(timeouts.ACK_TIMEOUT, timeout), until=pending.acked,
+                       step=timeouts.ACK_LOOK_S)
         if not pending.nacked.is_set():
             self._wait(pending, deadline - time.monotonic())
 
     def _wait(self, pending: Pending, timeout: float, nack_ends: bool = True,
-              until: threading.Event | None = None, step: float = 0.02) -> None:
+              until: threading.Event | None = None, step: float = timeouts.REPLY_LOOK_S) -> None:
         """Wait for a reply (or ``until``), a NACK (if ``nack_ends``), a cancel or the timeout."""
         until = until or pending.done
         deadline = time.monotonic() + timeout

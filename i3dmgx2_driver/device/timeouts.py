@@ -81,6 +81,12 @@ TEMPERATURE_RETRIES = 2
 RECORD_POLL_S = 0.01
 #: How often a resume looks for a record of the stream still running (s; within RESUME_LOOK_S).
 RESUME_POLL_S = 0.002
+#: How often a request's wait looks for a NACK or a cancel beside its reply (s), and its wait
+#: for the base station's ACK (a shared port's) for its sensor's NACK.
+REPLY_LOOK_S = 0.02
+ACK_LOOK_S = 0.01
+#: The reader's select() timeout while the line is quiet: how soon it sees it is told to stop.
+SELECT_TIMEOUT_S = 0.2
 #: The reader's wait while the parser holds one byte (a lone 0xAA: an ACK, or a packet's
 #: start), to tell the two apart soon (s).
 LONE_BYTE_WAIT_S = 0.02

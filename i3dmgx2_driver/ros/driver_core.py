@@ -77,6 +77,11 @@ from ..device.shared_port import SharedPort
 from ..device.supervisor import DeviceSupervisor
 
 
+#: How long a stop waits for the sensors together (s); one that hangs is left to the
+#: process's deadline (lifetime.py).
+STOP_ALL_S = 5.0
+
+
 def load_config(node: Node) -> DriverConfig:
     """
     Declare and validate the parameters on ``node``; return the configuration.
@@ -302,7 +307,7 @@ class DriverSet:
     def shutdown(self, report: bool = True) -> None:
         """Stop every stream and close the port, the sensors at once (within 5 s)."""
         self.fault_capture.close()  # our own stop is no fault
-        for core, exc in self.each(lambda core: core.shutdown(report), timeout=5.0,
+        for core, exc in self.each(lambda core: core.shutdown(report), timeout=STOP_ALL_S,
                                    name='gx2-stop-{}'):
             # Said, not raised: the other sensors and the port are still to be let go.
             print(f'[i3dmgx2_driver] stopping node {core.sensor.address}: {exc}',

@@ -69,6 +69,8 @@ _FINISH_GRACE = 0.3
 #: Worker threads of the executor. Its pool starts them one by one, as callbacks
 #: overlap, and keeps them: a node's thread count may rise by a few and stay.
 EXECUTOR_THREADS = 4
+#: How long the executor's shutdown waits for its callbacks to end (s).
+EXECUTOR_SHUTDOWN_S = 0.5
 
 
 class _Spinner:
@@ -181,7 +183,7 @@ def run(make_node: Callable[[], Any], args: list[str] | None = None) -> int:
                 executor.remove_node(node)
                 node.destroy_node()
         finally:
-            executor.shutdown(timeout_sec=0.5)
+            executor.shutdown(timeout_sec=EXECUTOR_SHUTDOWN_S)
             rclpy.try_shutdown()
     return code
 

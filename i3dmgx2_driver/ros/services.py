@@ -55,6 +55,9 @@ from ..device.operation import Device
 from ..device.self_test import format_report, SelfTestRun, Step
 from ..device.status import State
 
+#: How often the capture at start looks whether the stream runs yet (s).
+STREAM_LOOK_S = 0.1
+
 
 # -- the device operations' services -----------------------------------------------
 
@@ -199,7 +202,7 @@ class DeviceServices:
     def _capture_on_start(self) -> None:
         """Wait for the first streaming start, then capture once (own thread)."""
         while self._device.status().state is not State.STREAMING:
-            if self._stop.wait(0.1):
+            if self._stop.wait(STREAM_LOOK_S):
                 return
         ok, message = self._exclusive('gyro bias capture', self._capture)
         if not ok:
