@@ -55,3 +55,24 @@ def test_the_floor_node_refuses_to_start_without_a_port():
                           capture_output=True, text=True, timeout=120, cwd=BENCHMARKS.parent)
     assert done.returncode != 0
     assert 'port' in done.stderr
+
+
+_FLOOR_DIAGNOSTICS = """
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.serialization import deserialize_message
+import floor_node
+data = floor_node._diagnostics()
+array = deserialize_message(data, DiagnosticArray)
+print(len(array.status), sum(len(s.values) for s in array.status),
+      len(data) - floor_node.DIAGNOSTICS_BYTES)
+"""
+
+
+def test_the_floor_publishes_a_diagnostics_array_of_the_drivers_shape():
+    # The floor does the driver's work at the edge, its /diagnostics once a second included:
+    # 7 statuses, 60 values, its size in bytes (run where the benchmarks run, not imported).
+    done = subprocess.run([sys.executable, '-c', _FLOOR_DIAGNOSTICS], capture_output=True,
+                          text=True, timeout=120, cwd=BENCHMARKS)
+    assert done.returncode == 0, done.stderr[-2000:]
+    statuses, values, over = map(int, done.stdout.split())
+    assert (statuses, values) == (7, 60) and 0 <= over < 8, done.stdout
